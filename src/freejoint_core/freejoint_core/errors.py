@@ -1,0 +1,5 @@
+"""Typed errors raised by the freejoint core when an argument is bad."""
+
+
+class FreejointValueError(ValueError):
+    """A bad argument; the message starts with the argument's name."""

@@ -1,0 +1,82 @@
+"""Every freejoint_msgs type crosses between two real processes intact."""
+import os
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ECHO = os.path.join(HERE, '..', 'nodes', 'echo_interfaces.py')
+
+
+def _setpoint():
+    from freejoint_msgs.msg import CartesianSetpoint
+    msg = CartesianSetpoint()
+    msg.header.stamp.sec = 3
+    msg.header.stamp.nanosec = 1_000_000
+    msg.header.frame_id = 'base_link'
+    msg.position = [0.2, -0.1]
+    msg.velocity = [0.01, 0.02]
+    msg.acceleration = [-1.5, 2.5]
+    msg.plan_id = 4
+    msg.plan_time = 3.001
+    msg.final = True
+    return msg
+
+
+def _state():
+    from freejoint_msgs.msg import ControllerState
+    msg = ControllerState()
+    msg.header.stamp.sec = 1
+    msg.error = [1e-4, -2e-4]
+    msg.error_rate = [0.5, 0.25]
+    msg.sliding = [0.3, -0.3]
+    msg.theta_hat = [0.1, 0.2, 0.3, 0.4, 0.5]
+    msg.rho_hat = 1.25
+    msg.delta_v = [-0.7, 0.7]
+    msg.effort = [3.5, -2.0]
+    msg.joint_names = ['joint1', 'joint2']
+    msg.det_dd = 1.5e-3
+    msg.position = [0.2, 0.0]
+    msg.position_desired = [0.2001, 0.0]
+    msg.status = ControllerState.STATUS_NEAR_SINGULAR | ControllerState.STATUS_TORQUE_LIMITED
+    msg.message = 'near singular; torque limited'
+    return msg
+
+
+@pytest.mark.parametrize('make', [_setpoint, _state], ids=['CartesianSetpoint', 'ControllerState'])
+def test_message_round_trips_through_another_process(make, procs, ros_node, wait):
+    import rclpy
+    sent = make()
+    topic = '/probe/' + type(sent).__name__
+    got = []
+    pub = ros_node.create_publisher(type(sent), topic, 10)
+    ros_node.create_subscription(type(sent), topic + '/echo', got.append, 10)
+    echo = procs.start_script(ECHO, 'echo')
+
+    def spin():
+        pub.publish(sent)
+        rclpy.spin_once(ros_node, timeout_sec=0.1)
+
+    wait(lambda: got, 30.0, 'the echo of %s (echo log: %s)' % (topic, procs.log(echo)),
+         spin=spin)
+    assert got[0] == sent
+
+
+def test_plan_circle_service_answers_from_another_process(procs, ros_node, wait):
+    import rclpy
+    from freejoint_msgs.srv import PlanCircle
+    procs.start_script(ECHO, 'echo')
+    client = ros_node.create_client(PlanCircle, '/probe/plan_circle')
+    wait(lambda: client.service_is_ready(), 30.0, 'the plan_circle service',
+         spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.1))
+    request = PlanCircle.Request(centre=[0.0, 0.0], radius=1.5, duration=5.0,
+                                 start_angle=0.0, direction=1, execute=True)
+    future = client.call_async(request)
+    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=10.0)
+    assert future.done(), 'no answer from plan_circle within 10 s'
+    answer = future.result()
+    assert not answer.accepted
+    assert answer.reason == 'radius 1.500 m >= 1 m'
+    assert answer.margin == pytest.approx(-0.5)
+    assert answer.plan_id == 0

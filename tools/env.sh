@@ -1,0 +1,19 @@
+# shellcheck shell=bash
+# Source me: `. tools/env.sh` gives a shell with the freejoint workspace (what
+# `source install/setup.bash` does on a full ROS 2 install, plus the project's .venv).
+# Set up with a sourced ROS 2 Jazzy, that install stays the underlay; otherwise .venv is.
+_fj_root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+export VIRTUAL_ENV="$_fj_root/.venv"
+case ":$PATH:" in *":$VIRTUAL_ENV/bin:"*) ;; *) export PATH="$VIRTUAL_ENV/bin:$PATH" ;; esac
+if ! grep -qs system "$_fj_root/.stamps/venv"; then
+  # The venv is laid out like a ROS install prefix (lib/, share/ament_index/).
+  case ":${AMENT_PREFIX_PATH:-}:" in *":$VIRTUAL_ENV:"*) ;; *)
+    export AMENT_PREFIX_PATH="$VIRTUAL_ENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}" ;; esac
+  case ":${CMAKE_PREFIX_PATH:-}:" in *":$VIRTUAL_ENV:"*) ;; *)
+    export CMAKE_PREFIX_PATH="$VIRTUAL_ENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}" ;; esac
+fi
+if [ "${1:-}" != --no-install ] && [ -f "$_fj_root/install/local_setup.bash" ]; then
+  # shellcheck disable=SC1091
+  COLCON_CURRENT_PREFIX="$_fj_root/install" . "$_fj_root/install/local_setup.bash"
+fi
+unset _fj_root
