@@ -1,0 +1,486 @@
+"""Robust Cartesian control law for free-joint manipulators (paper eqs. 15-19).
+
+One tick at t_k, with the measured state (q, qd) and the setpoint
+(p_d, pd_d, pdd_d)::
+
+    e   = p - p_d,             edot = J qd - pd_d,        s = edot + Lam e
+    v   = pdd_d - (K + Lam) edot - K Lam e                            (16)
+    a   = R s,   h = ||a|| + eps ('sum', the paper's) or
+                 h = ||a|| if ||a|| > eps else eps ('sat')
+    psi = (1, ||qd||^2, ||pdd_d||, ||edot||, ||e||)                    (18)
+    rho = theta^T psi,         dv = -rho a / h                         (17)
+    tau = Da#(v + dv - b),     Da# = Da^T (Da Da^T)^-1                  (15)
+
+with ``Da``, ``b`` (eqs. 4, 5) from the NOMINAL parameters, and the
+adaptation law (19) ``theta_dot = Gamma (psi ||a||^2 / h - sigma theta)``.
+
+Timing of the adaptation: the torque of tick k uses ``theta_k`` (the estimate
+before the update).  Then (19) is advanced over ``dt`` with its input
+``u = psi_k ||a_k||^2 / h_k`` held (zero-order hold, like the torque), by the
+exact solution of the linear low-pass, per component::
+
+    theta_{k+1} = exp(-Gamma sigma dt) theta_k + (1 - exp(-Gamma sigma dt)) u / sigma
+    theta_{k+1} = theta_k + Gamma u dt                      (sigma = 0)
+
+a convex combination of ``theta_k >= 0`` and ``u / sigma >= 0``, so
+``theta >= 0`` holds exactly for ``theta(0) >= 0`` for any dt (Remark 2).
+``ControlOutput.theta`` is ``theta_{k+1}``.
+
+Beyond the paper (Assumption 2 may fail): when ``|det(Da Da^T)| <
+det_threshold`` the pseudoinverse is replaced by damped least squares
+``Da^T (Da Da^T + lam2 I)^-1``, with the smallest ``lam2 >= 0`` for which
+``det(Da Da^T + lam2 I) = det_threshold``:
+
+    lam2 = 2 (thr - det) / (tr + sqrt(tr^2 + 4 (thr - det))),  tr = trace(Da Da^T).
+
+It equals the exact pseudoinverse as ``det -> thr`` (continuous switch) and is
+bounded: the singular values ``sig_i / (sig_i^2 + lam2)`` of the fallback
+satisfy ``||Da#|| <= sqrt((||Da||_F^2 + sqrt(thr)) / thr)`` whatever the
+configuration (same order as the exact inverse at the threshold).  The tick
+then reports ``STATUS_NEAR_SINGULAR``.  An optional per-joint torque limit
+clips ``tau`` and reports ``STATUS_TORQUE_LIMITED``.
+
+Hot path: for the 3-link arm with one passive joint (``fast3.Arm3Model``,
+r = 2) the tick is scalar Python floats (no numpy call except building the
+output arrays); any other arm (or ``use_fast=False``) uses the general numpy
+path, which computes the same law (tests check they agree).
+"""
+
+from dataclasses import dataclass
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from freejoint_core.arm import ArmModel, ArmParams, check_vector, make_model
+from freejoint_core.errors import FreejointValueError
+
+STATUS_OK = 0
+STATUS_NEAR_SINGULAR = 1
+STATUS_TORQUE_LIMITED = 2
+STATUS_STALE_STATE = 4
+STATUS_STALE_SETPOINT = 8
+STATUS_BAD_INPUT = 16
+
+H_FORMS = ('sum', 'sat')
+
+_isfinite = math.isfinite
+_sqrt = math.sqrt
+
+
+def _vector(value, n, name, lower, strict):
+    """Validate a gain vector: scalar (broadcast) or n numbers, bounded below."""
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+        vals = (float(value),) * n
+    else:
+        try:
+            vals = tuple(float(v) for v in value)
+        except (TypeError, ValueError) as exc:
+            raise FreejointValueError(
+                f'{name}: expected a number or {n} numbers, got {value!r}') from exc
+    if len(vals) != n:
+        raise FreejointValueError(f'{name}: expected shape ({n},), got ({len(vals)},)')
+    for v in vals:
+        if not _isfinite(v) or v < lower or (strict and v == lower):
+            cmp = '>' if strict else '>='
+            raise FreejointValueError(f'{name}: values must be finite and {cmp} {lower}, '
+                                      f'got {vals}')
+    return vals
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Controller gains (paper Sec. 4 defaults).
+
+    Attributes
+    ----------
+    K, Lam, R : tuple of float, (2,)
+        Diagonals of K, Lambda, R, > 0 (a scalar is broadcast).
+    Gamma, sigma : tuple of float, (5,)
+        Diagonals of the adaptation gain and sigma-modification, >= 0.
+    eps : float
+        Chattering bound epsilon of h_alpha, > 0.
+    h_form : {'sum', 'sat'}
+        'sum': ``h = ||a|| + eps`` (paper); 'sat': ``max(||a||, eps)``.
+    theta0 : tuple of float, (5,)
+        Initial estimate, >= 0 (used at construction and by ``reset``).
+    robust : bool
+        False: ``dv = 0`` and no adaptation (plain nominal inverse dynamics).
+    det_threshold : float
+        Fallback threshold on ``|det(Da Da^T)|``, > 0 (paper's eps_d).
+    tau_limit : None, float or tuple of float, (r,)
+        Per-joint torque limit [N m], > 0; None disables it.
+    """
+
+    K: tuple = (100.0, 100.0)
+    Lam: tuple = (50.0, 50.0)
+    R: tuple = (2.0, 2.0)
+    Gamma: tuple = (0.01,) * 5
+    sigma: tuple = (0.1,) * 5
+    eps: float = 0.1
+    h_form: str = 'sum'
+    theta0: tuple = (0.0,) * 5
+    robust: bool = True
+    det_threshold: float = 1e-7
+    tau_limit: object = None
+
+    def __post_init__(self):
+        """Validate and normalise to tuples of floats."""
+        for name, n, lower, strict in (('K', 2, 0.0, True), ('Lam', 2, 0.0, True),
+                                       ('R', 2, 0.0, True), ('Gamma', 5, 0.0, False),
+                                       ('sigma', 5, 0.0, False), ('theta0', 5, 0.0, False)):
+            object.__setattr__(self, name, _vector(getattr(self, name), n, name, lower, strict))
+        for name in ('eps', 'det_threshold'):
+            object.__setattr__(self, name, _vector(getattr(self, name), 1, name, 0.0, True)[0])
+        if self.h_form not in H_FORMS:
+            raise FreejointValueError(f'h_form: expected one of {H_FORMS}, got {self.h_form!r}')
+        if not isinstance(self.robust, (bool, np.bool_)):
+            raise FreejointValueError(f'robust: expected a bool, got {self.robust!r}')
+        object.__setattr__(self, 'robust', bool(self.robust))
+        lim = self.tau_limit
+        if lim is not None:
+            if isinstance(lim, (int, float, np.integer, np.floating)) and not isinstance(
+                    lim, bool):
+                lim = float(lim)
+                if not _isfinite(lim) or lim <= 0.0:
+                    raise FreejointValueError(f'tau_limit: must be finite and > 0, got {lim}')
+            else:
+                try:
+                    n = len(lim)
+                except TypeError as exc:
+                    raise FreejointValueError(
+                        f'tau_limit: expected None, a number or r numbers, got {lim!r}') from exc
+                lim = _vector(lim, n, 'tau_limit', 0.0, True)
+            object.__setattr__(self, 'tau_limit', lim)
+
+
+class ControlOutput(NamedTuple):
+    """Result of one control tick (numpy arrays are fresh, owned by the caller).
+
+    Attributes
+    ----------
+    tau : numpy.ndarray, (r,)
+        Active joint torques [N m] (after the optional limit).
+    e, edot, s : numpy.ndarray, (2,)
+        Tracking error [m], its rate [m/s], ``s = edot + Lam e``.
+    theta : numpy.ndarray, (5,)
+        Adaptive estimate AFTER this tick's update (the torque used the one before).
+    rho : float
+        ``theta^T psi`` used this tick (0 when ``robust`` is False).
+    dv : numpy.ndarray, (2,)
+        Robust term [m/s^2].
+    det : float
+        ``|det(Da Da^T)|`` of the nominal model (before any damping).
+    p : numpy.ndarray, (2,)
+        Measured end-effector position [m].
+    status : int
+        Bitmask of ``STATUS_*``.
+    """
+
+    tau: np.ndarray
+    e: np.ndarray
+    edot: np.ndarray
+    s: np.ndarray
+    theta: np.ndarray
+    rho: float
+    dv: np.ndarray
+    det: float
+    p: np.ndarray
+    status: int
+
+
+def _bad(name, value, n):
+    shape = np.shape(value) if not isinstance(value, (str, bytes)) else '?'
+    return FreejointValueError(
+        f'{name}: expected {n} finite numbers (shape ({n},)), got {value!r} with shape {shape}')
+
+
+def _vec2(x, name):
+    """Two finite floats from a sequence or ndarray (no numpy math)."""
+    if type(x) is np.ndarray:
+        x = x.tolist()
+    try:
+        a, b = x
+        if _isfinite(a) and _isfinite(b):
+            return a, b
+    except (TypeError, ValueError):
+        pass
+    raise _bad(name, x, 2)
+
+
+def _vec3(x, name):
+    """Three finite floats from a sequence or ndarray (no numpy math)."""
+    if type(x) is np.ndarray:
+        x = x.tolist()
+    try:
+        a, b, c = x
+        if _isfinite(a) and _isfinite(b) and _isfinite(c):
+            return a, b, c
+    except (TypeError, ValueError):
+        pass
+    raise _bad(name, x, 3)
+
+
+def _dls_lambda2(det, trace, thr):
+    """Smallest lam2 >= 0 with det(A + lam2 I) = thr for a 2x2 PSD A (det < thr)."""
+    gap = thr - det
+    return 2.0 * gap / (trace + _sqrt(trace * trace + 4.0 * gap))
+
+
+class RobustController:
+    """The paper's robust controller with sigma-modified adaptation.
+
+    Parameters
+    ----------
+    nominal_params : ArmParams
+        Guessed (nominal) parameters used for ``Da`` and ``b`` (Table I: 70 %).
+    gains : Gains
+        Controller gains.
+    use_fast : bool
+        Use the scalar 3-link kernel when possible (n == 3, r == 2); False
+        forces the general numpy path (for checks).
+
+    Attributes
+    ----------
+    theta : numpy.ndarray, (5,)
+        Current adaptive estimate (copy).
+    """
+
+    def __init__(self, nominal_params, gains=None, use_fast=True):
+        self._use_fast = bool(use_fast)
+        self.set_nominal(nominal_params)
+        self._theta = None
+        self.set_gains(Gains() if gains is None else gains)
+        self.reset()
+
+    # -- configuration ----------------------------------------------------
+    def set_nominal(self, params):
+        """Replace the nominal model (next step); keeps theta.
+
+        Parameters
+        ----------
+        params : ArmParams
+        """
+        if not isinstance(params, ArmParams):
+            raise FreejointValueError(
+                f'nominal_params: expected ArmParams, got {type(params).__name__}')
+        if getattr(self, 'gains', None) is not None and self.gains.tau_limit is not None:
+            self._resolve_limit(self.gains.tau_limit, params.r)
+        self.nominal = params
+        self.n = params.n
+        self.r = params.r
+        self.model = make_model(params) if self._use_fast else ArmModel(params)
+        self._fast = self._use_fast and self.n == 3 and self.r == 2 and hasattr(
+            self.model, 'task')
+        self._task = self.model.task if self._fast else None
+        if getattr(self, 'gains', None) is not None:
+            self.set_gains(self.gains)
+
+    @staticmethod
+    def _resolve_limit(lim, r):
+        if lim is None:
+            return None
+        if isinstance(lim, float):
+            return (lim,) * r
+        if len(lim) != r:
+            raise FreejointValueError(f'tau_limit: expected shape ({r},), got ({len(lim)},)')
+        return tuple(lim)
+
+    def set_gains(self, gains):
+        """Install new gains (effective next step); theta is kept (see ``reset``).
+
+        Parameters
+        ----------
+        gains : Gains
+        """
+        if not isinstance(gains, Gains):
+            raise FreejointValueError(f'gains: expected Gains, got {type(gains).__name__}')
+        limit = self._resolve_limit(gains.tau_limit, self.r)
+        self.gains = gains
+        self._limit = limit
+        kx, ky = gains.K
+        lx, ly = gains.Lam
+        self._lam = (lx, ly)
+        self._kl = (kx + lx, ky + ly)
+        self._kxl = (kx * lx, ky * ly)
+        self._rr = gains.R
+        self._eps = gains.eps
+        self._sum = gains.h_form == 'sum'
+        self._robust = gains.robust
+        self._thr = gains.det_threshold
+        self._gamma = gains.Gamma
+        self._sigma = gains.sigma
+        self._decay_cache = (None, None)
+
+    def reset(self):
+        """Set theta back to ``gains.theta0``."""
+        self._theta = list(self.gains.theta0)
+
+    @property
+    def theta(self):
+        """Current adaptive estimate, numpy copy (5,)."""
+        return np.array(self._theta)
+
+    # -- adaptation -------------------------------------------------------
+    def _decay(self, dt):
+        """Per-component (a_i, c_i): theta <- a_i theta + c_i u_i."""
+        if self._decay_cache[0] == dt:
+            return self._decay_cache[1]
+        coef = []
+        for g, sg in zip(self._gamma, self._sigma):
+            if sg > 0.0:
+                a = math.exp(-g * sg * dt)
+                coef.append((a, (1.0 - a) / sg))
+            else:
+                coef.append((1.0, g * dt))
+        coef = tuple(coef)
+        self._decay_cache = (dt, coef)
+        return coef
+
+    # -- tick -------------------------------------------------------------
+    def step(self, q, qd, p_d, pd_d, pdd_d, dt):
+        """Compute the torque for one tick and advance the adaptation by dt.
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Measured joint angles [rad].
+        qd : array_like, (n,)
+            Measured joint velocities [rad/s].
+        p_d, pd_d, pdd_d : array_like, (2,)
+            Desired end-effector position [m], velocity [m/s], acceleration [m/s^2].
+        dt : float
+            Control period [s], > 0 (used for the adaptation update).
+
+        Returns
+        -------
+        ControlOutput
+        """
+        if not (type(dt) is float and dt > 0.0 and dt < math.inf):
+            try:
+                dtf = float(dt)
+            except (TypeError, ValueError):
+                dtf = math.nan
+            if not (_isfinite(dtf) and dtf > 0.0):
+                raise FreejointValueError(f'dt: must be finite and > 0, got {dt!r}')
+            dt = dtf
+        if self._fast:
+            return self._step_fast(q, qd, p_d, pd_d, pdd_d, dt)
+        return self._step_general(q, qd, p_d, pd_d, pdd_d, dt)
+
+    def _step_fast(self, q, qd, p_d, pd_d, pdd_d, dt):
+        q0, q1, q2 = _vec3(q, 'q')
+        w0, w1, w2 = _vec3(qd, 'qd')
+        pdx, pdy = _vec2(p_d, 'p_d')
+        vdx, vdy = _vec2(pd_d, 'pd_d')
+        adx, ady = _vec2(pdd_d, 'pdd_d')
+        px, py, vx, vy, d00, d01, d10, d11, bx, by = self._task(q0, q1, q2, w0, w1, w2)
+        ex = px - pdx
+        ey = py - pdy
+        edx = vx - vdx
+        edy = vy - vdy
+        lx, ly = self._lam
+        sx = edx + lx * ex
+        sy = edy + ly * ey
+        klx, kly = self._kl
+        kx, ky = self._kxl
+        vvx = adx - klx * edx - kx * ex
+        vvy = ady - kly * edy - ky * ey
+        theta = self._theta
+        if self._robust:
+            rx, ry = self._rr
+            alx = rx * sx
+            aly = ry * sy
+            na2 = alx * alx + aly * aly
+            na = _sqrt(na2)
+            eps = self._eps
+            if self._sum:
+                h = na + eps
+            else:
+                h = na if na > eps else eps
+            psi = (1.0, w0 * w0 + w1 * w1 + w2 * w2, _sqrt(adx * adx + ady * ady),
+                   _sqrt(edx * edx + edy * edy), _sqrt(ex * ex + ey * ey))
+            rho = (theta[0] + theta[1] * psi[1] + theta[2] * psi[2] + theta[3] * psi[3]
+                   + theta[4] * psi[4])
+            f = rho / h
+            dvx = -f * alx
+            dvy = -f * aly
+            u = na2 / h
+            coef = self._decay(dt)
+            theta = [a * th + c * (u * ps) for (a, c), th, ps in zip(coef, theta, psi)]
+            self._theta = theta
+        else:
+            rho = dvx = dvy = 0.0
+        wx = vvx + dvx - bx
+        wy = vvy + dvy - by
+        a00 = d00 * d00 + d01 * d01
+        a01 = d00 * d10 + d01 * d11
+        a11 = d10 * d10 + d11 * d11
+        det = a00 * a11 - a01 * a01
+        status = 0
+        if abs(det) < self._thr:
+            lam2 = _dls_lambda2(det, a00 + a11, self._thr)
+            a00 += lam2
+            a11 += lam2
+            det_use = a00 * a11 - a01 * a01
+            status = STATUS_NEAR_SINGULAR
+        else:
+            det_use = det
+        y0 = (a11 * wx - a01 * wy) / det_use
+        y1 = (a00 * wy - a01 * wx) / det_use
+        t0 = d00 * y0 + d10 * y1
+        t1 = d01 * y0 + d11 * y1
+        lim = self._limit
+        if lim is not None:
+            l0, l1 = lim
+            if t0 > l0 or t0 < -l0 or t1 > l1 or t1 < -l1:
+                t0 = l0 if t0 > l0 else (-l0 if t0 < -l0 else t0)
+                t1 = l1 if t1 > l1 else (-l1 if t1 < -l1 else t1)
+                status |= STATUS_TORQUE_LIMITED
+        arr = np.array((t0, t1, ex, ey, edx, edy, sx, sy, dvx, dvy, px, py, *theta))
+        return ControlOutput(arr[0:2], arr[2:4], arr[4:6], arr[6:8], arr[12:17], rho,
+                             arr[8:10], abs(det), arr[10:12], status)
+
+    def _step_general(self, q, qd, p_d, pd_d, pdd_d, dt):
+        q = check_vector(q, self.n, 'q')
+        qd = check_vector(qd, self.n, 'qd')
+        p_d = check_vector(p_d, 2, 'p_d')
+        pd_d = check_vector(pd_d, 2, 'pd_d')
+        pdd_d = check_vector(pdd_d, 2, 'pdd_d')
+        model = self.model
+        p = model.fk(q)
+        da, b = model.decoupling(q, qd)
+        e = p - p_d
+        edot = model.jacobian(q) @ qd - pd_d
+        lam = np.array(self._lam)
+        s = edot + lam * e
+        v = pdd_d - np.array(self._kl) * edot - np.array(self._kxl) * e
+        if self._robust:
+            alpha = np.array(self._rr) * s
+            na = float(np.linalg.norm(alpha))
+            h = na + self._eps if self._sum else max(na, self._eps)
+            psi = np.array([1.0, float(qd @ qd), np.linalg.norm(pdd_d), np.linalg.norm(edot),
+                            np.linalg.norm(e)])
+            theta = np.array(self._theta)
+            rho = float(theta @ psi)
+            dv = -rho * alpha / h
+            coef = np.array(self._decay(dt))
+            self._theta = (coef[:, 0] * theta + coef[:, 1] * (na * na / h) * psi).tolist()
+        else:
+            rho = 0.0
+            dv = np.zeros(2)
+        a = da @ da.T
+        det = float(np.linalg.det(a))
+        status = STATUS_OK
+        if abs(det) < self._thr:
+            a = a + _dls_lambda2(det, float(np.trace(a)), self._thr) * np.eye(2)
+            status = STATUS_NEAR_SINGULAR
+        tau = da.T @ np.linalg.solve(a, v + dv - b)
+        if self._limit is not None:
+            lim = np.array(self._limit)
+            clipped = np.clip(tau, -lim, lim)
+            if np.any(clipped != tau):
+                status |= STATUS_TORQUE_LIMITED
+            tau = clipped
+        return ControlOutput(tau, e, edot, s, np.array(self._theta), rho, dv, abs(det), p,
+                             status)

@@ -1,0 +1,229 @@
+"""Simulated arm (the "real" plant): eq. (1) integrated with fixed-step RK4.
+
+Over one control period ``dt`` the actuator torque and one disturbance draw
+are held constant (zero-order hold), and eq. (1)
+``M qdd + C qd + G = B tau_a + d`` is integrated with classic fixed-step RK4
+at ``dt_sub`` (``dt`` must be an integer multiple).  Because the forcing is
+constant inside the period, the right-hand side is smooth there and RK4 keeps
+its fourth order.
+
+Disturbance: ``rng = numpy.random.default_rng(seed)``; every ``step`` draws
+``rng.uniform(-dist_bound, dist_bound, n)`` once (passive joints included),
+so ``|d_i| <= dist_bound`` (Section 4: 0.5 N m).  ``dist_bound = 0`` disables
+it and no draw is made.
+
+Step size: ``DEFAULT_DT_SUB`` = 0.5 ms (two RK4 sub-steps per 1 ms period).
+Measured (``bench/core_law_plant.py``): against a 10x finer step the
+closed-loop end-effector error differs by ~1e-10 mm and a 5 s free swing
+with disturbance by ~1e-9 rad; see the bench for the figures.
+"""
+
+import math
+
+import numpy as np
+
+from freejoint_core.arm import ArmParams, check_vector, make_model
+from freejoint_core.errors import FreejointValueError
+
+DEFAULT_DT_SUB = 0.0005
+"""Default RK4 sub-step [s]."""
+
+
+def _positive(value, name, allow_zero=False):
+    try:
+        value = float(value)
+    except (TypeError, ValueError) as exc:
+        raise FreejointValueError(f'{name}: expected a number, got {value!r}') from exc
+    if not math.isfinite(value) or value < 0.0 or (value == 0.0 and not allow_zero):
+        bound = '>= 0' if allow_zero else '> 0'
+        raise FreejointValueError(f'{name}: must be finite and {bound}, got {value}')
+    return value
+
+
+class Plant:
+    """The simulated manipulator with bounded random joint disturbances.
+
+    Parameters
+    ----------
+    params : ArmParams
+        Real physical parameters.
+    dt_sub : float
+        RK4 step [s], > 0.
+    dist_bound : float
+        Disturbance bound [N m], >= 0 (0 disables the disturbance).
+    seed : int or None
+        Seed of ``numpy.random.default_rng``.
+    q0, qd0 : array_like, (n,), optional
+        Initial joint angles [rad] and velocities [rad/s]; zeros if None.
+
+    Attributes
+    ----------
+    q, qd : numpy.ndarray, (n,)
+        Copies of the current joint angles [rad] and velocities [rad/s].
+    t : float
+        Simulated time [s] (sum of the ``dt`` passed to ``step``).
+    k : int
+        Number of ``step`` calls since construction/reset.
+    last_disturbance : tuple of float
+        The disturbance [N m] held over the last step (zeros if disabled).
+    """
+
+    def __init__(self, params, dt_sub=DEFAULT_DT_SUB, dist_bound=0.5, seed=0, q0=None,
+                 qd0=None):
+        if not isinstance(params, ArmParams):
+            raise FreejointValueError(f'params: expected ArmParams, got {type(params).__name__}')
+        self.params = params
+        self.model = make_model(params)
+        self.n = params.n
+        self.r = params.r
+        self.dt_sub = _positive(dt_sub, 'dt_sub')
+        self.dist_bound = _positive(dist_bound, 'dist_bound', allow_zero=True)
+        self._check_seed(seed)
+        self._seed0 = seed
+        self._q0 = self._state(q0, 'q0')
+        self._qd0 = self._state(qd0, 'qd0')
+        self._active = params.active
+        self._fast = hasattr(self.model, 'qdd')
+        self._dt_cache = (None, 0)
+        self.reset()
+
+    @staticmethod
+    def _check_seed(seed):
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))
+                                 or seed < 0):
+            raise FreejointValueError(f'seed: expected a non-negative int or None, got {seed!r}')
+
+    def _state(self, x, name):
+        if x is None:
+            return [0.0] * self.n
+        return check_vector(x, self.n, name).tolist()
+
+    def reset(self, q0=None, qd0=None, seed=None):
+        """Restart at t = 0, k = 0 with a freshly seeded disturbance generator.
+
+        Parameters
+        ----------
+        q0, qd0 : array_like, (n,), optional
+            New initial state; None keeps the one given at construction
+            (or the last reset).
+        seed : int, optional
+            New seed; None keeps the previous one.
+        """
+        if q0 is not None:
+            self._q0 = self._state(q0, 'q0')
+        if qd0 is not None:
+            self._qd0 = self._state(qd0, 'qd0')
+        if seed is not None:
+            self._check_seed(seed)
+            self._seed0 = seed
+        self._q = list(self._q0)
+        self._qd = list(self._qd0)
+        self._rng = np.random.default_rng(self._seed0)
+        self.t = 0.0
+        self.k = 0
+        self.last_disturbance = (0.0,) * self.n
+
+    @property
+    def q(self):
+        """Joint angles [rad], numpy copy (n,)."""
+        return np.array(self._q)
+
+    @property
+    def qd(self):
+        """Joint velocities [rad/s], numpy copy (n,)."""
+        return np.array(self._qd)
+
+    def _substeps(self, dt):
+        if dt == self._dt_cache[0]:
+            return self._dt_cache[1]
+        dt_f = _positive(dt, 'dt')
+        n_sub = round(dt_f / self.dt_sub)
+        if n_sub < 1 or abs(n_sub * self.dt_sub - dt_f) > 1e-9 * dt_f:
+            raise FreejointValueError(
+                f'dt: {dt_f} s is not an integer multiple of dt_sub = {self.dt_sub} s')
+        self._dt_cache = (dt, n_sub)
+        return n_sub
+
+    def step(self, tau_active, dt):
+        """Advance by one control period with torque and disturbance held.
+
+        Parameters
+        ----------
+        tau_active : array_like, (r,)
+            Actuator torques on the active joints, in ``params.active`` order [N m].
+        dt : float
+            Control period [s], an integer multiple of ``dt_sub``.
+        """
+        n_sub = self._substeps(dt)
+        tau = tau_active.tolist() if isinstance(tau_active, np.ndarray) else tau_active
+        try:
+            ok = len(tau) == self.r and all(math.isfinite(v) for v in tau)
+        except TypeError:
+            ok = False
+        if not ok:
+            shape = np.shape(tau_active) if not isinstance(tau_active, (str, bytes)) else '?'
+            raise FreejointValueError(
+                f'tau_active: expected {self.r} finite values (shape ({self.r},)), '
+                f'got {tau_active!r} with shape {shape}')
+        if self.dist_bound > 0.0:
+            full = self._rng.uniform(-self.dist_bound, self.dist_bound, self.n).tolist()
+            self.last_disturbance = tuple(full)
+        else:
+            full = [0.0] * self.n
+        for j, v in zip(self._active, tau):
+            full[j] += float(v)
+        if self._fast:
+            self._rk4_fast3(n_sub, full)
+        else:
+            self._rk4_general(n_sub, np.array(full))
+        self.t += dt
+        self.k += 1
+
+    def _rk4_fast3(self, n_sub, tau):
+        qdd = self.model.qdd
+        h = self.dt_sub
+        h2 = 0.5 * h
+        h6 = h / 6.0
+        t0, t1, t2 = tau
+        q0, q1, q2 = self._q
+        w0, w1, w2 = self._qd
+        for _ in range(n_sub):
+            a0, a1, a2 = qdd(q0, q1, q2, w0, w1, w2, t0, t1, t2)
+            u0 = w0 + h2 * a0
+            u1 = w1 + h2 * a1
+            u2 = w2 + h2 * a2
+            b0, b1, b2 = qdd(q0 + h2 * w0, q1 + h2 * w1, q2 + h2 * w2, u0, u1, u2, t0, t1, t2)
+            v0 = w0 + h2 * b0
+            v1 = w1 + h2 * b1
+            v2 = w2 + h2 * b2
+            c0, c1, c2 = qdd(q0 + h2 * u0, q1 + h2 * u1, q2 + h2 * u2, v0, v1, v2, t0, t1, t2)
+            x0 = w0 + h * c0
+            x1 = w1 + h * c1
+            x2 = w2 + h * c2
+            d0, d1, d2 = qdd(q0 + h * v0, q1 + h * v1, q2 + h * v2, x0, x1, x2, t0, t1, t2)
+            q0 += h6 * (w0 + 2.0 * (u0 + v0) + x0)
+            q1 += h6 * (w1 + 2.0 * (u1 + v1) + x1)
+            q2 += h6 * (w2 + 2.0 * (u2 + v2) + x2)
+            w0 += h6 * (a0 + 2.0 * (b0 + c0) + d0)
+            w1 += h6 * (a1 + 2.0 * (b1 + c1) + d1)
+            w2 += h6 * (a2 + 2.0 * (b2 + c2) + d2)
+        self._q = [q0, q1, q2]
+        self._qd = [w0, w1, w2]
+
+    def _rk4_general(self, n_sub, tau):
+        f = self.model.forward_dynamics
+        h = self.dt_sub
+        q = np.array(self._q)
+        w = np.array(self._qd)
+        for _ in range(n_sub):
+            a = f(q, w, tau)
+            u = w + 0.5 * h * a
+            b = f(q + 0.5 * h * w, u, tau)
+            v = w + 0.5 * h * b
+            c = f(q + 0.5 * h * u, v, tau)
+            x = w + h * c
+            d = f(q + h * v, x, tau)
+            q = q + (h / 6.0) * (w + 2.0 * (u + v) + x)
+            w = w + (h / 6.0) * (a + 2.0 * (b + c) + d)
+        self._q = q.tolist()
+        self._qd = w.tolist()
