@@ -14,6 +14,9 @@ REQ=$ROOT/tools/requirements.txt
 PY=${PYTHON:-python3}
 START=$SECONDS
 mkdir -p "$STAMPS"
+# One set-up at a time in this tree (parallel `make` targets, several shells).
+exec 9>"$STAMPS/lock"
+flock 9
 
 say() { printf '[setup %3ss] %s\n' "$((SECONDS - START))" "$*"; }
 die() {
