@@ -1,4 +1,5 @@
-"""Planar n-link arm with free (passive) joints: parameters and the reference model.
+"""
+Planar n-link arm with free (passive) joints: parameters and the reference model.
 
 Conventions (shared by the whole package, see ``docs/CONTRACT.md``):
 
@@ -20,14 +21,14 @@ eqs. (4)-(5): ``pdd - b(q, qd) = Da(q) tau_a + J M^-1 d`` with
 coordinates (link Jacobians, Christoffel symbols).  ``make_model`` returns the
 specialised 3-link kernel (``freejoint_core.fast3.Arm3Model``, derived in
 absolute link angles) when ``n == 3``; both expose the same interface.
+
 """
 
 from dataclasses import dataclass
 import math
 
-import numpy as np
-
 from freejoint_core.errors import FreejointValueError
+import numpy as np
 
 CASES = ('horizontal', 'vertical')
 
@@ -50,7 +51,8 @@ def _float_tuple(name, values):
 
 @dataclass(frozen=True)
 class ArmParams:
-    """Physical parameters of a planar arm with passive joints.
+    """
+    Physical parameters of a planar arm with passive joints.
 
     Attributes
     ----------
@@ -73,6 +75,7 @@ class ArmParams:
     ------
     FreejointValueError
         If any field is invalid; the message starts with the field's name.
+
     """
 
     lengths: tuple
@@ -130,26 +133,27 @@ class ArmParams:
 
     @property
     def n(self):
-        """Number of joints (= links)."""
+        """Return the number of joints (= links)."""
         return len(self.lengths)
 
     @property
     def active(self):
-        """Sorted tuple of the active joint indices."""
+        """Return the sorted tuple of the active joint indices."""
         return tuple(i for i in range(self.n) if i not in self.passive)
 
     @property
     def r(self):
-        """Number of active joints."""
+        """Return the number of active joints."""
         return self.n - len(self.passive)
 
     @property
     def p(self):
-        """Number of passive joints."""
+        """Return the number of passive joints."""
         return len(self.passive)
 
     def scaled(self, scale):
-        """Return a copy with masses, inertias and com multiplied by ``scale``.
+        """
+        Return a copy with masses, inertias and com multiplied by ``scale``.
 
         Lengths stay exact (the paper assumes exactly known lengths); the Table I
         nominal model is ``table1(case).scaled(0.7)``.
@@ -162,6 +166,7 @@ class ArmParams:
         Returns
         -------
         ArmParams
+
         """
         try:
             scale = float(scale)
@@ -179,7 +184,8 @@ class ArmParams:
 
 
 def table1(case='horizontal'):
-    """Return the real parameters of Table I (3 identical links, joint 3 passive).
+    """
+    Return the real parameters of Table I (3 identical links, joint 3 passive).
 
     Parameters
     ----------
@@ -191,6 +197,7 @@ def table1(case='horizontal'):
     -------
     ArmParams
         L = 0.5 m, m = 1 kg, I = 0.1 kg m^2, L_c = 0.25 m per link, passive (2,).
+
     """
     if case not in CASES:
         raise FreejointValueError(f'case: expected one of {CASES}, got {case!r}')
@@ -201,7 +208,8 @@ def table1(case='horizontal'):
 
 
 def check_vector(x, n, name):
-    """Return ``x`` as a finite float numpy array of shape (n,), or raise.
+    """
+    Return ``x`` as a finite float numpy array of shape (n,), or raise.
 
     Parameters
     ----------
@@ -215,6 +223,7 @@ def check_vector(x, n, name):
     Returns
     -------
     numpy.ndarray, (n,)
+
     """
     try:
         arr = np.asarray(x, dtype=float)
@@ -228,7 +237,8 @@ def check_vector(x, n, name):
 
 
 class ArmModel:
-    """General n-link planar arm model (numpy reference implementation).
+    """
+    General n-link planar arm model (numpy reference implementation).
 
     Derived in joint coordinates: link COM Jacobians ``Jv_i`` (2, n) and
     angular Jacobians give ``M = sum_i m_i Jv_i^T Jv_i + I_i w_i^T w_i``; the
@@ -238,6 +248,7 @@ class ArmModel:
     ----------
     params : ArmParams
         Physical parameters.
+
     """
 
     def __init__(self, params):
@@ -272,7 +283,8 @@ class ArmModel:
         return np.cumsum(q)
 
     def fk(self, q):
-        """End-effector position.
+        """
+        End-effector position.
 
         Parameters
         ----------
@@ -283,12 +295,14 @@ class ArmModel:
         -------
         numpy.ndarray, (2,)
             End-effector (x, y) [m].
+
         """
         phi = self._phi(self._q(q))
         return np.array([self._L @ np.cos(phi), self._L @ np.sin(phi)])
 
     def jacobian(self, q):
-        """End-effector Jacobian ``J = df/dq``.
+        """
+        End-effector Jacobian ``J = df/dq``.
 
         Parameters
         ----------
@@ -299,6 +313,7 @@ class ArmModel:
         -------
         numpy.ndarray, (2, n)
             [m/rad].
+
         """
         phi = self._phi(self._q(q))
         lx = -self._L * np.sin(phi)
@@ -307,7 +322,8 @@ class ArmModel:
         return np.array([np.cumsum(lx[::-1])[::-1], np.cumsum(ly[::-1])[::-1]])
 
     def jdot_qdot(self, q, qd):
-        """Velocity-product term of the end-effector acceleration, ``Jdot qd``.
+        """
+        Velocity-product term of the end-effector acceleration, ``Jdot qd``.
 
         Parameters
         ----------
@@ -320,6 +336,7 @@ class ArmModel:
         -------
         numpy.ndarray, (2,)
             [m/s^2].
+
         """
         phi = self._phi(self._q(q))
         w = np.cumsum(self._q(qd, 'qd'))
@@ -327,7 +344,8 @@ class ArmModel:
         return np.array([-(w2 @ np.cos(phi)), -(w2 @ np.sin(phi))])
 
     def com_jacobians(self, q):
-        """Linear Jacobians of the link centres of mass.
+        """
+        Linear Jacobians of the link centres of mass.
 
         Parameters
         ----------
@@ -338,6 +356,7 @@ class ArmModel:
         -------
         numpy.ndarray, (n, 2, n)
             ``Jv[i]`` maps qd to the COM velocity of link i [m/s].
+
         """
         return self._com_jacobians(self._phi(self._q(q)))
 
@@ -368,7 +387,8 @@ class ArmModel:
 
     # -- dynamics ---------------------------------------------------------
     def mass_matrix(self, q):
-        """Inertia matrix ``M(q)``.
+        """
+        Inertia matrix ``M(q)``.
 
         Parameters
         ----------
@@ -379,6 +399,7 @@ class ArmModel:
         -------
         numpy.ndarray, (n, n)
             Symmetric positive definite [kg m^2].
+
         """
         return self._mass(self._phi(self._q(q)))
 
@@ -397,7 +418,8 @@ class ArmModel:
         return half + half.transpose(0, 2, 1)
 
     def coriolis_matrix(self, q, qd):
-        """Coriolis/centrifugal matrix ``C(q, qd)`` from Christoffel symbols.
+        """
+        Coriolis/centrifugal matrix ``C(q, qd)`` from Christoffel symbols.
 
         With this choice ``Mdot - 2 C`` is skew-symmetric.
 
@@ -412,6 +434,7 @@ class ArmModel:
         -------
         numpy.ndarray, (n, n)
             [kg m^2/s].
+
         """
         phi = self._phi(self._q(q))
         qd = self._q(qd, 'qd')
@@ -421,7 +444,8 @@ class ArmModel:
         return gamma @ qd
 
     def coriolis(self, q, qd):
-        """Coriolis and centrifugal torques ``C(q, qd) qd``.
+        """
+        Coriolis and centrifugal torques ``C(q, qd) qd``.
 
         Parameters
         ----------
@@ -434,12 +458,14 @@ class ArmModel:
         -------
         numpy.ndarray, (n,)
             [N m].
+
         """
         qd = self._q(qd, 'qd')
         return self.coriolis_matrix(q, qd) @ qd
 
     def gravity_torque(self, q):
-        """Gravity torques ``G(q) = dV/dq`` (gravity along -y).
+        """
+        Gravity torques ``G(q) = dV/dq`` (gravity along -y).
 
         Parameters
         ----------
@@ -450,12 +476,14 @@ class ArmModel:
         -------
         numpy.ndarray, (n,)
             [N m].
+
         """
         jv = self._com_jacobians(self._phi(self._q(q)))
         return self._g * (self._m @ jv[:, 1, :])
 
     def forward_dynamics(self, q, qd, tau):
-        """Joint accelerations ``qdd = M^-1 (tau - C qd - G)``.
+        """
+        Joint accelerations ``qdd = M^-1 (tau - C qd - G)``.
 
         Parameters
         ----------
@@ -471,22 +499,26 @@ class ArmModel:
         -------
         numpy.ndarray, (n,)
             [rad/s^2].
+
         """
         tau = check_vector(tau, self.n, 'tau')
         rhs = tau - self.coriolis(q, qd) - self.gravity_torque(q)
         return np.linalg.solve(self.mass_matrix(q), rhs)
 
     def partition(self, mat):
-        """Split an (n, n) matrix into active/passive blocks (eq. 2).
+        """
+        Split an (n, n) matrix into active/passive blocks (eq. 2).
 
         Parameters
         ----------
         mat : array_like, (n, n)
+            Joint-space matrix, e.g. ``M(q)``.
 
         Returns
         -------
         tuple of numpy.ndarray
             ``(M_aa (r, r), M_ap (r, p), M_pa (p, r), M_pp (p, p))``.
+
         """
         mat = np.asarray(mat, dtype=float)
         if mat.shape != (self.n, self.n):
@@ -496,7 +528,8 @@ class ArmModel:
         return mat[np.ix_(a, a)], mat[np.ix_(a, p)], mat[np.ix_(p, a)], mat[np.ix_(p, p)]
 
     def effective(self, q):
-        """Effective Jacobian and inertia of eq. (3).
+        """
+        Effective Jacobian and inertia of eq. (3).
 
         Parameters
         ----------
@@ -509,6 +542,7 @@ class ArmModel:
             ``J_a - J_p M_pp^-1 M_pa``.
         Maa_eff : numpy.ndarray, (r, r)
             ``M_aa - M_ap M_pp^-1 M_pa`` [kg m^2].
+
         """
         jac = self.jacobian(q)
         maa, map_, mpa, mpp = self.partition(self.mass_matrix(q))
@@ -519,7 +553,8 @@ class ArmModel:
         return ja - jp @ x, maa - map_ @ x
 
     def decoupling(self, q, qd):
-        """Decoupling matrix and drift of the task-space dynamics (eqs. 4, 5).
+        """
+        Decoupling matrix and drift of the task-space dynamics (eqs. 4, 5).
 
         Parameters
         ----------
@@ -534,6 +569,7 @@ class ArmModel:
             ``J M^-1 B`` [m/(s^2 N m)].
         b : numpy.ndarray, (2,)
             ``Jdot qd - J M^-1 (C qd + G)`` [m/s^2].
+
         """
         q = self._q(q)
         qd = self._q(qd, 'qd')
@@ -543,7 +579,8 @@ class ArmModel:
         return da, b
 
     def energy(self, q, qd):
-        """Total mechanical energy ``1/2 qd^T M qd + V(q)``, V = 0 at y = 0.
+        """
+        Total mechanical energy ``1/2 qd^T M qd + V(q)``, V = 0 at y = 0.
 
         Parameters
         ----------
@@ -556,6 +593,7 @@ class ArmModel:
         -------
         float
             [J].
+
         """
         q = self._q(q)
         qd = self._q(qd, 'qd')
@@ -564,7 +602,8 @@ class ArmModel:
         return float(0.5 * qd @ self.mass_matrix(q) @ qd + self._g * (self._m @ y_com))
 
     def ik(self, p, q_passive, branch=1):
-        """Inverse kinematics for the two active joints, passive angles given.
+        """
+        Inverse kinematics for the two active joints, passive angles given.
 
         Needs r == 2 (e.g. the 3-link arm with one passive joint).  The links
         between and after the two active joints are rigid once the passive
@@ -593,6 +632,7 @@ class ArmModel:
         FreejointValueError
             ``p`` unreachable, bad shapes, ``branch`` not +-1, or r != 2
             (message names ``params``).
+
         """
         if self.r != 2:
             raise FreejointValueError(
@@ -651,17 +691,20 @@ def _wrap(angle):
 
 
 def make_model(params):
-    """Return the fastest model implementation for ``params``.
+    """
+    Return the fastest model implementation for ``params``.
 
     Parameters
     ----------
     params : ArmParams
+        Physical parameters.
 
     Returns
     -------
     ArmModel
         ``freejoint_core.fast3.Arm3Model`` (closed-form scalar kernel, same
         interface) when ``params.n == 3``, else the general ``ArmModel``.
+
     """
     if not isinstance(params, ArmParams):
         raise FreejointValueError(f'params: expected ArmParams, got {type(params).__name__}')

@@ -1,4 +1,5 @@
-"""Robust Cartesian control law for free-joint manipulators (paper eqs. 15-19).
+"""
+Robust Cartesian control law for free-joint manipulators (paper eqs. 15-19).
 
 One tick at t_k, with the measured state (q, qd) and the setpoint
 (p_d, pd_d, pdd_d)::
@@ -44,16 +45,16 @@ Hot path: for the 3-link arm with one passive joint (``fast3.Arm3Model``,
 r = 2) the tick is scalar Python floats (no numpy call except building the
 output arrays); any other arm (or ``use_fast=False``) uses the general numpy
 path, which computes the same law (tests check they agree).
+
 """
 
 from dataclasses import dataclass
 import math
 from typing import NamedTuple
 
-import numpy as np
-
 from freejoint_core.arm import ArmModel, ArmParams, check_vector, make_model
 from freejoint_core.errors import FreejointValueError
+import numpy as np
 
 STATUS_OK = 0
 STATUS_NEAR_SINGULAR = 1
@@ -90,7 +91,8 @@ def _vector(value, n, name, lower, strict):
 
 @dataclass(frozen=True)
 class Gains:
-    """Controller gains (paper Sec. 4 defaults).
+    """
+    Controller gains (paper Sec. 4 defaults).
 
     Attributes
     ----------
@@ -110,6 +112,7 @@ class Gains:
         Fallback threshold on ``|det(Da Da^T)|``, > 0 (paper's eps_d).
     tau_limit : None, float or tuple of float, (r,)
         Per-joint torque limit [N m], > 0; None disables it.
+
     """
 
     K: tuple = (100.0, 100.0)
@@ -155,7 +158,8 @@ class Gains:
 
 
 class ControlOutput(NamedTuple):
-    """Result of one control tick (numpy arrays are fresh, owned by the caller).
+    """
+    Result of one control tick (numpy arrays are fresh, owned by the caller).
 
     Attributes
     ----------
@@ -175,6 +179,7 @@ class ControlOutput(NamedTuple):
         Measured end-effector position [m].
     status : int
         Bitmask of ``STATUS_*``.
+
     """
 
     tau: np.ndarray
@@ -228,7 +233,8 @@ def _dls_lambda2(det, trace, thr):
 
 
 class RobustController:
-    """The paper's robust controller with sigma-modified adaptation.
+    """
+    The paper's robust controller with sigma-modified adaptation.
 
     Parameters
     ----------
@@ -244,6 +250,7 @@ class RobustController:
     ----------
     theta : numpy.ndarray, (5,)
         Current adaptive estimate (copy).
+
     """
 
     def __init__(self, nominal_params, gains=None, use_fast=True):
@@ -255,11 +262,14 @@ class RobustController:
 
     # -- configuration ----------------------------------------------------
     def set_nominal(self, params):
-        """Replace the nominal model (next step); keeps theta.
+        """
+        Replace the nominal model (next step); keeps theta.
 
         Parameters
         ----------
         params : ArmParams
+            New nominal parameters.
+
         """
         if not isinstance(params, ArmParams):
             raise FreejointValueError(
@@ -287,11 +297,14 @@ class RobustController:
         return tuple(lim)
 
     def set_gains(self, gains):
-        """Install new gains (effective next step); theta is kept (see ``reset``).
+        """
+        Install new gains (effective next step); theta is kept (see ``reset``).
 
         Parameters
         ----------
         gains : Gains
+            New gains; ``tau_limit`` must have r entries.
+
         """
         if not isinstance(gains, Gains):
             raise FreejointValueError(f'gains: expected Gains, got {type(gains).__name__}')
@@ -318,7 +331,7 @@ class RobustController:
 
     @property
     def theta(self):
-        """Current adaptive estimate, numpy copy (5,)."""
+        """Return the current adaptive estimate, numpy copy (5,)."""
         return np.array(self._theta)
 
     # -- adaptation -------------------------------------------------------
@@ -339,7 +352,8 @@ class RobustController:
 
     # -- tick -------------------------------------------------------------
     def step(self, q, qd, p_d, pd_d, pdd_d, dt):
-        """Compute the torque for one tick and advance the adaptation by dt.
+        """
+        Compute the torque for one tick and advance the adaptation by dt.
 
         Parameters
         ----------
@@ -355,6 +369,7 @@ class RobustController:
         Returns
         -------
         ControlOutput
+
         """
         if not (type(dt) is float and dt > 0.0 and dt < math.inf):
             try:

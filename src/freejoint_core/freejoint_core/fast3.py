@@ -1,4 +1,5 @@
-"""Closed-form scalar kernel for the planar 3-link arm (the real-time hot path).
+"""
+Closed-form scalar kernel for the planar 3-link arm (the real-time hot path).
 
 Derived in absolute link angles ``phi = S q`` (``S`` lower-triangular ones:
 ``phi_1 = q_1``, ``phi_2 = q_1 + q_2``, ``phi_3 = q_1 + q_2 + q_3``), where the
@@ -27,26 +28,28 @@ evaluation and no argument checks (the callers validate where data enters).
 
 ``Arm3Model`` has the ``ArmModel`` interface (numpy in, numpy out, validated)
 on top of those kernels; ``make_model`` returns it for n == 3.
+
 """
 
 import math
 
-import numpy as np
-
 from freejoint_core.arm import ArmModel, check_vector
 from freejoint_core.errors import FreejointValueError
+import numpy as np
 
 _cos = math.cos
 _sin = math.sin
 
 
 class Arm3Model(ArmModel):
-    """Planar 3-link arm, closed-form scalar kernel; any passive subset with r >= 2.
+    """
+    Planar 3-link arm, closed-form scalar kernel; any passive subset with r >= 2.
 
     Parameters
     ----------
     params : ArmParams
         Must have ``n == 3``.
+
     """
 
     def __init__(self, params):
@@ -74,7 +77,8 @@ class Arm3Model(ArmModel):
 
     # -- scalar kernels (hot path) ------------------------------------------
     def qdd(self, q0, q1, q2, w0, w1, w2, t0, t1, t2):
-        """Forward dynamics on floats.
+        """
+        Forward dynamics on floats.
 
         Parameters
         ----------
@@ -89,6 +93,7 @@ class Arm3Model(ArmModel):
         -------
         tuple of float
             Joint accelerations ``(qdd0, qdd1, qdd2)`` [rad/s^2].
+
         """
         f2 = q0 + q1
         f3 = f2 + q2
@@ -197,7 +202,8 @@ class Arm3Model(ArmModel):
         return px, py, vx, vy, wx, wy, bx, by
 
     def task(self, q0, q1, q2, w0, w1, w2):
-        """Everything the 2-active-joint controller needs, on floats.
+        """
+        Everything the 2-active-joint controller needs, on floats.
 
         Valid only when ``r == 2`` (one passive joint).
 
@@ -214,6 +220,7 @@ class Arm3Model(ArmModel):
             ``(px, py, vx, vy, d00, d01, d10, d11, bx, by)``: end-effector
             position [m] and velocity ``J qd`` [m/s], ``Da`` (2x2, row-major,
             columns in ``params.active`` order) and ``b`` [m/s^2] (eqs. 4, 5).
+
         """
         px, py, vx, vy, wx, wy, bx, by = self._task_full(q0, q1, q2, w0, w1, w2)
         ia = self._ia

@@ -1,4 +1,5 @@
-"""Simulated arm (the "real" plant): eq. (1) integrated with fixed-step RK4.
+"""
+Simulated arm (the "real" plant): eq. (1) integrated with fixed-step RK4.
 
 Over one control period ``dt`` the actuator torque and one disturbance draw
 are held constant (zero-order hold), and eq. (1)
@@ -16,14 +17,14 @@ Step size: ``DEFAULT_DT_SUB`` = 0.5 ms (two RK4 sub-steps per 1 ms period).
 Measured (``bench/core_law_plant.py``): against a 10x finer step the
 closed-loop end-effector error differs by ~1e-10 mm and a 5 s free swing
 with disturbance by ~1e-9 rad; see the bench for the figures.
+
 """
 
 import math
 
-import numpy as np
-
 from freejoint_core.arm import ArmParams, check_vector, make_model
 from freejoint_core.errors import FreejointValueError
+import numpy as np
 
 DEFAULT_DT_SUB = 0.0005
 """Default RK4 sub-step [s]."""
@@ -41,7 +42,8 @@ def _positive(value, name, allow_zero=False):
 
 
 class Plant:
-    """The simulated manipulator with bounded random joint disturbances.
+    """
+    The simulated manipulator with bounded random joint disturbances.
 
     Parameters
     ----------
@@ -66,6 +68,7 @@ class Plant:
         Number of ``step`` calls since construction/reset.
     last_disturbance : tuple of float
         The disturbance [N m] held over the last step (zeros if disabled).
+
     """
 
     def __init__(self, params, dt_sub=DEFAULT_DT_SUB, dist_bound=0.5, seed=0, q0=None,
@@ -99,7 +102,8 @@ class Plant:
         return check_vector(x, self.n, name).tolist()
 
     def reset(self, q0=None, qd0=None, seed=None):
-        """Restart at t = 0, k = 0 with a freshly seeded disturbance generator.
+        """
+        Restart at t = 0, k = 0 with a freshly seeded disturbance generator.
 
         Parameters
         ----------
@@ -108,6 +112,7 @@ class Plant:
             (or the last reset).
         seed : int, optional
             New seed; None keeps the previous one.
+
         """
         if q0 is not None:
             self._q0 = self._state(q0, 'q0')
@@ -125,12 +130,12 @@ class Plant:
 
     @property
     def q(self):
-        """Joint angles [rad], numpy copy (n,)."""
+        """Return the joint angles [rad], numpy copy (n,)."""
         return np.array(self._q)
 
     @property
     def qd(self):
-        """Joint velocities [rad/s], numpy copy (n,)."""
+        """Return the joint velocities [rad/s], numpy copy (n,)."""
         return np.array(self._qd)
 
     def _substeps(self, dt):
@@ -145,7 +150,8 @@ class Plant:
         return n_sub
 
     def step(self, tau_active, dt):
-        """Advance by one control period with torque and disturbance held.
+        """
+        Advance by one control period with torque and disturbance held.
 
         Parameters
         ----------
@@ -153,6 +159,7 @@ class Plant:
             Actuator torques on the active joints, in ``params.active`` order [N m].
         dt : float
             Control period [s], an integer multiple of ``dt_sub``.
+
         """
         n_sub = self._substeps(dt)
         tau = tau_active.tolist() if isinstance(tau_active, np.ndarray) else tau_active
