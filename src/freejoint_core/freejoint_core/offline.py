@@ -1,0 +1,400 @@
+"""Offline closed-loop runner: the paper's simulation study (Sec. 4) without ROS.
+
+Closed loop, tick ``k = 0 .. N-1`` with ``t_k = k dt`` and ``N = duration / dt``
+(5000 ticks for 5 s at 1 ms)::
+
+    (q, qd) = plant state at t_k
+    (p_d, pd_d, pdd_d) = trajectory.sample(t_k)
+    out = controller.step(q, qd, p_d, pd_d, pdd_d, dt)      -> tau_k
+    plant.step(tau_k, dt)                                    -> state at t_{k+1}
+
+The recorded ticks are ``t_0 .. t_{N-1}`` (0 .. 4.999 s): the state the last
+plant step produces at ``t_N = duration`` is not a tick and is not recorded.
+The ROS graph replicates exactly this loop, so its records equal these.
+
+Variants (all with the paper's gains unless ``gains`` is given):
+
+* ``robust``: nominal model ``table1(case).scaled(nominal_scale)`` (70 %),
+  random joint disturbance ``|d_i| <= dist_bound`` (0.5 N m) seeded by ``seed``;
+* ``robust_off``: as ``robust`` but ``Gains(robust=False)``: ``dv = 0`` and no
+  adaptation (plain nominal inverse dynamics, eq. 15 with ``v_r = v``);
+* ``exact``: nominal == real, no disturbance, robust term on.
+
+Initial state: ``q3(0) = q3_0_deg`` (120 deg), ``q1, q2`` from
+``ArmModel.ik(p_d(0), [q3], branch=+1)`` so the end effector starts on the
+desired start point ``(0.2, 0)`` (for q3 = 120 deg: q1 = -78.46 deg,
+q2 = 96.93 deg), at rest.
+
+Divergence: the run stops, without raising, at the first tick whose state or
+controller output is not finite (or whose computation raises), whose
+tracking error exceeds ``diverge_m`` (0.5 m), or whose fastest joint turns
+faster than ``diverge_qd`` (1000 rad/s: half a radian per 0.5 ms RK4 step,
+beyond which the integration no longer means anything); a tick with a finite state is
+recorded even if it is the one that stops the run. ``diverged_at_s`` is that
+tick's time (if the plant step itself fails, the next tick's time). Records
+never hold NaN.
+"""
+
+import argparse
+import dataclasses
+import math
+import sys
+import time
+
+import numpy as np
+
+from .arm import ArmModel, CASES, table1
+from .control import Gains, RobustController
+from .errors import FreejointValueError
+from .metrics import compute_record, format_summary, format_table, write_records
+from .plant import DEFAULT_DT_SUB, Plant
+from .trajectory import CircleQuintic
+
+VARIANTS = ('robust', 'robust_off', 'exact')
+DEFAULT_OUT = 'bags/offline/metrics.json'
+# Errors that mean "the numbers blew up" inside the model/controller/plant.
+_BLOWUP = (ArithmeticError, ValueError, np.linalg.LinAlgError)
+
+
+def _pos_float(name, value):
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise FreejointValueError(f'{name}: expected a number, got {value!r}') from None
+    if not math.isfinite(out) or out <= 0.0:
+        raise FreejointValueError(f'{name}: must be finite and > 0, got {out}')
+    return out
+
+
+def initial_state(params, q3_0_deg=120.0, start=(0.2, 0.0)):
+    """Joint angles (rad) putting the end effector at ``start`` with ``q3 = q3_0_deg``.
+
+    Parameters
+    ----------
+    params : ArmParams
+        The (real) arm, one passive joint.
+    q3_0_deg : float
+        Initial passive joint angle (deg).
+    start : sequence of float, shape (2,)
+        End-effector start (m).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        ``q(0)`` (rad) from ``ArmModel.ik`` on branch +1.
+
+    """
+    try:
+        q3 = math.radians(float(q3_0_deg))
+    except (TypeError, ValueError):
+        raise FreejointValueError(f'q3_0_deg: expected a number, got {q3_0_deg!r}') from None
+    if not math.isfinite(q3):
+        raise FreejointValueError(f'q3_0_deg: must be finite, got {q3_0_deg}')
+    try:
+        return ArmModel(params).ik(start, [q3], branch=1)
+    except FreejointValueError as exc:
+        raise FreejointValueError(f'q3_0_deg: no configuration reaches the start: {exc}') \
+            from None
+
+
+def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_SUB,
+             duration=5.0, nominal_scale=0.7, dist_bound=0.5, gains=None, record_trace=False,
+             trajectory=None, diverge_m=0.5, diverge_qd=1000.0):
+    """Run one closed-loop case and return its metrics record (and trace).
+
+    Parameters
+    ----------
+    case : {'horizontal', 'vertical'}
+        Table I case (Case 1 / Case 2).
+    variant : {'robust', 'robust_off', 'exact'}
+        See the module notes.
+    seed : int or None
+        Disturbance seed (unused, but recorded, by ``exact``).
+    q3_0_deg : float
+        Initial passive joint angle (deg).
+    dt : float
+        Control period (s).
+    dt_sub : float
+        Plant RK4 step (s); ``dt`` must be an integer multiple.
+    duration : float
+        Run length (s); ``duration / dt`` ticks (an integer).
+    nominal_scale : float
+        Nominal/real ratio of masses, inertias and COM distances (robust variants).
+    dist_bound : float
+        Disturbance bound (N m) of the robust variants; ``exact`` uses 0.
+    gains : Gains, optional
+        Controller gains (paper's by default); ``robust_off`` forces
+        ``robust=False``.
+    record_trace : bool
+        Also return the per-tick arrays.
+    trajectory : CircleQuintic, optional
+        Desired path; default the paper's circle (centre 0, r 0.2 m, 5 s).
+    diverge_m : float
+        Error (m) beyond which the run is stopped as diverged.
+    diverge_qd : float
+        Joint speed (rad/s) beyond which the run is stopped as diverged.
+
+    Returns
+    -------
+    record : dict
+        :func:`freejoint_core.metrics.compute_record` with ``source='offline'``.
+    trace : dict or None
+        With ``record_trace``: ``t`` (N,), ``q``, ``qd`` (N, 3), ``p``,
+        ``p_d``, ``e`` (N, 2), ``tau`` (N, 2), ``theta`` (N, 5), ``det``,
+        ``rho`` (N,), ``status`` (N,) int, over the recorded ticks.
+
+    """
+    if case not in CASES:
+        raise FreejointValueError(f'case: expected one of {CASES}, got {case!r}')
+    if variant not in VARIANTS:
+        raise FreejointValueError(f'variant: expected one of {VARIANTS}, got {variant!r}')
+    dt = _pos_float('dt', dt)
+    duration = _pos_float('duration', duration)
+    diverge_m = _pos_float('diverge_m', diverge_m)
+    diverge_qd = _pos_float('diverge_qd', diverge_qd)
+    n_ticks = int(round(duration / dt))
+    if n_ticks < 1 or abs(n_ticks * dt - duration) > 1e-9 * duration:
+        raise FreejointValueError(
+            f'duration: {duration} s is not a positive integer multiple of dt = {dt} s')
+    if gains is None:
+        gains = Gains()
+    elif not isinstance(gains, Gains):
+        raise FreejointValueError(f'gains: expected Gains, got {type(gains).__name__}')
+    if trajectory is None:
+        trajectory = CircleQuintic()
+    elif not isinstance(trajectory, CircleQuintic):
+        raise FreejointValueError(
+            f'trajectory: expected CircleQuintic, got {type(trajectory).__name__}')
+
+    dt_sub = _pos_float('dt_sub', dt_sub)
+    n_sub = round(dt / dt_sub)
+    if n_sub < 1 or abs(n_sub * dt_sub - dt) > 1e-9 * dt:
+        raise FreejointValueError(
+            f'dt_sub: dt = {dt} s is not an integer multiple of dt_sub = {dt_sub} s')
+    real = table1(case)
+    if variant == 'exact':
+        nominal, dist = real, 0.0
+    else:
+        nominal = real.scaled(_pos_float('nominal_scale', nominal_scale))
+        dist = dist_bound
+    if variant == 'robust_off':
+        gains = dataclasses.replace(gains, robust=False)
+    px0, py0 = trajectory.sample(0.0)[0]
+    q0 = initial_state(real, q3_0_deg, (px0, py0))
+    plant = Plant(real, dt_sub, dist_bound=dist, seed=seed, q0=q0)
+    ctrl = RobustController(nominal, gains)
+
+    # Setpoints of every tick, through the same scalar path the graph uses.
+    sample = trajectory.sample_tuple
+    des = [sample(k * dt) for k in range(n_ticks)]
+    t_arr = np.arange(n_ticks) * dt
+    p_buf = np.empty((n_ticks, 2))
+    tau_buf = np.empty((n_ticks, 2))
+    det_buf = np.empty(n_ticks)
+    q3_buf = np.empty(n_ticks)
+    if record_trace:
+        q_buf = np.empty((n_ticks, 3))
+        qd_buf = np.empty((n_ticks, 3))
+        th_buf = np.empty((n_ticks, 5))
+        rho_buf = np.empty(n_ticks)
+        st_buf = np.empty(n_ticks, dtype=np.int64)
+    isfinite = math.isfinite
+    passive = real.passive[0]
+    limit2 = diverge_m * diverge_m
+    theta = ctrl.theta
+    diverged = None
+    n_rec = 0
+    for k in range(n_ticks):
+        t = k * dt
+        pdx, pdy, vdx, vdy, adx, ady = des[k]
+        q = plant.q
+        qd = plant.qd
+        try:
+            out = ctrl.step(q, qd, (pdx, pdy), (vdx, vdy), (adx, ady), dt)
+        except _BLOWUP:
+            diverged = t
+            break
+        px, py = out.p.tolist()
+        t0, t1 = out.tau.tolist()
+        ex = px - pdx
+        ey = py - pdy
+        err2 = ex * ex + ey * ey
+        if not (isfinite(err2) and isfinite(t0) and isfinite(t1) and isfinite(out.det)):
+            diverged = t
+            break
+        p_buf[k] = px, py
+        tau_buf[k] = t0, t1
+        det_buf[k] = out.det
+        q3_buf[k] = q[passive]
+        theta = out.theta
+        if record_trace:
+            q_buf[k] = q
+            qd_buf[k] = qd
+            th_buf[k] = theta
+            rho_buf[k] = out.rho
+            st_buf[k] = out.status
+        n_rec = k + 1
+        w0, w1, w2 = qd.tolist()
+        if err2 > limit2 or max(abs(w0), abs(w1), abs(w2)) > diverge_qd:
+            diverged = t
+            break
+        try:
+            plant.step(out.tau, dt)
+        except _BLOWUP:
+            diverged = (k + 1) * dt
+            break
+    if n_rec == 0:   # cannot happen from a finite initial state, but never emit NaN
+        raise FreejointValueError(
+            f'gains: the first tick already fails (case {case}, variant {variant})')
+    p_d = np.array([d[:2] for d in des[:n_rec]])
+    record = compute_record(case, variant, seed, t_arr[:n_rec], p_buf[:n_rec], p_d,
+                            tau_buf[:n_rec], theta, q3_buf[:n_rec], det_buf[:n_rec],
+                            diverged, 'offline')
+    if not record_trace:
+        return record, None
+    trace = {
+        't': t_arr[:n_rec], 'q': q_buf[:n_rec], 'qd': qd_buf[:n_rec], 'p': p_buf[:n_rec],
+        'p_d': p_d, 'e': p_buf[:n_rec] - p_d, 'tau': tau_buf[:n_rec],
+        'theta': th_buf[:n_rec], 'det': det_buf[:n_rec], 'rho': rho_buf[:n_rec],
+        'status': st_buf[:n_rec],
+    }
+    return record, trace
+
+
+def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
+            progress=None):
+    """Run the offline study: robust and robust_off over seeds, exact once, per case.
+
+    Parameters
+    ----------
+    seeds : iterable of int
+        Seeds of the ``robust`` runs.
+    cases : iterable of str
+        Cases to run.
+    dt_sub : float
+        Plant RK4 step (s).
+    off_seeds : iterable of int, optional
+        Seeds of the ``robust_off`` runs; default the same as ``seeds``.
+    progress : callable, optional
+        Called with each record as it completes.
+
+    Returns
+    -------
+    list of dict
+        Records in the order case, variant (robust, robust_off, exact), seed.
+
+    """
+    seeds = list(seeds)
+    off_seeds = seeds if off_seeds is None else list(off_seeds)
+    records = []
+    for case in cases:
+        jobs = [('robust', s) for s in seeds] + [('robust_off', s) for s in off_seeds]
+        jobs.append(('exact', 0))
+        for variant, seed in jobs:
+            rec, _ = run_case(case, variant, seed, dt_sub=dt_sub)
+            records.append(rec)
+            if progress is not None:
+                progress(rec)
+    return records
+
+
+_FIGURES = ('rms_mm', 'max_mm', 'final_mm', 'tau_peak_nm', 'theta_final', 'q3_range_deg',
+            'min_det')
+
+
+def compare_records(a, b):
+    """Largest absolute change of every table figure between two record lists.
+
+    Parameters
+    ----------
+    a, b : list of dict
+        Records of the same runs in the same order.
+
+    Returns
+    -------
+    dict
+        ``'figures'``: figure name -> max absolute difference over the runs
+        that completed in both lists (list figures flattened; 0.0 if none);
+        ``'completed'``: number of such runs; ``'diverged'``: number of runs
+        that diverged in both; ``'diverged_at_s'``: max change (s) of the
+        divergence time over those; ``'mismatch'``: runs that diverged in one
+        list only.
+
+    """
+    if len(a) != len(b):
+        raise FreejointValueError(f'b: expected {len(a)} records, got {len(b)}')
+    figs = {name: 0.0 for name in _FIGURES}
+    out = {'figures': figs, 'completed': 0, 'diverged': 0, 'diverged_at_s': 0.0,
+           'mismatch': 0}
+    for ra, rb in zip(a, b):
+        if (ra['case'], ra['variant'], ra['seed']) != (rb['case'], rb['variant'], rb['seed']):
+            raise FreejointValueError('b: records are not the same runs in the same order')
+        da, db = ra['diverged_at_s'], rb['diverged_at_s']
+        if da is None and db is None:
+            out['completed'] += 1
+            for name in _FIGURES:
+                va = np.atleast_1d(np.asarray(ra[name], dtype=float))
+                vb = np.atleast_1d(np.asarray(rb[name], dtype=float))
+                figs[name] = max(figs[name], float(np.max(np.abs(va - vb))))
+        elif da is not None and db is not None:
+            out['diverged'] += 1
+            out['diverged_at_s'] = max(out['diverged_at_s'], abs(da - db))
+        else:
+            out['mismatch'] += 1
+    return out
+
+
+def _parse(argv):
+    ap = argparse.ArgumentParser(
+        prog='offline', description='Offline closed-loop runs of the paper (no ROS): both '
+        'cases, robust over seeds, robust_off, exact; prints the table, writes JSON.')
+    ap.add_argument('--out', default=DEFAULT_OUT,
+                    help=f'records JSON (default {DEFAULT_OUT}); "" to skip writing')
+    ap.add_argument('--seeds', type=int, default=10, help='seeds 0..N-1 (default 10)')
+    ap.add_argument('--off-seeds', type=int, default=None,
+                    help='seeds of robust_off (default: same as --seeds)')
+    ap.add_argument('--cases', nargs='+', choices=CASES, default=list(CASES))
+    ap.add_argument('--dt-sub', type=float, default=DEFAULT_DT_SUB,
+                    help=f'plant RK4 step in s (default {DEFAULT_DT_SUB})')
+    ap.add_argument('--compare-dt-sub', action='store_true',
+                    help='also run with dt_sub/10 and print the max change of every figure')
+    ap.add_argument('--theta', action='store_true', help='show theta_final in the table')
+    return ap.parse_args(argv)
+
+
+def main(argv=None):
+    """Console entry point ``offline`` (``python -m freejoint_core.offline``)."""
+    args = _parse(sys.argv[1:] if argv is None else argv)
+    if args.seeds < 1:
+        raise SystemExit('offline: --seeds must be >= 1')
+    off = None if args.off_seeds is None else range(args.off_seeds)
+    t0 = time.perf_counter()
+    records = run_all(range(args.seeds), args.cases, args.dt_sub, off)
+    wall = time.perf_counter() - t0
+    print(f'offline: {len(records)} runs, dt = 1 ms, dt_sub = {args.dt_sub:g} s, '
+          f'{wall:.1f} s wall')
+    print(format_table(records, theta=args.theta))
+    print()
+    print(format_summary(records))
+    if args.out:
+        write_records(args.out, records)
+        print(f'\nrecords written to {args.out}')
+    if args.compare_dt_sub:
+        fine_dt = args.dt_sub / 10.0
+        t0 = time.perf_counter()
+        fine = run_all(range(args.seeds), args.cases, fine_dt, off)
+        wall = time.perf_counter() - t0
+        diff = compare_records(records, fine)
+        print(f'\ndt_sub study: {args.dt_sub:g} s vs {fine_dt:g} s ({wall:.1f} s wall), '
+              f'max |change| over the {diff["completed"]} runs completed in both:')
+        units = {'rms_mm': 'mm', 'max_mm': 'mm', 'final_mm': 'mm', 'tau_peak_nm': 'N m',
+                 'q3_range_deg': 'deg', 'min_det': '1/(kg^4 m^4)'}
+        for name, value in diff['figures'].items():
+            print(f'  {name:<14} {value:.3g} {units.get(name, "")}'.rstrip())
+        print(f'  diverged in both: {diff["diverged"]} runs, divergence time changed by up to '
+              f'{diff["diverged_at_s"]:.3g} s; diverged in one only: {diff["mismatch"]}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
