@@ -330,6 +330,11 @@ class RobustController:
         self._theta = list(self.gains.theta0)
 
     @property
+    def uses_fast_path(self):
+        """Return True when ticks run on the scalar 3-link kernel."""
+        return self._fast
+
+    @property
     def theta(self):
         """Return the current adaptive estimate, numpy copy (5,)."""
         return np.array(self._theta)
