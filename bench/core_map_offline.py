@@ -1,4 +1,5 @@
-"""Benchmark: singularity map and offline closed-loop run (freejoint_core).
+"""
+Benchmark: singularity map and offline closed-loop run (freejoint_core).
 
 Figures (wall time, median of a few repeats, printed; nothing is asserted):
 

@@ -1,4 +1,5 @@
-"""Run metrics: one record format for the offline runner, the ROS graph and bags.
+"""
+Run metrics: one record format for the offline runner, the ROS graph and bags.
 
 A *record* is a flat dict of plain Python values (JSON-serialisable):
 
@@ -60,7 +61,8 @@ def _text(name, value):
 
 def compute_record(case, variant, seed, t, p, p_d, tau, theta, q_passive, det,
                    diverged_at_s=None, source='offline'):
-    """Build a run record from per-tick arrays.
+    """
+    Build a run record from per-tick arrays.
 
     Parameters
     ----------
@@ -187,7 +189,8 @@ _COLUMNS = (
 
 
 def format_table(records, theta=False):
-    """Format records as a fixed-width text table (one row per record).
+    """
+    Format records as a fixed-width text table (one row per record).
 
     Columns: case, variant, seed, rms/max/final error (mm, 4 significant
     digits), peak torques (N m), passive angle range (deg), minimum
@@ -225,11 +228,13 @@ def format_table(records, theta=False):
 
 
 def summarize(records):
-    """Worst case over seeds per (case, variant, source).
+    """
+    Worst case over seeds per (case, variant, source).
 
     Parameters
     ----------
     records : list of dict
+        Records as from :func:`compute_record`.
 
     Returns
     -------
@@ -270,7 +275,8 @@ def format_summary(records):
 
 
 def write_records(path, records):
-    """Write records to a JSON file (parent directories are created).
+    """
+    Write records to a JSON file (parent directories are created).
 
     Parameters
     ----------
@@ -301,11 +307,13 @@ def write_records(path, records):
 
 
 def read_records(path):
-    """Read records written by :func:`write_records`.
+    """
+    Read records written by :func:`write_records`.
 
     Parameters
     ----------
     path : str or os.PathLike
+        A file written by :func:`write_records`.
 
     Returns
     -------

@@ -1,4 +1,5 @@
-"""Offline closed-loop runner: the paper's simulation study (Sec. 4) without ROS.
+"""
+Offline closed-loop runner: the paper's simulation study (Sec. 4) without ROS.
 
 Closed loop, tick ``k = 0 .. N-1`` with ``t_k = k dt`` and ``N = duration / dt``
 (5000 ticks for 5 s at 1 ms)::
@@ -67,7 +68,8 @@ def _pos_float(name, value):
 
 
 def initial_state(params, q3_0_deg=120.0, start=(0.2, 0.0)):
-    """Joint angles (rad) putting the end effector at ``start`` with ``q3 = q3_0_deg``.
+    """
+    Joint angles (rad) putting the end effector at ``start`` with ``q3 = q3_0_deg``.
 
     Parameters
     ----------
@@ -100,7 +102,8 @@ def initial_state(params, q3_0_deg=120.0, start=(0.2, 0.0)):
 def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_SUB,
              duration=5.0, nominal_scale=0.7, dist_bound=0.5, gains=None, record_trace=False,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0):
-    """Run one closed-loop case and return its metrics record (and trace).
+    """
+    Run one closed-loop case and return its metrics record (and trace).
 
     Parameters
     ----------
@@ -263,7 +266,8 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
 
 def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
             progress=None):
-    """Run the offline study: robust and robust_off over seeds, exact once, per case.
+    """
+    Run the offline study: robust and robust_off over seeds, exact once, per case.
 
     Parameters
     ----------
@@ -303,7 +307,8 @@ _FIGURES = ('rms_mm', 'max_mm', 'final_mm', 'tau_peak_nm', 'theta_final', 'q3_ra
 
 
 def compare_records(a, b):
-    """Largest absolute change of every table figure between two record lists.
+    """
+    Largest absolute change of every table figure between two record lists.
 
     Parameters
     ----------
@@ -323,7 +328,7 @@ def compare_records(a, b):
     """
     if len(a) != len(b):
         raise FreejointValueError(f'b: expected {len(a)} records, got {len(b)}')
-    figs = {name: 0.0 for name in _FIGURES}
+    figs = dict.fromkeys(_FIGURES, 0.0)
     out = {'figures': figs, 'completed': 0, 'diverged': 0, 'diverged_at_s': 0.0,
            'mismatch': 0}
     for ra, rb in zip(a, b):

@@ -1,4 +1,5 @@
-"""Dynamic singularities of the nominal decoupling matrix (paper, Sec. 3.2).
+"""
+Dynamic singularities of the nominal decoupling matrix (paper, Sec. 3.2).
 
 The paper's three steps for a singularity-free Cartesian path:
 
@@ -115,7 +116,8 @@ def _coefficients(params):
 
 
 def det_da_closed_form(nominal_params, q2, q3):
-    """Signed ``det(Da)`` of the 3-link arm with joint 3 passive, vectorised.
+    """
+    Signed ``det(Da)`` of the 3-link arm with joint 3 passive, vectorised.
 
     ``det(Da Da^T) = det(Da)^2`` since ``Da`` is square (r = m = 2).
 
@@ -173,7 +175,8 @@ def _batched_da(params, q2, q3):
 
 
 def det_da_general(nominal_params, q2, q3):
-    """Signed ``det(Da)`` of a 3-link arm with any one passive joint, vectorised.
+    """
+    Signed ``det(Da)`` of a 3-link arm with any one passive joint, vectorised.
 
     Batched linear algebra (``numpy.linalg.solve`` on (N, 3, 3)); slower than
     :func:`det_da_closed_form` but not tied to ``passive == (2,)``.
@@ -204,7 +207,8 @@ def det_da_general(nominal_params, q2, q3):
 
 
 def ee_radius(lengths, q2, q3):
-    """Distance of the end effector from the base (m), 3-link arm, vectorised.
+    """
+    Distance of the end effector from the base (m), 3-link arm, vectorised.
 
     ``|p|^2 = L1^2 + L2^2 + L3^2 + 2 L1 L2 c2 + 2 L2 L3 c3 + 2 L1 L3 c23``:
     independent of ``q1``.
@@ -232,7 +236,8 @@ def ee_radius(lengths, q2, q3):
 
 @dataclass(frozen=True)
 class DetMap:
-    """Joint-space map of the nominal decoupling determinant.
+    """
+    Joint-space map of the nominal decoupling determinant.
 
     Attributes
     ----------
@@ -264,7 +269,8 @@ class DetMap:
 
 
 def _closed_form_grid(params, n):
-    """``det(Da)`` on the full (q2, q3) grid, closed form, about 11 array passes.
+    """
+    ``det(Da)`` on the full (q2, q3) grid, closed form, about 11 array passes.
 
     ``cos(q2 + q3)`` on a uniform periodic grid is ``C[(i + j) mod n]``: a
     sliding-window view of ``[C, C]`` (no computation). The mirror symmetry
@@ -301,7 +307,8 @@ def _closed_form_grid(params, n):
 
 
 def det_map(nominal_params, resolution_deg=1.0, method='auto'):
-    """Step 1: sample ``|det(Da Da^T)|`` of the nominal model over joint space.
+    """
+    Step 1: sample ``|det(Da Da^T)|`` of the nominal model over joint space.
 
     Uses the nominal parameters only; gravity plays no part (``Da = J M^-1 B``
     holds no gravity term, see the module notes) and ``q1`` drops out by the
@@ -353,7 +360,8 @@ def det_map(nominal_params, resolution_deg=1.0, method='auto'):
 
 @dataclass(frozen=True)
 class SemiSingularRegion:
-    """Step 2: the Cartesian semi-singular region, a union of annuli.
+    """
+    Step 2: the Cartesian semi-singular region, a union of annuli.
 
     Attributes
     ----------
@@ -396,7 +404,8 @@ class SemiSingularRegion:
         return np.array(out, dtype=float).reshape(-1, 2)
 
     def radial_distance(self, r):
-        """Signed distance (m) of base distances ``r`` to the forbidden set.
+        """
+        Signed distance (m) of base distances ``r`` to the forbidden set.
 
         Positive in the nonsingular region within reach (distance to the
         nearest semi-singular interval or reach boundary, an ``r_min = 0``
@@ -415,7 +424,8 @@ class SemiSingularRegion:
         return dist
 
     def to_grid(self, extent, cell):
-        """Rasterise to an occupancy grid (for ``nav_msgs/OccupancyGrid``).
+        """
+        Rasterise to an occupancy grid (for ``nav_msgs/OccupancyGrid``).
 
         Parameters
         ----------
@@ -486,7 +496,8 @@ def _merge(lo, hi):
 
 
 def semi_singular(det_map, eps_d=EPS_D):
-    """Step 2: the semi-singular region in Cartesian space (union of annuli).
+    """
+    Step 2: the semi-singular region in Cartesian space (union of annuli).
 
     A joint-space sample ``(q2, q3)`` is flagged singular if
     ``|det(Da Da^T)| <= eps_d`` there, or if ``det(Da)`` changes sign to a
@@ -546,7 +557,8 @@ def semi_singular(det_map, eps_d=EPS_D):
 
 @dataclass(frozen=True)
 class PathCheck:
-    """Result of :func:`check_path`.
+    """
+    Result of :func:`check_path`.
 
     Attributes
     ----------
@@ -571,7 +583,8 @@ class PathCheck:
 
 
 def check_path(region, points, times=None):
-    """Step 3: accept a Cartesian path only if it avoids the semi-singular set.
+    """
+    Step 3: accept a Cartesian path only if it avoids the semi-singular set.
 
     Parameters
     ----------
@@ -630,11 +643,13 @@ def check_path(region, points, times=None):
 
 
 def figure2_data(det_map, region):
-    """Return the data of the paper's Fig. 2 (joint-space map and Cartesian annuli).
+    """
+    Return the data of the paper's Fig. 2 (joint-space map and Cartesian annuli).
 
     Parameters
     ----------
     det_map : DetMap
+        From :func:`det_map`.
     region : SemiSingularRegion
         Computed from ``det_map``.
 

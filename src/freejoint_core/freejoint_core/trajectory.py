@@ -1,4 +1,5 @@
-"""Circle trajectory with a quintic time scaling of the angle (paper, Sec. 4).
+"""
+Circle trajectory with a quintic time scaling of the angle (paper, Sec. 4).
 
 The end effector goes once around a circle; the polar angle about the centre
 follows the quintic ``s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5`` of the
@@ -26,7 +27,8 @@ def _finite_float(name, value):
 
 
 def workspace_annulus(lengths):
-    """Return the reach annulus ``(r_min, r_max)`` (m) of a planar serial arm.
+    """
+    Return the reach annulus ``(r_min, r_max)`` (m) of a planar serial arm.
 
     With every joint free to turn a full revolution (paper, Sec. 4: no joint
     limits) the end effector reaches exactly the points whose distance from
@@ -56,7 +58,8 @@ def workspace_annulus(lengths):
 
 
 class CircleQuintic:
-    """One revolution around a circle, quintic in time, held at the ends.
+    """
+    One revolution around a circle, quintic in time, held at the ends.
 
     ``phi(t) = start_angle + direction * 2 pi * s(tau)``, ``tau = t / T``
     clipped to ``[0, 1]``, ``s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5`` and
@@ -137,7 +140,8 @@ class CircleQuintic:
         return self._dir
 
     def sample_tuple(self, t):
-        """Sample at time ``t`` as plain floats, for hot loops.
+        """
+        Sample at time ``t`` as plain floats, for hot loops.
 
         Parameters
         ----------
@@ -172,7 +176,8 @@ class CircleQuintic:
                 -rs * wd - rc * w2, rc * wd - rs * w2)
 
     def sample(self, t):
-        """Sample position, velocity and acceleration at time ``t``.
+        """
+        Sample position, velocity and acceleration at time ``t``.
 
         Parameters
         ----------
@@ -194,7 +199,8 @@ class CircleQuintic:
         return np.array([px, py]), np.array([vx, vy]), np.array([ax, ay])
 
     def points(self, num=721):
-        """Return ``num`` points evenly spaced in angle along the path, shape (num, 2), m.
+        """
+        Return ``num`` points evenly spaced in angle along the path, shape (num, 2), m.
 
         Both ends are included (the first and last point coincide).
         """
@@ -205,7 +211,8 @@ class CircleQuintic:
                                 self._cy + self._radius * np.sin(phi)))
 
     def check_reachable(self, params):
-        """Raise unless the whole circle lies in the arm's reach annulus.
+        """
+        Raise unless the whole circle lies in the arm's reach annulus.
 
         Parameters
         ----------
