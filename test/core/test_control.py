@@ -34,6 +34,13 @@ def test_default_gains_are_the_papers():
         0.1, 'sum', True, 1e-7, None)
 
 
+def test_scalar_gains_are_broadcast():
+    g = Gains(K=10, Lam=5.0, R=1.0, Gamma=0.5, sigma=0.2, theta0=1, tau_limit=3)
+    assert (g.K, g.Lam, g.R) == ((10.0, 10.0), (5.0, 5.0), (1.0, 1.0))
+    assert (g.Gamma, g.sigma, g.theta0) == ((0.5,) * 5, (0.2,) * 5, (1.0,) * 5)
+    assert g.tau_limit == 3.0
+
+
 # -- the closed loop with an exact model --------------------------------------------
 @pytest.mark.parametrize('params, use_fast', [
     (table1('vertical'), True), (table1('vertical'), False), (table1('horizontal'), True),
