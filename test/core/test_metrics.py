@@ -119,7 +119,7 @@ def test_write_then_read_round_trips(tmp_path):
     path = tmp_path / 'sub' / 'metrics.json'
     metrics.write_records(path, recs)
     assert metrics.read_records(path) == recs
-    assert json.loads(path.read_text())['format'] == metrics.FORMAT
+    assert json.loads(path.read_text()) == recs
 
 
 def test_reading_a_foreign_file_names_path(tmp_path):
@@ -129,7 +129,10 @@ def test_reading_a_foreign_file_names_path(tmp_path):
         metrics.read_records(path)
     with pytest.raises(FreejointValueError, match='^path:'):
         metrics.read_records(tmp_path / 'missing.json')
-    path.write_text(json.dumps({'format': metrics.FORMAT, 'records': [{'case': 'x'}]}))
+    path.write_text(json.dumps({'records': []}))
+    with pytest.raises(FreejointValueError, match='^path:.*JSON list'):
+        metrics.read_records(path)
+    path.write_text(json.dumps([{'case': 'x'}]))
     with pytest.raises(FreejointValueError, match='^path:.*lacks keys'):
         metrics.read_records(path)
 

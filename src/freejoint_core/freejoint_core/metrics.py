@@ -35,7 +35,6 @@ from .errors import FreejointValueError
 
 KEYS = ('case', 'variant', 'seed', 'rms_mm', 'max_mm', 'final_mm', 'tau_peak_nm',
         'theta_final', 'q3_range_deg', 'min_det', 'diverged_at_s', 'source')
-FORMAT = 'freejoint-metrics/1'
 
 
 def _array(name, value, ndim_options):
@@ -276,7 +275,7 @@ def format_summary(records):
 
 def write_records(path, records):
     """
-    Write records to a JSON file (parent directories are created).
+    Write records to a JSON file as a plain list (parent directories are created).
 
     Parameters
     ----------
@@ -297,7 +296,7 @@ def write_records(path, records):
     if parent:
         os.makedirs(parent, exist_ok=True)
     try:
-        text = json.dumps({'format': FORMAT, 'records': records}, indent=1, allow_nan=False)
+        text = json.dumps(records, indent=1, allow_nan=False)
     except (TypeError, ValueError) as exc:
         raise FreejointValueError(f'records: not JSON-serialisable: {exc}') from None
     tmp = path + '.tmp'
@@ -331,9 +330,9 @@ def read_records(path):
             data = json.load(fh)
     except (OSError, json.JSONDecodeError) as exc:
         raise FreejointValueError(f'path: cannot read records from {path!r}: {exc}') from None
-    if not isinstance(data, dict) or data.get('format') != FORMAT:
-        raise FreejointValueError(f'path: {path!r} is not a {FORMAT} file')
+    if not isinstance(data, list):
+        raise FreejointValueError(f'path: {path!r} is not a records file (a JSON list of records)')
     try:
-        return _check_records(data.get('records'))
+        return _check_records(data)
     except FreejointValueError as exc:
         raise FreejointValueError(f'path: {path!r}: {exc}') from None
