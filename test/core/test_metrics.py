@@ -70,8 +70,9 @@ def test_single_tick_record():
 ])
 def test_bad_inputs_name_the_argument(field, value, match):
     t, p, p_d, tau, theta, q3, det = _arrays()
-    args = dict(case='horizontal', variant='robust', seed=0, t=t, p=p, p_d=p_d, tau=tau,
-                theta=theta, q_passive=q3, det=det, diverged_at_s=None, source='offline')
+    args = {'case': 'horizontal', 'variant': 'robust', 'seed': 0, 't': t, 'p': p, 'p_d': p_d,
+            'tau': tau, 'theta': theta, 'q_passive': q3, 'det': det, 'diverged_at_s': None,
+            'source': 'offline'}
     args[field] = value
     with pytest.raises(FreejointValueError, match=match):
         metrics.compute_record(**args)
