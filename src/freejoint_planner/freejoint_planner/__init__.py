@@ -1,0 +1,1 @@
+"""freejoint planner: singularity-checked circle plans streamed on the control grid."""

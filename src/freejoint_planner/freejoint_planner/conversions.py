@@ -1,0 +1,109 @@
+"""
+Message conversions of the planner (ROS message types only, no node, no spinning).
+
+``occupancy_grid`` turns ``SemiSingularRegion.to_grid`` into ``nav_msgs/OccupancyGrid``:
+100 = semi-singular (the cell touches the region), 0 = nonsingular and within reach,
+-1 (unknown) = out of the arm's reach; row 0 is the bottom row (``y_min``), as both
+``to_grid`` and OccupancyGrid lay it out, so the data is ``grid.ravel()``.
+"""
+
+import array
+
+from builtin_interfaces.msg import Time
+from freejoint_msgs.msg import CartesianSetpoint
+from geometry_msgs.msg import Point
+from nav_msgs.msg import OccupancyGrid
+import numpy as np
+from visualization_msgs.msg import Marker
+
+from .stream import split_ns
+
+
+def time_msg(t_ns):
+    """Return ``builtin_interfaces/Time`` of a ROS time in integer nanoseconds (>= 0)."""
+    sec, nanosec = split_ns(t_ns)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def time_ns(msg):
+    """Return the integer nanoseconds of a ``builtin_interfaces/Time``."""
+    return msg.sec * 1_000_000_000 + msg.nanosec
+
+
+def setpoint_msg(sp, frame_id):
+    """Return the ``freejoint_msgs/CartesianSetpoint`` of a ``stream.Setpoint``."""
+    msg = CartesianSetpoint()
+    sec, nanosec = split_ns(sp.stamp_ns)
+    msg.header.stamp.sec = sec
+    msg.header.stamp.nanosec = nanosec
+    msg.header.frame_id = frame_id
+    msg.position[0] = sp.px
+    msg.position[1] = sp.py
+    msg.velocity[0] = sp.vx
+    msg.velocity[1] = sp.vy
+    msg.acceleration[0] = sp.ax
+    msg.acceleration[1] = sp.ay
+    msg.plan_id = sp.plan_id
+    msg.plan_time = sp.plan_time
+    msg.final = sp.final
+    return msg
+
+
+def occupancy_grid(grid, extent, cell, frame_id, stamp_ns):
+    """
+    Return a ``nav_msgs/OccupancyGrid`` of an int8 grid from ``SemiSingularRegion.to_grid``.
+
+    Parameters
+    ----------
+    grid : numpy.ndarray of int8, shape (ny, nx)
+        Row 0 at ``y_min``, column 0 at ``x_min``; values 100, 0, -1.
+    extent : sequence of float, shape (4,)
+        ``(x_min, x_max, y_min, y_max)`` (m) the grid was made for.
+    cell : float
+        Cell size (m).
+    frame_id : str
+        Frame of the grid (the arm's base frame).
+    stamp_ns : int
+        Header stamp and map load time (ns).
+
+    Returns
+    -------
+    nav_msgs.msg.OccupancyGrid
+
+    """
+    grid = np.asarray(grid)
+    if grid.ndim != 2 or grid.dtype != np.int8:
+        raise ValueError(f'grid: expected a 2-D int8 array, got {grid.dtype} {grid.shape}')
+    msg = OccupancyGrid()
+    msg.header.stamp = time_msg(stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.info.map_load_time = time_msg(stamp_ns)
+    msg.info.resolution = float(cell)
+    msg.info.height, msg.info.width = (int(n) for n in grid.shape)
+    msg.info.origin.position.x = float(extent[0])
+    msg.info.origin.position.y = float(extent[2])
+    msg.info.origin.orientation.w = 1.0
+    msg.data = array.array('b', np.ascontiguousarray(grid).tobytes())
+    return msg
+
+
+def path_marker(points, frame_id, stamp_ns, plan_id=0, width=0.005):
+    """
+    Return a ``visualization_msgs/Marker`` LINE_STRIP through ``points`` (m, (N, 2)).
+
+    Namespace ``planned_path``, id 0 (each new plan replaces the previous line), green,
+    line width ``width`` (m), no lifetime (stays until replaced).
+    """
+    msg = Marker()
+    msg.header.stamp = time_msg(stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.ns = 'planned_path'
+    msg.id = 0
+    msg.type = Marker.LINE_STRIP
+    msg.action = Marker.ADD
+    msg.pose.orientation.w = 1.0
+    msg.scale.x = float(width)
+    msg.color.r, msg.color.g, msg.color.b, msg.color.a = 0.1, 0.8, 0.2, 1.0
+    msg.text = f'plan {int(plan_id)}'
+    msg.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in np.asarray(points)]
+    return msg

@@ -1,0 +1,331 @@
+"""
+Planner node: singularity-checked circle plans streamed on the control grid.
+
+At start (and whenever a map parameter changes: ``case``, ``nominal_scale``,
+``resolution_deg``, ``eps_d``) it computes the singularity map of the nominal arm and the
+semi-singular region (``freejoint_core.singularity``; about 0.1 s at 0.25 deg, during
+which the node does nothing else), publishes it as ``semi_singular_map``
+(nav_msgs/OccupancyGrid, transient local; 100 semi-singular, 0 nonsingular, -1 out of
+reach) and checks circles against it. A circle that enters the semi-singular region or
+leaves the reach is refused with the reason (``~/plan_circle`` answers it; a parameter
+change gets it back from ``ros2 param set``) and never streams: the running plan goes on.
+
+An accepted plan streams ``setpoint`` (freejoint_msgs/CartesianSetpoint) on the control
+grid of the ROS clock as ``docs/GRAPH.md`` lays down: triggered by every ``/clock``
+message in sim time (by a 1/control_period wall timer reading the system clock
+otherwise), each tick ``t_k = k dt`` with ``t_k <= now + lookahead dt`` published once,
+in order, carrying ``CircleQuintic.sample_tuple(k_plan dt)``. The planned path goes out as
+a LINE_STRIP on ``planned_path`` (visualization_msgs/Marker, transient local).
+
+With ``autostart`` the configured circle (parameters ``centre``, ``radius``, ``duration``,
+``start_angle``, ``direction``, ``start_delay``) starts at activation and again, anew,
+after every accepted change of those parameters.
+"""
+
+import math
+
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.trajectory import CircleQuintic
+from freejoint_msgs.msg import CartesianSetpoint
+from freejoint_msgs.srv import PlanCircle
+from nav_msgs.msg import OccupancyGrid
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock as ClockMsg
+from visualization_msgs.msg import Marker
+
+from .conversions import occupancy_grid, path_marker, setpoint_msg, time_ns
+from .planning import CIRCLE_KEYS, compute_model, grid_extent, make_circle, MAP_KEYS, RANGES
+from .planning import validate
+from .stream import Plan, SetpointStream
+
+NODE_NAME = 'freejoint_planner'
+
+# Setpoints: reliable, keep-last 100 (lockstep loses nothing); transient local so that a
+# controller started after the planner still gets the ticks already published ahead.
+SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# /clock: best effort accepts any publisher (rclcpp's ClockQoS is best effort).
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                       reliability=ReliabilityPolicy.BEST_EFFORT)
+
+MARKER_POINTS = 361
+
+
+def _range(name):
+    lo, hi = RANGES[name]
+    if isinstance(lo, int) and isinstance(hi, int):
+        return {'integer_range': [IntegerRange(from_value=lo, to_value=hi, step=1)]}
+    return {'floating_point_range': [FloatingPointRange(from_value=float(lo),
+                                                        to_value=float(hi))]}
+
+
+# name -> (default, description, extra descriptor fields)
+PARAMETERS = {
+    'case': ('horizontal', "Arm of Table I: 'horizontal' or 'vertical' (the singularity map "
+             'is the same for both: Da holds no gravity term).', {}),
+    'nominal_scale': (0.7, 'Nominal model = Table I masses, inertias and COMs times this '
+                      '(paper: 0.7). Changing it recomputes the map.', _range('nominal_scale')),
+    'resolution_deg': (0.25, 'Joint-space step of the singularity map (deg); 360 / value an '
+                       'even integer. 0.25 costs about 0.1 s. Changing it recomputes the map.',
+                       _range('resolution_deg')),
+    'eps_d': (1e-7, 'Semi-singular criterion on |det(Da Da^T)| (paper: 1e-7), > 0. Changing '
+              'it recomputes the map.', _range('eps_d')),
+    'grid_resolution': (0.01, 'Cell size of the semi_singular_map OccupancyGrid (m).',
+                        _range('grid_resolution')),
+    'frame_id': ('base_link', 'Frame of the setpoints, map and marker (the arm base).', {}),
+    'control_period': (0.001, 'Control period dt (s); setpoint k is stamped k * dt. Must '
+                       'match the simulator and controller.',
+                       dict(_range('control_period'), read_only=True)),
+    'lookahead': (20, 'Setpoints published ahead of ROS time (ticks).', _range('lookahead')),
+    'centre': ([0.0, 0.0], 'Circle centre (x, y) in m, base frame.', {}),
+    'radius': (0.2, 'Circle radius (m), > 0.', _range('radius')),
+    'duration': (5.0, 'Time of the revolution (s), > 0.', _range('duration')),
+    'start_angle': (0.0, 'Angle of the start point about the centre (rad), from +x.', {}),
+    'direction': (1, '+1 counter-clockwise, -1 clockwise.',
+                  {'integer_range': [IntegerRange(from_value=-1, to_value=1, step=2)]}),
+    'start_delay': (0.0, 'Delay from the start of a plan to its motion (s); the start point '
+                    'is held meanwhile.', _range('start_delay')),
+    'autostart': (True, 'Start the configured circle at activation and after every accepted '
+                  'change of its parameters.', {}),
+}
+
+
+class PlannerNode(Node):
+    """Thin ROS wrapper around freejoint_core's singularity analysis and CircleQuintic."""
+
+    def __init__(self):
+        super().__init__(NODE_NAME)
+        self._cfg = self._declare_parameters()
+        self._sim = self.get_parameter('use_sim_time').value
+        self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS))
+        self.get_logger().info(
+            f'singularity map computed in {self._model.seconds * 1e3:.0f} ms: '
+            f'{self._model.describe()}')
+        self._setpoint_pub = self.create_publisher(CartesianSetpoint, 'setpoint', SETPOINT_QOS)
+        self._map_pub = self.create_publisher(OccupancyGrid, 'semi_singular_map', LATCHED_QOS)
+        self._marker_pub = self.create_publisher(Marker, 'planned_path', LATCHED_QOS)
+        self._stream = SetpointStream(self._cfg['control_period'], self._cfg['lookahead'],
+                                      skip_late=not self._sim)
+        self._last_plan_id = 0
+        self._restarts_logged = 0
+        self._publish_map()
+        if self._cfg['autostart']:
+            circle = make_circle(self._cfg)
+            check = self._model.check(circle)
+            if check.ok:
+                self._execute(circle, self._cfg['start_delay'], check.margin, 'configured')
+            else:
+                self.get_logger().error(
+                    f'configured circle refused, nothing streams: {self._describe(circle)}: '
+                    f'{check.reason}')
+        self.create_subscription(ClockMsg, '/clock', self._on_clock, CLOCK_QOS)
+        self._timer = self.create_timer(self._cfg['control_period'], self._on_timer,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
+        if self._sim:
+            self._timer.cancel()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.create_service(PlanCircle, '~/plan_circle', self._on_plan_circle)
+        self.get_logger().info(
+            f"ready: {'sim time (/clock)' if self._sim else 'system time'}, "
+            f"dt {self._cfg['control_period']:g} s, lookahead {self._cfg['lookahead']} ticks")
+
+    # ---- parameters -------------------------------------------------------------------
+    def _declare_parameters(self):
+        """Declare every parameter once; fall back to the default on a bad override."""
+        cfg = {}
+        for name, (default, description, extra) in PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=description, **extra)
+            try:
+                value = self.declare_parameter(name, default, descriptor).value
+            except Exception as exc:  # bad type or out of range in the overrides
+                self.get_logger().error(f'parameter {name}: {exc}; using the default '
+                                        f'{default!r}')
+                value = self.declare_parameter(name, default, descriptor,
+                                               ignore_override=True).value
+            if name == 'centre':
+                value = list(value)
+            reason = validate({name: value})
+            if reason:
+                self.get_logger().error(f'parameter {reason}; using the default {default!r}')
+                self.set_parameters([Parameter(name, value=default)])
+                value = default
+            cfg[name] = value
+        return cfg
+
+    def _on_set_parameters(self, params):
+        """Validate a parameter change; re-check the circle; apply or refuse with a reason."""
+        new = dict(self._cfg)
+        sim = self._sim
+        for p in params:
+            if p.name == 'use_sim_time':
+                sim = bool(p.value)
+            elif p.name in new:
+                new[p.name] = list(p.value) if p.name == 'centre' else p.value
+        reason = validate(new)
+        if reason:
+            return self._refuse(reason)
+        changed = {k for k in new if new[k] != self._cfg[k]}
+        model = self._model
+        if changed & set(MAP_KEYS):
+            try:
+                model = compute_model(*(new[k] for k in MAP_KEYS))
+            except FreejointValueError as exc:
+                return self._refuse(str(exc))
+            self.get_logger().info(f'singularity map recomputed in {model.seconds * 1e3:.0f} '
+                                   f'ms: {model.describe()}')
+            plan = self._stream.plan
+            if plan is not None:
+                check = model.check(plan.trajectory)
+                if not check.ok:
+                    return self._refuse(f'the running plan {plan.plan_id} would enter the '
+                                        f'semi-singular region of the new map: {check.reason}')
+        circle = None
+        if changed & set(CIRCLE_KEYS):
+            circle = make_circle(new)
+            check = model.check(circle)
+            if not check.ok:
+                return self._refuse(f'circle refused, the running plan goes on: '
+                                    f'{self._describe(circle)}: {check.reason}')
+        # accepted: apply
+        self._cfg = new
+        self._stream.lookahead = int(new['lookahead'])
+        if model is not self._model or changed & {'grid_resolution', 'frame_id'}:
+            self._model = model
+            self._publish_map()
+        if circle is not None and new['autostart']:
+            self._execute(circle, new['start_delay'], check.margin, 'configured')
+        elif 'frame_id' in changed and self._stream.plan is not None:
+            self._publish_marker(self._stream.plan)
+        if sim != self._sim:
+            self._switch_time_source(sim)
+        return SetParametersResult(successful=True)
+
+    def _refuse(self, reason):
+        self.get_logger().warning(f'parameter change refused: {reason}',
+                                  throttle_duration_sec=1.0)
+        return SetParametersResult(successful=False, reason=reason)
+
+    def _switch_time_source(self, sim):
+        """Trigger on /clock (sim time) or the wall timer; restart on the new time base."""
+        self._sim = sim
+        self._stream.skip_late = not sim
+        self._stream.reset_time_base()
+        if sim:
+            self._timer.cancel()
+        else:
+            self._timer.reset()
+        self.get_logger().warning(
+            f"use_sim_time {sim}: streaming on {'/clock' if sim else 'system time'}; the "
+            'running plan starts again on the new time base')
+
+    # ---- plans ------------------------------------------------------------------------
+    @staticmethod
+    def _describe(circle):
+        c = circle.centre
+        return (f'circle centre ({c[0]:.6g}, {c[1]:.6g}) m radius {circle.radius:.6g} m '
+                f'duration {circle.duration:.6g} s')
+
+    def _execute(self, circle, start_delay, margin, source):
+        """Replace the running plan by ``circle``; it starts at the next trigger."""
+        self._last_plan_id += 1
+        plan = Plan(self._last_plan_id, circle, round(float(start_delay) * 1e9))
+        self._stream.start(plan)
+        self._publish_marker(plan)
+        self.get_logger().info(
+            f'plan {plan.plan_id} ({source}) accepted with margin {margin:.4f} m: '
+            f'{self._describe(circle)}, start delay {float(start_delay):g} s')
+        return plan.plan_id
+
+    def _on_plan_circle(self, request, response):
+        """Check a requested circle; if accepted and ``execute``, start it now."""
+        try:
+            circle = CircleQuintic(centre=tuple(float(v) for v in request.centre),
+                                   radius=request.radius, duration=request.duration,
+                                   start_angle=request.start_angle,
+                                   direction=int(request.direction))
+        except FreejointValueError as exc:
+            response.accepted = False
+            response.reason = f'bad request: {exc}'
+            response.margin = math.nan
+            response.plan_id = 0
+            self.get_logger().error(f'plan_circle: {response.reason}',
+                                    throttle_duration_sec=1.0)
+            return response
+        check = self._model.check(circle)
+        response.accepted = bool(check.ok)
+        response.margin = float(check.margin)
+        response.plan_id = 0
+        if not check.ok:
+            response.reason = f'{self._describe(circle)} refused: {check.reason}'
+            self.get_logger().warning(f'plan_circle: {response.reason}',
+                                      throttle_duration_sec=1.0)
+        elif request.execute:
+            response.plan_id = self._execute(circle, 0.0, check.margin, 'plan_circle')
+        else:
+            self.get_logger().info(f'plan_circle: {self._describe(circle)} accepted with '
+                                   f'margin {check.margin:.4f} m (not executed)')
+        return response
+
+    # ---- publishing -------------------------------------------------------------------
+    def _now_ns(self):
+        return self.get_clock().now().nanoseconds
+
+    def _publish_map(self):
+        cell = float(self._cfg['grid_resolution'])
+        extent = grid_extent(self._model.region.reach, cell)
+        grid = self._model.region.to_grid(extent, cell)
+        self._map_pub.publish(occupancy_grid(grid, extent, cell, self._cfg['frame_id'],
+                                             self._now_ns()))
+
+    def _publish_marker(self, plan):
+        self._marker_pub.publish(path_marker(plan.trajectory.points(MARKER_POINTS),
+                                             self._cfg['frame_id'], self._now_ns(),
+                                             plan.plan_id))
+
+    def _advance(self, now_ns):
+        frame_id = self._cfg['frame_id']
+        publish = self._setpoint_pub.publish
+        for sp in self._stream.advance(now_ns):
+            publish(setpoint_msg(sp, frame_id))
+        if self._stream.restarts != self._restarts_logged:
+            self._restarts_logged = self._stream.restarts
+            self.get_logger().warning(
+                f'ROS time went back to {now_ns * 1e-9:.6f} s: the stream starts over and the '
+                'running plan starts again')
+
+    def _on_clock(self, msg):
+        if self._sim:
+            self._advance(time_ns(msg.clock))
+
+    def _on_timer(self):
+        if not self._sim:
+            self._advance(self._now_ns())
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = PlannerNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

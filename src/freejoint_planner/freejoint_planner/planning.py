@@ -1,0 +1,230 @@
+"""
+The planner's configuration, singularity map and path check (plain Python, no ROS).
+
+The math is ``freejoint_core``'s: ``singularity.det_map`` / ``semi_singular`` /
+``check_path`` (paper, Sec. 3.2) on the nominal arm ``table1(case).scaled(nominal_scale)``
+and ``trajectory.CircleQuintic``. This module only validates the node's parameter values,
+bundles the map with what was computed from it, and samples a circle densely enough for
+``check_path``.
+"""
+
+from dataclasses import dataclass
+import math
+import time
+
+from freejoint_core.arm import CASES, table1
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.singularity import check_path, det_map, semi_singular
+from freejoint_core.trajectory import CircleQuintic
+import numpy as np
+
+# Parameters of the configured circle; an accepted change of any of them re-checks it.
+CIRCLE_KEYS = ('centre', 'radius', 'duration', 'start_angle', 'direction', 'start_delay')
+# Parameters of the singularity map; an accepted change of any of them recomputes it.
+MAP_KEYS = ('case', 'nominal_scale', 'resolution_deg', 'eps_d')
+
+# Accepted ranges (also the ParameterDescriptor ranges of the node).
+RANGES = {
+    'nominal_scale': (0.1, 10.0),
+    'resolution_deg': (0.1, 10.0),
+    'eps_d': (0.0, 1.0),            # exclusive lower bound
+    'grid_resolution': (0.001, 0.5),
+    'radius': (0.0, 10.0),          # exclusive lower bound
+    'duration': (0.0, 3600.0),      # exclusive lower bound
+    'start_delay': (0.0, 3600.0),
+    'control_period': (1e-5, 1.0),
+    'lookahead': (0, 1000),
+}
+
+# Largest arc length (m) between the points of a circle handed to check_path.
+CHECK_STEP = 5e-4
+
+
+def validate(cfg):
+    """
+    Return why a planner configuration is invalid, or '' if it is valid.
+
+    Parameters
+    ----------
+    cfg : dict
+        Parameter name -> value, as the node holds them (only the keys present are
+        checked; ``centre`` a sequence, ``direction`` an int, ...).
+
+    Returns
+    -------
+    str
+        The first problem found, naming the parameter, or ''.
+
+    """
+    def number(name):
+        value = cfg[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise FreejointValueError(f'{name}: expected a number, got {value!r}')
+        value = float(value)
+        if not math.isfinite(value):
+            raise FreejointValueError(f'{name}: expected a finite number, got {value}')
+        return value
+
+    try:
+        for name, (lo, hi) in RANGES.items():
+            if name not in cfg:
+                continue
+            value = number(name)
+            open_lo = name in ('eps_d', 'radius', 'duration')
+            if value < lo or (open_lo and value <= lo) or value > hi:
+                bound = f'({lo:g}' if open_lo else f'[{lo:g}'
+                raise FreejointValueError(f'{name}: expected a value in {bound}, {hi:g}], '
+                                          f'got {value:g}')
+        if 'lookahead' in cfg and cfg['lookahead'] != int(cfg['lookahead']):
+            raise FreejointValueError(f"lookahead: expected an integer, got {cfg['lookahead']}")
+        if 'resolution_deg' in cfg:
+            steps = 360.0 / float(cfg['resolution_deg'])
+            if abs(steps - round(steps)) > 1e-9 * steps or round(steps) % 2:
+                raise FreejointValueError(
+                    f"resolution_deg: 360 / {cfg['resolution_deg']:g} must be an even integer "
+                    '(e.g. 0.25, 0.5, 1.0)')
+        if 'control_period' in cfg:
+            dt = float(cfg['control_period'])
+            if abs(dt * 1e9 - round(dt * 1e9)) > 1e-3:
+                raise FreejointValueError(
+                    f'control_period: {dt:g} s is not a whole number of nanoseconds')
+        if 'case' in cfg and cfg['case'] not in CASES:
+            raise FreejointValueError(f"case: expected one of {CASES}, got {cfg['case']!r}")
+        if 'direction' in cfg and (isinstance(cfg['direction'], bool)
+                                   or cfg['direction'] not in (1, -1)):
+            raise FreejointValueError(f"direction: expected +1 or -1, got {cfg['direction']!r}")
+        if 'centre' in cfg:
+            centre = list(cfg['centre'])
+            if len(centre) != 2:
+                raise FreejointValueError(
+                    f'centre: expected 2 values (x, y) in m, got {len(centre)}: {centre}')
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       and math.isfinite(v) for v in centre):
+                raise FreejointValueError(f'centre: expected finite numbers, got {centre}')
+        if 'start_angle' in cfg:
+            number('start_angle')
+        if 'frame_id' in cfg and not str(cfg['frame_id']).strip():
+            raise FreejointValueError('frame_id: expected a frame name, got an empty string')
+    except FreejointValueError as exc:
+        return str(exc)
+    return ''
+
+
+def make_circle(cfg):
+    """Return the ``CircleQuintic`` of the configured circle in ``cfg`` (validated before)."""
+    return CircleQuintic(centre=tuple(float(v) for v in cfg['centre']),
+                         radius=float(cfg['radius']), duration=float(cfg['duration']),
+                         start_angle=float(cfg['start_angle']),
+                         direction=int(cfg['direction']))
+
+
+def circle_check_points(circle, max_step=CHECK_STEP):
+    """
+    Return points of the circle for ``check_path``, shape (N, 2), m.
+
+    Evenly spaced in angle with at most ``max_step`` of arc between neighbours, plus the
+    circle's nearest and farthest points from the base: the semi-singular region is a
+    union of annuli about the base, so the path's radial distance to it is smallest at
+    one of those two points whenever the path avoids it, and the margin is exact.
+
+    Parameters
+    ----------
+    circle : CircleQuintic
+        The path.
+    max_step : float
+        Largest arc length between sampled points (m), > 0.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N, 2)
+
+    """
+    num = max(721, int(math.ceil(2.0 * math.pi * circle.radius / max_step)) + 1)
+    pts = circle.points(num)
+    centre = circle.centre
+    dist = float(np.hypot(centre[0], centre[1]))
+    if dist > 0.0:
+        u = centre / dist
+        pts = np.vstack((pts, centre - circle.radius * u, centre + circle.radius * u))
+    return pts
+
+
+@dataclass(frozen=True)
+class SingularityModel:
+    """
+    A singularity map of the nominal arm and the region computed from it.
+
+    Attributes
+    ----------
+    case : str
+    nominal_scale : float
+    resolution_deg : float
+    eps_d : float
+    nominal : ArmParams
+        ``table1(case).scaled(nominal_scale)``.
+    region : SemiSingularRegion
+        ``semi_singular(det_map(nominal, resolution_deg), eps_d)``.
+    seconds : float
+        Wall time the computation took (s).
+
+    """
+
+    case: str
+    nominal_scale: float
+    resolution_deg: float
+    eps_d: float
+    nominal: object
+    region: object
+    seconds: float
+
+    def check(self, circle):
+        """Return the ``PathCheck`` of a circle against this region (and the reach)."""
+        return check_path(self.region, circle_check_points(circle))
+
+    def describe(self):
+        """Return a one-line summary of the region (for the log)."""
+        lo, hi = self.region.reach
+        bands = ', '.join(f'[{a:.4f}, {b:.4f}]' for a, b in self.region.intervals) or 'none'
+        return (f'semi-singular annuli {bands} m in reach [{lo:.4f}, {hi:.4f}] m '
+                f'(case {self.case}, nominal_scale {self.nominal_scale:g}, '
+                f'resolution {self.resolution_deg:g} deg, eps_d {self.eps_d:g})')
+
+
+def compute_model(case, nominal_scale, resolution_deg, eps_d):
+    """
+    Compute the singularity map and semi-singular region of the nominal arm.
+
+    Parameters
+    ----------
+    case : str
+        'horizontal' or 'vertical' (the map is the same for both: ``Da`` has no gravity).
+    nominal_scale : float
+        Nominal model = Table I scaled by this (paper: 0.7).
+    resolution_deg : float
+        Joint-space grid step (deg); 0.25 takes about 0.1 s.
+    eps_d : float
+        Criterion on ``|det(Da Da^T)|`` (paper: 1e-7).
+
+    Returns
+    -------
+    SingularityModel
+
+    """
+    start = time.perf_counter()
+    nominal = table1(case).scaled(nominal_scale)
+    region = semi_singular(det_map(nominal, resolution_deg), eps_d)
+    return SingularityModel(case=case, nominal_scale=float(nominal_scale),
+                            resolution_deg=float(resolution_deg), eps_d=float(eps_d),
+                            nominal=nominal, region=region,
+                            seconds=time.perf_counter() - start)
+
+
+def grid_extent(reach, cell):
+    """
+    Return the occupancy grid's ``(x_min, x_max, y_min, y_max)`` (m) for a reach annulus.
+
+    A square about the base whose half side is the arm's reach ``r_max`` rounded up to a
+    whole number of cells, so the grid has ``2 ceil(r_max / cell)`` cells a side.
+    """
+    half = math.ceil(float(reach[1]) / cell - 1e-9) * cell
+    return (-half, half, -half, half)

@@ -1,0 +1,203 @@
+"""
+Control-grid arithmetic and the setpoint stream of a plan (plain Python, no ROS).
+
+The rules are those of ``docs/GRAPH.md`` (lockstep protocol, item 5):
+
+* tick ``k`` has the stamp ``t_k = k * dt_ns`` integer nanoseconds of ROS time,
+  ``dt_ns = round(dt * 1e9)``;
+* whenever ROS time advances to ``now`` every not yet published tick with
+  ``t_k <= now + lookahead * dt_ns`` is published, in order, each exactly once;
+* tick ``k`` of a plan that starts at tick ``k0`` carries
+  ``CircleQuintic.sample_tuple((k - k0) * dt)`` (the offline runner's ``t_k = k dt``),
+  ``plan_time = (t_k - t_k0) * 1e-9`` and ``final = (k - k0) * dt > duration``; before the
+  start the start point is held (``plan_time < 0``), after the duration the end point.
+
+A plan starts at the first trigger after it was accepted, on the first tick at or after
+``now + start_delay`` that has not been published yet (ticks already published belong to
+the previous plan). With no plan at all nothing is published and the stream only follows
+the clock. If ROS time goes backwards (a simulator reset, a looped bag) the stream starts
+over on the new time base and the running plan starts again.
+"""
+
+from typing import NamedTuple
+
+
+def period_ns(dt):
+    """
+    Return the control period in integer nanoseconds, ``round(dt * 1e9)``.
+
+    Parameters
+    ----------
+    dt : float
+        Control period (s), > 0 and a whole number of nanoseconds.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        If ``dt`` is not positive or not a whole number of nanoseconds (to 1e-3 ns).
+
+    """
+    dt = float(dt)
+    if not dt > 0.0:
+        raise ValueError(f'control_period: expected > 0 s, got {dt}')
+    dt_ns = round(dt * 1e9)
+    if dt_ns < 1 or abs(dt * 1e9 - dt_ns) > 1e-3:
+        raise ValueError(f'control_period: {dt} s is not a whole number of nanoseconds')
+    return dt_ns
+
+
+def ceil_div(a, b):
+    """Return ``ceil(a / b)`` for integers (``b > 0``), exact for any size."""
+    return -((-a) // b)
+
+
+def first_tick_at_or_after(t_ns, dt_ns):
+    """Return the smallest tick ``k`` with ``k * dt_ns >= t_ns``."""
+    return ceil_div(t_ns, dt_ns)
+
+
+def last_tick_due(now_ns, dt_ns, lookahead):
+    """Return the largest tick ``k`` with ``k * dt_ns <= now_ns + lookahead * dt_ns``."""
+    return (now_ns + lookahead * dt_ns) // dt_ns
+
+
+def split_ns(t_ns):
+    """Return ``(sec, nanosec)`` of a ROS time given in integer nanoseconds (>= 0)."""
+    return divmod(int(t_ns), 1_000_000_000)
+
+
+class Setpoint(NamedTuple):
+    """One setpoint of the stream: what a ``CartesianSetpoint`` message carries."""
+
+    stamp_ns: int
+    px: float
+    py: float
+    vx: float
+    vy: float
+    ax: float
+    ay: float
+    plan_id: int
+    plan_time: float
+    final: bool
+
+
+class Plan:
+    """
+    A trajectory with an id and a start delay; its start tick is fixed when it starts.
+
+    Parameters
+    ----------
+    plan_id : int
+        Id carried by its setpoints (> 0).
+    trajectory : object
+        Has ``sample_tuple(t)`` and ``duration`` (``freejoint_core.trajectory.CircleQuintic``).
+    start_delay_ns : int
+        Delay (ns, >= 0) from the trigger at which the plan starts to its first tick.
+
+    """
+
+    def __init__(self, plan_id, trajectory, start_delay_ns=0):
+        self.plan_id = int(plan_id)
+        self.trajectory = trajectory
+        self.start_delay_ns = int(start_delay_ns)
+        self.start_tick = None          # fixed by SetpointStream.advance
+
+    def __repr__(self):
+        return (f'Plan(plan_id={self.plan_id}, trajectory={self.trajectory!r}, '
+                f'start_delay_ns={self.start_delay_ns}, start_tick={self.start_tick})')
+
+
+class SetpointStream:
+    """
+    Which setpoints are due when ROS time advances, each tick exactly once, in order.
+
+    Parameters
+    ----------
+    dt : float
+        Control period (s), a whole number of nanoseconds.
+    lookahead : int
+        Ticks published ahead of ROS time (>= 0).
+    skip_late : bool
+        If true (real time on the wall clock) ticks already in the past when they fall
+        due are skipped (counted in ``skipped``); if false (sim time) none is ever skipped.
+
+    """
+
+    def __init__(self, dt, lookahead=20, skip_late=False):
+        self.dt = float(dt)
+        self.dt_ns = period_ns(dt)
+        self.lookahead = int(lookahead)
+        if self.lookahead < 0:
+            raise ValueError(f'lookahead: expected >= 0 ticks, got {lookahead}')
+        self.skip_late = bool(skip_late)
+        self.plan = None
+        self.next_tick = None           # first tick not yet published (None: not started)
+        self.last_now_ns = None
+        self.restarts = 0               # times ROS time went backwards
+        self.skipped = 0                # late ticks skipped (skip_late only)
+
+    def start(self, plan):
+        """Replace the running plan by ``plan``; it starts at the next ``advance``."""
+        plan.start_tick = None
+        self.plan = plan
+
+    def reset_time_base(self):
+        """Forget the clock (a new time base): restart the stream and the running plan."""
+        self.next_tick = None
+        self.last_now_ns = None
+        if self.plan is not None:
+            self.plan.start_tick = None
+
+    def advance(self, now_ns):
+        """
+        Return the setpoints due at ROS time ``now_ns`` (int ns), marking them published.
+
+        Parameters
+        ----------
+        now_ns : int
+            Current ROS time (ns).
+
+        Returns
+        -------
+        list of Setpoint
+            In stamp order; empty when nothing is due or there is no plan.
+
+        """
+        now_ns = int(now_ns)
+        if self.last_now_ns is not None and now_ns < self.last_now_ns:
+            self.restarts += 1
+            self.reset_time_base()
+        self.last_now_ns = now_ns
+        dt_ns = self.dt_ns
+        first = first_tick_at_or_after(now_ns, dt_ns)
+        if self.next_tick is None:
+            self.next_tick = first
+        elif self.next_tick < first and (self.skip_late or self.plan is None):
+            if self.plan is not None:
+                self.skipped += first - self.next_tick
+            self.next_tick = first
+        plan = self.plan
+        if plan is None:
+            return []
+        if plan.start_tick is None:
+            plan.start_tick = max(self.next_tick,
+                                  first_tick_at_or_after(now_ns + plan.start_delay_ns, dt_ns))
+        last = last_tick_due(now_ns, dt_ns, self.lookahead)
+        out = [self.setpoint(k) for k in range(self.next_tick, last + 1)]
+        if last >= self.next_tick:
+            self.next_tick = last + 1
+        return out
+
+    def setpoint(self, k):
+        """Return the setpoint of tick ``k`` of the running plan (which must have started)."""
+        plan = self.plan
+        traj = plan.trajectory
+        k_plan = k - plan.start_tick
+        t = k_plan * self.dt
+        px, py, vx, vy, ax, ay = traj.sample_tuple(t)
+        return Setpoint(k * self.dt_ns, px, py, vx, vy, ax, ay, plan.plan_id,
+                        (k_plan * self.dt_ns) * 1e-9, t > traj.duration)

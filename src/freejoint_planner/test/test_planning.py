@@ -1,0 +1,114 @@
+"""The planner's parameter validation, circle sampling, path check and grid extent."""
+import re
+
+from freejoint_core.arm import table1
+from freejoint_core.singularity import det_map, semi_singular
+from freejoint_core.trajectory import CircleQuintic
+from freejoint_planner.planning import circle_check_points, compute_model, grid_extent
+from freejoint_planner.planning import make_circle, validate
+import numpy as np
+import pytest
+
+DEFAULTS = {
+    'case': 'horizontal', 'nominal_scale': 0.7, 'resolution_deg': 0.25, 'eps_d': 1e-7,
+    'grid_resolution': 0.01, 'frame_id': 'base_link', 'control_period': 0.001,
+    'lookahead': 20, 'centre': [0.0, 0.0], 'radius': 0.2, 'duration': 5.0,
+    'start_angle': 0.0, 'direction': 1, 'start_delay': 0.0, 'autostart': True,
+}
+
+
+@pytest.fixture(scope='module')
+def model():
+    return compute_model('horizontal', 0.7, 1.0, 1e-7)
+
+
+def test_the_paper_configuration_is_valid():
+    assert validate(DEFAULTS) == ''
+
+
+@pytest.mark.parametrize('name,value,match', [
+    ('radius', -0.1, r'radius: expected a value in \(0, 10\], got -0.1'),
+    ('radius', 0.0, 'radius: expected a value in'),
+    ('eps_d', 0.0, r'eps_d: expected a value in \(0, 1\], got 0'),
+    ('eps_d', -1e-7, 'eps_d'),
+    ('resolution_deg', 0.05, r'resolution_deg: expected a value in \[0.1, 10\]'),
+    ('resolution_deg', 1.6, r'360 / 1.6 must be an even integer'),      # 225 steps
+    ('resolution_deg', 0.7, r'360 / 0.7 must be an even integer'),      # 514.3 steps
+    ('centre', [0.1], r'centre: expected 2 values \(x, y\) in m, got 1'),
+    ('centre', [0.1, 0.2, 0.3], 'centre: expected 2 values'),
+    ('centre', [0.1, float('nan')], 'centre: expected finite numbers'),
+    ('direction', 0, r'direction: expected \+1 or -1, got 0'),
+    ('case', 'diagonal', "case: expected one of .*, got 'diagonal'"),
+    ('duration', 0.0, 'duration'),
+    ('start_delay', -1.0, 'start_delay'),
+    ('lookahead', -1, 'lookahead'),
+    ('control_period', 0.0010000005, 'control_period: .* not a whole number'),
+    ('grid_resolution', 1.0, 'grid_resolution'),
+    ('frame_id', ' ', 'frame_id'),
+    ('start_angle', float('inf'), 'start_angle: expected a finite number'),
+    ('nominal_scale', True, 'nominal_scale: expected a number'),
+])
+def test_a_bad_value_is_refused_with_a_reason_naming_it(name, value, match):
+    reason = validate({**DEFAULTS, name: value})
+    assert reason.startswith(name + ':')
+    assert re.search(match, reason), reason
+
+
+def test_make_circle_builds_the_configured_circle():
+    c = make_circle({**DEFAULTS, 'centre': [0.1, -0.2], 'direction': -1, 'start_angle': 1.0})
+    assert c.centre.tolist() == [0.1, -0.2]
+    assert (c.radius, c.duration, c.start_angle, c.direction) == (0.2, 5.0, 1.0, -1)
+
+
+def test_check_points_are_dense_and_include_the_nearest_and_farthest_points():
+    pts = circle_check_points(CircleQuintic(centre=(0.5, 0.0), radius=0.2))
+    # 2 pi 0.2 / 5e-4 = 2513.3 -> 2514 steps, 2515 points, plus the two extremes
+    assert pts.shape == (2517, 2)
+    assert pts[-2].tolist() == pytest.approx([0.3, 0.0], abs=1e-15)
+    assert pts[-1].tolist() == pytest.approx([0.7, 0.0], abs=1e-15)
+    steps = np.hypot(*np.diff(pts[:-2], axis=0).T)
+    assert steps.max() <= 5e-4
+
+
+def test_check_points_of_a_circle_about_the_base_are_the_circle_only():
+    pts = circle_check_points(CircleQuintic(radius=0.01))
+    assert pts.shape == (721, 2)
+    assert np.allclose(np.hypot(pts[:, 0], pts[:, 1]), 0.01, rtol=0, atol=1e-15)
+
+
+def test_model_is_the_core_region_of_the_nominal_arm(model):
+    ref = semi_singular(det_map(table1('horizontal').scaled(0.7), 1.0), 1e-7)
+    assert np.array_equal(model.region.intervals, ref.intervals)
+    assert model.region.reach == (0.0, 1.5)
+    assert model.seconds > 0.0
+
+
+def test_the_paper_circle_passes_with_the_exact_radial_margin(model):
+    check = model.check(CircleQuintic())
+    lo = model.region.intervals[0, 0]
+    assert check.ok and check.reason == ''
+    assert check.margin == pytest.approx(lo - 0.2, abs=1e-12)
+    assert check.margin > 0.25
+
+
+def test_an_off_centre_circle_reaches_its_margin_at_the_nearest_point(model):
+    check = model.check(CircleQuintic(centre=(0.1, 0.05), radius=0.2))
+    lo = model.region.intervals[0, 0]
+    assert check.ok
+    assert check.margin == pytest.approx(lo - (np.hypot(0.1, 0.05) + 0.2), abs=1e-12)
+
+
+@pytest.mark.parametrize('centre,radius', [((0.5, 0.0), 0.2), ((1.5, 0.0), 0.2),
+                                           ((0.0, 0.0), 0.6)])
+def test_a_circle_into_the_semi_singular_region_or_out_of_reach_is_refused(
+        model, centre, radius):
+    check = model.check(CircleQuintic(centre=centre, radius=radius))
+    assert not check.ok
+    assert check.margin < 0.0
+    assert 'semi-singular annulus' in check.reason or 'reach' in check.reason
+
+
+def test_grid_extent_is_a_square_of_whole_cells_covering_the_reach():
+    assert grid_extent((0.0, 1.5), 0.01) == pytest.approx((-1.5, 1.5, -1.5, 1.5))
+    assert grid_extent((0.0, 1.5), 0.4) == pytest.approx((-1.6, 1.6, -1.6, 1.6))
+    assert grid_extent((0.2, 1.0), 0.25) == pytest.approx((-1.0, 1.0, -1.0, 1.0))

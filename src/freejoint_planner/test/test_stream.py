@@ -1,0 +1,154 @@
+"""The control-grid arithmetic and the setpoint stream, by hand-derived ticks and stamps."""
+from freejoint_core.trajectory import CircleQuintic
+from freejoint_planner.stream import ceil_div, first_tick_at_or_after, last_tick_due
+from freejoint_planner.stream import period_ns, Plan, SetpointStream, split_ns
+import pytest
+
+MS = 1_000_000  # ns
+
+
+def test_period_is_rounded_to_whole_nanoseconds():
+    assert period_ns(0.001) == MS
+    assert period_ns(0.0025) == 2_500_000
+    assert period_ns(2e-9) == 2
+
+
+@pytest.mark.parametrize('dt,match', [(0.0, 'expected > 0'), (-0.001, 'expected > 0'),
+                                      (1.5e-9, 'whole number of nanoseconds'),
+                                      (1e-10, 'whole number of nanoseconds')])
+def test_period_that_is_not_whole_nanoseconds_is_refused(dt, match):
+    with pytest.raises(ValueError, match=match):
+        period_ns(dt)
+
+
+def test_integer_ceil_division_rounds_up_for_both_signs():
+    assert ceil_div(7, 2) == 4
+    assert ceil_div(6, 2) == 3
+    assert ceil_div(-7, 2) == -3
+    assert ceil_div(10**30 + 1, 10**9) == 10**21 + 1
+
+
+def test_first_tick_at_or_after_and_last_tick_due_on_and_off_the_grid():
+    assert first_tick_at_or_after(0, MS) == 0
+    assert first_tick_at_or_after(3 * MS, MS) == 3
+    assert first_tick_at_or_after(2_500_000, MS) == 3
+    assert last_tick_due(3 * MS, MS, 20) == 23
+    assert last_tick_due(2_500_000, MS, 20) == 22
+    assert last_tick_due(2_500_000, MS, 0) == 2
+
+
+def test_split_ns_gives_sec_and_nanosec():
+    assert split_ns(1_500_000_001) == (1, 500_000_001)
+    assert split_ns(999_999_999) == (0, 999_999_999)
+
+
+def _ticks(setpoints):
+    return [sp.stamp_ns // MS for sp in setpoints]
+
+
+def _stream(lookahead=20, skip_late=False):
+    return SetpointStream(0.001, lookahead, skip_late=skip_late)
+
+
+def test_nothing_streams_without_a_plan():
+    s = _stream()
+    assert s.advance(0) == []
+    assert s.advance(5 * MS) == []
+
+
+def test_each_tick_up_to_now_plus_lookahead_is_published_once_in_order():
+    s = _stream()
+    s.start(Plan(1, CircleQuintic()))
+    assert _ticks(s.advance(0)) == list(range(0, 21))
+    assert s.advance(0) == []                               # same time again: nothing new
+    assert _ticks(s.advance(1 * MS)) == [21]
+    assert _ticks(s.advance(5_500_000)) == [22, 23, 24, 25]   # 25.5 ms -> tick 25
+    assert _ticks(s.advance(5_999_999)) == []
+    assert _ticks(s.advance(6 * MS)) == [26]
+
+
+def test_lookahead_zero_publishes_the_ticks_at_or_before_now():
+    s = _stream(lookahead=0)
+    s.start(Plan(1, CircleQuintic()))
+    assert _ticks(s.advance(0)) == [0]
+    assert _ticks(s.advance(2_500_000)) == [1, 2]
+
+
+def test_setpoint_k_is_the_circle_sampled_at_k_dt_since_the_plan_start():
+    circle = CircleQuintic(duration=0.0105)
+    s = _stream(lookahead=0)
+    s.start(Plan(3, circle))
+    out = s.advance(0) + s.advance(7 * MS) + s.advance(12 * MS)
+    assert _ticks(out) == list(range(13))
+    for k, sp in enumerate(out):
+        assert (sp.px, sp.py, sp.vx, sp.vy, sp.ax, sp.ay) == circle.sample_tuple(k * 0.001)
+        assert sp.stamp_ns == k * MS
+        assert sp.plan_id == 3
+        assert sp.plan_time == (k * MS) * 1e-9
+    # 10 ms <= 10.5 ms: still moving; 11 ms: the first tick past the duration
+    assert [sp.final for sp in out] == [False] * 11 + [True, True]
+    assert (out[12].vx, out[12].vy) == (0.0, 0.0)
+
+
+def test_a_plan_accepted_later_starts_at_the_first_tick_at_or_after_now():
+    circle = CircleQuintic()
+    s = _stream()
+    assert s.advance(7_300_000) == []
+    s.start(Plan(1, circle))
+    out = s.advance(7_300_000)
+    assert _ticks(out) == list(range(8, 28))                # ceil(7.3) .. floor(27.3)
+    assert out[0].plan_time == 0.0
+    assert (out[0].px, out[0].py) == (0.2, 0.0)
+    assert (out[1].px, out[1].py) == circle.sample_tuple(0.001)[:2]
+
+
+def test_start_delay_holds_the_start_point_before_the_plan_time_zero():
+    circle = CircleQuintic()
+    s = _stream(lookahead=0)
+    s.start(Plan(1, circle, start_delay_ns=10_500_000))      # -> tick ceil(10.5) = 11
+    out = s.advance(0) + s.advance(12 * MS)
+    assert out[0].plan_time == (-11 * MS) * 1e-9
+    assert out[0].plan_time == pytest.approx(-0.011, rel=1e-15)
+    assert (out[0].px, out[0].py, out[0].vx, out[0].vy) == (0.2, 0.0, -0.0, 0.0)
+    assert out[11].plan_time == 0.0
+    assert (out[12].px, out[12].py) == circle.sample_tuple(0.001)[:2]
+
+
+def test_a_new_plan_starts_at_the_first_unpublished_tick():
+    s = _stream()
+    s.start(Plan(1, CircleQuintic()))
+    first = s.advance(0)                                    # ticks 0 .. 20 of plan 1
+    s.start(Plan(2, CircleQuintic(radius=0.1)))
+    assert s.advance(0) == []
+    nxt = s.advance(1 * MS)
+    assert _ticks(first) == list(range(21)) and {sp.plan_id for sp in first} == {1}
+    assert _ticks(nxt) == [21]
+    assert (nxt[0].plan_id, nxt[0].plan_time, nxt[0].px) == (2, 0.0, 0.1)
+
+
+def test_time_going_backwards_restarts_the_stream_and_the_plan():
+    s = _stream(lookahead=2)
+    s.start(Plan(1, CircleQuintic()))
+    s.advance(0)
+    s.advance(5 * MS)
+    out = s.advance(1 * MS)
+    assert s.restarts == 1
+    assert _ticks(out) == [1, 2, 3]
+    assert [sp.plan_time for sp in out] == [0.0, 0.001, 0.002]
+
+
+def test_sim_time_never_skips_a_tick_but_real_time_skips_the_late_ones():
+    sim = _stream()
+    sim.start(Plan(1, CircleQuintic()))
+    sim.advance(0)
+    assert _ticks(sim.advance(100 * MS)) == list(range(21, 121))
+    wall = _stream(skip_late=True)
+    wall.start(Plan(1, CircleQuintic()))
+    wall.advance(0)
+    assert _ticks(wall.advance(100 * MS)) == list(range(100, 121))
+    assert wall.skipped == 79
+
+
+def test_negative_lookahead_is_refused():
+    with pytest.raises(ValueError, match='lookahead'):
+        SetpointStream(0.001, -1)
