@@ -1,0 +1,1 @@
+"""freejoint run tools: recorder, player and offline analysis of rosbag2 (MCAP) bags."""

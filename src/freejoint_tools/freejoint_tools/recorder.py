@@ -1,0 +1,374 @@
+"""
+Recorder node: every topic of a run (or a list) into a rosbag2 bag with MCAP storage.
+
+What ``ros2 bag record -s mcap`` does, for this workspace where rosbag2 is not installed:
+
+* topics are discovered periodically (``discovery_period``, wall time), so publishers that
+  join late are recorded from their first message on; ``topics: []`` (the default) records
+  every topic with a publisher (hidden ``_``-topics only if listed), else only those listed;
+* each subscription adapts to the publishers' offered QoS: reliable if all of them are,
+  transient local if all of them are (the latched map and marker), keep-last with a deep
+  queue (``queue_depth``) so nothing is dropped while the recorder catches up;
+* messages are taken serialized (``raw=True``: the CDR bytes, no decode and re-encode) and
+  written with their receive time from the node's ROS clock as MCAP ``log_time`` - sim time
+  under ``use_sim_time:=true`` (see below);
+* the MCAP chunk is closed and handed to the OS every ``flush_period`` (wall s), so a
+  SIGKILL loses at most that much of the tail; SIGINT and SIGTERM take what is already
+  queued, then finalise the bag (summary, statistics, ``metadata.yaml``) and print what
+  was received per topic (and any loss the middleware reported).
+
+Timestamps: with ``use_sim_time:=true`` the log times are sim time (the lockstep ``/clock``,
+``t_k = k dt``), the same time base as the header stamps. ``ros2 bag play --clock`` (and
+this package's player) publishes ``/clock`` from the log times, so nodes replaying the bag
+with ``use_sim_time`` see a clock consistent with the stamps of the data - which is what
+they need; with system-time log times the replayed clock would be ~1.7e9 s while the stamps
+were ~0 s. The recorded ``/clock`` topic itself is skipped by the player when it publishes
+its own clock (``ros2 bag play --clock`` users: add ``--exclude-topics /clock``).
+"""
+
+import datetime
+import importlib
+import os
+import shutil
+import signal
+import sys
+import time
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from .bagfile import BagError, BagWriter
+from .qos import profile_to_dict, subscription_qos
+from .typedefs import DefinitionError, Definitions
+
+DEFAULT_DIR = 'bags'
+# Files an earlier run of the tools leaves in a bag directory (what overwrite may delete).
+_OWN_FILES = ('metadata.yaml', 'metrics.json')
+_OWN_SUFFIXES = ('.mcap', '.png', '.yaml.tmp', '.json.tmp')
+
+
+def _descriptor(description, ptype, read_only=True, float_range=None, int_range=None):
+    d = ParameterDescriptor(description=description, type=ptype, read_only=read_only)
+    if float_range:
+        d.floating_point_range = [FloatingPointRange(
+            from_value=float_range[0], to_value=float_range[1], step=0.0)]
+    if int_range:
+        d.integer_range = [IntegerRange(from_value=int_range[0], to_value=int_range[1],
+                                        step=1)]
+    return d
+
+
+def parse_custom_data(items):
+    """
+    Parse ``['key=value', ...]`` into a dict; raise ValueError naming a bad item.
+
+    Keys are non-empty and unique; values may be empty.
+    """
+    out = {}
+    for item in items or []:
+        key, sep, value = str(item).partition('=')
+        key = key.strip()
+        if not sep or not key:
+            raise ValueError('custom_data item %r is not key=value' % item)
+        if key in out:
+            raise ValueError('custom_data key %r given twice' % key)
+        out[key] = value.strip()
+    return out
+
+
+def _is_hidden(name):
+    return any(part.startswith('_') for part in name.split('/') if part)
+
+
+def _message_class(msgtype):
+    pkg, kind, name = msgtype.split('/')
+    module = importlib.import_module('%s.%s' % (pkg, kind))
+    return getattr(module, name)
+
+
+class Recorder(Node):
+    """Record the run's topics into a rosbag2 (v9, MCAP) bag; see the module notes."""
+
+    def __init__(self, **kwargs):
+        super().__init__('recorder', **kwargs)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.declare_parameter('output', '', _descriptor(
+            'Bag directory to create (default bags/rosbag2_<date-time>); must not exist '
+            'unless overwrite is true', ParameterType.PARAMETER_STRING))
+        self.declare_parameter('topics', [''], _descriptor(
+            'Topics to record; empty list = every topic with a publisher',
+            ParameterType.PARAMETER_STRING_ARRAY))
+        self.declare_parameter('exclude', [''], _descriptor(
+            'Topics not to record', ParameterType.PARAMETER_STRING_ARRAY))
+        self.declare_parameter('custom_data', [''], _descriptor(
+            'Run information as key=value items (e.g. case=horizontal, variant=robust, '
+            'seed=0), stored in metadata.yaml custom_data and at once in the MCAP file',
+            ParameterType.PARAMETER_STRING_ARRAY))
+        self.declare_parameter('overwrite', False, _descriptor(
+            'Replace an existing bag directory at output (only one holding bag files)',
+            ParameterType.PARAMETER_BOOL))
+        self.declare_parameter('discovery_period', 0.05, _descriptor(
+            'Wall period of topic discovery (s)', ParameterType.PARAMETER_DOUBLE,
+            float_range=(0.01, 10.0)))
+        self.declare_parameter('flush_period', 0.25, _descriptor(
+            'Wall period of closing the MCAP chunk and flushing the file (s): the most '
+            'a SIGKILL can lose', ParameterType.PARAMETER_DOUBLE, float_range=(0.01, 60.0)))
+        self.declare_parameter('chunk_size', 1 << 20, _descriptor(
+            'MCAP chunk size (bytes); a chunk also closes at every flush',
+            ParameterType.PARAMETER_INTEGER, int_range=(4096, 1 << 28)))
+        self.declare_parameter('queue_depth', 5000, _descriptor(
+            'Subscription queue depth (messages) per topic', ParameterType.PARAMETER_INTEGER,
+            int_range=(1, 1000000)))
+        p = self._params
+        self._wanted = {self.resolve_topic_name(t) for t in p['topics']}
+        self._excluded = {self.resolve_topic_name(t) for t in p['exclude']}
+        output = p['output'] or os.path.join(
+            DEFAULT_DIR, datetime.datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S'))
+        if p['overwrite']:
+            _remove_old_bag(output)
+        self.writer = BagWriter(output, p['custom_data'], chunk_size=p['chunk_size'],
+                                ros_distro=os.environ.get('ROS_DISTRO') or 'jazzy')
+        self.output = output
+        self._defs = Definitions()
+        self._subs = {}          # topic -> subscription
+        self._channels = {}      # topic -> bag channel id
+        self.received = {}       # topic -> messages received
+        self.lost = {}           # topic -> messages the middleware reported lost
+        self._write_errors = 0
+        self._skipped = set()
+        self._warned = set()
+        self._closed = False
+        wall = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(p['discovery_period'], self._discover, clock=wall)
+        self.create_timer(p['flush_period'], self._flush, clock=wall)
+        self.get_logger().info('recording into %s (%s)' % (
+            output, 'topics: ' + ', '.join(sorted(self._wanted)) if self._wanted
+            else 'all topics'))
+        self._discover()
+
+    # -- parameters -------------------------------------------------------------------
+    _params = {}
+
+    def _on_set_parameters(self, params):
+        values = dict(self._params)
+        for param in params:
+            value = param.value
+            if param.name in ('topics', 'exclude'):
+                value = [v for v in (value or []) if v]
+                bad = [v for v in value if not isinstance(v, str) or ' ' in v]
+                if bad:
+                    return SetParametersResult(successful=False,
+                                               reason='%s: bad topic name %r'
+                                               % (param.name, bad[0]))
+            elif param.name == 'custom_data':
+                try:
+                    value = parse_custom_data(v for v in (value or []) if v)
+                except ValueError as exc:
+                    return SetParametersResult(successful=False, reason=str(exc))
+            elif param.name in ('discovery_period', 'flush_period'):
+                if value is None or not value > 0.0:
+                    return SetParametersResult(successful=False,
+                                               reason='%s must be > 0 s' % param.name)
+            values[param.name] = value
+        self._params = values
+        return SetParametersResult(successful=True)
+
+    # -- discovery --------------------------------------------------------------------
+    def _warn_once(self, key, text):
+        if key not in self._warned:
+            self._warned.add(key)
+            self.get_logger().warning(text)
+
+    def _discover(self):
+        if self._closed:
+            return
+        for name, types in self.get_topic_names_and_types():
+            if name in self._subs or name in self._skipped:
+                continue
+            if self._wanted:
+                if name not in self._wanted:
+                    continue
+            elif _is_hidden(name):
+                continue
+            if name in self._excluded:
+                continue
+            if len(types) != 1:
+                self._warn_once(('types', name), 'not recording %s: it has several types %s'
+                                % (name, ', '.join(types)))
+                continue
+            infos = self.get_publishers_info_by_topic(name)
+            if infos:
+                self._start(name, types[0], infos)
+
+    def _start(self, name, msgtype, infos):
+        log = self.get_logger()
+        try:
+            msg_class = _message_class(msgtype)
+        except (ImportError, AttributeError, ValueError) as exc:
+            self._skipped.add(name)
+            log.error('not recording %s: type %s is not installed (%s)' % (name, msgtype, exc))
+            return
+        advertised = str(infos[0].topic_type_hash or '')
+        if advertised.startswith('RIHS01_') is False:
+            advertised = ''
+        try:
+            msgdef, digest = self._defs.lookup(msgtype)
+        except DefinitionError as exc:
+            msgdef, digest = '', ''
+            log.warning('recording %s without a message definition: %s' % (name, exc))
+        if advertised and digest and advertised != digest:
+            log.warning("%s: the publisher's type hash %s differs from the installed "
+                        "definition of %s (%s); the bag keeps the publisher's hash"
+                        % (name, advertised, msgtype, digest))
+        offered = [i.qos_profile for i in infos]
+        channel = self.writer.add_topic(name, msgtype, msgdef, advertised or digest,
+                                        [profile_to_dict(q) for q in offered])
+        qos = subscription_qos(offered, self._params['queue_depth'])
+        self.received[name] = 0
+        self.lost[name] = 0
+        self._channels[name] = channel
+        self._subs[name] = self.create_subscription(
+            msg_class, name, self._callback(name, channel), qos, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(message_lost=self._lost_callback(name)))
+        log.info('recording %s [%s] (%s, %s)' % (
+            name, msgtype, qos.reliability.name.lower(), qos.durability.name.lower()))
+
+    def _callback(self, name, channel):
+        write = self.writer.write
+        now = self.get_clock().now
+        received = self.received
+
+        def on_message(data):
+            received[name] += 1
+            try:
+                write(channel, now().nanoseconds, data)
+            except (OSError, ValueError) as exc:
+                self._write_errors += 1
+                self.get_logger().error('cannot write a message of %s: %s' % (name, exc),
+                                        throttle_duration_sec=5.0)
+        return on_message
+
+    def _lost_callback(self, name):
+        def on_lost(info):
+            self.lost[name] += int(info.total_count_change)
+            self.get_logger().warning('%s: the middleware reports %d message(s) lost' % (
+                name, info.total_count_change), throttle_duration_sec=1.0)
+        return on_lost
+
+    # -- flushing and closing ---------------------------------------------------------
+    def _flush(self):
+        if self._closed:
+            return
+        try:
+            self.writer.flush()
+        except OSError as exc:
+            self.get_logger().error('cannot flush the bag: %s' % exc,
+                                    throttle_duration_sec=5.0)
+
+    def total_received(self):
+        """Return the number of messages received so far."""
+        return sum(self.received.values())
+
+    def close(self):
+        """Finalise the bag and log what was recorded per topic."""
+        if self._closed:
+            return
+        self._closed = True
+        for sub in self._subs.values():
+            self.destroy_subscription(sub)
+        self._subs = {}
+        self.writer.close()
+        lines = ['bag %s finalised: %d messages on %d topics'
+                 % (self.output, self.total_received(), len(self._channels))]
+        for name in sorted(self._channels):
+            written = self.writer.count(self._channels[name])
+            lines.append('  %s: received %d, written %d, lost (middleware) %d'
+                         % (name, self.received[name], written, self.lost[name]))
+        if self._write_errors:
+            lines.append('  %d message(s) could not be written' % self._write_errors)
+        self.get_logger().info('\n'.join(lines))
+
+
+def _remove_old_bag(path):
+    if not os.path.exists(path):
+        return
+    if not os.path.isdir(path):
+        raise BagError(path, 'exists and is not a bag directory, not overwriting')
+    names = os.listdir(path)
+    foreign = [n for n in names if n not in _OWN_FILES and not n.endswith(_OWN_SUFFIXES)]
+    if foreign:
+        raise BagError(path, 'holds %s, which is not a bag file; not overwriting' % foreign[0])
+    shutil.rmtree(path)
+
+
+class _Stop:
+    """SIGINT/SIGTERM set a flag; the main loop then drains the queues and finalises."""
+
+    def __init__(self):
+        self.signum = None
+
+    def __call__(self, signum, frame):
+        self.signum = signum
+
+
+def spin_until_stopped(node, executor, stop, drain_quiet=0.1, drain_max=2.0):
+    """Spin until a signal; then take what is still queued (bounded) before returning."""
+    while stop.signum is None and rclpy.ok():
+        executor.spin_once(timeout_sec=0.1)
+    deadline = time.monotonic() + drain_max
+    last_count, last_change = node.total_received(), time.monotonic()
+    while rclpy.ok() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.02)
+        count = node.total_received()
+        if count != last_count:
+            last_count, last_change = count, time.monotonic()
+        elif time.monotonic() - last_change >= drain_quiet:
+            break
+
+
+def make_executor():
+    """Return rclpy's EventsExecutor (about 4x less CPU per message), else the default."""
+    try:
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    except ImportError:  # pragma: no cover - present in rclpy 7.1 (Jazzy)
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor()
+
+
+def main(args=None):
+    """Run the recorder until SIGINT/SIGTERM; finalise the bag; exit 0 (1 if it cannot)."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = _Stop()
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    node = None
+    try:
+        node = Recorder()
+    except (BagError, InvalidParameterValueException, OSError) as exc:
+        print('recorder: error: %s' % exc, file=sys.stderr)
+        rclpy.try_shutdown()
+        return 1
+    executor = make_executor()
+    executor.add_node(node)
+    try:
+        spin_until_stopped(node, executor, stop)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.close()
+        executor.remove_node(node)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
