@@ -1,0 +1,255 @@
+"""
+Offline analysis of recorded runs: metrics records and the paper's figures from bags.
+
+Usage::
+
+    analyze BAG [BAG ...] [--figures-dir DIR] [--no-plots] [--passive-joint NAME]
+            [--max-ticks N] [--state-topic T] [--joint-topic T] [--theta]
+    python -m freejoint_tools.analyze ...        (what ``make analyze BAGS=...`` runs)
+
+For each bag the per-tick arrays are computed from the recorded ``ControllerState`` and
+``JointState`` messages only - decoded with the message definitions stored in the bag -
+by ``freejoint_control.records.arrays_from_messages``, the same conversion the demo applies
+to the messages it receives live, and turned into a record by
+``freejoint_core.metrics.compute_record`` with ``source: 'bag'``. The record is written
+beside the bag's files as ``<bag>/metrics.json`` and all records are printed as the
+offline runner's table.
+
+Run information comes from the bag's ``custom_data`` (the recorder's ``custom_data``
+parameter: ``case``, ``variant``, ``seed``, and optionally ``passive_joint``,
+``max_ticks``, ``diverged_at_s``, ``nominal_scale``); without it the case is taken from the
+bag's directory name if that is a case name, the variant is ``'unknown'`` and the seed
+None (a warning says so). Command-line options override the bag.
+
+Figures (PNG): per bag ``fig3_<bag>.png`` (Case 1, horizontal) or ``fig4_<bag>.png``
+(Case 2, vertical) - the paper's Figs. 3/4: desired and actual path in the x-y plane,
+tracking errors, active torques, passive joint angle, theta-hat over time; once
+``fig2_singularity.png`` - the paper's Fig. 2, recomputed with ``freejoint_core.singularity``
+from the nominal parameters, with the recorded planner map (OccupancyGrid) and planned path
+(Marker) of the first bag overlaid when they are recorded; with several bags
+``compare.png`` side by side. Per-bag figures go into the bag directory, the others into
+the bags' common parent directory, unless ``--figures-dir`` names one directory for all.
+
+Bad input (a missing, truncated or foreign bag, a bag without the run's topics) gives one
+line ``analyze: error: <file>: <problem>`` on stderr and exit code 1. A bag whose recorder
+was killed (not finalised) is analysed up to its last complete chunk, with a warning.
+"""
+
+import argparse
+import os
+import sys
+
+from .bagfile import BagError, open_bag
+
+STATE_TYPE = 'freejoint_msgs/msg/ControllerState'
+JOINT_TYPE = 'sensor_msgs/msg/JointState'
+GRID_TYPE = 'nav_msgs/msg/OccupancyGrid'
+MARKER_TYPE = 'visualization_msgs/msg/Marker'
+DEFAULT_PASSIVE = 'joint3'
+
+
+class AnalysisError(Exception):
+    """Bad input for the analysis; ``str()`` is one line naming the file."""
+
+
+def _pick_topic(bag, msgtype, preferred, given):
+    if given:
+        if given not in bag.topics:
+            raise AnalysisError('%s: no topic %s in the bag' % (bag.path, given))
+        return given
+    names = bag.topics_of_type(msgtype)
+    names = [n for n in names if bag.topics[n].count] or names
+    if preferred in names:
+        return preferred
+    if len(names) == 1:
+        return names[0]
+    if not names:
+        raise AnalysisError('%s: no %s topic in the bag (topics: %s)' % (
+            bag.path, msgtype, ', '.join(sorted(bag.topics)) or 'none'))
+    raise AnalysisError('%s: several %s topics (%s); choose one with an option'
+                        % (bag.path, msgtype, ', '.join(names)))
+
+
+def run_info(bag, overrides=None):
+    """
+    Return ``(info dict, warnings)`` of a bag: case, variant, seed, passive_joint, ...
+
+    From the bag's custom_data, then the command-line ``overrides`` (non-None values).
+    """
+    from freejoint_core.arm import CASES
+    data = dict(bag.custom_data)
+    warnings = []
+    info = {'case': data.get('case'), 'variant': data.get('variant'),
+            'seed': data.get('seed'), 'passive_joint': data.get('passive_joint'),
+            'max_ticks': data.get('max_ticks'), 'diverged_at_s': data.get('diverged_at_s'),
+            'nominal_scale': data.get('nominal_scale')}
+    for key, value in (overrides or {}).items():
+        if value is not None:
+            info[key] = value
+    name = os.path.basename(os.path.normpath(bag.path))
+    if not info['case']:
+        if name in CASES:
+            info['case'] = name
+            warnings.append('%s: no run information in the bag; case %r taken from its '
+                            'name' % (bag.path, name))
+        else:
+            info['case'] = 'unknown'
+            warnings.append('%s: no run information in the bag (case unknown)' % bag.path)
+    if not info['variant']:
+        info['variant'] = 'unknown'
+    info['passive_joint'] = info['passive_joint'] or DEFAULT_PASSIVE
+
+    def number(key, kind):
+        value = info[key]
+        if value in (None, '', 'None', 'none', 'null'):
+            info[key] = None
+            return
+        try:
+            info[key] = kind(value)
+        except (TypeError, ValueError):
+            raise AnalysisError('%s: run information %s=%r is not a number'
+                                % (bag.path, key, value))
+    number('seed', int)
+    number('max_ticks', int)
+    number('diverged_at_s', float)
+    number('nominal_scale', float)
+    return info, warnings
+
+
+def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
+    """
+    Compute the record of one bag.
+
+    Returns
+    -------
+    tuple
+        ``(record, trace, warnings)``: the metrics record (``source: 'bag'``), a dict of
+        per-tick arrays for the plots (the ``compute_record`` arrays plus ``name``,
+        ``info``, the recorded ``grid`` and ``path`` if any), and warning lines.
+
+    Raises
+    ------
+    BagError, AnalysisError
+        With a one-line message naming the file.
+
+    """
+    from freejoint_control.records import arrays_from_messages
+    from freejoint_core.errors import FreejointValueError
+    from freejoint_core.metrics import compute_record
+    bag = open_bag(path)
+    warnings = [n for n in bag.notes]
+    info, more = run_info(bag, overrides)
+    warnings += more
+    states_topic = _pick_topic(bag, STATE_TYPE, '/controller_state', state_topic)
+    joints_topic = _pick_topic(bag, JOINT_TYPE, '/joint_states', joint_topic)
+    store = bag.typestore()
+    states = [m for _, m in bag.decode(states_topic, store)]
+    joints = [m for _, m in bag.decode(joints_topic, store)]
+    try:
+        arrays = arrays_from_messages(states, joints, info['passive_joint'],
+                                      max_ticks=info['max_ticks'])
+        record = compute_record(info['case'], info['variant'], info['seed'],
+                                diverged_at_s=info['diverged_at_s'], source='bag', **arrays)
+    except (ValueError, FreejointValueError) as exc:
+        raise AnalysisError('%s: %s (topics %s, %s)' % (bag.path, exc, states_topic,
+                                                          joints_topic))
+    trace = dict(arrays)
+    trace['name'] = os.path.basename(os.path.normpath(bag.path))
+    trace['info'] = info
+    trace['finalised'] = bag.finalised
+    trace['joints'] = _joint_positions(joints, arrays['t'])
+    trace['grid'] = trace['path'] = None
+    grids = bag.topics_of_type(GRID_TYPE)
+    if grids and bag.topics[grids[0]].count:
+        trace['grid'] = bag.decode(grids[0], store)[-1][1]
+    markers = bag.topics_of_type(MARKER_TYPE)
+    if markers and bag.topics[markers[0]].count:
+        trace['path'] = bag.decode(markers[0], store)[-1][1]
+    return record, trace, warnings
+
+
+def _joint_positions(joint_states, t):
+    """Return ``{joint name: positions (N,)}`` at the tick times ``t`` (first per stamp)."""
+    import numpy as np
+    wanted = {int(round(v * 1e9)) for v in t}
+    first = {}
+    for msg in joint_states:
+        ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+        if ns in wanted and ns not in first:
+            first[ns] = msg
+    stamps = [int(round(v * 1e9)) for v in t]
+    if not stamps or any(ns not in first for ns in stamps):
+        return {}
+    names = list(first[stamps[0]].name)
+    out = {}
+    for i, name in enumerate(names):
+        try:
+            out[name] = np.array([float(first[ns].position[list(first[ns].name).index(name)])
+                                  for ns in stamps])
+        except (ValueError, IndexError):
+            continue
+    return out
+
+
+def _parse(argv):
+    parser = argparse.ArgumentParser(
+        prog='analyze', description='Metrics and the paper\'s figures from recorded bags.')
+    parser.add_argument('bags', nargs='+', metavar='BAG', help='bag directories')
+    parser.add_argument('--figures-dir', default=None,
+                        help='write every figure here (default: per-bag figures into the '
+                        'bag, the others into the bags\' common parent)')
+    parser.add_argument('--no-plots', action='store_true', help='only the metrics')
+    parser.add_argument('--passive-joint', default=None,
+                        help='passive joint name (default: from the bag, else joint3)')
+    parser.add_argument('--max-ticks', type=int, default=None,
+                        help='use only the first N ticks (default: from the bag, else all)')
+    parser.add_argument('--case', default=None, help='override the case of every bag')
+    parser.add_argument('--variant', default=None, help='override the variant of every bag')
+    parser.add_argument('--seed', type=int, default=None, help='override the seed')
+    parser.add_argument('--state-topic', default=None, help='ControllerState topic')
+    parser.add_argument('--joint-topic', default=None, help='JointState topic')
+    parser.add_argument('--theta', action='store_true', help='table with theta_final')
+    return parser.parse_args(argv)
+
+
+def main(argv=None):
+    """Analyse the bags named on the command line; return the exit code."""
+    opts = _parse(sys.argv[1:] if argv is None else argv)
+    from freejoint_core.metrics import format_table, write_records
+    overrides = {'case': opts.case, 'variant': opts.variant, 'seed': opts.seed,
+                 'passive_joint': opts.passive_joint, 'max_ticks': opts.max_ticks}
+    records, traces = [], []
+    for path in opts.bags:
+        try:
+            record, trace, warnings = analyse_bag(path, overrides, opts.state_topic,
+                                                  opts.joint_topic)
+        except (BagError, AnalysisError) as exc:
+            print('analyze: error: %s' % exc, file=sys.stderr)
+            return 1
+        for line in warnings:
+            print('analyze: warning: %s' % line, file=sys.stderr)
+        try:
+            write_records(os.path.join(path, 'metrics.json'), [record])
+        except OSError as exc:
+            print('analyze: error: %s: cannot write metrics.json: %s'
+                  % (path, exc.strerror), file=sys.stderr)
+            return 1
+        records.append(record)
+        traces.append(trace)
+    print(format_table(records, theta=opts.theta))
+    if not opts.no_plots:
+        from .plots import write_figures
+        try:
+            written = write_figures(traces, [os.path.normpath(p) for p in opts.bags],
+                                    opts.figures_dir)
+        except OSError as exc:
+            print('analyze: error: %s: cannot write a figure: %s'
+                  % (exc.filename or opts.figures_dir, exc.strerror), file=sys.stderr)
+            return 1
+        for path in written:
+            print('figure: %s' % path)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,192 @@
+"""
+Player node: republish a recorded bag with ``/clock``, as ``ros2 bag play --clock`` does.
+
+Parameters: ``bag`` (the bag directory), ``rate`` (playback speed factor), ``clock``
+(publish ``/clock`` from the bag's log times - sim time if it was recorded with
+``use_sim_time`` - before each message whose time advanced; the recorded ``/clock`` topic
+is then not republished), ``topics`` / ``exclude`` (which topics; default all),
+``start_delay`` (wall s before the first message), ``wait_for_subscribers`` (wait until
+every publisher has that many matched subscriptions, at most ``wait_timeout`` s),
+``queue_depth`` (publisher depth where the recording does not know it).
+
+Each topic is republished with the QoS recorded for it (reliability, durability; the
+latched map and marker stay transient local), the messages as recorded (the serialized
+bytes, no decode), in the bag's file order = the order the recorder received them, paced
+by their log times divided by ``rate``. At the end the player waits until every reliable
+subscriber acknowledged everything, logs what it played, and exits (code 0; 1 if the bag
+cannot be read: one line naming the file).
+"""
+
+import sys
+import time
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
+import rclpy
+from rclpy.duration import Duration
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+
+from .bagfile import BagError, open_bag
+from .qos import publisher_qos
+from .recorder import _message_class
+
+
+def _descriptor(description, ptype, float_range=None, int_range=None):
+    d = ParameterDescriptor(description=description, type=ptype, read_only=True)
+    if float_range:
+        d.floating_point_range = [FloatingPointRange(
+            from_value=float_range[0], to_value=float_range[1], step=0.0)]
+    if int_range:
+        d.integer_range = [IntegerRange(from_value=int_range[0], to_value=int_range[1],
+                                        step=1)]
+    return d
+
+
+class Player(Node):
+    """Republish a bag; see the module notes."""
+
+    def __init__(self, **kwargs):
+        super().__init__('player', **kwargs)
+        self._params = {}
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.declare_parameter('bag', '', _descriptor('Bag directory to play',
+                                                      ParameterType.PARAMETER_STRING))
+        self.declare_parameter('rate', 1.0, _descriptor(
+            'Playback speed factor (2.0 = twice as fast)', ParameterType.PARAMETER_DOUBLE,
+            float_range=(0.001, 1000.0)))
+        self.declare_parameter('clock', True, _descriptor(
+            'Publish /clock from the log times (the recorded /clock is not republished)',
+            ParameterType.PARAMETER_BOOL))
+        self.declare_parameter('topics', [''], _descriptor(
+            'Topics to play; empty list = all', ParameterType.PARAMETER_STRING_ARRAY))
+        self.declare_parameter('exclude', [''], _descriptor(
+            'Topics not to play', ParameterType.PARAMETER_STRING_ARRAY))
+        self.declare_parameter('start_delay', 0.0, _descriptor(
+            'Wall time to wait before the first message (s)', ParameterType.PARAMETER_DOUBLE,
+            float_range=(0.0, 3600.0)))
+        self.declare_parameter('wait_for_subscribers', 0, _descriptor(
+            'Wait until every publisher has this many matched subscriptions',
+            ParameterType.PARAMETER_INTEGER, int_range=(0, 1000)))
+        self.declare_parameter('wait_timeout', 10.0, _descriptor(
+            'Longest wait for subscribers, and for acknowledgements at the end (s)',
+            ParameterType.PARAMETER_DOUBLE, float_range=(0.0, 3600.0)))
+        self.declare_parameter('queue_depth', 1000, _descriptor(
+            'Publisher depth where the recording does not know it',
+            ParameterType.PARAMETER_INTEGER, int_range=(1, 1000000)))
+        p = self._params
+        if not p['bag']:
+            raise BagError('bag', 'no bag given (-p bag:=<directory>)')
+        self.bag = open_bag(p['bag'])
+        for note in self.bag.notes:
+            self.get_logger().warning(note)
+        wanted = {self.resolve_topic_name(t) for t in p['topics']}
+        excluded = {self.resolve_topic_name(t) for t in p['exclude']}
+        if p['clock']:
+            excluded.add('/clock')
+        self._pubs = {}
+        for name, topic in sorted(self.bag.topics.items()):
+            if (wanted and name not in wanted) or name in excluded or not topic.count:
+                continue
+            try:
+                msg_class = _message_class(topic.type)
+            except (ImportError, AttributeError, ValueError):
+                self.get_logger().error('not playing %s: type %s is not installed'
+                                        % (name, topic.type))
+                continue
+            self._pubs[name] = self.create_publisher(
+                msg_class, name, publisher_qos(topic.qos, p['queue_depth']))
+        self._clock_pub = None
+        if p['clock']:
+            self._clock_pub = self.create_publisher(
+                Clock, '/clock', QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        self.played = dict.fromkeys(self._pubs, 0)
+
+    def _on_set_parameters(self, params):
+        values = dict(self._params)
+        for param in params:
+            value = param.value
+            if param.name in ('topics', 'exclude'):
+                value = [v for v in (value or []) if v]
+            elif param.name == 'rate' and not (value or 0.0) > 0.0:
+                return SetParametersResult(successful=False, reason='rate must be > 0')
+            values[param.name] = value
+        self._params = values
+        return SetParametersResult(successful=True)
+
+    def wait_for_subscribers(self):
+        """Wait until each publisher has the wanted number of subscribers (bounded)."""
+        need = self._params['wait_for_subscribers']
+        if not need:
+            return True
+        deadline = time.monotonic() + self._params['wait_timeout']
+        while time.monotonic() < deadline:
+            if all(pub.get_subscription_count() >= need for pub in self._pubs.values()):
+                return True
+            time.sleep(0.01)
+        self.get_logger().warning('not every topic has %d subscriber(s) after %.1f s; '
+                                  'playing anyway' % (need, self._params['wait_timeout']))
+        return False
+
+    def play(self):
+        """Publish the bag's messages paced by their log times; return the count."""
+        rate = self._params['rate']
+        time.sleep(self._params['start_delay'])
+        selected = [m for m in self.bag.messages if m[0] in self._pubs]
+        if not selected:
+            self.get_logger().warning('nothing to play')
+            return 0
+        t0 = selected[0][1]
+        wall0 = time.monotonic()
+        last_clock = None
+        due_ns = 0
+        for name, log_time, _, data in selected:
+            due_ns = max(due_ns, log_time - t0)
+            wait = wall0 + due_ns * 1e-9 / rate - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            if self._clock_pub is not None and (last_clock is None or log_time > last_clock):
+                clock = Clock()
+                clock.clock.sec, clock.clock.nanosec = divmod(log_time, 1_000_000_000)
+                self._clock_pub.publish(clock)
+                last_clock = log_time
+            self._pubs[name].publish(data)
+            self.played[name] += 1
+        return len(selected)
+
+    def finish(self):
+        """Wait (bounded) until reliable subscribers acknowledged everything; log counts."""
+        timeout = Duration(seconds=self._params['wait_timeout'])
+        for pub in list(self._pubs.values()) + ([self._clock_pub] if self._clock_pub else []):
+            pub.wait_for_all_acked(timeout)
+        self.get_logger().info('played %d messages from %s: %s' % (
+            sum(self.played.values()), self.bag.path,
+            ', '.join('%s %d' % kv for kv in sorted(self.played.items()))))
+
+
+def main(args=None):
+    """Play the bag once and exit (0; 1 if it cannot be read)."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = Player()
+        node.wait_for_subscribers()
+        node.play()
+        node.finish()
+    except (BagError, InvalidParameterValueException) as exc:
+        print('player: error: %s' % exc, file=sys.stderr)
+        return 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,231 @@
+"""
+The paper's figures from analysed bags (matplotlib, Agg, PNG; no pyplot state).
+
+* :func:`figure2` - Fig. 2: (a) the singular samples of ``|det(Da Da^T)| <= eps_d`` in
+  joint space (q2, q3; any q1) and (b) the semi-singular annuli in Cartesian space, both
+  recomputed by ``freejoint_core.singularity`` from the nominal Table I parameters, with
+  the recorded planner map (OccupancyGrid, shaded) and planned path (Marker) overlaid when
+  the bag has them, and the run's recorded path and joint trajectory;
+* :func:`figure_run` - Figs. 3/4 of one run: path in the x-y plane (desired and actual),
+  tracking errors, active torques, passive joint angle, theta-hat over time, error norm;
+* :func:`figure_compare` - several runs side by side.
+"""
+
+import os
+
+import matplotlib
+matplotlib.use('Agg')
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.patches import Circle, Wedge  # noqa: E402
+import numpy as np  # noqa: E402
+
+DPI = 72
+FIG_NUMBER = {'horizontal': 3, 'vertical': 4}
+CASE_TITLE = {'horizontal': 'Case 1 (horizontal motion)',
+              'vertical': 'Case 2 (vertical motion)'}
+
+
+def _label(trace):
+    info = trace['info']
+    seed = '' if info['seed'] is None else ', seed %d' % info['seed']
+    return '%s (%s%s)' % (trace['name'], info['variant'], seed)
+
+
+def run_figure_name(trace):
+    """Return the file name of a run's figure: fig3_<bag>.png, fig4_<bag>.png or run_."""
+    number = FIG_NUMBER.get(trace['info']['case'])
+    return ('fig%d_%s.png' % (number, trace['name'])) if number else (
+        'run_%s.png' % trace['name'])
+
+
+def figure_run(trace, path):
+    """Write Fig. 3/4 of one run to ``path``."""
+    t = trace['t']
+    p, p_d = trace['p'], trace['p_d']
+    err_mm = 1000.0 * (p - p_d)
+    fig = Figure(figsize=(12.0, 6.6))
+    axes = fig.subplots(2, 3)
+    ax = axes[0, 0]
+    ax.plot(p_d[:, 0], p_d[:, 1], 'k--', lw=1.2, label='desired')
+    ax.plot(p[:, 0], p[:, 1], 'C3', lw=1.0, label='actual')
+    ax.plot(p_d[0, 0], p_d[0, 1], 'ko', ms=4)
+    ax.set_aspect('equal', adjustable='datalim')
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title('(a) end-effector path')
+    ax.legend(loc='upper right', fontsize=8)
+    ax = axes[0, 1]
+    ax.plot(t, err_mm[:, 0], label='$e_x$')
+    ax.plot(t, err_mm[:, 1], label='$e_y$')
+    ax.set_xlabel('t [s]')
+    ax.set_ylabel('error [mm]')
+    ax.set_title('(b) tracking errors')
+    ax.legend(fontsize=8)
+    ax = axes[0, 2]
+    for i in range(trace['tau'].shape[1]):
+        ax.plot(t, trace['tau'][:, i], lw=0.8, label=r'$\tau_%d$' % (i + 1))
+    ax.set_xlabel('t [s]')
+    ax.set_ylabel('torque [N m]')
+    ax.set_title('(c) active joint torques')
+    ax.legend(fontsize=8)
+    ax = axes[1, 0]
+    ax.plot(t, np.degrees(trace['q_passive']), 'C2')
+    ax.set_xlabel('t [s]')
+    ax.set_ylabel('$q_3$ [deg]')
+    ax.set_title('(d) passive joint angle')
+    ax = axes[1, 1]
+    theta = np.atleast_2d(trace['theta'])
+    for i in range(theta.shape[1]):
+        ax.plot(t, theta[:, i], lw=1.0, label=r'$\hat\theta_%d$' % (i + 1))
+    ax.set_xlabel('t [s]')
+    ax.set_ylabel(r'$\hat\theta$')
+    ax.set_title(r'(e) adaptive estimates $\hat\theta$')
+    ax.legend(fontsize=7, ncol=2)
+    ax = axes[1, 2]
+    norm = np.hypot(err_mm[:, 0], err_mm[:, 1])
+    ax.semilogy(t, np.maximum(norm, 1e-6), 'C4')
+    ax.set_xlabel('t [s]')
+    ax.set_ylabel(r'$\|p - p_d\|$ [mm]')
+    ax.set_title('(f) error norm')
+    for ax in axes.flat:
+        ax.grid(True, alpha=0.3)
+    case = trace['info']['case']
+    fig.suptitle('%s - %s, from the bag%s' % (
+        CASE_TITLE.get(case, 'case %s' % case), _label(trace),
+        '' if trace['finalised'] else ' (not finalised)'))
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def figure2(trace, path, resolution_deg=1.0):
+    """Write Fig. 2 (singular regions; see the module notes) to ``path``."""
+    from freejoint_core.arm import table1
+    from freejoint_core.singularity import det_map, EPS_D, semi_singular
+    info = trace['info']
+    case = info['case'] if info['case'] in FIG_NUMBER else 'horizontal'
+    scale = info.get('nominal_scale') or 0.7
+    nominal = table1(case).scaled(scale)
+    dmap = det_map(nominal, resolution_deg)
+    region = semi_singular(dmap, EPS_D)
+    fig = Figure(figsize=(11.0, 5.2))
+    ax_j, ax_c = fig.subplots(1, 2)
+    mask = np.asarray(region.singular_mask, dtype=float)
+    ax_j.imshow(np.ma.masked_equal(mask.T, 0.0), origin='lower', extent=(0, 360, 0, 360),
+                cmap='Reds', vmin=0.0, vmax=1.2, interpolation='nearest', aspect='auto')
+    joints = trace.get('joints') or {}
+    if 'joint2' in joints and 'joint3' in joints:
+        q2 = np.degrees(joints['joint2']) % 360.0
+        q3 = np.degrees(joints['joint3']) % 360.0
+        ax_j.plot(q2, q3, '.', ms=1.0, color='C0', label='run (q2, q3)')
+        ax_j.legend(loc='upper right', fontsize=8)
+    ax_j.set_xlim(-6, 366)      # the q2 = 0 band sits on the edge
+    ax_j.set_ylim(-6, 366)
+    ax_j.set_xlabel('$q_2$ [deg]')
+    ax_j.set_ylabel('$q_3$ [deg]')
+    ax_j.set_title(r'(a) joint space: singular ($|\det(\hat D_a \hat D_a^T)| \leq %g$, red)'
+                   % region.eps_d, fontsize=10)
+    lo, hi = region.reach
+    grid = trace.get('grid')
+    if grid is not None and grid.info.width and grid.info.height:
+        data = np.asarray(grid.data, dtype=float).reshape(grid.info.height, grid.info.width)
+        x0, y0 = grid.info.origin.position.x, grid.info.origin.position.y
+        res = grid.info.resolution
+        shade = np.ma.masked_where(data <= 0, data)
+        ax_c.imshow(shade, origin='lower', cmap='Greys', vmin=0, vmax=200, alpha=0.6,
+                    extent=(x0, x0 + res * grid.info.width, y0, y0 + res * grid.info.height),
+                    interpolation='nearest')
+    for a, b in region.intervals:
+        ax_c.add_patch(Wedge((0.0, 0.0), b, 0.0, 360.0, width=max(b - a, 1e-4),
+                             color='C3', alpha=0.35, lw=0))
+    ax_c.add_patch(Circle((0.0, 0.0), hi, fill=False, ls='--', color='k', lw=0.8))
+    if lo > 0:
+        ax_c.add_patch(Circle((0.0, 0.0), lo, fill=False, ls='--', color='k', lw=0.8))
+    marker = trace.get('path')
+    if marker is not None and len(marker.points):
+        xs = [pt.x for pt in marker.points]
+        ys = [pt.y for pt in marker.points]
+        ax_c.plot(xs, ys, 'k-', lw=1.5, label='planned path (recorded Marker)')
+    else:
+        ax_c.plot(trace['p_d'][:, 0], trace['p_d'][:, 1], 'k-', lw=1.5,
+                  label='desired path (recorded setpoints)')
+    ax_c.plot(trace['p'][:, 0], trace['p'][:, 1], 'C0', lw=0.8, label='actual path')
+    ax_c.set_xlim(-hi * 1.05, hi * 1.05)
+    ax_c.set_ylim(-hi * 1.05, hi * 1.05)
+    ax_c.set_aspect('equal')
+    ax_c.set_xlabel('x [m]')
+    ax_c.set_ylabel('y [m]')
+    ax_c.set_title('(b) Cartesian space: semi-singular annuli (red)%s' % (
+        ', recorded map (grey)' if grid is not None else ''), fontsize=10)
+    ax_c.legend(loc='lower right', fontsize=8)
+    for ax in (ax_j, ax_c):
+        ax.grid(True, alpha=0.3)
+    fig.suptitle('Fig. 2 - recomputed from the nominal Table I parameters (x%.2f), '
+                 '%g deg grid; run %s' % (scale, resolution_deg, trace['name']))
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def figure_compare(traces, path):
+    """Write the runs side by side (paths, error norm, passive angle, torques) to ``path``."""
+    fig = Figure(figsize=(14.0, 4.4))
+    ax_p, ax_e, ax_q, ax_t = fig.subplots(1, 4)
+    for i, tr in enumerate(traces):
+        color = 'C%d' % (i % 10)
+        label = _label(tr)
+        if i == 0:
+            ax_p.plot(tr['p_d'][:, 0], tr['p_d'][:, 1], 'k--', lw=1.0, label='desired')
+        ax_p.plot(tr['p'][:, 0], tr['p'][:, 1], color=color, lw=0.9, label=label)
+        err = 1000.0 * np.hypot(*(tr['p'] - tr['p_d']).T)
+        ax_e.semilogy(tr['t'], np.maximum(err, 1e-6), color=color, lw=0.9, label=label)
+        ax_q.plot(tr['t'], np.degrees(tr['q_passive']), color=color, lw=0.9, label=label)
+        ax_t.plot(tr['t'], np.max(np.abs(tr['tau']), axis=1), color=color, lw=0.8,
+                  label=label)
+    ax_p.set_aspect('equal', adjustable='datalim')
+    ax_p.set_xlabel('x [m]')
+    ax_p.set_ylabel('y [m]')
+    ax_p.set_title('path')
+    ax_e.set_xlabel('t [s]')
+    ax_e.set_ylabel(r'$\|p - p_d\|$ [mm]')
+    ax_e.set_title('tracking error')
+    ax_q.set_xlabel('t [s]')
+    ax_q.set_ylabel('$q_3$ [deg]')
+    ax_q.set_title('passive joint')
+    ax_t.set_xlabel('t [s]')
+    ax_t.set_ylabel(r'max$_i |\tau_i|$ [N m]')
+    ax_t.set_title('largest active torque')
+    for ax in (ax_p, ax_e, ax_q, ax_t):
+        ax.grid(True, alpha=0.3)
+    ax_p.legend(fontsize=7)
+    fig.suptitle('%d runs side by side (from their bags)' % len(traces))
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def write_figures(traces, bag_paths, figures_dir=None):
+    """
+    Write every figure of the analysed runs; return the paths written.
+
+    Per run its Fig. 3/4, once Fig. 2 (from the first run), and with several runs the
+    comparison. Into ``figures_dir`` if given, else per-run figures into each bag and the
+    others into the bags' common parent directory.
+    """
+    written = []
+    if figures_dir:
+        os.makedirs(figures_dir, exist_ok=True)
+        common = figures_dir
+    else:
+        parents = [os.path.dirname(os.path.abspath(p)) for p in bag_paths]
+        common = os.path.commonpath(parents) if parents else '.'
+        common = os.path.relpath(common) if not os.path.isabs(bag_paths[0]) else common
+    for trace, bag in zip(traces, bag_paths):
+        out_dir = figures_dir or bag
+        written.append(figure_run(trace, os.path.join(out_dir, run_figure_name(trace))))
+    if traces:
+        written.append(figure2(traces[0], os.path.join(common, 'fig2_singularity.png')))
+    if len(traces) > 1:
+        written.append(figure_compare(traces, os.path.join(common, 'compare.png')))
+    return written
+

@@ -1,0 +1,99 @@
+"""Fixtures of the freejoint_tools tests: bags written in-process, the test publisher."""
+import importlib.util
+import os
+import subprocess
+import sys
+
+import pytest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+PUBLISHER = os.path.join(HERE, '..', 'nodes', 'tools_publisher.py')
+
+
+def _load_publisher():
+    spec = importlib.util.spec_from_file_location('tools_publisher', PUBLISHER)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope='session')
+def publisher_module():
+    """Give the test publisher module (its ``tick_messages(k)``, ``latched_messages()``)."""
+    return _load_publisher()
+
+
+class BagMaker:
+    """Write bags of a lockstep-like run in-process with BagWriter (no recorder process)."""
+
+    def __init__(self, module):
+        self.module = module
+
+    def __call__(self, path, ticks, custom_data=None, finalise=True, chunk_size=64 * 1024,
+                 flush_every=0):
+        """
+        Write ``ticks`` ticks (joint_states, setpoint, controller_state, /clock) and the map.
+
+        Returns the dict topic -> list of the rclpy messages written, in order.
+        """
+        from rclpy.serialization import serialize_message
+
+        from freejoint_tools.bagfile import BagWriter, default_qos_dict
+        from freejoint_tools.typedefs import Definitions
+        defs = Definitions()
+        writer = BagWriter(path, custom_data, chunk_size=chunk_size)
+        grid, marker = self.module.latched_messages()
+        topics = [('/joint_states', 'sensor_msgs/msg/JointState', 'volatile'),
+                  ('/setpoint', 'freejoint_msgs/msg/CartesianSetpoint', 'transient_local'),
+                  ('/controller_state', 'freejoint_msgs/msg/ControllerState', 'volatile'),
+                  ('/clock', 'rosgraph_msgs/msg/Clock', 'volatile'),
+                  ('/semi_singular_map', 'nav_msgs/msg/OccupancyGrid', 'transient_local'),
+                  ('/planned_path', 'visualization_msgs/msg/Marker', 'transient_local')]
+        channels = {}
+        for name, msgtype, durability in topics:
+            text, digest = defs.lookup(msgtype)
+            channels[name] = writer.add_topic(name, msgtype, text, digest,
+                                              [default_qos_dict(durability=durability)])
+        written = {name: [] for name, _, _ in topics}
+
+        def put(name, t_ns, msg):
+            writer.write(channels[name], t_ns, serialize_message(msg))
+            written[name].append(msg)
+
+        put('/semi_singular_map', 0, grid)
+        put('/planned_path', 0, marker)
+        from rosgraph_msgs.msg import Clock
+        for k in range(ticks):
+            js, sp, cs = self.module.tick_messages(k)
+            t_ns = k * self.module.DT_NS
+            clock = Clock()
+            clock.clock = js.header.stamp
+            put('/clock', t_ns, clock)
+            put('/joint_states', t_ns, js)
+            put('/setpoint', t_ns, sp)
+            put('/controller_state', t_ns, cs)
+            if flush_every and (k + 1) % flush_every == 0:
+                writer.flush()
+        if finalise:
+            writer.close()
+        else:
+            writer.abandon()
+        return written
+
+
+@pytest.fixture
+def make_bag(publisher_module):
+    """Give ``make_bag(path, ticks, custom_data=None, finalise=True, ...)``."""
+    return BagMaker(publisher_module)
+
+
+def run_analyze(*args, timeout=120.0):
+    """Run ``python -m freejoint_tools.analyze args`` (what make analyze runs)."""
+    return subprocess.run([sys.executable, '-m', 'freejoint_tools.analyze', *args],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture
+def analyze():
+    """Give ``analyze(*args)`` -> CompletedProcess of the analysis command line."""
+    return run_analyze
