@@ -2,9 +2,9 @@
 A lockstep-like run without the real nodes: publishes what the graph publishes per tick.
 
 Per control tick k (stamp t_k = k * dt): ``/clock`` (if --clock), ``joint_states``
-(sensor_msgs/JointState, joints joint1..3), ``setpoint`` (freejoint_msgs/CartesianSetpoint, transient local)
-and ``controller_state`` (freejoint_msgs/ControllerState), each reliable keep-last 100 as
-in docs/GRAPH.md; before the ticks, once, the latched ``semi_singular_map``
+(sensor_msgs/JointState, joints joint1..3), ``setpoint`` (freejoint_msgs/CartesianSetpoint,
+transient local) and ``controller_state`` (freejoint_msgs/ControllerState), each reliable
+keep-last 100 as in docs/GRAPH.md; before the ticks, once, the latched ``semi_singular_map``
 (nav_msgs/OccupancyGrid) and ``planned_path`` (visualization_msgs/Marker), transient local
 depth 1. Message contents are a pure function of k (:func:`tick_messages`).
 

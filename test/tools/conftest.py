@@ -83,7 +83,7 @@ class BagMaker:
 
 @pytest.fixture
 def make_bag(publisher_module):
-    """Give ``make_bag(path, ticks, custom_data=None, finalise=True, ...)``."""
+    """Give the bag maker (path, ticks, custom_data=None, finalise=True, ...)."""
     return BagMaker(publisher_module)
 
 
@@ -95,5 +95,24 @@ def run_analyze(*args, timeout=120.0):
 
 @pytest.fixture
 def analyze():
-    """Give ``analyze(*args)`` -> CompletedProcess of the analysis command line."""
+    """Give a runner of the analysis command line (args -> CompletedProcess)."""
     return run_analyze
+
+
+def assert_same_record(bag_record, graph_record, tol=1e-9):
+    """Assert two records have the same keys and values (numbers within ``tol``)."""
+    assert set(bag_record) == set(graph_record)
+    for key, value in graph_record.items():
+        if key == 'source':
+            continue
+        if isinstance(value, (float, list)):
+            assert bag_record[key] == pytest.approx(value, abs=tol, rel=0), key
+        else:
+            assert bag_record[key] == value, key
+    assert bag_record['source'] == 'bag'
+
+
+@pytest.fixture
+def same_record():
+    """Give the record check: a bag record agrees with a graph record within 1e-9."""
+    return assert_same_record

@@ -35,8 +35,8 @@ def test_finalised_bag_has_version_9_metadata_listing_every_topic(tmp_path, make
     for name, msgs in written.items():
         meta = listed[name]['topic_metadata']
         assert listed[name]['message_count'] == len(msgs)
-        assert meta['type'] == type(msgs[0]).__module__.split('.')[0] + '/msg/' + \
-            type(msgs[0]).__name__
+        cls = msgs[0].__class__
+        assert meta['type'] == cls.__module__.split('.')[0] + '/msg/' + cls.__name__
         assert meta['serialization_format'] == 'cdr'
         assert meta['type_description_hash'].startswith('RIHS01_')
         assert isinstance(meta['offered_qos_profiles'], list)

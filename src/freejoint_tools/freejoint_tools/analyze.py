@@ -137,7 +137,7 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     from freejoint_core.errors import FreejointValueError
     from freejoint_core.metrics import compute_record
     bag = open_bag(path)
-    warnings = [n for n in bag.notes]
+    warnings = list(bag.notes)
     info, more = run_info(bag, overrides)
     warnings += more
     states_topic = _pick_topic(bag, STATE_TYPE, '/controller_state', state_topic)
@@ -151,8 +151,8 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
         record = compute_record(info['case'], info['variant'], info['seed'],
                                 diverged_at_s=info['diverged_at_s'], source='bag', **arrays)
     except (ValueError, FreejointValueError) as exc:
-        raise AnalysisError('%s: %s (topics %s, %s)' % (bag.path, exc, states_topic,
-                                                          joints_topic))
+        raise AnalysisError('%s: %s (topics %s, %s)'
+                            % (bag.path, exc, states_topic, joints_topic))
     trace = dict(arrays)
     trace['name'] = os.path.basename(os.path.normpath(bag.path))
     trace['info'] = info
@@ -193,11 +193,11 @@ def _joint_positions(joint_states, t):
 
 def _parse(argv):
     parser = argparse.ArgumentParser(
-        prog='analyze', description='Metrics and the paper\'s figures from recorded bags.')
+        prog='analyze', description="Metrics and the paper's figures from recorded bags.")
     parser.add_argument('bags', nargs='+', metavar='BAG', help='bag directories')
     parser.add_argument('--figures-dir', default=None,
                         help='write every figure here (default: per-bag figures into the '
-                        'bag, the others into the bags\' common parent)')
+                        "bag, the others into the bags' common parent)")
     parser.add_argument('--no-plots', action='store_true', help='only the metrics')
     parser.add_argument('--passive-joint', default=None,
                         help='passive joint name (default: from the bag, else joint3)')

@@ -228,4 +228,3 @@ def write_figures(traces, bag_paths, figures_dir=None):
     if len(traces) > 1:
         written.append(figure_compare(traces, os.path.join(common, 'compare.png')))
     return written
-

@@ -1,0 +1,113 @@
+"""The analysis computes the graph's records from bags and draws the paper's figures."""
+import json
+import os
+
+import pytest
+
+
+def _live_record(written, case, variant, seed, max_ticks=None):
+    """Record from the messages themselves, as the demo computes it from live messages."""
+    from freejoint_control.records import arrays_from_messages
+    from freejoint_core.metrics import compute_record
+    arrays = arrays_from_messages(written['/controller_state'], written['/joint_states'],
+                                  'joint3', max_ticks=max_ticks)
+    return compute_record(case, variant, seed, source='graph', **arrays)
+
+
+def test_bag_records_equal_the_records_of_the_messages_recorded(tmp_path, make_bag,
+                                                                analyze, same_record):
+    path = str(tmp_path / 'horizontal')
+    written = make_bag(path, 400, custom_data={'case': 'horizontal', 'variant': 'robust',
+                                               'seed': '7', 'max_ticks': '300'})
+    done = analyze(path, '--no-plots')
+    assert done.returncode == 0, done.stderr
+    with open(os.path.join(path, 'metrics.json')) as fh:
+        records = json.load(fh)
+    assert len(records) == 1
+    same_record(records[0], _live_record(written, 'horizontal', 'robust', 7, 300))
+    table = done.stdout.splitlines()
+    assert table[0].split()[:3] == ['case', 'variant', 'seed']
+    assert table[2].split()[:3] == ['horizontal', 'robust', '7']
+    assert table[2].split()[-1] == 'bag'
+
+
+def test_two_bags_give_figures_3_4_2_and_a_comparison(tmp_path, make_bag, analyze):
+    bags = []
+    for case in ('horizontal', 'vertical'):
+        bags.append(str(tmp_path / 'demo' / case))
+        make_bag(bags[-1], 200, custom_data={'case': case, 'variant': 'robust', 'seed': '0'})
+    figures = str(tmp_path / 'figures')
+    done = analyze(*bags, '--figures-dir', figures)
+    assert done.returncode == 0, done.stderr
+    names = sorted(os.listdir(figures))
+    assert names == ['compare.png', 'fig2_singularity.png', 'fig3_horizontal.png',
+                     'fig4_vertical.png']
+    for name in names:
+        with open(os.path.join(figures, name), 'rb') as fh:
+            assert fh.read(8) == b'\x89PNG\r\n\x1a\n', name
+    rows = [line.split()[0] for line in done.stdout.splitlines()[2:4]]
+    assert rows == ['horizontal', 'vertical']
+    assert all(os.path.isfile(os.path.join(b, 'metrics.json')) for b in bags)
+
+
+def test_figures_default_to_the_bag_and_its_parent(tmp_path, make_bag, analyze):
+    path = str(tmp_path / 'runs' / 'vertical')
+    make_bag(path, 50, custom_data={'case': 'vertical', 'variant': 'robust_off'})
+    done = analyze(path)
+    assert done.returncode == 0, done.stderr
+    assert os.path.isfile(os.path.join(path, 'fig4_vertical.png'))
+    assert os.path.isfile(str(tmp_path / 'runs' / 'fig2_singularity.png'))
+
+
+def test_killed_recording_is_analysed_up_to_its_last_chunk_with_a_warning(
+        tmp_path, make_bag, analyze, same_record):
+    path = str(tmp_path / 'killed')
+    written = make_bag(path, 250, custom_data={'case': 'vertical', 'variant': 'robust',
+                                               'seed': '1'},
+                       finalise=False, chunk_size=1 << 30, flush_every=100)
+    done = analyze(path, '--no-plots')
+    assert done.returncode == 0, done.stderr
+    assert 'not finalised' in done.stderr and 'Traceback' not in done.stderr
+    with open(os.path.join(path, 'metrics.json')) as fh:
+        record = json.load(fh)[0]
+    same_record(record, _live_record(written, 'vertical', 'robust', 1, 200))
+
+
+def test_case_is_taken_from_the_bag_name_when_the_bag_has_no_run_information(
+        tmp_path, make_bag, analyze):
+    path = str(tmp_path / 'vertical')
+    make_bag(path, 20)
+    done = analyze(path, '--no-plots')
+    assert done.returncode == 0, done.stderr
+    assert "case 'vertical' taken from its name" in done.stderr
+    row = done.stdout.splitlines()[2].split()
+    assert row[:3] == ['vertical', 'unknown', '-']
+
+
+@pytest.mark.parametrize('damage', ['missing', 'truncated', 'foreign', 'no_states'])
+def test_bad_input_gives_one_line_naming_the_file_and_a_non_zero_exit(
+        tmp_path, make_bag, analyze, damage):
+    path = str(tmp_path / 'run')
+    if damage in ('truncated', 'no_states'):
+        make_bag(path, 30)
+    if damage == 'truncated':
+        mcap = os.path.join(path, 'run_0.mcap')
+        os.truncate(mcap, os.path.getsize(mcap) - 100)
+        expected = mcap + ': truncated at byte'
+    elif damage == 'foreign':
+        os.makedirs(os.path.join(path, 'src'))
+        with open(os.path.join(path, 'README'), 'w') as fh:
+            fh.write('not a bag\n')
+        expected = path + ': not a rosbag2 bag'
+    elif damage == 'no_states':
+        done = analyze(path, '--no-plots', '--state-topic', '/nothing')
+        expected = path + ': no topic /nothing in the bag'
+    else:
+        expected = path + ': no such bag'
+    if damage != 'no_states':
+        done = analyze(path, '--no-plots')
+    assert done.returncode == 1
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert lines[0].startswith('analyze: error: ' + expected), lines[0]
+    assert done.stdout == ''

@@ -1,0 +1,156 @@
+"""The recorder node keeps every message of a 1 kHz run and survives SIGINT/SIGTERM/SIGKILL."""
+import json
+import os
+import signal
+
+import pytest
+import yaml
+
+pytestmark = pytest.mark.ros
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+PUBLISHER = os.path.join(HERE, '..', 'nodes', 'tools_publisher.py')
+TICK_TOPICS = ('/joint_states', '/setpoint', '/controller_state')
+
+
+def _start_recorder(procs, bag, *params):
+    args = ['--ros-args', '-p', 'output:=%s' % bag, '-p', 'topics:=[]', *params]
+    return procs.start_node('freejoint_tools', 'recorder', 'recorder', args)
+
+
+def _log(proc):
+    """Return what a process printed, also after procs.stop closed its log."""
+    with open(proc.log_path) as fh:
+        return fh.read()
+
+
+def _stamps_ns(bag, topic):
+    from freejoint_control.records import stamp_ns
+    return [stamp_ns(m) for _, m in bag.decode(topic)]
+
+
+def test_recorder_holds_every_message_of_a_1khz_lockstep_like_run(procs, ros_node, wait,
+                                                                  tmp_path, same_record):
+    import rclpy
+    from freejoint_msgs.msg import CartesianSetpoint, ControllerState
+    from rclpy.qos import QoSProfile
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import get_types_from_msg, get_typestore, Stores
+    from sensor_msgs.msg import JointState
+
+    from rclpy.serialization import deserialize_message
+
+    from freejoint_tools.analyze import analyse_bag
+    from freejoint_tools.bagfile import open_bag
+    from freejoint_tools.recorder import _message_class
+    bag_path = str(tmp_path / 'horizontal')
+    summary_path = str(tmp_path / 'published.json')
+    recorder = _start_recorder(procs, bag_path, '-p', 'use_sim_time:=true', '-p',
+                               'custom_data:=[case=horizontal, variant=robust, seed=4]')
+    live = {t: [] for t in TICK_TOPICS}
+    for topic, msg_type in zip(TICK_TOPICS, (JointState, CartesianSetpoint, ControllerState)):
+        ros_node.create_subscription(msg_type, topic, live[topic].append,
+                                     QoSProfile(depth=5000))
+    publisher = procs.start_script(PUBLISHER, 'publisher', [
+        '--ticks', '2000', '--rate', '1000', '--clock', '--subscribers', '2',
+        '--summary', summary_path])
+    wait(lambda: publisher.poll() is not None, 90.0,
+         'the publisher to finish (log: %s)' % procs.log(publisher),
+         spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.01))
+    assert publisher.returncode == 0, procs.log(publisher)
+    wait(lambda: all(len(v) == 2000 for v in live.values()), 20.0, 'the live messages',
+         spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.01))
+    assert procs.stop(recorder) == 0
+    log = _log(recorder)
+    assert 'finalised: ' in log and '/joint_states: received 2000, written 2000' in log, log
+    with open(summary_path) as fh:
+        published = json.load(fh)['topics']
+
+    bag = open_bag(bag_path)
+    assert bag.finalised, bag.notes
+    for topic, sent in published.items():           # counts and the last message, exactly
+        assert bag.topics[topic].count == sent['count'], topic
+        last = [data for name, _, _, data in bag.messages if name == topic][-1]
+        # (the wire form may carry trailing CDR padding the in-process form lacks)
+        msg_type = _message_class(bag.topics[topic].type)
+        assert deserialize_message(last, msg_type) == \
+            deserialize_message(bytes.fromhex(sent['last']), msg_type), topic
+    with open(os.path.join(bag_path, 'metadata.yaml')) as fh:
+        info = yaml.safe_load(fh)['rosbag2_bagfile_information']
+    assert info['version'] == 9 and info['storage_identifier'] == 'mcap'
+    listed = {t['topic_metadata']['name']: (t['topic_metadata']['type'], t['message_count'])
+              for t in info['topics_with_message_count']}
+    for topic, sent in published.items():
+        assert listed[topic] == (bag.topics[topic].type, sent['count'])
+    assert listed['/controller_state'][0] == 'freejoint_msgs/msg/ControllerState'
+    assert {'/rosout', '/parameter_events'} <= set(listed)   # "all topics" means all
+    assert info['custom_data'] == {'case': 'horizontal', 'variant': 'robust', 'seed': '4'}
+
+    store = get_typestore(Stores.EMPTY)                   # only what the bag holds
+    with Reader(bag_path) as reader:
+        for conn in reader.connections:
+            store.register(get_types_from_msg(conn.msgdef.data, conn.msgtype))
+        states = [store.deserialize_cdr(raw, c.msgtype)
+                  for c, _, raw in reader.messages() if c.topic == '/controller_state']
+    assert list(states[-1].theta_hat) == list(live['/controller_state'][-1].theta_hat)
+
+    # log times are sim time (use_sim_time): the stamps' time base, not the wall clock
+    log_times = [t for name, t, _, _ in bag.messages if name == '/joint_states']
+    assert log_times == sorted(log_times)
+    assert 1_900_000_000 <= log_times[-1] <= 1_999_000_000
+
+    # the analysis of the bag gives the record of the live messages
+    from freejoint_control.records import arrays_from_messages
+    from freejoint_core.metrics import compute_record
+    graph = compute_record('horizontal', 'robust', 4, source='graph', **arrays_from_messages(
+        live['/controller_state'], live['/joint_states'], 'joint3'))
+    record, _, _ = analyse_bag(bag_path)
+    same_record(record, graph)
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_signal_mid_run_gives_a_finalised_bag_without_gaps(procs, wait, tmp_path, signum):
+    from freejoint_tools.bagfile import open_bag
+    bag_path = str(tmp_path / 'run')
+    recorder = _start_recorder(procs, bag_path)
+    publisher = procs.start_script(PUBLISHER, 'publisher', ['--ticks', '0', '--rate', '1000'])
+    mcap = os.path.join(bag_path, 'run_0.mcap')
+    wait(lambda: os.path.exists(mcap) and os.path.getsize(mcap) > 100_000, 60.0,
+         'the bag to grow (publisher: %s)' % procs.log(publisher))
+    recorder.send_signal(signum)
+    recorder.wait(20.0)
+    assert recorder.returncode == 0, _log(recorder)
+    procs.stop(publisher)
+    assert os.path.isfile(os.path.join(bag_path, 'metadata.yaml'))
+    bag = open_bag(bag_path)
+    assert bag.finalised
+    stamps = _stamps_ns(bag, '/joint_states')
+    assert len(stamps) > 100
+    assert stamps == [k * 1_000_000 for k in range(len(stamps))]      # no gap, no loss
+    assert abs(bag.topics['/controller_state'].count - len(stamps)) <= 2
+
+
+def test_sigkill_leaves_a_bag_the_analysis_reads_up_to_the_last_chunk(procs, wait, tmp_path,
+                                                                      analyze):
+    from freejoint_tools.bagfile import open_bag
+    bag_path = str(tmp_path / 'vertical')
+    recorder = _start_recorder(procs, bag_path, '-p', 'flush_period:=0.2', '-p',
+                               'custom_data:=[case=vertical, variant=robust, seed=2]')
+    publisher = procs.start_script(PUBLISHER, 'publisher', ['--ticks', '0', '--rate', '1000'])
+    mcap = os.path.join(bag_path, 'vertical_0.mcap')
+    wait(lambda: os.path.exists(mcap) and os.path.getsize(mcap) > 100_000, 60.0,
+         'the bag to grow (publisher: %s)' % procs.log(publisher))
+    os.killpg(recorder.pid, signal.SIGKILL)
+    recorder.wait(10.0)
+    procs.stop(publisher)
+    assert not os.path.exists(os.path.join(bag_path, 'metadata.yaml'))
+    bag = open_bag(bag_path)
+    assert not bag.finalised
+    stamps = _stamps_ns(bag, '/joint_states')
+    assert len(stamps) > 100
+    assert stamps == [k * 1_000_000 for k in range(len(stamps))]
+    done = analyze(bag_path, '--no-plots')
+    assert done.returncode == 0, done.stderr
+    assert 'not finalised' in done.stderr
+    row = done.stdout.splitlines()[2].split()
+    assert row[:3] == ['vertical', 'robust', '2']
