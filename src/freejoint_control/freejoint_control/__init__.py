@@ -1,0 +1,1 @@
+"""freejoint_control: the robust controller node and the run-record conversion."""

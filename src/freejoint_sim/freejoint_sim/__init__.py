@@ -1,0 +1,1 @@
+"""freejoint_sim: the simulated arm with a free joint as a ROS 2 node."""

@@ -1,0 +1,185 @@
+"""
+Parameters of the simulator node: declaration table and validation (no ROS types).
+
+``SPECS`` lists every parameter once; :func:`build_config` turns a complete
+``{name: value}`` dict into a validated :class:`Config` (real arm, initial state from
+``freejoint_core.offline.initial_state``, command mapping) or raises
+``FreejointValueError`` naming the parameter.
+
+"""
+
+from dataclasses import dataclass
+import math
+
+from freejoint_core.arm import ArmParams, table1
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.offline import initial_state
+
+MODES = ('lockstep', 'realtime')
+EXECUTORS = ('single_threaded', 'events')
+
+
+@dataclass(frozen=True)
+class Spec:
+    """One parameter: default value, description, optional (min, max), read-only."""
+
+    name: str
+    default: object
+    description: str
+    bounds: tuple = None
+    read_only: bool = False
+
+
+SPECS = (
+    Spec('case', 'horizontal',
+         "arm case (Table I real parameters): 'horizontal' (no gravity) or 'vertical' "
+         '(9.81 m/s^2 along -y); takes effect on reset'),
+    Spec('mode', 'lockstep',
+         "'lockstep': own /clock, advance one control period per command; 'realtime': "
+         'step on the wall clock and apply the latest command', read_only=True),
+    Spec('joint_names', ['joint1', 'joint2', 'joint3'],
+         'names of all joints in model order (base to tip), passive ones included',
+         read_only=True),
+    Spec('joints', ['joint1', 'joint2'],
+         'active joints in the order of the effort command (JointGroupEffortController)',
+         read_only=True),
+    Spec('control_period', 0.001,
+         'step [s]: one command and one disturbance draw are held over it (the lockstep '
+         'grid; the wall-clock step in real time)', (1e-5, 1.0), read_only=True),
+    Spec('dt_sub', 0.0005,
+         'RK4 integration step [s]; control_period must be an integer multiple; takes '
+         'effect on reset', (1e-7, 1.0)),
+    Spec('publish_rate', 1000.0,
+         'real time: rate [Hz] of joint_states and ee_position (a divisor of the step '
+         'rate); lockstep publishes every step', (0.1, 1e6)),
+    Spec('dist_bound', 0.5,
+         'bound [N m] of the uniform random joint disturbance (0 = off); takes effect on '
+         'reset', (0.0, 1e3)),
+    Spec('seed', 0, 'seed of the disturbance generator (>= 0); takes effect on reset'),
+    Spec('initial_position', [0.2, 0.0],
+         'initial end-effector position [m] (x, y); with initial_passive_deg gives q(0) by '
+         'inverse kinematics (branch +1), at rest; takes effect on reset'),
+    Spec('initial_passive_deg', 120.0,
+         'initial passive joint angle [deg]; takes effect on reset', (-1e4, 1e4)),
+    Spec('command_timeout', 0.5,
+         'wall time [s] without a command after which zero effort is applied (and a '
+         'warning given); lockstep: per step, after the first command', (1e-3, 3600.0)),
+    Spec('frame_id', 'base_link', 'frame of ee_position and of the arm base'),
+    Spec('executor', 'single_threaded',
+         "rclpy executor: 'single_threaded' or 'events' (rclpy.experimental.EventsExecutor)",
+         read_only=True),
+)
+
+
+@dataclass(frozen=True)
+class Config:
+    """Validated simulator configuration."""
+
+    params: ArmParams
+    q0: tuple
+    joint_names: tuple
+    joints: tuple
+    cmd_to_active: tuple
+    lockstep: bool
+    dt: float
+    dt_ns: int
+    dt_sub: float
+    publish_every: int
+    dist_bound: float
+    seed: int
+    command_timeout: float
+    frame_id: str
+    executor: str
+
+
+def _names(name, value):
+    names = tuple(value)
+    if not names or any(not isinstance(v, str) or not v for v in names):
+        raise FreejointValueError(f'{name}: expected non-empty joint names, got {list(names)}')
+    if len(set(names)) != len(names):
+        raise FreejointValueError(f'{name}: joint names must be unique, got {list(names)}')
+    return names
+
+
+def _multiple(name, big, small):
+    """Return big / small if it is a positive integer (within 1e-9 relative), else raise."""
+    n = round(big / small)
+    if n < 1 or abs(n * small - big) > 1e-9 * big:
+        raise FreejointValueError(name)
+    return n
+
+
+def build_config(values):
+    """
+    Validate a complete parameter dict; return the :class:`Config`.
+
+    Parameters
+    ----------
+    values : dict
+        One value per name of ``SPECS``.
+
+    Returns
+    -------
+    Config
+
+    Raises
+    ------
+    FreejointValueError
+        The message starts with the offending parameter's name.
+
+    """
+    params = table1(values['case'])
+    if values['mode'] not in MODES:
+        raise FreejointValueError(f'mode: expected one of {MODES}, got {values["mode"]!r}')
+    joint_names = _names('joint_names', values['joint_names'])
+    if len(joint_names) != params.n:
+        raise FreejointValueError(
+            f'joint_names: the arm has {params.n} joints, got {len(joint_names)} names')
+    joints = _names('joints', values['joints'])
+    active_names = [joint_names[i] for i in params.active]
+    if sorted(joints) != sorted(active_names):
+        raise FreejointValueError(
+            f'joints: expected the {params.r} active joints {active_names} in any order, '
+            f'got {list(joints)}')
+    dt = float(values['control_period'])
+    dt_sub = float(values['dt_sub'])
+    if not (math.isfinite(dt) and dt > 0.0):
+        raise FreejointValueError(f'control_period: must be > 0, got {dt}')
+    if not (math.isfinite(dt_sub) and dt_sub > 0.0):
+        raise FreejointValueError(f'dt_sub: must be > 0, got {dt_sub}')
+    _multiple(f'dt_sub: control_period {dt} s is not an integer multiple of dt_sub '
+              f'{dt_sub} s', dt, dt_sub)
+    rate = float(values['publish_rate'])
+    if not (math.isfinite(rate) and rate > 0.0):
+        raise FreejointValueError(f'publish_rate: must be > 0, got {rate}')
+    every = _multiple(f'publish_rate: {rate} Hz does not divide the step rate '
+                      f'{1.0 / dt:g} Hz', 1.0 / rate, dt)
+    dist = float(values['dist_bound'])
+    if not (math.isfinite(dist) and dist >= 0.0):
+        raise FreejointValueError(f'dist_bound: must be >= 0, got {dist}')
+    seed = values['seed']
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise FreejointValueError(f'seed: expected an integer >= 0, got {seed!r}')
+    start = tuple(values['initial_position'])
+    if len(start) != 2 or not all(isinstance(v, float) and math.isfinite(v) for v in start):
+        raise FreejointValueError(
+            f'initial_position: expected 2 finite numbers (x, y) [m], got {list(start)}')
+    try:
+        q0 = initial_state(params, values['initial_passive_deg'], start)
+    except FreejointValueError as exc:
+        raise FreejointValueError(
+            f'initial_position: unreachable with initial_passive_deg = '
+            f'{values["initial_passive_deg"]}: {exc}') from None
+    timeout = float(values['command_timeout'])
+    if not (math.isfinite(timeout) and timeout > 0.0):
+        raise FreejointValueError(f'command_timeout: must be > 0, got {timeout}')
+    if values['executor'] not in EXECUTORS:
+        raise FreejointValueError(
+            f'executor: expected one of {EXECUTORS}, got {values["executor"]!r}')
+    return Config(params=params, q0=tuple(q0.tolist()), joint_names=joint_names,
+                  joints=joints,
+                  cmd_to_active=tuple(active_names.index(name) for name in joints),
+                  lockstep=values['mode'] == 'lockstep', dt=dt, dt_ns=round(dt * 1e9),
+                  dt_sub=dt_sub, publish_every=every, dist_bound=dist, seed=seed,
+                  command_timeout=timeout, frame_id=str(values['frame_id']),
+                  executor=values['executor'])

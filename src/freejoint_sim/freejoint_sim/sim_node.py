@@ -1,0 +1,384 @@
+"""
+Simulator node: the planar arm with a free joint (freejoint_core.plant.Plant) in ROS 2.
+
+Publishes ``joint_states`` (sensor_msgs/JointState: every joint, the passive one included;
+position, velocity and the actuator effort applied over the last step) and ``ee_position``
+(geometry_msgs/PointStamped, from the core model's forward kinematics); takes the active
+joint efforts on ``effort_controller/commands`` (std_msgs/Float64MultiArray in the order of
+parameter ``joints``, what ros2_control's JointGroupEffortController takes; remap it to
+``/<controller>/commands``).  ``~/reset`` (std_srvs/Trigger) puts the arm back at its
+initial configuration, at rest, with a freshly seeded disturbance, at the next step (time
+keeps running).
+
+Modes (docs/GRAPH.md):
+
+* ``lockstep``: the node owns ``/clock``; at step k it publishes ``/clock = t_k`` and the
+  state stamped t_k, waits for the command answering t_k, integrates one control period
+  with it and the disturbance draw of step k, and goes on.  Deterministic for a seed, as
+  fast as the graph answers.
+* ``realtime``: steps on the wall clock at ``1 / control_period`` and applies the latest
+  command.
+
+A command of the wrong length or with a non-finite value is refused (throttled error
+naming the problem) and zero effort is applied; no command for ``command_timeout`` wall
+seconds means zero effort and a warning (ros2_control would hold the last command
+forever; this node does not).
+
+"""
+
+import math
+import signal
+import time
+
+from builtin_interfaces.msg import Time
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.plant import Plant
+from freejoint_sim.params import build_config, SPECS
+from geometry_msgs.msg import PointStamped
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                 reliability=ReliabilityPolicy.RELIABLE)
+"""QoS of joint_states, ee_position and the commands (docs/GRAPH.md)."""
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                       reliability=ReliabilityPolicy.RELIABLE)
+"""QoS of /clock: reliable (matches reliable and best-effort subscribers)."""
+
+REPUBLISH_PERIOD = 0.2
+"""Lockstep: wall period [s] of republishing step 0 until the first command arrives."""
+MAX_CATCH_UP = 20
+"""Real time: steps integrated at most per timer callback before dropping behind."""
+LABEL_PREFIX = 'stamp_ns='
+
+_isfinite = math.isfinite
+_monotonic = time.monotonic
+
+
+def declare(node, specs):
+    """Declare each parameter of ``specs`` once with its descriptor; return the values."""
+    for spec in specs:
+        desc = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
+        if spec.bounds is not None:
+            desc.floating_point_range = [FloatingPointRange(
+                from_value=float(spec.bounds[0]), to_value=float(spec.bounds[1]), step=0.0)]
+        node.declare_parameter(spec.name, spec.default, desc)
+    return {spec.name: _plain(node.get_parameter(spec.name).value) for spec in specs}
+
+
+def _plain(value):
+    """Parameter value as plain Python (arrays as lists)."""
+    if isinstance(value, (str, bool, int, float)) or value is None:
+        return value
+    return list(value)
+
+
+class SimNode(Node):
+    """The simulated arm behind JointState / effort command topics."""
+
+    def __init__(self, **kwargs):
+        super().__init__('sim_node', **kwargs)
+        self._values = declare(self, SPECS)
+        cfg = build_config(self._values)   # raises: bad start-up parameters
+        self.config = cfg
+        self._plant = Plant(cfg.params, cfg.dt_sub, dist_bound=cfg.dist_bound, seed=cfg.seed,
+                            q0=cfg.q0)
+        self._fk = self._plant.model.fk
+        self._install(cfg)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        n = cfg.params.n
+        r = cfg.params.r
+        self._r = r
+        self._zero = [0.0] * r
+        self._applied = [0.0] * n      # actuator effort of the last step, all joints
+        self._active = cfg.params.active
+        self._k = 0
+        self._t_ns = 0
+        self._timeouts = 0
+        self._refused = 0
+        self._got_first = False
+        self._waiting_since = _monotonic()
+        self._last_publish = 0.0
+        self._reset_pending = False
+        self._latest = None            # real time: (tau_active list, wall time)
+        self._cmd_timed_out = False
+
+        self._js = JointState()
+        self._js.name = list(cfg.joint_names)
+        self._js.header.frame_id = ''
+        self._ee = PointStamped()
+        self._ee.header.frame_id = cfg.frame_id
+        self._clock_msg = ClockMsg()
+        self._stamp = Time()
+
+        self._pub_js = self.create_publisher(JointState, 'joint_states', QOS)
+        self._pub_ee = self.create_publisher(PointStamped, 'ee_position', QOS)
+        self._pub_clock = (self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
+                           if cfg.lockstep else None)
+        self.create_subscription(Float64MultiArray, 'effort_controller/commands',
+                                 self._on_command, QOS)
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        if cfg.lockstep:
+            period = max(0.001, min(0.05, cfg.command_timeout / 4.0))
+            self.create_timer(period, self._lockstep_watchdog, clock=steady)
+        else:
+            self._rt_start = None
+            self.create_timer(cfg.dt, self._realtime_step, clock=steady)
+        self.get_logger().info(
+            'simulator ready: %s arm, %s, dt %g s (RK4 %g s), disturbance %g N m seed %d, '
+            'q0 = [%s] rad, command timeout %g s' % (
+                self._values['case'], 'lockstep' if cfg.lockstep else 'real time', cfg.dt,
+                cfg.dt_sub, cfg.dist_bound, cfg.seed, ', '.join('%.6f' % v for v in cfg.q0),
+                cfg.command_timeout))
+        if cfg.lockstep:
+            self._publish_state()
+            self.get_logger().info('lockstep: waiting for the first command (step 0 is '
+                                   'republished every %g s)' % REPUBLISH_PERIOD)
+
+    # -- parameters ------------------------------------------------------------
+    def _install(self, cfg):
+        self.config = cfg
+        self._dt = cfg.dt
+        self._dt_ns = cfg.dt_ns
+        self._timeout = cfg.command_timeout
+        self._every = cfg.publish_every
+        self._lockstep = cfg.lockstep
+        self._cmd_map = cfg.cmd_to_active
+        self._identity = cfg.cmd_to_active == tuple(range(len(cfg.cmd_to_active)))
+
+    def _on_set_parameters(self, params):
+        values = dict(self._values)
+        for param in params:
+            if param.name in values:
+                values[param.name] = _plain(param.value)
+        try:
+            cfg = build_config(values)
+        except FreejointValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self._install(cfg)
+        self._ee.header.frame_id = cfg.frame_id
+        self._values = values
+        self.get_logger().info('parameters set: %s (arm, disturbance, dt_sub and initial '
+                               'state take effect on ~/reset)'
+                               % ', '.join('%s=%s' % (p.name, _plain(p.value)) for p in params))
+        return SetParametersResult(successful=True)
+
+    def _on_reset(self, request, response):
+        self._reset_pending = True
+        cfg = self.config
+        response.success = True
+        response.message = ('arm back at q0 = [%s] rad at rest, %s case, seed %d, from step '
+                            '%d on' % (', '.join('%.6f' % v for v in cfg.q0),
+                                       self._values['case'], cfg.seed, self._k + 1))
+        self.get_logger().info('reset requested: ' + response.message)
+        return response
+
+    def _do_reset(self):
+        cfg = self.config
+        self._reset_pending = False
+        self._plant = Plant(cfg.params, cfg.dt_sub, dist_bound=cfg.dist_bound, seed=cfg.seed,
+                            q0=cfg.q0)
+        self._fk = self._plant.model.fk
+        self._applied = [0.0] * cfg.params.n
+
+    # -- commands --------------------------------------------------------------
+    def _command_effort(self, msg):
+        """Active efforts in model order from a command, or None (refused, logged)."""
+        data = msg.data
+        if len(data) != self._r:
+            problem = 'expected %d efforts for %s, got %d' % (
+                self._r, list(self.config.joints), len(data))
+        else:
+            for v in data:
+                if not _isfinite(v):
+                    problem = 'non-finite effort in %s' % list(data)
+                    break
+            else:
+                if self._identity:
+                    return data.tolist()
+                tau = [0.0] * self._r
+                for j, i in enumerate(self._cmd_map):
+                    tau[i] = data[j]
+                return tau
+        self._refused += 1
+        self.get_logger().error('command refused: %s; zero effort applied' % problem,
+                                throttle_duration_sec=1.0)
+        return None
+
+    def _on_command(self, msg):
+        if not self._lockstep:
+            tau = self._command_effort(msg)
+            self._latest = (self._zero if tau is None else tau, _monotonic())
+            if self._cmd_timed_out:
+                self._cmd_timed_out = False
+                self.get_logger().info('commands are back')
+            return
+        dims = msg.layout.dim
+        if dims:
+            label = dims[0].label
+            if label.startswith(LABEL_PREFIX):
+                try:
+                    ns = int(label[len(LABEL_PREFIX):])
+                except ValueError:
+                    ns = self._t_ns
+                if ns != self._t_ns:
+                    self.get_logger().debug('dropped a command for stamp %d ns at step %d '
+                                            '(t = %d ns)' % (ns, self._k, self._t_ns))
+                    return
+        tau = self._command_effort(msg)
+        if not self._got_first:
+            self._got_first = True
+            self.get_logger().info('first command: running')
+        self._advance(self._zero if tau is None else tau)
+
+    # -- stepping --------------------------------------------------------------
+    def _advance(self, tau):
+        """Integrate one control period with ``tau`` (active, model order); publish."""
+        if self._reset_pending:
+            self._do_reset()
+        else:
+            self._plant.step(tau, self._dt)
+            applied = self._applied
+            for i, v in zip(self._active, tau):
+                applied[i] = v
+        self._k += 1
+        self._t_ns = self._k * self._dt_ns
+        if self._lockstep or self._k % self._every == 0:
+            self._publish_state()
+
+    def _publish_state(self):
+        t_ns = self._t_ns
+        stamp = self._stamp
+        stamp.sec = t_ns // 1_000_000_000
+        stamp.nanosec = t_ns % 1_000_000_000
+        if self._lockstep:
+            self._clock_msg.clock = stamp
+            self._pub_clock.publish(self._clock_msg)
+        else:
+            stamp = self.get_clock().now().to_msg()
+        plant = self._plant
+        q = plant.q
+        js = self._js
+        js.header.stamp = stamp
+        js.position = q.tolist()
+        js.velocity = plant.qd.tolist()
+        js.effort = self._applied
+        self._pub_js.publish(js)
+        px, py = self._fk(q).tolist()
+        ee = self._ee
+        ee.header.stamp = stamp
+        ee.point.x = px
+        ee.point.y = py
+        self._pub_ee.publish(ee)
+        now = _monotonic()
+        self._waiting_since = now
+        self._last_publish = now
+
+    def _lockstep_watchdog(self):
+        now = _monotonic()
+        if not self._got_first:
+            if now - self._last_publish >= REPUBLISH_PERIOD:
+                self._publish_state()
+                self.get_logger().info('waiting for the first command on %s' %
+                                       self._cmd_topic(), throttle_duration_sec=5.0)
+            return
+        if now - self._waiting_since > self._timeout:
+            self._timeouts += 1
+            self.get_logger().warn(
+                'no command for step %d (t = %.3f s) within %g s: zero effort (%d timeouts '
+                'so far)' % (self._k, self._t_ns * 1e-9, self._timeout, self._timeouts))
+            self._advance(self._zero)
+
+    def _realtime_step(self):
+        now = _monotonic()
+        if self._rt_start is None:
+            self._rt_start = now - self._dt
+        due = int((now - self._rt_start) / self._dt) - self._k
+        if due > MAX_CATCH_UP:
+            self.get_logger().warn('real time: %d steps behind the wall clock, dropping %d'
+                                   % (due, due - 1), throttle_duration_sec=1.0)
+            self._rt_start += (due - 1) * self._dt
+            due = 1
+        for _ in range(due):
+            latest = self._latest
+            if latest is None:
+                tau = self._zero
+            elif now - latest[1] > self._timeout:
+                tau = self._zero
+                if not self._cmd_timed_out:
+                    self._cmd_timed_out = True
+                    self._timeouts += 1
+                    self.get_logger().warn(
+                        'no command on %s for %g s: zero effort (not holding the last one)'
+                        % (self._cmd_topic(), self._timeout))
+            else:
+                tau = latest[0]
+            self._advance(tau)
+
+    def _cmd_topic(self):
+        return self.resolve_topic_name('effort_controller/commands')
+
+    def report(self):
+        """One line for the end of the run: steps, timeouts, refused commands."""
+        return 'simulator stopped at step %d (t = %.3f s): %d command timeouts, %d refused ' \
+            'commands' % (self._k, self._t_ns * 1e-9, self._timeouts, self._refused)
+
+
+def spin(node, executor):
+    """
+    Spin ``node`` until SIGINT/SIGTERM, with the executor the parameter ``executor`` names.
+
+    The signal only sets a flag, so the callback that runs finishes and the node shuts down
+    between callbacks (rclpy's own handler invalidates the context under a running
+    callback, whose next publish then fails).  ``EventsExecutor.spin()`` of the rclpy 7.1.6
+    wheels never runs a timer and busy-waits, so both executors are driven by ``spin_once``.
+    """
+    stop = []
+
+    def on_signal(signum, frame):
+        stop.append(signum)
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    if executor == 'events':
+        from rclpy.experimental import EventsExecutor
+        ex = EventsExecutor()
+    else:
+        ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    while not stop and rclpy.ok():
+        ex.spin_once(timeout_sec=0.2)
+
+
+def main(args=None):
+    """Run the node until SIGINT/SIGTERM."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        node = SimNode()
+        spin(node, node.config.executor)
+    except FreejointValueError as exc:
+        rclpy.logging.get_logger('sim_node').fatal('bad parameter: %s' % exc)
+        raise SystemExit(2)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.get_logger().info(node.report())
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
