@@ -118,13 +118,14 @@ class Player(Node):
         return SetParametersResult(successful=True)
 
     def wait_for_subscribers(self):
-        """Wait until each publisher has the wanted number of subscribers (bounded)."""
+        """Wait until each publisher (/clock too) has the wanted subscribers (bounded)."""
         need = self._params['wait_for_subscribers']
         if not need:
             return True
         deadline = time.monotonic() + self._params['wait_timeout']
+        pubs = list(self._pubs.values()) + ([self._clock_pub] if self._clock_pub else [])
         while time.monotonic() < deadline:
-            if all(pub.get_subscription_count() >= need for pub in self._pubs.values()):
+            if all(pub.get_subscription_count() >= need for pub in pubs):
                 return True
             time.sleep(0.01)
         self.get_logger().warning('not every topic has %d subscriber(s) after %.1f s; '

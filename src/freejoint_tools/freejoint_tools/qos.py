@@ -82,8 +82,9 @@ def publisher_qos(profiles, depth):
     Return the QoS to republish a recorded topic with (its first recorded offer).
 
     Reliability and durability as recorded; keep-last with the recorded depth if known,
-    else ``depth`` (discovery does not carry the depth) - a transient local topic keeps
-    its last message only (depth 1) unless the recording says otherwise.
+    else ``depth`` (discovery does not carry the depth). Transient local streams (the
+    setpoints) need the deep queue as much as volatile ones: a depth of 1 would let a fast
+    playback overwrite samples a reliable subscriber has not acknowledged yet.
     """
     first = profiles[0] if profiles else {}
     reliability = _policy(ReliabilityPolicy, first.get('reliability'),
@@ -94,10 +95,7 @@ def publisher_qos(profiles, depth):
     if durability not in (DurabilityPolicy.VOLATILE, DurabilityPolicy.TRANSIENT_LOCAL):
         durability = DurabilityPolicy.VOLATILE
     recorded_depth = int(first.get('depth') or 0)
-    if recorded_depth > 0:
-        keep = recorded_depth
-    else:
-        keep = 1 if durability == DurabilityPolicy.TRANSIENT_LOCAL else int(depth)
+    keep = recorded_depth if recorded_depth > 0 else int(depth)
     kwargs = {}
     for key in ('deadline', 'lifespan'):
         value = _duration(first.get(key, {}))
