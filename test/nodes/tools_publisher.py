@@ -10,7 +10,7 @@ depth 1. Message contents are a pure function of k (:func:`tick_messages`).
 
 Usage: tools_publisher.py --ticks N --rate HZ [--clock] [--subscribers M] [--summary FILE]
 
-It waits (up to 30 s) until every tick topic has at least M matched subscriptions, then
+It waits (up to 30 s) until every tick topic (and /clock) has at least M matched subscriptions, then
 publishes the ticks at HZ (0: as fast as it can), waits until every message is
 acknowledged, writes a JSON summary (per topic: messages published and the CDR bytes of
 the last one, hex) and exits; or publishes until SIGINT with --ticks 0.
@@ -133,7 +133,8 @@ def main():
     publish('/semi_singular_map', grid)
     publish('/planned_path', marker)
     deadline = time.monotonic() + 30.0
-    while any(pubs[t].get_subscription_count() < opts.subscribers for t in TICK_TOPICS):
+    waited = TICK_TOPICS + (('/clock',) if opts.clock else ())
+    while any(pubs[t].get_subscription_count() < opts.subscribers for t in waited):
         if time.monotonic() > deadline or stop:
             print('tools_publisher: no subscriber within 30 s', file=sys.stderr, flush=True)
             return 2
