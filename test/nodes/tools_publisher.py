@@ -10,9 +10,9 @@ depth 1. Message contents are a pure function of k (:func:`tick_messages`).
 
 Usage: tools_publisher.py --ticks N --rate HZ [--clock] [--subscribers M] [--summary FILE]
 
-It waits (up to 30 s) until every tick topic (and /clock) has at least M matched subscriptions, then
-publishes the ticks at HZ (0: as fast as it can), waits until every message is
-acknowledged, writes a JSON summary (per topic: messages published and the CDR bytes of
+It waits (up to 30 s) until every tick topic (and /clock) has at least M matched
+subscriptions, then publishes the ticks at HZ (0: as fast as it can), waits until every
+message is acknowledged, writes a JSON summary (per topic: messages published and the CDR bytes of
 the last one, hex) and exits; or publishes until SIGINT with --ticks 0.
 """
 
