@@ -25,7 +25,7 @@ MAP_KEYS = ('case', 'nominal_scale', 'resolution_deg', 'eps_d')
 
 # Accepted ranges (also the ParameterDescriptor ranges of the node).
 RANGES = {
-    'nominal_scale': (0.1, 10.0),
+    'nominal_scale': (0.01, 100.0),
     'resolution_deg': (0.1, 10.0),
     'eps_d': (0.0, 1.0),            # exclusive lower bound
     'grid_resolution': (0.001, 0.5),

@@ -1,0 +1,289 @@
+"""
+The planner node in its own process: map, path, setpoint stream in sim time, refusals.
+
+The test process plays the simulator's part of the lockstep protocol: it owns `/clock`.
+"""
+import os
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+YAML = os.path.join(ROOT, 'config', 'planner.yaml')
+NODE = '/freejoint_planner'
+MS = 1_000_000  # ns
+DT = 0.001
+LOOKAHEAD = 20
+
+
+def _start_planner(procs, args=('-p', 'use_sim_time:=true')):
+    return procs.start_node('freejoint_planner', 'planner_node', 'planner',
+                            ['--ros-args', *args])
+
+
+def _spin(node, timeout=0.02):
+    import rclpy
+    rclpy.spin_once(node, timeout_sec=timeout)
+
+
+def _wait_ready(ros_node, procs, proc, wait):
+    """Wait for ~/plan_circle: the planner creates it last, after the map and marker."""
+    from freejoint_msgs.srv import PlanCircle
+    client = ros_node.create_client(PlanCircle, NODE + '/plan_circle')
+    wait(client.service_is_ready, 30.0,
+         'the planner service (log: %s)' % procs.log(proc), spin=lambda: _spin(ros_node, 0.1))
+    return client
+
+
+def _call(ros_node, client, request, what, timeout=10.0):
+    import rclpy
+    future = client.call_async(request)
+    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=timeout)
+    assert future.done(), 'no answer to %s within %.0f s' % (what, timeout)
+    return future.result()
+
+
+def _param_client(ros_node, wait):
+    from rclpy.parameter_client import AsyncParameterClient
+    client = AsyncParameterClient(ros_node, NODE)
+    wait(lambda: client.services_are_ready(), 30.0, 'the planner parameter services',
+         spin=lambda: _spin(ros_node, 0.1))
+    return client
+
+
+def _set(ros_node, client, name, value):
+    """Set one parameter as `ros2 param set` does; return its SetParametersResult."""
+    import rclpy
+    from rclpy.parameter import Parameter
+    future = client.set_parameters([Parameter(name, value=value)])
+    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=10.0)
+    assert future.done(), 'no answer to setting %s within 10 s' % name
+    return future.result().results[0]
+
+
+def _get(ros_node, client, names):
+    import rclpy
+    from rclpy.parameter import parameter_value_to_python
+    future = client.get_parameters(names)
+    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=10.0)
+    assert future.done(), 'no answer to get_parameters within 10 s'
+    return {n: parameter_value_to_python(v) for n, v in zip(names, future.result().values)}
+
+
+class ClockDriver:
+    """Publish `/clock` like the lockstep sim and collect the planner's setpoints."""
+
+    def __init__(self, ros_node):
+        from freejoint_msgs.msg import CartesianSetpoint
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        self.node = ros_node
+        self.got = []
+        self.clock_pub = ros_node.create_publisher(Clock, '/clock', 10)
+        # GRAPH.md: reliable, keep-last 100, volatile (what a controller may use)
+        self.sub = ros_node.create_subscription(
+            CartesianSetpoint, 'setpoint', self.got.append,
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        self._clock = Clock
+
+    def matched(self):
+        _spin(self.node)
+        return (self.sub.get_publisher_count() >= 1
+                and self.clock_pub.get_subscription_count() >= 2)   # time source + trigger
+
+    def publish(self, now_ns):
+        msg = self._clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(now_ns, 1_000_000_000)
+        self.clock_pub.publish(msg)
+
+    def last_stamp(self):
+        if not self.got:
+            return None
+        s = self.got[-1].header.stamp
+        return s.sec * 1_000_000_000 + s.nanosec
+
+    def step(self, now_ns, wait, what=''):
+        """Publish /clock = now and wait for the setpoints due (up to now + lookahead)."""
+        due = (now_ns + LOOKAHEAD * MS) // MS * MS
+
+        def spin():
+            before = len(self.got)
+            _spin(self.node, 0.02)
+            if len(self.got) == before:
+                self.publish(now_ns)       # best effort: say it again until answered
+
+        self.publish(now_ns)
+        wait(lambda: self.last_stamp() is not None and self.last_stamp() >= due, 10.0,
+             'setpoint %d ns after /clock %d ns %s' % (due, now_ns, what), spin=spin)
+        for _ in range(2):                 # anything published beyond `due` shows up now
+            _spin(self.node, 0.005)
+        assert self.last_stamp() == due, 'published beyond now + lookahead: %d > %d' % (
+            self.last_stamp(), due)
+
+
+def test_planner_yaml_loads_and_a_late_subscriber_gets_the_map_and_the_path(
+        procs, ros_node, wait):
+    import numpy as np
+    from freejoint_core.arm import table1
+    from freejoint_core.singularity import det_map, semi_singular
+    from nav_msgs.msg import OccupancyGrid
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from visualization_msgs.msg import Marker
+    import yaml
+    with open(YAML) as f:
+        expected = yaml.safe_load(f)['/**']['ros__parameters']
+    proc = _start_planner(procs, ('--params-file', YAML))
+    _wait_ready(ros_node, procs, proc, wait)
+    # late: subscribed only now, after the planner published both at start
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    grids, markers = [], []
+    ros_node.create_subscription(OccupancyGrid, 'semi_singular_map', grids.append, latched)
+    ros_node.create_subscription(Marker, 'planned_path', markers.append, latched)
+    wait(lambda: grids and markers, 15.0, 'the latched map and marker',
+         spin=lambda: _spin(ros_node, 0.1))
+
+    params = _get(ros_node, _param_client(ros_node, wait), sorted(expected))
+    assert params == expected
+    assert params['use_sim_time'] is True          # not the default: the file was applied
+
+    grid = grids[0]
+    cell = expected['grid_resolution']
+    info = grid.info
+    assert (info.width, info.height) == (300, 300)  # 2 * 1.5 m reach / 0.01 m
+    assert (info.origin.position.x, info.origin.position.y) == (-1.5, -1.5)
+    assert grid.header.frame_id == 'base_link'
+    region = semi_singular(det_map(table1(expected['case']).scaled(expected['nominal_scale']),
+                                   expected['resolution_deg']), expected['eps_d'])
+    extent = (info.origin.position.x, info.origin.position.x + info.width * cell,
+              info.origin.position.y, info.origin.position.y + info.height * cell)
+    ref = region.to_grid(extent, cell)
+    data = np.array(grid.data, dtype=np.int8).reshape(info.height, info.width)
+    assert np.array_equal(data == 100, ref == 100)   # the semi-singular cells agree
+    assert np.array_equal(data, ref)
+    assert data[150, 150] == 0 and data[150, 250] == 100 and data[0, 0] == -1
+
+    marker = markers[0]
+    assert marker.type == Marker.LINE_STRIP and marker.header.frame_id == 'base_link'
+    pts = np.array([(p.x, p.y) for p in marker.points])
+    assert len(pts) > 100
+    assert np.allclose(np.hypot(pts[:, 0], pts[:, 1]), 0.2, rtol=0, atol=1e-12)
+    assert pts[0] == pytest.approx([0.2, 0.0], abs=1e-15)
+
+
+def test_setpoints_in_sim_time_are_the_circle_on_the_grid_each_stamp_once_in_order_ahead(
+        procs, ros_node, wait):
+    from freejoint_core.trajectory import CircleQuintic
+    proc = _start_planner(procs)
+    _wait_ready(ros_node, procs, proc, wait)
+    clock = ClockDriver(ros_node)
+    wait(clock.matched, 30.0, 'the planner matching /clock and setpoint',
+         spin=lambda: _spin(ros_node, 0.05))
+    for _ in range(10):
+        _spin(ros_node, 0.02)
+    assert clock.got == [], 'setpoints before any /clock'
+    # The sim's start: /clock 0 (said again until answered), then single steps, times off
+    # the grid, and jumps of many ticks, through the end of the 5 s circle.
+    times = [0, 1 * MS, 2 * MS, 2_500_000, 2_999_999, 3 * MS, 3_000_001, 7 * MS]
+    times += list(range(80 * MS, 5_100 * MS, 73 * MS)) + [5_100 * MS]
+    for now in times:
+        clock.step(now, wait, '(log: %s)' % procs.log(proc))
+    last = (5_100 + LOOKAHEAD)
+    stamps = [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in clock.got]
+    assert stamps == [k * MS for k in range(last + 1)]       # each once, in order, on the grid
+    circle = CircleQuintic()                                  # the paper's, the default
+    for k, m in enumerate(clock.got):
+        assert tuple(m.position) + tuple(m.velocity) + tuple(m.acceleration) == \
+            circle.sample_tuple(k * DT), 'tick %d' % k
+        assert (m.plan_id, m.plan_time, m.final) == (1, (k * MS) * 1e-9, k * DT > 5.0)
+        assert m.header.frame_id == 'base_link'
+    assert [m.final for m in clock.got].index(True) == 5001
+
+
+def test_a_path_into_the_semi_singular_region_is_refused_and_the_good_plan_keeps_streaming(
+        procs, ros_node, wait):
+    from freejoint_core.trajectory import CircleQuintic
+    from freejoint_msgs.srv import PlanCircle
+    proc = _start_planner(procs)
+    client = _wait_ready(ros_node, procs, proc, wait)
+    params = _param_client(ros_node, wait)
+    clock = ClockDriver(ros_node)
+    wait(clock.matched, 30.0, 'the planner matching /clock and setpoint',
+         spin=lambda: _spin(ros_node, 0.05))
+    clock.step(0, wait)
+
+    bad = PlanCircle.Request(centre=[0.5, 0.0], radius=0.2, duration=5.0, start_angle=0.0,
+                             direction=1, execute=True)
+    answer = _call(ros_node, client, bad, 'plan_circle (semi-singular)')
+    assert not answer.accepted
+    assert 'refused' in answer.reason and 'semi-singular annulus' in answer.reason
+    assert answer.margin < 0.0 and answer.plan_id == 0
+
+    paper = PlanCircle.Request(centre=[0.0, 0.0], radius=0.2, duration=5.0, start_angle=0.0,
+                               direction=1, execute=False)
+    answer = _call(ros_node, client, paper, 'plan_circle (paper circle)')
+    assert answer.accepted and answer.reason == ''
+    assert answer.margin > 0.2 and answer.plan_id == 0        # about 0.29 m; not executed
+
+    result = _set(ros_node, params, 'centre', [0.5, 0.0])
+    assert not result.successful
+    assert 'circle refused' in result.reason and 'semi-singular annulus' in result.reason
+    for name, value in [('radius', -0.1), ('eps_d', 0.0), ('resolution_deg', 0.05),
+                        ('centre', [0.1])]:
+        result = _set(ros_node, params, name, value)
+        assert not result.successful and name in result.reason, (name, result.reason)
+    assert _get(ros_node, params, ['centre', 'radius', 'eps_d', 'resolution_deg']) == {
+        'centre': [0.0, 0.0], 'radius': 0.2, 'eps_d': 1e-7, 'resolution_deg': 0.25}
+
+    for now in (1 * MS, 30 * MS, 100 * MS):
+        clock.step(now, wait, '(log: %s)' % procs.log(proc))
+    circle = CircleQuintic()
+    assert len(clock.got) == 121
+    for k, m in enumerate(clock.got):
+        assert m.plan_id == 1
+        assert tuple(m.position) == circle.sample_tuple(k * DT)[:2], 'tick %d' % k
+    assert 'refused' in procs.log(proc)
+
+
+def test_a_circle_change_starts_anew_at_the_next_tick_and_a_map_change_recomputes_the_map(
+        procs, ros_node, wait):
+    import numpy as np
+    from freejoint_core.arm import table1
+    from freejoint_core.singularity import det_map, semi_singular
+    from freejoint_core.trajectory import CircleQuintic
+    from nav_msgs.msg import OccupancyGrid
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    proc = _start_planner(procs)
+    _wait_ready(ros_node, procs, proc, wait)
+    params = _param_client(ros_node, wait)
+    clock = ClockDriver(ros_node)
+    wait(clock.matched, 30.0, 'the planner matching /clock and setpoint',
+         spin=lambda: _spin(ros_node, 0.05))
+    clock.step(0, wait)
+    clock.step(10 * MS, wait)                                 # ticks 0 .. 30 of plan 1
+    result = _set(ros_node, params, 'radius', 0.3)
+    assert result.successful, result.reason
+    clock.step(12 * MS, wait)                                 # ticks 31, 32 of plan 2
+    assert [m.plan_id for m in clock.got] == [1] * 31 + [2, 2]
+    new = CircleQuintic(radius=0.3)
+    assert [m.plan_time for m in clock.got[31:]] == [0.0, MS * 1e-9]
+    assert [tuple(m.position) for m in clock.got[31:]] == [new.sample_tuple(0.0)[:2],
+                                                           new.sample_tuple(DT)[:2]]
+    assert 'plan 2 (configured) accepted' in procs.log(proc)
+
+    grids = []
+    ros_node.create_subscription(OccupancyGrid, 'semi_singular_map', grids.append,
+                                 QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    wait(lambda: grids, 15.0, 'the latched map', spin=lambda: _spin(ros_node, 0.1))
+    result = _set(ros_node, params, 'eps_d', 0.1)             # wider band, plan 2 still clear
+    assert result.successful, result.reason
+    wait(lambda: len(grids) == 2, 15.0, 'the recomputed map', spin=lambda: _spin(ros_node, 0.1))
+    region = semi_singular(det_map(table1('horizontal').scaled(0.7), 0.25), 0.1)
+    ref = region.to_grid((-1.5, 1.5, -1.5, 1.5), 0.01)
+    assert np.array_equal(np.array(grids[1].data, dtype=np.int8).reshape(300, 300), ref)
+    assert not np.array_equal(grids[0].data, grids[1].data)
+    result = _set(ros_node, params, 'eps_d', 1.0)             # everything semi-singular
+    assert not result.successful
+    assert 'running plan 2 would enter the semi-singular region' in result.reason
+    assert _get(ros_node, params, ['eps_d']) == {'eps_d': 0.1}
