@@ -12,11 +12,12 @@ from freejoint_core.trajectory import CircleQuintic
 from freejoint_msgs.msg import CartesianSetpoint
 import rclpy
 from rclpy.executors import ExternalShutdownException
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                 reliability=ReliabilityPolicy.RELIABLE)
+                 reliability=ReliabilityPolicy.RELIABLE,
+                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def main():
@@ -62,7 +63,8 @@ def main():
     else:
         node.create_subscription(
             Clock, '/clock',
-            lambda m: publish_up_to(m.clock.sec * 1_000_000_000 + m.clock.nanosec), 10)
+            lambda m: publish_up_to(m.clock.sec * 1_000_000_000 + m.clock.nanosec),
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
     node.get_logger().info('streaming setpoints')
     try:
         rclpy.spin(node)

@@ -27,18 +27,47 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                  reliability=ReliabilityPolicy.RELIABLE)
-"""QoS of joint_states, setpoint, commands and controller_state (docs/GRAPH.md)."""
+"""QoS of joint_states, commands and controller_state (docs/GRAPH.md)."""
+SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""QoS of setpoint: transient local, so a controller started after the planner still gets
+the ticks streamed ahead while the simulator waited for its first command (GRAPH.md)."""
 
 _isfinite = math.isfinite
 _monotonic = time.monotonic
 _NAME_MAP_CACHE = 16
+
+
+class Throttle:
+    """
+    Rate-limit log lines per kind of problem (at most one per ``period`` wall s each).
+
+    Unlike rclpy's per-call-site throttling, a different problem is logged at once, and
+    the next line of a kind says how many were suppressed meanwhile.
+    """
+
+    def __init__(self, period=1.0):
+        self.period = period
+        self._last = {}
+        self._suppressed = {}
+
+    def __call__(self, log, kind, text):
+        """Log ``text`` with ``log`` unless ``kind`` was logged less than a period ago."""
+        now = _monotonic()
+        if now - self._last.get(kind, -1e18) < self.period:
+            self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
+            return
+        more = self._suppressed.pop(kind, 0)
+        self._last[kind] = now
+        log(text + (' (%d more like it suppressed)' % more if more else ''))
 
 
 def declare(node, specs):
@@ -94,12 +123,13 @@ class ControllerNode(Node):
         self._map = None
         self._ticks = 0
         self._zero_answers = 0
+        self._throttle = Throttle(1.0)
 
         self._pub_cmd = self.create_publisher(Float64MultiArray, 'effort_controller/commands',
                                               QOS)
         self._pub_state = self.create_publisher(ControllerState, 'controller_state', QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_state, QOS)
-        self.create_subscription(CartesianSetpoint, 'setpoint', self._on_setpoint, QOS)
+        self.create_subscription(CartesianSetpoint, 'setpoint', self._on_setpoint, SETPOINT_QOS)
         period = min(0.05, cfg.stale_timeout / 4.0)
         self.create_timer(period, self._watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
@@ -149,9 +179,10 @@ class ControllerNode(Node):
             want = self.config.joint_names
             missing = [n for n in want if n not in key]
             if missing:
-                found = (None, 'JointState lacks joint(s) %s (has %s)' % (missing, list(key)))
+                found = (None, 'JointState lacks joint(s) %s (has %s)' % (missing, list(key)),
+                         'missing')
             else:
-                found = (tuple(key.index(n) for n in want), '')
+                found = (tuple(key.index(n) for n in want), '', '')
             if len(self._name_maps) >= _NAME_MAP_CACHE:
                 self._name_maps.clear()
             self._name_maps[key] = found
@@ -178,7 +209,7 @@ class ControllerNode(Node):
             self._recent.clear()
         names = msg.name
         found = self._map if names == self._map_names else self._joint_map(names)
-        idx, reason = found
+        idx, reason, kind = found
         if idx is not None:
             pos = msg.position
             vel = msg.velocity
@@ -188,19 +219,21 @@ class ControllerNode(Node):
                 qd = (vel[i0], vel[i1], vel[i2])
             except (IndexError, ValueError):
                 q = None
+                kind = 'short'
                 reason = 'JointState has %d names but %d positions and %d velocities' % (
                     len(names), len(pos), len(vel))
             if q is not None and not (_isfinite(q[0]) and _isfinite(q[1]) and _isfinite(q[2])
                                       and _isfinite(qd[0]) and _isfinite(qd[1])
                                       and _isfinite(qd[2])):
+                kind = 'nonfinite'
                 reason = 'JointState has a non-finite position or velocity: q=%s qd=%s' % (
                     list(q), list(qd))
                 q = None
         else:
             q = None
         if q is None:
-            self.get_logger().error('state refused: %s; zero effort' % reason,
-                                    throttle_duration_sec=1.0)
+            self._throttle(self.get_logger().error, kind,
+                           'state refused: %s; zero effort' % reason)
             self._answer_zero(ns, stamp, STATUS_BAD_INPUT, 'bad input: ' + reason)
             return
         self._last_q = q
@@ -217,8 +250,8 @@ class ControllerNode(Node):
                 self._answer_zero(ns, stamp, STATUS_STALE_SETPOINT,
                                   'stale setpoint: none stamped within %g s before the state'
                                   % self._stale)
-                self.get_logger().warn('no fresh setpoint: zero effort',
-                                       throttle_duration_sec=1.0)
+                self._throttle(self.get_logger().warn, 'stale_setpoint',
+                               'no fresh setpoint: zero effort')
                 return
             self._tick(ns, stamp, q, qd, sp)
 
@@ -244,9 +277,10 @@ class ControllerNode(Node):
         values = (p[0], p[1], v[0], v[1], a[0], a[1])
         for x in values:
             if not _isfinite(x):
-                self.get_logger().error(
+                self._throttle(
+                    self.get_logger().error, 'setpoint',
                     'setpoint refused: non-finite value in position %s, velocity %s, '
-                    'acceleration %s' % (list(p), list(v), list(a)), throttle_duration_sec=1.0)
+                    'acceleration %s' % (list(p), list(v), list(a)))
                 return
         self._setpoint_seen = True
         if not self._lockstep:
@@ -330,9 +364,10 @@ class ControllerNode(Node):
         if pending is not None:
             if self._setpoint_seen and now - pending[4] > self._stale:
                 self._pending = None
-                self.get_logger().warn(
+                self._throttle(
+                    self.get_logger().warn, 'stale_setpoint',
                     'no setpoint for the state stamped %d ns within %g s: zero effort'
-                    % (pending[0], self._stale), throttle_duration_sec=1.0)
+                    % (pending[0], self._stale))
                 self._answer_zero(pending[0], pending[1], STATUS_STALE_SETPOINT,
                                   'stale setpoint: none for this stamp within %g s'
                                   % self._stale)

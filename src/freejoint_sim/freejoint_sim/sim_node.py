@@ -64,6 +64,30 @@ _isfinite = math.isfinite
 _monotonic = time.monotonic
 
 
+class Throttle:
+    """
+    Rate-limit log lines per kind of problem (at most one per ``period`` wall s each).
+
+    Unlike rclpy's per-call-site throttling, a different problem is logged at once, and
+    the next line of a kind says how many were suppressed meanwhile.
+    """
+
+    def __init__(self, period=1.0):
+        self.period = period
+        self._last = {}
+        self._suppressed = {}
+
+    def __call__(self, log, kind, text):
+        """Log ``text`` with ``log`` unless ``kind`` was logged less than a period ago."""
+        now = _monotonic()
+        if now - self._last.get(kind, -1e18) < self.period:
+            self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
+            return
+        more = self._suppressed.pop(kind, 0)
+        self._last[kind] = now
+        log(text + (' (%d more like it suppressed)' % more if more else ''))
+
+
 def declare(node, specs):
     """Declare each parameter of ``specs`` once with its descriptor; return the values."""
     for spec in specs:
@@ -112,6 +136,7 @@ class SimNode(Node):
         self._reset_pending = False
         self._latest = None            # real time: (tau_active list, wall time)
         self._cmd_timed_out = False
+        self._throttle = Throttle(1.0)
 
         self._js = JointState()
         self._js.name = list(cfg.joint_names)
@@ -197,11 +222,13 @@ class SimNode(Node):
         """Active efforts in model order from a command, or None (refused, logged)."""
         data = msg.data
         if len(data) != self._r:
+            kind = 'length'
             problem = 'expected %d efforts for %s, got %d' % (
                 self._r, list(self.config.joints), len(data))
         else:
             for v in data:
                 if not _isfinite(v):
+                    kind = 'nonfinite'
                     problem = 'non-finite effort in %s' % list(data)
                     break
             else:
@@ -212,8 +239,8 @@ class SimNode(Node):
                     tau[i] = data[j]
                 return tau
         self._refused += 1
-        self.get_logger().error('command refused: %s; zero effort applied' % problem,
-                                throttle_duration_sec=1.0)
+        self._throttle(self.get_logger().error, kind,
+                       'command refused: %s; zero effort applied' % problem)
         return None
 
     def _on_command(self, msg):
@@ -306,8 +333,9 @@ class SimNode(Node):
             self._rt_start = now - self._dt
         due = int((now - self._rt_start) / self._dt) - self._k
         if due > MAX_CATCH_UP:
-            self.get_logger().warn('real time: %d steps behind the wall clock, dropping %d'
-                                   % (due, due - 1), throttle_duration_sec=1.0)
+            self._throttle(self.get_logger().warn, 'behind',
+                           'real time: %d steps behind the wall clock, dropping %d'
+                           % (due, due - 1))
             self._rt_start += (due - 1) * self._dt
             due = 1
         for _ in range(due):

@@ -1,0 +1,253 @@
+"""
+The simulator node in its own process, driven by this test as its controller.
+
+Every published state is compared with ``freejoint_core.plant.Plant`` stepped here with the
+efforts the simulator should have applied: the commanded ones, or zero for a refused or
+missing command.
+"""
+import math
+import os
+
+from freejoint_core.arm import make_model, table1
+from freejoint_core.offline import initial_state
+from freejoint_core.plant import Plant
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+PARAMS = os.path.join(ROOT, 'config', 'sim.yaml')
+DT = 0.001
+DT_NS = 1_000_000
+
+
+def _qos():
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    return QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+class Controller:
+    """This test as the simulator's controller."""
+
+    def __init__(self, node, wait):
+        import rclpy
+        from geometry_msgs.msg import PointStamped
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+        self.rclpy = rclpy
+        self.node = node
+        self.wait = wait
+        self.states = {}
+        self.ee = {}
+        self.clock = []
+        self.pub = node.create_publisher(Float64MultiArray, 'effort_controller/commands',
+                                         _qos())
+        node.create_subscription(JointState, 'joint_states', self._on_state, _qos())
+        node.create_subscription(PointStamped, 'ee_position', self._on_ee, _qos())
+        node.create_subscription(
+            Clock, '/clock',
+            lambda m: self.clock.append(m.clock.sec * 1_000_000_000 + m.clock.nanosec),
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+        self.Float64MultiArray = Float64MultiArray
+        self.MultiArrayDimension = MultiArrayDimension
+
+    @staticmethod
+    def _ns(msg):
+        return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+    def _on_state(self, msg):
+        self.states.setdefault(self._ns(msg), msg)
+
+    def _on_ee(self, msg):
+        self.ee.setdefault(self._ns(msg), msg)
+
+    def spin(self):
+        self.rclpy.spin_once(self.node, timeout_sec=0.05)
+
+    def command(self, data, k=None):
+        """Publish efforts; labelled with the stamp of step k unless k is None."""
+        msg = self.Float64MultiArray()
+        if k is not None:
+            msg.layout.dim = [self.MultiArrayDimension(label='stamp_ns=%d' % (k * DT_NS),
+                                                       size=len(data), stride=len(data))]
+        msg.data = [float(v) for v in data]
+        self.pub.publish(msg)
+
+    def state(self, k, what='the state', timeout=15.0):
+        ns = k * DT_NS
+        self.wait(lambda: ns in self.states and ns in self.ee, timeout,
+                  '%s of step %d' % (what, k), spin=self.spin)
+        return self.states[ns]
+
+    def connect(self, proc, procs):
+        self.wait(lambda: self.pub.get_subscription_count() > 0 and self.states,
+                  30.0, 'the simulator (log: %s)' % proc.log_path, spin=self.spin)
+
+
+def _plant(case='horizontal', seed=0, dist=0.5):
+    params = table1(case)
+    return Plant(params, 0.0005, dist_bound=dist, seed=seed, q0=initial_state(params))
+
+
+def _stepped(plant, tau):
+    plant.step(tau, DT)
+    return plant
+
+
+def _same(msg, plant, effort):
+    assert list(msg.name) == ['joint1', 'joint2', 'joint3']
+    assert list(msg.position) == plant.q.tolist()
+    assert list(msg.velocity) == plant.qd.tolist()
+    assert list(msg.effort) == [effort[0], effort[1], 0.0]
+
+
+def _start(procs, *extra):
+    return procs.start_node('freejoint_sim', 'sim_node', 'sim',
+                            ['--ros-args', '--params-file', PARAMS, *extra])
+
+
+def test_params_file_loads_and_lockstep_steps_are_the_plant(procs, ros_node, wait):
+    proc = _start(procs)
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    plant = _plant()
+    model = make_model(table1('horizontal'))
+    msg = ctl.state(0)
+    _same(msg, plant, (0.0, 0.0))
+    for k in range(30):
+        tau = (3.0 * math.sin(0.3 * k), -2.0 * math.cos(0.2 * k))
+        ctl.command(tau, k)
+        msg = ctl.state(k + 1)
+        plant.step(tau, DT)
+        _same(msg, plant, tau)
+        ee = ctl.ee[(k + 1) * DT_NS]
+        assert [ee.point.x, ee.point.y] == model.fk(plant.q).tolist()
+        assert ee.header.frame_id == 'base_link'
+    wait(lambda: 30 * DT_NS in ctl.clock, 10.0, '/clock at step 30', spin=ctl.spin)
+    assert ctl.clock == sorted(ctl.clock) and 15 * DT_NS in ctl.clock
+    assert procs.stop(proc) == 0
+    with open(proc.log_path) as f:
+        assert 'simulator stopped at step 30 (t = 0.030 s): 0 command timeouts' in f.read()
+
+
+def test_wrong_length_and_nan_commands_are_refused_and_zero_effort_applied(
+        procs, ros_node, wait):
+    proc = _start(procs, '-p', 'case:=vertical', '-p', 'seed:=3')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    plant = _plant('vertical', seed=3)
+    ctl.command([1.0, 2.0, 3.0], 0)
+    _same(ctl.state(1, 'the state after a 3-effort command'), _stepped(plant, (0.0, 0.0)),
+          (0.0, 0.0))
+    ctl.command([1.0, math.nan], 1)
+    _same(ctl.state(2, 'the state after a NaN command'), _stepped(plant, (0.0, 0.0)),
+          (0.0, 0.0))
+    # A command for another stamp is dropped; one without a stamp label answers this step.
+    ctl.command([5.0, 5.0], 7)
+    ctl.command([0.5, -0.5])
+    _same(ctl.state(3), _stepped(plant, (0.5, -0.5)), (0.5, -0.5))
+    log = procs.log(proc)
+    assert "command refused: expected 2 efforts for ['joint1', 'joint2'], got 3; zero " \
+        'effort applied' in log
+    assert 'command refused: non-finite effort in [1.0, nan]; zero effort applied' in log
+    assert procs.stop(proc) == 0
+
+
+def test_lockstep_without_command_times_out_to_zero_effort_and_warns(procs, ros_node, wait):
+    proc = _start(procs, '-p', 'command_timeout:=0.2')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    plant = _plant()
+    ctl.command([2.0, -1.0], 0)
+    ctl.state(1)
+    plant.step((2.0, -1.0), DT)
+    # No command for steps 1 and 2: each is integrated with zero effort after the timeout.
+    msg = ctl.state(3, 'the state after two timeouts')
+    plant.step((0.0, 0.0), DT)
+    plant.step((0.0, 0.0), DT)
+    _same(msg, plant, (0.0, 0.0))
+    log = procs.log(proc)
+    assert 'no command for step 1 (t = 0.001 s) within 0.2 s: zero effort (1 timeouts' in log
+    assert 'no command for step 2 (t = 0.002 s)' in log
+    assert procs.stop(proc) == 0
+
+
+def test_reset_service_puts_the_arm_back_at_rest_and_time_runs_on(procs, ros_node, wait):
+    import rclpy
+    from std_srvs.srv import Trigger
+    proc = _start(procs)
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    for k in range(3):
+        ctl.command([4.0, 4.0], k)
+        ctl.state(k + 1)
+    client = ros_node.create_client(Trigger, '/sim_node/reset')
+    assert client.wait_for_service(timeout_sec=15.0), 'no ~/reset service'
+    future = client.call_async(Trigger.Request())
+    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
+    assert future.done() and future.result().success
+    assert 'from step 4 on' in future.result().message
+    ctl.command([4.0, 4.0], 3)
+    plant = _plant()
+    _same(ctl.state(4, 'the state after the reset'), plant, (0.0, 0.0))
+    ctl.command([1.0, 1.0], 4)
+    plant.step((1.0, 1.0), DT)
+    _same(ctl.state(5), plant, (1.0, 1.0))
+    assert procs.stop(proc) == 0
+
+
+def test_bad_parameter_values_are_refused_with_a_reason_and_it_keeps_running(
+        procs, ros_node, wait):
+    import rclpy
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    proc = _start(procs)
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    client = AsyncParameterClient(ros_node, 'sim_node')
+    assert client.wait_for_services(timeout_sec=15.0), 'no parameter services'
+    future = client.set_parameters([Parameter('dt_sub', value=0.0003),
+                                    Parameter('seed', value=-2),
+                                    Parameter('initial_position', value=[2.0, 0.0]),
+                                    Parameter('case', value='sideways'),
+                                    Parameter('command_timeout', value=1.0)])
+    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
+    assert future.done(), 'no answer from set_parameters within 15 s'
+    res = future.result().results
+    assert res[0].reason == ('dt_sub: control_period 0.001 s is not an integer multiple of '
+                             'dt_sub 0.0003 s')
+    assert res[1].reason == 'seed: expected an integer >= 0, got -2'
+    assert res[2].reason.startswith('initial_position: unreachable')
+    assert res[3].reason.startswith("case: expected one of ('horizontal', 'vertical')")
+    assert [r.successful for r in res] == [False, False, False, False, True]
+    ctl.command([1.0, 1.0], 0)
+    plant = _plant()
+    plant.step((1.0, 1.0), DT)
+    _same(ctl.state(1), plant, (1.0, 1.0))
+    assert procs.stop(proc) == 0
+
+
+def test_realtime_applies_the_latest_command_and_zero_after_the_timeout(
+        procs, ros_node, wait):
+    proc = _start(procs, '-p', 'mode:=realtime', '-p', 'command_timeout:=0.3',
+                  '-p', 'publish_rate:=100.0')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+
+    def latest_effort():
+        return list(ctl.states[max(ctl.states)].effort)
+
+    def commanding():
+        ctl.command([1.5, -0.5])
+        ctl.spin()
+
+    wait(lambda: latest_effort() == [1.5, -0.5, 0.0], 15.0, 'the commanded effort applied',
+         spin=commanding)
+    # The controller goes silent: zero effort after command_timeout, not the last command.
+    wait(lambda: latest_effort() == [0.0, 0.0, 0.0], 15.0, 'zero effort after the timeout',
+         spin=ctl.spin)
+    assert 'no command on /effort_controller/commands for 0.3 s: zero effort' in \
+        procs.log(proc)
+    assert procs.stop(proc) == 0
