@@ -287,3 +287,28 @@ def test_a_circle_change_starts_anew_at_the_next_tick_and_a_map_change_recompute
     assert not result.successful
     assert 'running plan 2 would enter the semi-singular region' in result.reason
     assert _get(ros_node, params, ['eps_d']) == {'eps_d': 0.1}
+
+
+def test_bad_parameter_values_at_start_are_named_and_fall_back_to_the_defaults(capfd):
+    import rclpy
+    from freejoint_planner.planner_node import PlannerNode
+    rclpy.init(args=['--ros-args', '-p', 'radius:=-1.0', '-p', 'centre:=[0.1]',
+                     '-p', 'resolution_deg:=0.7', '-p', 'case:=diagonal', '-p', 'lookahead:=5'])
+    try:
+        node = PlannerNode()
+        try:
+            values = {n: node.get_parameter(n).value
+                      for n in ('radius', 'resolution_deg', 'case', 'lookahead')}
+            centre = list(node.get_parameter('centre').value)
+            plan = node._stream.plan
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown()
+    assert values == {'radius': 0.2, 'resolution_deg': 0.25, 'case': 'horizontal',
+                      'lookahead': 5}                         # lookahead:=5 is good: kept
+    assert centre == [0.0, 0.0]
+    assert plan is not None and plan.trajectory.radius == 0.2  # the default circle runs
+    err = capfd.readouterr().err
+    for name in ('radius', 'centre', 'resolution_deg', 'case'):
+        assert 'parameter %s:' % name in err and 'using the default' in err, err
