@@ -1,0 +1,530 @@
+"""
+Run the paper's two cases through the ROS 2 node graph (`make demo`), beside the offline runner.
+
+For Case 1 (horizontal) and Case 2 (vertical), in lockstep with the robust controller and
+disturbance seed 0, this starts the three nodes as separate processes - exactly the
+executables ``ros2 run`` starts (``install/<pkg>/lib/<pkg>/<exe>``) with the parameter files
+of ``config/`` and per-case overrides (``-p case:=vertical``) - and the recorder when it is
+installed, follows the run, stops everything with SIGINT and computes the graph's record from
+the messages the run published (``freejoint_control.records.arrays_from_messages``, then
+``freejoint_core.metrics.compute_record``).  It prints the offline runner's records of the
+same runs beside the graph's, checks that the end-effector trajectories agree, writes the
+graph's records to ``bags/demo/metrics.json`` and runs ``analyze`` on the bags if installed.
+
+Usage: ``python tools/demo.py [--cases horizontal vertical] [--seed 0] [--out bags/demo]``
+(``make demo`` runs it after ``tools/setup.sh``).  The graph runs in ROS domain
+``$ROS_DOMAIN_ID`` (if unset, a free one is picked and printed) and sees only this machine
+unless ``ROS_AUTOMATIC_DISCOVERY_RANGE`` says otherwise.
+"""
+import argparse
+import os
+import signal
+import struct
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+INSTALL = os.path.join(ROOT, 'install')
+CONFIG = os.path.join(ROOT, 'config')
+CASES = ('horizontal', 'vertical')
+PASSIVE_JOINT = 'joint3'
+STALL_TIMEOUT = 30.0
+"""Wall seconds without a new tick after which a run is given up."""
+
+
+def executable(pkg, exe):
+    """Return what ``ros2 run <pkg> <exe>`` starts: install/<pkg>/lib/<pkg>/<exe>."""
+    return os.path.join(INSTALL, pkg, 'lib', pkg, exe)
+
+
+def say(text):
+    """Print a progress line at once."""
+    print('[demo] ' + text, flush=True)
+
+
+def stamp_ns_of(raw):
+    """Return the header stamp (ns) of a serialized message that starts with a Header."""
+    sec, nanosec = struct.unpack_from('<iI', raw, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+# -- settings -------------------------------------------------------------------------
+def _ros_params(path):
+    import yaml
+    with open(path) as f:
+        data = yaml.safe_load(f)
+    for section in data.values():
+        if isinstance(section, dict) and 'ros__parameters' in section:
+            return section['ros__parameters']
+    raise SystemExit('demo: %s has no ros__parameters section' % path)
+
+
+def offline_settings(config_dir=CONFIG):
+    """
+    Return the ``run_case`` keyword arguments matching the parameter files of the graph.
+
+    Parameters
+    ----------
+    config_dir : str
+        Directory holding sim.yaml, controller.yaml and planner.yaml.
+
+    Returns
+    -------
+    dict
+        ``dt``, ``dt_sub``, ``duration``, ``nominal_scale``, ``dist_bound``, ``q3_0_deg``,
+        ``gains``, ``trajectory`` for ``freejoint_core.offline.run_case``.
+
+    """
+    from freejoint_core.control import Gains
+    from freejoint_core.trajectory import CircleQuintic
+    sim = _ros_params(os.path.join(config_dir, 'sim.yaml'))
+    ctl = _ros_params(os.path.join(config_dir, 'controller.yaml'))
+    plan = _ros_params(os.path.join(config_dir, 'planner.yaml'))
+    dt = float(sim['control_period'])
+    for name, other in (('controller', ctl), ('planner', plan)):
+        if float(other['control_period']) != dt:
+            raise SystemExit('demo: control_period differs between sim.yaml (%g) and %s.yaml '
+                             '(%g)' % (dt, name, float(other['control_period'])))
+    trajectory = CircleQuintic(centre=plan['centre'], radius=plan['radius'],
+                               duration=plan['duration'], start_angle=plan['start_angle'],
+                               direction=plan['direction'])
+    start = trajectory.sample(0.0)[0].tolist()
+    if max(abs(a - float(b)) for a, b in zip(start, sim['initial_position'])) > 1e-12:
+        raise SystemExit('demo: sim.yaml initial_position %s is not the start of the planned '
+                         'circle %s, but the offline runner starts there'
+                         % (sim['initial_position'], start))
+    tau_limit = float(ctl['tau_limit'])
+    gains = Gains(K=ctl['K'], Lam=ctl['Lambda'], R=ctl['R'], Gamma=ctl['Gamma'],
+                  sigma=ctl['sigma'], eps=ctl['epsilon'], h_form=ctl['h_form'],
+                  theta0=ctl['theta0'], robust=bool(ctl['robust']),
+                  det_threshold=ctl['det_threshold'],
+                  tau_limit=tau_limit if tau_limit > 0.0 else None)
+    return {'dt': dt, 'dt_sub': float(sim['dt_sub']), 'duration': float(plan['duration']),
+            'nominal_scale': float(ctl['nominal_scale']),
+            'dist_bound': float(sim['dist_bound']),
+            'q3_0_deg': float(sim['initial_passive_deg']), 'gains': gains,
+            'trajectory': trajectory}
+
+
+# -- collecting the run's messages -----------------------------------------------------
+class Collector:
+    """
+    Take the run's ControllerState, JointState and ee_position messages, serialized.
+
+    Serialized (``raw=True``) subscriptions keep the callbacks cheap enough for 1 kHz; the
+    stamps are read straight from the CDR header, the messages are deserialized after the
+    run.  Deep reader queues keep every message while this process catches up.
+    """
+
+    TOPICS = (('controller_state', 'freejoint_msgs.msg', 'ControllerState'),
+              ('joint_states', 'sensor_msgs.msg', 'JointState'),
+              ('ee_position', 'geometry_msgs.msg', 'PointStamped'))
+
+    def __init__(self, node, depth=20000):
+        import importlib
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+        self.node = node
+        self.types = {}
+        self.raw = {}
+        self.last = {}
+        self.subs = {}
+        for topic, module, name in self.TOPICS:
+            self.types[topic] = getattr(importlib.import_module(module), name)
+            self.raw[topic] = []
+            self.last[topic] = -1
+            self.subs[topic] = node.create_subscription(
+                self.types[topic], topic, self._callback(topic), qos, raw=True)
+
+    def _callback(self, topic):
+        store = self.raw[topic].append
+        last = self.last
+
+        def take(raw):
+            store(raw)
+            ns = stamp_ns_of(raw)
+            if ns > last[topic]:
+                last[topic] = ns
+        return take
+
+    def close(self):
+        """Destroy the subscriptions (what arrives later is not taken)."""
+        for sub in self.subs.values():
+            self.node.destroy_subscription(sub)
+        self.subs = {}
+
+    def progress_ns(self):
+        """Return the newest stamp every topic has reached (ns), -1 before the first."""
+        return min(self.last.values())
+
+    def publishers_ready(self, topics=('controller_state', 'joint_states', 'ee_position')):
+        """Return True when each subscription has matched a publisher."""
+        return all(self.subs[t].get_publisher_count() > 0 for t in topics)
+
+    def messages(self, topic):
+        """Deserialize what was taken on ``topic``, in arrival order."""
+        from rclpy.serialization import deserialize_message
+        kind = self.types[topic]
+        return [deserialize_message(raw, kind) for raw in self.raw[topic]]
+
+
+def ee_trajectory(points, dt_ns, n_ticks):
+    """
+    Return the end-effector positions of ticks 0..n_ticks-1 from ee_position messages.
+
+    Parameters
+    ----------
+    points : list of geometry_msgs/PointStamped
+        The messages, any order, repeats allowed (the first per stamp counts).
+    dt_ns : int
+        Control period (ns).
+    n_ticks : int
+        Number of ticks wanted.
+
+    Returns
+    -------
+    numpy.ndarray, (n_ticks, 2)
+
+    Raises
+    ------
+    ValueError
+        Naming the first tick without a message.
+
+    """
+    import numpy as np
+    first = {}
+    for msg in points:
+        first.setdefault(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec, msg)
+    out = np.empty((n_ticks, 2))
+    for k in range(n_ticks):
+        msg = first.get(k * dt_ns)
+        if msg is None:
+            raise ValueError('ee_position: no message for tick %d (t = %.3f s)'
+                             % (k, k * dt_ns * 1e-9))
+        out[k] = msg.point.x, msg.point.y
+    return out
+
+
+# -- processes --------------------------------------------------------------------------
+class Graph:
+    """The node processes of one run, their logs, and a clean stop."""
+
+    def __init__(self, log_dir, tag):
+        self.log_dir = log_dir
+        self.tag = tag
+        self.procs = []
+
+    def start(self, name, cmd):
+        """Start ``cmd`` with its output in <log_dir>/<tag>_<name>.log; return the Popen."""
+        os.makedirs(self.log_dir, exist_ok=True)
+        path = os.path.join(self.log_dir, '%s_%s.log' % (self.tag, name))
+        log = open(path, 'w')
+        env = dict(os.environ, PYTHONUNBUFFERED='1')
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env,
+                                start_new_session=True, cwd=ROOT)
+        proc.name = name
+        proc.log_path = path
+        proc.log_file = log
+        self.procs.append(proc)
+        return proc
+
+    def alive(self):
+        """Return the names of the processes that exited (empty if all run)."""
+        return [p.name for p in self.procs if p.poll() is not None]
+
+    def stop(self, proc, timeout=20.0):
+        """SIGINT the process, wait, SIGKILL after ``timeout`` s; return its exit code."""
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(5.0)
+        proc.log_file.close()
+        return proc.returncode
+
+    def stop_all(self):
+        """Stop every process still running, last started first; return {name: code}."""
+        codes = {}
+        for proc in reversed(self.procs):
+            if not proc.log_file.closed:
+                codes[proc.name] = self.stop(proc)
+        return codes
+
+    @staticmethod
+    def tail(proc, lines=8):
+        """Return the last lines of a process log."""
+        with open(proc.log_path) as f:
+            return ''.join(f.readlines()[-lines:])
+
+
+def node_cmd(pkg, exe, params_file, overrides=()):
+    """Return the command line of a node, as ``ros2 run`` with a params file."""
+    cmd = [executable(pkg, exe), '--ros-args', '--params-file', params_file]
+    for item in overrides:
+        cmd += ['-p', item]
+    return cmd
+
+
+def spin_until(executor, predicate, timeout, step=0.1):
+    """Spin until ``predicate()`` or ``timeout`` wall s; return whether it held."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        executor.spin_once(timeout_sec=step)
+    return predicate()
+
+
+def recorder_listens(node, topics):
+    """Return True when a node named 'recorder' subscribes every one of ``topics``."""
+    for topic in topics:
+        infos = node.get_subscriptions_info_by_topic(topic)
+        if not any(info.node_name == 'recorder' for info in infos):
+            return False
+    return True
+
+
+def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
+              record=True, progress=say):
+    """
+    Run one case through the graph in lockstep until tick n_ticks - 1 was published.
+
+    Start order: recorder (if installed), simulator, controller; once the recorder and this
+    process listen to them, the planner, whose first setpoint starts the loop.
+
+    Returns
+    -------
+    dict
+        ``wall_s`` (first to last tick), ``sim_s``, ``codes`` (exit codes), ``logs``,
+        ``bag`` (path or None).
+
+    Raises
+    ------
+    RuntimeError
+        A node exited early, or the run stalled (the message names the logs).
+
+    """
+    graph = Graph(log_dir, case)
+    rec_exe = executable('freejoint_tools', 'recorder')
+    bag = None
+    try:
+        if record and os.path.exists(rec_exe):
+            bag = os.path.join(out_dir, case)
+            info = 'case=%s, variant=robust, seed=%d, passive_joint=%s, max_ticks=%d' % (
+                case, seed, PASSIVE_JOINT, n_ticks)
+            graph.start('recorder', [rec_exe, '--ros-args', '-p', 'output:=' + bag,
+                                     '-p', 'topics:=[]', '-p', 'overwrite:=true',
+                                     '-p', 'use_sim_time:=true',
+                                     '-p', 'custom_data:=[%s]' % info])
+        graph.start('sim_node', node_cmd('freejoint_sim', 'sim_node',
+                                         os.path.join(CONFIG, 'sim.yaml'),
+                                         ['case:=' + case, 'seed:=%d' % seed]))
+        graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
+                                                os.path.join(CONFIG, 'controller.yaml'),
+                                                ['case:=' + case]))
+        node = collector.node
+
+        def ready():
+            ok = collector.publishers_ready()
+            if bag is not None:
+                ok = ok and recorder_listens(node, ('/joint_states', '/controller_state',
+                                                    '/effort_controller/commands',
+                                                    '/ee_position', '/clock'))
+            return ok
+
+        if not spin_until(executor, lambda: ready() or graph.alive(), 60.0):
+            raise RuntimeError('the simulator and controller did not come up within 60 s '
+                               '(logs in %s)' % log_dir)
+        if graph.alive():
+            raise RuntimeError('%s exited at start:\n%s' % (
+                graph.alive(), '\n'.join(graph.tail(p) for p in graph.procs
+                                         if p.poll() is not None)))
+        graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node',
+                                             os.path.join(CONFIG, 'planner.yaml'),
+                                             ['case:=' + case]))
+        last_ns = (n_ticks - 1) * dt_ns
+        first_wall = time.monotonic()
+        started = False
+        last_change = time.monotonic()
+        seen = -1
+        next_report = time.monotonic() + 1.0
+        while collector.progress_ns() < last_ns:
+            executor.spin_once(timeout_sec=0.05)
+            now = time.monotonic()
+            ns = collector.progress_ns()
+            if ns != seen:
+                seen = ns
+                last_change = now
+                if not started and ns >= 0:
+                    started = True
+                    first_wall = now
+            if now >= next_report and started:
+                next_report = now + 1.0
+                rtf = ns * 1e-9 / max(now - first_wall, 1e-9)
+                progress('  %-10s t = %.3f of %.3f s sim   (%.2fx real time)'
+                         % (case, ns * 1e-9, last_ns * 1e-9, rtf))
+            if graph.alive():
+                raise RuntimeError('%s exited during the run (logs in %s)'
+                                   % (graph.alive(), log_dir))
+            if now - last_change > STALL_TIMEOUT:
+                raise RuntimeError('no new tick for %g s at t = %.3f s (logs in %s)'
+                                   % (STALL_TIMEOUT, max(ns, 0) * 1e-9, log_dir))
+        wall = time.monotonic() - first_wall
+        # Take what is still in flight, then stop: the simulator first (the clock stops).
+        spin_until(executor, lambda: False, 0.2, step=0.05)
+    finally:
+        codes = {}
+        for name in ('sim_node', 'controller_node', 'planner_node', 'recorder'):
+            for proc in graph.procs:
+                if proc.name == name and not proc.log_file.closed:
+                    codes[name] = graph.stop(proc, 60.0 if name == 'recorder' else 20.0)
+    return {'wall_s': wall, 'sim_s': last_ns * 1e-9, 'codes': codes,
+            'logs': [p.log_path for p in graph.procs], 'bag': bag,
+            'sim_log': next(p.log_path for p in graph.procs if p.name == 'sim_node')}
+
+
+def graph_record(collector, case, seed, n_ticks):
+    """Return the graph's record of the collected run (source 'graph') and its arrays."""
+    from freejoint_control.records import arrays_from_messages
+    from freejoint_core.metrics import compute_record
+    arrays = arrays_from_messages(collector.messages('controller_state'),
+                                  collector.messages('joint_states'), PASSIVE_JOINT,
+                                  max_ticks=n_ticks)
+    got = len(arrays['t'])
+    if got != n_ticks:
+        raise RuntimeError('only %d of %d ticks have both a ControllerState and a JointState'
+                           % (got, n_ticks))
+    record = compute_record(case, 'robust', seed, source='graph', **arrays)
+    return record, arrays
+
+
+# -- main -------------------------------------------------------------------------------
+def _parse(argv):
+    ap = argparse.ArgumentParser(prog='demo', description=__doc__.split('\n')[1])
+    ap.add_argument('--cases', nargs='+', choices=CASES, default=list(CASES))
+    ap.add_argument('--seed', type=int, default=0, help='disturbance seed (default 0)')
+    ap.add_argument('--out', default=os.path.join(ROOT, 'bags', 'demo'),
+                    help='output directory (default bags/demo)')
+    ap.add_argument('--no-record', action='store_true', help='do not start the recorder')
+    return ap.parse_args(argv)
+
+
+def main(argv=None):
+    """Run the demo; return the exit code."""
+    args = _parse(sys.argv[1:] if argv is None else argv)
+    t_start = time.monotonic()
+    if not os.environ.get('ROS_DOMAIN_ID'):
+        os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
+    missing = [exe for exe in (executable('freejoint_sim', 'sim_node'),
+                               executable('freejoint_control', 'controller_node'),
+                               executable('freejoint_planner', 'planner_node'))
+               if not os.path.exists(exe)]
+    if missing:
+        say('error: not built: %s (run tools/setup.sh)' % ', '.join(missing))
+        return 1
+    from freejoint_core.metrics import format_table, write_records
+    from freejoint_core.offline import run_case
+    import numpy as np
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+
+    settings = offline_settings()
+    dt_ns = round(settings['dt'] * 1e9)
+    n_ticks = int(round(settings['duration'] / settings['dt']))
+    out = os.path.abspath(args.out)
+    log_dir = os.path.join(out, 'logs')
+    os.makedirs(out, exist_ok=True)
+    recorder = executable('freejoint_tools', 'recorder')
+    analyze = executable('freejoint_tools', 'analyze')
+    say('ROS_DOMAIN_ID=%s, discovery %s; %d ticks of %g s per case, seed %d' % (
+        os.environ['ROS_DOMAIN_ID'], os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'], n_ticks,
+        settings['dt'], args.seed))
+    record_bags = not args.no_record and os.path.exists(recorder)
+    if not args.no_record and not record_bags:
+        say('recorder not installed yet (%s): running without bags' % recorder)
+
+    rclpy.init()
+    node = rclpy.create_node('freejoint_demo')
+    collector = None
+    executor = EventsExecutor()
+    executor.add_node(node)
+    graph_records, offline_records, runs = [], [], []
+    failed = False
+    try:
+        for i, case in enumerate(args.cases):
+            who = 'recorder, ' if record_bags else ''
+            say('case %d/%d: %s - starting %ssim_node, controller_node, planner_node '
+                '(lockstep, robust, seed %d)' % (i + 1, len(args.cases), case, who, args.seed))
+            if collector is not None:
+                collector.close()
+            collector = Collector(node)
+            try:
+                run = run_graph(case, args.seed, n_ticks, dt_ns, collector, executor, out,
+                                log_dir, record=record_bags)
+            except RuntimeError as exc:
+                say('error: %s: %s' % (case, exc))
+                failed = True
+                break
+            bad = {name: code for name, code in run['codes'].items() if code != 0}
+            say('  %s: %.3f s simulated in %.2f s wall (%.2fx real time); stopped cleanly%s'
+                % (case, run['sim_s'], run['wall_s'], run['sim_s'] / run['wall_s'],
+                   '' if not bad else ' EXCEPT %s' % bad))
+            with open(run['sim_log']) as f:
+                stop_line = [line for line in f if 'simulator stopped' in line]
+            if stop_line:
+                say('  ' + stop_line[-1].split(']: ')[-1].strip())
+            try:
+                record, arrays = graph_record(collector, case, args.seed, n_ticks)
+            except (RuntimeError, ValueError) as exc:
+                say('error: %s: %s' % (case, exc))
+                failed = True
+                break
+            off, trace = run_case(case, 'robust', args.seed, record_trace=True, **settings)
+            ee = ee_trajectory(collector.messages('ee_position'), dt_ns, n_ticks)
+            dev = float(np.max(np.abs(ee - trace['p'])))
+            verdict = '' if dev <= 1e-9 else '  (NOT within 1e-9 m)'
+            say('  end-effector trajectory, graph vs offline runner: max |difference| = '
+                '%.3g m over %d ticks%s' % (dev, n_ticks, verdict))
+            failed = failed or dev > 1e-9
+            graph_records.append(record)
+            offline_records.append(off)
+            runs.append(run)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    if graph_records:
+        metrics = os.path.join(out, 'metrics.json')
+        write_records(metrics, graph_records)
+        rows = [r for pair in zip(offline_records, graph_records) for r in pair]
+        print()
+        print(format_table(rows))
+        print()
+    if not failed and os.path.exists(analyze) and record_bags:
+        bags = [run['bag'] for run in runs]
+        say('analyze %s' % ' '.join(os.path.relpath(b, ROOT) for b in bags))
+        code = subprocess.call([analyze, *bags], cwd=ROOT)
+        if code != 0:
+            say('analyze exited with %d' % code)
+            failed = True
+    elif record_bags and not os.path.exists(analyze):
+        say('analyze not installed yet (%s): no bag analysis' % analyze)
+    say('outputs:')
+    if graph_records:
+        say('  %s  graph records (source "graph")' % os.path.relpath(metrics, ROOT))
+    for run in runs:
+        if run['bag']:
+            say('  %s/  bag of the %s run' % (os.path.relpath(run['bag'], ROOT),
+                                              os.path.basename(run['bag'])))
+    say('  %s/  node logs' % os.path.relpath(log_dir, ROOT))
+    say('wall time %.1f s%s' % (time.monotonic() - t_start, ' - FAILED' if failed else ''))
+    return 1 if failed else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
