@@ -1,0 +1,195 @@
+"""
+The three nodes as separate processes (simulator, controller, the real planner), as a user
+starts them with ``ros2 run`` and the parameter files of ``config/``.
+
+In lockstep the graph must reproduce the offline runner (``freejoint_core.offline``) exactly,
+whatever the start order and whatever the order of the joints in the JointState; in real
+time, a silent controller must leave the arm with zero effort.
+"""
+import importlib.util
+import os
+
+from freejoint_control.records import arrays_from_messages
+from freejoint_core.metrics import compute_record, KEYS
+from freejoint_core.offline import run_case
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CONFIG = os.path.join(ROOT, 'config')
+RELAY = os.path.join(ROOT, 'test', 'nodes', 'ctl_joint_relay.py')
+DT_NS = 1_000_000
+NODES = {
+    'sim': ('freejoint_sim', 'sim_node', 'sim.yaml', 'simulator ready'),
+    'controller': ('freejoint_control', 'controller_node', 'controller.yaml',
+                   'controller ready'),
+    'planner': ('freejoint_planner', 'planner_node', 'planner.yaml', 'ready:'),
+}
+
+
+def _demo():
+    """Import tools/demo.py (its Collector and the offline settings of config/)."""
+    spec = importlib.util.spec_from_file_location('freejoint_demo',
+                                                  os.path.join(ROOT, 'tools', 'demo.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+demo = _demo()
+
+
+class Run:
+    """Start graph nodes, take the run's messages in this process, wait for ticks."""
+
+    def __init__(self, procs, ros_node, wait):
+        from rclpy.experimental import EventsExecutor
+        self.procs = procs
+        self.wait = wait
+        self.collector = demo.Collector(ros_node)
+        self.executor = EventsExecutor()
+        self.executor.add_node(ros_node)
+        self.started = {}
+
+    def spin(self):
+        self.executor.spin_once(timeout_sec=0.05)
+
+    def start(self, name, *overrides, args=()):
+        pkg, exe, params, ready = NODES[name]
+        cmd = ['--ros-args', '--params-file', os.path.join(CONFIG, params), *args]
+        for item in overrides:
+            cmd += ['-p', item]
+        proc = self.procs.start_node(pkg, exe, name, cmd)
+        self.wait(lambda: ready in self.procs.log(proc) or proc.poll() is not None, 30.0,
+                  '%s to start (log %s)' % (name, proc.log_path), spin=self.spin)
+        assert proc.poll() is None, self.procs.log(proc)
+        self.started[name] = proc
+        return proc
+
+    def ticks(self, n, timeout=240.0):
+        """Wait until ticks 0..n-1 were published on every collected topic."""
+        self.wait(lambda: self.collector.progress_ns() >= (n - 1) * DT_NS, timeout,
+                  '%d ticks (logs: %s)' % (n, [p.log_path for p in self.started.values()]),
+                  spin=self.spin)
+
+    def stop(self):
+        """Stop the nodes (simulator first); return their exit codes."""
+        codes = {}
+        for name in ('sim', 'controller', 'planner'):
+            if name in self.started:
+                codes[name] = self.procs.stop(self.started[name])
+        return codes
+
+    def arrays(self, n):
+        return arrays_from_messages(self.collector.messages('controller_state'),
+                                    self.collector.messages('joint_states'), 'joint3',
+                                    max_ticks=n)
+
+    def ee(self, n):
+        return demo.ee_trajectory(self.collector.messages('ee_position'), DT_NS, n)
+
+
+def _offline(case):
+    return run_case(case, 'robust', 0, record_trace=True, **demo.offline_settings(CONFIG))
+
+
+def _assert_prefix_equals_offline(run, case, n):
+    """The first n ticks of the graph run are the offline runner's, within 1e-9."""
+    _, trace = _offline(case)
+    arrays = run.arrays(n)
+    assert len(arrays['t']) == n
+    assert np.max(np.abs(run.ee(n) - trace['p'][:n])) <= 1e-9
+    for key in ('p', 'p_d', 'tau', 'theta', 'det'):
+        assert np.max(np.abs(arrays[key] - trace[key][:n])) <= 1e-9, key
+    assert np.max(np.abs(arrays['q_passive'] - trace['q'][:n, 2])) <= 1e-9
+
+
+def test_lockstep_graph_end_effector_equals_the_offline_runner_at_every_step(
+        procs, ros_node, wait):
+    run = Run(procs, ros_node, wait)
+    run.start('sim')
+    run.start('controller')
+    run.start('planner')
+    n = 5000   # the full 5 s case: ticks t_0 .. t_4999 as the offline runner records them
+    run.ticks(n)
+    assert run.stop() == {'sim': 0, 'controller': 0, 'planner': 0}
+    record, trace = _offline('horizontal')
+    ee = run.ee(n)
+    assert ee.shape == trace['p'].shape
+    assert np.max(np.abs(ee - trace['p'])) <= 1e-9
+    graph = compute_record('horizontal', 'robust', 0, source='graph', **run.arrays(n))
+    for key in KEYS:
+        if key in ('case', 'variant', 'seed', 'diverged_at_s'):
+            assert graph[key] == record[key]
+        elif key != 'source':
+            assert graph[key] == pytest.approx(record[key], abs=1e-9, rel=0.0), key
+    with open(run.started['sim'].log_path) as f:
+        assert ': 0 command timeouts, 0 refused commands' in f.read()
+
+
+def test_lockstep_tracking_stays_within_the_offline_error_bound(procs, ros_node, wait):
+    run = Run(procs, ros_node, wait)
+    run.start('sim', 'case:=vertical')
+    run.start('controller', 'case:=vertical')
+    run.start('planner', 'case:=vertical')
+    n = 2500   # half the vertical case: the fastest part of the circle
+    run.ticks(n)
+    run.stop()
+    record, _ = _offline('vertical')
+    arrays = run.arrays(n)
+    err_mm = 1000.0 * np.hypot(*(arrays['p'] - arrays['p_d']).T)
+    assert err_mm.max() <= record['max_mm'] + 1e-6
+    _assert_prefix_equals_offline(run, 'vertical', n)
+
+
+@pytest.mark.parametrize('order', [('controller', 'planner', 'sim'),
+                                   ('sim', 'planner', 'controller'),
+                                   ('planner', 'controller', 'sim')],
+                         ids=['sim-last', 'controller-last', 'planner-first'])
+def test_nodes_wire_up_in_any_start_order(order, procs, ros_node, wait):
+    run = Run(procs, ros_node, wait)
+    for name in order:
+        run.start(name)
+    n = 300
+    run.ticks(n)
+    assert run.stop() == {'sim': 0, 'controller': 0, 'planner': 0}
+    _assert_prefix_equals_offline(run, 'horizontal', n)
+
+
+def test_joint_states_of_a_driver_in_another_order_drive_the_controller_as_the_sims_do(
+        procs, ros_node, wait):
+    run = Run(procs, ros_node, wait)
+    run.start('sim')
+    relay = procs.start_script(RELAY, 'relay')
+    wait(lambda: 'relay ready' in procs.log(relay), 30.0, 'the relay', spin=run.spin)
+    run.start('controller', args=['-r', 'joint_states:=driver/joint_states'])
+    run.start('planner')
+    n = 1000
+    run.ticks(n)
+    run.stop()
+    _assert_prefix_equals_offline(run, 'horizontal', n)
+
+
+def test_stopping_the_controller_makes_the_sim_apply_zero_effort_within_its_timeout(
+        procs, ros_node, wait):
+    from sensor_msgs.msg import JointState
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    run = Run(procs, ros_node, wait)
+    efforts = []
+    ros_node.create_subscription(JointState, 'joint_states',
+                                 lambda m: efforts.append(list(m.effort)),
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    sim = run.start('sim', 'mode:=realtime', 'command_timeout:=0.3', 'publish_rate:=100.0')
+    controller = run.start('controller', 'lockstep:=false')
+    run.start('planner', 'use_sim_time:=false')
+    wait(lambda: efforts and efforts[-1][:2] != [0.0, 0.0], 60.0,
+         'the controller driving the real-time simulator', spin=run.spin)
+    assert procs.stop(controller) == 0
+    # ros2_control would hold the last command forever; the simulator applies zero.
+    wait(lambda: efforts[-1] == [0.0, 0.0, 0.0], 30.0, 'zero effort after the timeout',
+         spin=run.spin)
+    log = procs.log(sim)
+    assert 'no command on /effort_controller/commands for 0.3 s: zero effort (not holding ' \
+        'the last one)' in log

@@ -1,0 +1,48 @@
+"""
+A stand-in for a real driver's joint_state_broadcaster, for the graph tests.
+
+Republishes every ``joint_states`` message on ``driver/joint_states`` with the joints in
+another order and two extra joints (a gripper and a wrist that the arm model does not
+have), as a real robot's driver may publish them.
+"""
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+ORDER = ('gripper', 'joint3', 'joint1', 'wrist', 'joint2')
+
+
+def main():
+    rclpy.init()
+    node = rclpy.create_node('ctl_joint_relay')
+    pub = node.create_publisher(JointState, 'driver/joint_states', QOS)
+
+    def relay(msg):
+        names = list(msg.name)
+        out = JointState()
+        out.header = msg.header
+        out.name = list(ORDER)
+        for field in ('position', 'velocity', 'effort'):
+            values = getattr(msg, field)
+            setattr(out, field, [float(values[names.index(n)]) if n in names else 0.25
+                                 for n in ORDER])
+        pub.publish(out)
+
+    node.create_subscription(JointState, 'joint_states', relay, QOS)
+    node.get_logger().info('relay ready')
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:
+        if rclpy.ok():
+            raise
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
