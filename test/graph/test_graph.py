@@ -1,8 +1,8 @@
 """
-The three nodes as separate processes (simulator, controller, the real planner), as a user
-starts them with ``ros2 run`` and the parameter files of ``config/``.
+The node graph: simulator, controller and the real planner as separate processes.
 
-In lockstep the graph must reproduce the offline runner (``freejoint_core.offline``) exactly,
+They are started as ``ros2 run`` starts them, with the parameter files of ``config/``. In
+lockstep the graph must reproduce the offline runner (``freejoint_core.offline``) exactly,
 whatever the start order and whatever the order of the joints in the JointState; in real
 time, a silent controller must leave the arm with zero effort.
 """
@@ -96,7 +96,7 @@ def _offline(case):
 
 
 def _assert_prefix_equals_offline(run, case, n):
-    """The first n ticks of the graph run are the offline runner's, within 1e-9."""
+    """Assert that the first n ticks of the graph run are the offline runner's (1e-9)."""
     _, trace = _offline(case)
     arrays = run.arrays(n)
     assert len(arrays['t']) == n
