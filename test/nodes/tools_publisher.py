@@ -9,6 +9,7 @@ keep-last 100 as in docs/GRAPH.md; before the ticks, once, the latched ``semi_si
 depth 1. Message contents are a pure function of k (:func:`tick_messages`).
 
 Usage: tools_publisher.py --ticks N --rate HZ [--clock] [--subscribers M] [--summary FILE]
+                          [--setpoint-volatile]
 
 It waits (up to 30 s) until every tick topic (and /clock) has at least M matched
 subscriptions, then publishes the ticks at HZ (0: as fast as it can), waits until every
@@ -99,6 +100,8 @@ def main():
     parser.add_argument('--clock', action='store_true')
     parser.add_argument('--subscribers', type=int, default=1)
     parser.add_argument('--summary', default='')
+    parser.add_argument('--setpoint-volatile', action='store_true',
+                        help='offer setpoint volatile (not the graph contract)')
     opts = parser.parse_args()
     stop = []
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
@@ -107,7 +110,8 @@ def main():
     tick_qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     # as the planner offers it (docs/GRAPH.md): transient local, depth 100
     setpoint_qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
+                              durability=DurabilityPolicy.VOLATILE if opts.setpoint_volatile
+                              else DurabilityPolicy.TRANSIENT_LOCAL)
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
     pubs = {

@@ -113,7 +113,10 @@ def test_signal_mid_run_gives_a_finalised_bag_without_gaps(procs, wait, tmp_path
     from freejoint_tools.bagfile import open_bag
     bag_path = str(tmp_path / 'run')
     recorder = _start_recorder(procs, bag_path)
-    publisher = procs.start_script(PUBLISHER, 'publisher', ['--ticks', '0', '--rate', '1000'])
+    # setpoint offered volatile: the recorder's contract (transient local) subscription
+    # does not match it and is replaced by one adapted to the offer
+    publisher = procs.start_script(PUBLISHER, 'publisher', ['--ticks', '0', '--rate', '1000',
+                                                            '--setpoint-volatile'])
     mcap = os.path.join(bag_path, 'run_0.mcap')
     wait(lambda: os.path.exists(mcap) and os.path.getsize(mcap) > 100_000, 60.0,
          'the bag to grow (publisher: %s)' % procs.log(publisher))
@@ -128,6 +131,9 @@ def test_signal_mid_run_gives_a_finalised_bag_without_gaps(procs, wait, tmp_path
     assert len(stamps) > 100
     assert stamps == [k * 1_000_000 for k in range(len(stamps))]      # no gap, no loss
     assert abs(bag.topics['/controller_state'].count - len(stamps)) <= 2
+    assert bag.topics['/setpoint'].count > 100
+    assert bag.topics['/setpoint'].qos[0]['durability'] == 'volatile'
+    assert 'subscribing anew' in _log(recorder)
 
 
 def test_sigkill_leaves_a_bag_the_analysis_reads_up_to_the_last_chunk(procs, wait, tmp_path,

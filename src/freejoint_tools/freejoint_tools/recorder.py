@@ -17,6 +17,15 @@ What ``ros2 bag record -s mcap`` does, for this workspace where rosbag2 is not i
   queued, then finalise the bag (summary, statistics, ``metadata.yaml``) and print what
   was received per topic (and any loss the middleware reported).
 
+Readiness: publishers that start together with the run (lockstep starts at the first
+command) can be discovered late - Fast DDS sometimes needs seconds to discover one of
+several participants started at once. The recorder therefore subscribes to the graph's
+contract topics at start (``graph_topics``), and its service ``~/status``
+(std_srvs/Trigger) answers ``success: true`` only once every topic of ``ready_topics``
+(default: the graph's topics) has a matched publisher; its message lists the matched
+publishers per topic. A launcher that must lose nothing starts the nodes, waits for that,
+then starts the run (e.g. the planner's ``~/plan_circle`` with ``autostart: false``).
+
 Timestamps: with ``use_sim_time:=true`` the log times are sim time (the lockstep ``/clock``,
 ``t_k = k dt``), the same time base as the header stamps. ``ros2 bag play --clock`` (and
 this package's player) publishes ``/clock`` from the log times, so nodes replaying the bag
@@ -42,13 +51,31 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from std_srvs.srv import Trigger
 
 from .bagfile import BagError, BagWriter
 from .qos import profile_to_dict, subscription_qos
 from .typedefs import DefinitionError, Definitions
 
 DEFAULT_DIR = 'bags'
+# The freejoint graph's topics (docs/GRAPH.md): name (relative = in the recorder's
+# namespace), type, transient local. With graph_topics (default) the recorder subscribes to
+# them at start - reliable, deep queue - so that it is matched with their publishers in the
+# same discovery round as the other nodes and misses nothing of a run that starts at once
+# (lockstep starts with the first command). If the publishers offer other QoS or another
+# type the subscription is replaced by one adapted to them. Other topics are discovered.
+GRAPH_TOPICS = (
+    ('/clock', 'rosgraph_msgs/msg/Clock', False),
+    ('joint_states', 'sensor_msgs/msg/JointState', False),
+    ('ee_position', 'geometry_msgs/msg/PointStamped', False),
+    ('effort_controller/commands', 'std_msgs/msg/Float64MultiArray', False),
+    ('controller_state', 'freejoint_msgs/msg/ControllerState', False),
+    ('setpoint', 'freejoint_msgs/msg/CartesianSetpoint', True),
+    ('semi_singular_map', 'nav_msgs/msg/OccupancyGrid', True),
+    ('planned_path', 'visualization_msgs/msg/Marker', True),
+)
 # Files an earlier run of the tools leaves in a bag directory (what overwrite may delete).
 _OWN_FILES = ('metadata.yaml', 'metrics.json')
 _OWN_SUFFIXES = ('.mcap', '.png', '.yaml.tmp', '.json.tmp')
@@ -123,6 +150,13 @@ class Recorder(Node):
         self.declare_parameter('chunk_size', 1 << 20, _descriptor(
             'MCAP chunk size (bytes); a chunk also closes at every flush',
             ParameterType.PARAMETER_INTEGER, int_range=(4096, 1 << 28)))
+        self.declare_parameter('graph_topics', True, _descriptor(
+            'Subscribe to the freejoint graph topics (docs/GRAPH.md) at start, with their '
+            'contract types and QoS, so a run that starts before discovery loses nothing',
+            ParameterType.PARAMETER_BOOL))
+        self.declare_parameter('ready_topics', [t for t, _, _ in GRAPH_TOPICS], _descriptor(
+            '~/status answers success once each of these topics has a matched publisher',
+            ParameterType.PARAMETER_STRING_ARRAY))
         self.declare_parameter('queue_depth', 5000, _descriptor(
             'Subscription queue depth (messages) per topic', ParameterType.PARAMETER_INTEGER,
             int_range=(1, 1000000)))
@@ -138,7 +172,8 @@ class Recorder(Node):
         self.output = output
         self._defs = Definitions()
         self._subs = {}          # topic -> subscription
-        self._channels = {}      # topic -> bag channel id
+        self._channels = {}      # topic -> (bag channel id, type)
+        self._unconfirmed = {}   # pre-subscribed topic -> (contract type, QoS) until seen
         self.received = {}       # topic -> messages received
         self.lost = {}           # topic -> messages the middleware reported lost
         self._write_errors = 0
@@ -151,6 +186,10 @@ class Recorder(Node):
         self.get_logger().info('recording into %s (%s)' % (
             output, 'topics: ' + ', '.join(sorted(self._wanted)) if self._wanted
             else 'all topics'))
+        if p['graph_topics']:
+            self._presubscribe()
+        self._ready_topics = [self.resolve_topic_name(t) for t in p['ready_topics']]
+        self.create_service(Trigger, '~/status', self._status)
         self._discover()
 
     # -- parameters -------------------------------------------------------------------
@@ -160,7 +199,7 @@ class Recorder(Node):
         values = dict(self._params)
         for param in params:
             value = param.value
-            if param.name in ('topics', 'exclude'):
+            if param.name in ('topics', 'exclude', 'ready_topics'):
                 value = [v for v in (value or []) if v]
                 bad = [v for v in value if not isinstance(v, str) or ' ' in v]
                 if bad:
@@ -180,80 +219,155 @@ class Recorder(Node):
         self._params = values
         return SetParametersResult(successful=True)
 
-    # -- discovery --------------------------------------------------------------------
+    # -- subscriptions ----------------------------------------------------------------
     def _warn_once(self, key, text):
         if key not in self._warned:
             self._warned.add(key)
             self.get_logger().warning(text)
 
+    def _selected(self, name):
+        if self._wanted:
+            if name not in self._wanted:
+                return False
+        elif _is_hidden(name):
+            return False
+        return name not in self._excluded
+
+    def _presubscribe(self):
+        """Subscribe to the graph's contract topics before any publisher exists."""
+        for rel, msgtype, latched in GRAPH_TOPICS:
+            name = self.resolve_topic_name(rel)
+            if not self._selected(name):
+                continue
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST,
+                             depth=self._params['queue_depth'],
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
+                             else DurabilityPolicy.VOLATILE)
+            if self._subscribe(name, msgtype, qos):
+                self._unconfirmed[name] = (msgtype, qos)
+
     def _discover(self):
         if self._closed:
             return
         for name, types in self.get_topic_names_and_types():
-            if name in self._subs or name in self._skipped:
+            if name in self._skipped or not self._selected(name):
                 continue
-            if self._wanted:
-                if name not in self._wanted:
-                    continue
-            elif _is_hidden(name):
-                continue
-            if name in self._excluded:
+            if name in self._subs and name not in self._unconfirmed:
                 continue
             if len(types) != 1:
                 self._warn_once(('types', name), 'not recording %s: it has several types %s'
                                 % (name, ', '.join(types)))
                 continue
             infos = self.get_publishers_info_by_topic(name)
-            if infos:
-                self._start(name, types[0], infos)
+            if not infos:
+                continue
+            if name in self._unconfirmed:
+                self._confirm(name, types[0], infos)
+            else:
+                qos = subscription_qos([i.qos_profile for i in infos],
+                                       self._params['queue_depth'])
+                if self._subscribe(name, types[0], qos):
+                    self._register(name, types[0], infos)
 
-    def _start(self, name, msgtype, infos):
-        log = self.get_logger()
+    def _confirm(self, name, msgtype, infos):
+        """Keep a pre-subscription if the publishers match it, else replace it."""
+        expected, qos = self._unconfirmed.pop(name)
+        adapted = subscription_qos([i.qos_profile for i in infos], self._params['queue_depth'])
+        compatible = msgtype == expected and (
+            adapted.reliability == ReliabilityPolicy.RELIABLE
+            or qos.reliability != ReliabilityPolicy.RELIABLE) and (
+            adapted.durability == DurabilityPolicy.TRANSIENT_LOCAL
+            or qos.durability != DurabilityPolicy.TRANSIENT_LOCAL)
+        if not compatible:
+            self.get_logger().warning(
+                '%s: its publishers offer %s (%s, %s), not the graph contract; '
+                'subscribing anew' % (name, msgtype, adapted.reliability.name.lower(),
+                                      adapted.durability.name.lower()))
+            self.destroy_subscription(self._subs.pop(name))
+            if name in self._channels and self._channels[name][1] != msgtype:
+                self._warn_once(('retype', name), '%s: type changed; not recording' % name)
+                self._skipped.add(name)
+                return
+            if not self._subscribe(name, msgtype, adapted):
+                return
+        self._register(name, msgtype, infos)
+
+    def _subscribe(self, name, msgtype, qos):
         try:
             msg_class = _message_class(msgtype)
         except (ImportError, AttributeError, ValueError) as exc:
             self._skipped.add(name)
-            log.error('not recording %s: type %s is not installed (%s)' % (name, msgtype, exc))
-            return
-        advertised = str(infos[0].topic_type_hash or '')
-        if advertised.startswith('RIHS01_') is False:
+            self.get_logger().error('not recording %s: type %s is not installed (%s)'
+                                    % (name, msgtype, exc))
+            return False
+        self.received.setdefault(name, 0)
+        self.lost.setdefault(name, 0)
+        self._subs[name] = self.create_subscription(
+            msg_class, name, self._callback(name, msgtype), qos, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(message_lost=self._lost_callback(name)))
+        self.get_logger().info('recording %s [%s] (%s, %s)' % (
+            name, msgtype, qos.reliability.name.lower(), qos.durability.name.lower()))
+        return True
+
+    def _register(self, name, msgtype, infos=None):
+        """Add the topic's channel to the bag (once): definition, hash, offered QoS."""
+        if name in self._channels:
+            return self._channels[name][0]
+        if infos is None:
+            infos = self.get_publishers_info_by_topic(name)
+        advertised = str(infos[0].topic_type_hash or '') if infos else ''
+        if not advertised.startswith('RIHS01_'):
             advertised = ''
         try:
             msgdef, digest = self._defs.lookup(msgtype)
         except DefinitionError as exc:
             msgdef, digest = '', ''
-            log.warning('recording %s without a message definition: %s' % (name, exc))
+            self.get_logger().warning('recording %s without a message definition: %s'
+                                      % (name, exc))
         if advertised and digest and advertised != digest:
-            log.warning("%s: the publisher's type hash %s differs from the installed "
-                        "definition of %s (%s); the bag keeps the publisher's hash"
-                        % (name, advertised, msgtype, digest))
-        offered = [i.qos_profile for i in infos]
+            self.get_logger().warning(
+                "%s: the publisher's type hash %s differs from the installed definition of "
+                "%s (%s); the bag keeps the publisher's hash"
+                % (name, advertised, msgtype, digest))
         channel = self.writer.add_topic(name, msgtype, msgdef, advertised or digest,
-                                        [profile_to_dict(q) for q in offered])
-        qos = subscription_qos(offered, self._params['queue_depth'])
-        self.received[name] = 0
-        self.lost[name] = 0
-        self._channels[name] = channel
-        self._subs[name] = self.create_subscription(
-            msg_class, name, self._callback(name, channel), qos, raw=True,
-            event_callbacks=SubscriptionEventCallbacks(message_lost=self._lost_callback(name)))
-        log.info('recording %s [%s] (%s, %s)' % (
-            name, msgtype, qos.reliability.name.lower(), qos.durability.name.lower()))
+                                        [profile_to_dict(i.qos_profile) for i in infos])
+        self._channels[name] = (channel, msgtype)
+        return channel
 
-    def _callback(self, name, channel):
+    def _callback(self, name, msgtype):
         write = self.writer.write
         now = self.get_clock().now
         received = self.received
+        channels = self._channels
 
         def on_message(data):
+            stamp = now().nanoseconds
             received[name] += 1
             try:
-                write(channel, now().nanoseconds, data)
+                entry = channels.get(name)
+                channel = entry[0] if entry else self._register(name, msgtype)
+                write(channel, stamp, data)
             except (OSError, ValueError) as exc:
                 self._write_errors += 1
                 self.get_logger().error('cannot write a message of %s: %s' % (name, exc),
                                         throttle_duration_sec=5.0)
         return on_message
+
+    def matched(self):
+        """Return ``{topic: matched publishers}`` of the recorder's subscriptions."""
+        return {name: sub.get_publisher_count() for name, sub in self._subs.items()}
+
+    def _status(self, request, response):
+        """~/status: success once every ready topic has a matched publisher."""
+        matched = self.matched()
+        waiting = [t for t in self._ready_topics if not matched.get(t)]
+        response.success = not waiting and not self._closed
+        response.message = '%s; matched publishers: %s' % (
+            'recording' if response.success else
+            ('closed' if self._closed else 'waiting for ' + ', '.join(waiting)),
+            ', '.join('%s %d' % kv for kv in sorted(matched.items())))
+        return response
 
     def _lost_callback(self, name):
         def on_lost(info):
@@ -288,7 +402,7 @@ class Recorder(Node):
         lines = ['bag %s finalised: %d messages on %d topics'
                  % (self.output, self.total_received(), len(self._channels))]
         for name in sorted(self._channels):
-            written = self.writer.count(self._channels[name])
+            written = self.writer.count(self._channels[name][0])
             lines.append('  %s: received %d, written %d, lost (middleware) %d'
                          % (name, self.received[name], written, self.lost[name]))
         if self._write_errors:
@@ -318,12 +432,14 @@ class _Stop:
         self.signum = signum
 
 
-def spin_until_stopped(node, executor, stop, drain_quiet=0.1, drain_max=2.0):
+def spin_until_stopped(node, executor, stop, drain_quiet=0.3, drain_max=3.0):
     """Spin until a signal; then take what is still queued (bounded) before returning."""
     while stop.signum is None and rclpy.ok():
         executor.spin_once(timeout_sec=0.1)
     deadline = time.monotonic() + drain_max
     last_count, last_change = node.total_received(), time.monotonic()
+    node.get_logger().info('stopping (signal %d) after %d messages; taking what is queued'
+                           % (stop.signum or 0, last_count))
     while rclpy.ok() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.02)
         count = node.total_received()

@@ -1,0 +1,84 @@
+"""
+A recording of the real lockstep graph gives the same record as its live messages.
+
+The run is started (planner ``~/plan_circle``) only once the recorder's ``~/status`` says
+every graph topic has a matched publisher, as a launcher that must lose nothing does.
+"""
+import os
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CONFIG = os.path.join(ROOT, 'config')
+TICKS = 400
+
+
+def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, tmp_path,
+                                                         same_record):
+    import rclpy
+    from freejoint_msgs.msg import ControllerState
+    from freejoint_msgs.srv import PlanCircle
+    from std_srvs.srv import Trigger
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import JointState
+
+    from freejoint_control.records import arrays_from_messages, stamp_ns
+    from freejoint_core.metrics import compute_record
+    from freejoint_tools.analyze import analyse_bag
+    from freejoint_tools.bagfile import open_bag
+    live = {'states': [], 'joints': []}
+    ros_node.create_subscription(ControllerState, '/controller_state', live['states'].append,
+                                 QoSProfile(depth=10000))
+    ros_node.create_subscription(JointState, '/joint_states', live['joints'].append,
+                                 QoSProfile(depth=10000))
+    bag_path = str(tmp_path / 'horizontal')
+    recorder = procs.start_node('freejoint_tools', 'recorder', 'recorder', [
+        '--ros-args', '-p', 'output:=%s' % bag_path, '-p', 'topics:=[]',
+        '-p', 'use_sim_time:=true',
+        '-p', 'custom_data:=[case=horizontal, variant=robust, seed=0, max_ticks=%d]' % TICKS])
+    wait(lambda: 'recording into' in procs.log(recorder), 30.0, 'the recorder')
+    nodes = []
+    for pkg, exe, conf in (('freejoint_planner', 'planner_node', 'planner.yaml'),
+                           ('freejoint_sim', 'sim_node', 'sim.yaml'),
+                           ('freejoint_control', 'controller_node', 'controller.yaml')):
+        nodes.append(procs.start_node(pkg, exe, exe, [
+            '--ros-args', '--params-file', os.path.join(CONFIG, conf),
+            '-p', 'autostart:=false'] if exe == 'planner_node' else [
+            '--ros-args', '--params-file', os.path.join(CONFIG, conf)]))
+
+    def call(client, request, what):
+        wait(client.service_is_ready, 30.0, what,
+             spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.05))
+        future = client.call_async(request)
+        rclpy.spin_until_future_complete(ros_node, future, timeout_sec=10.0)
+        assert future.done(), 'no answer from %s' % what
+        return future.result()
+
+    status = ros_node.create_client(Trigger, '/recorder/status')
+    answers = []
+    wait(lambda: answers and answers[-1].success, 60.0,
+         'the recorder to match every graph topic (%s)' % (answers[-1:] or ''),
+         spin=lambda: answers.append(call(status, Trigger.Request(), 'recorder status')))
+    plan = ros_node.create_client(PlanCircle, '/freejoint_planner/plan_circle')
+    answer = call(plan, PlanCircle.Request(centre=[0.0, 0.0], radius=0.2, duration=5.0,
+                                           start_angle=0.0, direction=1, execute=True),
+                  'plan_circle')
+    assert answer.accepted, answer.reason
+    wait(lambda: len(live['states']) > TICKS + 50, 120.0,
+         'the graph to run %d ticks (sim: %s)' % (TICKS, procs.log(nodes[1])[-500:]),
+         spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.01))
+    for proc in reversed(nodes):
+        procs.stop(proc)
+    assert procs.stop(recorder) == 0
+    bag = open_bag(bag_path)
+    assert bag.finalised
+    recorded = {stamp_ns(m) for _, m in bag.decode('/controller_state')}
+    assert {stamp_ns(m) for m in live['states']} <= recorded
+    assert min(recorded) == 0
+    graph = compute_record('horizontal', 'robust', 0, source='graph', **arrays_from_messages(
+        live['states'], live['joints'], 'joint3', max_ticks=TICKS))
+    record, _, warnings = analyse_bag(bag_path)
+    assert warnings == []
+    same_record(record, graph)
