@@ -26,6 +26,12 @@ contract topics at start (``graph_topics``), and its service ``~/status``
 publishers per topic. A launcher that must lose nothing starts the nodes, waits for that,
 then starts the run (e.g. the planner's ``~/plan_circle`` with ``autostart: false``).
 
+Transport: the recorder's Fast DDS participant receives over UDP loopback, not shared
+memory (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` unless the environment sets it): a sample still
+queued in a shared-memory port is lost when its publisher's process exits (its segment goes
+away), so a recorder a few ticks behind lost the simulator's last ticks when a run was
+stopped; in the kernel's socket buffer they survive the publisher.
+
 Timestamps: with ``use_sim_time:=true`` the log times are sim time (the lockstep ``/clock``,
 ``t_k = k dt``), the same time base as the header stamps. ``ros2 bag play --clock`` (and
 this package's player) publishes ``/clock`` from the log times, so nodes replaying the bag
@@ -461,6 +467,8 @@ def make_executor():
 
 def main(args=None):
     """Run the recorder until SIGINT/SIGTERM; finalise the bag; exit 0 (1 if it cannot)."""
+    # Fast DDS: receive over UDP (loopback), not shared memory - see the module notes.
+    os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = _Stop()
     signal.signal(signal.SIGINT, stop)
