@@ -63,11 +63,12 @@ def test_killed_recording_is_analysed_up_to_its_last_chunk_with_a_warning(
         tmp_path, make_bag, analyze, same_record):
     path = str(tmp_path / 'killed')
     written = make_bag(path, 250, custom_data={'case': 'vertical', 'variant': 'robust',
-                                               'seed': '1'},
+                                               'seed': '1', 'max_ticks': '250'},
                        finalise=False, chunk_size=1 << 30, flush_every=100)
     done = analyze(path, '--no-plots')
     assert done.returncode == 0, done.stderr
     assert 'not finalised' in done.stderr and 'Traceback' not in done.stderr
+    assert 'holds 200 ticks, fewer than max_ticks = 250' in done.stderr
     with open(os.path.join(path, 'metrics.json')) as fh:
         record = json.load(fh)[0]
     same_record(record, _live_record(written, 'vertical', 'robust', 1, 200))

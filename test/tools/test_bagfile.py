@@ -185,3 +185,20 @@ def test_definitions_come_from_the_installed_msg_files_for_custom_types():
     assert digest.startswith('RIHS01_')
     with pytest.raises(DefinitionError, match='no_such_pkg'):
         defs.lookup('no_such_pkg/msg/Thing')
+
+
+def test_overwrite_removes_only_a_directory_of_bag_files(tmp_path, make_bag):
+    from freejoint_tools.bagfile import BagError
+    from freejoint_tools.recorder import _remove_old_bag
+    old = str(tmp_path / 'old')
+    make_bag(old, 5)
+    (tmp_path / 'old' / 'fig3_old.png').write_bytes(b'png')
+    (tmp_path / 'old' / 'metrics.json').write_text('[]')
+    _remove_old_bag(old)
+    assert not os.path.exists(old)
+    mine = tmp_path / 'mine'
+    mine.mkdir()
+    (mine / 'thesis.tex').write_text('precious')
+    with pytest.raises(BagError, match='holds thesis.tex, which is not a bag file'):
+        _remove_old_bag(str(mine))
+    assert (mine / 'thesis.tex').exists()

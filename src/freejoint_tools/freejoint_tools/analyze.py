@@ -153,6 +153,9 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     except (ValueError, FreejointValueError) as exc:
         raise AnalysisError('%s: %s (topics %s, %s)'
                             % (bag.path, exc, states_topic, joints_topic))
+    if info['max_ticks'] is not None and len(arrays['t']) < info['max_ticks']:
+        warnings.append('%s: holds %d ticks, fewer than max_ticks = %d (run cut short?)'
+                        % (bag.path, len(arrays['t']), info['max_ticks']))
     trace = dict(arrays)
     trace['name'] = os.path.basename(os.path.normpath(bag.path))
     trace['info'] = info
