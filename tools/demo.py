@@ -278,13 +278,44 @@ def spin_until(executor, predicate, timeout, step=0.1):
     return predicate()
 
 
-def recorder_listens(node, topics):
-    """Return True when a node named 'recorder' subscribes every one of ``topics``."""
-    for topic in topics:
-        infos = node.get_subscriptions_info_by_topic(topic)
-        if not any(info.node_name == 'recorder' for info in infos):
-            return False
-    return True
+def call(executor, client, request, timeout):
+    """Call a service (waiting for it up to ``timeout`` s); return the answer or None."""
+    if not spin_until(executor, client.service_is_ready, timeout):
+        return None
+    future = client.call_async(request)
+    spin_until(executor, future.done, timeout, step=0.05)
+    return future.result() if future.done() else None
+
+
+def start_plan(executor, node, plan, timeout=30.0):
+    """Ask the planner for the configured circle (``~/plan_circle``, execute); return it."""
+    from freejoint_msgs.srv import PlanCircle
+    client = node.create_client(PlanCircle, '/freejoint_planner/plan_circle')
+    try:
+        request = PlanCircle.Request(
+            centre=[float(v) for v in plan['centre']], radius=float(plan['radius']),
+            duration=float(plan['duration']), start_angle=float(plan['start_angle']),
+            direction=int(plan['direction']), execute=True)
+        return call(executor, client, request, timeout)
+    finally:
+        node.destroy_client(client)
+
+
+def recorder_ready(executor, node, timeout):
+    """Wait until the recorder's ``~/status`` says every graph topic is matched."""
+    from std_srvs.srv import Trigger
+    client = node.create_client(Trigger, '/recorder/status')
+    deadline = time.monotonic() + timeout
+    answer = None
+    try:
+        while time.monotonic() < deadline:
+            answer = call(executor, client, Trigger.Request(), deadline - time.monotonic())
+            if answer is not None and answer.success:
+                return True, answer.message
+            spin_until(executor, lambda: False, 0.2)
+        return False, answer.message if answer is not None else 'no answer'
+    finally:
+        node.destroy_client(client)
 
 
 def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
@@ -292,24 +323,27 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
     """
     Run one case through the graph in lockstep until tick n_ticks - 1 was published.
 
-    Start order: recorder (if installed), simulator, controller; once the recorder and this
-    process listen to them, the planner, whose first setpoint starts the loop.
+    All nodes are started (recorder if installed, simulator, controller, planner with
+    ``autostart: false``); once the recorder (``~/status``) and this process have matched
+    every publisher, the planner's ``~/plan_circle`` starts the configured circle at t = 0.
 
     Returns
     -------
     dict
         ``wall_s`` (first to last tick), ``sim_s``, ``codes`` (exit codes), ``logs``,
-        ``bag`` (path or None).
+        ``bag`` (path or None), ``sim_log``.
 
     Raises
     ------
     RuntimeError
-        A node exited early, or the run stalled (the message names the logs).
+        A node exited early, or the run did not start or stalled (the message names the
+        logs).
 
     """
     graph = Graph(log_dir, case)
     rec_exe = executable('freejoint_tools', 'recorder')
     bag = None
+    node = collector.node
     try:
         if record and os.path.exists(rec_exe):
             bag = os.path.join(out_dir, case)
@@ -325,26 +359,23 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
         graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
                                                 os.path.join(CONFIG, 'controller.yaml'),
                                                 ['case:=' + case]))
-        node = collector.node
-
-        def ready():
-            ok = collector.publishers_ready()
-            if bag is not None:
-                ok = ok and recorder_listens(node, ('/joint_states', '/controller_state',
-                                                    '/effort_controller/commands',
-                                                    '/ee_position', '/clock'))
-            return ok
-
-        if not spin_until(executor, lambda: ready() or graph.alive(), 60.0):
-            raise RuntimeError('the simulator and controller did not come up within 60 s '
-                               '(logs in %s)' % log_dir)
-        if graph.alive():
-            raise RuntimeError('%s exited at start:\n%s' % (
-                graph.alive(), '\n'.join(graph.tail(p) for p in graph.procs
-                                         if p.poll() is not None)))
         graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node',
                                              os.path.join(CONFIG, 'planner.yaml'),
-                                             ['case:=' + case]))
+                                             ['case:=' + case, 'autostart:=false']))
+        if not spin_until(executor, lambda: collector.publishers_ready() or graph.alive(),
+                          60.0) or graph.alive():
+            raise RuntimeError('the nodes did not come up within 60 s%s (logs in %s)' % (
+                '' if not graph.alive() else ': %s exited' % graph.alive(), log_dir))
+        if bag is not None:
+            ok, status = recorder_ready(executor, node, 60.0)
+            if not ok:
+                raise RuntimeError('the recorder is not ready after 60 s: %s (logs in %s)'
+                                   % (status, log_dir))
+        plan = _ros_params(os.path.join(CONFIG, 'planner.yaml'))
+        answer = start_plan(executor, node, plan)
+        if answer is None or not answer.accepted:
+            raise RuntimeError('the planner did not start the circle: %s (logs in %s)' % (
+                'no answer from ~/plan_circle' if answer is None else answer.reason, log_dir))
         last_ns = (n_ticks - 1) * dt_ns
         first_wall = time.monotonic()
         started = False
