@@ -127,6 +127,10 @@ def test_signal_mid_run_gives_a_finalised_bag_without_gaps(procs, wait, tmp_path
     assert os.path.isfile(os.path.join(bag_path, 'metadata.yaml'))
     bag = open_bag(bag_path)
     assert bag.finalised
+    from rosbags.rosbag2 import Reader
+    with Reader(bag_path) as reader:                  # rosbags reads it, summary and all
+        assert reader.message_count == bag.message_count
+        assert sum(1 for _ in reader.messages()) == bag.message_count
     stamps = _stamps_ns(bag, '/joint_states')
     assert len(stamps) > 100
     assert stamps == [k * 1_000_000 for k in range(len(stamps))]      # no gap, no loss
