@@ -252,6 +252,10 @@ class Recorder(Node):
                              else DurabilityPolicy.VOLATILE)
             if self._subscribe(name, msgtype, qos):
                 self._unconfirmed[name] = (msgtype, qos)
+                try:                   # parse the definitions now, not during the run
+                    self._defs.lookup(msgtype)
+                except DefinitionError:
+                    pass               # said when the topic is registered
 
     def _discover(self):
         if self._closed:
