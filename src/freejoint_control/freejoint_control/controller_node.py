@@ -418,8 +418,10 @@ def spin(node, executor):
     else:
         ex = SingleThreadedExecutor()
     ex.add_node(node)
-    while not stop and rclpy.ok():
-        ex.spin_once(timeout_sec=0.2)
+    context_ok = node.context.ok
+    spin_once = ex.spin_once
+    while not stop and context_ok():
+        spin_once(timeout_sec=0.2)
 
 
 def main(args=None):
