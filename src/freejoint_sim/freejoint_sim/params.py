@@ -68,6 +68,12 @@ SPECS = (
     Spec('executor', 'single_threaded',
          "rclpy executor: 'single_threaded' or 'events' (rclpy.experimental.EventsExecutor)",
          read_only=True),
+    Spec('timing_file', '',
+         'measurement (bench/graph.py): path of a .npz file of per-step wall times (state '
+         "publication, receipt of the command answering it); '' = off", read_only=True),
+    Spec('timing_steps', 0,
+         'measurement: steps recorded in timing_file (arrays preallocated; the file is '
+         'written when they are full, or at shutdown)', read_only=True),
 )
 
 
@@ -90,6 +96,8 @@ class Config:
     command_timeout: float
     frame_id: str
     executor: str
+    timing_file: str = ''
+    timing_steps: int = 0
 
 
 def _names(name, value):
@@ -176,10 +184,19 @@ def build_config(values):
     if values['executor'] not in EXECUTORS:
         raise FreejointValueError(
             f'executor: expected one of {EXECUTORS}, got {values["executor"]!r}')
+    timing_steps = values['timing_steps']
+    if isinstance(timing_steps, bool) or not isinstance(timing_steps, int) or not (
+            0 <= timing_steps <= 10_000_000):
+        raise FreejointValueError(
+            f'timing_steps: expected an integer in [0, 10000000], got {timing_steps!r}')
+    timing_file = str(values['timing_file'])
+    if timing_file and timing_steps < 1:
+        raise FreejointValueError('timing_steps: must be >= 1 when timing_file is set')
     return Config(params=params, q0=tuple(q0.tolist()), joint_names=joint_names,
                   joints=joints,
                   cmd_to_active=tuple(active_names.index(name) for name in joints),
                   lockstep=values['mode'] == 'lockstep', dt=dt, dt_ns=round(dt * 1e9),
                   dt_sub=dt_sub, publish_every=every, dist_bound=dist, seed=seed,
                   command_timeout=timeout, frame_id=str(values['frame_id']),
-                  executor=values['executor'])
+                  executor=values['executor'], timing_file=timing_file,
+                  timing_steps=timing_steps)

@@ -34,6 +34,7 @@ from builtin_interfaces.msg import Time
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.plant import Plant
 from freejoint_sim.params import build_config, SPECS
+from freejoint_sim.timing import StepTiming, WRITE_DELAY
 from geometry_msgs.msg import PointStamped
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 import rclpy
@@ -137,6 +138,10 @@ class SimNode(Node):
         self._latest = None            # real time: (tau_active list, wall time)
         self._cmd_timed_out = False
         self._throttle = Throttle(1.0)
+        self._timing = (StepTiming(cfg.timing_file, cfg.timing_steps) if cfg.timing_file
+                        else None)
+        self._timing_steps = cfg.timing_steps if cfg.timing_file else 0
+        self._timing_write_at = self._timing_steps + WRITE_DELAY if cfg.timing_file else -1
 
         self._js = JointState()
         self._js.name = list(cfg.joint_names)
@@ -244,9 +249,13 @@ class SimNode(Node):
         return None
 
     def _on_command(self, msg):
+        now = _monotonic()
         if not self._lockstep:
             tau = self._command_effort(msg)
-            self._latest = (self._zero if tau is None else tau, _monotonic())
+            answered = -1
+            if self._timing is not None:
+                answered = self._note_realtime_command(msg, now)
+            self._latest = (self._zero if tau is None else tau, now, answered)
             if self._cmd_timed_out:
                 self._cmd_timed_out = False
                 self.get_logger().info('commands are back')
@@ -264,10 +273,41 @@ class SimNode(Node):
                                             '(t = %d ns)' % (ns, self._k, self._t_ns))
                     return
         tau = self._command_effort(msg)
+        k = self._k
+        if k < self._timing_steps:
+            timing = self._timing
+            if timing.received[k] != timing.received[k]:   # NaN: the first answer
+                timing.received[k] = now
+                timing.applied[k] = k
         if not self._got_first:
             self._got_first = True
             self.get_logger().info('first command: running')
         self._advance(self._zero if tau is None else tau)
+
+    def _note_realtime_command(self, msg, now):
+        """Note the receipt time of a real-time command; return the step it answers or -1."""
+        dims = msg.layout.dim
+        if not dims or not dims[0].label.startswith(LABEL_PREFIX):
+            return -1
+        try:
+            ns = int(dims[0].label[len(LABEL_PREFIX):])
+        except ValueError:
+            return -1
+        timing = self._timing
+        k = timing.step_of_stamp(ns, self._k)
+        if k >= 0 and timing.received[k] != timing.received[k]:
+            timing.received[k] = now
+        return k
+
+    def write_timing(self):
+        """Write the timing file if measuring and not yet written; return its path."""
+        timing = self._timing
+        if timing is None or timing.written:
+            return None
+        path = timing.write('lockstep' if self._lockstep else 'realtime', self._dt)
+        self.get_logger().info('timing of steps 0..%d written to %s'
+                               % (timing.steps - 1, path))
+        return path
 
     # -- stepping --------------------------------------------------------------
     def _advance(self, tau):
@@ -283,6 +323,8 @@ class SimNode(Node):
         self._t_ns = self._k * self._dt_ns
         if self._lockstep or self._k % self._every == 0:
             self._publish_state()
+        if self._k == self._timing_write_at:
+            self.write_timing()
 
     def _publish_state(self):
         t_ns = self._t_ns
@@ -293,7 +335,9 @@ class SimNode(Node):
             self._clock_msg.clock = stamp
             self._pub_clock.publish(self._clock_msg)
         else:
-            stamp = self.get_clock().now().to_msg()
+            wall = self.get_clock().now()
+            stamp = wall.to_msg()
+            t_ns = wall.nanoseconds
         plant = self._plant
         q = plant.q
         js = self._js
@@ -301,6 +345,11 @@ class SimNode(Node):
         js.position = q.tolist()
         js.velocity = plant.qd.tolist()
         js.effort = self._applied
+        k = self._k
+        if k < self._timing_steps:
+            timing = self._timing
+            timing.published[k] = _monotonic()
+            timing.stamp_ns[k] = t_ns
         self._pub_js.publish(js)
         px, py = self._fk(q).tolist()
         ee = self._ee
@@ -337,6 +386,8 @@ class SimNode(Node):
                            'real time: %d steps behind the wall clock, dropping %d'
                            % (due, due - 1))
             self._rt_start += (due - 1) * self._dt
+            if self._timing is not None:
+                self._timing.dropped += due - 1
             due = 1
         for _ in range(due):
             latest = self._latest
@@ -352,6 +403,8 @@ class SimNode(Node):
                         % (self._cmd_topic(), self._timeout))
             else:
                 tau = latest[0]
+                if self._k < self._timing_steps:
+                    self._timing.applied[self._k] = latest[2]
             self._advance(tau)
 
     def _cmd_topic(self):
@@ -406,6 +459,7 @@ def main(args=None):
     finally:
         if node is not None:
             node.get_logger().info(node.report())
+            node.write_timing()
             node.destroy_node()
         rclpy.try_shutdown()
 

@@ -1,0 +1,517 @@
+"""
+Benchmark: the running node graph (sim_node, controller_node, planner_node, recorder).
+
+Two runs of the graph, each started as ``make demo`` starts it (the installed executables
+with ``config/*.yaml`` and per-run overrides), isolated in a ROS domain of their own with
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, every wait bounded, every process stopped
+(SIGINT, then SIGKILL) whatever happens:
+
+* lockstep, 1 kHz, recorder on: the 5-s horizontal case (5000 ticks) - real-time factor
+  (simulated / wall time, from the simulator's own per-step publish times of steps 0 and
+  5000), per-tick wall time, state->command latency, ticks in the bag;
+* real time, 1 kHz, recorder on, ``FREEJOINT_BENCH_RT_SECONDS`` (default 60) s of the
+  paper's circle repeated back to back: state->command latency p50 / p99 / max (from the
+  simulator's publication of state k to its receipt of the command answering k), control
+  periods without a fresh command (the command applied over period k did not answer state
+  k, or none came), periods skipped, the tracking error (from the bag's controller_state)
+  against the offline runner's bound (worst max error of seeds 0-9, same case);
+* for both: CPU time per tick and peak resident memory (``VmHWM`` of ``/proc/<pid>/status``
+  at the end of the run) of each node, and the machine's load average.
+
+The times come from the simulator (parameters ``timing_file`` / ``timing_steps``: a
+preallocated per-step array written once, no per-tick logging; ``freejoint_sim.timing``).
+Benchmarks assert nothing; figures and targets go to ``bench/run_all.py``'s table.
+
+Usage: ``. tools/env.sh && python bench/graph.py [--lockstep-only | --realtime-only]``;
+``FREEJOINT_BENCH_RT_SECONDS=10`` for a quick real-time run.  Logs and bags stay in
+``bags/bench/graph/`` (git-ignored).
+"""
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+INSTALL = os.path.join(ROOT, 'install')
+CONFIG = os.path.join(ROOT, 'config')
+OUT = os.path.join(ROOT, 'bags', 'bench', 'graph')
+CASE = 'horizontal'
+SEED = 0
+LOCKSTEP_TICKS = 5000
+RT_SECONDS = float(os.environ.get('FREEJOINT_BENCH_RT_SECONDS', '60'))
+RT_STARTUP_STEPS = 30000
+"""Real time: steps the timing arrays hold beyond the measured window (start-up, stop)."""
+NODES = ('sim_node', 'controller_node', 'planner_node', 'recorder')
+RT_READY_TOPICS = '[joint_states, ee_position, effort_controller/commands, ' \
+    'controller_state, setpoint]'
+OFFLINE_SEEDS = range(10)
+
+
+def executable(pkg, exe):
+    """Return what ``ros2 run <pkg> <exe>`` starts: install/<pkg>/lib/<pkg>/<exe>."""
+    return os.path.join(INSTALL, pkg, 'lib', pkg, exe)
+
+
+def say(text):
+    """Print a progress line at once."""
+    print('[bench graph] ' + text, flush=True)
+
+
+def load_average():
+    """Return the 1-minute load average."""
+    return os.getloadavg()[0]
+
+
+# -- processes --------------------------------------------------------------------------
+def proc_cpu_seconds(pid):
+    """Return user + system CPU seconds of a process (0.0 if gone)."""
+    try:
+        with open('/proc/%d/stat' % pid) as f:
+            fields = f.read().rsplit(')', 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def proc_vmhwm_mib(pid):
+    """Return the peak resident set (VmHWM) of a process in MiB, None if gone."""
+    try:
+        with open('/proc/%d/status' % pid) as f:
+            for line in f:
+                if line.startswith('VmHWM:'):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        return None
+    return None
+
+
+class Graph:
+    """Node processes of one run: start with a log each, measure, stop cleanly."""
+
+    def __init__(self, log_dir, tag, env):
+        self.log_dir = log_dir
+        self.tag = tag
+        self.env = env
+        self.procs = {}
+
+    def start(self, name, cmd):
+        """Start ``cmd`` (its output to <log_dir>/<tag>_<name>.log); return the Popen."""
+        os.makedirs(self.log_dir, exist_ok=True)
+        path = os.path.join(self.log_dir, '%s_%s.log' % (self.tag, name))
+        log = open(path, 'w')
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self.env,
+                                start_new_session=True, cwd=ROOT)
+        proc.log_path = path
+        proc.log_file = log
+        self.procs[name] = proc
+        return proc
+
+    def exited(self):
+        """Return the names of the processes that exited."""
+        return [n for n, p in self.procs.items() if p.poll() is not None]
+
+    def cpu(self):
+        """Return {name: CPU seconds so far}."""
+        return {n: proc_cpu_seconds(p.pid) for n, p in self.procs.items()}
+
+    def vmhwm(self):
+        """Return {name: VmHWM MiB}."""
+        return {n: proc_vmhwm_mib(p.pid) for n, p in self.procs.items()}
+
+    def stop(self, name, timeout=20.0):
+        """SIGINT one process, wait, SIGKILL its group after ``timeout`` s; return its code."""
+        proc = self.procs[name]
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(5.0)
+        if not proc.log_file.closed:
+            proc.log_file.close()
+        return proc.returncode
+
+    def stop_all(self, order=NODES):
+        """Stop every process (in ``order``, the rest after); return {name: exit code}."""
+        codes = {}
+        names = [n for n in order if n in self.procs] + [
+            n for n in self.procs if n not in order]
+        for name in names:
+            codes[name] = self.stop(name, 60.0 if name == 'recorder' else 20.0)
+        return codes
+
+    def tail(self, name, lines=5):
+        """Return the last lines of a process log."""
+        with open(self.procs[name].log_path) as f:
+            return ''.join(f.readlines()[-lines:])
+
+
+def node_cmd(pkg, exe, config, overrides):
+    """Return a node's command line, as ``ros2 run`` with a params file and overrides."""
+    cmd = [executable(pkg, exe), '--ros-args', '--params-file', os.path.join(CONFIG, config)]
+    for item in overrides:
+        cmd += ['-p', item]
+    return cmd
+
+
+def start_graph(graph, bag, sim_overrides, ctl_overrides, planner_overrides, rec_overrides,
+                custom):
+    """Start recorder, simulator, controller and planner (planner autostart off)."""
+    graph.start('recorder', [executable('freejoint_tools', 'recorder'), '--ros-args',
+                             '-p', 'output:=' + bag, '-p', 'topics:=[]',
+                             '-p', 'overwrite:=true', '-p', 'custom_data:=[%s]' % custom]
+                + [a for item in rec_overrides for a in ('-p', item)])
+    graph.start('sim_node', node_cmd('freejoint_sim', 'sim_node', 'sim.yaml',
+                                     ['case:=' + CASE, 'seed:=%d' % SEED] + sim_overrides))
+    graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
+                                            'controller.yaml', ['case:=' + CASE]
+                                            + ctl_overrides))
+    graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node', 'planner.yaml',
+                                         ['case:=' + CASE, 'autostart:=false']
+                                         + planner_overrides))
+
+
+# -- this process's ROS node (services only: nothing on the hot path) --------------------
+class Client:
+    """An rclpy node of the bench: recorder status, plan requests; spun only while used."""
+
+    def __init__(self):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        rclpy.init()
+        self.rclpy = rclpy
+        self.node = rclpy.create_node('freejoint_bench')
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+
+    def close(self):
+        """Destroy the node and shut rclpy down."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.try_shutdown()
+
+    def spin_until(self, predicate, timeout, step=0.05):
+        """Spin until ``predicate()`` or ``timeout`` s; return whether it held."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            self.executor.spin_once(timeout_sec=step)
+        return predicate()
+
+    def call(self, srv_type, name, request, timeout):
+        """Call service ``name`` (waiting for it up to ``timeout`` s); answer or None."""
+        client = self.node.create_client(srv_type, name)
+        try:
+            if not self.spin_until(client.service_is_ready, timeout):
+                return None
+            future = client.call_async(request)
+            self.spin_until(future.done, timeout, step=0.01)
+            return future.result() if future.done() else None
+        finally:
+            self.node.destroy_client(client)
+
+    def recorder_ready(self, timeout):
+        """Wait until the recorder's ``~/status`` says every graph topic is matched."""
+        from std_srvs.srv import Trigger
+        deadline = time.monotonic() + timeout
+        answer = None
+        while time.monotonic() < deadline:
+            answer = self.call(Trigger, '/recorder/status', Trigger.Request(),
+                               max(0.1, deadline - time.monotonic()))
+            if answer is not None and answer.success:
+                return True, answer.message
+            time.sleep(0.2)
+        return False, answer.message if answer is not None else 'no answer'
+
+    def plan_circle(self, plan, timeout=20.0):
+        """Ask the planner for the configured circle, executed at once; return the answer."""
+        from freejoint_msgs.srv import PlanCircle
+        request = PlanCircle.Request(
+            centre=[float(v) for v in plan['centre']], radius=float(plan['radius']),
+            duration=float(plan['duration']), start_angle=float(plan['start_angle']),
+            direction=int(plan['direction']), execute=True)
+        return self.call(PlanCircle, '/freejoint_planner/plan_circle', request, timeout)
+
+
+def ros_params(name):
+    """Return the ros__parameters of config/<name>."""
+    import yaml
+    with open(os.path.join(CONFIG, name)) as f:
+        data = yaml.safe_load(f)
+    for section in data.values():
+        if isinstance(section, dict) and 'ros__parameters' in section:
+            return section['ros__parameters']
+    raise RuntimeError('%s has no ros__parameters' % name)
+
+
+def wait_for_file(path, graph, timeout, what):
+    """Wait (bounded) until ``path`` exists; raise if a node exits or time runs out."""
+    deadline = time.monotonic() + timeout
+    while not os.path.exists(path):
+        if graph.exited():
+            raise RuntimeError('%s exited during the run (%s)' % (
+                ', '.join(graph.exited()), graph.log_dir))
+        if time.monotonic() > deadline:
+            raise RuntimeError('%s: not done within %g s (logs in %s)'
+                               % (what, timeout, graph.log_dir))
+        time.sleep(0.05)
+
+
+def _env(offset):
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(110 + (os.getpid() + offset) % 40)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env['PYTHONUNBUFFERED'] = '1'
+    env.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
+    return env
+
+
+def _percentiles(values):
+    import numpy as np
+    if len(values) == 0:
+        return None, None, None
+    return (float(np.percentile(values, 50)), float(np.percentile(values, 99)),
+            float(np.max(values)))
+
+
+def _node_rows(prefix, cpu0, cpu1, hwm, ticks):
+    rows = []
+    for name in NODES:
+        if name in cpu1:
+            rows.append({'name': '%s: %s CPU per tick' % (prefix, name),
+                         'value': 1e6 * (cpu1[name] - cpu0.get(name, 0.0)) / max(ticks, 1),
+                         'unit': 'us', 'target': None})
+    for name in NODES:
+        if hwm.get(name) is not None:
+            rows.append({'name': '%s: %s peak RSS (VmHWM)' % (prefix, name),
+                         'value': hwm[name], 'unit': 'MiB', 'target': None})
+    return rows
+
+
+# -- lockstep ---------------------------------------------------------------------------
+def lockstep(client, env, ticks=LOCKSTEP_TICKS):
+    """Run the 5-s case in lockstep with the recorder; return the rows."""
+    import numpy as np
+    from freejoint_tools.bagfile import open_bag
+    run_dir = os.path.join(OUT, 'lockstep')
+    shutil.rmtree(run_dir, ignore_errors=True)
+    timing_path = os.path.join(run_dir, 'timing.npz')
+    bag = os.path.join(run_dir, 'bag')
+    graph = Graph(os.path.join(run_dir, 'logs'), 'lockstep', env)
+    load0 = load_average()
+    say('lockstep: %d ticks, recorder on, ROS_DOMAIN_ID %s, load %.2f'
+        % (ticks, env['ROS_DOMAIN_ID'], load0))
+    try:
+        start_graph(graph, bag, ['timing_file:=' + timing_path, 'timing_steps:=%d' % (ticks + 1)],
+                    [], [], ['use_sim_time:=true'],
+                    'case=%s, variant=robust, seed=%d, max_ticks=%d' % (CASE, SEED, ticks))
+        ok, status = client.recorder_ready(60.0)
+        if not ok:
+            raise RuntimeError('recorder not ready after 60 s: %s' % status)
+        answer = client.plan_circle(ros_params('planner.yaml'))
+        if answer is None or not answer.accepted:
+            raise RuntimeError('the planner did not start the circle: %s' % (
+                'no answer' if answer is None else answer.reason))
+        cpu0 = graph.cpu()
+        wait_for_file(timing_path, graph, 120.0 + ticks * 0.01, 'lockstep run')
+        cpu1 = graph.cpu()
+        hwm = graph.vmhwm()
+    finally:
+        codes = graph.stop_all()
+    load1 = load_average()
+    t = np.load(timing_path)
+    pub, rec = t['published'], t['received']
+    wall = pub[ticks] - pub[0]
+    sim_s = ticks * float(t['dt'])
+    latency = (rec[:ticks] - pub[:ticks]) * 1e6
+    p50, p99, pmax = _percentiles(latency[np.isfinite(latency)])
+    counts = {}
+    for topic, info in open_bag(bag).topics.items():
+        counts[topic] = info.count
+    kept = counts.get('/controller_state', 0)
+    say('lockstep: %.3f s simulated in %.3f s wall: %.2fx real time; latency p50 %.0f us, '
+        'p99 %.0f us; bag: %d controller_state; exit codes %s; load %.2f -> %.2f'
+        % (sim_s, wall, sim_s / wall, p50, p99, kept, codes, load0, load1))
+    rows = [
+        {'name': 'lockstep 1 kHz + recorder: real-time factor (5-s case)',
+         'value': sim_s / wall, 'unit': 'x', 'target': '>= 2'},
+        {'name': 'lockstep: wall time per tick', 'value': 1e6 * wall / ticks, 'unit': 'us',
+         'target': None},
+        {'name': 'lockstep: state->command latency p50', 'value': p50, 'unit': 'us',
+         'target': None},
+        {'name': 'lockstep: state->command latency p99', 'value': p99, 'unit': 'us',
+         'target': None},
+        {'name': 'lockstep: ticks missing in the bag (controller_state)',
+         'value': max(0, ticks - kept), 'unit': 'ticks', 'target': '<= 0'},
+    ]
+    rows += _node_rows('lockstep', cpu0, cpu1, hwm, ticks + 100)
+    rows.append({'name': 'lockstep: load average (1 min) at the end', 'value': load1,
+                 'unit': '', 'target': None})
+    return rows
+
+
+# -- real time --------------------------------------------------------------------------
+def offline_bound():
+    """Return the offline runner's worst max / rms tracking error [mm] over seeds 0-9."""
+    from freejoint_core.offline import run_case
+    worst_max = worst_rms = 0.0
+    for seed in OFFLINE_SEEDS:
+        record = run_case(CASE, 'robust', seed)
+        worst_max = max(worst_max, record['max_mm'])
+        worst_rms = max(worst_rms, record['rms_mm'])
+    return worst_max, worst_rms
+
+
+def tracking_error(bag, window_ns):
+    """Return (max, rms) mm of |p - p_d| of the controller_state ticks stamped in window."""
+    import numpy as np
+    from freejoint_tools.bagfile import open_bag
+    lo, hi = window_ns
+    err = []
+    for msg in open_bag(bag).decode('/controller_state'):
+        ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        if lo <= ns <= hi:
+            err.append(np.hypot(msg.position[0] - msg.position_desired[0],
+                                msg.position[1] - msg.position_desired[1]))
+    if not err:
+        return None, None, 0
+    err = 1000.0 * np.asarray(err)
+    return float(err.max()), float(np.sqrt(np.mean(err ** 2))), len(err)
+
+
+def realtime(client, env, seconds=RT_SECONDS):
+    """Run the graph in real time with the recorder for ``seconds``; return the rows."""
+    import numpy as np
+    run_dir = os.path.join(OUT, 'realtime')
+    shutil.rmtree(run_dir, ignore_errors=True)
+    timing_path = os.path.join(run_dir, 'timing.npz')
+    bag = os.path.join(run_dir, 'bag')
+    graph = Graph(os.path.join(run_dir, 'logs'), 'realtime', env)
+    plan = ros_params('planner.yaml')
+    period = float(plan['duration']) + 0.5
+    steps = int(seconds * 1000) + RT_STARTUP_STEPS
+    load0 = load_average()
+    say('real time: %g s at 1 kHz, recorder on, the circle every %g s, ROS_DOMAIN_ID %s, '
+        'load %.2f' % (seconds, period, env['ROS_DOMAIN_ID'], load0))
+    plans = 0
+    try:
+        start_graph(graph, bag, ['mode:=realtime', 'timing_file:=' + timing_path,
+                                 'timing_steps:=%d' % steps],
+                    ['lockstep:=false'], ['use_sim_time:=false'],
+                    ['use_sim_time:=false', 'ready_topics:=' + RT_READY_TOPICS],
+                    'case=%s, variant=robust, seed=%d' % (CASE, SEED))
+        ok, status = client.recorder_ready(60.0)
+        if not ok:
+            raise RuntimeError('recorder not ready after 60 s: %s' % status)
+        client.spin_until(lambda: False, 0.5)   # the controller holds q(0) meanwhile
+        start = time.monotonic()
+        cpu0 = graph.cpu()
+        next_plan = start
+        while time.monotonic() < start + seconds:
+            if graph.exited():
+                raise RuntimeError('%s exited during the run (%s)' % (
+                    ', '.join(graph.exited()), graph.log_dir))
+            if time.monotonic() >= next_plan:
+                answer = client.plan_circle(plan)
+                if answer is None or not answer.accepted:
+                    raise RuntimeError('the planner did not start the circle: %s' % (
+                        'no answer' if answer is None else answer.reason))
+                plans += 1
+                next_plan += period
+            time.sleep(0.05)
+        end = time.monotonic()
+        cpu1 = graph.cpu()
+        hwm = graph.vmhwm()
+    finally:
+        codes = graph.stop_all()
+    load1 = load_average()
+    t = np.load(timing_path)
+    pub, rec, applied = t['published'], t['received'], t['applied']
+    window = np.nonzero((pub >= start) & (pub <= end))[0]
+    if len(window) < 2:
+        raise RuntimeError('real time: the timing file holds no step of the window')
+    k0, k1 = int(window[0]), int(window[-1])
+    ks = np.arange(k0, k1)          # periods k -> k+1 inside the window
+    latency = (rec[ks] - pub[ks]) * 1e6
+    got = np.isfinite(latency)
+    p50, p99, pmax = _percentiles(latency[got])
+    stale = int(np.count_nonzero(applied[ks] != ks))
+    expected = int(round((pub[k1] - pub[k0]) / float(t['dt'])))
+    skipped = max(0, expected - (k1 - k0))
+    gaps = np.diff(pub[k0:k1 + 1]) * 1e6
+    max_mm, rms_mm, n_err = tracking_error(bag, (int(t['stamp_ns'][k0]),
+                                                 int(t['stamp_ns'][k1])))
+    bound_max, bound_rms = offline_bound()
+    say('real time: %d periods in %.1f s, latency p50 %.0f us p99 %.0f us max %.0f us, %d '
+        'without a fresh command (%d without any), %d skipped; tracking max %.3f mm rms %.3f '
+        'mm over %d ticks (offline worst max %.3f, rms %.3f); %d plans; exit codes %s; '
+        'load %.2f -> %.2f' % (len(ks), end - start, p50, p99, pmax, stale,
+                               int(np.count_nonzero(~got)), skipped, max_mm, rms_mm, n_err,
+                               bound_max, bound_rms, plans, codes, load0, load1))
+    rows = [
+        {'name': 'real time 1 kHz + recorder: state->command latency p50',
+         'value': p50 * 1e-3, 'unit': 'ms', 'target': None},
+        {'name': 'real time: state->command latency p99', 'value': p99 * 1e-3, 'unit': 'ms',
+         'target': '<= 1'},
+        {'name': 'real time: state->command latency max', 'value': pmax * 1e-3,
+         'unit': 'ms', 'target': None},
+        {'name': 'real time: control periods without a fresh command of %d' % len(ks),
+         'value': stale, 'unit': 'periods', 'target': '<= 0'},
+        {'name': 'real time: periods skipped (timer behind)', 'value': skipped,
+         'unit': 'periods', 'target': '<= 0'},
+        {'name': 'real time: max gap between state publications', 'value': gaps.max() * 1e-3,
+         'unit': 'ms', 'target': None},
+        {'name': 'real time: tracking error max (circle x %d)' % plans, 'value': max_mm,
+         'unit': 'mm', 'target': '<= %.4g' % bound_max},
+        {'name': 'real time: tracking error rms', 'value': rms_mm, 'unit': 'mm',
+         'target': '<= %.4g' % bound_rms},
+    ]
+    rows += _node_rows('real time', cpu0, cpu1, hwm, len(ks))
+    rows.append({'name': 'real time: load average (1 min) at the end', 'value': load1,
+                 'unit': '', 'target': None})
+    return rows
+
+
+def run(which=('lockstep', 'realtime')):
+    """Return the benchmark rows: list of dict(name, value, unit, target)."""
+    missing = [exe for exe in (executable('freejoint_sim', 'sim_node'),
+                               executable('freejoint_control', 'controller_node'),
+                               executable('freejoint_planner', 'planner_node'),
+                               executable('freejoint_tools', 'recorder'))
+               if not os.path.exists(exe)]
+    if missing:
+        raise RuntimeError('not built: %s (run tools/setup.sh)' % ', '.join(missing))
+    rows = []
+    for i, name in enumerate(which):
+        env = _env(20 * i)
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']   # this process's node too
+        client = Client()
+        try:
+            rows += (lockstep if name == 'lockstep' else realtime)(client, env)
+        finally:
+            client.close()
+    return rows
+
+
+def main(argv):
+    """Run the benchmark from the command line; print the rows."""
+    which = ('lockstep', 'realtime')
+    if '--lockstep-only' in argv:
+        which = ('lockstep',)
+    elif '--realtime-only' in argv:
+        which = ('realtime',)
+    for row in run(which):
+        value = row['value']
+        print('%-58s %12s %-8s %s' % (row['name'], 'n/a' if value is None else '%.4g' % value,
+                                      row['unit'], row['target'] or ''))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))
