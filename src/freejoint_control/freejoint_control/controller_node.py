@@ -67,7 +67,13 @@ class Throttle:
             return
         more = self._suppressed.pop(kind, 0)
         self._last[kind] = now
-        log(text + (' (%d more like it suppressed)' % more if more else ''))
+        text += ' (%d more like it suppressed)' % more if more else ''
+        # rclpy ties one severity to each logging call site (ValueError on another one):
+        # a call line per severity.
+        if getattr(log, '__name__', '') == 'error':
+            log(text)
+        else:
+            log(text)
 
 
 def declare(node, specs):
