@@ -102,7 +102,8 @@ class Player(Node):
         self._clock_pub = None
         if p['clock']:
             self._clock_pub = self.create_publisher(
-                Clock, '/clock', QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+                Clock, '/clock', QoSProfile(depth=p['queue_depth'],
+                                            reliability=ReliabilityPolicy.RELIABLE))
         self.played = dict.fromkeys(self._pubs, 0)
 
     def _on_set_parameters(self, params):
