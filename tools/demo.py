@@ -43,6 +43,12 @@ def say(text):
     print('[demo] ' + text, flush=True)
 
 
+def shown(path):
+    """Return ``path`` relative to the repository if it lies inside it, else absolute."""
+    path = os.path.abspath(path)
+    return os.path.relpath(path, ROOT) if path.startswith(ROOT + os.sep) else path
+
+
 def stamp_ns_of(raw):
     """Return the header stamp (ns) of a serialized message that starts with a Header."""
     sec, nanosec = struct.unpack_from('<iI', raw, 4)
@@ -538,7 +544,7 @@ def main(argv=None):
         print()
     if not failed and os.path.exists(analyze) and record_bags:
         bags = [run['bag'] for run in runs]
-        say('analyze %s' % ' '.join(os.path.relpath(b, ROOT) for b in bags))
+        say('analyze %s' % ' '.join(shown(b) for b in bags))
         code = subprocess.call([analyze, *bags], cwd=ROOT)
         if code != 0:
             say('analyze exited with %d' % code)
@@ -547,12 +553,12 @@ def main(argv=None):
         say('analyze not installed yet (%s): no bag analysis' % analyze)
     say('outputs:')
     if graph_records:
-        say('  %s  graph records (source "graph")' % os.path.relpath(metrics, ROOT))
+        say('  %s  graph records (source "graph")' % shown(metrics))
     for run in runs:
         if run['bag']:
-            say('  %s/  bag of the %s run' % (os.path.relpath(run['bag'], ROOT),
+            say('  %s/  bag of the %s run' % (shown(run['bag']),
                                               os.path.basename(run['bag'])))
-    say('  %s/  node logs' % os.path.relpath(log_dir, ROOT))
+    say('  %s/  node logs' % shown(log_dir))
     say('wall time %.1f s%s' % (time.monotonic() - t_start, ' - FAILED' if failed else ''))
     return 1 if failed else 0
 
