@@ -383,7 +383,7 @@ class Recorder(Node):
         def on_lost(info):
             self.lost[name] += int(info.total_count_change)
             self.get_logger().warning('%s: the middleware reports %d message(s) lost' % (
-                name, info.total_count_change), throttle_duration_sec=1.0)
+                name, info.total_count_change))
         return on_lost
 
     # -- flushing and closing ---------------------------------------------------------
