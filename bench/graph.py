@@ -160,11 +160,12 @@ def node_cmd(pkg, exe, config, overrides):
 
 def start_graph(graph, bag, sim_overrides, ctl_overrides, planner_overrides, rec_overrides,
                 custom):
-    """Start recorder, simulator, controller and planner (planner autostart off)."""
-    graph.start('recorder', [executable('freejoint_tools', 'recorder'), '--ros-args',
-                             '-p', 'output:=' + bag, '-p', 'topics:=[]',
-                             '-p', 'overwrite:=true', '-p', 'custom_data:=[%s]' % custom]
-                + [a for item in rec_overrides for a in ('-p', item)])
+    """Start recorder (unless ``bag`` is None), simulator, controller and planner."""
+    if bag is not None:
+        graph.start('recorder', [executable('freejoint_tools', 'recorder'), '--ros-args',
+                                 '-p', 'output:=' + bag, '-p', 'topics:=[]',
+                                 '-p', 'overwrite:=true', '-p', 'custom_data:=[%s]' % custom]
+                    + [a for item in rec_overrides for a in ('-p', item)])
     graph.start('sim_node', node_cmd('freejoint_sim', 'sim_node', 'sim.yaml',
                                      ['case:=' + CASE, 'seed:=%d' % SEED] + sim_overrides))
     graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
@@ -294,25 +295,40 @@ def _node_rows(prefix, cpu0, cpu1, hwm, ticks):
 
 
 # -- lockstep ---------------------------------------------------------------------------
-def lockstep(client, env, ticks=LOCKSTEP_TICKS):
-    """Run the 5-s case in lockstep with the recorder; return the rows."""
+def wait_ready(client, record):
+    """Wait for the recorder's status (or, without it, the planner's service, then 1 s)."""
+    if record:
+        ok, status = client.recorder_ready(60.0)
+        if not ok:
+            raise RuntimeError('recorder not ready after 60 s: %s' % status)
+    else:
+        from freejoint_msgs.srv import PlanCircle
+        probe = client.node.create_client(PlanCircle, '/freejoint_planner/plan_circle')
+        try:
+            if not client.spin_until(probe.service_is_ready, 60.0):
+                raise RuntimeError('the planner is not up after 60 s')
+        finally:
+            client.node.destroy_client(probe)
+        client.spin_until(lambda: False, 1.0)
+
+
+def lockstep(client, env, ticks=LOCKSTEP_TICKS, record=True):
+    """Run the 5-s case in lockstep, the recorder on if ``record``; return the rows."""
     import numpy as np
     from freejoint_tools.bagfile import open_bag
     run_dir = os.path.join(OUT, 'lockstep')
     shutil.rmtree(run_dir, ignore_errors=True)
     timing_path = os.path.join(run_dir, 'timing.npz')
-    bag = os.path.join(run_dir, 'bag')
+    bag = os.path.join(run_dir, 'bag') if record else None
     graph = Graph(os.path.join(run_dir, 'logs'), 'lockstep', env)
     load0 = load_average()
-    say('lockstep: %d ticks, recorder on, ROS_DOMAIN_ID %s, load %.2f'
-        % (ticks, env['ROS_DOMAIN_ID'], load0))
+    say('lockstep: %d ticks, recorder %s, ROS_DOMAIN_ID %s, load %.2f'
+        % (ticks, 'on' if record else 'OFF', env['ROS_DOMAIN_ID'], load0))
     try:
         start_graph(graph, bag, ['timing_file:=' + timing_path, 'timing_steps:=%d' % (ticks + 1)],
                     [], [], ['use_sim_time:=true'],
                     'case=%s, variant=robust, seed=%d, max_ticks=%d' % (CASE, SEED, ticks))
-        ok, status = client.recorder_ready(60.0)
-        if not ok:
-            raise RuntimeError('recorder not ready after 60 s: %s' % status)
+        wait_ready(client, record)
         answer = client.plan_circle(ros_params('planner.yaml'))
         if answer is None or not answer.accepted:
             raise RuntimeError('the planner did not start the circle: %s' % (
@@ -331,24 +347,28 @@ def lockstep(client, env, ticks=LOCKSTEP_TICKS):
     latency = (rec[:ticks] - pub[:ticks]) * 1e6
     p50, p99, pmax = _percentiles(latency[np.isfinite(latency)])
     counts = {}
-    for topic, info in open_bag(bag).topics.items():
-        counts[topic] = info.count
+    if record:
+        for topic, info in open_bag(bag).topics.items():
+            counts[topic] = info.count
     kept = counts.get('/controller_state', 0)
     say('lockstep: %.3f s simulated in %.3f s wall: %.2fx real time; latency p50 %.0f us, '
         'p99 %.0f us; bag: %d controller_state; exit codes %s; load %.2f -> %.2f'
         % (sim_s, wall, sim_s / wall, p50, p99, kept, codes, load0, load1))
     rows = [
         {'name': 'lockstep 1 kHz + recorder: real-time factor (5-s case)',
-         'value': sim_s / wall, 'unit': 'x', 'target': '>= 2'},
+         'value': sim_s / wall, 'unit': 'x', 'target': '>= 2'} if record else
+        {'name': 'lockstep 1 kHz, NO recorder: real-time factor (5-s case)',
+         'value': sim_s / wall, 'unit': 'x', 'target': None},
         {'name': 'lockstep: wall time per tick', 'value': 1e6 * wall / ticks, 'unit': 'us',
          'target': None},
         {'name': 'lockstep: state->command latency p50', 'value': p50, 'unit': 'us',
          'target': None},
         {'name': 'lockstep: state->command latency p99', 'value': p99, 'unit': 'us',
          'target': None},
-        {'name': 'lockstep: ticks missing in the bag (controller_state)',
-         'value': max(0, ticks - kept), 'unit': 'ticks', 'target': '<= 0'},
     ]
+    if record:
+        rows.append({'name': 'lockstep: ticks missing in the bag (controller_state)',
+                     'value': max(0, ticks - kept), 'unit': 'ticks', 'target': '<= 0'})
     rows += _node_rows('lockstep', cpu0, cpu1, hwm, ticks + 100)
     rows.append({'name': 'lockstep: load average (1 min) at the end', 'value': load1,
                  'unit': '', 'target': None})
@@ -373,7 +393,7 @@ def tracking_error(bag, window_ns):
     from freejoint_tools.bagfile import open_bag
     lo, hi = window_ns
     err = []
-    for msg in open_bag(bag).decode('/controller_state'):
+    for _, msg in open_bag(bag).decode('/controller_state'):
         ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         if lo <= ns <= hi:
             err.append(np.hypot(msg.position[0] - msg.position_desired[0],
