@@ -26,11 +26,14 @@ contract topics at start (``graph_topics``), and its service ``~/status``
 publishers per topic. A launcher that must lose nothing starts the nodes, waits for that,
 then starts the run (e.g. the planner's ``~/plan_circle`` with ``autostart: false``).
 
-Transport: the recorder's Fast DDS participant receives over UDP loopback, not shared
-memory (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` unless the environment sets it): a sample still
-queued in a shared-memory port is lost when its publisher's process exits (its segment goes
-away), so a recorder a few ticks behind lost the simulator's last ticks when a run was
-stopped; in the kernel's socket buffer they survive the publisher.
+Stopping a run: on one machine Fast DDS moves data through shared memory (rmw_fastrtps
+with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` sets its transports itself), and a sample
+the recorder has not taken yet is lost, without a report, when its publisher's process
+exits. The recorder runs some ten ticks behind a loaded lockstep graph, so a launcher stops
+the recorder's publishers only once it had time to catch up (e.g. stop the controller
+first - the lockstep pauses - wait half a second, then the rest, the recorder last).
+Messages the middleware does report lost (a publisher's depth-100 history overrun while
+the recorder was starved of CPU) are logged at once and counted in the summary.
 
 Timestamps: with ``use_sim_time:=true`` the log times are sim time (the lockstep ``/clock``,
 ``t_k = k dt``), the same time base as the header stamps. ``ros2 bag play --clock`` (and
@@ -163,10 +166,14 @@ class Recorder(Node):
         self.declare_parameter('ready_topics', [t for t, _, _ in GRAPH_TOPICS], _descriptor(
             '~/status answers success once each of these topics has a matched publisher',
             ParameterType.PARAMETER_STRING_ARRAY))
+        self.declare_parameter('executor', 'events', _descriptor(
+            "rclpy executor: 'events' (rclpy.experimental.EventsExecutor) or "
+            "'single_threaded'", ParameterType.PARAMETER_STRING))
         self.declare_parameter('queue_depth', 5000, _descriptor(
             'Subscription queue depth (messages) per topic', ParameterType.PARAMETER_INTEGER,
             int_range=(1, 1000000)))
         p = self._params
+        self.executor_kind = p['executor']
         self._wanted = {self.resolve_topic_name(t) for t in p['topics']}
         self._excluded = {self.resolve_topic_name(t) for t in p['exclude']}
         output = p['output'] or os.path.join(
@@ -217,6 +224,10 @@ class Recorder(Node):
                     value = parse_custom_data(v for v in (value or []) if v)
                 except ValueError as exc:
                     return SetParametersResult(successful=False, reason=str(exc))
+            elif param.name == 'executor' and value not in ('events', 'single_threaded'):
+                return SetParametersResult(
+                    successful=False,
+                    reason="executor must be 'events' or 'single_threaded', got %r" % value)
             elif param.name in ('discovery_period', 'flush_period'):
                 if value is None or not value > 0.0:
                     return SetParametersResult(successful=False,
@@ -381,6 +392,8 @@ class Recorder(Node):
 
     def _lost_callback(self, name):
         def on_lost(info):
+            if info.total_count_change <= 0:
+                return
             self.lost[name] += int(info.total_count_change)
             self.get_logger().warning('%s: the middleware reports %d message(s) lost' % (
                 name, info.total_count_change))
@@ -459,20 +472,20 @@ def spin_until_stopped(node, executor, stop, drain_quiet=0.3, drain_max=3.0):
             break
 
 
-def make_executor():
-    """Return rclpy's EventsExecutor (about 4x less CPU per message), else the default."""
-    try:
-        from rclpy.experimental import EventsExecutor
-        return EventsExecutor()
-    except ImportError:  # pragma: no cover - present in rclpy 7.1 (Jazzy)
-        from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor()
+def make_executor(kind='events'):
+    """Return rclpy's EventsExecutor (about 4x less CPU per message) or the default one."""
+    if kind == 'events':
+        try:
+            from rclpy.experimental import EventsExecutor
+            return EventsExecutor()
+        except ImportError:  # pragma: no cover - present in rclpy 7.1 (Jazzy)
+            pass
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor()
 
 
 def main(args=None):
     """Run the recorder until SIGINT/SIGTERM; finalise the bag; exit 0 (1 if it cannot)."""
-    # Fast DDS: receive over UDP (loopback), not shared memory - see the module notes.
-    os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = _Stop()
     signal.signal(signal.SIGINT, stop)
@@ -484,7 +497,7 @@ def main(args=None):
         print('recorder: error: %s' % exc, file=sys.stderr)
         rclpy.try_shutdown()
         return 1
-    executor = make_executor()
+    executor = make_executor(node.executor_kind)
     executor.add_node(node)
     try:
         spin_until_stopped(node, executor, stop)
