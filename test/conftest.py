@@ -55,7 +55,8 @@ class Procs:
     @staticmethod
     def log(proc):
         """Return what the process printed so far."""
-        proc.log_file.flush()
+        if not proc.log_file.closed:
+            proc.log_file.flush()
         with open(proc.log_path) as f:
             return f.read()
 

@@ -18,6 +18,7 @@ unless ``ROS_AUTOMATIC_DISCOVERY_RANGE`` says otherwise.
 """
 import argparse
 import os
+import re
 import signal
 import struct
 import subprocess
@@ -31,6 +32,10 @@ CASES = ('horizontal', 'vertical')
 PASSIVE_JOINT = 'joint3'
 STALL_TIMEOUT = 30.0
 """Wall seconds without a new tick after which a run is given up."""
+DRAIN_QUIET = 0.5
+"""Wall seconds the recorder's count must stay unchanged before the nodes are stopped."""
+FIGURES = os.path.join(ROOT, 'docs', 'figures')
+"""Where the figures of the two paper cases go (shown in the README)."""
 
 
 def executable(pkg, exe):
@@ -324,6 +329,33 @@ def recorder_ready(executor, node, timeout):
         node.destroy_client(client)
 
 
+def recorder_drained(executor, node, quiet, timeout):
+    """
+    Wait until the recorder's received count (``~/status``) is unchanged for ``quiet`` s.
+
+    Called once the simulator holds (``max_steps``): the graph is silent, so a steady count
+    means the recorder has taken everything published. Return the count (None: no answer).
+    """
+    from std_srvs.srv import Trigger
+    client = node.create_client(Trigger, '/recorder/status')
+    deadline = time.monotonic() + timeout
+    last, since = None, time.monotonic()
+    try:
+        while time.monotonic() < deadline:
+            answer = call(executor, client, Trigger.Request(), deadline - time.monotonic())
+            match = answer and re.search(r'received (\d+)', answer.message)
+            count = int(match.group(1)) if match else None
+            now = time.monotonic()
+            if count != last:
+                last, since = count, now
+            elif count is not None and now - since >= quiet:
+                return count
+            spin_until(executor, lambda: False, 0.1)
+        return last
+    finally:
+        node.destroy_client(client)
+
+
 def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
               record=True, progress=say):
     """
@@ -361,7 +393,8 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
                                      '-p', 'custom_data:=[%s]' % info])
         graph.start('sim_node', node_cmd('freejoint_sim', 'sim_node',
                                          os.path.join(CONFIG, 'sim.yaml'),
-                                         ['case:=' + case, 'seed:=%d' % seed]))
+                                         ['case:=' + case, 'seed:=%d' % seed,
+                                          'max_steps:=%d' % n_ticks]))
         graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
                                                 os.path.join(CONFIG, 'controller.yaml'),
                                                 ['case:=' + case]))
@@ -410,11 +443,16 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
                 raise RuntimeError('no new tick for %g s at t = %.3f s (logs in %s)'
                                    % (STALL_TIMEOUT, max(ns, 0) * 1e-9, log_dir))
         wall = time.monotonic() - first_wall
-        # Take what is still in flight, then stop: the simulator first (the clock stops).
+        # The simulator now holds (max_steps): take what is still in flight, and let the
+        # recorder take everything before any publisher exits (a sample not yet taken from
+        # shared memory dies with its publisher).
         spin_until(executor, lambda: False, 0.2, step=0.05)
+        if bag is not None:
+            recorder_drained(executor, node, DRAIN_QUIET, 30.0)
     finally:
+        # The recorder last, so that it finalises the bag after every publisher is gone.
         codes = {}
-        for name in ('sim_node', 'controller_node', 'planner_node', 'recorder'):
+        for name in ('controller_node', 'planner_node', 'sim_node', 'recorder'):
             for proc in graph.procs:
                 if proc.name == name and not proc.log_file.closed:
                     codes[name] = graph.stop(proc, 60.0 if name == 'recorder' else 20.0)
@@ -545,7 +583,7 @@ def main(argv=None):
     if not failed and os.path.exists(analyze) and record_bags:
         bags = [run['bag'] for run in runs]
         say('analyze %s' % ' '.join(shown(b) for b in bags))
-        code = subprocess.call([analyze, *bags], cwd=ROOT)
+        code = subprocess.call([analyze, *bags, '--figures-dir', FIGURES], cwd=ROOT)
         if code != 0:
             say('analyze exited with %d' % code)
             failed = True

@@ -174,6 +174,26 @@ def test_lockstep_without_command_times_out_to_zero_effort_and_warns(procs, ros_
     assert procs.stop(proc) == 0
 
 
+def test_lockstep_holds_at_max_steps_ignoring_commands_and_timeouts(procs, ros_node, wait):
+    proc = _start(procs, '-p', 'max_steps:=3', '-p', 'command_timeout:=0.1')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    for k in range(3):
+        ctl.command([1.0, -1.0], k)
+        ctl.state(k + 1)
+    # Step 3 is the last: a command for it is ignored and no timeout steps on.
+    ctl.command([1.0, -1.0], 3)
+    wait(lambda: 'reached max_steps = 3 (t = 0.003 s): holding' in procs.log(proc), 10.0,
+         'the hold message', spin=ctl.spin)
+    deadline_spins = 10   # 0.5 s of spinning, five command timeouts' worth
+    for _ in range(deadline_spins):
+        ctl.spin()
+    assert max(ctl.states) == 3 * DT_NS
+    assert procs.stop(proc) == 0
+    assert 'simulator stopped at step 3 (t = 0.003 s): 0 command timeouts' in \
+        procs.log(proc)
+
+
 def test_reset_service_puts_the_arm_back_at_rest_and_time_runs_on(procs, ros_node, wait):
     import rclpy
     from std_srvs.srv import Trigger

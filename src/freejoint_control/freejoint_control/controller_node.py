@@ -32,10 +32,13 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+QUEUE_DEPTH = 1000
+"""Keep-last depth of the run's streams: 1 s at 1 kHz, so a recorder that stalls
+for less than that loses nothing (docs/GRAPH.md)."""
+QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
                  reliability=ReliabilityPolicy.RELIABLE)
 """QoS of joint_states, commands and controller_state (docs/GRAPH.md)."""
-SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
                           reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """QoS of setpoint: transient local, so a controller started after the planner still gets

@@ -51,14 +51,17 @@ NODE_NAME = 'freejoint_planner'
 
 # Setpoints: reliable, keep-last 100 (lockstep loses nothing); transient local so that a
 # controller started after the planner still gets the ticks already published ahead.
-SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+QUEUE_DEPTH = 1000
+"""Keep-last depth of the run's streams: 1 s at 1 kHz, so a recorder that stalls
+for less than that loses nothing (docs/GRAPH.md)."""
+SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
                           reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 # /clock: best effort accepts any publisher (rclcpp's ClockQoS is best effort).
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
                        reliability=ReliabilityPolicy.BEST_EFFORT)
 
 MARKER_POINTS = 361

@@ -64,6 +64,10 @@ SPECS = (
     Spec('command_timeout', 0.5,
          'wall time [s] without a command after which zero effort is applied (and a '
          'warning given); lockstep: per step, after the first command', (1e-3, 3600.0)),
+    Spec('max_steps', 0,
+         'lockstep: once step max_steps is published the simulator holds (no further '
+         'step, no further message; later commands are ignored); 0 = run until stopped. '
+         'A run of N control ticks uses N (the state at t = N dt is the last one)'),
     Spec('frame_id', 'base_link', 'frame of ee_position and of the arm base'),
     Spec('executor', 'single_threaded',
          "rclpy executor: 'single_threaded' or 'events' (rclpy.experimental.EventsExecutor)",
@@ -98,6 +102,7 @@ class Config:
     executor: str
     timing_file: str = ''
     timing_steps: int = 0
+    max_steps: int = 0
 
 
 def _names(name, value):
@@ -189,6 +194,10 @@ def build_config(values):
             0 <= timing_steps <= 10_000_000):
         raise FreejointValueError(
             f'timing_steps: expected an integer in [0, 10000000], got {timing_steps!r}')
+    max_steps = values['max_steps']
+    if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 0:
+        raise FreejointValueError(
+            f'max_steps: expected an integer >= 0 (0 = no limit), got {max_steps!r}')
     timing_file = str(values['timing_file'])
     if timing_file and timing_steps < 1:
         raise FreejointValueError('timing_steps: must be >= 1 when timing_file is set')
@@ -199,4 +208,4 @@ def build_config(values):
                   dt_sub=dt_sub, publish_every=every, dist_bound=dist, seed=seed,
                   command_timeout=timeout, frame_id=str(values['frame_id']),
                   executor=values['executor'], timing_file=timing_file,
-                  timing_steps=timing_steps)
+                  timing_steps=timing_steps, max_steps=max_steps)

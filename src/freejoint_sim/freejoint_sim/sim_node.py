@@ -48,12 +48,15 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+QUEUE_DEPTH = 1000
+"""Keep-last depth of the run's streams: 1 s at 1 kHz, so a recorder that stalls
+for less than that loses nothing (docs/GRAPH.md)."""
+QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
                  reliability=ReliabilityPolicy.RELIABLE)
 """QoS of joint_states, ee_position and the commands (docs/GRAPH.md)."""
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
                        reliability=ReliabilityPolicy.RELIABLE)
-"""QoS of /clock: reliable (matches reliable and best-effort subscribers)."""
+"""QoS of /clock: reliable, as deep as the state (a lagging recorder loses nothing)."""
 
 REPUBLISH_PERIOD = 0.2
 """Lockstep: wall period [s] of republishing step 0 until the first command arrives."""
@@ -192,6 +195,7 @@ class SimNode(Node):
         self._lockstep = cfg.lockstep
         self._cmd_map = cfg.cmd_to_active
         self._identity = cfg.cmd_to_active == tuple(range(len(cfg.cmd_to_active)))
+        self._max_steps = cfg.max_steps
 
     def _on_set_parameters(self, params):
         values = dict(self._values)
@@ -266,6 +270,8 @@ class SimNode(Node):
                 self._cmd_timed_out = False
                 self.get_logger().info('commands are back')
             return
+        if self._holding():
+            return
         dims = msg.layout.dim
         if dims:
             label = dims[0].label
@@ -316,6 +322,10 @@ class SimNode(Node):
         return path
 
     # -- stepping --------------------------------------------------------------
+    def _holding(self):
+        """Return True once a lockstep run has reached ``max_steps`` (it then holds)."""
+        return 0 < self._max_steps <= self._k
+
     def _advance(self, tau):
         """Integrate one control period with ``tau`` (active, model order); publish."""
         if self._reset_pending:
@@ -331,6 +341,9 @@ class SimNode(Node):
             self._publish_state()
         if self._k == self._timing_write_at:
             self.write_timing()
+        if self._lockstep and self._k == self._max_steps:
+            self.get_logger().info('reached max_steps = %d (t = %.3f s): holding'
+                                   % (self._k, self._t_ns * 1e-9))
 
     def _publish_state(self):
         t_ns = self._t_ns
@@ -374,6 +387,8 @@ class SimNode(Node):
                 self._publish_state()
                 self.get_logger().info('waiting for the first command on %s' %
                                        self._cmd_topic(), throttle_duration_sec=5.0)
+            return
+        if self._holding():
             return
         if now - self._waiting_since > self._timeout:
             self._timeouts += 1

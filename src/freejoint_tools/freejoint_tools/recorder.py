@@ -32,7 +32,7 @@ the recorder has not taken yet is lost, without a report, when its publisher's p
 exits. The recorder runs some ten ticks behind a loaded lockstep graph, so a launcher stops
 the recorder's publishers only once it had time to catch up (e.g. stop the controller
 first - the lockstep pauses - wait half a second, then the rest, the recorder last).
-Messages the middleware does report lost (a publisher's depth-100 history overrun while
+Messages the middleware does report lost (a publisher's depth-1000 history overrun while
 the recorder was starved of CPU) are logged at once and counted in the summary.
 
 Timestamps: with ``use_sim_time:=true`` the log times are sim time (the lockstep ``/clock``,
@@ -380,13 +380,14 @@ class Recorder(Node):
         return {name: sub.get_publisher_count() for name, sub in self._subs.items()}
 
     def _status(self, request, response):
-        """~/status: success once every ready topic has a matched publisher."""
+        """~/status: success once every ready topic has a matched publisher; the count so far."""
         matched = self.matched()
         waiting = [t for t in self._ready_topics if not matched.get(t)]
         response.success = not waiting and not self._closed
-        response.message = '%s; matched publishers: %s' % (
+        response.message = '%s; received %d; matched publishers: %s' % (
             'recording' if response.success else
             ('closed' if self._closed else 'waiting for ' + ', '.join(waiting)),
+            sum(self.received.values()),
             ', '.join('%s %d' % kv for kv in sorted(matched.items())))
         return response
 
