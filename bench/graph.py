@@ -45,8 +45,11 @@ RT_SECONDS = float(os.environ.get('FREEJOINT_BENCH_RT_SECONDS', '60'))
 RT_STARTUP_STEPS = 30000
 """Real time: steps the timing arrays hold beyond the measured window (start-up, stop)."""
 NODES = ('sim_node', 'controller_node', 'planner_node', 'recorder')
-RT_READY_TOPICS = '[joint_states, ee_position, effort_controller/commands, ' \
-    'controller_state, setpoint]'
+STOP_ORDER = ('controller_node', 'planner_node', 'sim_node', 'recorder')
+DRAIN_PAUSE = 1.0
+"""Wall seconds between stopping the controller and the rest (the recorder catches up)."""
+RT_READY_BEFORE_SIM = '[effort_controller/commands, controller_state, setpoint]'
+RT_SIM_TOPICS = ('/joint_states', '/ee_position')
 OFFLINE_SEEDS = range(10)
 
 
@@ -96,6 +99,7 @@ class Graph:
         self.tag = tag
         self.env = env
         self.procs = {}
+        self._cpu = {}
 
     def start(self, name, cmd):
         """Start ``cmd`` (its output to <log_dir>/<tag>_<name>.log); return the Popen."""
@@ -114,8 +118,11 @@ class Graph:
         return [n for n, p in self.procs.items() if p.poll() is not None]
 
     def cpu(self):
-        """Return {name: CPU seconds so far}."""
-        return {n: proc_cpu_seconds(p.pid) for n, p in self.procs.items()}
+        """Return {name: CPU seconds so far} (a process that exited: its last reading)."""
+        for name, proc in self.procs.items():
+            if proc.poll() is None:
+                self._cpu[name] = proc_cpu_seconds(proc.pid)
+        return dict(self._cpu)
 
     def vmhwm(self):
         """Return {name: VmHWM MiB}."""
@@ -135,13 +142,21 @@ class Graph:
             proc.log_file.close()
         return proc.returncode
 
-    def stop_all(self, order=NODES):
-        """Stop every process (in ``order``, the rest after); return {name: exit code}."""
+    def stop_all(self, order=STOP_ORDER):
+        """
+        Stop every process (in ``order``, the rest after); return {name: exit code}.
+
+        The controller first (the graph pauses: the lockstep sim waits, the real-time sim
+        applies zero effort), then a pause for the recorder to take what is in flight (a
+        shared-memory sample not yet taken dies with its publisher), the recorder last.
+        """
         codes = {}
         names = [n for n in order if n in self.procs] + [
             n for n in self.procs if n not in order]
         for name in names:
             codes[name] = self.stop(name, 60.0 if name == 'recorder' else 20.0)
+            if name == 'controller_node' and 'recorder' in self.procs:
+                time.sleep(DRAIN_PAUSE)
         return codes
 
     def tail(self, name, lines=5):
@@ -158,22 +173,28 @@ def node_cmd(pkg, exe, config, overrides):
     return cmd
 
 
+def start_sim(graph, overrides):
+    """Start the simulator."""
+    graph.start('sim_node', node_cmd('freejoint_sim', 'sim_node', 'sim.yaml',
+                                     ['case:=' + CASE, 'seed:=%d' % SEED] + overrides))
+
+
 def start_graph(graph, bag, sim_overrides, ctl_overrides, planner_overrides, rec_overrides,
                 custom):
-    """Start recorder (unless ``bag`` is None), simulator, controller and planner."""
+    """Start recorder (unless ``bag`` is None), simulator (unless None), controller, planner."""
     if bag is not None:
         graph.start('recorder', [executable('freejoint_tools', 'recorder'), '--ros-args',
                                  '-p', 'output:=' + bag, '-p', 'topics:=[]',
                                  '-p', 'overwrite:=true', '-p', 'custom_data:=[%s]' % custom]
                     + [a for item in rec_overrides for a in ('-p', item)])
-    graph.start('sim_node', node_cmd('freejoint_sim', 'sim_node', 'sim.yaml',
-                                     ['case:=' + CASE, 'seed:=%d' % SEED] + sim_overrides))
+    if sim_overrides is not None:
+        start_sim(graph, sim_overrides)
     graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
                                             'controller.yaml', ['case:=' + CASE]
                                             + ctl_overrides))
     graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node', 'planner.yaml',
-                                         ['case:=' + CASE, 'autostart:=false']
-                                         + planner_overrides))
+                                         ['case:=' + CASE] + (planner_overrides or
+                                                              ['autostart:=false'])))
 
 
 # -- this process's ROS node (services only: nothing on the hot path) --------------------
@@ -228,6 +249,23 @@ class Client:
                 return True, answer.message
             time.sleep(0.2)
         return False, answer.message if answer is not None else 'no answer'
+
+    def controller_answers(self, timeout, count=20):
+        """Wait until ``count`` controller_state messages arrived (briefly subscribed)."""
+        from freejoint_msgs.msg import ControllerState
+        got = []
+        sub = self.node.create_subscription(ControllerState, 'controller_state',
+                                            lambda raw: got.append(1), 10, raw=True)
+        try:
+            return self.spin_until(lambda: len(got) >= count, timeout, step=0.01)
+        finally:
+            self.node.destroy_subscription(sub)
+
+    def recorder_status(self, timeout=5.0):
+        """Return the message of the recorder's ``~/status`` ('' if no answer)."""
+        from std_srvs.srv import Trigger
+        answer = self.call(Trigger, '/recorder/status', Trigger.Request(), timeout)
+        return answer.message if answer is not None else ''
 
     def plan_circle(self, plan, timeout=20.0):
         """Ask the planner for the configured circle, executed at once; return the answer."""
@@ -381,7 +419,7 @@ def offline_bound():
     from freejoint_core.offline import run_case
     worst_max = worst_rms = 0.0
     for seed in OFFLINE_SEEDS:
-        record = run_case(CASE, 'robust', seed)
+        record, _ = run_case(CASE, 'robust', seed)
         worst_max = max(worst_max, record['max_mm'])
         worst_rms = max(worst_rms, record['rms_mm'])
     return worst_max, worst_rms
@@ -419,23 +457,40 @@ def realtime(client, env, seconds=RT_SECONDS):
     say('real time: %g s at 1 kHz, recorder on, the circle every %g s, ROS_DOMAIN_ID %s, '
         'load %.2f' % (seconds, period, env['ROS_DOMAIN_ID'], load0))
     plans = 0
+    exited = []
     try:
-        start_graph(graph, bag, ['mode:=realtime', 'timing_file:=' + timing_path,
-                                 'timing_steps:=%d' % steps],
-                    ['lockstep:=false'], ['use_sim_time:=false'],
-                    ['use_sim_time:=false', 'ready_topics:=' + RT_READY_TOPICS],
+        # The planner holds the start point (the configured circle, delayed "forever"), the
+        # controller answers from the first state on: the simulator starts last, at rest
+        # on that point, so the arm never drifts uncontrolled.
+        start_graph(graph, bag, None, ['lockstep:=false'],
+                    ['use_sim_time:=false', 'autostart:=true', 'start_delay:=3600.0'],
+                    ['use_sim_time:=false', 'ready_topics:=' + RT_READY_BEFORE_SIM],
                     'case=%s, variant=robust, seed=%d' % (CASE, SEED))
         ok, status = client.recorder_ready(60.0)
         if not ok:
             raise RuntimeError('recorder not ready after 60 s: %s' % status)
-        client.spin_until(lambda: False, 0.5)   # the controller holds q(0) meanwhile
+        start_sim(graph, ['mode:=realtime', 'timing_file:=' + timing_path,
+                          'timing_steps:=%d' % steps])
+        if not client.spin_until(lambda: all(
+                ' %s 1' % t in client.recorder_status() for t in RT_SIM_TOPICS), 60.0):
+            raise RuntimeError('the recorder did not match the simulator within 60 s')
+        # Discovery can take seconds: the arm may have drifted (zero effort) until the
+        # controller answered. Once it does, the arm goes back to q(0) at rest (~/reset).
+        if not client.controller_answers(60.0):
+            raise RuntimeError('the controller does not answer the simulator after 60 s')
+        from std_srvs.srv import Trigger
+        if client.call(Trigger, '/sim_node/reset', Trigger.Request(), 20.0) is None:
+            raise RuntimeError('the simulator did not answer ~/reset')
+        client.spin_until(lambda: False, 1.0)   # the controller holds the start point
         start = time.monotonic()
         cpu0 = graph.cpu()
         next_plan = start
         while time.monotonic() < start + seconds:
-            if graph.exited():
-                raise RuntimeError('%s exited during the run (%s)' % (
-                    ', '.join(graph.exited()), graph.log_dir))
+            exited = graph.exited()
+            if exited:
+                say('real time: %s exited during the run (logs in %s): %s' % (
+                    ', '.join(exited), graph.log_dir, graph.tail(exited[0], 3).strip()))
+                break
             if time.monotonic() >= next_plan:
                 answer = client.plan_circle(plan)
                 if answer is None or not answer.accepted:
@@ -474,6 +529,10 @@ def realtime(client, env, seconds=RT_SECONDS):
                                int(np.count_nonzero(~got)), skipped, max_mm, rms_mm, n_err,
                                bound_max, bound_rms, plans, codes, load0, load1))
     rows = [
+        {'name': 'real time: seconds measured (of %g)' % seconds,
+         'value': (pub[k1] - pub[k0]), 'unit': 's', 'target': '>= %g' % (0.99 * seconds)},
+        {'name': 'real time: nodes that exited during the run', 'value': len(exited),
+         'unit': 'nodes', 'target': '<= 0'},
         {'name': 'real time 1 kHz + recorder: state->command latency p50',
          'value': p50 * 1e-3, 'unit': 'ms', 'target': None},
         {'name': 'real time: state->command latency p99', 'value': p99 * 1e-3, 'unit': 'ms',
@@ -514,6 +573,10 @@ def run(which=('lockstep', 'realtime')):
         client = Client()
         try:
             rows += (lockstep if name == 'lockstep' else realtime)(client, env)
+        except (RuntimeError, OSError) as exc:
+            say('%s run failed: %s' % (name, exc))
+            rows.append({'name': '%s run completed' % name, 'value': 0, 'unit': '',
+                         'target': '>= 1'})
         finally:
             client.close()
     return rows

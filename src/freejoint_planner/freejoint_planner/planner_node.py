@@ -12,10 +12,12 @@ change gets it back from ``ros2 param set``) and never streams: the running plan
 
 An accepted plan streams ``setpoint`` (freejoint_msgs/CartesianSetpoint) on the control
 grid of the ROS clock as ``docs/GRAPH.md`` lays down: triggered by every ``/clock``
-message in sim time (by a 1/control_period wall timer reading the system clock
-otherwise), each tick ``t_k = k dt`` with ``t_k <= now + lookahead dt`` published once,
-in order, carrying ``CircleQuintic.sample_tuple(k_plan dt)``. The planned path goes out as
-a LINE_STRIP on ``planned_path`` (visualization_msgs/Marker, transient local).
+message in sim time (by a wall timer reading the system clock otherwise, every
+``max(1, lookahead // 2)`` control periods: each firing publishes about half the lookahead
+at once, a tenth of the wake-ups of a 1/control_period timer at the default 20), each
+tick ``t_k = k dt`` with ``t_k <= now + lookahead dt`` published once, in order, carrying
+``CircleQuintic.sample_tuple(k_plan dt)``. The planned path goes out as a LINE_STRIP on
+``planned_path`` (visualization_msgs/Marker, transient local).
 
 With ``autostart`` the configured circle (parameters ``centre``, ``radius``, ``duration``,
 ``start_angle``, ``direction``, ``start_delay``) starts at activation and again, anew,
@@ -135,10 +137,7 @@ class PlannerNode(Node):
                     f'configured circle refused, nothing streams: {self._describe(circle)}: '
                     f'{check.reason}')
         self.create_subscription(ClockMsg, '/clock', self._on_clock, CLOCK_QOS)
-        self._timer = self.create_timer(self._cfg['control_period'], self._on_timer,
-                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
-        if self._sim:
-            self._timer.cancel()
+        self._timer = self._make_timer()
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.create_service(PlanCircle, '~/plan_circle', self._on_plan_circle)
         self.get_logger().info(
@@ -205,6 +204,9 @@ class PlannerNode(Node):
         # accepted: apply
         self._cfg = new
         self._stream.lookahead = int(new['lookahead'])
+        if 'lookahead' in changed:
+            self.destroy_timer(self._timer)
+            self._timer = self._make_timer()
         if model is not self._model or changed & {'grid_resolution', 'frame_id'}:
             self._model = model
             self._publish_map()
@@ -220,6 +222,20 @@ class PlannerNode(Node):
         self.get_logger().warning(f'parameter change refused: {reason}',
                                   throttle_duration_sec=1.0)
         return SetParametersResult(successful=False, reason=reason)
+
+    def _make_timer(self):
+        """
+        Return the real-time trigger: a wall timer every max(1, lookahead // 2) periods.
+
+        Each firing publishes every tick up to now + lookahead, so at least half the
+        lookahead stays published ahead; cancelled in sim time (/clock triggers instead).
+        """
+        period = self._cfg['control_period'] * max(1, int(self._cfg['lookahead']) // 2)
+        timer = self.create_timer(period, self._on_timer,
+                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
+        if self._sim:
+            timer.cancel()
+        return timer
 
     def _switch_time_source(self, sim):
         """Trigger on /clock (sim time) or the wall timer; restart on the new time base."""
