@@ -22,7 +22,8 @@ The times come from the simulator (parameters ``timing_file`` / ``timing_steps``
 preallocated per-step array written once, no per-tick logging; ``freejoint_sim.timing``).
 Benchmarks assert nothing; figures and targets go to ``bench/run_all.py``'s table.
 
-Usage: ``. tools/env.sh && python bench/graph.py [--lockstep-only | --realtime-only]``;
+Usage: ``. tools/env.sh && python bench/graph.py [--lockstep-only | --realtime-only]
+[--separate-only | --composed-only]``;
 ``FREEJOINT_BENCH_RT_SECONDS=10`` for a quick real-time run.  Logs and bags stay in
 ``bags/bench/graph/`` (git-ignored).
 """
@@ -44,8 +45,10 @@ LOCKSTEP_TICKS = 5000
 RT_SECONDS = float(os.environ.get('FREEJOINT_BENCH_RT_SECONDS', '60'))
 RT_STARTUP_STEPS = 30000
 """Real time: steps the timing arrays hold beyond the measured window (start-up, stop)."""
-NODES = ('sim_node', 'controller_node', 'planner_node', 'recorder')
-STOP_ORDER = ('controller_node', 'planner_node', 'sim_node', 'recorder')
+NODES = ('sim_node', 'controller_node', 'planner_node', 'graph', 'recorder')
+STOP_ORDER = ('controller_node', 'planner_node', 'sim_node', 'graph', 'recorder')
+LAYOUTS = {'separate': '', 'composed': ' [1 process]'}
+"""Graph layouts (a process per node / bringup ``graph``) and their tag in the rows."""
 DRAIN_PAUSE = 1.0
 """Wall seconds between stopping the controller and the rest (the recorder catches up)."""
 RT_READY_BEFORE_SIM = '[effort_controller/commands, controller_state, setpoint]'
@@ -153,6 +156,11 @@ class Graph:
         codes = {}
         names = [n for n in order if n in self.procs] + [
             n for n in self.procs if n not in order]
+        one = self.procs.get('graph')
+        if one is not None and one.poll() is None and 'recorder' in self.procs:
+            one.send_signal(signal.SIGSTOP)     # the graph pauses, the recorder catches up
+            time.sleep(DRAIN_PAUSE)
+            one.send_signal(signal.SIGCONT)
         for name in names:
             codes[name] = self.stop(name, 60.0 if name == 'recorder' else 20.0)
             if name == 'controller_node' and 'recorder' in self.procs:
@@ -174,27 +182,44 @@ def node_cmd(pkg, exe, config, overrides):
 
 
 def start_sim(graph, overrides):
-    """Start the simulator."""
+    """Start the simulator (its own process)."""
     graph.start('sim_node', node_cmd('freejoint_sim', 'sim_node', 'sim.yaml',
                                      ['case:=' + CASE, 'seed:=%d' % SEED] + overrides))
 
 
-def start_graph(graph, bag, sim_overrides, ctl_overrides, planner_overrides, rec_overrides,
-                custom):
-    """Start recorder (unless ``bag`` is None), simulator (unless None), controller, planner."""
+def start_graph(graph, layout, bag, sim_overrides, ctl_overrides, planner_overrides,
+                rec_overrides, custom):
+    """
+    Start the recorder (unless ``bag`` is None) and the three nodes.
+
+    ``layout`` 'separate': a process per node, as ``make demo`` starts them (the simulator
+    only if ``sim_overrides`` is not None); 'composed': the three in one process,
+    ``ros2 run freejoint_bringup graph`` with the same parameter files and overrides.
+    """
     if bag is not None:
         graph.start('recorder', [executable('freejoint_tools', 'recorder'), '--ros-args',
                                  '-p', 'output:=' + bag, '-p', 'topics:=[]',
                                  '-p', 'overwrite:=true', '-p', 'custom_data:=[%s]' % custom]
                     + [a for item in rec_overrides for a in ('-p', item)])
+    sim = ['case:=' + CASE, 'seed:=%d' % SEED] + list(sim_overrides or [])
+    ctl = ['case:=' + CASE] + ctl_overrides
+    planner = ['case:=' + CASE] + (planner_overrides or ['autostart:=false'])
+    if layout == 'composed':
+        sim, ctl, planner = ([item.replace(':=', '=', 1) for item in items]
+                             for items in (sim, ctl, planner))
+        graph.start('graph', [executable('freejoint_bringup', 'graph'),
+                              '--sim-params', os.path.join(CONFIG, 'sim.yaml'), '--sim', *sim,
+                              '--controller-params', os.path.join(CONFIG, 'controller.yaml'),
+                              '--controller', *ctl,
+                              '--planner-params', os.path.join(CONFIG, 'planner.yaml'),
+                              '--planner', *planner])
+        return
     if sim_overrides is not None:
         start_sim(graph, sim_overrides)
     graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
-                                            'controller.yaml', ['case:=' + CASE]
-                                            + ctl_overrides))
+                                            'controller.yaml', ctl))
     graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node', 'planner.yaml',
-                                         ['case:=' + CASE] + (planner_overrides or
-                                                              ['autostart:=false'])))
+                                         planner))
 
 
 # -- this process's ROS node (services only: nothing on the hot path) --------------------
@@ -350,20 +375,22 @@ def wait_ready(client, record):
         client.spin_until(lambda: False, 1.0)
 
 
-def lockstep(client, env, ticks=LOCKSTEP_TICKS, record=True):
+def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True):
     """Run the 5-s case in lockstep, the recorder on if ``record``; return the rows."""
     import numpy as np
     from freejoint_tools.bagfile import open_bag
-    run_dir = os.path.join(OUT, 'lockstep')
+    tag = 'lockstep' + LAYOUTS[layout]
+    run_dir = os.path.join(OUT, 'lockstep_' + layout)
     shutil.rmtree(run_dir, ignore_errors=True)
     timing_path = os.path.join(run_dir, 'timing.npz')
     bag = os.path.join(run_dir, 'bag') if record else None
     graph = Graph(os.path.join(run_dir, 'logs'), 'lockstep', env)
     load0 = load_average()
-    say('lockstep: %d ticks, recorder %s, ROS_DOMAIN_ID %s, load %.2f'
-        % (ticks, 'on' if record else 'OFF', env['ROS_DOMAIN_ID'], load0))
+    say('%s: %d ticks, recorder %s, ROS_DOMAIN_ID %s, load %.2f'
+        % (tag, ticks, 'on' if record else 'OFF', env['ROS_DOMAIN_ID'], load0))
     try:
-        start_graph(graph, bag, ['timing_file:=' + timing_path, 'timing_steps:=%d' % (ticks + 1)],
+        start_graph(graph, layout, bag,
+                    ['timing_file:=' + timing_path, 'timing_steps:=%d' % (ticks + 1)],
                     [], [], ['use_sim_time:=true'],
                     'case=%s, variant=robust, seed=%d, max_ticks=%d' % (CASE, SEED, ticks))
         wait_ready(client, record)
@@ -389,40 +416,45 @@ def lockstep(client, env, ticks=LOCKSTEP_TICKS, record=True):
         for topic, info in open_bag(bag).topics.items():
             counts[topic] = info.count
     kept = counts.get('/controller_state', 0)
-    say('lockstep: %.3f s simulated in %.3f s wall: %.2fx real time; latency p50 %.0f us, '
+    say('%s: %.3f s simulated in %.3f s wall: %.2fx real time; latency p50 %.0f us, '
         'p99 %.0f us; bag: %d controller_state; exit codes %s; load %.2f -> %.2f'
-        % (sim_s, wall, sim_s / wall, p50, p99, kept, codes, load0, load1))
+        % (tag, sim_s, wall, sim_s / wall, p50, p99, kept, codes, load0, load1))
     rows = [
-        {'name': 'lockstep 1 kHz + recorder: real-time factor (5-s case)',
+        {'name': '%s 1 kHz + recorder: real-time factor' % tag,
          'value': sim_s / wall, 'unit': 'x', 'target': '>= 2'} if record else
-        {'name': 'lockstep 1 kHz, NO recorder: real-time factor (5-s case)',
+        {'name': '%s 1 kHz, NO recorder: real-time factor' % tag,
          'value': sim_s / wall, 'unit': 'x', 'target': None},
-        {'name': 'lockstep: wall time per tick', 'value': 1e6 * wall / ticks, 'unit': 'us',
+        {'name': '%s: wall time per tick' % tag, 'value': 1e6 * wall / ticks, 'unit': 'us',
          'target': None},
-        {'name': 'lockstep: state->command latency p50', 'value': p50, 'unit': 'us',
+        {'name': '%s: state->command latency p50' % tag, 'value': p50, 'unit': 'us',
          'target': None},
-        {'name': 'lockstep: state->command latency p99', 'value': p99, 'unit': 'us',
+        {'name': '%s: state->command latency p99' % tag, 'value': p99, 'unit': 'us',
          'target': None},
     ]
     if record:
-        rows.append({'name': 'lockstep: ticks missing in the bag (controller_state)',
+        rows.append({'name': '%s: ticks missing in the bag' % tag,
                      'value': max(0, ticks - kept), 'unit': 'ticks', 'target': '<= 0'})
-    rows += _node_rows('lockstep', cpu0, cpu1, hwm, ticks + 100)
-    rows.append({'name': 'lockstep: load average (1 min) at the end', 'value': load1,
+    rows += _node_rows(tag, cpu0, cpu1, hwm, ticks + 100)
+    rows.append({'name': '%s: load average (1 min) at the end' % tag, 'value': load1,
                  'unit': '', 'target': None})
     return rows
 
 
 # -- real time --------------------------------------------------------------------------
+_BOUND = []
+
+
 def offline_bound():
     """Return the offline runner's worst max / rms tracking error [mm] over seeds 0-9."""
     from freejoint_core.offline import run_case
-    worst_max = worst_rms = 0.0
-    for seed in OFFLINE_SEEDS:
-        record, _ = run_case(CASE, 'robust', seed)
-        worst_max = max(worst_max, record['max_mm'])
-        worst_rms = max(worst_rms, record['rms_mm'])
-    return worst_max, worst_rms
+    if not _BOUND:
+        worst_max = worst_rms = 0.0
+        for seed in OFFLINE_SEEDS:
+            record, _ = run_case(CASE, 'robust', seed)
+            worst_max = max(worst_max, record['max_mm'])
+            worst_rms = max(worst_rms, record['rms_mm'])
+        _BOUND.extend((worst_max, worst_rms))
+    return tuple(_BOUND)
 
 
 def tracking_error(bag, window_ns):
@@ -442,10 +474,11 @@ def tracking_error(bag, window_ns):
     return float(err.max()), float(np.sqrt(np.mean(err ** 2))), len(err)
 
 
-def realtime(client, env, seconds=RT_SECONDS):
+def realtime(client, env, layout='separate', seconds=RT_SECONDS):
     """Run the graph in real time with the recorder for ``seconds``; return the rows."""
     import numpy as np
-    run_dir = os.path.join(OUT, 'realtime')
+    tag = 'real time' + LAYOUTS[layout]
+    run_dir = os.path.join(OUT, 'realtime_' + layout)
     shutil.rmtree(run_dir, ignore_errors=True)
     timing_path = os.path.join(run_dir, 'timing.npz')
     bag = os.path.join(run_dir, 'bag')
@@ -454,23 +487,25 @@ def realtime(client, env, seconds=RT_SECONDS):
     period = float(plan['duration']) + 0.5
     steps = int(seconds * 1000) + RT_STARTUP_STEPS
     load0 = load_average()
-    say('real time: %g s at 1 kHz, recorder on, the circle every %g s, ROS_DOMAIN_ID %s, '
-        'load %.2f' % (seconds, period, env['ROS_DOMAIN_ID'], load0))
+    say('%s: %g s at 1 kHz, recorder on, the circle every %g s, ROS_DOMAIN_ID %s, '
+        'load %.2f' % (tag, seconds, period, env['ROS_DOMAIN_ID'], load0))
     plans = 0
     exited = []
     try:
         # The planner holds the start point (the configured circle, delayed "forever"), the
-        # controller answers from the first state on: the simulator starts last, at rest
-        # on that point, so the arm never drifts uncontrolled.
-        start_graph(graph, bag, None, ['lockstep:=false'],
+        # controller answers from the first state on: the simulator starts last (separate
+        # processes), at rest on that point.
+        sim = ['mode:=realtime', 'timing_file:=' + timing_path, 'timing_steps:=%d' % steps]
+        composed = layout == 'composed'
+        start_graph(graph, layout, bag, sim if composed else None, ['lockstep:=false'],
                     ['use_sim_time:=false', 'autostart:=true', 'start_delay:=3600.0'],
                     ['use_sim_time:=false', 'ready_topics:=' + RT_READY_BEFORE_SIM],
                     'case=%s, variant=robust, seed=%d' % (CASE, SEED))
         ok, status = client.recorder_ready(60.0)
         if not ok:
             raise RuntimeError('recorder not ready after 60 s: %s' % status)
-        start_sim(graph, ['mode:=realtime', 'timing_file:=' + timing_path,
-                          'timing_steps:=%d' % steps])
+        if not composed:
+            start_sim(graph, sim)
         if not client.spin_until(lambda: all(
                 ' %s 1' % t in client.recorder_status() for t in RT_SIM_TOPICS), 60.0):
             raise RuntimeError('the recorder did not match the simulator within 60 s')
@@ -488,8 +523,8 @@ def realtime(client, env, seconds=RT_SECONDS):
         while time.monotonic() < start + seconds:
             exited = graph.exited()
             if exited:
-                say('real time: %s exited during the run (logs in %s): %s' % (
-                    ', '.join(exited), graph.log_dir, graph.tail(exited[0], 3).strip()))
+                say('%s: %s exited during the run (logs in %s): %s' % (
+                    tag, ', '.join(exited), graph.log_dir, graph.tail(exited[0], 3).strip()))
                 break
             if time.monotonic() >= next_plan:
                 answer = client.plan_circle(plan)
@@ -509,7 +544,7 @@ def realtime(client, env, seconds=RT_SECONDS):
     pub, rec, applied = t['published'], t['received'], t['applied']
     window = np.nonzero((pub >= start) & (pub <= end))[0]
     if len(window) < 2:
-        raise RuntimeError('real time: the timing file holds no step of the window')
+        raise RuntimeError('%s: the timing file holds no step of the window' % tag)
     k0, k1 = int(window[0]), int(window[-1])
     ks = np.arange(k0, k1)          # periods k -> k+1 inside the window
     latency = (rec[ks] - pub[ks]) * 1e6
@@ -522,61 +557,66 @@ def realtime(client, env, seconds=RT_SECONDS):
     max_mm, rms_mm, n_err = tracking_error(bag, (int(t['stamp_ns'][k0]),
                                                  int(t['stamp_ns'][k1])))
     bound_max, bound_rms = offline_bound()
-    say('real time: %d periods in %.1f s, latency p50 %.0f us p99 %.0f us max %.0f us, %d '
+    say('%s: %d periods in %.1f s, latency p50 %.0f us p99 %.0f us max %.0f us, %d '
         'without a fresh command (%d without any), %d skipped; tracking max %.3f mm rms %.3f '
         'mm over %d ticks (offline worst max %.3f, rms %.3f); %d plans; exit codes %s; '
-        'load %.2f -> %.2f' % (len(ks), end - start, p50, p99, pmax, stale,
+        'load %.2f -> %.2f' % (tag, len(ks), end - start, p50, p99, pmax, stale,
                                int(np.count_nonzero(~got)), skipped, max_mm, rms_mm, n_err,
                                bound_max, bound_rms, plans, codes, load0, load1))
     rows = [
-        {'name': 'real time: seconds measured (of %g)' % seconds,
+        {'name': '%s: seconds measured (of %g)' % (tag, seconds),
          'value': (pub[k1] - pub[k0]), 'unit': 's', 'target': '>= %g' % (0.99 * seconds)},
-        {'name': 'real time: nodes that exited during the run', 'value': len(exited),
+        {'name': '%s: nodes that exited during the run' % tag, 'value': len(exited),
          'unit': 'nodes', 'target': '<= 0'},
-        {'name': 'real time 1 kHz + recorder: state->command latency p50',
+        {'name': '%s 1 kHz + recorder: latency p50' % tag,
          'value': p50 * 1e-3, 'unit': 'ms', 'target': None},
-        {'name': 'real time: state->command latency p99', 'value': p99 * 1e-3, 'unit': 'ms',
+        {'name': '%s: state->command latency p99' % tag, 'value': p99 * 1e-3, 'unit': 'ms',
          'target': '<= 1'},
-        {'name': 'real time: state->command latency max', 'value': pmax * 1e-3,
+        {'name': '%s: state->command latency max' % tag, 'value': pmax * 1e-3,
          'unit': 'ms', 'target': None},
-        {'name': 'real time: control periods without a fresh command of %d' % len(ks),
+        {'name': '%s: periods without a fresh command' % tag,
          'value': stale, 'unit': 'periods', 'target': '<= 0'},
-        {'name': 'real time: periods skipped (timer behind)', 'value': skipped,
+        {'name': '%s: periods skipped (timer behind)' % tag, 'value': skipped,
          'unit': 'periods', 'target': '<= 0'},
-        {'name': 'real time: max gap between state publications', 'value': gaps.max() * 1e-3,
-         'unit': 'ms', 'target': None},
-        {'name': 'real time: tracking error max (circle x %d)' % plans, 'value': max_mm,
+        {'name': '%s: max gap between state publications' % tag,
+         'value': gaps.max() * 1e-3, 'unit': 'ms', 'target': None},
+        {'name': '%s: tracking error max (%d circles)' % (tag, plans), 'value': max_mm,
          'unit': 'mm', 'target': '<= %.4g' % bound_max},
-        {'name': 'real time: tracking error rms', 'value': rms_mm, 'unit': 'mm',
+        {'name': '%s: tracking error rms' % tag, 'value': rms_mm, 'unit': 'mm',
          'target': '<= %.4g' % bound_rms},
     ]
-    rows += _node_rows('real time', cpu0, cpu1, hwm, len(ks))
-    rows.append({'name': 'real time: load average (1 min) at the end', 'value': load1,
+    rows += _node_rows(tag, cpu0, cpu1, hwm, len(ks))
+    rows.append({'name': '%s: load average (1 min) at the end' % tag, 'value': load1,
                  'unit': '', 'target': None})
     return rows
 
 
-def run(which=('lockstep', 'realtime')):
+RUNS = (('lockstep', 'separate'), ('lockstep', 'composed'), ('realtime', 'separate'),
+        ('realtime', 'composed'))
+
+
+def run(which=RUNS):
     """Return the benchmark rows: list of dict(name, value, unit, target)."""
     missing = [exe for exe in (executable('freejoint_sim', 'sim_node'),
                                executable('freejoint_control', 'controller_node'),
                                executable('freejoint_planner', 'planner_node'),
-                               executable('freejoint_tools', 'recorder'))
+                               executable('freejoint_tools', 'recorder'),
+                               executable('freejoint_bringup', 'graph'))
                if not os.path.exists(exe)]
     if missing:
         raise RuntimeError('not built: %s (run tools/setup.sh)' % ', '.join(missing))
     rows = []
-    for i, name in enumerate(which):
-        env = _env(20 * i)
+    for i, (kind, layout) in enumerate(which):
+        env = _env(10 * i)
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
         os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']   # this process's node too
         client = Client()
         try:
-            rows += (lockstep if name == 'lockstep' else realtime)(client, env)
+            rows += (lockstep if kind == 'lockstep' else realtime)(client, env, layout)
         except (RuntimeError, OSError) as exc:
-            say('%s run failed: %s' % (name, exc))
-            rows.append({'name': '%s run completed' % name, 'value': 0, 'unit': '',
-                         'target': '>= 1'})
+            say('%s (%s) run failed: %s' % (kind, layout, exc))
+            rows.append({'name': '%s%s run completed' % (kind, LAYOUTS[layout]), 'value': 0,
+                         'unit': '', 'target': '>= 1'})
         finally:
             client.close()
     return rows
@@ -584,11 +624,11 @@ def run(which=('lockstep', 'realtime')):
 
 def main(argv):
     """Run the benchmark from the command line; print the rows."""
-    which = ('lockstep', 'realtime')
-    if '--lockstep-only' in argv:
-        which = ('lockstep',)
-    elif '--realtime-only' in argv:
-        which = ('realtime',)
+    which = [(k, lay) for k, lay in RUNS
+             if not ('--lockstep-only' in argv and k != 'lockstep')
+             and not ('--realtime-only' in argv and k != 'realtime')
+             and not ('--separate-only' in argv and lay != 'separate')
+             and not ('--composed-only' in argv and lay != 'composed')]
     for row in run(which):
         value = row['value']
         print('%-58s %12s %-8s %s' % (row['name'], 'n/a' if value is None else '%.4g' % value,

@@ -14,6 +14,7 @@ EXECUTABLES = {
     'freejoint_planner': ['planner_node'],
     'freejoint_control': ['controller_node'],
     'freejoint_tools': ['recorder', 'player', 'analyze'],
+    'freejoint_bringup': ['graph'],
 }
 PACKAGES = sorted(EXECUTABLES) + ['freejoint_msgs']
 

@@ -111,8 +111,8 @@ PARAMETERS = {
 class PlannerNode(Node):
     """Thin ROS wrapper around freejoint_core's singularity analysis and CircleQuintic."""
 
-    def __init__(self):
-        super().__init__(NODE_NAME)
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
         self._cfg = self._declare_parameters()
         self._sim = self.get_parameter('use_sim_time').value
         self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS))

@@ -1,0 +1,1 @@
+"""freejoint_bringup: the graph's nodes in one process (composition for rclpy)."""
