@@ -1,0 +1,69 @@
+"""The graph's three nodes in one process (freejoint_bringup graph) run the lockstep loop."""
+import importlib.util
+import os
+
+from freejoint_core.offline import run_case
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CONFIG = os.path.join(ROOT, 'config')
+DT_NS = 1_000_000
+
+
+def _offline_settings():
+    """Return the offline runner's settings of config/ (tools/demo.py computes them)."""
+    spec = importlib.util.spec_from_file_location('freejoint_demo',
+                                                  os.path.join(ROOT, 'tools', 'demo.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.offline_settings()
+
+
+def test_one_process_graph_reproduces_the_offline_run_and_stops_cleanly(
+        procs, ros_node, wait):
+    from freejoint_msgs.srv import PlanCircle
+    from geometry_msgs.msg import PointStamped
+    from rclpy.experimental import EventsExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    graph = procs.start_node('freejoint_bringup', 'graph', 'graph', [
+        '--sim-params', os.path.join(CONFIG, 'sim.yaml'),
+        '--controller-params', os.path.join(CONFIG, 'controller.yaml'),
+        '--planner-params', os.path.join(CONFIG, 'planner.yaml'),
+        '--planner', 'autostart=false'])
+    executor = EventsExecutor()
+    executor.add_node(ros_node)
+
+    def spin():
+        executor.spin_once(timeout_sec=0.05)
+
+    points = {}
+
+    def on_point(msg):
+        points.setdefault(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
+                          (msg.point.x, msg.point.y))
+
+    sub = ros_node.create_subscription(PointStamped, 'ee_position', on_point,
+                                       QoSProfile(depth=5000,
+                                                  reliability=ReliabilityPolicy.RELIABLE))
+    wait(lambda: sub.get_publisher_count() > 0 or graph.poll() is not None, 60.0,
+         'the graph process to publish ee_position', spin=spin)
+    assert graph.poll() is None, procs.log(graph)
+    client = ros_node.create_client(PlanCircle, '/freejoint_planner/plan_circle')
+    wait(client.service_is_ready, 30.0, 'the planner service', spin=spin)
+    future = client.call_async(PlanCircle.Request(centre=[0.0, 0.0], radius=0.2,
+                                                  duration=5.0, start_angle=0.0, direction=1,
+                                                  execute=True))
+    wait(future.done, 30.0, 'the plan_circle answer', spin=spin)
+    assert future.result().accepted, future.result().reason
+    n = 300
+    wait(lambda: all(k * DT_NS in points for k in range(n)), 120.0,
+         '%d ticks of ee_position (log %s)' % (n, graph.log_path), spin=spin)
+    assert procs.stop(graph) == 0
+    log = procs.log(graph)
+    assert 'simulator stopped' in log and 'controller stopped' in log, log
+    _, trace = run_case('horizontal', 'robust', 0, record_trace=True, **_offline_settings())
+    graph_p = np.array([points[k * DT_NS] for k in range(n)])
+    assert np.max(np.abs(graph_p - trace['p'][:n])) <= 1e-9
