@@ -54,7 +54,13 @@ def main(argv=None):
         except ImportError as exc:
             print('[bench] %s: not available (%s)' % (name, exc), flush=True)
             continue
-        for row in module.run():
+        try:
+            module_rows = module.run()
+        except Exception as exc:  # one broken benchmark must not cost the whole table
+            print('[bench] %s failed: %s: %s' % (name, type(exc).__name__, exc), flush=True)
+            module_rows = [{'name': '%s completed' % name, 'value': 0, 'unit': '',
+                            'target': '>= 1'}]
+        for row in module_rows:
             row.setdefault('target', None)
             row['module'] = name
             rows.append(row)
@@ -64,6 +70,7 @@ def main(argv=None):
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, 'w') as f:
         json.dump({'cpu_count': os.cpu_count(), 'machine': platform.machine(),
+                   'load_average': os.getloadavg(),
                    'python': platform.python_version(), 'figures': rows}, f, indent=2)
     print('[bench] written to %s' % os.path.relpath(args.out, ROOT))
     return 0
