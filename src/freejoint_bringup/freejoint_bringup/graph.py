@@ -6,7 +6,7 @@ node classes, names, parameters, topics and services as ``sim_node``, ``controll
 and ``planner_node`` started one by one (docs/GRAPH.md holds for both), but the messages
 between them take Fast DDS's intra-process path in the publishing thread: no
 shared-memory hand-over and no wake-up of another process per message. On the 2-core
-bench machine the lockstep graph with the recorder runs about 1.3-1.5x faster this way
+bench machine the lockstep graph with the recorder runs about 1.2-1.5x faster this way
 (docs/performance.md). Nodes of other processes (recorder, RViz, a second controller)
 see the same graph.
 
