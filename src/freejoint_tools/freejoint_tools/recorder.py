@@ -36,7 +36,12 @@ Messages the middleware does report lost (a publisher's depth-1000 history overr
 the recorder was starved of CPU) are logged at once and counted in the summary.
 
 Timestamps: with ``use_sim_time:=true`` the log times are sim time (the lockstep ``/clock``,
-``t_k = k dt``), the same time base as the header stamps. ``ros2 bag play --clock`` (and
+``t_k = k dt``), the same time base as the header stamps: a message's log time is the
+latest recorded ``/clock`` that arrived before it (the node's clock if ``/clock`` is not
+recorded). In sim time messages are taken in batches, every ``batch_period`` (10 ms) in
+arrival order: one wake-up per batch instead of one per message (in system time the log
+time is the clock when a message is taken, so each is taken as it arrives).
+``ros2 bag play --clock`` (and
 this package's player) publishes ``/clock`` from the log times, so nodes replaying the bag
 with ``use_sim_time`` see a clock consistent with the stamps of the data - which is what
 they need; with system-time log times the replayed clock would be ~1.7e9 s while the stamps
@@ -49,6 +54,7 @@ import importlib
 import os
 import shutil
 import signal
+import struct
 import sys
 import time
 
@@ -169,11 +175,17 @@ class Recorder(Node):
         self.declare_parameter('executor', 'events', _descriptor(
             "rclpy executor: 'events' (rclpy.experimental.EventsExecutor) or "
             "'single_threaded'", ParameterType.PARAMETER_STRING))
+        self.declare_parameter('batch_period', 0.01, _descriptor(
+            'Sim time: wall period (s) of taking what arrived, in arrival order (the '
+            'executor queue drained at once): one wake-up per period instead of one per '
+            'message, 15-30 % less CPU per message at 1 kHz; 0 = wake up for each message',
+            ParameterType.PARAMETER_DOUBLE, float_range=(0.0, 0.1)))
         self.declare_parameter('queue_depth', 5000, _descriptor(
             'Subscription queue depth (messages) per topic', ParameterType.PARAMETER_INTEGER,
             int_range=(1, 1000000)))
         p = self._params
         self.executor_kind = p['executor']
+        self.batch_period = p['batch_period']
         self._wanted = {self.resolve_topic_name(t) for t in p['topics']}
         self._excluded = {self.resolve_topic_name(t) for t in p['exclude']}
         output = p['output'] or os.path.join(
@@ -189,6 +201,7 @@ class Recorder(Node):
         self._unconfirmed = {}   # pre-subscribed topic -> (contract type, QoS) until seen
         self.received = {}       # topic -> messages received
         self.lost = {}           # topic -> messages the middleware reported lost
+        self._recorded_clock = [None]   # ns of the last /clock message taken
         self._write_errors = 0
         self._skipped = set()
         self._warned = set()
@@ -358,12 +371,23 @@ class Recorder(Node):
 
     def _callback(self, name, msgtype):
         write = self.writer.write
-        now = self.get_clock().now
+        clock = self.get_clock()
+        now = clock.now
         received = self.received
         channels = self._channels
+        is_clock = name == '/clock'
+        recorded_clock = self._recorded_clock
 
         def on_message(data):
-            stamp = now().nanoseconds
+            # Sim time: the latest /clock recorded before this message, in arrival order
+            # (the TimeSource keeps only the newest /clock, so a recorder that takes a
+            # batch at once would stamp it all with the batch's last clock).
+            if is_clock:
+                recorded_clock[0] = clock_ns(data)
+            if recorded_clock[0] is not None and clock.ros_time_is_active:
+                stamp = recorded_clock[0]
+            else:
+                stamp = now().nanoseconds
             received[name] += 1
             try:
                 entry = channels.get(name)
@@ -434,6 +458,14 @@ class Recorder(Node):
         self.get_logger().info('\n'.join(lines))
 
 
+def clock_ns(data):
+    """Return the time (ns) in a serialized rosgraph_msgs/Clock, None if it is too short."""
+    if len(data) < 12:
+        return None
+    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
 def _remove_old_bag(path):
     if not os.path.exists(path):
         return
@@ -456,10 +488,40 @@ class _Stop:
         self.signum = signum
 
 
-def spin_until_stopped(node, executor, stop, drain_quiet=0.3, drain_max=3.0):
-    """Spin until a signal; then take what is still queued (bounded) before returning."""
+def take_queued(node, executor, max_events=100000):
+    """
+    Run what the executor has queued, in order, until a few events in a row add nothing.
+
+    Events that record nothing (timers, services, the TimeSource's /clock) end the batch
+    only after three in a row; what is left is taken next time, still in order.
+    """
+    idle = 0
+    spin_once = executor.spin_once
+    for _ in range(max_events):
+        before = node.total_received()
+        spin_once(timeout_sec=0.0)
+        idle = idle + 1 if node.total_received() == before else 0
+        if idle >= 3:
+            return
+
+
+def spin_until_stopped(node, executor, stop, drain_quiet=0.3, drain_max=3.0,
+                       batch_period=0.0):
+    """
+    Spin until a signal; then take what is still queued (bounded) before returning.
+
+    With ``batch_period`` and sim time (log times from the recorded /clock, exact
+    whenever the message is taken) the thread sleeps that long and then takes everything
+    that arrived meanwhile, in arrival order; in system time the log time is the clock
+    when the message is taken, so each message is taken as it arrives.
+    """
+    clock = node.get_clock()
     while stop.signum is None and rclpy.ok():
-        executor.spin_once(timeout_sec=0.1)
+        if batch_period > 0.0 and clock.ros_time_is_active:
+            time.sleep(batch_period)
+            take_queued(node, executor)
+        else:
+            executor.spin_once(timeout_sec=0.1)
     deadline = time.monotonic() + drain_max
     last_count, last_change = node.total_received(), time.monotonic()
     node.get_logger().info('stopping (signal %d) after %d messages; taking what is queued'
@@ -501,7 +563,7 @@ def main(args=None):
     executor = make_executor(node.executor_kind)
     executor.add_node(node)
     try:
-        spin_until_stopped(node, executor, stop)
+        spin_until_stopped(node, executor, stop, batch_period=node.batch_period)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
