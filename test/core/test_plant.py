@@ -231,3 +231,16 @@ def test_constructor_rejects_bad_arguments_naming_them(kwargs, match):
 def test_constructor_rejects_non_params():
     with pytest.raises(FreejointValueError, match='^params'):
         Plant({'lengths': (0.5, 0.5, 0.5)})
+
+
+def test_a_diverging_step_raises_and_keeps_the_last_finite_state():
+    from freejoint_core.errors import PlantDivergedError
+    plant = Plant(table1('vertical'), 0.0005, dist_bound=0.0, q0=[0.1, 0.2, 0.3])
+    plant.step([1.0, -1.0], 0.001)
+    q, qd, k = plant.q, plant.qd, plant.k
+    with pytest.raises(PlantDivergedError, match='^tau_active: the integration over step 1'):
+        plant.step([1e306, -1e306], 0.001)
+    assert plant.q.tolist() == q.tolist() and plant.qd.tolist() == qd.tolist()
+    assert plant.k == k
+    plant.step([0.0, 0.0], 0.001)
+    assert plant.k == k + 1

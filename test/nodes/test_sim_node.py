@@ -194,6 +194,24 @@ def test_lockstep_holds_at_max_steps_ignoring_commands_and_timeouts(procs, ros_n
         procs.log(proc)
 
 
+def test_a_diverging_integration_holds_the_last_state_and_the_node_runs_on(
+        procs, ros_node, wait):
+    proc = _start(procs, '-p', 'dist_bound:=0.0')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    ctl.command([1.0, -1.0], 0)
+    before = ctl.state(1)
+    ctl.command([1e306, -1e306], 1)     # finite, so accepted; RK4 cannot resolve it
+    held = ctl.state(2, 'the state after the diverging step')
+    assert list(held.position) == list(before.position)
+    assert list(held.velocity) == list(before.velocity)
+    ctl.command([0.0, 0.0], 2)
+    ctl.state(3, 'a state after it: the node runs on')
+    assert 'step 1: tau_active: the integration over step 1 diverged' in procs.log(proc)
+    assert 'holding the last finite state (call ~/reset)' in procs.log(proc)
+    assert procs.stop(proc) == 0
+
+
 def test_reset_service_puts_the_arm_back_at_rest_and_time_runs_on(procs, ros_node, wait):
     import rclpy
     from std_srvs.srv import Trigger

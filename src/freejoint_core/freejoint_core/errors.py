@@ -3,3 +3,7 @@
 
 class FreejointValueError(ValueError):
     """A bad argument; the message starts with the argument's name."""
+
+
+class PlantDivergedError(FreejointValueError):
+    """The integration produced a non-finite state; the plant kept its last finite one."""

@@ -25,7 +25,7 @@ horizontal), versus 1e-6 mm at dt_sub = 1 ms; a free swing with disturbance
 import math
 
 from freejoint_core.arm import ArmModel, ArmParams, check_vector, make_model
-from freejoint_core.errors import FreejointValueError
+from freejoint_core.errors import FreejointValueError, PlantDivergedError
 import numpy as np
 
 DEFAULT_DT_SUB = 0.0005
@@ -165,6 +165,15 @@ class Plant:
         dt : float
             Control period [s], an integer multiple of ``dt_sub``.
 
+        Raises
+        ------
+        FreejointValueError
+            Naming ``tau_active`` or ``dt`` if they are bad.
+        PlantDivergedError
+            If the integration produced a non-finite state (torques far beyond what
+            ``dt_sub`` resolves); the plant keeps its last finite state, the disturbance
+            draw of the step is spent.
+
         """
         n_sub = self._substeps(dt)
         tau = tau_active.tolist() if isinstance(tau_active, np.ndarray) else tau_active
@@ -184,10 +193,16 @@ class Plant:
             full = [0.0] * self.n
         for j, v in zip(self._active, tau):
             full[j] += float(v)
+        q_before, qd_before = self._q, self._qd
         if self._fast:
             self._rk4_fast3(n_sub, full)
         else:
             self._rk4_general(n_sub, np.array(full))
+        if not all(map(math.isfinite, self._q + self._qd)):
+            self._q, self._qd = q_before, qd_before
+            raise PlantDivergedError(
+                f'tau_active: the integration over step {self.k} diverged (non-finite state '
+                f'from q = {q_before}, qd = {qd_before}); the state is left as it was')
         self.t += dt
         self.k += 1
 

@@ -31,7 +31,7 @@ import signal
 import time
 
 from builtin_interfaces.msg import Time
-from freejoint_core.errors import FreejointValueError
+from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.plant import Plant
 from freejoint_sim.params import build_config, SPECS
 from freejoint_sim.timing import StepTiming, WRITE_DELAY
@@ -331,7 +331,14 @@ class SimNode(Node):
         if self._reset_pending:
             self._do_reset()
         else:
-            self._plant.step(tau, self._dt)
+            try:
+                self._plant.step(tau, self._dt)
+            except PlantDivergedError as exc:
+                # Keep running on the last finite state; the run is no longer physical.
+                self._throttle(self.get_logger().error, 'diverged',
+                               'step %d: %s; holding the last finite state (call ~/reset)'
+                               % (self._k, exc))
+                tau = self._zero
             applied = self._applied
             for i, v in zip(self._active, tau):
                 applied[i] = v
