@@ -16,7 +16,7 @@ EXECUTABLES = {
     'freejoint_tools': ['recorder', 'player', 'analyze'],
     'freejoint_bringup': ['graph'],
 }
-PACKAGES = sorted(EXECUTABLES) + ['freejoint_msgs']
+PACKAGES = sorted(EXECUTABLES) + ['freejoint_common', 'freejoint_msgs']
 
 
 @pytest.mark.parametrize('pkg', PACKAGES)

@@ -13,19 +13,19 @@ node only converts messages, pairs states with setpoints and guards its inputs
 """
 
 import math
-import signal
 import time
 
+from freejoint_common.node_tools import declare, plain, spin, Throttle
 from freejoint_control.params import build_config, SPECS
 from freejoint_core.control import (RobustController, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
                                     STATUS_TORQUE_LIMITED)
 from freejoint_core.errors import FreejointValueError
 from freejoint_msgs.msg import CartesianSetpoint, ControllerState
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -47,54 +47,6 @@ the ticks streamed ahead while the simulator waited for its first command (GRAPH
 _isfinite = math.isfinite
 _monotonic = time.monotonic
 _NAME_MAP_CACHE = 16
-
-
-class Throttle:
-    """
-    Rate-limit log lines per kind of problem (at most one per ``period`` wall s each).
-
-    Unlike rclpy's per-call-site throttling, a different problem is logged at once, and
-    the next line of a kind says how many were suppressed meanwhile.
-    """
-
-    def __init__(self, period=1.0):
-        self.period = period
-        self._last = {}
-        self._suppressed = {}
-
-    def __call__(self, log, kind, text):
-        """Log ``text`` with ``log`` unless ``kind`` was logged less than a period ago."""
-        now = _monotonic()
-        if now - self._last.get(kind, -1e18) < self.period:
-            self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
-            return
-        more = self._suppressed.pop(kind, 0)
-        self._last[kind] = now
-        text += ' (%d more like it suppressed)' % more if more else ''
-        # rclpy ties one severity to each logging call site (ValueError on another one):
-        # a call line per severity.
-        if getattr(log, '__name__', '') == 'error':
-            log(text)
-        else:
-            log(text)
-
-
-def declare(node, specs):
-    """Declare each parameter of ``specs`` once with its descriptor; return the values."""
-    for spec in specs:
-        desc = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
-        if spec.bounds is not None:
-            desc.floating_point_range = [FloatingPointRange(
-                from_value=float(spec.bounds[0]), to_value=float(spec.bounds[1]), step=0.0)]
-        node.declare_parameter(spec.name, spec.default, desc)
-    return {spec.name: _plain(node.get_parameter(spec.name).value) for spec in specs}
-
-
-def _plain(value):
-    """Parameter value as plain Python (arrays as lists)."""
-    if isinstance(value, (str, bool, int, float)) or value is None:
-        return value
-    return list(value)
 
 
 class ControllerNode(Node):
@@ -161,7 +113,7 @@ class ControllerNode(Node):
         values = dict(self._values)
         for param in params:
             if param.name in values:
-                values[param.name] = _plain(param.value)
+                values[param.name] = plain(param.value)
         try:
             cfg = build_config(values)
         except FreejointValueError as exc:
@@ -175,7 +127,7 @@ class ControllerNode(Node):
                 self._ctl.reset()
         self._install(cfg)
         self._values = values
-        changed = ', '.join('%s=%s' % (p.name, _plain(p.value)) for p in params)
+        changed = ', '.join('%s=%s' % (p.name, plain(p.value)) for p in params)
         self.get_logger().info('parameters set (effective next tick): ' + changed)
         return SetParametersResult(successful=True)
 
@@ -403,34 +355,6 @@ def _status_message(status, det, values):
     if status & STATUS_TORQUE_LIMITED:
         parts.append('torque limited to %g N m' % values['tau_limit'])
     return '; '.join(parts)
-
-
-def spin(node, executor):
-    """
-    Spin ``node`` until SIGINT/SIGTERM, with the executor the parameter ``executor`` names.
-
-    The signal only sets a flag, so the callback that runs finishes and the node shuts down
-    between callbacks (rclpy's own handler invalidates the context under a running
-    callback, whose next publish then fails).  ``EventsExecutor.spin()`` of the rclpy 7.1.6
-    wheels never runs a timer and busy-waits, so both executors are driven by ``spin_once``.
-    """
-    stop = []
-
-    def on_signal(signum, frame):
-        stop.append(signum)
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    if executor == 'events':
-        from rclpy.experimental import EventsExecutor
-        ex = EventsExecutor()
-    else:
-        ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    context_ok = node.context.ok
-    spin_once = ex.spin_once
-    while not stop and context_ok():
-        spin_once(timeout_sec=0.2)
 
 
 def main(args=None):

@@ -10,20 +10,10 @@ the node uses the same check at start-up and in its set-parameters callback.
 
 from dataclasses import dataclass
 
+from freejoint_common.node_tools import Spec, unique_names
 from freejoint_core.arm import ArmParams, table1
 from freejoint_core.control import Gains
 from freejoint_core.errors import FreejointValueError
-
-
-@dataclass(frozen=True)
-class Spec:
-    """One parameter: default value, description, optional (min, max), read-only."""
-
-    name: str
-    default: object
-    description: str
-    bounds: tuple = None
-    read_only: bool = False
 
 
 SPECS = (
@@ -90,15 +80,6 @@ class Config:
     executor: str
 
 
-def _names(name, value):
-    names = tuple(value)
-    if not names or any(not isinstance(v, str) or not v for v in names):
-        raise FreejointValueError(f'{name}: expected non-empty joint names, got {list(names)}')
-    if len(set(names)) != len(names):
-        raise FreejointValueError(f'{name}: joint names must be unique, got {list(names)}')
-    return names
-
-
 def build_config(values):
     """
     Validate a complete parameter dict; return the :class:`Config`.
@@ -123,11 +104,11 @@ def build_config(values):
         nominal = nominal.scaled(values['nominal_scale'])
     except FreejointValueError as exc:
         raise FreejointValueError('nominal_' + str(exc)) from None
-    joint_names = _names('joint_names', values['joint_names'])
+    joint_names = unique_names('joint_names', values['joint_names'])
     if len(joint_names) != nominal.n:
         raise FreejointValueError(
             f'joint_names: the arm has {nominal.n} joints, got {len(joint_names)} names')
-    joints = _names('joints', values['joints'])
+    joints = unique_names('joints', values['joints'])
     active_names = [joint_names[i] for i in nominal.active]
     if sorted(joints) != sorted(active_names):
         raise FreejointValueError(

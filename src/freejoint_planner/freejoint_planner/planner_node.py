@@ -25,8 +25,8 @@ after every accepted change of those parameters.
 """
 
 import math
-import signal
 
+from freejoint_common.node_tools import spin
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_msgs.msg import CartesianSetpoint
@@ -334,39 +334,12 @@ class PlannerNode(Node):
             self._advance(self._now_ns())
 
 
-def spin(node):
-    """
-    Spin ``node`` with rclpy's EventsExecutor until SIGINT/SIGTERM.
-
-    About half the CPU per /clock -> setpoint of the default executor (bench/graph.py,
-    docs/performance.md). ``EventsExecutor.spin()`` of the rclpy 7.1.6 wheels never runs a
-    timer and busy-waits (and ignored SIGINT here), so it is driven by ``spin_once``; the
-    signal only sets a flag, so the node stops between callbacks. The planner has no
-    ROS-time timer (its wall timer runs on the steady clock), which that executor would
-    fire at wrong times under ``use_sim_time`` (docs/GRAPH.md, executors).
-    """
-    from rclpy.experimental import EventsExecutor
-    stop = []
-
-    def on_signal(signum, frame):
-        stop.append(signum)
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    executor = EventsExecutor()
-    executor.add_node(node)
-    context_ok = node.context.ok
-    spin_once = executor.spin_once
-    while not stop and context_ok():
-        spin_once(timeout_sec=0.2)
-
-
 def main(args=None):
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         node = PlannerNode()
-        spin(node)
+        spin(node, 'events')
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

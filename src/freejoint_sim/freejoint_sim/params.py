@@ -11,23 +11,13 @@ Parameters of the simulator node: declaration table and validation (no ROS types
 from dataclasses import dataclass
 import math
 
+from freejoint_common.node_tools import Spec, unique_names
 from freejoint_core.arm import ArmParams, table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.offline import initial_state
 
 MODES = ('lockstep', 'realtime')
 EXECUTORS = ('single_threaded', 'events')
-
-
-@dataclass(frozen=True)
-class Spec:
-    """One parameter: default value, description, optional (min, max), read-only."""
-
-    name: str
-    default: object
-    description: str
-    bounds: tuple = None
-    read_only: bool = False
 
 
 SPECS = (
@@ -105,15 +95,6 @@ class Config:
     max_steps: int = 0
 
 
-def _names(name, value):
-    names = tuple(value)
-    if not names or any(not isinstance(v, str) or not v for v in names):
-        raise FreejointValueError(f'{name}: expected non-empty joint names, got {list(names)}')
-    if len(set(names)) != len(names):
-        raise FreejointValueError(f'{name}: joint names must be unique, got {list(names)}')
-    return names
-
-
 def _multiple(name, big, small):
     """Return big / small if it is a positive integer (within 1e-9 relative), else raise."""
     n = round(big / small)
@@ -144,11 +125,11 @@ def build_config(values):
     params = table1(values['case'])
     if values['mode'] not in MODES:
         raise FreejointValueError(f'mode: expected one of {MODES}, got {values["mode"]!r}')
-    joint_names = _names('joint_names', values['joint_names'])
+    joint_names = unique_names('joint_names', values['joint_names'])
     if len(joint_names) != params.n:
         raise FreejointValueError(
             f'joint_names: the arm has {params.n} joints, got {len(joint_names)} names')
-    joints = _names('joints', values['joints'])
+    joints = unique_names('joints', values['joints'])
     active_names = [joint_names[i] for i in params.active]
     if sorted(joints) != sorted(active_names):
         raise FreejointValueError(

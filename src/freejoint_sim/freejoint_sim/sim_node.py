@@ -27,19 +27,19 @@ forever; this node does not).
 """
 
 import math
-import signal
 import time
 
 from builtin_interfaces.msg import Time
+from freejoint_common.node_tools import declare, plain, spin, Throttle
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.plant import Plant
 from freejoint_sim.params import build_config, SPECS
 from freejoint_sim.timing import StepTiming, WRITE_DELAY
 from geometry_msgs.msg import PointStamped
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -66,54 +66,6 @@ LABEL_PREFIX = 'stamp_ns='
 
 _isfinite = math.isfinite
 _monotonic = time.monotonic
-
-
-class Throttle:
-    """
-    Rate-limit log lines per kind of problem (at most one per ``period`` wall s each).
-
-    Unlike rclpy's per-call-site throttling, a different problem is logged at once, and
-    the next line of a kind says how many were suppressed meanwhile.
-    """
-
-    def __init__(self, period=1.0):
-        self.period = period
-        self._last = {}
-        self._suppressed = {}
-
-    def __call__(self, log, kind, text):
-        """Log ``text`` with ``log`` unless ``kind`` was logged less than a period ago."""
-        now = _monotonic()
-        if now - self._last.get(kind, -1e18) < self.period:
-            self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
-            return
-        more = self._suppressed.pop(kind, 0)
-        self._last[kind] = now
-        text += ' (%d more like it suppressed)' % more if more else ''
-        # rclpy ties one severity to each logging call site (ValueError on another one):
-        # a call line per severity.
-        if getattr(log, '__name__', '') == 'error':
-            log(text)
-        else:
-            log(text)
-
-
-def declare(node, specs):
-    """Declare each parameter of ``specs`` once with its descriptor; return the values."""
-    for spec in specs:
-        desc = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
-        if spec.bounds is not None:
-            desc.floating_point_range = [FloatingPointRange(
-                from_value=float(spec.bounds[0]), to_value=float(spec.bounds[1]), step=0.0)]
-        node.declare_parameter(spec.name, spec.default, desc)
-    return {spec.name: _plain(node.get_parameter(spec.name).value) for spec in specs}
-
-
-def _plain(value):
-    """Parameter value as plain Python (arrays as lists)."""
-    if isinstance(value, (str, bool, int, float)) or value is None:
-        return value
-    return list(value)
 
 
 class SimNode(Node):
@@ -201,7 +153,7 @@ class SimNode(Node):
         values = dict(self._values)
         for param in params:
             if param.name in values:
-                values[param.name] = _plain(param.value)
+                values[param.name] = plain(param.value)
         try:
             cfg = build_config(values)
         except FreejointValueError as exc:
@@ -211,7 +163,7 @@ class SimNode(Node):
         self._values = values
         self.get_logger().info('parameters set: %s (arm, disturbance, dt_sub and initial '
                                'state take effect on ~/reset)'
-                               % ', '.join('%s=%s' % (p.name, _plain(p.value)) for p in params))
+                               % ', '.join('%s=%s' % (p.name, plain(p.value)) for p in params))
         return SetParametersResult(successful=True)
 
     def _on_reset(self, request, response):
@@ -442,34 +394,6 @@ class SimNode(Node):
         """One line for the end of the run: steps, timeouts, refused commands."""
         return 'simulator stopped at step %d (t = %.3f s): %d command timeouts, %d refused ' \
             'commands' % (self._k, self._t_ns * 1e-9, self._timeouts, self._refused)
-
-
-def spin(node, executor):
-    """
-    Spin ``node`` until SIGINT/SIGTERM, with the executor the parameter ``executor`` names.
-
-    The signal only sets a flag, so the callback that runs finishes and the node shuts down
-    between callbacks (rclpy's own handler invalidates the context under a running
-    callback, whose next publish then fails).  ``EventsExecutor.spin()`` of the rclpy 7.1.6
-    wheels never runs a timer and busy-waits, so both executors are driven by ``spin_once``.
-    """
-    stop = []
-
-    def on_signal(signum, frame):
-        stop.append(signum)
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    if executor == 'events':
-        from rclpy.experimental import EventsExecutor
-        ex = EventsExecutor()
-    else:
-        ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    context_ok = node.context.ok
-    spin_once = ex.spin_once
-    while not stop and context_ok():
-        spin_once(timeout_sec=0.2)
 
 
 def main(args=None):

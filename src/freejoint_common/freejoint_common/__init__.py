@@ -1,0 +1,1 @@
+"""Node plumbing shared by the freejoint nodes (parameters, throttled logs, spin loop)."""

@@ -1,0 +1,115 @@
+"""
+Node plumbing shared by the freejoint nodes.
+
+``Spec`` and :func:`declare` declare each parameter once with its descriptor;
+:func:`unique_names` validates a joint-name list; :class:`Throttle` rate-limits log lines
+per kind of problem; :func:`spin` runs a node until SIGINT/SIGTERM, stopping between
+callbacks.
+"""
+
+from dataclasses import dataclass
+import signal
+import time
+
+from freejoint_core.errors import FreejointValueError
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.executors import SingleThreadedExecutor
+
+_monotonic = time.monotonic
+
+
+@dataclass(frozen=True)
+class Spec:
+    """One parameter: default value, description, optional (min, max), read-only."""
+
+    name: str
+    default: object
+    description: str
+    bounds: tuple = None
+    read_only: bool = False
+
+
+def unique_names(name, value):
+    """Return ``value`` as a tuple of unique non-empty names, or raise naming ``name``."""
+    names = tuple(value)
+    if not names or any(not isinstance(v, str) or not v for v in names):
+        raise FreejointValueError(f'{name}: expected non-empty joint names, got {list(names)}')
+    if len(set(names)) != len(names):
+        raise FreejointValueError(f'{name}: joint names must be unique, got {list(names)}')
+    return names
+
+
+class Throttle:
+    """
+    Rate-limit log lines per kind of problem (at most one per ``period`` wall s each).
+
+    Unlike rclpy's per-call-site throttling, a different problem is logged at once, and
+    the next line of a kind says how many were suppressed meanwhile.
+    """
+
+    def __init__(self, period=1.0):
+        self.period = period
+        self._last = {}
+        self._suppressed = {}
+
+    def __call__(self, log, kind, text):
+        """Log ``text`` with ``log`` unless ``kind`` was logged less than a period ago."""
+        now = _monotonic()
+        if now - self._last.get(kind, -1e18) < self.period:
+            self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
+            return
+        more = self._suppressed.pop(kind, 0)
+        self._last[kind] = now
+        text += ' (%d more like it suppressed)' % more if more else ''
+        # rclpy ties one severity to each logging call site (ValueError on another one):
+        # a call line per severity.
+        if getattr(log, '__name__', '') == 'error':
+            log(text)
+        else:
+            log(text)
+
+
+def declare(node, specs):
+    """Declare each parameter of ``specs`` once with its descriptor; return the values."""
+    for spec in specs:
+        desc = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
+        if spec.bounds is not None:
+            desc.floating_point_range = [FloatingPointRange(
+                from_value=float(spec.bounds[0]), to_value=float(spec.bounds[1]), step=0.0)]
+        node.declare_parameter(spec.name, spec.default, desc)
+    return {spec.name: plain(node.get_parameter(spec.name).value) for spec in specs}
+
+
+def plain(value):
+    """Parameter value as plain Python (arrays as lists)."""
+    if isinstance(value, (str, bool, int, float)) or value is None:
+        return value
+    return list(value)
+
+
+def spin(node, executor):
+    """
+    Spin ``node`` until SIGINT/SIGTERM, with the executor the parameter ``executor`` names.
+
+    The signal only sets a flag, so the callback that runs finishes and the node shuts down
+    between callbacks (rclpy's own handler invalidates the context under a running
+    callback, whose next publish then fails).  ``EventsExecutor.spin()`` of the rclpy 7.1.6
+    wheels never runs a timer and busy-waits, so both executors are driven by ``spin_once``.
+    """
+    stop = []
+
+    def on_signal(signum, frame):
+        stop.append(signum)
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    if executor == 'events':
+        from rclpy.experimental import EventsExecutor
+        ex = EventsExecutor()
+    else:
+        ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    context_ok = node.context.ok
+    spin_once = ex.spin_once
+    while not stop and context_ok():
+        spin_once(timeout_sec=0.2)
