@@ -343,12 +343,13 @@ def _percentiles(values):
             float(np.max(values)))
 
 
-def _node_rows(prefix, cpu0, cpu1, hwm, ticks):
+def _node_rows(prefix, cpu0, cpu1, hwm, ticks, exited=()):
     rows = []
     for name in NODES:
         if name in cpu1:
             rows.append({'name': '%s: %s CPU per tick' % (prefix, name),
-                         'value': 1e6 * (cpu1[name] - cpu0.get(name, 0.0)) / max(ticks, 1),
+                         'value': None if name in exited else
+                         1e6 * (cpu1[name] - cpu0.get(name, 0.0)) / max(ticks, 1),
                          'unit': 'us', 'target': None})
     for name in NODES:
         if hwm.get(name) is not None:
@@ -580,12 +581,12 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS):
          'unit': 'periods', 'target': '<= 0'},
         {'name': '%s: max gap between state publications' % tag,
          'value': gaps.max() * 1e-3, 'unit': 'ms', 'target': None},
-        {'name': '%s: tracking error max (%d circles)' % (tag, plans), 'value': max_mm,
+        {'name': '%s: tracking error max' % tag, 'value': max_mm,
          'unit': 'mm', 'target': '<= %.4g' % bound_max},
         {'name': '%s: tracking error rms' % tag, 'value': rms_mm, 'unit': 'mm',
          'target': '<= %.4g' % bound_rms},
     ]
-    rows += _node_rows(tag, cpu0, cpu1, hwm, len(ks))
+    rows += _node_rows(tag, cpu0, cpu1, hwm, len(ks), exited)
     rows.append({'name': '%s: load average (1 min) at the end' % tag, 'value': load1,
                  'unit': '', 'target': None})
     return rows
