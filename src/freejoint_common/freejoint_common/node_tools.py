@@ -113,3 +113,45 @@ def spin(node, executor):
     spin_once = ex.spin_once
     while not stop and context_ok():
         spin_once(timeout_sec=0.2)
+
+
+def run(make_node, name, args=None, on_stop=None):
+    """
+    Run a freejoint node process: init, spin until SIGINT/SIGTERM, stop between callbacks.
+
+    Parameters
+    ----------
+    make_node : callable
+        Builds the node (after ``rclpy.init``); its ``config.executor`` names the executor
+        (``'events'`` if it has none).
+    name : str
+        Logger name for a start-up failure.
+    args : list of str, optional
+        Command-line arguments for ``rclpy.init``.
+    on_stop : callable, optional
+        Called with the node before it is destroyed (final report, files).
+
+    A bad start-up parameter (``FreejointValueError``) is logged as fatal, naming it, and
+    the process exits with status 2.
+
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        node = make_node()
+        config = getattr(node, 'config', None)
+        spin(node, getattr(config, 'executor', 'events'))
+    except FreejointValueError as exc:
+        rclpy.logging.get_logger(name).fatal('bad parameter: %s' % exc)
+        raise SystemExit(2)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            if on_stop is not None:
+                on_stop(node)
+            node.destroy_node()
+        rclpy.try_shutdown()

@@ -15,7 +15,7 @@ node only converts messages, pairs states with setpoints and guards its inputs
 import math
 import time
 
-from freejoint_common.node_tools import declare, plain, spin, Throttle
+from freejoint_common.node_tools import declare, plain, run, Throttle
 from freejoint_control.params import build_config, SPECS
 from freejoint_core.control import (RobustController, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
@@ -23,12 +23,9 @@ from freejoint_core.control import (RobustController, STATUS_BAD_INPUT, STATUS_N
 from freejoint_core.errors import FreejointValueError
 from freejoint_msgs.msg import CartesianSetpoint, ControllerState
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -359,21 +356,8 @@ def _status_message(status, det, values):
 
 def main(args=None):
     """Run the node until SIGINT/SIGTERM."""
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = ControllerNode()
-        spin(node, node.config.executor)
-    except FreejointValueError as exc:
-        rclpy.logging.get_logger('controller_node').fatal('bad parameter: %s' % exc)
-        raise SystemExit(2)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.get_logger().info(node.report())
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run(ControllerNode, 'controller_node', args,
+        lambda node: node.get_logger().info(node.report()))
 
 
 if __name__ == '__main__':

@@ -26,7 +26,7 @@ after every accepted change of those parameters.
 
 import math
 
-from freejoint_common.node_tools import spin
+from freejoint_common.node_tools import run
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_msgs.msg import CartesianSetpoint
@@ -34,13 +34,10 @@ from freejoint_msgs.srv import PlanCircle
 from nav_msgs.msg import OccupancyGrid
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock as ClockMsg
 from visualization_msgs.msg import Marker
 
@@ -335,17 +332,8 @@ class PlannerNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = PlannerNode()
-        spin(node, 'events')
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    """Run the node until SIGINT/SIGTERM."""
+    run(PlannerNode, 'freejoint_planner', args)
 
 
 if __name__ == '__main__':

@@ -30,19 +30,16 @@ import math
 import time
 
 from builtin_interfaces.msg import Time
-from freejoint_common.node_tools import declare, plain, spin, Throttle
+from freejoint_common.node_tools import declare, plain, run, Throttle
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.plant import Plant
 from freejoint_sim.params import build_config, SPECS
 from freejoint_sim.timing import StepTiming, WRITE_DELAY
 from geometry_msgs.msg import PointStamped
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -396,24 +393,14 @@ class SimNode(Node):
             'commands' % (self._k, self._t_ns * 1e-9, self._timeouts, self._refused)
 
 
+def _on_stop(node):
+    node.get_logger().info(node.report())
+    node.write_timing()
+
+
 def main(args=None):
     """Run the node until SIGINT/SIGTERM."""
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = SimNode()
-        spin(node, node.config.executor)
-    except FreejointValueError as exc:
-        rclpy.logging.get_logger('sim_node').fatal('bad parameter: %s' % exc)
-        raise SystemExit(2)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.get_logger().info(node.report())
-            node.write_timing()
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run(SimNode, 'sim_node', args, _on_stop)
 
 
 if __name__ == '__main__':
