@@ -1,8 +1,10 @@
 """
 Benchmark: the running node graph (sim_node, controller_node, planner_node, recorder).
 
-Two runs of the graph, each started as ``make demo`` starts it (the installed executables
-with ``config/*.yaml`` and per-run overrides), isolated in a ROS domain of their own with
+Two runs of the graph in each of two layouts: a process per node, started as ``make demo``
+starts them (the installed executables with ``config/*.yaml`` and per-run overrides), and
+the three nodes in one process (``ros2 run freejoint_bringup graph`` with the same files;
+rows tagged ``[1 process]``). Each run is isolated in a ROS domain of its own with
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, every wait bounded, every process stopped
 (SIGINT, then SIGKILL) whatever happens:
 
