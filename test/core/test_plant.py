@@ -244,3 +244,11 @@ def test_a_diverging_step_raises_and_keeps_the_last_finite_state():
     assert plant.k == k
     plant.step([0.0, 0.0], 0.001)
     assert plant.k == k + 1
+
+
+def test_a_step_from_an_infinite_angle_is_a_divergence_not_a_math_error():
+    from freejoint_core.errors import PlantDivergedError
+    plant = Plant(table1('vertical'), 0.0005, dist_bound=0.0, q0=[0.1, 0.2, 0.3])
+    plant._q = [math.inf, 0.2, 0.3]   # what a blown-up earlier step would leave in fast3
+    with pytest.raises(PlantDivergedError, match='diverged'):
+        plant.step([0.0, 0.0], 0.001)

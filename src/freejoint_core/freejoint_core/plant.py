@@ -194,11 +194,15 @@ class Plant:
         for j, v in zip(self._active, tau):
             full[j] += float(v)
         q_before, qd_before = self._q, self._qd
-        if self._fast:
-            self._rk4_fast3(n_sub, full)
-        else:
-            self._rk4_general(n_sub, np.array(full))
-        if not all(map(math.isfinite, self._q + self._qd)):
+        try:
+            if self._fast:
+                self._rk4_fast3(n_sub, full)
+            else:
+                self._rk4_general(n_sub, np.array(full))
+            finite = all(map(math.isfinite, self._q + self._qd))
+        except (ArithmeticError, ValueError):   # e.g. math.cos(inf): a math domain error
+            finite = False
+        if not finite:
             self._q, self._qd = q_before, qd_before
             raise PlantDivergedError(
                 f'tau_active: the integration over step {self.k} diverged (non-finite state '
