@@ -32,6 +32,8 @@ CASES = ('horizontal', 'vertical')
 PASSIVE_JOINT = 'joint3'
 STALL_TIMEOUT = 30.0
 """Wall seconds without a new tick after which a run is given up."""
+SETTLE = 1.0
+"""Wall seconds between the recorder's readiness and the start of the circle."""
 DRAIN_QUIET = 0.5
 """Wall seconds the recorder's count must stay unchanged before the nodes are stopped."""
 FIGURES = os.path.join(ROOT, 'docs', 'figures')
@@ -410,6 +412,9 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
             if not ok:
                 raise RuntimeError('the recorder is not ready after 60 s: %s (logs in %s)'
                                    % (status, log_dir))
+            # The readers have matched every publisher; the writers' side of the match
+            # (what makes a volatile writer send to the recorder) can lag by tens of ms.
+            spin_until(executor, lambda: False, SETTLE)
         plan = _ros_params(os.path.join(CONFIG, 'planner.yaml'))
         answer = start_plan(executor, node, plan)
         if answer is None or not answer.accepted:

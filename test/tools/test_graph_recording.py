@@ -5,6 +5,7 @@ The run is started (planner ``~/plan_circle``) only once the recorder's ``~/stat
 every graph topic has a matched publisher, as a launcher that must lose nothing does.
 """
 import os
+import time
 
 import pytest
 
@@ -13,6 +14,8 @@ pytestmark = pytest.mark.ros
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CONFIG = os.path.join(ROOT, 'config')
 TICKS = 400
+SETTLE = 1.0
+"""Wall seconds between the recorder's readiness and the start of the run."""
 
 
 def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, tmp_path,
@@ -61,6 +64,11 @@ def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, 
     wait(lambda: answers and answers[-1].success, 60.0,
          'the recorder to match every graph topic (%s)' % (answers[-1:] or ''),
          spin=lambda: answers.append(call(status, Trigger.Request(), 'recorder status')))
+    # The recorder's readers have matched every publisher; the publishers' side of the match
+    # (what makes a volatile writer send to it) can lag by tens of ms: let it settle.
+    settle = time.monotonic() + SETTLE
+    while time.monotonic() < settle:
+        rclpy.spin_once(ros_node, timeout_sec=0.05)
     plan = ros_node.create_client(PlanCircle, '/freejoint_planner/plan_circle')
     answer = call(plan, PlanCircle.Request(centre=[0.0, 0.0], radius=0.2, duration=5.0,
                                            start_angle=0.0, direction=1, execute=True),
