@@ -66,6 +66,7 @@ def parse(argv):
 def spin(nodes):
     """Spin every node with one EventsExecutor until SIGINT/SIGTERM (flag, spin_once)."""
     import rclpy
+    from freejoint_common.node_tools import spin_until
     from rclpy.experimental import EventsExecutor
     stop = []
 
@@ -77,9 +78,7 @@ def spin(nodes):
     executor = EventsExecutor()
     for node in nodes.values():
         executor.add_node(node)
-    spin_once = executor.spin_once
-    while not stop and rclpy.ok():
-        spin_once(timeout_sec=0.2)
+    spin_until(executor.spin_once, rclpy.ok, stop)
 
 
 def finish(name, node):

@@ -4,23 +4,32 @@ Node plumbing shared by the freejoint nodes.
 ``Spec`` and :func:`declare` declare each parameter once with its descriptor;
 :func:`unique_names` validates a joint-name list; :class:`Throttle` rate-limits log lines
 per kind of problem; :func:`spin` runs a node until SIGINT/SIGTERM, stopping between
-callbacks.
+callbacks; ``SCHEDULING_SPECS`` and :func:`request_scheduling` give a node the
+``thread_priority`` / ``cpu_affinity`` parameters of ros2_control's controller_manager.
 """
 
 from dataclasses import dataclass
 import signal
 import time
 
+from freejoint_common.scheduling import MAX_PRIORITY, process_scheduling
 from freejoint_core.errors import FreejointValueError
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
 
 _monotonic = time.monotonic
 
 
 @dataclass(frozen=True)
 class Spec:
-    """One parameter: default value, description, optional (min, max), read-only."""
+    """
+    One parameter: default value, description, optional (min, max), read-only.
+
+    An int default with bounds gets an integer range, a float one a floating-point range.
+    A default of None declares an integer array without a value (rclpy cannot declare an
+    empty typed array): the node reads None, ``ros2 param set`` takes an integer array.
+    """
 
     name: str
     default: object
@@ -71,13 +80,61 @@ class Throttle:
 
 def declare(node, specs):
     """Declare each parameter of ``specs`` once with its descriptor; return the values."""
+    values = {}
     for spec in specs:
         desc = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
-        if spec.bounds is not None:
+        if spec.default is None:
+            param = node.declare_parameter(spec.name, Parameter.Type.INTEGER_ARRAY, desc)
+            values[spec.name] = plain(param.value)     # None unless given at start-up
+            continue
+        if spec.bounds is not None and isinstance(spec.default, int):
+            desc.integer_range = [IntegerRange(
+                from_value=int(spec.bounds[0]), to_value=int(spec.bounds[1]), step=1)]
+        elif spec.bounds is not None:
             desc.floating_point_range = [FloatingPointRange(
                 from_value=float(spec.bounds[0]), to_value=float(spec.bounds[1]), step=0.0)]
-        node.declare_parameter(spec.name, spec.default, desc)
-    return {spec.name: plain(node.get_parameter(spec.name).value) for spec in specs}
+        values[spec.name] = plain(node.declare_parameter(spec.name, spec.default, desc).value)
+    return values
+
+
+SCHEDULING_SPECS = (
+    Spec('thread_priority', 0,
+         'SCHED_FIFO priority (1..%d) of every thread of this process (executor and '
+         'middleware threads), as the controller_manager thread_priority of ros2_control; '
+         '0 = the default scheduler. Needs root, CAP_SYS_NICE or an rtprio limit: refused '
+         'with the reason otherwise' % MAX_PRIORITY, (0, MAX_PRIORITY)),
+    Spec('cpu_affinity', None,
+         'CPUs every thread of this process may run on (integer array, e.g. [1]); not set = '
+         'every CPU the process started with'),
+)
+"""Real-time scheduling parameters (``freejoint_common.scheduling``), for sim and controller."""
+SCHEDULING_NAMES = tuple(spec.name for spec in SCHEDULING_SPECS)
+
+
+def request_scheduling(node, values, at_start=False):
+    """
+    Ask for the node's ``thread_priority`` / ``cpu_affinity`` for the whole process.
+
+    Returns None when applied, else the reason. At start-up (``at_start``, before the
+    node's set-parameters callback is added) a refusal is logged as an error and the node
+    runs on without it, as ros2_control's controller_manager does: ``thread_priority``
+    becomes 0 in ``values`` and in the node's parameters (``ros2 param get`` tells the
+    truth) and the affinity alone is applied. A non-default result is logged.
+    """
+    sched = process_scheduling()
+    name = node.get_fully_qualified_name()
+    reason = sched.request(name, values['thread_priority'], values['cpu_affinity'])
+    if reason is not None and at_start:
+        asked = values['thread_priority']
+        values['thread_priority'] = 0
+        node.set_parameters([Parameter('thread_priority', value=0)])
+        again = sched.request(name, 0, values['cpu_affinity'])
+        node.get_logger().error(
+            'thread_priority %s not applied: %s; running with thread_priority 0 (%s)'
+            % (asked, reason, sched.describe() if again is None else again))
+    elif reason is None and sched.requests and (sched.priority or sched.affinity):
+        node.get_logger().info('process scheduling: ' + sched.describe())
+    return reason
 
 
 def plain(value):
@@ -109,10 +166,22 @@ def spin(node, executor):
     else:
         ex = SingleThreadedExecutor()
     ex.add_node(node)
-    context_ok = node.context.ok
-    spin_once = ex.spin_once
-    while not stop and context_ok():
+    spin_until(ex.spin_once, node.context.ok, stop)
+
+
+REFRESH_PERIOD = 1.0
+"""Wall period [s] of applying the process scheduling to threads started meanwhile."""
+
+
+def spin_until(spin_once, ok, stop):
+    """Call ``spin_once`` until ``stop`` is non-empty or not ``ok()``; keep new threads' RT."""
+    refresh = process_scheduling().refresh
+    next_refresh = _monotonic() + REFRESH_PERIOD
+    while not stop and ok():
         spin_once(timeout_sec=0.2)
+        if _monotonic() >= next_refresh:
+            next_refresh = _monotonic() + REFRESH_PERIOD
+            refresh()
 
 
 def run(make_node, name, args=None, on_stop=None):

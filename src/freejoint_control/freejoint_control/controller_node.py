@@ -15,7 +15,8 @@ node only converts messages, pairs states with setpoints and guards its inputs
 import math
 import time
 
-from freejoint_common.node_tools import declare, plain, run, Throttle
+from freejoint_common.node_tools import declare, plain, request_scheduling, run
+from freejoint_common.node_tools import SCHEDULING_NAMES, Throttle
 from freejoint_control.params import build_config, SPECS
 from freejoint_core.control import (RobustController, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
@@ -53,6 +54,7 @@ class ControllerNode(Node):
         super().__init__('controller_node', **kwargs)
         self._values = declare(self, SPECS)
         self.config = build_config(self._values)   # raises: bad start-up parameters
+        request_scheduling(self, self._values, at_start=True)
         cfg = self.config
         self._ctl = RobustController(cfg.nominal, cfg.gains)
         self._install(cfg)
@@ -115,6 +117,10 @@ class ControllerNode(Node):
             cfg = build_config(values)
         except FreejointValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
+        if any(p.name in SCHEDULING_NAMES for p in params):
+            reason = request_scheduling(self, values)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
         old = self.config
         if cfg.nominal != old.nominal:
             self._ctl.set_nominal(cfg.nominal)

@@ -10,7 +10,8 @@ the node uses the same check at start-up and in its set-parameters callback.
 
 from dataclasses import dataclass
 
-from freejoint_common.node_tools import Spec, unique_names
+from freejoint_common.node_tools import SCHEDULING_SPECS, Spec, unique_names
+from freejoint_common.scheduling import validate_affinity, validate_priority
 from freejoint_core.arm import ArmParams, table1
 from freejoint_core.control import Gains
 from freejoint_core.errors import FreejointValueError
@@ -58,7 +59,7 @@ SPECS = (
     Spec('executor', 'single_threaded',
          "rclpy executor: 'single_threaded' or 'events' (rclpy.experimental.EventsExecutor)",
          read_only=True),
-)
+) + SCHEDULING_SPECS
 
 DEFAULTS = {s.name: s.default for s in SPECS}
 EXECUTORS = ('single_threaded', 'events')
@@ -138,6 +139,8 @@ def build_config(values):
     if values['executor'] not in EXECUTORS:
         raise FreejointValueError(
             f'executor: expected one of {EXECUTORS}, got {values["executor"]!r}')
+    validate_priority(values['thread_priority'])
+    validate_affinity(values['cpu_affinity'])
     return Config(nominal=nominal, gains=gains, joint_names=joint_names, joints=joints,
                   cmd_index=cmd_index, dt=dt, dt_ns=round(dt * 1e9),
                   lockstep=bool(values['lockstep']), stale_timeout=stale,

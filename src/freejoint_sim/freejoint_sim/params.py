@@ -11,7 +11,8 @@ Parameters of the simulator node: declaration table and validation (no ROS types
 from dataclasses import dataclass
 import math
 
-from freejoint_common.node_tools import Spec, unique_names
+from freejoint_common.node_tools import SCHEDULING_SPECS, Spec, unique_names
+from freejoint_common.scheduling import validate_affinity, validate_priority
 from freejoint_core.arm import ArmParams, table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.offline import initial_state
@@ -68,7 +69,7 @@ SPECS = (
     Spec('timing_steps', 0,
          'measurement: steps recorded in timing_file (arrays preallocated; the file is '
          'written when they are full, or at shutdown)', read_only=True),
-)
+) + SCHEDULING_SPECS
 
 
 @dataclass(frozen=True)
@@ -182,6 +183,8 @@ def build_config(values):
     timing_file = str(values['timing_file'])
     if timing_file and timing_steps < 1:
         raise FreejointValueError('timing_steps: must be >= 1 when timing_file is set')
+    validate_priority(values['thread_priority'])
+    validate_affinity(values['cpu_affinity'])
     return Config(params=params, q0=tuple(q0.tolist()), joint_names=joint_names,
                   joints=joints,
                   cmd_to_active=tuple(active_names.index(name) for name in joints),

@@ -30,7 +30,8 @@ import math
 import time
 
 from builtin_interfaces.msg import Time
-from freejoint_common.node_tools import declare, plain, run, Throttle
+from freejoint_common.node_tools import declare, plain, request_scheduling, run
+from freejoint_common.node_tools import SCHEDULING_NAMES, Throttle
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.plant import Plant
 from freejoint_sim.params import build_config, SPECS
@@ -72,6 +73,7 @@ class SimNode(Node):
         super().__init__('sim_node', **kwargs)
         self._values = declare(self, SPECS)
         cfg = build_config(self._values)   # raises: bad start-up parameters
+        request_scheduling(self, self._values, at_start=True)
         self.config = cfg
         self._plant = Plant(cfg.params, cfg.dt_sub, dist_bound=cfg.dist_bound, seed=cfg.seed,
                             q0=cfg.q0)
@@ -155,6 +157,10 @@ class SimNode(Node):
             cfg = build_config(values)
         except FreejointValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
+        if any(p.name in SCHEDULING_NAMES for p in params):
+            reason = request_scheduling(self, values)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
         self._install(cfg)
         self._ee.header.frame_id = cfg.frame_id
         self._values = values
