@@ -56,6 +56,19 @@ DRAIN_PAUSE = 1.0
 RT_READY_BEFORE_SIM = '[effort_controller/commands, controller_state, setpoint]'
 RT_SIM_TOPICS = ('/joint_states', '/ee_position')
 OFFLINE_SEEDS = range(10)
+PRIORITY = int(os.environ.get('FREEJOINT_BENCH_PRIORITY', '50'))
+"""thread_priority of the simulator and the controller (SCHED_FIFO; 0 = default scheduler;
+50 is ros2_control's controller_manager default)."""
+AFFINITY = os.environ.get('FREEJOINT_BENCH_AFFINITY', '')
+"""cpu_affinity of the simulator and the controller, e.g. '1' or '0,1' ('' = not set)."""
+
+
+def scheduling_overrides():
+    """Return the sim's and the controller's thread_priority / cpu_affinity overrides."""
+    items = ['thread_priority:=%d' % PRIORITY]
+    if AFFINITY:
+        items.append('cpu_affinity:=[%s]' % AFFINITY)
+    return items
 
 
 def executable(pkg, exe):
@@ -186,7 +199,8 @@ def node_cmd(pkg, exe, config, overrides):
 def start_sim(graph, overrides):
     """Start the simulator (its own process)."""
     graph.start('sim_node', node_cmd('freejoint_sim', 'sim_node', 'sim.yaml',
-                                     ['case:=' + CASE, 'seed:=%d' % SEED] + overrides))
+                                     ['case:=' + CASE, 'seed:=%d' % SEED] + overrides
+                                     + scheduling_overrides()))
 
 
 def start_graph(graph, layout, bag, sim_overrides, ctl_overrides, planner_overrides,
@@ -203,8 +217,9 @@ def start_graph(graph, layout, bag, sim_overrides, ctl_overrides, planner_overri
                                  '-p', 'output:=' + bag, '-p', 'topics:=[]',
                                  '-p', 'overwrite:=true', '-p', 'custom_data:=[%s]' % custom]
                     + [a for item in rec_overrides for a in ('-p', item)])
-    sim = ['case:=' + CASE, 'seed:=%d' % SEED] + list(sim_overrides or [])
-    ctl = ['case:=' + CASE] + ctl_overrides
+    sched = scheduling_overrides()
+    sim = ['case:=' + CASE, 'seed:=%d' % SEED] + list(sim_overrides or []) + sched
+    ctl = ['case:=' + CASE] + ctl_overrides + sched
     planner = ['case:=' + CASE] + (planner_overrides or ['autostart:=false'])
     if layout == 'composed':
         sim, ctl, planner = ([item.replace(':=', '=', 1) for item in items]
@@ -608,7 +623,11 @@ def run(which=RUNS):
                if not os.path.exists(exe)]
     if missing:
         raise RuntimeError('not built: %s (run tools/setup.sh)' % ', '.join(missing))
-    rows = []
+    rows = [{'name': 'graph runs: sim and controller thread_priority (SCHED_FIFO; 0 = off)%s'
+             % (', cpu_affinity [%s]' % AFFINITY if AFFINITY else ''),
+             'value': PRIORITY, 'unit': '', 'target': None}]
+    say('sim and controller: thread_priority %d%s' % (
+        PRIORITY, ', cpu_affinity [%s]' % AFFINITY if AFFINITY else ''))
     for i, (kind, layout) in enumerate(which):
         env = _env(10 * i)
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

@@ -114,8 +114,12 @@ def main(args=None):
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        from freejoint_common.node_tools import GC_PAUSES
         for name, node in nodes.items():
             finish(name, node)
+        if nodes:
+            next(iter(nodes.values())).get_logger().info(GC_PAUSES.report())
+        for node in nodes.values():
             node.destroy_node()
         rclpy.try_shutdown()
     return code
