@@ -19,6 +19,18 @@ tick ``t_k = k dt`` with ``t_k <= now + lookahead dt`` published once, in order,
 ``CircleQuintic.sample_tuple(k_plan dt)``. The planned path goes out as a LINE_STRIP on
 ``planned_path`` (visualization_msgs/Marker, transient local).
 
+Sim time (``use_sim_time``, the switch every ROS node has): ROS time advances only with
+``/clock``, which the lockstep simulator may publish every ``N``-th step only (its
+``clock_rate``). The ticks between two ``/clock`` messages must already be out when the first
+of them arrives, so ``lookahead >= N - 1`` is required and ``lookahead >= 2 N - 1`` rides
+out one lost ``/clock`` (``stream.py``). The node learns ``N`` from the ``/clock`` it sees,
+logs it with the verdict, and warns, naming the rule, when ticks went out after ROS time
+had passed them. It takes ``/clock`` once: its own subscription triggers the stream and
+sets the node's ROS clock (``ROSClock.set_ros_time_override``), in place of rclpy's
+``TimeSource``, which would subscribe ``/clock`` a second time (a delivery and a Python
+callback per message); the TimeSource is detached at start and ``use_sim_time`` switches
+the ROS clock here.
+
 With ``autostart`` the configured circle (parameters ``centre``, ``radius``, ``duration``,
 ``start_angle``, ``direction``, ``start_delay``) starts at activation and again, anew,
 after every accepted change of those parameters.
@@ -38,6 +50,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMsg
 from visualization_msgs.msg import Marker
 
@@ -112,6 +125,8 @@ class PlannerNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self._cfg = self._declare_parameters()
         self._sim = self.get_parameter('use_sim_time').value
+        self._ros_clock = self.get_clock()
+        self._own_clock = self._detach_time_source()
         self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS))
         self.get_logger().info(
             f'singularity map computed in {self._model.seconds * 1e3:.0f} ms: '
@@ -123,6 +138,8 @@ class PlannerNode(Node):
                                       skip_late=not self._sim)
         self._last_plan_id = 0
         self._restarts_logged = 0
+        self._spacing_logged = 0
+        self._late_logged = 0
         self._publish_map()
         if self._cfg['autostart']:
             circle = make_circle(self._cfg)
@@ -234,9 +251,37 @@ class PlannerNode(Node):
             timer.cancel()
         return timer
 
+    def _detach_time_source(self):
+        """
+        Take /clock once: detach rclpy's TimeSource; return False if it cannot be.
+
+        Every rclpy Node has a TimeSource that, with ``use_sim_time``, subscribes /clock
+        and sets the node's ROS clock from it: a second delivery of each /clock besides
+        the subscription that triggers the stream. Detached from the node (its
+        subscription destroyed, its ``use_sim_time`` callback removed), the ROS clock is
+        set by ``_on_clock`` and switched by ``_switch_time_source`` instead. Should a
+        future rclpy not have these internals, the TimeSource stays (correct, one more
+        delivery per /clock).
+        """
+        source = getattr(self, '_time_source', None)
+        callback = getattr(source, '_on_parameter_event', None)
+        if callback is None or not hasattr(source, 'detach_node'):
+            self.get_logger().warning('rclpy TimeSource internals not found: /clock is '
+                                      'delivered twice (TimeSource and the stream)')
+            return False
+        try:
+            self.remove_on_set_parameters_callback(callback)
+        except ValueError:
+            pass
+        source.detach_node()
+        self._ros_clock._set_ros_time_is_active(bool(self._sim))
+        return True
+
     def _switch_time_source(self, sim):
         """Trigger on /clock (sim time) or the wall timer; restart on the new time base."""
         self._sim = sim
+        if self._own_clock:
+            self._ros_clock._set_ros_time_is_active(sim)
         self._stream.skip_late = not sim
         self._stream.reset_time_base()
         if sim:
@@ -314,17 +359,50 @@ class PlannerNode(Node):
     def _advance(self, now_ns):
         frame_id = self._cfg['frame_id']
         publish = self._setpoint_pub.publish
-        for sp in self._stream.advance(now_ns):
+        stream = self._stream
+        for sp in stream.advance(now_ns):
             publish(setpoint_msg(sp, frame_id))
-        if self._stream.restarts != self._restarts_logged:
-            self._restarts_logged = self._stream.restarts
+        if stream.restarts != self._restarts_logged:
+            self._restarts_logged = stream.restarts
+            self._spacing_logged = 0
             self.get_logger().warning(
                 f'ROS time went back to {now_ns * 1e-9:.6f} s: the stream starts over and the '
                 'running plan starts again')
 
+    def _check_spacing(self, now_ns):
+        """Log the /clock spacing learnt (when it grows) and warn about late ticks."""
+        stream = self._stream
+        n = stream.spacing
+        lookahead = stream.lookahead
+        rule = (f'lookahead must be >= N - 1 = {n - 1} ticks for /clock every N = {n} '
+                f'ticks, >= 2 N - 1 = {2 * n - 1} to ride out a lost /clock')
+        if stream.late != self._late_logged:
+            late = stream.late - self._late_logged
+            self._late_logged = stream.late
+            self.get_logger().warning(
+                f'{late} setpoint(s) went out only at /clock {now_ns * 1e-9:.6f} s, after ROS '
+                f'time had passed them (lockstep: the controller waited for them): {rule}; '
+                f'lookahead is {lookahead}', throttle_duration_sec=1.0)
+        if n > self._spacing_logged:
+            self._spacing_logged = n
+            if lookahead >= 2 * n - 1:
+                self.get_logger().info(f'/clock every {n} ticks (or more): lookahead '
+                                       f'{lookahead} covers it and one lost /clock')
+            else:
+                self.get_logger().warning(
+                    f'/clock every {n} ticks (or more): {rule}; lookahead is {lookahead}'
+                    + ('' if lookahead >= n - 1 else ': ticks will go out late'))
+
     def _on_clock(self, msg):
         if self._sim:
-            self._advance(time_ns(msg.clock))
+            now_ns = time_ns(msg.clock)
+            if self._own_clock:
+                self._ros_clock.set_ros_time_override(
+                    Time(nanoseconds=now_ns, clock_type=ClockType.ROS_TIME))
+            self._advance(now_ns)
+            stream = self._stream
+            if stream.spacing > self._spacing_logged or stream.late != self._late_logged:
+                self._check_spacing(now_ns)
 
     def _on_timer(self):
         if not self._sim:

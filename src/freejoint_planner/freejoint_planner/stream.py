@@ -17,6 +17,16 @@ A plan starts at the first trigger after it was accepted, on the first tick at o
 the previous plan). With no plan at all nothing is published and the stream only follows
 the clock. If ROS time goes backwards (a simulator reset, a looped bag) the stream starts
 over on the new time base and the running plan starts again.
+
+Clock spacing rule (sim time). ROS time only advances with ``/clock``, and the lockstep
+simulator may publish it every ``N``-th step only (its ``clock_rate``). The ticks strictly
+between two ``/clock`` messages, ``k + 1 .. k + N - 1``, must all be out when ``/clock =
+t_k`` triggers the stream, or the controller waits for them (the next ``/clock`` never comes:
+the simulator is waiting for their commands). So **lookahead >= N - 1** is required, and
+**lookahead >= 2 N - 1** rides out one lost ``/clock`` message (the subscription is best
+effort). The stream cannot know ``N`` in advance: it learns it (``spacing``, the largest
+advance in ticks from one trigger to the next) and counts the ticks it published only after
+ROS time had passed them (``late``), so the node can warn and name the rule.
 """
 
 from typing import NamedTuple
@@ -125,6 +135,17 @@ class SetpointStream:
         If true (real time on the wall clock) ticks already in the past when they fall
         due are skipped (counted in ``skipped``); if false (sim time) none is ever skipped.
 
+    Attributes
+    ----------
+    spacing : int
+        Largest advance of ROS time, in ticks, from one ``advance`` to the next since the
+        time base started (sim time: the ``/clock`` spacing ``N`` of the module's rule).
+    late : int
+        Ticks published only after ROS time had passed them (sim time: ``lookahead`` was
+        below ``N - 1``, or ``/clock`` messages were lost); never in real time (skipped).
+    restarts, skipped : int
+        Times ROS time went backwards; late ticks skipped (``skip_late`` only).
+
     """
 
     def __init__(self, dt, lookahead=20, skip_late=False):
@@ -139,6 +160,8 @@ class SetpointStream:
         self.last_now_ns = None
         self.restarts = 0               # times ROS time went backwards
         self.skipped = 0                # late ticks skipped (skip_late only)
+        self.late = 0                   # ticks published after ROS time passed them
+        self.spacing = 0                # largest advance (ticks) between two triggers
 
     def start(self, plan):
         """Replace the running plan by ``plan``; it starts at the next ``advance``."""
@@ -149,6 +172,7 @@ class SetpointStream:
         """Forget the clock (a new time base): restart the stream and the running plan."""
         self.next_tick = None
         self.last_now_ns = None
+        self.spacing = 0
         if self.plan is not None:
             self.plan.start_tick = None
 
@@ -168,12 +192,17 @@ class SetpointStream:
 
         """
         now_ns = int(now_ns)
-        if self.last_now_ns is not None and now_ns < self.last_now_ns:
-            self.restarts += 1
-            self.reset_time_base()
-        self.last_now_ns = now_ns
         dt_ns = self.dt_ns
         first = first_tick_at_or_after(now_ns, dt_ns)
+        prev = self.last_now_ns
+        if prev is not None and now_ns < prev:
+            self.restarts += 1
+            self.reset_time_base()
+        elif prev is not None:
+            gap = first - first_tick_at_or_after(prev, dt_ns)
+            if gap > self.spacing:
+                self.spacing = gap
+        self.last_now_ns = now_ns
         if self.next_tick is None:
             self.next_tick = first
         elif self.next_tick < first and (self.skip_late or self.plan is None):
@@ -187,9 +216,12 @@ class SetpointStream:
             plan.start_tick = max(self.next_tick,
                                   first_tick_at_or_after(now_ns + plan.start_delay_ns, dt_ns))
         last = last_tick_due(now_ns, dt_ns, self.lookahead)
-        out = [self.setpoint(k) for k in range(self.next_tick, last + 1)]
-        if last >= self.next_tick:
+        start = self.next_tick
+        out = [self.setpoint(k) for k in range(start, last + 1)]
+        if last >= start:
             self.next_tick = last + 1
+            if start < first:           # sim time: ticks ROS time had already passed
+                self.late += min(last + 1, first) - start
         return out
 
     def setpoint(self, k):

@@ -152,3 +152,75 @@ def test_sim_time_never_skips_a_tick_but_real_time_skips_the_late_ones():
 def test_negative_lookahead_is_refused():
     with pytest.raises(ValueError, match='lookahead'):
         SetpointStream(0.001, -1)
+
+
+def _lockstep(stream, steps, every, lost=()):
+    """
+    Play the lockstep simulator and controller against ``stream``; return what they saw.
+
+    The simulator publishes /clock on the steps that are multiples of ``every`` (minus the
+    ``lost`` ones) and needs the setpoint of each step before it can go on (the controller
+    answers a state only with its setpoint). Returns the setpoints in publication order and
+    the step it stalled at (None if it got through ``steps``).
+    """
+    out = []
+    have = set()
+    for k in range(steps + 1):
+        if k % every == 0 and k not in lost:
+            for sp in stream.advance(k * MS):
+                out.append(sp)
+                have.add(sp.stamp_ns)
+        if k * MS not in have:
+            return out, k
+    return out, None
+
+
+@pytest.mark.parametrize('every,lookahead', [(1, 0), (10, 9), (10, 20), (20, 19), (7, 50)])
+def test_a_sparse_clock_streams_every_tick_once_in_order_when_lookahead_covers_it(
+        every, lookahead):
+    s = _stream(lookahead)
+    s.start(Plan(1, CircleQuintic()))
+    out, stalled = _lockstep(s, 5000, every)
+    assert stalled is None
+    assert _ticks(out)[:5001] == list(range(5001))
+    assert len(out) == len(set(_ticks(out)))
+    # the same setpoints as a stream that sees /clock at every step
+    dense = _stream(lookahead)
+    dense.start(Plan(1, CircleQuintic()))
+    ref = [sp for k in range(0, 5001 + lookahead, every) for sp in dense.advance(k * MS)]
+    assert out == ref[:len(out)]
+    assert (s.spacing, s.late) == (every, 0)
+
+
+def test_lookahead_below_the_clock_spacing_minus_one_stalls_the_loop_and_counts_late_ticks():
+    s = _stream(lookahead=8)
+    s.start(Plan(1, CircleQuintic()))
+    out, stalled = _lockstep(s, 100, 10)
+    assert stalled == 9                          # ticks 0 .. 8 out at /clock 0, 9 missing
+    assert s.late == 0                           # nothing late yet: the next /clock is due
+    assert _ticks(s.advance(10 * MS)) == list(range(9, 19))   # tick 9 only now
+    assert (s.spacing, s.late) == (10, 1)
+
+
+def test_one_lost_clock_is_ridden_out_with_lookahead_twice_the_spacing_minus_one():
+    for lookahead, stall in ((19, None), (18, 19)):
+        s = _stream(lookahead)
+        s.start(Plan(1, CircleQuintic()))
+        out, stalled = _lockstep(s, 1000, 10, lost={10})
+        assert stalled == stall, lookahead
+        if stall is None:
+            assert _ticks(out)[:1001] == list(range(1001)) and s.late == 0
+            assert s.spacing == 20
+
+
+def test_the_clock_spacing_is_learnt_from_the_triggers_and_forgotten_on_a_new_time_base():
+    s = _stream()
+    assert s.spacing == 0
+    s.advance(0)
+    s.advance(0)                                 # the sim republishing step 0
+    assert s.spacing == 0
+    s.advance(10 * MS)
+    s.advance(15 * MS)
+    assert s.spacing == 10
+    s.advance(2 * MS)                            # backwards: a new time base
+    assert (s.restarts, s.spacing) == (1, 0)
