@@ -49,7 +49,7 @@ class Controller:
         node.create_subscription(
             Clock, '/clock',
             lambda m: self.clock.append(m.clock.sec * 1_000_000_000 + m.clock.nanosec),
-            QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))   # none lost
         self.Float64MultiArray = Float64MultiArray
         self.MultiArrayDimension = MultiArrayDimension
 
@@ -126,10 +126,36 @@ def test_params_file_loads_and_lockstep_steps_are_the_plant(procs, ros_node, wai
         assert [ee.point.x, ee.point.y] == model.fk(plant.q).tolist()
         assert ee.header.frame_id == 'base_link'
     wait(lambda: 30 * DT_NS in ctl.clock, 10.0, '/clock at step 30', spin=ctl.spin)
-    assert ctl.clock == sorted(ctl.clock) and 15 * DT_NS in ctl.clock
+    # config/sim.yaml: clock_rate 100 Hz, /clock every 10th step (step 0 maybe repeated)
+    assert ctl.clock == sorted(ctl.clock)
+    assert sorted(set(ctl.clock)) == [0, 10 * DT_NS, 20 * DT_NS, 30 * DT_NS]
     assert procs.stop(proc) == 0
     with open(proc.log_path) as f:
         assert 'simulator stopped at step 30 (t = 0.030 s): 0 command timeouts' in f.read()
+
+
+def test_clock_goes_out_on_the_multiples_of_the_clock_period_and_at_max_steps(
+        procs, ros_node, wait):
+    proc = _start(procs, '-p', 'clock_rate:=250.0', '-p', 'max_steps:=30')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    wait(lambda: len(ctl.clock) >= 2, 10.0, 'step 0 republished while waiting',
+         spin=ctl.spin)
+    assert set(ctl.clock) == {0}
+    plant = _plant()
+    for k in range(30):
+        ctl.command([1.0, -0.5], k)
+        msg = ctl.state(k + 1)                 # the state every step, stamped t_k
+        plant.step((1.0, -0.5), DT)
+        _same(msg, plant, (1.0, -0.5))
+    wait(lambda: 30 * DT_NS in ctl.clock, 10.0, '/clock at max_steps', spin=ctl.spin)
+    for _ in range(5):
+        ctl.spin()
+    # 250 Hz at 1 kHz: every 4th step, and max_steps = 30 (the end of the run)
+    assert ctl.clock == sorted(ctl.clock)
+    assert sorted(set(ctl.clock)) == [k * DT_NS for k in (0, 4, 8, 12, 16, 20, 24, 28, 30)]
+    assert len(ctl.states) == 31
+    assert procs.stop(proc) == 0
 
 
 def test_wrong_length_and_nan_commands_are_refused_and_zero_effort_applied(
@@ -250,6 +276,7 @@ def test_bad_parameter_values_are_refused_with_a_reason_and_it_keeps_running(
                                     Parameter('seed', value=-2),
                                     Parameter('initial_position', value=[2.0, 0.0]),
                                     Parameter('case', value='sideways'),
+                                    Parameter('clock_rate', value=300.0),
                                     Parameter('command_timeout', value=1.0)])
     rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
     assert future.done(), 'no answer from set_parameters within 15 s'
@@ -259,7 +286,9 @@ def test_bad_parameter_values_are_refused_with_a_reason_and_it_keeps_running(
     assert res[1].reason == 'seed: expected an integer >= 0, got -2'
     assert res[2].reason.startswith('initial_position: unreachable')
     assert res[3].reason.startswith("case: expected one of ('horizontal', 'vertical')")
-    assert [r.successful for r in res] == [False, False, False, False, True]
+    assert res[4].reason == ('clock_rate: 300 Hz does not divide the step rate 1000 Hz '
+                             '(1 / (clock_rate * control_period) must be an integer)')
+    assert [r.successful for r in res] == [False, False, False, False, False, True]
     ctl.command([1.0, 1.0], 0)
     plant = _plant()
     plant.step((1.0, 1.0), DT)

@@ -43,6 +43,13 @@ SPECS = (
     Spec('publish_rate', 1000.0,
          'real time: rate [Hz] of joint_states and ee_position (a divisor of the step '
          'rate); lockstep publishes every step', (0.1, 1e6)),
+    Spec('clock_rate', 0.0,
+         'lockstep: rate [Hz] of /clock in sim time (like gazebo_ros publish_rate): /clock '
+         'goes out on the steps that are multiples of 1 / (clock_rate * control_period), '
+         'which must be an integer >= 1, and always at step 0 and at max_steps; the state '
+         'goes out every step. 0 = every step. A node streaming ahead of a /clock every N '
+         'steps (the planner) needs a lookahead of at least N - 1 steps',
+         (0.0, 1e6)),
     Spec('dist_bound', 0.5,
          'bound [N m] of the uniform random joint disturbance (0 = off); takes effect on '
          'reset', (0.0, 1e3)),
@@ -94,6 +101,7 @@ class Config:
     timing_file: str = ''
     timing_steps: int = 0
     max_steps: int = 0
+    clock_every: int = 1
 
 
 def _multiple(name, big, small):
@@ -102,6 +110,21 @@ def _multiple(name, big, small):
     if n < 1 or abs(n * small - big) > 1e-9 * big:
         raise FreejointValueError(name)
     return n
+
+
+def _clock_every(rate, dt):
+    """Return the steps from one /clock to the next for ``clock_rate`` (0: every step)."""
+    rate = float(rate)
+    if not (math.isfinite(rate) and rate >= 0.0):
+        raise FreejointValueError(f'clock_rate: must be >= 0 Hz (0 = every step), got {rate}')
+    if rate == 0.0:
+        return 1
+    step_rate = 1.0 / dt
+    if rate > step_rate * (1.0 + 1e-9):
+        raise FreejointValueError(f'clock_rate: {rate:g} Hz is above the step rate '
+                                  f'{step_rate:g} Hz (1 / control_period)')
+    return _multiple(f'clock_rate: {rate:g} Hz does not divide the step rate {step_rate:g} '
+                     'Hz (1 / (clock_rate * control_period) must be an integer)', 1.0 / rate, dt)
 
 
 def build_config(values):
@@ -149,6 +172,7 @@ def build_config(values):
         raise FreejointValueError(f'publish_rate: must be > 0, got {rate}')
     every = _multiple(f'publish_rate: {rate} Hz does not divide the step rate '
                       f'{1.0 / dt:g} Hz', 1.0 / rate, dt)
+    clock_every = _clock_every(values['clock_rate'], dt)
     dist = float(values['dist_bound'])
     if not (math.isfinite(dist) and dist >= 0.0):
         raise FreejointValueError(f'dist_bound: must be >= 0, got {dist}')
@@ -192,4 +216,4 @@ def build_config(values):
                   dt_sub=dt_sub, publish_every=every, dist_bound=dist, seed=seed,
                   command_timeout=timeout, frame_id=str(values['frame_id']),
                   executor=values['executor'], timing_file=timing_file,
-                  timing_steps=timing_steps, max_steps=max_steps)
+                  timing_steps=timing_steps, max_steps=max_steps, clock_every=clock_every)

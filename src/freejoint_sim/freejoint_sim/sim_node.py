@@ -15,7 +15,12 @@ Modes (docs/GRAPH.md):
 * ``lockstep``: the node owns ``/clock``; at step k it publishes ``/clock = t_k`` and the
   state stamped t_k, waits for the command answering t_k, integrates one control period
   with it and the disturbance draw of step k, and goes on.  Deterministic for a seed, as
-  fast as the graph answers.
+  fast as the graph answers.  With ``clock_rate`` (Hz, 0 = every step) ``/clock`` goes out
+  only on the steps that are multiples of ``1 / (clock_rate * control_period)`` (and at
+  step 0, its republications, and ``max_steps``), the state still every step: fewer
+  ``/clock`` publications and deliveries per tick (gazebo_ros's ``publish_rate``).  A
+  node that streams ahead of ``/clock`` every N steps needs a lookahead of at least N - 1
+  steps (the planner: ``docs/GRAPH.md``, lockstep item 5).
 * ``realtime``: steps on the wall clock at ``1 / control_period`` and applies the latest
   command.
 
@@ -143,6 +148,7 @@ class SimNode(Node):
         self._dt_ns = cfg.dt_ns
         self._timeout = cfg.command_timeout
         self._every = cfg.publish_every
+        self._clock_every = cfg.clock_every
         self._lockstep = cfg.lockstep
         self._cmd_map = cfg.cmd_to_active
         self._identity = cfg.cmd_to_active == tuple(range(len(cfg.cmd_to_active)))
@@ -313,8 +319,10 @@ class SimNode(Node):
         stamp.sec = t_ns // 1_000_000_000
         stamp.nanosec = t_ns % 1_000_000_000
         if self._lockstep:
-            self._clock_msg.clock = stamp
-            self._pub_clock.publish(self._clock_msg)
+            k = self._k
+            if k % self._clock_every == 0 or k == self._max_steps:
+                self._clock_msg.clock = stamp
+                self._pub_clock.publish(self._clock_msg)
         else:
             wall = self.get_clock().now()
             stamp = wall.to_msg()
