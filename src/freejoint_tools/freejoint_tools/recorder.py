@@ -9,9 +9,20 @@ What ``ros2 bag record -s mcap`` does, for this workspace where rosbag2 is not i
 * each subscription adapts to the publishers' offered QoS: reliable if all of them are,
   transient local if all of them are (the latched map and marker), keep-last with a deep
   queue (``queue_depth``) so nothing is dropped while the recorder catches up;
-* messages are taken serialized (``raw=True``: the CDR bytes, no decode and re-encode) and
-  written with their receive time from the node's ROS clock as MCAP ``log_time`` - sim time
-  under ``use_sim_time:=true`` (see below);
+* messages are taken serialized (``raw=True``: the CDR bytes, no decode and re-encode) by
+  the recorder itself, not dispatched by an executor one by one: the recording
+  subscriptions live on a second node (``<name>_takes``) that no executor spins, and every
+  ``batch_period`` (10 ms, wall) the recorder takes everything each of them holds
+  (``take_message``) and merges the takes of all topics by their receive time (the
+  middleware's timestamp on reception), so the bag keeps the order of arrival. One wake-up
+  per batch instead of one per message; the recorder's own node keeps ``~/status``, the
+  timers, the parameters and the message-lost events in its executor;
+* log time = the receive time: in system time the middleware's reception timestamp, in sim
+  time (``use_sim_time:=true``) the latest recorded ``/clock`` received before the message
+  (see below). A message received less than 2 ms before a take began waits for the next
+  batch, when everything received before it has been taken too (if one is taken after a
+  later message was written all the same, its log time is still that of its receive time,
+  and the summary counts it);
 * the MCAP chunk is closed and handed to the OS every ``flush_period`` (wall s), so a
   SIGKILL loses at most that much of the tail; SIGINT and SIGTERM take what is already
   queued, then finalise the bag (summary, statistics, ``metadata.yaml``) and print what
@@ -37,20 +48,22 @@ the recorder was starved of CPU) are logged at once and counted in the summary.
 
 Timestamps: with ``use_sim_time:=true`` the log times are sim time (the lockstep ``/clock``,
 ``t_k = k dt``), the same time base as the header stamps: a message's log time is the
-latest recorded ``/clock`` that arrived before it (the node's clock if ``/clock`` is not
-recorded). In sim time messages are taken in batches, every ``batch_period`` (10 ms) in
-arrival order: one wake-up per batch instead of one per message (in system time the log
-time is the clock when a message is taken, so each is taken as it arrives).
-``ros2 bag play --clock`` (and
-this package's player) publishes ``/clock`` from the log times, so nodes replaying the bag
-with ``use_sim_time`` see a clock consistent with the stamps of the data - which is what
-they need; with system-time log times the replayed clock would be ~1.7e9 s while the stamps
-were ~0 s. The recorded ``/clock`` topic itself is skipped by the player when it publishes
-its own clock (``ros2 bag play --clock`` users: add ``--exclude-topics /clock``).
+latest recorded ``/clock`` that arrived before it, whenever the batch is taken. The
+recorder takes ``/clock`` itself (also when it does not record it), so its node's
+TimeSource does not subscribe to ``/clock`` (one dispatch per tick less); before the first
+``/clock`` the log time is 0, and ``use_sim_time`` is read once at start.
+``ros2 bag play --clock`` (and this package's player) publishes ``/clock`` from the log
+times, so nodes replaying the bag with ``use_sim_time`` see a clock consistent with the
+stamps of the data - which is what they need; with system-time log times the replayed
+clock would be ~1.7e9 s while the stamps were ~0 s. The recorded ``/clock`` topic itself
+is skipped by the player when it publishes its own clock (``ros2 bag play --clock`` users:
+add ``--exclude-topics /clock``).
 """
 
+import bisect
 import datetime
 import importlib
+import operator
 import os
 import shutil
 import signal
@@ -63,7 +76,7 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParameters
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.exceptions import InvalidParameterValueException
+from rclpy.exceptions import InvalidHandle, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -91,6 +104,12 @@ GRAPH_TOPICS = (
     ('semi_singular_map', 'nav_msgs/msg/OccupancyGrid', True),
     ('planned_path', 'visualization_msgs/msg/Marker', True),
 )
+# A batch writes what was received up to this long before the take began; later messages
+# wait for the next batch, when everything received before them has surely been taken too
+# (a message is timestamped on reception a little before it can be taken).
+HOLD_NS = 2_000_000
+CLOCK_TOPIC = '/clock'
+_RECEIVED = operator.itemgetter(0)
 # Files an earlier run of the tools leaves in a bag directory (what overwrite may delete).
 _OWN_FILES = ('metadata.yaml', 'metrics.json')
 _OWN_SUFFIXES = ('.mcap', '.png', '.yaml.tmp', '.json.tmp')
@@ -123,6 +142,10 @@ def parse_custom_data(items):
             raise ValueError('custom_data key %r given twice' % key)
         out[key] = value.strip()
     return out
+
+
+def _never_called(data):
+    """Stand for the callback of a subscription no executor dispatches (it is taken)."""
 
 
 def _is_hidden(name):
@@ -176,16 +199,27 @@ class Recorder(Node):
             "rclpy executor: 'events' (rclpy.experimental.EventsExecutor) or "
             "'single_threaded'", ParameterType.PARAMETER_STRING))
         self.declare_parameter('batch_period', 0.01, _descriptor(
-            'Sim time: wall period (s) of taking what arrived, in arrival order (the '
-            'executor queue drained at once): one wake-up per period instead of one per '
-            'message, 15-30 % less CPU per message at 1 kHz; 0 = wake up for each message',
-            ParameterType.PARAMETER_DOUBLE, float_range=(0.0, 0.1)))
+            'Wall period (s) of taking what arrived on every recorded topic (the '
+            'subscriptions are not dispatched by the executor): one wake-up per period '
+            'instead of one per message', ParameterType.PARAMETER_DOUBLE,
+            float_range=(0.001, 0.1)))
         self.declare_parameter('queue_depth', 5000, _descriptor(
             'Subscription queue depth (messages) per topic', ParameterType.PARAMETER_INTEGER,
             int_range=(1, 1000000)))
         p = self._params
         self.executor_kind = p['executor']
         self.batch_period = p['batch_period']
+        # Sim time: log times come from the /clock messages the recorder takes itself, so
+        # the node's TimeSource need not take every /clock too (a dispatch per tick).
+        self._sim_time = self.get_parameter('use_sim_time').value is True
+        if self._sim_time:
+            self._time_source.detach_node()
+        # The recorded topics' subscriptions live on a node no executor spins: nothing
+        # dispatches them; take() takes what they hold every batch_period. Services, timers,
+        # parameters and the message-lost events stay on this node, in the executor.
+        self._takes_node = Node(self.get_name() + '_takes', namespace=self.get_namespace(),
+                                context=self.context, use_global_arguments=False,
+                                enable_rosout=False, start_parameter_services=False)
         self._wanted = {self.resolve_topic_name(t) for t in p['topics']}
         self._excluded = {self.resolve_topic_name(t) for t in p['exclude']}
         output = p['output'] or os.path.join(
@@ -197,11 +231,18 @@ class Recorder(Node):
         self.output = output
         self._defs = Definitions()
         self._subs = {}          # topic -> subscription
+        self._takers = []        # (topic or None for /clock only, handle, type), /clock first
+        self._clock_only = None  # sim time, /clock not recorded: its subscription all the same
+        self._pending = []       # (receive ns, topic, data) taken, written in a later batch
+        self._clock_ns = None    # the latest /clock taken (ns), in receive order
+        self._clocks = []        # (receive ns, /clock ns) of the recent /clock messages
+        self._types = {}         # topic -> type of its subscription
+        self._last_written = 0   # receive ns of the last message written
+        self._late = 0           # messages taken after a later one was written
         self._channels = {}      # topic -> (bag channel id, type)
         self._unconfirmed = {}   # pre-subscribed topic -> (contract type, QoS) until seen
         self.received = {}       # topic -> messages received
         self.lost = {}           # topic -> messages the middleware reported lost
-        self._recorded_clock = [None]   # ns of the last /clock message taken
         self._write_errors = 0
         self._skipped = set()
         self._warned = set()
@@ -214,6 +255,12 @@ class Recorder(Node):
             else 'all topics'))
         if p['graph_topics']:
             self._presubscribe()
+        if self._sim_time and not self._selected(CLOCK_TOPIC):
+            self._clock_only = self._takes_node.create_subscription(
+                _message_class('rosgraph_msgs/msg/Clock'), CLOCK_TOPIC, _never_called,
+                QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=p['queue_depth'],
+                           reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
+            self._update_takers()
         self._ready_topics = [self.resolve_topic_name(t) for t in p['ready_topics']]
         self.create_service(Trigger, '~/status', self._status)
         self._discover()
@@ -241,6 +288,10 @@ class Recorder(Node):
                 return SetParametersResult(
                     successful=False,
                     reason="executor must be 'events' or 'single_threaded', got %r" % value)
+            elif param.name == 'use_sim_time':
+                return SetParametersResult(
+                    successful=False, reason='use_sim_time is read once at start (the '
+                    'recorder takes /clock itself); restart the recorder to change it')
             elif param.name in ('discovery_period', 'flush_period'):
                 if value is None or not value > 0.0:
                     return SetParametersResult(successful=False,
@@ -318,7 +369,7 @@ class Recorder(Node):
                 '%s: its publishers offer %s (%s, %s), not the graph contract; '
                 'subscribing anew' % (name, msgtype, adapted.reliability.name.lower(),
                                       adapted.durability.name.lower()))
-            self.destroy_subscription(self._subs.pop(name))
+            self._unsubscribe(name)
             if name in self._channels and self._channels[name][1] != msgtype:
                 self._warn_once(('retype', name), '%s: type changed; not recording' % name)
                 self._skipped.add(name)
@@ -337,12 +388,32 @@ class Recorder(Node):
             return False
         self.received.setdefault(name, 0)
         self.lost.setdefault(name, 0)
-        self._subs[name] = self.create_subscription(
-            msg_class, name, self._callback(name, msgtype), qos, raw=True,
+        sub = self._takes_node.create_subscription(
+            msg_class, name, _never_called, qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(message_lost=self._lost_callback(name)))
+        for handler in sub.event_handlers:    # the events are dispatched with this node's
+            self.add_waitable(handler)
+        self._subs[name] = sub
+        self._types[name] = msgtype
+        self._update_takers()
         self.get_logger().info('recording %s [%s] (%s, %s)' % (
             name, msgtype, qos.reliability.name.lower(), qos.durability.name.lower()))
         return True
+
+    def _unsubscribe(self, name):
+        """Destroy a topic's subscription, after taking what it still holds."""
+        self.take()
+        sub = self._subs.pop(name)
+        self._update_takers()
+        for handler in sub.event_handlers:
+            self.remove_waitable(handler)
+        self._takes_node.destroy_subscription(sub)
+
+    def _update_takers(self):
+        subs = sorted(self._subs.items(), key=lambda item: item[0] != CLOCK_TOPIC)
+        if self._clock_only is not None:
+            subs.insert(0, (None, self._clock_only))
+        self._takers = [(name, sub.handle, sub.msg_type) for name, sub in subs]
 
     def _register(self, name, msgtype, infos=None):
         """Add the topic's channel to the bag (once): definition, hash, offered QoS."""
@@ -369,35 +440,113 @@ class Recorder(Node):
         self._channels[name] = (channel, msgtype)
         return channel
 
-    def _callback(self, name, msgtype):
-        write = self.writer.write
-        clock = self.get_clock()
-        now = clock.now
-        received = self.received
-        channels = self._channels
-        is_clock = name == '/clock'
-        recorded_clock = self._recorded_clock
+    def take(self, final=False):
+        """
+        Take what every subscription holds and write it in receive order; return the count.
 
-        def on_message(data):
-            # Sim time: the latest /clock recorded before this message, in arrival order
-            # (the TimeSource keeps only the newest /clock, so a recorder that takes a
-            # batch at once would stamp it all with the batch's last clock).
-            if is_clock:
-                recorded_clock[0] = clock_ns(data)
-            if recorded_clock[0] is not None and clock.ros_time_is_active:
-                stamp = recorded_clock[0]
-            else:
-                stamp = now().nanoseconds
-            received[name] += 1
+        The takes of all topics are merged by their receive time (the middleware's
+        timestamp on reception), so the bag keeps the order of arrival and, in sim time,
+        each message gets the latest /clock received before it. Messages received less
+        than ``HOLD_NS`` before the take began wait for the next batch (a message that
+        arrived just before them may not be takeable yet); ``final`` writes them all.
+        """
+        cutoff = time.time_ns() - HOLD_NS
+        batch = self._pending
+        before = len(batch)
+        received = self.received
+        for name, handle, msg_type in self._takers:
+            take = handle.take_message
+            taken = len(batch)
+            try:
+                with handle:
+                    while True:
+                        got = take(msg_type, True)
+                        if got is None:
+                            break
+                        batch.append((got[1]['received_timestamp'] or time.time_ns(),
+                                      name, got[0]))
+            except InvalidHandle:      # destroyed at shutdown
+                continue
+            if name is not None:
+                received[name] += len(batch) - taken
+        count = len(batch) - before
+        if not batch:
+            return 0
+        if count:
+            batch.sort(key=_RECEIVED)          # stable: /clock first on equal times
+        if final:
+            ready, self._pending = batch, []
+        else:
+            split = bisect.bisect_right(batch, cutoff, key=_RECEIVED)
+            ready, self._pending = batch[:split], batch[split:]
+        if ready:
+            self._write(ready)
+        return count
+
+    def _write(self, ready):
+        if ready[0][0] < self._last_written:   # rare: taken after a later message was written
+            split = bisect.bisect_left(ready, self._last_written, key=_RECEIVED)
+            self._write_late(ready[:split])
+            ready = ready[split:]
+            if not ready:
+                return
+        write = self.writer.write
+        channels = self._channels
+        sim_time = self._sim_time
+        clocks = self._clocks
+        clock = self._clock_ns
+        for received, name, data in ready:
+            if name is None or name == CLOCK_TOPIC:
+                t = clock_ns(data)
+                if t is not None:
+                    clock = t
+                    clocks.append((received, t))
+                if name is None:
+                    continue
+            if not sim_time:
+                stamp = received
+            elif clock is not None:
+                stamp = clock
+            else:                              # no /clock yet: the node's clock (0)
+                stamp = self.get_clock().now().nanoseconds
             try:
                 entry = channels.get(name)
-                channel = entry[0] if entry else self._register(name, msgtype)
-                write(channel, stamp, data)
+                write(entry[0] if entry else self._register(name, self._types[name]),
+                      stamp, data)
             except (OSError, ValueError) as exc:
-                self._write_errors += 1
-                self.get_logger().error('cannot write a message of %s: %s' % (name, exc),
-                                        throttle_duration_sec=5.0)
-        return on_message
+                self._write_error(name, exc)
+        self._clock_ns = clock
+        self._last_written = ready[-1][0]
+        if len(clocks) > 8192:
+            del clocks[:4096]
+
+    def _write_late(self, late):
+        """Write messages received before others already written: log time as if in order."""
+        self._late += len(late)
+        clocks = self._clocks
+        for received, name, data in late:
+            if name is None or name == CLOCK_TOPIC:
+                t = clock_ns(data)
+                if t is not None:
+                    bisect.insort(clocks, (received, t), key=_RECEIVED)
+                if name is None:
+                    continue
+            if self._sim_time:
+                at = bisect.bisect_right(clocks, received, key=_RECEIVED)
+                stamp = clocks[at - 1][1] if at else self.get_clock().now().nanoseconds
+            else:
+                stamp = received
+            try:
+                entry = self._channels.get(name)
+                channel = entry[0] if entry else self._register(name, self._types[name])
+                self.writer.write(channel, stamp, data)
+            except (OSError, ValueError) as exc:
+                self._write_error(name, exc)
+
+    def _write_error(self, name, exc):
+        self._write_errors += 1
+        self.get_logger().error('cannot write a message of %s: %s' % (name, exc),
+                                throttle_duration_sec=5.0)
 
     def matched(self):
         """Return ``{topic: matched publishers}`` of the recorder's subscriptions."""
@@ -442,11 +591,19 @@ class Recorder(Node):
         """Finalise the bag and log what was recorded per topic."""
         if self._closed:
             return
-        self._closed = True
-        for sub in self._subs.values():
-            self.destroy_subscription(sub)
-        self._subs = {}
-        self.writer.close()
+        try:
+            self.take(final=True)
+        except Exception as exc:  # noqa: B902 - finalise the bag whatever the take said
+            self.get_logger().error('cannot take the last messages: %s' % exc)
+        finally:
+            self._closed = True
+            for name in list(self._subs):
+                sub = self._subs.pop(name)
+                for handler in sub.event_handlers:
+                    self.remove_waitable(handler)
+                self._takes_node.destroy_subscription(sub)
+            self._takers = []
+            self.writer.close()
         lines = ['bag %s finalised: %d messages on %d topics'
                  % (self.output, self.total_received(), len(self._channels))]
         for name in sorted(self._channels):
@@ -455,7 +612,15 @@ class Recorder(Node):
                          % (name, self.received[name], written, self.lost[name]))
         if self._write_errors:
             lines.append('  %d message(s) could not be written' % self._write_errors)
+        if self._late:
+            lines.append('  %d message(s) taken after a later one was written (their log '
+                         'time as if in order)' % self._late)
         self.get_logger().info('\n'.join(lines))
+
+    def destroy_node(self):
+        """Destroy the node and the one that holds the recording subscriptions."""
+        self._takes_node.destroy_node()
+        super().destroy_node()
 
 
 def clock_ns(data):
@@ -488,50 +653,33 @@ class _Stop:
         self.signum = signum
 
 
-def take_queued(node, executor, max_events=100000):
+def spin_until_stopped(node, executor, stop, drain_quiet=0.3, drain_max=3.0):
     """
-    Run what the executor has queued, in order, until a few events in a row add nothing.
+    Take and write every ``batch_period`` until a signal; then take what is left.
 
-    Events that record nothing (timers, services, the TimeSource's /clock) end the batch
-    only after three in a row; what is left is taken next time, still in order.
+    Between takes the executor runs this node's timers, services and events. After the
+    signal the takes go on (bounded) until nothing came for ``drain_quiet`` s.
     """
-    idle = 0
+    period = node.batch_period
     spin_once = executor.spin_once
-    for _ in range(max_events):
-        before = node.total_received()
-        spin_once(timeout_sec=0.0)
-        idle = idle + 1 if node.total_received() == before else 0
-        if idle >= 3:
-            return
-
-
-def spin_until_stopped(node, executor, stop, drain_quiet=0.3, drain_max=3.0,
-                       batch_period=0.0):
-    """
-    Spin until a signal; then take what is still queued (bounded) before returning.
-
-    With ``batch_period`` and sim time (log times from the recorded /clock, exact
-    whenever the message is taken) the thread sleeps that long and then takes everything
-    that arrived meanwhile, in arrival order; in system time the log time is the clock
-    when the message is taken, so each message is taken as it arrives.
-    """
-    clock = node.get_clock()
+    monotonic = time.monotonic
+    next_take = monotonic() + period
     while stop.signum is None and rclpy.ok():
-        if batch_period > 0.0 and clock.ros_time_is_active:
-            time.sleep(batch_period)
-            take_queued(node, executor)
-        else:
-            executor.spin_once(timeout_sec=0.1)
-    deadline = time.monotonic() + drain_max
-    last_count, last_change = node.total_received(), time.monotonic()
+        wait = next_take - monotonic()
+        if wait > 0.0:
+            spin_once(timeout_sec=wait)
+            continue
+        node.take()
+        next_take = max(next_take + period, monotonic() + 0.2 * period)
+    deadline = monotonic() + drain_max
+    last_change = monotonic()
     node.get_logger().info('stopping (signal %d) after %d messages; taking what is queued'
-                           % (stop.signum or 0, last_count))
-    while rclpy.ok() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.02)
-        count = node.total_received()
-        if count != last_count:
-            last_count, last_change = count, time.monotonic()
-        elif time.monotonic() - last_change >= drain_quiet:
+                           % (stop.signum or 0, node.total_received()))
+    while rclpy.ok() and monotonic() < deadline:
+        spin_once(timeout_sec=0.02)
+        if node.take():
+            last_change = monotonic()
+        elif monotonic() - last_change >= drain_quiet:
             break
 
 
@@ -563,7 +711,7 @@ def main(args=None):
     executor = make_executor(node.executor_kind)
     executor.add_node(node)
     try:
-        spin_until_stopped(node, executor, stop, batch_period=node.batch_period)
+        spin_until_stopped(node, executor, stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
