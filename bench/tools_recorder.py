@@ -8,14 +8,19 @@ Figures (printed; nothing is asserted):
   runs 2 s of ticks while a recorder process records all topics; the messages the bag
   holds are counted against those published: the highest rate with no loss (msg/s; target
   >= 4000, the 1 kHz lockstep graph's four topics), the loss at each rate, and the
-  recorder's CPU time per message (us, from /proc);
+  recorder's CPU time per message (us, from /proc); with ``--sim-time`` the recorder runs
+  with ``use_sim_time:=true`` (log times from the recorded /clock, as in the graph);
 * in-process: BagWriter messages/s, open_bag + decode + record of a 5-s run (5000 ticks).
 
-Usage: ``. tools/env.sh && python bench/tools_recorder.py`` (needs the built workspace).
+Usage: ``. tools/env.sh && python bench/tools_recorder.py [--sim-time] [--rates 1000,4000]
+[--recorder 'CMD ...']`` (needs the built workspace; ``--recorder`` runs another recorder
+command, e.g. a copy of an older version for an A/B pair).
 """
 
+import argparse
 import json
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -45,14 +50,16 @@ def _cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def _one_rate(tmp, tick_rate):
+def _one_rate(tmp, tick_rate, recorder_cmd, sim_time):
     from freejoint_tools.bagfile import open_bag
     env = _env()
     bag = os.path.join(tmp, 'rate_%d' % tick_rate)
     summary = os.path.join(tmp, 'published_%d.json' % tick_rate)
-    recorder = subprocess.Popen([RECORDER, '--ros-args', '-p', 'output:=%s' % bag,
-                                 '-p', 'topics:=[]'], env=env, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
+    params = ['-p', 'use_sim_time:=true'] if sim_time else []
+    recorder = subprocess.Popen(recorder_cmd + ['--ros-args', '-p', 'output:=%s' % bag,
+                                                '-p', 'topics:=[]', *params],
+                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    hung = False
     try:
         ticks = int(tick_rate * SECONDS)
         cpu0 = None
@@ -67,14 +74,19 @@ def _one_rate(tmp, tick_rate):
         cpu1 = _cpu_seconds(recorder.pid)
     finally:
         recorder.send_signal(signal.SIGINT)
-        recorder.wait(60)
+        try:
+            recorder.wait(60)
+        except subprocess.TimeoutExpired:   # a hung recorder: its bag is not finalised
+            hung = True
+            recorder.kill()
+            recorder.wait(10)
     with open(summary) as fh:
         published = json.load(fh)
     sent = sum(published['topics'][t]['count'] for t in TICK_TOPICS)
     topics = open_bag(bag).topics
     kept = sum(topics[t].count if t in topics else 0 for t in TICK_TOPICS)
     return {'offered': sent / published['seconds'], 'sent': sent, 'kept': kept,
-            'cpu_us': 1e6 * (cpu1 - (cpu0 or cpu1)) / max(kept, 1)}
+            'cpu_us': 1e6 * (cpu1 - (cpu0 or cpu1)) / max(kept, 1), 'hung': hung}
 
 
 def _bag_tools(tmp):
@@ -93,13 +105,16 @@ def _bag_tools(tmp):
     return count, write_s, time.perf_counter() - start
 
 
-def run():
+def run(rates=TICK_RATES, recorder_cmd=None, sim_time=False):
     """Return the benchmark rows: list of dict(name, value, unit, target)."""
     rows = []
     best = 0.0
     with tempfile.TemporaryDirectory() as tmp:
-        for tick_rate in TICK_RATES:
-            r = _one_rate(tmp, tick_rate)
+        for tick_rate in rates:
+            r = _one_rate(tmp, tick_rate, recorder_cmd or [RECORDER], sim_time)
+            if r['hung']:
+                rows.append({'name': 'recorder at %d ticks/s: hung at SIGINT (killed)'
+                             % tick_rate, 'value': 1, 'unit': '', 'target': '<= 0'})
             lost = r['sent'] - r['kept']
             if lost == 0:
                 best = max(best, r['offered'])
@@ -120,7 +135,21 @@ def run():
     return rows
 
 
-if __name__ == '__main__':
-    for row in run():
+def main():
+    """Print the rows; see the module notes for the options."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--sim-time', action='store_true',
+                        help='run the recorder with use_sim_time:=true')
+    parser.add_argument('--rates', default=','.join(str(r) for r in TICK_RATES),
+                        help='tick rates (ticks/s, 4 messages per tick), comma-separated')
+    parser.add_argument('--recorder', default='',
+                        help='recorder command to run instead of the installed one')
+    args = parser.parse_args()
+    rates = [int(r) for r in args.rates.split(',') if r]
+    for row in run(rates, shlex.split(args.recorder) or None, args.sim_time):
         print('%-58s %12.4g %-6s %s' % (row['name'], row['value'], row['unit'],
                                         row['target'] or ''))
+
+
+if __name__ == '__main__':
+    main()
