@@ -31,6 +31,7 @@ Usage: ``. tools/env.sh && python bench/graph.py [--lockstep-only | --realtime-o
 """
 
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -309,6 +310,26 @@ class Client:
         answer = self.call(Trigger, '/recorder/status', Trigger.Request(), timeout)
         return answer.message if answer is not None else ''
 
+    def recorder_drained(self, quiet=1.0, timeout=120.0):
+        """
+        Wait until the recorder's received count is unchanged for ``quiet`` s.
+
+        Called once the simulator holds at ``max_steps`` (the graph is silent): a steady
+        count means the recorder has taken everything. Return (count or None, wall s).
+        """
+        start = time.monotonic()
+        last, since = None, start
+        while time.monotonic() < start + timeout:
+            match = re.search(r'received (\d+)', self.recorder_status())
+            count = int(match.group(1)) if match else None
+            now = time.monotonic()
+            if count != last:
+                last, since = count, now
+            elif count is not None and now - since >= quiet:
+                return count, since - start
+            self.spin_until(lambda: False, 0.1)
+        return last, time.monotonic() - start
+
     def plan_circle(self, plan, timeout=20.0):
         """Ask the planner for the configured circle, executed at once; return the answer."""
         from freejoint_msgs.srv import PlanCircle
@@ -408,7 +429,8 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True):
         % (tag, ticks, 'on' if record else 'OFF', env['ROS_DOMAIN_ID'], load0))
     try:
         start_graph(graph, layout, bag,
-                    ['timing_file:=' + timing_path, 'timing_steps:=%d' % (ticks + 1)],
+                    ['timing_file:=' + timing_path, 'timing_steps:=%d' % (ticks + 1),
+                     'max_steps:=%d' % ticks],
                     [], [], ['use_sim_time:=true'],
                     'case=%s, variant=robust, seed=%d, max_ticks=%d' % (CASE, SEED, ticks))
         wait_ready(client, record)
@@ -420,6 +442,10 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True):
         wait_for_file(timing_path, graph, 120.0 + ticks * 0.01, 'lockstep run')
         cpu1 = graph.cpu()
         hwm = graph.vmhwm()
+        lag = None
+        if record:
+            # The sim holds at max_steps: stop nothing before the recorder has it all.
+            _count, lag = client.recorder_drained()
     finally:
         codes = graph.stop_all()
     load1 = load_average()
@@ -452,6 +478,8 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True):
     if record:
         rows.append({'name': '%s: ticks missing in the bag' % tag,
                      'value': max(0, ticks - kept), 'unit': 'ticks', 'target': '<= 0'})
+        rows.append({'name': '%s: recorder behind at the last tick (until drained)' % tag,
+                     'value': lag, 'unit': 's', 'target': None})
     rows += _node_rows(tag, cpu0, cpu1, hwm, ticks + 100)
     rows.append({'name': '%s: load average (1 min) at the end' % tag, 'value': load1,
                  'unit': '', 'target': None})

@@ -200,8 +200,11 @@ def test_lockstep_without_command_times_out_to_zero_effort_and_warns(procs, ros_
     assert procs.stop(proc) == 0
 
 
-def test_lockstep_holds_at_max_steps_ignoring_commands_and_timeouts(procs, ros_node, wait):
-    proc = _start(procs, '-p', 'max_steps:=3', '-p', 'command_timeout:=0.1')
+def test_lockstep_holds_at_max_steps_ignoring_commands_and_timeouts(
+        procs, ros_node, wait, tmp_path):
+    timing = str(tmp_path / 'timing.npz')
+    proc = _start(procs, '-p', 'max_steps:=3', '-p', 'command_timeout:=0.1',
+                  '-p', 'timing_file:=' + timing, '-p', 'timing_steps:=10')
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
     for k in range(3):
@@ -215,6 +218,9 @@ def test_lockstep_holds_at_max_steps_ignoring_commands_and_timeouts(procs, ros_n
     for _ in range(deadline_spins):
         ctl.spin()
     assert max(ctl.states) == 3 * DT_NS
+    # The run is over at max_steps: the timing file is written then, not at the stop.
+    wait(lambda: os.path.exists(timing), 10.0, 'the timing file while holding')
+    assert proc.poll() is None
     assert procs.stop(proc) == 0
     assert 'simulator stopped at step 3 (t = 0.003 s): 0 command timeouts' in \
         procs.log(proc)

@@ -312,6 +312,7 @@ class SimNode(Node):
         if self._lockstep and self._k == self._max_steps:
             self.get_logger().info('reached max_steps = %d (t = %.3f s): holding'
                                    % (self._k, self._t_ns * 1e-9))
+            self.write_timing()     # no later command can be received: the run is over
 
     def _publish_state(self):
         t_ns = self._t_ns
