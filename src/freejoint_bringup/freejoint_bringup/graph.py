@@ -83,6 +83,8 @@ def spin(nodes):
 
 def finish(name, node):
     """Log the node's end-of-run line (and write the simulator's timing file)."""
+    if hasattr(node, 'stop_stepping'):
+        node.stop_stepping()
     if hasattr(node, 'report'):
         node.get_logger().info(node.report())
     if hasattr(node, 'write_timing'):

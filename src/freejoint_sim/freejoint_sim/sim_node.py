@@ -32,6 +32,7 @@ forever; this node does not).
 """
 
 import math
+import threading
 import time
 
 from builtin_interfaces.msg import Time
@@ -64,7 +65,7 @@ CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
 REPUBLISH_PERIOD = 0.2
 """Lockstep: wall period [s] of republishing step 0 until the first command arrives."""
 MAX_CATCH_UP = 20
-"""Real time: steps integrated at most per timer callback before dropping behind."""
+"""Real time: steps integrated at most at one wake-up before dropping behind."""
 LABEL_PREFIX = 'stamp_ns='
 
 _isfinite = math.isfinite
@@ -129,7 +130,9 @@ class SimNode(Node):
             self.create_timer(period, self._lockstep_watchdog, clock=steady)
         else:
             self._rt_start = None
-            self.create_timer(cfg.dt, self._realtime_step, clock=steady)
+            self._rt_stop = threading.Event()
+            self._rt_thread = threading.Thread(target=self._realtime_loop, name='sim_step',
+                                               daemon=True)
         self.get_logger().info(
             'simulator ready: %s arm, %s, dt %g s (RK4 %g s), disturbance %g N m seed %d, '
             'q0 = [%s] rad, command timeout %g s' % (
@@ -140,6 +143,8 @@ class SimNode(Node):
             self._publish_state()
             self.get_logger().info('lockstep: waiting for the first command (step 0 is '
                                    'republished every %g s)' % REPUBLISH_PERIOD)
+        else:
+            self._rt_thread.start()
 
     # -- parameters ------------------------------------------------------------
     def _install(self, cfg):
@@ -368,6 +373,36 @@ class SimNode(Node):
                 'so far)' % (self._k, self._t_ns * 1e-9, self._timeout, self._timeouts))
             self._advance(self._zero)
 
+    def _realtime_loop(self):
+        """
+        Real time: step on the wall clock in a thread of its own.
+
+        Sleeps to the next period boundary ``t0 + (k + 1) dt`` of the monotonic clock (an
+        absolute grid: no drift), then integrates what is due and publishes. A thread
+        instead of an executor timer: the state goes out on time even while the executor
+        thread takes a command, parameters or a service call, and each period costs one
+        wake-up (the timer cost two and fired up to 0.8 ms late at p99 under load). The
+        thread inherits the process's ``thread_priority``; an unexpected error is logged
+        (throttled) and stepping goes on.
+        """
+        stop = self._rt_stop
+        sleep = time.sleep
+        while not stop.is_set():
+            try:
+                self._realtime_step()
+            except Exception as exc:   # noqa: B902 - a bug must not stop the arm silently
+                self._throttle(self.get_logger().error, 'step_error',
+                               'real-time step %d failed: %r' % (self._k, exc))
+            delay = self._rt_start + (self._k + 1) * self._dt - _monotonic()
+            if delay > 0.0:
+                sleep(delay)
+
+    def stop_stepping(self):
+        """Stop the real-time stepping thread (before the node is destroyed)."""
+        if not self._lockstep and self._rt_thread.is_alive():
+            self._rt_stop.set()
+            self._rt_thread.join(1.0)
+
     def _realtime_step(self):
         now = _monotonic()
         if self._rt_start is None:
@@ -409,6 +444,7 @@ class SimNode(Node):
 
 
 def _on_stop(node):
+    node.stop_stepping()
     node.get_logger().info(node.report())
     node.write_timing()
 
