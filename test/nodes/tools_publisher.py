@@ -9,10 +9,13 @@ keep-last 100 as in docs/GRAPH.md; before the ticks, once, the latched ``semi_si
 depth 1. Message contents are a pure function of k (:func:`tick_messages`).
 
 Usage: tools_publisher.py --ticks N --rate HZ [--clock] [--subscribers M] [--summary FILE]
-                          [--setpoint-volatile]
+                          [--setpoint-volatile] [--recorder NODE]
 
 It waits (up to 30 s) until every tick topic (and /clock) has at least M matched
-subscriptions, then publishes the ticks at HZ (0: as fast as it can), waits until every
+subscriptions - and, with --recorder, until that recorder's ``~/status`` says its
+subscriptions have matched their publishers (the readers' side of the match, which can
+complete well after the writers' side: a message published before it is not received) -
+then publishes the ticks at HZ (0: as fast as it can), waits until every
 message is acknowledged, writes a JSON summary (per topic: messages published and the CDR bytes of
 the last one, hex) and exits; or publishes until SIGINT with --ticks 0.
 """
@@ -32,6 +35,7 @@ from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
 DT_NS = 1_000_000
@@ -93,6 +97,25 @@ def latched_messages():
     return grid, marker
 
 
+def recorder_ready(node, name, deadline, stop):
+    """Call ``<name>/status`` until it answers success; return False at the deadline."""
+    client = node.create_client(Trigger, name + '/status')
+    try:
+        while time.monotonic() < deadline and not stop:
+            if client.wait_for_service(timeout_sec=0.1):
+                future = client.call_async(Trigger.Request())
+                rclpy.spin_until_future_complete(node, future, timeout_sec=max(
+                    0.0, deadline - time.monotonic()))
+                if future.done() and future.result().success:
+                    print('tools_publisher: %s/status: %s'
+                          % (name, future.result().message), flush=True)
+                    return True
+                time.sleep(0.05)   # poll period of the status, not a settle time
+        return False
+    finally:
+        node.destroy_client(client)
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument('--ticks', type=int, default=1000)
@@ -102,6 +125,8 @@ def main():
     parser.add_argument('--summary', default='')
     parser.add_argument('--setpoint-volatile', action='store_true',
                         help='offer setpoint volatile (not the graph contract)')
+    parser.add_argument('--recorder', default='',
+                        help="also wait until this recorder node's ~/status answers success")
     opts = parser.parse_args()
     stop = []
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
@@ -143,6 +168,10 @@ def main():
             print('tools_publisher: no subscriber within 30 s', file=sys.stderr, flush=True)
             return 2
         time.sleep(0.01)
+    if opts.recorder and not recorder_ready(node, opts.recorder, deadline, stop):
+        print('tools_publisher: %s/status not ready within 30 s' % opts.recorder,
+              file=sys.stderr, flush=True)
+        return 2
     time.sleep(0.2)   # let the subscriptions' reliable handshakes settle
     print('tools_publisher: publishing', flush=True)
     t0 = time.monotonic()

@@ -12,6 +12,8 @@ pytestmark = pytest.mark.ros
 HERE = os.path.dirname(os.path.abspath(__file__))
 PUBLISHER = os.path.join(HERE, '..', 'nodes', 'tools_publisher.py')
 TICK_TOPICS = ('/joint_states', '/setpoint', '/controller_state')
+# what the recorder's ~/status waits for: the topics the publisher sends per tick
+READY_TOPICS = 'ready_topics:=[/clock, %s]' % ', '.join(TICK_TOPICS)
 
 
 def _start_recorder(procs, bag, *params):
@@ -64,9 +66,11 @@ def test_recorder_holds_every_message_of_a_1khz_lockstep_like_run(procs, wait, t
     bag_path = str(tmp_path / 'horizontal')
     summary_path = str(tmp_path / 'published.json')
     recorder = _start_recorder(procs, bag_path, '-p', 'use_sim_time:=true', '-p',
-                               'custom_data:=[case=horizontal, variant=robust, seed=4]')
+                               'custom_data:=[case=horizontal, variant=robust, seed=4]',
+                               '-p', READY_TOPICS)
     publisher = procs.start_script(PUBLISHER, 'publisher', [
-        '--ticks', '2000', '--rate', '1000', '--clock', '--summary', summary_path])
+        '--ticks', '2000', '--rate', '1000', '--clock', '--summary', summary_path,
+        '--recorder', '/recorder'])
     wait(lambda: publisher.poll() is not None, 90.0,
          'the publisher to finish (log: %s)' % procs.log(publisher))
     assert publisher.returncode == 0, procs.log(publisher)
@@ -219,9 +223,11 @@ def test_topics_published_interleaved_are_recorded_in_publish_order_after_their_
     from freejoint_tools.bagfile import open_bag
     bag_path = str(tmp_path / 'interleaved')
     recorder = _start_recorder(procs, bag_path, '-p', 'use_sim_time:=true',
-                               '-p', 'batch_period:=0.05')
-    publisher = procs.start_script(PUBLISHER, 'publisher',
-                                   ['--ticks', '1500', '--rate', '1000', '--clock'])
+                               '-p', 'batch_period:=0.05', '-p', READY_TOPICS)
+    # the publisher starts once both sides of every match are there (a message published
+    # before the recorder's reader matched would be missing or repaired out of order)
+    publisher = procs.start_script(PUBLISHER, 'publisher', [
+        '--ticks', '1500', '--rate', '1000', '--clock', '--recorder', '/recorder'])
     wait(lambda: publisher.poll() is not None, 90.0,
          'the publisher to finish (log: %s)' % procs.log(publisher))
     assert publisher.returncode == 0, procs.log(publisher)
@@ -242,9 +248,9 @@ def test_a_burst_of_many_batches_is_recorded_whole_in_publish_order(procs, wait,
     from freejoint_tools.bagfile import open_bag
     bag_path = str(tmp_path / 'burst')
     started_ns = time.time_ns()
-    recorder = _start_recorder(procs, bag_path, '-p', 'batch_period:=0.1')
-    publisher = procs.start_script(PUBLISHER, 'publisher',
-                                   ['--ticks', '3000', '--rate', '0', '--clock'])
+    recorder = _start_recorder(procs, bag_path, '-p', 'batch_period:=0.1', '-p', READY_TOPICS)
+    publisher = procs.start_script(PUBLISHER, 'publisher', [
+        '--ticks', '3000', '--rate', '0', '--clock', '--recorder', '/recorder'])
     wait(lambda: publisher.poll() is not None, 90.0,
          'the publisher to finish (log: %s)' % procs.log(publisher))
     assert publisher.returncode == 0, procs.log(publisher)
