@@ -203,13 +203,19 @@ def _assert_in_publish_order(sequence, ticks, log):
     The publisher sends /clock, joint_states, setpoint, controller_state per tick. On an
     overloaded machine a publisher's history can overflow while the recorder is starved
     of CPU: any message missing must then have been reported lost by the middleware.
+    Once the middleware reports losses, reliable repairs of a lagging topic can arrive
+    after later ticks of the others, and the bag is in arrival order: then each topic
+    must still be in publish order on its own.
     """
     order = ('/clock',) + TICK_TOPICS
-    index = [4 * k + order.index(name) for name, k, _ in sequence]
-    assert index == sorted(set(index)), 'not in publish order'
+    lost = sum(_reported_lost(log, name) for name in order)
+    if lost == 0:
+        index = [4 * k + order.index(name) for name, k, _ in sequence]
+        assert index == sorted(set(index)), 'not in publish order'
     for name in order:
-        kept = sum(1 for n, _, _ in sequence if n == name)
-        assert kept + _reported_lost(log, name) == ticks, (name, kept)
+        ks = [k for n, k, _ in sequence if n == name]
+        assert ks == sorted(set(ks)), '%s not in publish order' % name
+        assert len(ks) + _reported_lost(log, name) == ticks, (name, len(ks))
 
 
 def test_topics_published_interleaved_are_recorded_in_publish_order_after_their_clock(
