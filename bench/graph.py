@@ -25,7 +25,7 @@ preallocated per-step array written once, no per-tick logging; ``freejoint_sim.t
 Benchmarks assert nothing; figures and targets go to ``bench/run_all.py``'s table.
 
 Usage: ``. tools/env.sh && python bench/graph.py [--lockstep-only | --realtime-only]
-[--separate-only | --composed-only]``;
+[--separate-only | --composed-only | --loop-only]``;
 ``FREEJOINT_BENCH_RT_SECONDS=10`` for a quick real-time run.  Logs and bags stay in
 ``bags/bench/graph/`` (git-ignored).
 """
@@ -50,8 +50,11 @@ RT_STARTUP_STEPS = 30000
 """Real time: steps the timing arrays hold beyond the measured window (start-up, stop)."""
 NODES = ('sim_node', 'controller_node', 'planner_node', 'graph', 'recorder')
 STOP_ORDER = ('controller_node', 'planner_node', 'sim_node', 'graph', 'recorder')
-LAYOUTS = {'separate': '', 'composed': ' [1 process]'}
-"""Graph layouts (a process per node / bringup ``graph``) and their tag in the rows."""
+LAYOUTS = {'separate': '', 'composed': ' [1 process]', 'loop': ' [sim+controller 1 process]'}
+"""Graph layouts and their tag in the rows: a process per node; the three nodes in one
+process (bringup ``graph``); the control loop - sim and controller - in one process
+(``graph --nodes sim controller``, as ros2_control keeps hardware and controllers in the
+controller_manager's process) with the planner in its own."""
 DRAIN_PAUSE = 1.0
 """Wall seconds between stopping the controller and the rest (the recorder catches up)."""
 RT_READY_BEFORE_SIM = '[effort_controller/commands, controller_state, setpoint]'
@@ -222,15 +225,20 @@ def start_graph(graph, layout, bag, sim_overrides, ctl_overrides, planner_overri
     sim = ['case:=' + CASE, 'seed:=%d' % SEED] + list(sim_overrides or []) + sched
     ctl = ['case:=' + CASE] + ctl_overrides + sched
     planner = ['case:=' + CASE] + (planner_overrides or ['autostart:=false'])
-    if layout == 'composed':
-        sim, ctl, planner = ([item.replace(':=', '=', 1) for item in items]
-                             for items in (sim, ctl, planner))
-        graph.start('graph', [executable('freejoint_bringup', 'graph'),
-                              '--sim-params', os.path.join(CONFIG, 'sim.yaml'), '--sim', *sim,
-                              '--controller-params', os.path.join(CONFIG, 'controller.yaml'),
-                              '--controller', *ctl,
-                              '--planner-params', os.path.join(CONFIG, 'planner.yaml'),
-                              '--planner', *planner])
+    if layout in ('composed', 'loop'):
+        sim_, ctl_, planner_ = ([item.replace(':=', '=', 1) for item in items]
+                                for items in (sim, ctl, planner))
+        cmd = [executable('freejoint_bringup', 'graph'),
+               '--sim-params', os.path.join(CONFIG, 'sim.yaml'), '--sim', *sim_,
+               '--controller-params', os.path.join(CONFIG, 'controller.yaml'),
+               '--controller', *ctl_]
+        if layout == 'composed':
+            graph.start('graph', cmd + ['--planner-params', os.path.join(CONFIG, 'planner.yaml'),
+                                        '--planner', *planner_])
+            return
+        graph.start('graph', cmd + ['--nodes', 'sim', 'controller'])
+        graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node',
+                                             'planner.yaml', planner))
         return
     if sim_overrides is not None:
         start_sim(graph, sim_overrides)
@@ -542,7 +550,7 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS):
         # controller answers from the first state on: the simulator starts last (separate
         # processes), at rest on that point.
         sim = ['mode:=realtime', 'timing_file:=' + timing_path, 'timing_steps:=%d' % steps]
-        composed = layout == 'composed'
+        composed = layout != 'separate'     # the sim starts with the controller
         start_graph(graph, layout, bag, sim if composed else None, ['lockstep:=false'],
                     ['use_sim_time:=false', 'autostart:=true', 'start_delay:=3600.0'],
                     ['use_sim_time:=false', 'ready_topics:=' + RT_READY_BEFORE_SIM],
@@ -637,8 +645,8 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS):
     return rows
 
 
-RUNS = (('lockstep', 'separate'), ('lockstep', 'composed'), ('realtime', 'separate'),
-        ('realtime', 'composed'))
+RUNS = (('lockstep', 'separate'), ('lockstep', 'composed'), ('lockstep', 'loop'),
+        ('realtime', 'separate'), ('realtime', 'composed'), ('realtime', 'loop'))
 
 
 def run(which=RUNS):
@@ -678,7 +686,8 @@ def main(argv):
              if not ('--lockstep-only' in argv and k != 'lockstep')
              and not ('--realtime-only' in argv and k != 'realtime')
              and not ('--separate-only' in argv and lay != 'separate')
-             and not ('--composed-only' in argv and lay != 'composed')]
+             and not ('--composed-only' in argv and lay != 'composed')
+             and not ('--loop-only' in argv and lay != 'loop')]
     for row in run(which):
         value = row['value']
         print('%-58s %12s %-8s %s' % (row['name'], 'n/a' if value is None else '%.4g' % value,
