@@ -186,6 +186,12 @@ class Graph:
                 time.sleep(DRAIN_PAUSE)
         return codes
 
+    def diverged(self):
+        """Return how often the simulator logged a diverged integration (its log lines)."""
+        name = 'sim_node' if 'sim_node' in self.procs else 'graph'
+        with open(self.procs[name].log_path) as f:
+            return sum(1 for line in f if 'holding the last finite state' in line)
+
     def tail(self, name, lines=5):
         """Return the last lines of a process log."""
         with open(self.procs[name].log_path) as f:
@@ -593,6 +599,10 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS):
         hwm = graph.vmhwm()
     finally:
         codes = graph.stop_all()
+    diverged = graph.diverged()
+    if diverged:
+        say('%s: the simulator logged %d diverged integration(s) (plant held at its last '
+            'finite state; logs in %s)' % (tag, diverged, graph.log_dir))
     load1 = load_average()
     t = np.load(timing_path)
     pub, rec, applied = t['published'], t['received'], t['applied']
@@ -632,6 +642,8 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS):
          'value': stale, 'unit': 'periods', 'target': '<= 0'},
         {'name': '%s: periods skipped (timer behind)' % tag, 'value': skipped,
          'unit': 'periods', 'target': '<= 0'},
+        {'name': '%s: plant diverged (sim log lines)' % tag, 'value': diverged,
+         'unit': 'lines', 'target': '<= 0'},
         {'name': '%s: max gap between state publications' % tag,
          'value': gaps.max() * 1e-3, 'unit': 'ms', 'target': None},
         {'name': '%s: tracking error max' % tag, 'value': max_mm,
