@@ -31,7 +31,6 @@ Usage: ``. tools/env.sh && python bench/graph.py [--lockstep-only | --realtime-o
 """
 
 import os
-import re
 import shutil
 import signal
 import subprocess
@@ -331,18 +330,9 @@ class Client:
         Called once the simulator holds at ``max_steps`` (the graph is silent): a steady
         count means the recorder has taken everything. Return (count or None, wall s).
         """
-        start = time.monotonic()
-        last, since = None, start
-        while time.monotonic() < start + timeout:
-            match = re.search(r'received (\d+)', self.recorder_status())
-            count = int(match.group(1)) if match else None
-            now = time.monotonic()
-            if count != last:
-                last, since = count, now
-            elif count is not None and now - since >= quiet:
-                return count, since - start
-            self.spin_until(lambda: False, 0.1)
-        return last, time.monotonic() - start
+        from freejoint_tools.recorder import wait_drained
+        return wait_drained(self.recorder_status, quiet, timeout,
+                            lambda: self.spin_until(lambda: False, 0.1))
 
     def plan_circle(self, plan, timeout=20.0):
         """Ask the planner for the configured circle, executed at once; return the answer."""

@@ -18,7 +18,6 @@ unless ``ROS_AUTOMATIC_DISCOVERY_RANGE`` says otherwise.
 """
 import argparse
 import os
-import re
 import signal
 import struct
 import subprocess
@@ -338,22 +337,19 @@ def recorder_drained(executor, node, quiet, timeout):
     Called once the simulator holds (``max_steps``): the graph is silent, so a steady count
     means the recorder has taken everything published. Return the count (None: no answer).
     """
+    from freejoint_tools.recorder import wait_drained
     from std_srvs.srv import Trigger
     client = node.create_client(Trigger, '/recorder/status')
     deadline = time.monotonic() + timeout
-    last, since = None, time.monotonic()
+
+    def read_status():
+        answer = call(executor, client, Trigger.Request(), deadline - time.monotonic())
+        return answer.message if answer is not None else None
+
     try:
-        while time.monotonic() < deadline:
-            answer = call(executor, client, Trigger.Request(), deadline - time.monotonic())
-            match = answer and re.search(r'received (\d+)', answer.message)
-            count = int(match.group(1)) if match else None
-            now = time.monotonic()
-            if count != last:
-                last, since = count, now
-            elif count is not None and now - since >= quiet:
-                return count
-            spin_until(executor, lambda: False, 0.1)
-        return last
+        count, _settled = wait_drained(read_status, quiet, timeout,
+                                       lambda: spin_until(executor, lambda: False, 0.1))
+        return count
     finally:
         node.destroy_client(client)
 

@@ -65,6 +65,7 @@ import datetime
 import importlib
 import operator
 import os
+import re
 import shutil
 import signal
 import struct
@@ -621,6 +622,51 @@ class Recorder(Node):
         """Destroy the node and the one that holds the recording subscriptions."""
         self._takes_node.destroy_node()
         super().destroy_node()
+
+
+def received_count(status):
+    """Return the message count a ``~/status`` answer reports ('received N'), or None."""
+    match = re.search(r'; received (\d+);', status or '')
+    return int(match.group(1)) if match else None
+
+
+def wait_drained(read_status, quiet, timeout, pause):
+    """
+    Wait until the recorder's received count stays the same for ``quiet`` s.
+
+    Meant for once the graph is silent (a lockstep simulator holding at ``max_steps``): a
+    steady count then means the recorder has taken everything published.
+
+    Parameters
+    ----------
+    read_status : callable
+        Returns the message of a ``~/status`` answer ('' or None: no answer).
+    quiet : float
+        Seconds the count must stay unchanged.
+    timeout : float
+        Seconds to wait at most.
+    pause : callable
+        Called between two reads (spin the caller's node for a moment).
+
+    Returns
+    -------
+    count : int or None
+        The steady count (the last one read on timeout; None: never answered).
+    settled : float
+        Seconds from the call to the count's last change (on timeout: to the timeout).
+
+    """
+    start = time.monotonic()
+    last, since = None, start
+    while time.monotonic() < start + timeout:
+        count = received_count(read_status())
+        now = time.monotonic()
+        if count != last:
+            last, since = count, now
+        elif count is not None and now - since >= quiet:
+            return count, since - start
+        pause()
+    return last, time.monotonic() - start
 
 
 def clock_ns(data):
