@@ -138,6 +138,19 @@ def request_scheduling(node, values, at_start=False):
     return reason
 
 
+def scheduling_refusal(node, params, values):
+    """
+    Apply a change of ``thread_priority`` / ``cpu_affinity`` among ``params`` (set-callback).
+
+    ``values`` are the node's validated values with ``params`` in them. Returns None when
+    neither is among ``params`` or the change is applied, else the reason to refuse the
+    parameters with.
+    """
+    if not any(p.name in SCHEDULING_NAMES for p in params):
+        return None
+    return request_scheduling(node, values)
+
+
 def plain(value):
     """Parameter value as plain Python (arrays as lists)."""
     if isinstance(value, (str, bool, int, float)) or value is None:

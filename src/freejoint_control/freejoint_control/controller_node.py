@@ -16,7 +16,7 @@ import math
 import time
 
 from freejoint_common.node_tools import declare, plain, request_scheduling, run
-from freejoint_common.node_tools import SCHEDULING_NAMES, Throttle
+from freejoint_common.node_tools import scheduling_refusal, Throttle
 from freejoint_control.params import build_config, SPECS
 from freejoint_core.control import (RobustController, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
@@ -117,10 +117,9 @@ class ControllerNode(Node):
             cfg = build_config(values)
         except FreejointValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        if any(p.name in SCHEDULING_NAMES for p in params):
-            reason = request_scheduling(self, values)
-            if reason is not None:
-                return SetParametersResult(successful=False, reason=reason)
+        reason = scheduling_refusal(self, params, values)
+        if reason is not None:
+            return SetParametersResult(successful=False, reason=reason)
         old = self.config
         if cfg.nominal != old.nominal:
             self._ctl.set_nominal(cfg.nominal)

@@ -37,7 +37,7 @@ import time
 
 from builtin_interfaces.msg import Time
 from freejoint_common.node_tools import declare, plain, request_scheduling, run
-from freejoint_common.node_tools import SCHEDULING_NAMES, Throttle
+from freejoint_common.node_tools import scheduling_refusal, Throttle
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.plant import Plant
 from freejoint_sim.params import build_config, SPECS
@@ -168,10 +168,9 @@ class SimNode(Node):
             cfg = build_config(values)
         except FreejointValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        if any(p.name in SCHEDULING_NAMES for p in params):
-            reason = request_scheduling(self, values)
-            if reason is not None:
-                return SetParametersResult(successful=False, reason=reason)
+        reason = scheduling_refusal(self, params, values)
+        if reason is not None:
+            return SetParametersResult(successful=False, reason=reason)
         self._install(cfg)
         self._ee.header.frame_id = cfg.frame_id
         self._values = values
