@@ -28,8 +28,10 @@ class Spec:
     One parameter: default value, description, optional (min, max), read-only.
 
     An int default with bounds gets an integer range, a float one a floating-point range.
-    A default of None declares an integer array without a value (rclpy cannot declare an
-    empty typed array): the node reads None, ``ros2 param set`` takes an integer array.
+    A default of None declares an empty integer array (rclpy cannot declare an empty typed
+    array with a default, so :func:`declare` sets it right after declaring it): the node
+    reads None, ``ros2 param get`` / ``dump`` show ``[]``, ``ros2 param set`` takes an
+    integer array.
     """
 
     name: str
@@ -86,7 +88,12 @@ def declare(node, specs):
         desc = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
         if spec.default is None:
             param = node.declare_parameter(spec.name, Parameter.Type.INTEGER_ARRAY, desc)
-            values[spec.name] = plain(param.value)     # None unless given at start-up
+            if param.type_ == Parameter.Type.NOT_SET:
+                # A parameter without a value makes rclpy's GetParameters answer an empty
+                # list for any request naming it: `ros2 param dump`, rqt and Foxglove then
+                # get nothing at all. An empty typed array is a value.
+                node.set_parameters([Parameter(spec.name, Parameter.Type.INTEGER_ARRAY, [])])
+            values[spec.name] = plain(param.value) or None    # None: not given
             continue
         if spec.bounds is not None and isinstance(spec.default, int):
             desc.integer_range = [IntegerRange(
@@ -243,6 +250,20 @@ def spin_until(spin_once, ok, stop):
             refresh()
 
 
+def parameter_error(exc):
+    """
+    One line naming the parameter and the reason, from a start-up parameter error.
+
+    ``FreejointValueError`` messages already start with the name; rclpy's
+    ``ParameterException`` ends with it ('<reason>: <name>'), so it is moved to the front.
+    """
+    text = ' '.join(str(exc).split())
+    if isinstance(exc, FreejointValueError):
+        return text
+    reason, sep, names = text.rpartition(': ')
+    return '%s: %s' % (names, reason) if sep else text
+
+
 def run(make_node, name, args=None, on_stop=None):
     """
     Run a freejoint node process: init, spin until SIGINT/SIGTERM, stop between callbacks.
@@ -259,11 +280,13 @@ def run(make_node, name, args=None, on_stop=None):
     on_stop : callable, optional
         Called with the node before it is destroyed (final report, files).
 
-    A bad start-up parameter (``FreejointValueError``) is logged as fatal, naming it, and
-    the process exits with status 2.
+    A bad start-up parameter (the node's own validation, ``FreejointValueError``, or
+    rclpy's range and type checks of the overrides) is one fatal line naming it and the
+    reason, and the process exits with status 2, without a traceback.
 
     """
     import rclpy
+    from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -272,8 +295,8 @@ def run(make_node, name, args=None, on_stop=None):
         node = make_node()
         config = getattr(node, 'config', None)
         spin(node, getattr(config, 'executor', 'events'))
-    except FreejointValueError as exc:
-        rclpy.logging.get_logger(name).fatal('bad parameter: %s' % exc)
+    except (FreejointValueError, ParameterException) as exc:
+        rclpy.logging.get_logger(name).fatal('bad parameter: %s' % parameter_error(exc))
         raise SystemExit(2)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
