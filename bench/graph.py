@@ -12,7 +12,10 @@ rows tagged ``[1 process]``). Each run is isolated in a ROS domain of its own wi
   (simulated / wall time, from the simulator's own per-step publish times of steps 0 and
   5000), per-tick wall time, state->command latency, ticks in the bag;
 * real time, 1 kHz, recorder on, ``FREEJOINT_BENCH_RT_SECONDS`` (default 60) s of the
-  paper's circle repeated back to back: state->command latency p50 / p99 / max (from the
+  paper's circle repeated, each asked for 0.5 s after the previous one's duration from the
+  reply that accepted it (not on a fixed wall-clock grid: a late reply must not cut the
+  running circle off), the horizontal case in each layout and the vertical case with a
+  process per node: state->command latency p50 / p99 / max (from the
   simulator's publication of state k to its receipt of the command answering k), control
   periods without a fresh command (the command applied over period k did not answer state
   k, or none came), periods skipped, the tracking error (from the bag's controller_state)
@@ -25,7 +28,7 @@ preallocated per-step array written once, no per-tick logging; ``freejoint_sim.t
 Benchmarks assert nothing; figures and targets go to ``bench/run_all.py``'s table.
 
 Usage: ``. tools/env.sh && python bench/graph.py [--lockstep-only | --realtime-only]
-[--separate-only | --composed-only | --loop-only]``;
+[--separate-only | --composed-only | --loop-only] [--horizontal-only | --vertical-only]``;
 ``FREEJOINT_BENCH_RT_SECONDS=10`` for a quick real-time run.  Logs and bags stay in
 ``bags/bench/graph/`` (git-ignored).
 """
@@ -66,9 +69,9 @@ AFFINITY = os.environ.get('FREEJOINT_BENCH_AFFINITY', '')
 """cpu_affinity of the simulator and the controller, e.g. '1' or '0,1' ('' = not set)."""
 
 
-def scheduling_overrides():
+def scheduling_overrides(priority=None):
     """Return the sim's and the controller's thread_priority / cpu_affinity overrides."""
-    items = ['thread_priority:=%d' % PRIORITY]
+    items = ['thread_priority:=%d' % (PRIORITY if priority is None else priority)]
     if AFFINITY:
         items.append('cpu_affinity:=[%s]' % AFFINITY)
     return items
@@ -122,14 +125,20 @@ class Graph:
         self.procs = {}
         self._cpu = {}
 
-    def start(self, name, cmd):
-        """Start ``cmd`` (its output to <log_dir>/<tag>_<name>.log); return the Popen."""
+    def start(self, name, cmd, log_name=None):
+        """
+        Start ``cmd`` (its output to <log_dir>/<tag>_<log_name or name>.log); return it.
+
+        A name already running is replaced in ``procs`` (a restart: stop or kill the old
+        process first); ``log_name`` keeps the old one's log.
+        """
         os.makedirs(self.log_dir, exist_ok=True)
-        path = os.path.join(self.log_dir, '%s_%s.log' % (self.tag, name))
+        path = os.path.join(self.log_dir, '%s_%s.log' % (self.tag, log_name or name))
         log = open(path, 'w')
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self.env,
                                 start_new_session=True, cwd=ROOT)
         proc.log_path = path
+        proc.logs = [path] + list(getattr(self.procs.get(name), 'logs', []))
         proc.log_file = log
         self.procs[name] = proc
         return proc
@@ -186,10 +195,14 @@ class Graph:
         return codes
 
     def diverged(self):
-        """Return how often the simulator logged a diverged integration (its log lines)."""
+        """Return the simulator's warning/error log lines about a diverged plant (all runs)."""
         name = 'sim_node' if 'sim_node' in self.procs else 'graph'
-        with open(self.procs[name].log_path) as f:
-            return sum(1 for line in f if 'holding the last finite state' in line)
+        count = 0
+        for path in self.procs[name].logs:
+            with open(path) as f:
+                count += sum(1 for line in f if 'diverg' in line.lower()
+                             and ('[ERROR]' in line or '[WARN]' in line))
+        return count
 
     def tail(self, name, lines=5):
         """Return the last lines of a process log."""
@@ -205,15 +218,15 @@ def node_cmd(pkg, exe, config, overrides):
     return cmd
 
 
-def start_sim(graph, overrides):
+def start_sim(graph, overrides, case=CASE, priority=None):
     """Start the simulator (its own process)."""
     graph.start('sim_node', node_cmd('freejoint_sim', 'sim_node', 'sim.yaml',
-                                     ['case:=' + CASE, 'seed:=%d' % SEED] + overrides
-                                     + scheduling_overrides()))
+                                     ['case:=' + case, 'seed:=%d' % SEED] + overrides
+                                     + scheduling_overrides(priority)))
 
 
 def start_graph(graph, layout, bag, sim_overrides, ctl_overrides, planner_overrides,
-                rec_overrides, custom):
+                rec_overrides, custom, case=CASE):
     """
     Start the recorder (unless ``bag`` is None) and the three nodes.
 
@@ -227,9 +240,9 @@ def start_graph(graph, layout, bag, sim_overrides, ctl_overrides, planner_overri
                                  '-p', 'overwrite:=true', '-p', 'custom_data:=[%s]' % custom]
                     + [a for item in rec_overrides for a in ('-p', item)])
     sched = scheduling_overrides()
-    sim = ['case:=' + CASE, 'seed:=%d' % SEED] + list(sim_overrides or []) + sched
-    ctl = ['case:=' + CASE] + ctl_overrides + sched
-    planner = ['case:=' + CASE] + (planner_overrides or ['autostart:=false'])
+    sim = ['case:=' + case, 'seed:=%d' % SEED] + list(sim_overrides or []) + sched
+    ctl = ['case:=' + case] + ctl_overrides + sched
+    planner = ['case:=' + case] + (planner_overrides or ['autostart:=false'])
     if layout in ('composed', 'loop'):
         sim_, ctl_, planner_ = ([item.replace(':=', '=', 1) for item in items]
                                 for items in (sim, ctl, planner))
@@ -246,7 +259,7 @@ def start_graph(graph, layout, bag, sim_overrides, ctl_overrides, planner_overri
                                              'planner.yaml', planner))
         return
     if sim_overrides is not None:
-        start_sim(graph, sim_overrides)
+        start_sim(graph, sim_overrides, case)
     graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
                                             'controller.yaml', ctl))
     graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node', 'planner.yaml',
@@ -492,20 +505,20 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True):
 
 
 # -- real time --------------------------------------------------------------------------
-_BOUND = []
+_BOUND = {}
 
 
-def offline_bound():
+def offline_bound(case=CASE):
     """Return the offline runner's worst max / rms tracking error [mm] over seeds 0-9."""
     from freejoint_core.offline import run_case
-    if not _BOUND:
+    if case not in _BOUND:
         worst_max = worst_rms = 0.0
         for seed in OFFLINE_SEEDS:
-            record, _ = run_case(CASE, 'robust', seed)
+            record, _ = run_case(case, 'robust', seed)
             worst_max = max(worst_max, record['max_mm'])
             worst_rms = max(worst_rms, record['rms_mm'])
-        _BOUND.extend((worst_max, worst_rms))
-    return tuple(_BOUND)
+        _BOUND[case] = (worst_max, worst_rms)
+    return _BOUND[case]
 
 
 def tracking_error(bag, window_ns):
@@ -525,65 +538,112 @@ def tracking_error(bag, window_ns):
     return float(err.max()), float(np.sqrt(np.mean(err ** 2))), len(err)
 
 
-def realtime(client, env, layout='separate', seconds=RT_SECONDS):
+def bring_up_realtime(client, graph, layout, bag, case, sim, ctl=(), planner=(),
+                      custom=None, reset=True):
+    """
+    Start a real-time graph with the recorder and wait until it runs; raise if it does not.
+
+    The planner holds the start point (the configured circle, delayed "forever"), the
+    controller answers from the first state on: the simulator starts last (separate
+    processes), at rest on that point. Discovery can take seconds, so once the controller
+    answers, the arm goes back to q(0) at rest (the simulator's ``~/reset``, if ``reset``).
+    ``sim`` / ``ctl`` / ``planner``: extra overrides of each node.
+    """
+    composed = layout != 'separate'     # the sim starts with the controller
+    sim = ['mode:=realtime'] + list(sim)
+    start_graph(graph, layout, bag, sim if composed else None,
+                ['lockstep:=false'] + list(ctl),
+                ['use_sim_time:=false', 'autostart:=true', 'start_delay:=3600.0']
+                + list(planner),
+                ['use_sim_time:=false', 'ready_topics:=' + RT_READY_BEFORE_SIM],
+                custom or 'case=%s, variant=robust, seed=%d' % (case, SEED), case)
+    ok, status = client.recorder_ready(60.0)
+    if not ok:
+        raise RuntimeError('recorder not ready after 60 s: %s' % status)
+    if not composed:
+        start_sim(graph, sim, case)
+    if not client.spin_until(lambda: graph.exited() or all(
+            ' %s 1' % t in client.recorder_status() for t in RT_SIM_TOPICS), 60.0):
+        raise RuntimeError('the recorder did not match the simulator within 60 s')
+    _raise_if_exited(graph)
+    if not client.controller_answers(60.0):
+        raise RuntimeError('the controller does not answer the simulator after 60 s')
+    if reset:
+        from std_srvs.srv import Trigger
+        if client.call(Trigger, '/sim_node/reset', Trigger.Request(), 20.0) is None:
+            raise RuntimeError('the simulator did not answer ~/reset')
+    client.spin_until(lambda: False, 1.0)   # the controller holds the start point
+
+
+def _raise_if_exited(graph):
+    exited = graph.exited()
+    if exited:
+        raise RuntimeError('%s exited at start-up (logs in %s): %s' % (
+            ', '.join(exited), graph.log_dir, graph.tail(exited[0], 2).strip()))
+
+
+class CircleLoop:
+    """
+    The configured circle asked for again and again, each from when the previous was accepted.
+
+    A plan is asked for ``period`` s (the circle's duration + 0.5 s) after the reply that
+    accepted the previous one: a late answer (discovery, a loaded machine) delays the next
+    plan instead of cutting the running one off.
+    """
+
+    def __init__(self, client, plan=None, period=None):
+        self.client = client
+        self.plan = plan or ros_params('planner.yaml')
+        self.period = float(self.plan['duration']) + 0.5 if period is None else period
+        self.next = time.monotonic()
+        self.accepted = []
+        """Monotonic wall times of the accepting replies."""
+        self.accepted_wall = []
+        """System-clock times (s) of the accepting replies."""
+
+    def poll(self):
+        """Ask for the next circle if it is due; raise if the planner refuses or is silent."""
+        if time.monotonic() < self.next:
+            return False
+        answer = self.client.plan_circle(self.plan)
+        if answer is None or not answer.accepted:
+            raise RuntimeError('the planner did not start the circle: %s' % (
+                'no answer' if answer is None else answer.reason))
+        now = time.monotonic()
+        self.accepted.append(now)
+        self.accepted_wall.append(time.time())
+        self.next = now + self.period
+        return True
+
+
+def realtime(client, env, layout='separate', seconds=RT_SECONDS, case=CASE):
     """Run the graph in real time with the recorder for ``seconds``; return the rows."""
     import numpy as np
-    tag = 'real time' + LAYOUTS[layout]
-    run_dir = os.path.join(OUT, 'realtime_' + layout)
+    tag = 'real time' + ('' if case == CASE else ' ' + case) + LAYOUTS[layout]
+    run_dir = os.path.join(OUT, 'realtime_' + layout + ('' if case == CASE else '_' + case))
     shutil.rmtree(run_dir, ignore_errors=True)
     timing_path = os.path.join(run_dir, 'timing.npz')
     bag = os.path.join(run_dir, 'bag')
     graph = Graph(os.path.join(run_dir, 'logs'), 'realtime', env)
-    plan = ros_params('planner.yaml')
-    period = float(plan['duration']) + 0.5
     steps = int(seconds * 1000) + RT_STARTUP_STEPS
+    loop = CircleLoop(client)
     load0 = load_average()
-    say('%s: %g s at 1 kHz, recorder on, the circle every %g s, ROS_DOMAIN_ID %s, '
-        'load %.2f' % (tag, seconds, period, env['ROS_DOMAIN_ID'], load0))
-    plans = 0
+    say('%s: %g s at 1 kHz, recorder on, the circle %g s after the previous was accepted, '
+        'ROS_DOMAIN_ID %s, load %.2f'
+        % (tag, seconds, loop.period, env['ROS_DOMAIN_ID'], load0))
     exited = []
     try:
-        # The planner holds the start point (the configured circle, delayed "forever"), the
-        # controller answers from the first state on: the simulator starts last (separate
-        # processes), at rest on that point.
-        sim = ['mode:=realtime', 'timing_file:=' + timing_path, 'timing_steps:=%d' % steps]
-        composed = layout != 'separate'     # the sim starts with the controller
-        start_graph(graph, layout, bag, sim if composed else None, ['lockstep:=false'],
-                    ['use_sim_time:=false', 'autostart:=true', 'start_delay:=3600.0'],
-                    ['use_sim_time:=false', 'ready_topics:=' + RT_READY_BEFORE_SIM],
-                    'case=%s, variant=robust, seed=%d' % (CASE, SEED))
-        ok, status = client.recorder_ready(60.0)
-        if not ok:
-            raise RuntimeError('recorder not ready after 60 s: %s' % status)
-        if not composed:
-            start_sim(graph, sim)
-        if not client.spin_until(lambda: all(
-                ' %s 1' % t in client.recorder_status() for t in RT_SIM_TOPICS), 60.0):
-            raise RuntimeError('the recorder did not match the simulator within 60 s')
-        # Discovery can take seconds: the arm may have drifted (zero effort) until the
-        # controller answered. Once it does, the arm goes back to q(0) at rest (~/reset).
-        if not client.controller_answers(60.0):
-            raise RuntimeError('the controller does not answer the simulator after 60 s')
-        from std_srvs.srv import Trigger
-        if client.call(Trigger, '/sim_node/reset', Trigger.Request(), 20.0) is None:
-            raise RuntimeError('the simulator did not answer ~/reset')
-        client.spin_until(lambda: False, 1.0)   # the controller holds the start point
+        bring_up_realtime(client, graph, layout, bag, case,
+                          ['timing_file:=' + timing_path, 'timing_steps:=%d' % steps])
         start = time.monotonic()
         cpu0 = graph.cpu()
-        next_plan = start
         while time.monotonic() < start + seconds:
             exited = graph.exited()
             if exited:
                 say('%s: %s exited during the run (logs in %s): %s' % (
                     tag, ', '.join(exited), graph.log_dir, graph.tail(exited[0], 3).strip()))
                 break
-            if time.monotonic() >= next_plan:
-                answer = client.plan_circle(plan)
-                if answer is None or not answer.accepted:
-                    raise RuntimeError('the planner did not start the circle: %s' % (
-                        'no answer' if answer is None else answer.reason))
-                plans += 1
-                next_plan += period
+            loop.poll()
             time.sleep(0.05)
         end = time.monotonic()
         cpu1 = graph.cpu()
@@ -611,13 +671,14 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS):
     gaps = np.diff(pub[k0:k1 + 1]) * 1e6
     max_mm, rms_mm, n_err = tracking_error(bag, (int(t['stamp_ns'][k0]),
                                                  int(t['stamp_ns'][k1])))
-    bound_max, bound_rms = offline_bound()
+    bound_max, bound_rms = offline_bound(case)
     say('%s: %d periods in %.1f s, latency p50 %.0f us p99 %.0f us max %.0f us, %d '
         'without a fresh command (%d without any), %d skipped; tracking max %.3f mm rms %.3f '
         'mm over %d ticks (offline worst max %.3f, rms %.3f); %d plans; exit codes %s; '
         'load %.2f -> %.2f' % (tag, len(ks), end - start, p50, p99, pmax, stale,
                                int(np.count_nonzero(~got)), skipped, max_mm, rms_mm, n_err,
-                               bound_max, bound_rms, plans, codes, load0, load1))
+                               bound_max, bound_rms, len(loop.accepted), codes, load0,
+                               load1))
     rows = [
         {'name': '%s: seconds measured (of %g)' % (tag, seconds),
          'value': (pub[k1] - pub[k0]), 'unit': 's', 'target': '>= %g' % (0.99 * seconds)},
@@ -648,9 +709,12 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS):
     return rows
 
 
-RUNS = (('lockstep', 'separate'), ('lockstep', 'composed'), ('lockstep', 'loop'),
-        ('realtime', 'separate'), ('realtime', 'composed'), ('realtime', 'loop'))
-"""The runs of ``make bench``: both modes in each layout."""
+RUNS = (('lockstep', 'separate', CASE), ('lockstep', 'composed', CASE),
+        ('lockstep', 'loop', CASE), ('realtime', 'separate', CASE),
+        ('realtime', 'separate', 'vertical'), ('realtime', 'composed', CASE),
+        ('realtime', 'loop', CASE))
+"""The runs of ``make bench``: both modes in each layout (the horizontal case), and the
+vertical case in real time, a process per node."""
 ALL_RUNS = RUNS
 
 
@@ -669,17 +733,21 @@ def run(which=RUNS):
              'value': PRIORITY, 'unit': '', 'target': None}]
     say('sim and controller: thread_priority %d%s' % (
         PRIORITY, ', cpu_affinity [%s]' % AFFINITY if AFFINITY else ''))
-    for i, (kind, layout) in enumerate(which):
+    for i, (kind, layout, case) in enumerate(which):
         env = _env(i)
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
         os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']   # this process's node too
         client = Client()
         try:
-            rows += (lockstep if kind == 'lockstep' else realtime)(client, env, layout)
+            if kind == 'lockstep':
+                rows += lockstep(client, env, layout)
+            else:
+                rows += realtime(client, env, layout, case=case)
         except (RuntimeError, OSError) as exc:
-            say('%s (%s) run failed: %s' % (kind, layout, exc))
-            rows.append({'name': '%s%s run completed' % (kind, LAYOUTS[layout]), 'value': 0,
-                         'unit': '', 'target': '>= 1'})
+            say('%s %s (%s) run failed: %s' % (kind, case, layout, exc))
+            rows.append({'name': '%s%s%s run completed' % (
+                kind, '' if case == CASE else ' ' + case, LAYOUTS[layout]), 'value': 0,
+                'unit': '', 'target': '>= 1'})
         finally:
             client.close()
     return rows
@@ -688,12 +756,14 @@ def run(which=RUNS):
 def main(argv):
     """Run the benchmark from the command line; print the rows."""
     runs = ALL_RUNS if '--loop-only' in argv else RUNS
-    which = [(k, lay) for k, lay in runs
+    which = [(k, lay, case) for k, lay, case in runs
              if not ('--lockstep-only' in argv and k != 'lockstep')
              and not ('--realtime-only' in argv and k != 'realtime')
              and not ('--separate-only' in argv and lay != 'separate')
              and not ('--composed-only' in argv and lay != 'composed')
-             and not ('--loop-only' in argv and lay != 'loop')]
+             and not ('--loop-only' in argv and lay != 'loop')
+             and not ('--horizontal-only' in argv and case != 'horizontal')
+             and not ('--vertical-only' in argv and case != 'vertical')]
     for row in run(which):
         value = row['value']
         print('%-58s %12s %-8s %s' % (row['name'], 'n/a' if value is None else '%.4g' % value,
