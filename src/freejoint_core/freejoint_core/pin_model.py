@@ -1,0 +1,347 @@
+"""
+Dynamics of a URDF arm from Pinocchio (rigid-body algorithms on the robot description).
+
+``PinArmModel`` has the ``ArmModel`` interface (``fk``, ``jacobian``, ``jdot_qdot``,
+``mass_matrix``, ``coriolis``, ``gravity_torque``, ``forward_dynamics``,
+``decoupling``, plus the inherited ``partition``, ``effective``, ``energy``, ``ik``),
+computed by Pinocchio from the URDF text of a :class:`freejoint_core.urdf.UrdfArm`:
+
+* ``M(q)``: ``crba`` (upper triangle, mirrored);
+* ``C(q, qd) qd = nonLinearEffects(q, qd) - computeGeneralizedGravity(q)``;
+* ``G(q)``: ``computeGeneralizedGravity`` with the model's gravity set to the arm's
+  gravity vector in the base frame;
+* ``J``: the x, y rows of the end-effector frame Jacobian (``LOCAL_WORLD_ALIGNED``);
+* ``Jdot qd``: the x, y rows of the end-effector frame's classical acceleration after
+  ``forwardKinematics(q, qd, 0)`` (zero joint acceleration);
+* ``fk``: the x, y of the end-effector frame placement.
+
+A nominal model (``scale != 1``) multiplies every body's mass, centre-of-mass lever
+and rotational inertia by ``scale``, as ``ArmParams.scaled``.  Continuous joints
+(two configuration entries, cos and sin) are mapped from the core's angles.
+
+``terms(q, qd)`` gives ``M``, ``h = C qd + G``, ``J``, ``Jdot qd`` and ``fk`` from one
+pass (the per-tick cost measured in ``bench/core_urdf.py``).
+"""
+
+from freejoint_core.arm import ArmModel, check_vector
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.urdf import UrdfArm
+import numpy as np
+import pinocchio as pin
+
+_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+class PinArmModel(ArmModel):
+    """
+    Planar arm dynamics from Pinocchio, ``ArmModel`` interface.
+
+    Parameters
+    ----------
+    arm : UrdfArm
+        The parsed description (URDF text, joint order, passive joints, gravity).
+    scale : float
+        Nominal factor on masses, inertias and COM levers (1.0: the URDF's values).
+
+    """
+
+    def __init__(self, arm, scale=1.0):
+        if not isinstance(arm, UrdfArm):
+            raise FreejointValueError(f'arm: expected UrdfArm, got {type(arm).__name__}')
+        params = arm.params if scale == 1.0 else arm.nominal(scale)
+        super().__init__(params)
+        self.arm = arm
+        try:
+            model = pin.buildModelFromXML(arm.urdf)
+        except (RuntimeError, ValueError) as exc:
+            raise FreejointValueError(f'arm: Pinocchio cannot read the URDF ({exc})') from None
+        if scale != 1.0:
+            for j in range(1, model.njoints):
+                inert = model.inertias[j]
+                model.inertias[j] = pin.Inertia(scale * inert.mass, scale * inert.lever,
+                                                scale * inert.inertia)
+        model.gravity.linear = np.array(arm.gravity_vector, dtype=float)
+        self.pin_model = model
+        self.pin_data = model.createData()
+        if not model.existFrame(arm.ee_link):
+            raise FreejointValueError(f'arm: Pinocchio has no frame {arm.ee_link!r}')
+        self._frame = model.getFrameId(arm.ee_link)
+        # core joint i -> Pinocchio (idx_q, nq, idx_v)
+        slots = []
+        for jname in arm.joint_names:
+            jid = model.getJointId(jname)
+            if jid >= model.njoints:
+                raise FreejointValueError(f'arm: Pinocchio has no joint {jname!r}')
+            jm = model.joints[jid]
+            slots.append((jm.idx_q, jm.nq, jm.idx_v))
+        if model.nv != self.n:
+            raise FreejointValueError(
+                f'arm: Pinocchio model has nv = {model.nv}, expected {self.n} joints')
+        self._slots = slots
+        self._vperm = np.array([s[2] for s in slots])
+        self._identity = (all(nq == 1 for _, nq, _ in slots)
+                          and [s[0] for s in slots] == list(range(self.n))
+                          and list(self._vperm) == list(range(self.n)))
+        self._zero = np.zeros(model.nv)
+
+    # -- conversions --------------------------------------------------------
+    def _config(self, q):
+        """Pinocchio configuration of the core's joint angles (validated)."""
+        q = self._q(q)
+        if self._identity:
+            return q
+        cfg = np.zeros(self.pin_model.nq)
+        for qi, (iq, nq, _) in zip(q, self._slots):
+            if nq == 1:
+                cfg[iq] = qi
+            else:
+                cfg[iq], cfg[iq + 1] = np.cos(qi), np.sin(qi)
+        return cfg
+
+    def _vel(self, qd, name='qd'):
+        qd = self._q(qd, name)
+        if self._identity:
+            return qd
+        out = np.zeros(self.pin_model.nv)
+        out[self._vperm] = qd
+        return out
+
+    def _back(self, vec):
+        """Core order of a Pinocchio velocity-space vector."""
+        return np.array(vec[self._vperm]) if not self._identity else np.array(vec)
+
+    def _back_mat(self, mat):
+        return np.array(mat[np.ix_(self._vperm, self._vperm)])
+
+    # -- kinematics ---------------------------------------------------------
+    def fk(self, q):
+        """
+        End-effector position from the frame placement.
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+
+        Returns
+        -------
+        numpy.ndarray, (2,)
+            End-effector (x, y) [m] in the base frame.
+
+        """
+        m, d = self.pin_model, self.pin_data
+        pin.framesForwardKinematics(m, d, self._config(q))
+        return np.array(d.oMf[self._frame].translation[:2])
+
+    def jacobian(self, q):
+        """
+        End-effector Jacobian, x and y rows of the frame Jacobian.
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+
+        Returns
+        -------
+        numpy.ndarray, (2, n)
+            [m/rad].
+
+        """
+        m, d = self.pin_model, self.pin_data
+        jac = pin.computeFrameJacobian(m, d, self._config(q), self._frame, _LWA)
+        return np.array(jac[:2][:, self._vperm])
+
+    def jdot_qdot(self, q, qd):
+        """
+        ``Jdot qd``: the end-effector classical acceleration at zero joint acceleration.
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+        qd : array_like, (n,)
+            Joint velocities [rad/s].
+
+        Returns
+        -------
+        numpy.ndarray, (2,)
+            [m/s^2].
+
+        """
+        m, d = self.pin_model, self.pin_data
+        pin.forwardKinematics(m, d, self._config(q), self._vel(qd), self._zero)
+        pin.updateFramePlacement(m, d, self._frame)
+        acc = pin.getFrameClassicalAcceleration(m, d, self._frame, _LWA)
+        return np.array(acc.linear[:2])
+
+    # -- dynamics -----------------------------------------------------------
+    def mass_matrix(self, q):
+        """
+        Inertia matrix ``M(q)`` (crba).
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+
+        Returns
+        -------
+        numpy.ndarray, (n, n)
+            [kg m^2].
+
+        """
+        m, d = self.pin_model, self.pin_data
+        mass = pin.crba(m, d, self._config(q))
+        mass = np.triu(mass) + np.triu(mass, 1).T
+        return self._back_mat(mass)
+
+    def coriolis(self, q, qd):
+        """
+        ``C(q, qd) qd`` = nonLinearEffects - generalized gravity.
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+        qd : array_like, (n,)
+            Joint velocities [rad/s].
+
+        Returns
+        -------
+        numpy.ndarray, (n,)
+            [N m].
+
+        """
+        m, d = self.pin_model, self.pin_data
+        cfg = self._config(q)
+        nle = np.array(pin.nonLinearEffects(m, d, cfg, self._vel(qd)))
+        return self._back(nle - pin.computeGeneralizedGravity(m, d, cfg))
+
+    def gravity_torque(self, q):
+        """
+        Gravity torques ``G(q)`` for the arm's gravity vector.
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+
+        Returns
+        -------
+        numpy.ndarray, (n,)
+            [N m].
+
+        """
+        m, d = self.pin_model, self.pin_data
+        return self._back(pin.computeGeneralizedGravity(m, d, self._config(q)))
+
+    def coriolis_matrix(self, q, qd):
+        """
+        Coriolis matrix ``C(q, qd)`` from Pinocchio (``computeCoriolisMatrix``).
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+        qd : array_like, (n,)
+            Joint velocities [rad/s].
+
+        Returns
+        -------
+        numpy.ndarray, (n, n)
+            [kg m^2/s].
+
+        """
+        m, d = self.pin_model, self.pin_data
+        cmat = pin.computeCoriolisMatrix(m, d, self._config(q), self._vel(qd))
+        return self._back_mat(np.array(cmat))
+
+    def forward_dynamics(self, q, qd, tau):
+        """
+        Joint accelerations ``qdd = M^-1 (tau - C qd - G)`` (ABA).
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+        qd : array_like, (n,)
+            Joint velocities [rad/s].
+        tau : array_like, (n,)
+            Generalised force on every joint [N m].
+
+        Returns
+        -------
+        numpy.ndarray, (n,)
+            [rad/s^2].
+
+        """
+        m, d = self.pin_model, self.pin_data
+        tau = self._vel(check_vector(tau, self.n, 'tau'), 'tau')
+        return self._back(pin.aba(m, d, self._config(q), self._vel(qd), tau))
+
+    def terms(self, q, qd):
+        """
+        Everything the control law needs, from one kinematics pass.
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+        qd : array_like, (n,)
+            Joint velocities [rad/s].
+
+        Returns
+        -------
+        mass : numpy.ndarray, (n, n)
+            ``M(q)`` [kg m^2].
+        h : numpy.ndarray, (n,)
+            ``C(q, qd) qd + G(q)`` [N m].
+        jac : numpy.ndarray, (2, n)
+            End-effector Jacobian [m/rad].
+        jdqd : numpy.ndarray, (2,)
+            ``Jdot qd`` [m/s^2].
+        p : numpy.ndarray, (2,)
+            End-effector position [m].
+
+        """
+        m, d = self.pin_model, self.pin_data
+        cfg, vel = self._config(q), self._vel(qd)
+        mass = pin.crba(m, d, cfg)
+        mass = np.triu(mass) + np.triu(mass, 1).T
+        h = np.array(pin.nonLinearEffects(m, d, cfg, vel))
+        # The joint Jacobians, then the zero-acceleration kinematics the frame's classical
+        # acceleration reads (velocities and accelerations of the joints).
+        pin.computeJointJacobians(m, d, cfg)
+        pin.forwardKinematics(m, d, cfg, vel, self._zero)
+        pin.updateFramePlacement(m, d, self._frame)
+        jac = pin.getFrameJacobian(m, d, self._frame, _LWA)[:2]
+        acc = pin.getFrameClassicalAcceleration(m, d, self._frame, _LWA).linear[:2]
+        p = d.oMf[self._frame].translation[:2]
+        if self._identity:
+            return mass, h, np.array(jac), np.array(acc), np.array(p)
+        return (self._back_mat(mass), self._back(h), np.array(jac[:, self._vperm]),
+                np.array(acc), np.array(p))
+
+    def decoupling(self, q, qd):
+        """
+        Decoupling matrix and drift of the task-space dynamics (eqs. 4, 5).
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+        qd : array_like, (n,)
+            Joint velocities [rad/s].
+
+        Returns
+        -------
+        Da : numpy.ndarray, (2, r)
+            ``J M^-1 B`` [m/(s^2 N m)].
+        b : numpy.ndarray, (2,)
+            ``Jdot qd - J M^-1 (C qd + G)`` [m/s^2].
+
+        """
+        mass, h, jac, jdqd, _ = self.terms(q, qd)
+        w = np.linalg.solve(mass, jac.T).T
+        return w @ self._B, jdqd - w @ h
