@@ -26,6 +26,19 @@ Initial state: ``q3(0) = q3_0_deg`` (120 deg), ``q1, q2`` from
 desired start point ``(0.2, 0)`` (for q3 = 120 deg: q1 = -78.46 deg,
 q2 = 96.93 deg), at rest.
 
+Fixed command delay (``delay_ticks = m``, default 0 = the loop above): the
+command computed from the state of tick ``k`` acts over ``[t_{k+m},
+t_{k+m+1}]``; over the first ``m`` periods, before any delayed command
+arrives, the command of tick 0 acts (the arm is driven from the start, as if
+the first command had been there; neither braked nor limp).  The recorded
+torque of tick ``k`` is the one computed at ``k``.  With ``predict`` the law
+runs on the state predicted for ``t_{k+m}`` by ``delay.StatePredictor`` (the
+nominal model integrated under the commands already sent, see
+``freejoint_core.delay``) and on the setpoint of ``t_k`` shifted to ``t_{k+m}``
+by ``delay.extrapolate_setpoint``; the recorded error is still the measured
+``p(t_k) - p_d(t_k)``.  Delayed runs are labelled ``<variant> d<m>`` (``+p``
+with the predictor).  ``--delay-study`` prints the table of docs/delay.md.
+
 Divergence: the run stops, without raising, at the first tick whose state or
 controller output is not finite (or whose computation raises), whose
 tracking error exceeds ``diverge_m`` (0.5 m), or whose fastest joint turns
@@ -44,8 +57,9 @@ import time
 
 import numpy as np
 
-from .arm import ArmModel, CASES, table1
+from .arm import ArmModel, CASES, make_model, table1
 from .control import Gains, RobustController
+from .delay import DEFAULT_BIAS_GAIN, extrapolate_setpoint, StatePredictor
 from .errors import FreejointValueError
 from .metrics import compute_record, format_summary, format_table, write_records
 from .plant import DEFAULT_DT_SUB, Plant
@@ -101,7 +115,8 @@ def initial_state(params, q3_0_deg=120.0, start=(0.2, 0.0)):
 
 def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_SUB,
              duration=5.0, nominal_scale=0.7, dist_bound=0.5, gains=None, record_trace=False,
-             trajectory=None, diverge_m=0.5, diverge_qd=1000.0):
+             trajectory=None, diverge_m=0.5, diverge_qd=1000.0, delay_ticks=0, predict=False,
+             bias_gain=DEFAULT_BIAS_GAIN):
     """
     Run one closed-loop case and return its metrics record (and trace).
 
@@ -136,6 +151,12 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
         Error (m) beyond which the run is stopped as diverged.
     diverge_qd : float
         Joint speed (rad/s) beyond which the run is stopped as diverged.
+    delay_ticks : int
+        Fixed command delay ``m`` (control periods), >= 0; see the module notes.
+    predict : bool
+        Compensate the delay with ``delay.StatePredictor`` (no effect at m = 0).
+    bias_gain : float
+        The predictor's ``bias_gain`` (0: plain nominal prediction).
 
     Returns
     -------
@@ -144,7 +165,9 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
     trace : dict or None
         With ``record_trace``: ``t`` (N,), ``q``, ``qd`` (N, 3), ``p``,
         ``p_d``, ``e`` (N, 2), ``tau`` (N, 2), ``theta`` (N, 5), ``det``,
-        ``rho`` (N,), ``status`` (N,) int, over the recorded ticks.
+        ``rho`` (N,), ``status`` (N,) int, over the recorded ticks; with
+        the predictor also ``q_law``, ``qd_law`` (N, 3): the predicted state
+        the law ran on.
 
     """
     if case not in CASES:
@@ -159,6 +182,12 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
     if n_ticks < 1 or abs(n_ticks * dt - duration) > 1e-9 * duration:
         raise FreejointValueError(
             f'duration: {duration} s is not a positive integer multiple of dt = {dt} s')
+    if isinstance(delay_ticks, bool) or not isinstance(delay_ticks, (int, np.integer)) \
+            or delay_ticks < 0:
+        raise FreejointValueError(f'delay_ticks: expected an int >= 0, got {delay_ticks!r}')
+    if not isinstance(predict, (bool, np.bool_)):
+        raise FreejointValueError(f'predict: expected a bool, got {predict!r}')
+    delay_ticks = int(delay_ticks)
     if gains is None:
         gains = Gains()
     elif not isinstance(gains, Gains):
@@ -186,6 +215,15 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
     q0 = initial_state(real, q3_0_deg, (px0, py0))
     plant = Plant(real, dt_sub, dist_bound=dist, seed=seed, q0=q0)
     ctrl = RobustController(nominal, gains)
+    label = variant
+    pred = None
+    if delay_ticks:
+        label = f'{variant} d{delay_ticks}' + ('+p' if predict else '')
+        if predict:
+            pred = StatePredictor(nominal, dt, dt_sub, max_ticks=delay_ticks,
+                                  bias_gain=bias_gain)
+            h_pred = delay_ticks * dt
+            fk_real = make_model(real).fk
 
     # Setpoints of every tick, through the same scalar path the graph uses.
     sample = trajectory.sample_tuple
@@ -201,6 +239,9 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
         th_buf = np.empty((n_ticks, 5))
         rho_buf = np.empty(n_ticks)
         st_buf = np.empty(n_ticks, dtype=np.int64)
+        if pred is not None:
+            ql_buf = np.empty((n_ticks, 3))
+            qdl_buf = np.empty((n_ticks, 3))
     isfinite = math.isfinite
     passive = real.passive[0]
     limit2 = diverge_m * diverge_m
@@ -213,11 +254,22 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
         q = plant.q
         qd = plant.qd
         try:
-            out = ctrl.step(q, qd, (pdx, pdy), (vdx, vdy), (adx, ady), dt)
+            if pred is None:
+                out = ctrl.step(q, qd, (pdx, pdy), (vdx, vdy), (adx, ady), dt)
+            else:
+                qp, qdp = pred.predict(q, qd, delay_ticks)
+                sp = extrapolate_setpoint((pdx, pdy), (vdx, vdy), (adx, ady), h_pred)
+                out = ctrl.step(qp, qdp, *sp, dt)
+                if not all(map(isfinite, out.theta.tolist() + qdp.tolist())):
+                    raise ArithmeticError('non-finite prediction or estimate')
+                pred.push(out.tau)
         except _BLOWUP:
             diverged = t
             break
-        px, py = out.p.tolist()
+        if pred is None:
+            px, py = out.p.tolist()
+        else:
+            px, py = fk_real(q).tolist()
         t0, t1 = out.tau.tolist()
         ex = px - pdx
         ey = py - pdy
@@ -236,13 +288,16 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
             th_buf[k] = theta
             rho_buf[k] = out.rho
             st_buf[k] = out.status
+            if pred is not None:
+                ql_buf[k] = qp
+                qdl_buf[k] = qdp
         n_rec = k + 1
         w0, w1, w2 = qd.tolist()
         if err2 > limit2 or max(abs(w0), abs(w1), abs(w2)) > diverge_qd:
             diverged = t
             break
         try:
-            plant.step(out.tau, dt)
+            plant.step(tau_buf[max(k - delay_ticks, 0)] if delay_ticks else out.tau, dt)
         except _BLOWUP:
             diverged = (k + 1) * dt
             break
@@ -250,7 +305,7 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
         raise FreejointValueError(
             f'gains: the first tick already fails (case {case}, variant {variant})')
     p_d = np.array([d[:2] for d in des[:n_rec]])
-    record = compute_record(case, variant, seed, t_arr[:n_rec], p_buf[:n_rec], p_d,
+    record = compute_record(case, label, seed, t_arr[:n_rec], p_buf[:n_rec], p_d,
                             tau_buf[:n_rec], theta, q3_buf[:n_rec], det_buf[:n_rec],
                             diverged, 'offline')
     if not record_trace:
@@ -261,6 +316,9 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
         'theta': th_buf[:n_rec], 'det': det_buf[:n_rec], 'rho': rho_buf[:n_rec],
         'status': st_buf[:n_rec],
     }
+    if pred is not None:
+        trace['q_law'] = ql_buf[:n_rec]
+        trace['qd_law'] = qdl_buf[:n_rec]
     return record, trace
 
 
