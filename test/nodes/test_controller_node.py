@@ -12,12 +12,16 @@ import re
 from freejoint_core.arm import table1
 from freejoint_core.control import (Gains, RobustController, STATUS_BAD_INPUT,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE)
+from freejoint_msgs.msg import ControllerState
 import pytest
 
 pytestmark = pytest.mark.ros
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PARAMS = os.path.join(ROOT, 'config', 'controller.yaml')
+STATUS_HOLDING = ControllerState.STATUS_HOLDING
+STATUS_RATE_LIMITED = ControllerState.STATUS_RATE_LIMITED
+STATUS_RESUMING = ControllerState.STATUS_RESUMING
 DT = 0.001
 DT_NS = 1_000_000
 NAMES = ['joint1', 'joint2', 'joint3']
@@ -262,18 +266,22 @@ def test_missing_joint_and_non_finite_state_are_refused_with_zero_effort(
     wait(lambda: 'non-finite position or velocity' in procs.log(proc), 10.0,
          'the NaN refusal in the log')
     assert "state refused: JointState lacks joint(s) ['joint3']" in procs.log(proc)
-    # A good state afterwards is served by the law.
+    # A good state afterwards is served by the law, ramping up from the zero effort the arm
+    # got at effort_rate_limit (20000 N m/s: 20 N m per 1 ms tick).
     ctl = RobustController(table1('horizontal').scaled(0.7), Gains())
     drv.setpoint(2, _setpoint(2))
     drv.joint_state(2, q, qd)
     st, cmd = drv.answer(2)
-    assert cmd == _expect(ctl, q, qd, _setpoint(2)).tau.tolist() and st.status == 0
+    tau = _expect(ctl, q, qd, _setpoint(2)).tau.tolist()
+    assert cmd == [max(-20.0, min(20.0, x)) for x in tau]
+    assert st.status == (STATUS_RATE_LIMITED if cmd != tau else 0)
+    assert list(st.theta_hat) == ctl.theta.tolist()
     assert procs.stop(proc) == 0
 
 
-def test_stale_setpoint_and_stale_state_command_zero_effort_and_say_so(
+def test_with_on_stale_zero_stale_setpoint_and_stale_state_command_zero_effort_and_say_so(
         procs, ros_node, wait):
-    proc = _start(procs, '-p', 'stale_timeout:=0.3')
+    proc = _start(procs, '-p', 'stale_timeout:=0.3', '-p', 'on_stale_setpoint:=zero')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
     q, qd = _state_q(0)

@@ -6,9 +6,11 @@ extra joints ignored) and ``setpoint`` (freejoint_msgs/CartesianSetpoint); per s
 publishes the active joint efforts on ``effort_controller/commands``
 (std_msgs/Float64MultiArray in the order of parameter ``joints``, the topic of
 ros2_control's JointGroupEffortController) and a ``controller_state``
-(freejoint_msgs/ControllerState).  The law itself is ``RobustController.step``; this
-node only converts messages, pairs states with setpoints and guards its inputs
-(docs/GRAPH.md: lockstep protocol, staleness, parameters).
+(freejoint_msgs/ControllerState).  The law itself is ``RobustController.step``, the
+hold / resume reference and the guards are ``freejoint_core.reference``; this node only
+converts messages, pairs states with setpoints, guards its inputs and outputs and offers
+``~/reset`` (std_srvs/Trigger: theta_hat back to theta0, hold / blend state forgotten)
+(docs/GRAPH.md: lockstep protocol, staleness, hold, limits, parameters).
 
 """
 
@@ -22,6 +24,8 @@ from freejoint_core.control import (RobustController, STATUS_BAD_INPUT, STATUS_N
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
                                     STATUS_TORQUE_LIMITED)
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.reference import (clamp_dt, limit_effort, MODE_HOLD, MODE_NONE,
+                                      ReferenceShaper, setpoint_refusal, state_refusal)
 from freejoint_msgs.msg import CartesianSetpoint, ControllerState
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -29,6 +33,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_srvs.srv import Trigger
 
 QUEUE_DEPTH = 1000
 """Keep-last depth of the run's streams: 1 s at 1 kHz, so a recorder that stalls
@@ -41,6 +46,12 @@ SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """QoS of setpoint: transient local, so a controller started after the planner still gets
 the ticks streamed ahead while the simulator waited for its first command (GRAPH.md)."""
+
+STATUS_HOLDING = ControllerState.STATUS_HOLDING
+STATUS_RATE_LIMITED = ControllerState.STATUS_RATE_LIMITED
+STATUS_LAW_FAULT = ControllerState.STATUS_LAW_FAULT
+STATUS_RESUMING = ControllerState.STATUS_RESUMING
+STATUS_DT_CLAMPED = ControllerState.STATUS_DT_CLAMPED
 
 _isfinite = math.isfinite
 _monotonic = time.monotonic
@@ -57,6 +68,7 @@ class ControllerNode(Node):
         request_scheduling(self, self._values, at_start=True)
         cfg = self.config
         self._ctl = RobustController(cfg.nominal, cfg.gains)
+        self._shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep)
         self._install(cfg)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
@@ -83,6 +95,17 @@ class ControllerNode(Node):
         self._map = None
         self._ticks = 0
         self._zero_answers = 0
+        self._holds = 0
+        self._faults = 0
+        self._refused_setpoints = 0
+        self._refused_states = 0
+        self._last_sp_refusal = ''
+        self._good_theta = self._ctl.theta
+        # Last command sent, in command order (None: none yet in lockstep, whose start is
+        # the paper's; real time starts from the zero effort the arm had).
+        self._prev_cmd = None if cfg.lockstep else list(self._zero)
+        self._rate_armed = not cfg.lockstep
+        self._clock = self.get_clock()
         self._throttle = Throttle(1.0)
 
         self._pub_cmd = self.create_publisher(Float64MultiArray, 'effort_controller/commands',
@@ -90,6 +113,7 @@ class ControllerNode(Node):
         self._pub_state = self.create_publisher(ControllerState, 'controller_state', QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_state, QOS)
         self.create_subscription(CartesianSetpoint, 'setpoint', self._on_setpoint, SETPOINT_QOS)
+        self.create_service(Trigger, '~/reset', self._on_reset)
         period = min(0.05, cfg.stale_timeout / 4.0)
         self.create_timer(period, self._watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
@@ -107,6 +131,12 @@ class ControllerNode(Node):
         self._stale = cfg.stale_timeout
         self._lockstep = cfg.lockstep
         self._identity = cfg.cmd_index == tuple(range(len(cfg.cmd_index)))
+        self._limits = cfg.effort_limits
+        self._rate = cfg.effort_rate_limit
+        self._hold_on_stale = cfg.on_stale_setpoint == 'hold'
+        self._shaper.set_resume_time(cfg.resume_time)
+        self._sp_bounds = (cfg.reach, cfg.setpoint_max_velocity, cfg.setpoint_max_acceleration)
+        self._state_bounds = (cfg.position_lower, cfg.position_upper, cfg.velocity_limit)
 
     def _on_set_parameters(self, params):
         values = dict(self._values)
@@ -127,6 +157,7 @@ class ControllerNode(Node):
             self._ctl.set_gains(cfg.gains)
             if cfg.gains.theta0 != old.gains.theta0:
                 self._ctl.reset()
+            self._good_theta = self._ctl.theta
         self._install(cfg)
         self._values = values
         changed = ', '.join('%s=%s' % (p.name, plain(p.value)) for p in params)
@@ -167,7 +198,7 @@ class ControllerNode(Node):
             self.get_logger().warn(
                 'state time went back from %d to %d ns (simulator restarted?): theta_hat '
                 'reset to theta0' % (self._last_ns, ns))
-            self._ctl.reset()
+            self._restart_state()
             self._setpoints.clear()
             self._recent.clear()
         names = msg.name
@@ -192,44 +223,77 @@ class ControllerNode(Node):
                 reason = 'JointState has a non-finite position or velocity: q=%s qd=%s' % (
                     list(q), list(qd))
                 q = None
+            if q is not None:
+                lower, upper, vlim = self._state_bounds
+                implausible = state_refusal(q, qd, lower, upper, vlim)
+                if implausible is not None:
+                    kind = 'implausible'
+                    reason = 'implausible state: ' + implausible
+                    q = None
         else:
             q = None
         if q is None:
+            self._refused_states += 1
             self._throttle(self.get_logger().error, kind,
-                           'state refused: %s; zero effort' % reason)
+                           'state refused: %s; zero effort, theta_hat kept' % reason)
             self._answer_zero(ns, stamp, STATUS_BAD_INPUT, 'bad input: ' + reason)
             return
         self._last_q = q
         if self._lockstep:
             sp = self._setpoints.pop(ns, None)
             if sp is None:
+                if self._shaper.mode == MODE_HOLD and self._setpoint_seen:
+                    # Already holding on a stale stream: answer at once, not a timeout per tick.
+                    self._pending = None
+                    self._no_setpoint(ns, stamp, q, qd)
+                    return
                 self._pending = (ns, stamp, q, qd, _monotonic())
                 return
             self._pending = None
-            self._tick(ns, stamp, q, qd, sp)
+            self._tick(ns, stamp, q, qd, ns, sp)
         else:
-            sp = self._realtime_setpoint(ns)
-            if sp is None:
-                self._answer_zero(ns, stamp, STATUS_STALE_SETPOINT,
-                                  'stale setpoint: none stamped within %g s before the state'
-                                  % self._stale)
-                self._throttle(self.get_logger().warn, 'stale_setpoint',
-                               'no fresh setpoint: zero effort')
+            found = self._realtime_setpoint(ns)
+            if found is None:
+                self._no_setpoint(ns, stamp, q, qd)
                 return
-            self._tick(ns, stamp, q, qd, sp)
+            self._tick(ns, stamp, q, qd, found[0], found[1])
+
+    def _no_setpoint(self, ns, stamp, q, qd):
+        """Answer a state without a fresh setpoint: hold (default) or zero effort."""
+        if self._setpoint_seen:
+            why = ('stale setpoint: none stamped within %g s before the state%s'
+                   % (self._stale, self._sp_refusal_note()))
+        else:
+            why = 'no setpoint yet' + self._sp_refusal_note()
+        if not self._hold_on_stale:
+            self._throttle(self.get_logger().warn, 'stale_setpoint', why + ': zero effort')
+            self._answer_zero(ns, stamp, STATUS_STALE_SETPOINT, why + ': zero effort')
+            return
+        if self._shaper.mode != MODE_HOLD:
+            self._holds += 1
+            self._throttle(self.get_logger().warn, 'hold', why + ': holding position')
+        self._tick(ns, stamp, q, qd, None, None, why)
+
+    def _sp_refusal_note(self):
+        text = self._last_sp_refusal
+        return ' (last setpoint refused: %s)' % text if text else ''
 
     def _realtime_setpoint(self, ns):
-        """Newest setpoint stamped <= ns + dt/2 and not older than stale_timeout, or None."""
+        """
+        Return (stamp_ns, values) of the newest fresh setpoint for ns, or None.
+
+        Fresh: stamped <= ns + dt/2 and not older than stale_timeout.
+        """
         recent = self._recent
         limit = ns + self._half_ns
         while len(recent) > 1 and recent[1][0] <= limit:
             del recent[0]
         if not recent or recent[0][0] > limit:
             return None
-        sp_ns, values = recent[0]
-        if (ns - sp_ns) * 1e-9 > self._stale:
+        found = recent[0]
+        if (ns - found[0]) * 1e-9 > self._stale:
             return None
-        return values
+        return found
 
     def _on_setpoint(self, msg):
         stamp = msg.header.stamp
@@ -238,13 +302,15 @@ class ControllerNode(Node):
         v = msg.velocity
         a = msg.acceleration
         values = (p[0], p[1], v[0], v[1], a[0], a[1])
-        for x in values:
-            if not _isfinite(x):
-                self._throttle(
-                    self.get_logger().error, 'setpoint',
-                    'setpoint refused: non-finite value in position %s, velocity %s, '
-                    'acceleration %s' % (list(p), list(v), list(a)))
-                return
+        reach, vmax, amax = self._sp_bounds
+        reason = setpoint_refusal(values, reach, vmax, amax)
+        if reason is not None:
+            self._refused_setpoints += 1
+            self._last_sp_refusal = reason
+            self._throttle(self.get_logger().error, 'setpoint',
+                           'setpoint stamped %d ns refused: %s; dropped' % (ns, reason))
+            return
+        self._last_sp_refusal = ''
         self._setpoint_seen = True
         if not self._lockstep:
             recent = self._recent
@@ -255,7 +321,7 @@ class ControllerNode(Node):
         pending = self._pending
         if pending is not None and pending[0] == ns:
             self._pending = None
-            self._tick(ns, pending[1], pending[2], pending[3], values)
+            self._tick(ns, pending[1], pending[2], pending[3], ns, values)
         elif ns > self._last_ns:
             setpoints = self._setpoints
             setpoints[ns] = values
@@ -264,11 +330,67 @@ class ControllerNode(Node):
                     del setpoints[key]
 
     # -- outputs ---------------------------------------------------------------
-    def _tick(self, ns, stamp, q, qd, sp):
-        px, py, vx, vy, ax, ay = sp
-        out = self._ctl.step(q, qd, (px, py), (vx, vy), (ax, ay), self._dt)
+    def _tick(self, ns, stamp, q, qd, sp_ns, sp, hold_reason=''):
+        """Compute and publish the command for the state stamped ns (sp None: hold)."""
+        status = 0
+        shaper = self._shaper
+        if self._lockstep or self._last_ns < 0:
+            dt = self._dt
+        else:
+            dt, clamped = clamp_dt((ns - self._last_ns) * 1e-9, self._dt)
+            if clamped:
+                status |= STATUS_DT_CLAMPED
+                self._throttle(self.get_logger().warn, 'dt',
+                               'state stamps %g s apart, outside [0.25, 4] x control_period: '
+                               'the law uses dt = %g s' % ((ns - self._last_ns) * 1e-9, dt))
+        if sp is None:
+            if shaper.mode != MODE_HOLD:
+                ref = shaper.hold(self._ctl.model.fk(q).tolist())
+                self._rate_armed = self._prev_cmd is not None
+            else:
+                ref = shaper.hold(None)
+            status |= STATUS_HOLDING
+            if self._setpoint_seen:
+                status |= STATUS_STALE_SETPOINT
+        else:
+            p_now = self._ctl.model.fk(q).tolist() if shaper.mode == MODE_NONE else None
+            ref, blending = shaper.track(ns * 1e-9, sp, p_now)
+            if blending:
+                status |= STATUS_RESUMING
+        px, py, vx, vy, ax, ay = ref
+        out = self._ctl.step(q, qd, (px, py), (vx, vy), (ax, ay), dt)
         tau = out.tau.tolist()
+        theta = out.theta.tolist()
         effort = tau if self._identity else [tau[i] for i in self.config.cmd_index]
+        limits = self._limits
+        fault = None
+        for i, x in enumerate(effort):
+            if not -limits[i] <= x <= limits[i]:
+                fault = 'torque %r' % (effort,)
+        tmax = self.config.gains.theta_max
+        for i, x in enumerate(theta):
+            if not 0.0 <= x <= tmax[i]:
+                fault = 'theta_hat %r' % (theta,)
+        if fault is not None:
+            self._faults += 1
+            self._ctl.set_theta(self._good_theta)
+            theta = self._good_theta.tolist()
+            effort = list(self._prev_cmd) if self._prev_cmd is not None else list(self._zero)
+            status |= STATUS_LAW_FAULT
+            self._throttle(self.get_logger().error, 'fault',
+                           'the law gave a non-finite or out-of-range %s: not published, '
+                           'theta_hat restored, previous command repeated' % fault)
+        else:
+            self._good_theta = out.theta
+        status |= out.status
+        if self._rate_armed:
+            effort, clipped, rated = limit_effort(effort, limits, self._prev_cmd,
+                                                  self._rate * dt)
+            if rated:
+                status |= STATUS_RATE_LIMITED
+            else:
+                self._rate_armed = False
+        self._prev_cmd = effort
         cmd = self._cmd
         cmd.data = effort
         self._dim.label = 'stamp_ns=%d' % ns
@@ -278,16 +400,27 @@ class ControllerNode(Node):
         st.error = out.e
         st.error_rate = out.edot
         st.sliding = out.s
-        st.theta_hat = out.theta
+        st.theta_hat = theta
         st.rho_hat = out.rho
         st.delta_v = out.dv
         st.effort = effort
         st.det_dd = out.det
         st.position = out.p
         st.position_desired = (px, py)
-        status = out.status
         st.status = status
-        st.message = _status_message(status, out.det, self._values) if status else ''
+        st.message = _status_message(status, out.det, self._values, hold_reason,
+                                     shaper) if status else ''
+        if sp_ns is None:
+            st.setpoint_stamp.sec = 0
+            st.setpoint_stamp.nanosec = 0
+            st.setpoint_age = 0.0
+        else:
+            st.setpoint_stamp.sec = sp_ns // 1_000_000_000
+            st.setpoint_stamp.nanosec = sp_ns % 1_000_000_000
+            st.setpoint_age = (ns - sp_ns) * 1e-9
+        st.dt = dt
+        st.state_age = 0.0 if self._lockstep else (
+            self._clock.now().nanoseconds - ns) * 1e-9
         self._pub_state.publish(st)
         self._last_ns = ns
         self._last_sp = (px, py)
@@ -316,9 +449,36 @@ class ControllerNode(Node):
         st.position_desired = self._last_sp
         st.status = status
         st.message = message
+        st.setpoint_stamp.sec = 0
+        st.setpoint_stamp.nanosec = 0
+        st.setpoint_age = 0.0
+        st.dt = 0.0
+        st.state_age = 0.0 if self._lockstep or ns < 0 else (
+            self._clock.now().nanoseconds - ns) * 1e-9
         self._pub_state.publish(st)
-        self._last_ns = ns
+        if ns >= 0:
+            self._last_ns = ns
         self._zero_answers += 1
+        # The arm got zero: the next computed command ramps up from it.
+        self._prev_cmd = list(self._zero)
+        self._rate_armed = True
+
+    def _restart_state(self):
+        """theta_hat back to theta0, hold / blend forgotten, the rate limit armed."""
+        self._ctl.reset()
+        self._good_theta = self._ctl.theta
+        self._shaper.reset()
+        self._rate_armed = self._prev_cmd is not None
+
+    def _on_reset(self, request, response):
+        """~/reset: restart theta_hat and the hold / blend state (std_srvs/Trigger)."""
+        self._restart_state()
+        self.get_logger().warn('reset: theta_hat = theta0 %s, hold / blend state cleared'
+                               % list(self.config.gains.theta0))
+        response.success = True
+        response.message = 'theta_hat reset to theta0 %s; hold / blend state cleared' % (
+            list(self.config.gains.theta0),)
+        return response
 
     def _watchdog(self):
         """Wall-clock staleness: a held lockstep state without setpoint, or no state."""
@@ -327,13 +487,7 @@ class ControllerNode(Node):
         if pending is not None:
             if self._setpoint_seen and now - pending[4] > self._stale:
                 self._pending = None
-                self._throttle(
-                    self.get_logger().warn, 'stale_setpoint',
-                    'no setpoint for the state stamped %d ns within %g s: zero effort'
-                    % (pending[0], self._stale))
-                self._answer_zero(pending[0], pending[1], STATUS_STALE_SETPOINT,
-                                  'stale setpoint: none for this stamp within %g s'
-                                  % self._stale)
+                self._no_setpoint(pending[0], pending[1], pending[2], pending[3])
             return
         last = self._last_state_wall
         if last is not None and not self._stale_reported and now - last > self._stale:
@@ -342,20 +496,37 @@ class ControllerNode(Node):
             stamp = self._state.header.stamp
             self._answer_zero(self._last_ns, stamp, STATUS_STALE_STATE,
                               'stale state: no joint_states within %g s' % self._stale)
+            if not self._lockstep:
+                # The arm moved under zero effort: the next state starts a hold / blend.
+                self._shaper.reset()
 
     def report(self):
-        """One line for the end of the run: ticks computed, zero-effort answers."""
-        return 'controller stopped: %d ticks computed, %d zero-effort answers (stale or bad ' \
-            'input)' % (self._ticks, self._zero_answers)
+        """One line for the end of the run: ticks, zero-effort answers, holds, refusals."""
+        return ('controller stopped: %d ticks computed, %d zero-effort answers (stale or bad '
+                'input), %d holds, %d states and %d setpoints refused, %d law faults'
+                % (self._ticks, self._zero_answers, self._holds, self._refused_states,
+                   self._refused_setpoints, self._faults))
 
 
-def _status_message(status, det, values):
+def _status_message(status, det, values, hold_reason, shaper):
     parts = []
+    if status & STATUS_HOLDING:
+        hold = shaper.hold_position
+        parts.append('holding at (%.4f, %.4f) m: %s' % (hold[0], hold[1], hold_reason))
+    if status & STATUS_RESUMING:
+        parts.append('resuming: blending from the hold to the setpoint over %g s'
+                     % values['resume_time'])
     if status & STATUS_NEAR_SINGULAR:
         parts.append('near singular: |det(Da Da^T)| = %.3g < %.3g, damped pseudo-inverse'
                      % (det, values['det_threshold']))
     if status & STATUS_TORQUE_LIMITED:
-        parts.append('torque limited to %g N m' % values['tau_limit'])
+        parts.append('torque limited to %s N m' % list(values['effort_limits']))
+    if status & STATUS_RATE_LIMITED:
+        parts.append('torque change limited to %g N m/s' % values['effort_rate_limit'])
+    if status & STATUS_LAW_FAULT:
+        parts.append('law fault: non-finite or out-of-range output, previous command repeated')
+    if status & STATUS_DT_CLAMPED:
+        parts.append('state stamps outside [0.25, 4] x control_period: dt clamped')
     return '; '.join(parts)
 
 

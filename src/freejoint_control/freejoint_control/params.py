@@ -9,6 +9,7 @@ the node uses the same check at start-up and in its set-parameters callback.
 """
 
 from dataclasses import dataclass
+import math
 
 from freejoint_common.node_tools import SCHEDULING_SPECS, Spec, unique_names
 from freejoint_common.scheduling import validate_affinity, validate_priority
@@ -50,12 +51,34 @@ SPECS = (
     Spec('robust', True, 'robust term and adaptation on (false: nominal inverse dynamics)'),
     Spec('det_threshold', 1e-7,
          '|det(Da Da^T)| below which the damped pseudo-inverse is used (> 0)', (1e-300, 1.0)),
-    Spec('tau_limit', 0.0,
-         'per-joint torque limit [N m] applied to every active joint; 0 = no limit',
-         (0.0, 1e6)),
+    Spec('effort_limits', [300.0, 200.0],
+         'per-joint torque limit [N m] (> 0, one per active joint in the order of joints); '
+         'the paper runs peak at 13 / 11 (horizontal) and 133 / 74 (vertical)'),
+    Spec('effort_rate_limit', 20000.0,
+         'largest torque change [N m/s] per joint after a (re)start, a hold, a reset or a '
+         'zero-effort answer, until the command has caught up with the law', (1.0, 1e9)),
     Spec('stale_timeout', 0.5,
-         'wall time [s] without a fresh state or setpoint after which zero effort is '
-         'commanded', (1e-3, 3600.0)),
+         'wall time [s] (lockstep) or state-stamp time (real time) without a fresh setpoint '
+         'after which the controller holds (or commands zero, see on_stale_setpoint); wall '
+         'time without a state after which zero effort is commanded', (1e-3, 3600.0)),
+    Spec('on_stale_setpoint', 'hold',
+         "no fresh setpoint: 'hold' the end effector where it is (full law, gravity "
+         "included) or command 'zero' effort"),
+    Spec('resume_time', 0.5,
+         'time [s of state stamps] of the quintic blend from the hold to the streamed '
+         'setpoint (0: switch at once)', (0.0, 60.0)),
+    Spec('theta_max', [100.0] * 5,
+         'element-wise bound of theta_hat (5 values > 0, <= 1e6), clamped inside the update'),
+    Spec('joint_position_lower', [-62.83, -62.83, -62.83],
+         'plausible joint positions [rad], lower bound per joint of joint_names'),
+    Spec('joint_position_upper', [62.83, 62.83, 62.83],
+         'plausible joint positions [rad], upper bound per joint of joint_names'),
+    Spec('joint_velocity_limit', [100.0, 100.0, 100.0],
+         'plausible joint speed [rad/s] per joint of joint_names (> 0)'),
+    Spec('setpoint_max_velocity', 5.0, 'largest plausible setpoint speed [m/s]',
+         (1e-6, 1e3)),
+    Spec('setpoint_max_acceleration', 50.0,
+         'largest plausible setpoint acceleration [m/s^2]', (1e-6, 1e5)),
     Spec('executor', 'single_threaded',
          "rclpy executor: 'single_threaded' or 'events' (rclpy.experimental.EventsExecutor)",
          read_only=True),
@@ -63,6 +86,12 @@ SPECS = (
 
 DEFAULTS = {s.name: s.default for s in SPECS}
 EXECUTORS = ('single_threaded', 'events')
+ON_STALE = ('hold', 'zero')
+GAIN_MAX = {'K': 1e4, 'Lambda': 1e4, 'R': 1e3, 'Gamma': 1e3, 'sigma': 1e3}
+"""Upper bounds of the gain vectors (K, Lambda in 1/s; beyond them the law is meaningless
+at any control rate this node runs; (K + Lambda) * control_period <= 1 is checked too)."""
+THETA_MAX_MAX = 1e6
+"""Upper bound of theta_max (and so of theta0)."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +108,16 @@ class Config:
     lockstep: bool
     stale_timeout: float
     executor: str
+    effort_limits: tuple
+    effort_rate_limit: float
+    on_stale_setpoint: str
+    resume_time: float
+    position_lower: tuple
+    position_upper: tuple
+    velocity_limit: tuple
+    reach: float
+    setpoint_max_velocity: float
+    setpoint_max_acceleration: float
 
 
 def build_config(values):
@@ -118,21 +157,65 @@ def build_config(values):
     cmd_index = tuple(active_names.index(name) for name in joints)
     if values['h_form'] not in ('sum', 'sat'):
         raise FreejointValueError(f"h_form: expected 'sum' or 'sat', got {values['h_form']!r}")
-    limit = float(values['tau_limit'])
-    if limit < 0.0:
-        raise FreejointValueError(f'tau_limit: must be >= 0 (0 = no limit), got {limit}')
+    dt = float(values['control_period'])
+    if not dt > 0.0:
+        raise FreejointValueError(f'control_period: must be > 0, got {dt}')
+    for name, upper in GAIN_MAX.items():
+        vals = _floats(name, values[name])
+        if any(v > upper for v in vals):
+            raise FreejointValueError(f'{name}: values must be <= {upper:g}, got {vals}')
+    for i, (k, lam) in enumerate(zip(_floats('K', values['K']),
+                                     _floats('Lambda', values['Lambda']))):
+        if (k + lam) * dt > 1.0:
+            raise FreejointValueError(
+                f'K: K[{i}] + Lambda[{i}] = {k + lam:g} 1/s is beyond 1 / control_period = '
+                f'{1.0 / dt:g} 1/s (the discrete loop would be unstable)')
+    theta_max = _floats('theta_max', values['theta_max'])
+    if len(theta_max) != 5 or any(not 0.0 < v <= THETA_MAX_MAX for v in theta_max):
+        raise FreejointValueError(
+            f'theta_max: expected 5 values in (0, {THETA_MAX_MAX:g}], got {list(theta_max)}')
+    theta0 = _floats('theta0', values['theta0'])
+    if len(theta0) == 5 and any(t > m for t, m in zip(theta0, theta_max)):
+        raise FreejointValueError(f'theta0: values must be <= theta_max {list(theta_max)}, '
+                                  f'got {list(theta0)}')
+    limits = _floats('effort_limits', values['effort_limits'])
+    if len(limits) != len(joints) or any(not 0.0 < v <= 1e6 for v in limits):
+        raise FreejointValueError(
+            f'effort_limits: expected {len(joints)} values in (0, 1e6] N m (one per joint of '
+            f'joints {list(joints)}), got {list(limits)}')
+    core_limit = tuple(limits[joints.index(name)] for name in active_names)
     try:
         gains = Gains(K=tuple(values['K']), Lam=tuple(values['Lambda']), R=tuple(values['R']),
                       Gamma=tuple(values['Gamma']), sigma=tuple(values['sigma']),
                       eps=values['epsilon'], h_form=values['h_form'],
                       theta0=tuple(values['theta0']), robust=bool(values['robust']),
-                      det_threshold=values['det_threshold'],
-                      tau_limit=limit if limit > 0.0 else None)
+                      det_threshold=values['det_threshold'], tau_limit=core_limit,
+                      theta_max=theta_max)
     except FreejointValueError as exc:
         raise FreejointValueError(_ros_names(str(exc))) from None
-    dt = float(values['control_period'])
-    if not dt > 0.0:
-        raise FreejointValueError(f'control_period: must be > 0, got {dt}')
+    if values['on_stale_setpoint'] not in ON_STALE:
+        raise FreejointValueError(f'on_stale_setpoint: expected one of {ON_STALE}, got '
+                                  f'{values["on_stale_setpoint"]!r}')
+    rate = float(values['effort_rate_limit'])
+    if not rate > 0.0:
+        raise FreejointValueError(f'effort_rate_limit: must be > 0, got {rate}')
+    resume = float(values['resume_time'])
+    if not resume >= 0.0:
+        raise FreejointValueError(f'resume_time: must be >= 0, got {resume}')
+    n = nominal.n
+    lower = _floats('joint_position_lower', values['joint_position_lower'])
+    upper = _floats('joint_position_upper', values['joint_position_upper'])
+    vlim = _floats('joint_velocity_limit', values['joint_velocity_limit'])
+    for name, vals in (('joint_position_lower', lower), ('joint_position_upper', upper),
+                       ('joint_velocity_limit', vlim)):
+        if len(vals) != n:
+            raise FreejointValueError(f'{name}: expected {n} values (one per joint of '
+                                      f'joint_names), got {list(vals)}')
+    if any(not lo < hi for lo, hi in zip(lower, upper)):
+        raise FreejointValueError(f'joint_position_upper: each bound must be above '
+                                  f'joint_position_lower {list(lower)}, got {list(upper)}')
+    if any(not v > 0.0 for v in vlim):
+        raise FreejointValueError(f'joint_velocity_limit: values must be > 0, got {list(vlim)}')
     stale = float(values['stale_timeout'])
     if not stale > 0.0:
         raise FreejointValueError(f'stale_timeout: must be > 0, got {stale}')
@@ -144,7 +227,23 @@ def build_config(values):
     return Config(nominal=nominal, gains=gains, joint_names=joint_names, joints=joints,
                   cmd_index=cmd_index, dt=dt, dt_ns=round(dt * 1e9),
                   lockstep=bool(values['lockstep']), stale_timeout=stale,
-                  executor=values['executor'])
+                  executor=values['executor'], effort_limits=limits, effort_rate_limit=rate,
+                  on_stale_setpoint=values['on_stale_setpoint'], resume_time=resume,
+                  position_lower=lower, position_upper=upper, velocity_limit=vlim,
+                  reach=float(sum(nominal.lengths)),
+                  setpoint_max_velocity=float(values['setpoint_max_velocity']),
+                  setpoint_max_acceleration=float(values['setpoint_max_acceleration']))
+
+
+def _floats(name, value):
+    """Return ``value`` as a tuple of finite floats, or raise naming ``name``."""
+    try:
+        vals = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise FreejointValueError(f'{name}: expected a list of numbers, got {value!r}') from None
+    if not all(math.isfinite(v) for v in vals):
+        raise FreejointValueError(f'{name}: values must be finite, got {list(vals)}')
+    return vals
 
 
 def _ros_names(text):

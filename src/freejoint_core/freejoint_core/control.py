@@ -39,7 +39,9 @@ bounded: the singular values ``sig_i / (sig_i^2 + lam2)`` of the fallback
 satisfy ``||Da#|| <= sqrt((||Da||_F^2 + sqrt(thr)) / thr)`` whatever the
 configuration (same order as the exact inverse at the threshold).  The tick
 then reports ``STATUS_NEAR_SINGULAR``.  An optional per-joint torque limit
-clips ``tau`` and reports ``STATUS_TORQUE_LIMITED``.
+clips ``tau`` and reports ``STATUS_TORQUE_LIMITED``; an optional element-wise bound
+``theta_max`` clamps ``theta_{k+1}`` (a non-finite value passes through, for the caller
+to detect).
 
 Hot path: for the 3-link arm with one passive joint (``fast3.Arm3Model``,
 r = 2) the tick is scalar Python floats (no numpy call except building the
@@ -112,6 +114,9 @@ class Gains:
         Fallback threshold on ``|det(Da Da^T)|``, > 0 (paper's eps_d).
     tau_limit : None, float or tuple of float, (r,)
         Per-joint torque limit [N m], > 0; None disables it.
+    theta_max : None, float or tuple of float, (5,)
+        Element-wise upper bound of theta_hat, > 0, applied inside the update
+        (``theta_{k+1} = min(theta_{k+1}, theta_max)``); None disables it.
 
     """
 
@@ -126,6 +131,7 @@ class Gains:
     robust: bool = True
     det_threshold: float = 1e-7
     tau_limit: object = None
+    theta_max: object = None
 
     def __post_init__(self):
         """Validate and normalise to tuples of floats."""
@@ -155,6 +161,9 @@ class Gains:
                         f'tau_limit: expected None, a number or r numbers, got {lim!r}') from exc
                 lim = _vector(lim, n, 'tau_limit', 0.0, True)
             object.__setattr__(self, 'tau_limit', lim)
+        if self.theta_max is not None:
+            object.__setattr__(self, 'theta_max',
+                               _vector(self.theta_max, 5, 'theta_max', 0.0, True))
 
 
 class ControlOutput(NamedTuple):
@@ -324,10 +333,28 @@ class RobustController:
         self._gamma = gains.Gamma
         self._sigma = gains.sigma
         self._decay_cache = (None, None)
+        self._theta_max = gains.theta_max
+        if self._theta_max is not None and self._theta is not None:
+            self._theta = [min(th, tm) for th, tm in zip(self._theta, self._theta_max)]
 
     def reset(self):
         """Set theta back to ``gains.theta0``."""
         self._theta = list(self.gains.theta0)
+
+    def set_theta(self, theta):
+        """
+        Replace the adaptive estimate (e.g. restore the last good one after a fault).
+
+        Parameters
+        ----------
+        theta : array_like, (5,)
+            New estimate, finite and >= 0 (clamped to ``gains.theta_max`` when set).
+
+        """
+        vals = list(_vector(theta, 5, 'theta', 0.0, False))
+        if self._theta_max is not None:
+            vals = [min(th, tm) for th, tm in zip(vals, self._theta_max)]
+        self._theta = vals
 
     @property
     def uses_fast_path(self):
@@ -428,6 +455,9 @@ class RobustController:
             u = na2 / h
             coef = self._decay(dt)
             theta = [a * th + c * (u * ps) for (a, c), th, ps in zip(coef, theta, psi)]
+            tmax = self._theta_max
+            if tmax is not None:
+                theta = [tm if th > tm else th for th, tm in zip(theta, tmax)]
             self._theta = theta
         else:
             rho = dvx = dvy = 0.0
@@ -485,7 +515,10 @@ class RobustController:
             rho = float(theta @ psi)
             dv = -rho * alpha / h
             coef = np.array(self._decay(dt))
-            self._theta = (coef[:, 0] * theta + coef[:, 1] * (na * na / h) * psi).tolist()
+            new = coef[:, 0] * theta + coef[:, 1] * (na * na / h) * psi
+            if self._theta_max is not None:
+                new = np.where(new > np.array(self._theta_max), self._theta_max, new)
+            self._theta = new.tolist()
         else:
             rho = 0.0
             dv = np.zeros(2)

@@ -1,0 +1,343 @@
+"""
+The controller's reference between the streamed setpoints and the law: hold and resume.
+
+A real arm must not go limp when its setpoints stop, nor jump when they come back.
+:class:`ReferenceShaper` gives, per tick, the reference ``(p, v, a)`` the law tracks:
+
+- **hold**: before the first setpoint (real time) and whenever the setpoints go stale,
+  the reference is the end-effector position measured at the onset of the hold, frozen,
+  with zero velocity and acceleration (as ros2_controllers' joint_trajectory_controller
+  holds the current position on activation and on cancel);
+- **resume**: when setpoints come (back), the reference is the streamed setpoint plus an
+  offset that starts at (last reference - setpoint) in position, velocity and
+  acceleration and decays to zero over ``resume_time`` along a quintic (C2): the
+  reference's position, velocity and acceleration stay continuous (:func:`quintic_offset`);
+- **stream**: the setpoint itself.
+
+Besides, :func:`clamp_dt`, :func:`limit_effort`, :func:`state_refusal` and
+:func:`setpoint_refusal` are the controller's input and output guards (plausibility of a
+state or a setpoint, the torque limit and rate limit, the law's time step from stamps).
+Plain floats and tuples, no ROS types.
+
+"""
+
+import math
+
+from freejoint_core.errors import FreejointValueError
+
+_isfinite = math.isfinite
+
+MODE_NONE = 'none'
+MODE_HOLD = 'hold'
+MODE_BLEND = 'blend'
+MODE_STREAM = 'stream'
+
+
+def quintic_offset(d0, v0, a0, duration, t):
+    """
+    Quintic from ``(d0, v0, a0)`` at ``t = 0`` to ``(0, 0, 0)`` at ``t = duration``.
+
+    The minimum-jerk polynomial with these six boundary conditions; held at zero for
+    ``t >= duration``.
+
+    Parameters
+    ----------
+    d0, v0, a0 : float
+        Initial value [m], rate [m/s] and second derivative [m/s^2] of the offset.
+    duration : float
+        Blend time [s], > 0.
+    t : float
+        Time since the blend started [s], >= 0.
+
+    Returns
+    -------
+    tuple of float
+        ``(d, v, a)`` at ``t`` [m, m/s, m/s^2].
+
+    """
+    if t >= duration:
+        return 0.0, 0.0, 0.0
+    if t <= 0.0:
+        return d0, v0, a0
+    T = duration
+    c3 = -(20.0 * d0 + 12.0 * v0 * T + 3.0 * a0 * T * T) / (2.0 * T ** 3)
+    c4 = (30.0 * d0 + 16.0 * v0 * T + 3.0 * a0 * T * T) / (2.0 * T ** 4)
+    c5 = -(12.0 * d0 + 6.0 * v0 * T + a0 * T * T) / (2.0 * T ** 5)
+    c2 = 0.5 * a0
+    d = d0 + t * (v0 + t * (c2 + t * (c3 + t * (c4 + t * c5))))
+    v = v0 + t * (2.0 * c2 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)))
+    a = 2.0 * c2 + t * (6.0 * c3 + t * (12.0 * c4 + t * 20.0 * c5))
+    return d, v, a
+
+
+class ReferenceShaper:
+    """
+    Hold / resume logic of the controller's reference (see the module notes).
+
+    Parameters
+    ----------
+    resume_time : float
+        Blend time [s] from the hold (or the last reference) to the streamed setpoint,
+        >= 0 (0: switch at once).
+    blend_on_start : bool
+        True (real time): the first setpoint is blended in from the end-effector position
+        measured then (a controller (re)started against an arm that is not at the stream's
+        position).  False (lockstep): the first setpoint is tracked as it is.
+
+    Attributes
+    ----------
+    mode : str
+        ``'none'`` (nothing yet), ``'hold'``, ``'blend'`` or ``'stream'``.
+
+    """
+
+    def __init__(self, resume_time, blend_on_start=True):
+        self.set_resume_time(resume_time)
+        self.blend_on_start = bool(blend_on_start)
+        self.reset()
+
+    def set_resume_time(self, resume_time):
+        """
+        Set the blend time [s], >= 0 (effective at the next blend).
+
+        Parameters
+        ----------
+        resume_time : float
+            Blend time [s].
+
+        """
+        value = float(resume_time)
+        if not (_isfinite(value) and value >= 0.0):
+            raise FreejointValueError(f'resume_time: must be finite and >= 0, got {resume_time!r}')
+        self.resume_time = value
+
+    def reset(self):
+        """Forget the hold and any blend: the next tick starts as at construction."""
+        self.mode = MODE_NONE
+        self._hold = None
+        self._last = None        # (px, py, vx, vy, ax, ay) of the last reference
+        self._t0 = 0.0
+        self._off0 = None
+
+    @property
+    def hold_position(self):
+        """Return the frozen hold position ``(x, y)`` [m], or None when not holding."""
+        return self._hold if self.mode == MODE_HOLD else None
+
+    def hold(self, p_now):
+        """
+        Return the hold reference; the hold starts (frozen at ``p_now``) if not holding.
+
+        Parameters
+        ----------
+        p_now : tuple of float, (2,)
+            Measured end-effector position [m] (used only at the onset of the hold).
+
+        Returns
+        -------
+        tuple of float, (6,)
+            ``(px, py, 0, 0, 0, 0)``: position [m], velocity [m/s], acceleration [m/s^2].
+
+        """
+        if self.mode != MODE_HOLD:
+            self.mode = MODE_HOLD
+            self._hold = (float(p_now[0]), float(p_now[1]))
+        ref = (self._hold[0], self._hold[1], 0.0, 0.0, 0.0, 0.0)
+        self._last = ref
+        return ref
+
+    def track(self, t, sp, p_now):
+        """
+        Return the reference for the setpoint ``sp`` at time ``t`` and whether it blends.
+
+        Parameters
+        ----------
+        t : float
+            Time of the tick [s] (the state's stamp; only differences are used).
+        sp : tuple of float, (6,)
+            Setpoint ``(px, py, vx, vy, ax, ay)`` [m, m/s, m/s^2].
+        p_now : tuple of float, (2,)
+            Measured end-effector position [m]: the start of the blend when the
+            controller starts (``blend_on_start``) with no reference yet.
+
+        Returns
+        -------
+        ref : tuple of float, (6,)
+            The reference ``(px, py, vx, vy, ax, ay)``.
+        blending : bool
+            True while the offset is still decaying.
+
+        """
+        mode = self.mode
+        if mode == MODE_STREAM:
+            self._last = sp
+            return sp, False
+        if mode == MODE_NONE:
+            if not self.blend_on_start:
+                self.mode = MODE_STREAM
+                self._last = sp
+                return sp, False
+            self._last = (float(p_now[0]), float(p_now[1]), 0.0, 0.0, 0.0, 0.0)
+            mode = MODE_HOLD
+        if mode == MODE_HOLD:
+            if self.resume_time <= 0.0:
+                self.mode = MODE_STREAM
+                self._last = sp
+                return sp, False
+            last = self._last
+            self._off0 = tuple(last[i] - sp[i] for i in range(6))
+            self._t0 = t
+            self.mode = MODE_BLEND
+        tau = t - self._t0
+        if tau >= self.resume_time:
+            self.mode = MODE_STREAM
+            self._last = sp
+            return sp, False
+        o = self._off0
+        dx, vx, ax = quintic_offset(o[0], o[2], o[4], self.resume_time, tau)
+        dy, vy, ay = quintic_offset(o[1], o[3], o[5], self.resume_time, tau)
+        ref = (sp[0] + dx, sp[1] + dy, sp[2] + vx, sp[3] + vy, sp[4] + ax, sp[5] + ay)
+        self._last = ref
+        return ref, True
+
+
+def clamp_dt(dt, nominal, low=0.25, high=4.0):
+    """
+    Bound a time step measured from stamps to ``[low, high] * nominal``.
+
+    Parameters
+    ----------
+    dt : float
+        Measured step [s] (difference of consecutive state stamps).
+    nominal : float
+        Nominal control period [s], > 0.
+    low, high : float
+        Bounds as multiples of ``nominal``.
+
+    Returns
+    -------
+    dt : float
+        The bounded step [s] (``nominal`` when ``dt`` is not finite).
+    clamped : bool
+        True when ``dt`` was outside the range.
+
+    """
+    lo = low * nominal
+    hi = high * nominal
+    if not _isfinite(dt):
+        return nominal, True
+    if dt < lo:
+        return lo, True
+    if dt > hi:
+        return hi, True
+    return dt, False
+
+
+def limit_effort(tau, limits, prev=None, max_step=None):
+    """
+    Clip torques to per-joint limits and, optionally, to a step from the previous command.
+
+    Parameters
+    ----------
+    tau : sequence of float, (r,)
+        Torques [N m] (finite).
+    limits : sequence of float, (r,)
+        Per-joint limits [N m], > 0: ``|tau_i| <= limits_i``.
+    prev : sequence of float, (r,), optional
+        Previous command [N m]; with ``max_step``, ``|tau_i - prev_i| <= max_step``.
+    max_step : float, optional
+        Largest change per tick [N m] (rate limit times dt).
+
+    Returns
+    -------
+    tau : list of float, (r,)
+        The limited torques.
+    clipped : bool
+        A torque limit bound.
+    rate_limited : bool
+        The step limit bound.
+
+    """
+    out = []
+    clipped = False
+    rated = False
+    for i, x in enumerate(tau):
+        lim = limits[i]
+        if x > lim:
+            x = lim
+            clipped = True
+        elif x < -lim:
+            x = -lim
+            clipped = True
+        if max_step is not None and prev is not None:
+            lo = prev[i] - max_step
+            hi = prev[i] + max_step
+            if x > hi:
+                x = hi
+                rated = True
+            elif x < lo:
+                x = lo
+                rated = True
+        out.append(x)
+    return out, clipped, rated
+
+
+def state_refusal(q, qd, lower, upper, vmax):
+    """
+    Return why a measured state is implausible, or None when it is within the limits.
+
+    Parameters
+    ----------
+    q, qd : sequence of float, (n,)
+        Joint positions [rad] and velocities [rad/s].
+    lower, upper : sequence of float, (n,)
+        Position limits [rad].
+    vmax : sequence of float, (n,)
+        Velocity limits [rad/s]: ``|qd_i| <= vmax_i``.
+
+    Returns
+    -------
+    str or None
+
+    """
+    for i, x in enumerate(q):
+        if not (_isfinite(x) and lower[i] <= x <= upper[i]):
+            return 'joint %d position %r outside [%g, %g] rad' % (i, x, lower[i], upper[i])
+    for i, x in enumerate(qd):
+        if not (_isfinite(x) and -vmax[i] <= x <= vmax[i]):
+            return 'joint %d velocity %r beyond %g rad/s' % (i, x, vmax[i])
+    return None
+
+
+def setpoint_refusal(sp, reach, vmax, amax):
+    """
+    Return why a setpoint is implausible, or None when it is within the bounds.
+
+    Parameters
+    ----------
+    sp : sequence of float, (6,)
+        ``(px, py, vx, vy, ax, ay)`` [m, m/s, m/s^2].
+    reach : float
+        Largest distance of a reachable point from the base [m].
+    vmax, amax : float
+        Bounds on the setpoint's speed [m/s] and acceleration magnitude [m/s^2].
+
+    Returns
+    -------
+    str or None
+
+    """
+    for x in sp:
+        if not _isfinite(x):
+            return 'non-finite value in %s' % (list(sp),)
+    r = math.hypot(sp[0], sp[1])
+    if not r <= reach:
+        return 'position (%g, %g) is %g m from the base, beyond the reach %g m' % (
+            sp[0], sp[1], r, reach)
+    v = math.hypot(sp[2], sp[3])
+    if not v <= vmax:
+        return 'velocity %g m/s beyond %g m/s' % (v, vmax)
+    a = math.hypot(sp[4], sp[5])
+    if not a <= amax:
+        return 'acceleration %g m/s^2 beyond %g m/s^2' % (a, amax)
+    return None

@@ -1,0 +1,134 @@
+"""Hold / resume reference and the controller's guards (freejoint_core.reference)."""
+import math
+
+from freejoint_core.arm import table1
+from freejoint_core.control import Gains, RobustController
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.reference import (clamp_dt, limit_effort, MODE_BLEND, MODE_HOLD,
+                                      MODE_STREAM, quintic_offset, ReferenceShaper,
+                                      setpoint_refusal, state_refusal)
+from freejoint_core.trajectory import CircleQuintic
+import numpy as np
+import pytest
+
+
+def test_quintic_offset_meets_its_six_boundary_conditions():
+    d0, v0, a0, T = 0.03, -0.2, 1.5, 0.5
+    assert quintic_offset(d0, v0, a0, T, 0.0) == (d0, v0, a0)
+    d, v, a = quintic_offset(d0, v0, a0, T, T - 1e-9)
+    assert abs(d) < 1e-12 and abs(v) < 1e-7 and abs(a) < 1e-4
+    assert quintic_offset(d0, v0, a0, T, T) == (0.0, 0.0, 0.0)
+    # Its derivatives are the returned rate and acceleration (finite differences).
+    h = 1e-6
+    for t in (0.05, 0.2, 0.41):
+        dm, vm, _ = quintic_offset(d0, v0, a0, T, t - h)
+        dp, vp, _ = quintic_offset(d0, v0, a0, T, t + h)
+        _, v, a = quintic_offset(d0, v0, a0, T, t)
+        assert abs((dp - dm) / (2 * h) - v) < 1e-6
+        assert abs((vp - vm) / (2 * h) - a) < 1e-4
+
+
+def test_hold_freezes_the_position_at_its_onset_with_zero_velocity():
+    sh = ReferenceShaper(0.5)
+    assert sh.hold((0.1, 0.2)) == (0.1, 0.2, 0.0, 0.0, 0.0, 0.0)
+    assert sh.hold((0.5, 0.5)) == (0.1, 0.2, 0.0, 0.0, 0.0, 0.0)
+    assert sh.mode == MODE_HOLD and sh.hold_position == (0.1, 0.2)
+
+
+def test_resume_blends_from_the_hold_to_the_stream_without_a_step():
+    traj = CircleQuintic()
+    dt = 1e-3
+    sh = ReferenceShaper(0.5)
+    hold = (0.23, -0.04)
+    refs = [sh.hold(hold)]
+    t0 = 1.7
+    for k in range(800):
+        sp = traj.sample_tuple(t0 + k * dt)
+        ref, blending = sh.track(t0 + k * dt, sp, None)
+        assert blending == (k * dt < 0.5 - 1e-12)
+        refs.append(ref)
+    refs = np.array(refs)
+    # Continuous position, velocity and acceleration: the largest change per tick is
+    # what a bounded jerk gives, at the switch into the blend and out of it.
+    steps = np.abs(np.diff(refs, axis=0)).max(axis=0)
+    assert steps[0:2].max() < 2e-3 * 1.0        # < 2 mm per ms: no jump of 0.03 m
+    assert steps[2:4].max() < 0.01              # m/s per tick
+    assert steps[4:6].max() < 0.2               # m/s^2 per tick
+    assert tuple(refs[1]) == pytest.approx(hold + (0, 0, 0, 0), abs=1e-12)
+    assert sh.mode == MODE_STREAM
+    assert tuple(refs[-1]) == traj.sample_tuple(t0 + 799 * dt)
+
+
+def test_first_setpoint_blends_in_from_the_arm_in_real_time_and_not_in_lockstep():
+    sp = (0.2, 0.0, 0.1, 0.0, 0.0, 0.0)
+    rt = ReferenceShaper(0.5, blend_on_start=True)
+    ref, blending = rt.track(10.0, sp, (0.25, 0.01))
+    assert blending and ref == (0.25, 0.01, 0.0, 0.0, 0.0, 0.0)
+    assert rt.mode == MODE_BLEND
+    ls = ReferenceShaper(0.5, blend_on_start=False)
+    assert ls.track(0.0, sp, (0.25, 0.01)) == (sp, False)
+    ls.reset()
+    assert ls.mode == 'none'
+
+
+def test_resume_time_zero_switches_at_once_and_bad_values_are_refused():
+    sh = ReferenceShaper(0.0)
+    sh.hold((0.0, 0.3))
+    sp = (0.2, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert sh.track(0.0, sp, None) == (sp, False)
+    with pytest.raises(FreejointValueError, match='^resume_time'):
+        ReferenceShaper(-1.0)
+    with pytest.raises(FreejointValueError, match='^resume_time'):
+        sh.set_resume_time(math.nan)
+
+
+def test_clamp_dt_bounds_the_step_to_a_quarter_and_four_periods():
+    assert clamp_dt(0.002, 0.002) == (0.002, False)
+    assert clamp_dt(0.0001, 0.002) == (0.0005, True)
+    assert clamp_dt(1.0, 0.002) == (0.008, True)
+    assert clamp_dt(math.inf, 0.001) == (0.001, True)
+
+
+def test_limit_effort_clips_per_joint_and_limits_the_step():
+    assert limit_effort([500.0, -10.0], (300.0, 200.0)) == ([300.0, -10.0], True, False)
+    tau, clipped, rated = limit_effort([100.0, -50.0], (300.0, 200.0), [0.0, 0.0], 20.0)
+    assert tau == [20.0, -20.0] and not clipped and rated
+    assert limit_effort([5.0, 1.0], (300.0, 200.0), [0.0, 0.0], 20.0) == ([5.0, 1.0], False,
+                                                                          False)
+
+
+def test_state_refusal_names_the_joint_and_the_limit():
+    lo, hi, vmax = (-6.0,) * 3, (6.0,) * 3, (100.0,) * 3
+    assert state_refusal((0.1, 0.2, 0.3), (1.0, 2.0, 3.0), lo, hi, vmax) is None
+    assert 'joint 1 position 1000000.0' in state_refusal((0.0, 1e6, 0.0), (0.0,) * 3, lo, hi,
+                                                         vmax)
+    assert 'joint 2 velocity 1e+160' in state_refusal((0.0,) * 3, (0.0, 0.0, 1e160), lo, hi,
+                                                      vmax)
+    assert 'velocity nan' in state_refusal((0.0,) * 3, (math.nan, 0.0, 0.0), lo, hi, vmax)
+
+
+def test_setpoint_refusal_checks_reach_speed_and_acceleration():
+    ok = (0.2, 0.0, 0.3, 0.0, 1.0, 0.0)
+    assert setpoint_refusal(ok, 0.9, 5.0, 50.0) is None
+    assert 'beyond the reach' in setpoint_refusal((1e300, 0.0, 0, 0, 0, 0), 0.9, 5.0, 50.0)
+    assert 'velocity' in setpoint_refusal((0.2, 0.0, 10.0, 0, 0, 0), 0.9, 5.0, 50.0)
+    assert 'acceleration' in setpoint_refusal((0.2, 0.0, 0, 0, 0, 1e3), 0.9, 5.0, 50.0)
+    assert 'non-finite' in setpoint_refusal((0.2, math.nan, 0, 0, 0, 0), 0.9, 5.0, 50.0)
+
+
+def test_theta_max_clamps_the_update_and_set_theta_restores_an_estimate():
+    ctl = RobustController(table1('horizontal').scaled(0.7),
+                           Gains(Gamma=(1e3,) * 5, theta_max=(1e-3,) * 5))
+    q = (-1.369438, 1.691679, 2.094395)
+    ctl.step(q, (1.0, -2.0, 3.0), (0.3, 0.1), (0.0, 0.0), (0.0, 0.0), 1e-3)
+    assert max(ctl.theta) <= 1e-3 and max(ctl.theta) == 1e-3
+    ctl.set_theta((0.0, 1e-4, 0.0, 0.0, 0.0))
+    assert ctl.theta.tolist() == [0.0, 1e-4, 0.0, 0.0, 0.0]
+    with pytest.raises(FreejointValueError, match='^theta'):
+        ctl.set_theta((math.nan,) * 5)
+    with pytest.raises(FreejointValueError, match='^theta_max'):
+        Gains(theta_max=(0.0,) * 5)
+    general = RobustController(table1('horizontal').scaled(0.7),
+                               Gains(Gamma=(1e3,) * 5, theta_max=(1e-3,) * 5), use_fast=False)
+    general.step(q, (1.0, -2.0, 3.0), (0.3, 0.1), (0.0, 0.0), (0.0, 0.0), 1e-3)
+    assert max(general.theta) == 1e-3
