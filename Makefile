@@ -4,7 +4,7 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := . tools/env.sh &&
 
-.PHONY: help setup demo test offline bench analyze clean
+.PHONY: help setup demo test offline bench soak analyze clean
 
 help:
 	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
@@ -12,6 +12,8 @@ help:
 	@echo 'make setup    only set up: .venv with ROS 2 Jazzy wheels, colcon build'
 	@echo 'make offline  offline closed-loop runner (reference table, bags/offline/metrics.json)'
 	@echo 'make bench    benchmarks (figures printed and written to bags/bench/bench.json)'
+	@echo 'make soak     real-time soak, both cases, 5 x 30 s each (bags/soak/soak.json);'
+	@echo '              SOAK_ARGS="--runs 2 --seconds 10 --hogs 2 --cases vertical"'
 	@echo 'make analyze BAGS="bags/demo/..."  metrics and plots from recorded bags'
 
 setup:
@@ -28,6 +30,9 @@ offline: setup
 
 bench: setup
 	@$(ENV) python bench/run_all.py
+
+soak: setup
+	@$(ENV) python bench/soak.py $(SOAK_ARGS)
 
 analyze: setup
 	@$(ENV) python -m freejoint_tools.analyze $(BAGS)

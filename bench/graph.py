@@ -557,9 +557,14 @@ def bring_up_realtime(client, graph, layout, bag, case, sim, ctl=(), planner=(),
                 + list(planner),
                 ['use_sim_time:=false', 'ready_topics:=' + RT_READY_BEFORE_SIM],
                 custom or 'case=%s, variant=robust, seed=%d' % (case, SEED), case)
-    ok, status = client.recorder_ready(60.0)
-    if not ok:
-        raise RuntimeError('recorder not ready after 60 s: %s' % status)
+    deadline = time.monotonic() + 60.0
+    while True:
+        _raise_if_exited(graph)
+        ok, status = client.recorder_ready(2.0)
+        if ok:
+            break
+        if time.monotonic() > deadline:
+            raise RuntimeError('recorder not ready after 60 s: %s' % status)
     if not composed:
         start_sim(graph, sim, case)
     if not client.spin_until(lambda: graph.exited() or all(
@@ -591,8 +596,11 @@ class CircleLoop:
     plan instead of cutting the running one off.
     """
 
-    def __init__(self, client, plan=None, period=None):
+    def __init__(self, client, plan=None, period=None, strict=True):
         self.client = client
+        self.strict = strict
+        self.refused = []
+        """(monotonic time, reason) of the refused requests (``strict=False``)."""
         self.plan = plan or ros_params('planner.yaml')
         self.period = float(self.plan['duration']) + 0.5 if period is None else period
         self.next = time.monotonic()
@@ -602,14 +610,18 @@ class CircleLoop:
         """System-clock times (s) of the accepting replies."""
 
     def poll(self):
-        """Ask for the next circle if it is due; raise if the planner refuses or is silent."""
+        """Ask for the next circle if due; a refusal or silence raises if ``strict``."""
         if time.monotonic() < self.next:
             return False
         answer = self.client.plan_circle(self.plan)
-        if answer is None or not answer.accepted:
-            raise RuntimeError('the planner did not start the circle: %s' % (
-                'no answer' if answer is None else answer.reason))
         now = time.monotonic()
+        if answer is None or not answer.accepted:
+            reason = 'no answer' if answer is None else answer.reason
+            if self.strict:
+                raise RuntimeError('the planner did not start the circle: %s' % reason)
+            self.refused.append((now, reason))
+            self.next = now + self.period
+            return False
         self.accepted.append(now)
         self.accepted_wall.append(time.time())
         self.next = now + self.period

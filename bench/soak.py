@@ -1,0 +1,524 @@
+"""
+Soak: the real-time graph at 1 kHz, many runs per case, each judged against the offline bound.
+
+``make soak`` runs, for each case (horizontal, vertical) and each of ``--runs`` runs (default
+5) of ``--seconds`` s (default 30): a process per node as ``make demo`` starts them (the
+installed executables with ``config/*.yaml``), the recorder on, the simulator and the
+controller at SCHED_FIFO ``--priority`` (default 50: ``thread_priority``), the planner's
+circle asked for again and again (each 0.5 s after the previous one's duration, from the
+reply that accepted it). Each run has a ROS domain of its own
+(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), every wait is bounded and every process is
+stopped (SIGINT, then SIGKILL of its group) whatever happens. ``--hogs N`` adds N CPU hog
+processes at normal priority beside the graph for the whole soak (each ends by itself after
+the soak's expected length, and is killed at the end in any case).
+
+Per run, from its bag (``controller_state``) and the simulator's per-step timing file:
+
+* tracking error rms / max over the measured window (``|position - position_desired|``);
+* stale periods: control periods over which the simulator applied no command answering the
+  newest state it had published (none, or an older one), and the longest run of them;
+* holds: controller ticks with the ``STATUS_HOLDING`` bit (32);
+* divergence: the simulator's warning/error log lines about a diverged plant, its
+  ``/diagnostics`` messages saying so (when recorded), and a tracking error above 0.5 m;
+* worst state age: the largest ``state_age`` of ``controller_state`` (the state's age when
+  the command went out; every ``*age*`` field is kept in the JSON) and the largest
+  state->command latency of the simulator's timing file;
+* the largest |effort| per joint.
+
+The bound per case is 1.5 x the offline runner's worst max error over seeds 0-9 (3 x with
+hogs), computed here from ``freejoint_core.offline``; each run prints met / NOT met. The
+table per run, the worst per case and the conditions (load average, priority, layout, CPU
+count, hogs) are printed and written to ``bags/soak/soak.json``.
+
+Usage: ``. tools/env.sh && python bench/soak.py [--runs 5] [--seconds 30]
+[--cases horizontal vertical] [--hogs N] [--priority 50]``. Bags and logs stay in
+``bags/soak/<case>_<run>/`` (git-ignored). Exit code 0 whatever the figures (a benchmark),
+1 if a run could not be made.
+"""
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+if HERE not in sys.path:
+    sys.path.insert(0, HERE)
+
+import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
+
+OUT = os.path.join(ROOT, 'bags', 'soak')
+CASES = ('horizontal', 'vertical')
+STATUS_HOLDING = 32
+"""``freejoint_msgs/ControllerState.STATUS_HOLDING`` (the message's constant when it has it)."""
+BOUND_FACTOR = 1.5
+BOUND_FACTOR_HOGS = 3.0
+DIVERGED_MM = 500.0
+"""A tracking error above this [mm] counts as a diverged run (the offline runner's 0.5 m)."""
+HOG_CODE = ('import sys, time\n'
+            'end = time.monotonic() + float(sys.argv[1])\n'
+            'while time.monotonic() < end:\n'
+            '    pass\n')
+
+
+def say(text):
+    """Print a progress line at once."""
+    print('[soak] ' + text, flush=True)
+
+
+def domain_env(index):
+    """Environment of run ``index``: a ROS domain (150-229) no other run of this soak uses."""
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(150 + ((os.getpid() % 5) * 16 + index) % 80)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env['PYTHONUNBUFFERED'] = '1'
+    env.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
+    return env
+
+
+def conditions(priority, hogs):
+    """Return the conditions of the soak: machine, load, scheduling, layout."""
+    return {'cpu_count': os.cpu_count(), 'machine': platform.machine(),
+            'kernel': platform.release(), 'load_average': list(os.getloadavg()),
+            'thread_priority': priority, 'scheduling': 'SCHED_FIFO' if priority else 'OTHER',
+            'layout': 'a process per node (make demo)', 'hogs': hogs,
+            'time_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}
+
+
+def holding_bit():
+    """Return the HOLDING status bit (the message's constant, else 32)."""
+    try:
+        from freejoint_msgs.msg import ControllerState
+        return int(getattr(ControllerState, 'STATUS_HOLDING', STATUS_HOLDING))
+    except ImportError:
+        return STATUS_HOLDING
+
+
+def effort_limits():
+    """Return the controller's per-joint effort limits of config/controller.yaml (or None)."""
+    ctl = bench_graph.ros_params('controller.yaml')
+    limits = ctl.get('effort_limits')
+    if limits:
+        return [float(v) for v in limits]
+    tau = float(ctl.get('tau_limit', 0.0) or 0.0)
+    return [tau, tau] if tau > 0.0 else None
+
+
+# -- CPU hogs ---------------------------------------------------------------------------
+class Hogs:
+    """N busy-loop processes at normal priority; each ends by itself after ``lifetime`` s."""
+
+    def __init__(self, count, lifetime):
+        self.procs = []
+        for _ in range(count):
+            self.procs.append(subprocess.Popen(
+                [sys.executable, '-c', HOG_CODE, '%.0f' % lifetime],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def stop(self):
+        """SIGINT each hog, then SIGKILL after 2 s; wait for all (bounded)."""
+        for proc in self.procs:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        for proc in self.procs:
+            try:
+                proc.wait(2.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(5.0)
+        self.procs = []
+
+
+# -- one real-time graph ----------------------------------------------------------------
+class Session:
+    """
+    One real-time graph (a process per node, recorder on) in a ROS domain of its own.
+
+    ``with Session(...) as s: s.up(); ...``: on leaving, every process is stopped (the
+    controller first, the recorder last) and this process's rclpy is shut down, whatever
+    happened. ``kill(name)`` is kill -9 of a node; ``restart(name)`` starts it again with
+    the same command line (``replace``: {old override: new} items changed).
+    """
+
+    def __init__(self, name, index, case, seconds, sim=(), ctl=(), planner=(), reset=True,
+                 timing=True):
+        self.name = name
+        self.case = case
+        self.dir = os.path.join(OUT, name)
+        shutil.rmtree(self.dir, ignore_errors=True)
+        os.makedirs(self.dir)
+        self.bag = os.path.join(self.dir, 'bag')
+        self.timing_path = os.path.join(self.dir, 'timing.npz') if timing else None
+        self.env = domain_env(index)
+        self.sim = list(sim)
+        if timing:
+            self.sim += ['timing_file:=' + self.timing_path,
+                         'timing_steps:=%d' % (int(seconds * 1000)
+                                               + bench_graph.RT_STARTUP_STEPS)]
+        self.ctl, self.planner, self.reset = list(ctl), list(planner), reset
+        self.client = None
+        self.graph = bench_graph.Graph(os.path.join(self.dir, 'logs'), 'run', self.env)
+        self.codes = {}
+        self.restarts = {}
+
+    def __enter__(self):
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        os.environ['ROS_DOMAIN_ID'] = self.env['ROS_DOMAIN_ID']   # this process's node
+        self.client = bench_graph.Client()
+        return self
+
+    def __exit__(self, *exc):
+        try:
+            self.codes = self.graph.stop_all()
+        finally:
+            self.client.close()
+
+    def up(self):
+        """Start the graph and wait until the controller holds the start point."""
+        bench_graph.bring_up_realtime(
+            self.client, self.graph, 'separate', self.bag, self.case, self.sim, self.ctl,
+            self.planner, 'case=%s, variant=robust, seed=%d, soak=%s'
+            % (self.case, bench_graph.SEED, self.name), reset=self.reset)
+
+    def wait(self, seconds, loop=None):
+        """Spin ``seconds`` s (asking for circles if ``loop``); raise if a node exited."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            exited = self.graph.exited()
+            if exited:
+                raise RuntimeError('%s exited (logs in %s): %s' % (
+                    ', '.join(exited), self.graph.log_dir,
+                    self.graph.tail(exited[0], 3).strip()))
+            if loop is not None:
+                loop.poll()
+            self.client.spin_until(lambda: False, min(0.05, max(0.0, end - time.monotonic())))
+
+    def kill(self, name):
+        """Send SIGKILL to the node's process group (kill -9); return the system time (s)."""
+        proc = self.graph.procs[name]
+        now = time.time()
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(10.0)
+        proc.log_file.close()
+        return now
+
+    def restart(self, name, replace=None):
+        """Start ``name`` again with its command line; return the system time (s)."""
+        old = self.graph.procs[name]
+        cmd = [(replace or {}).get(a, a) for a in old.args]
+        self.restarts[name] = self.restarts.get(name, 0) + 1
+        now = time.time()
+        self.graph.start(name, cmd, log_name='%s_%d' % (name, self.restarts[name] + 1))
+        return now
+
+    def diverged_lines(self):
+        """Return the simulator's log lines about a diverged plant."""
+        return self.graph.diverged()
+
+
+# -- analysis ---------------------------------------------------------------------------
+def stale_periods(timing_path, mono_window):
+    """
+    Return the simulator's timing figures of the periods inside ``mono_window``.
+
+    Returns
+    -------
+    dict
+        ``periods``, ``stale`` (periods whose applied command did not answer the newest
+        state published), ``longest_stale`` (consecutive), ``latency_max_ms`` (largest
+        state->command latency), ``latency_p99_ms``, ``stamp_window_ns`` (the stamps of
+        the first and last state of the window), ``skipped`` (periods the sim dropped).
+
+    """
+    import numpy as np
+    t = np.load(timing_path)
+    pub, rec, applied, stamp = t['published'], t['received'], t['applied'], t['stamp_ns']
+    published = np.isfinite(pub)
+    lo, hi = mono_window
+    window = np.nonzero(published & (pub >= lo) & (pub <= hi))[0]
+    if len(window) < 2:
+        raise RuntimeError('the timing file %s holds no step of the window' % timing_path)
+    k0, k1 = int(window[0]), int(window[-1])
+    idx = np.arange(len(pub))
+    newest = np.maximum.accumulate(np.where(published, idx, -1))
+    ks = np.arange(k0, k1)
+    stale = applied[ks] != newest[ks]
+    longest = run = 0
+    for s in stale:
+        run = run + 1 if s else 0
+        longest = max(longest, run)
+    latency = (rec[window] - pub[window]) * 1e3
+    latency = latency[np.isfinite(latency)]
+    return {'periods': int(len(ks)), 'stale': int(np.count_nonzero(stale)),
+            'longest_stale': int(longest),
+            'latency_max_ms': float(latency.max()) if len(latency) else None,
+            'latency_p99_ms': float(np.percentile(latency, 99)) if len(latency) else None,
+            'stamp_window_ns': (int(stamp[k0]), int(stamp[k1])),
+            'skipped': int(t['dropped'])}
+
+
+def stamp_ns(msg):
+    """Return a header stamp in ns."""
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def controller_ticks(bag_path):
+    """
+    Return the bag's controller_state as arrays (one row per message, arrival order).
+
+    Returns
+    -------
+    dict of numpy.ndarray
+        ``log_ns``, ``stamp_ns``, ``err_mm`` (|p - p_d|), ``p`` (n, 2) [m], ``pd`` (n, 2),
+        ``status``, ``effort`` (n, joints), and one array per ``*age*`` field of the
+        message (as recorded).
+
+    """
+    import numpy as np
+    from freejoint_tools.bagfile import open_bag
+    msgs = open_bag(bag_path).decode('/controller_state')
+    if not msgs:
+        raise RuntimeError('no controller_state in %s' % bag_path)
+    fields = [f for f in getattr(msgs[0][1], '__dataclass_fields__', {}) if 'age' in f]
+    out = {'log_ns': np.array([lt for lt, _ in msgs], dtype=np.int64),
+           'stamp_ns': np.array([stamp_ns(m) for _, m in msgs], dtype=np.int64),
+           'p': np.array([list(m.position) for _, m in msgs]),
+           'pd': np.array([list(m.position_desired) for _, m in msgs]),
+           'status': np.array([int(m.status) for _, m in msgs], dtype=np.int64)}
+    width = max(len(m.effort) for _, m in msgs)
+    effort = np.full((len(msgs), width), np.nan)
+    for i, (_, m) in enumerate(msgs):
+        effort[i, :len(m.effort)] = m.effort
+    out['effort'] = effort
+    out['err_mm'] = 1000.0 * np.hypot(*(out['p'] - out['pd']).T)
+    for f in fields:
+        try:
+            out['age:' + f] = np.array([float(getattr(m, f)) for _, m in msgs])
+        except (TypeError, ValueError):
+            pass
+    return out
+
+
+def diagnostics_diverged(bag_path):
+    """Return the /diagnostics messages of the bag saying a plant diverged (0 if none)."""
+    from freejoint_tools.bagfile import open_bag
+    bag = open_bag(bag_path)
+    if '/diagnostics' not in bag.topics:
+        return 0
+    count = 0
+    for _, msg in bag.decode('/diagnostics'):
+        for status in msg.status:
+            level = status.level
+            level = (int.from_bytes(level, 'little') if isinstance(level, (bytes, bytearray))
+                     else int(level))
+            text = ' '.join([status.message] + ['%s %s' % (kv.key, kv.value)
+                                                for kv in status.values]).lower()
+            if level >= 2 and 'diverg' in text:
+                count += 1
+                break
+    return count
+
+
+def summarise(ticks, mask):
+    """Return tracking, holds, efforts and ages of the ticks selected by ``mask``."""
+    import numpy as np
+    err = ticks['err_mm'][mask]
+    effort = np.abs(ticks['effort'][mask])
+    out = {'ticks': int(np.count_nonzero(mask)),
+           'max_mm': float(err.max()) if len(err) else None,
+           'rms_mm': float(np.sqrt(np.mean(err ** 2))) if len(err) else None,
+           'holds': int(np.count_nonzero(ticks['status'][mask] & holding_bit())),
+           'effort_max': ([float(v) for v in np.nanmax(effort, axis=0)]
+                          if len(effort) else None)}
+    for key in ticks:
+        if key.startswith('age:'):
+            values = ticks[key][mask]
+            out['max_' + key[4:]] = float(np.nanmax(values)) if len(values) else None
+    return out
+
+
+def bound_of(case, hogs):
+    """Return (bound mm, factor, offline worst max mm) of ``case``."""
+    worst, _rms = bench_graph.offline_bound(case)
+    factor = BOUND_FACTOR_HOGS if hogs else BOUND_FACTOR
+    return factor * worst, factor, worst
+
+
+# -- one soak run -----------------------------------------------------------------------
+def soak_run(case, index, run, seconds, hogs):
+    """Make one run of ``case``; return its row (dict)."""
+    name = '%s_%d' % (case, run)
+    bound, factor, worst = bound_of(case, hogs)
+    row = {'case': case, 'run': run, 'seconds': seconds, 'bound_mm': bound,
+           'bound_factor': factor, 'offline_worst_max_mm': worst}
+    load0 = os.getloadavg()[0]
+    with Session(name, index, case, seconds) as s:
+        row['ros_domain_id'] = s.env['ROS_DOMAIN_ID']
+        s.up()
+        loop = bench_graph.CircleLoop(s.client)
+        start = time.monotonic()
+        s.wait(seconds, loop)
+        end = time.monotonic()
+    row['exit_codes'] = s.codes
+    row['plans'] = len(loop.accepted)
+    row['load_before'], row['load_after'] = load0, os.getloadavg()[0]
+    timing = stale_periods(s.timing_path, (start, end))
+    lo, hi = timing.pop('stamp_window_ns')
+    row.update(timing)
+    ticks = controller_ticks(s.bag)
+    row.update(summarise(ticks, (ticks['stamp_ns'] >= lo) & (ticks['stamp_ns'] <= hi)))
+    if row.get('max_state_age') is not None:
+        row['state_age_max_ms'] = 1e3 * row['max_state_age']
+    row['diverged_log_lines'] = s.diverged_lines()
+    row['diverged_diagnostics'] = diagnostics_diverged(s.bag)
+    row['diverged'] = bool(row['diverged_log_lines'] or row['diverged_diagnostics']
+                           or (row['max_mm'] or 0.0) > DIVERGED_MM)
+    row['met'] = bool(row['max_mm'] is not None and row['max_mm'] <= bound
+                      and not row['diverged'])
+    row['bag'] = os.path.relpath(s.bag, ROOT)
+    return row
+
+
+COLUMNS = (('case', '%-10s'), ('run', '%3s'), ('rms_mm', '%7.3f'), ('max_mm', '%7.3f'),
+           ('bound_mm', '%6.2f'), ('stale', '%6d'), ('longest_stale', '%5d'),
+           ('holds', '%6d'), ('diverged', '%5s'), ('latency_max_ms', '%7.2f'),
+           ('state_age_max_ms', '%7.2f'),
+           ('plans', '%3d'), ('load_after', '%5.2f'), ('met', '%4s'))
+HEADER = ('case', 'run', 'rms mm', 'max mm', 'bound', 'stale', 'run', 'holds', 'div',
+          'lat ms', 'age ms', 'pl', 'load', 'met')
+
+
+def format_row(row):
+    """Return one table line."""
+    cells = []
+    for (key, fmt), head in zip(COLUMNS, HEADER):
+        value = row.get(key)
+        width = int(''.join(c for c in fmt.split('.')[0] if c.isdigit()) or 0)
+        if value is None:
+            cells.append('%*s' % (max(width, len(head)), 'n/a'))
+        elif key == 'met':
+            cells.append('%*s' % (max(width, len(head)), 'met' if value else 'NOT'))
+        elif key == 'diverged':
+            cells.append('%*s' % (max(width, len(head)), 'YES' if value else 'no'))
+        else:
+            text = fmt % value
+            cells.append('%*s' % (max(width, len(head)), text.strip()))
+    return ' '.join(cells)
+
+
+def format_header():
+    """Return the table's header line."""
+    return ' '.join('%*s' % (max(int(''.join(c for c in fmt.split('.')[0] if c.isdigit())
+                                     or 0), len(head)), head)
+                    for (_key, fmt), head in zip(COLUMNS, HEADER))
+
+
+def worst_of(rows):
+    """Return the worst figures of a case's rows."""
+    done = [r for r in rows if r.get('max_mm') is not None]
+    if not done:
+        return {'runs': len(rows), 'completed': 0}
+    return {'runs': len(rows), 'completed': len(done),
+            'max_mm': max(r['max_mm'] for r in done),
+            'rms_mm': max(r['rms_mm'] for r in done),
+            'stale': max(r['stale'] for r in done),
+            'longest_stale': max(r['longest_stale'] for r in done),
+            'holds': max(r['holds'] for r in done),
+            'diverged_runs': sum(1 for r in done if r['diverged']),
+            'latency_max_ms': max((r['latency_max_ms'] or 0.0) for r in done),
+            'state_age_max_ms': max((r.get('state_age_max_ms') or 0.0) for r in done),
+            'bound_mm': done[0]['bound_mm'],
+            'met_runs': sum(1 for r in rows if r.get('met')),
+            'all_met': all(r.get('met') for r in rows)}
+
+
+def parse(argv):
+    """Return the command-line options."""
+    ap = argparse.ArgumentParser(prog='soak', description=__doc__.strip().splitlines()[0])
+    ap.add_argument('--runs', type=int, default=5, help='runs per case (default 5)')
+    ap.add_argument('--seconds', type=float, default=30.0,
+                    help='measured seconds per run (default 30)')
+    ap.add_argument('--cases', nargs='+', choices=CASES, default=list(CASES))
+    ap.add_argument('--hogs', type=int, default=0,
+                    help='CPU hog processes at normal priority beside the graph (default 0)')
+    ap.add_argument('--priority', type=int, default=50,
+                    help='thread_priority (SCHED_FIFO) of sim and controller (0 = off)')
+    ap.add_argument('--out', default=os.path.join(OUT, 'soak.json'))
+    args = ap.parse_args(argv)
+    if args.runs < 1 or args.seconds <= 0 or args.hogs < 0 or not 0 <= args.priority <= 98:
+        ap.error('--runs >= 1, --seconds > 0, --hogs >= 0, 0 <= --priority <= 98')
+    return args
+
+
+def main(argv=None):
+    """Run the soak; print and write the tables; return the exit code."""
+    args = parse(sys.argv[1:] if argv is None else argv)
+    bench_graph.PRIORITY = args.priority
+    os.makedirs(OUT, exist_ok=True)
+    cond = conditions(args.priority, args.hogs)
+    say('%d run(s) x %g s per case %s, sim and controller thread_priority %d, %d hog(s), '
+        '%d CPUs, load %.2f' % (args.runs, args.seconds, ', '.join(args.cases), args.priority,
+                                args.hogs, os.cpu_count(), os.getloadavg()[0]))
+    for case in args.cases:
+        bound, factor, worst = bound_of(case, args.hogs)
+        say('%s: bound %.3f mm = %g x the offline worst max %.3f mm (seeds 0-9)'
+            % (case, bound, factor, worst))
+    rows = []
+    failed = 0
+    # The hogs outlive no soak: each ends after the soak's expected length plus a margin.
+    lifetime = len(args.cases) * args.runs * (args.seconds + 60.0) + 120.0
+    with Hogs(args.hogs, lifetime):
+        index = 0
+        for case in args.cases:
+            for run in range(args.runs):
+                say('%s run %d/%d: %g s' % (case, run + 1, args.runs, args.seconds))
+                try:
+                    row = soak_run(case, index, run, args.seconds, args.hogs)
+                except (RuntimeError, OSError) as exc:
+                    say('%s run %d failed: %s' % (case, run, exc))
+                    row = {'case': case, 'run': run, 'error': str(exc), 'met': False}
+                    failed += 1
+                index += 1
+                rows.append(row)
+                say(format_row(row) if 'error' not in row else 'run not made')
+    cond['load_average_end'] = list(os.getloadavg())
+    per_case = {case: worst_of([r for r in rows if r['case'] == case]) for case in args.cases}
+    print()
+    print(format_header())
+    for row in rows:
+        print(format_row(row) if 'error' not in row else '%-10s %3d  not made: %s'
+              % (row['case'], row['run'], row['error']))
+    print()
+    for case, worst in per_case.items():
+        if worst.get('completed'):
+            print('%-10s worst of %d: max %.3f mm (bound %.3f), rms %.3f mm, stale %d '
+                  '(longest run %d), holds %d, diverged runs %d, latency max %.2f ms, '
+                  'state age max %.2f ms: %d/%d runs met'
+                  % (case, worst['completed'], worst['max_mm'], worst['bound_mm'],
+                     worst['rms_mm'], worst['stale'], worst['longest_stale'], worst['holds'],
+                     worst['diverged_runs'], worst['latency_max_ms'],
+                     worst['state_age_max_ms'], worst['met_runs'], worst['runs']))
+        else:
+            print('%-10s no run completed' % case)
+    with open(args.out, 'w') as f:
+        json.dump({'conditions': cond, 'runs': rows, 'worst': per_case}, f, indent=2)
+    say('written to %s; load %.2f at the end'
+        % (os.path.relpath(args.out, ROOT), os.getloadavg()[0]))
+    return 1 if failed else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
