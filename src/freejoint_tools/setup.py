@@ -22,6 +22,7 @@ setup(
             'recorder = freejoint_tools.recorder:main',
             'player = freejoint_tools.player:main',
             'analyze = freejoint_tools.analyze:main',
+            'reindex = freejoint_tools.reindex:main',
         ],
     },
 )

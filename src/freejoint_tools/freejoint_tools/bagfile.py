@@ -24,18 +24,31 @@ refused.
 Run information (case, variant, seed, ...) given to the recorder is written twice: at once,
 as an MCAP metadata record ``freejoint_run`` (so a killed bag still has it), and on close as
 ``custom_data`` of ``metadata.yaml`` (what ``ros2 bag record --custom-data`` writes).
+
+Write errors (a full disk): what the mcap writer produces is handed to the file in whole
+records (every chunk with its message indexes); a write that fails is cut off again
+(``ftruncate`` to the last complete record), so the file stays readable up to the error.
+From then on nothing more is written and every message is counted lost for its topic
+(:meth:`BagWriter.lost`); :meth:`BagWriter.close` still finalises the bag: it frees the
+space it kept in reserve (a ``.reserve`` file next to the MCAP file, sized for the summary),
+and writes the summary of the complete records in place (:func:`finalise_mcap`) and
+``metadata.yaml``. :func:`finalise_mcap` also repairs the bag of a killed recorder (the
+``reindex`` command).
 """
 
+import errno
 import io
 import os
 import struct
+import zlib
 
-from mcap.data_stream import ReadDataStream
+from mcap.data_stream import ReadDataStream, RecordBuilder
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import (Channel, Chunk, DataEnd, Footer, Header, Message, Metadata, Schema,
-                          Statistics)
-from mcap.stream_reader import breakup_chunk
+from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message,
+                          MessageIndex, Metadata, MetadataIndex, Schema, Statistics,
+                          SummaryOffset)
+from mcap.stream_reader import breakup_chunk, StreamReader
 from mcap.writer import CompressionType, Writer
 import yaml
 
@@ -47,6 +60,10 @@ RUN_RECORD = 'freejoint_run'
 METADATA_FILE = 'metadata.yaml'
 # rosbag2 writes an infinite duration as this (sec, nsec) pair.
 INFINITE = (9223372036, 854775807)
+RESERVE_SUFFIX = '.reserve'
+# Space kept free for finalising (summary, metadata record, metadata.yaml): this much plus
+# twice the size the chunk indexes have reached.
+RESERVE_BASE = 256 * 1024
 
 
 class BagError(Exception):
@@ -84,6 +101,127 @@ def _dump_yaml(data):
     return yaml.safe_dump(data, default_flow_style=False, sort_keys=False)
 
 
+def bag_information(file_name, topics, counts, start_ns, end_ns, custom_data, ros_distro):
+    """
+    Return the rosbag2 version 9 bag information (the dict under the root key).
+
+    Parameters
+    ----------
+    file_name : str
+        The MCAP file, relative to the bag directory.
+    topics : sequence of dict
+        ``name``, ``type``, ``qos`` (list of dict), ``hash`` (str) per topic.
+    counts : sequence of int
+        Messages in the file per topic, in the order of ``topics``.
+    start_ns, end_ns : int or None
+        Log times (ns) of the first and last message in the file (None: no message).
+    custom_data : dict of str to str
+        Run information (None or empty: none).
+    ros_distro : str
+        Written as ``ros_distro``.
+
+    """
+    start = start_ns or 0
+    duration = (end_ns - start_ns) if start_ns is not None else 0
+    total = sum(counts)
+    return {
+        'version': VERSION,
+        'storage_identifier': STORAGE,
+        'duration': {'nanoseconds': duration},
+        'starting_time': {'nanoseconds_since_epoch': start},
+        'message_count': total,
+        'topics_with_message_count': [
+            {'topic_metadata': {'name': t['name'], 'type': t['type'],
+                                'serialization_format': 'cdr',
+                                'offered_qos_profiles': t['qos'],
+                                'type_description_hash': t['hash']},
+             'message_count': n}
+            for t, n in zip(topics, counts)],
+        'compression_format': '',
+        'compression_mode': '',
+        'relative_file_paths': [file_name],
+        'files': [{'path': file_name,
+                   'starting_time': {'nanoseconds_since_epoch': start},
+                   'duration': {'nanoseconds': duration},
+                   'message_count': total}],
+        'custom_data': dict(custom_data) if custom_data else None,
+        'ros_distro': ros_distro,
+    }
+
+
+def write_metadata_yaml(path, info):
+    """Write ``<path>/metadata.yaml`` (via a temporary file); raise BagError if it cannot."""
+    tmp = os.path.join(path, METADATA_FILE + '.tmp')
+    try:
+        with open(tmp, 'w', encoding='utf-8') as fh:
+            fh.write(_dump_yaml({'rosbag2_bagfile_information': info}))
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, os.path.join(path, METADATA_FILE))
+    except OSError as exc:
+        try:
+            os.remove(tmp)
+        except OSError:
+            pass
+        raise BagError(os.path.join(path, METADATA_FILE),
+                       'cannot write: %s' % (exc.strerror or exc))
+
+
+class _Sink:
+    """
+    The mcap writer's output stream: bytes gathered in memory, handed to the file by commit.
+
+    The writer only ever leaves complete records here when one of its calls returns, so a
+    commit that fails can be cut off again and the file always ends on a record boundary.
+    """
+
+    def __init__(self, fd):
+        self.fd = fd
+        self._parts = []
+        self.pending = 0       # bytes written by the mcap writer, not yet in the file
+        self.committed = 0     # bytes in the file
+        self.error = None      # the OSError of the first failed commit
+
+    def write(self, data):
+        if self.error is None:
+            self._parts.append(bytes(data))
+        self.pending += len(data)
+        return len(data)
+
+    def tell(self):
+        return self.committed + self.pending
+
+    def flush(self):
+        """Do nothing: :meth:`commit` hands the data to the file."""
+
+    def commit(self):
+        """Write what is pending to the file; on an error cut it off and return False."""
+        if self.error is not None:
+            self._parts, self.pending = [], 0
+            return False
+        if not self.pending:
+            return True
+        data = b''.join(self._parts)
+        self._parts = []
+        view = memoryview(data)
+        done = 0
+        try:
+            while done < len(data):
+                done += os.write(self.fd, view[done:])
+        except OSError as exc:
+            self.error = exc
+            self.pending = 0
+            try:
+                os.ftruncate(self.fd, self.committed)
+                os.lseek(self.fd, self.committed, os.SEEK_SET)
+            except OSError:
+                pass
+            return False
+        self.committed += len(data)
+        self.pending = 0
+        return True
+
+
 class BagWriter:
     """
     Write a rosbag2 (version 9) bag with MCAP storage.
@@ -98,6 +236,13 @@ class BagWriter:
         MCAP chunk size (bytes); a chunk is also closed by every :meth:`flush`.
     ros_distro : str
         Written as ``ros_distro`` in the metadata.
+
+    Notes
+    -----
+    A message is in the file once the chunk holding it is: when the chunk fills up
+    (``chunk_size``), at :meth:`flush` and at :meth:`close`. If the file system refuses a
+    write (``error`` is then set), that chunk and every later message are counted lost
+    for their topics (:meth:`lost`) and the file keeps what was written before.
 
     """
 
@@ -115,19 +260,79 @@ class BagWriter:
         self.mcap_path = os.path.join(self.path, self.file_name)
         self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
         self.ros_distro = ros_distro
-        self._file = open(self.mcap_path, 'xb')
-        self._writer = Writer(self._file, chunk_size=int(chunk_size),
+        try:
+            self._fd = os.open(self.mcap_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except OSError as exc:
+            raise BagError(self.mcap_path, 'cannot create: %s' % exc.strerror)
+        self._reserve_path = os.path.join(self.path, '.' + name + RESERVE_SUFFIX)
+        self._reserved = 0
+        self._keep_reserve(RESERVE_BASE)
+        self._sink = _Sink(self._fd)
+        self._writer = Writer(self._sink, chunk_size=int(chunk_size),
                               compression=CompressionType.NONE)
         self._writer.start(profile='ros2', library=LIBRARY)
         if self.custom_data:
             self._writer.add_metadata(RUN_RECORD, dict(self.custom_data))
         self._schemas = {}
-        self.topics = {}       # channel id -> dict(name, type, qos, hash, count)
-        self._counts = {}      # channel id -> messages written
+        self.topics = {}       # channel id -> dict(name, type, qos, hash)
+        self._counts = {}      # channel id -> messages in the file
+        self._pending = {}     # channel id -> messages handed to the writer, not in the file
+        self._lost = {}        # channel id -> messages that did not reach the file
+        self._pending_range = None   # (first, last) log time of the pending messages
+        self._chunks = 0
         self.start_ns = None
         self.end_ns = None
         self.closed = False
-        self._file.flush()
+        self.error = None      # str: the write error that stopped the bag (None: none)
+        self.error_at = None   # bytes in the file when it happened
+        self._commit()
+
+    # -- reserve ------------------------------------------------------------------------
+    def _keep_reserve(self, size):
+        """Grow the reserve file to ``size`` bytes (best effort: a full disk stops it)."""
+        if size <= self._reserved:
+            return
+        try:
+            fd = os.open(self._reserve_path, os.O_WRONLY | os.O_CREAT, 0o644)
+            try:
+                os.posix_fallocate(fd, 0, size)
+                self._reserved = size
+            finally:
+                os.close(fd)
+        except OSError:
+            pass
+
+    def _free_reserve(self):
+        try:
+            os.remove(self._reserve_path)
+        except FileNotFoundError:
+            pass
+        self._reserved = 0
+
+    # -- writing ------------------------------------------------------------------------
+    def _commit(self):
+        """Hand what the mcap writer produced to the file; account its messages."""
+        if self.error is None and self._sink.commit():
+            if self._pending_range is not None:
+                first, last = self._pending_range
+                if self.start_ns is None or first < self.start_ns:
+                    self.start_ns = first
+                if self.end_ns is None or last > self.end_ns:
+                    self.end_ns = last
+            for channel, n in self._pending.items():
+                self._counts[channel] += n
+        else:
+            if self.error is None:
+                exc = self._sink.error
+                self.error = exc.strerror or str(exc)
+                self.error_at = self._sink.committed
+                if exc.errno == errno.ENOSPC:
+                    self.error = 'disk full (%s)' % self.error
+            for channel, n in self._pending.items():
+                self._lost[channel] += n
+        for channel in self._pending:
+            self._pending[channel] = 0
+        self._pending_range = None
 
     def add_topic(self, topic, msgtype, msgdef, type_hash='', qos_profiles=()):
         """
@@ -162,77 +367,105 @@ class BagWriter:
         self.topics[channel] = {'name': topic, 'type': msgtype, 'qos': qos,
                                 'hash': type_hash or ''}
         self._counts[channel] = 0
+        self._pending[channel] = 0
+        self._lost[channel] = 0
         return channel
 
     def write(self, channel, log_time, data, publish_time=None):
         """Write serialized ``data`` (CDR bytes) received at ``log_time`` (ns)."""
-        n = self._counts[channel]
+        if self.error is not None or self.closed:
+            self._lost[channel] += 1
+            return
+        n = self._counts[channel] + self._pending[channel]
         sent = log_time if publish_time is None else publish_time
+        before = self._sink.pending
         self._writer.add_message(channel, log_time, data, sent, n & 0xffffffff)
-        self._counts[channel] = n + 1
-        if self.start_ns is None or log_time < self.start_ns:
-            self.start_ns = log_time
-        if self.end_ns is None or log_time > self.end_ns:
-            self.end_ns = log_time
+        self._pending[channel] += 1
+        span = self._pending_range
+        if span is None:
+            self._pending_range = (log_time, log_time)
+        elif log_time < span[0] or log_time > span[1]:
+            self._pending_range = (min(span[0], log_time), max(span[1], log_time))
+        if self._sink.pending != before:      # a chunk closed: every message is in it
+            self._chunks += 1
+            self._commit()
 
     def count(self, channel):
-        """Return the number of messages written on ``channel``."""
+        """Return the number of messages of ``channel`` in the file."""
         return self._counts[channel]
+
+    def lost(self, channel):
+        """Return the number of messages of ``channel`` that did not reach the file."""
+        return self._lost[channel]
 
     def flush(self):
         """Close the current chunk and hand everything written to the operating system."""
-        if not self.closed:
-            self._writer.flush()
+        if self.closed or self.error is not None:
+            return
+        if any(self._pending.values()):
+            self._chunks += 1
+        self._writer.flush()
+        self._commit()
+        self._keep_reserve(RESERVE_BASE + 2 * self._chunks * (80 + 10 * len(self.topics)))
 
     def metadata(self):
-        """Return the rosbag2 version 9 bag information (the dict under the root key)."""
-        start = self.start_ns or 0
-        duration = (self.end_ns - self.start_ns) if self.start_ns is not None else 0
-        total = sum(self._counts.values())
-        return {
-            'version': VERSION,
-            'storage_identifier': STORAGE,
-            'duration': {'nanoseconds': duration},
-            'starting_time': {'nanoseconds_since_epoch': start},
-            'message_count': total,
-            'topics_with_message_count': [
-                {'topic_metadata': {'name': t['name'], 'type': t['type'],
-                                    'serialization_format': 'cdr',
-                                    'offered_qos_profiles': t['qos'],
-                                    'type_description_hash': t['hash']},
-                 'message_count': self._counts[c]}
-                for c, t in self.topics.items()],
-            'compression_format': '',
-            'compression_mode': '',
-            'relative_file_paths': [self.file_name],
-            'files': [{'path': self.file_name,
-                       'starting_time': {'nanoseconds_since_epoch': start},
-                       'duration': {'nanoseconds': duration},
-                       'message_count': total}],
-            'custom_data': dict(self.custom_data) if self.custom_data else None,
-            'ros_distro': self.ros_distro,
-        }
+        """Return the rosbag2 version 9 bag information of what is in the file now."""
+        channels = list(self.topics)
+        return bag_information(self.file_name, [self.topics[c] for c in channels],
+                               [self._counts[c] for c in channels], self.start_ns,
+                               self.end_ns, self.custom_data, self.ros_distro)
 
     def close(self):
-        """Finalise: metadata record, MCAP summary and footer, then metadata.yaml."""
+        """
+        Finalise: metadata record, MCAP summary and footer, then metadata.yaml.
+
+        After a write error (or if the summary itself cannot be written) the summary of what
+        the file holds is written in place (:func:`finalise_mcap`) once the reserve is freed.
+
+        Raises
+        ------
+        BagError
+            If the bag cannot be finalised (the disk is full even without the reserve).
+
+        """
         if self.closed:
             return
-        info = self.metadata()
-        self._writer.add_metadata('rosbag2', {'serialized_metadata': _dump_yaml(info)})
-        self._writer.finish()
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self._file.close()
         self.closed = True
-        tmp = os.path.join(self.path, METADATA_FILE + '.tmp')
-        with open(tmp, 'w', encoding='utf-8') as fh:
-            fh.write(_dump_yaml({'rosbag2_bagfile_information': info}))
-        os.replace(tmp, os.path.join(self.path, METADATA_FILE))
+        self._free_reserve()
+        if self.error is None:
+            self._writer.flush()
+            if any(self._pending.values()):
+                self._chunks += 1
+            self._commit()
+        if self.error is None:
+            info = self.metadata()
+            self._writer.add_metadata('rosbag2', {'serialized_metadata': _dump_yaml(info)})
+            self._writer.finish()
+            if self._sink.commit():
+                self._finish_file()
+                write_metadata_yaml(self.path, info)
+                return
+        try:
+            os.close(self._fd)
+        except OSError:
+            pass
+        info = self.metadata()
+        finalise_mcap(self.mcap_path, {'serialized_metadata': _dump_yaml(info)})
+        write_metadata_yaml(self.path, info)
+
+    def _finish_file(self):
+        try:
+            os.fsync(self._fd)
+        except OSError:
+            pass
+        os.close(self._fd)
 
     def abandon(self):
         """Close the file as it is (no summary, no metadata.yaml), like a crash would."""
         if not self.closed:
-            self._file.close()
+            self._sink.commit()
+            os.close(self._fd)
+            self._free_reserve()
             self.closed = True
 
 
@@ -581,3 +814,283 @@ def _check_counts(bag, meta_path):
     missing = sorted(set(listed) - set(bag.topics))
     if missing:
         raise BagError(meta_path, 'lists topic %s, not in the MCAP file' % missing[0])
+
+
+class McapContents:
+    """
+    What :func:`scan_mcap` found in an MCAP file: its complete records and where they end.
+
+    Attributes
+    ----------
+    schemas, channels : dict of int to mcap record
+        By id, from the complete chunks (and the summary of a finalised file).
+    counts : dict of int to int
+        Messages per channel id in the complete chunks.
+    start_ns, end_ns : int or None
+        Log times of the first and last message (None: no message).
+    chunk_indexes : list of mcap.records.ChunkIndex
+        One per complete chunk (a chunk with all its message indexes).
+    metadata : list of tuple
+        ``(name, dict, offset, length)`` of the metadata records.
+    end : int
+        Byte offset just past the last complete record of the data section.
+    size : int
+        File size (bytes).
+    finalised : bool
+        The file has its summary and footer.
+
+    """
+
+    def __init__(self):
+        self.header = None
+        self.schemas = {}
+        self.channels = {}
+        self.counts = {}
+        self.start_ns = None
+        self.end_ns = None
+        self.chunk_indexes = []
+        self.metadata = []
+        self.end = len(MAGIC)
+        self.size = 0
+        self.finalised = False
+
+    @property
+    def message_count(self):
+        """Return the number of messages in the complete chunks."""
+        return sum(self.counts.values())
+
+    def run_record(self):
+        """Return the run information record (``freejoint_run``) as a dict ({} if none)."""
+        for name, data, _, _ in self.metadata:
+            if name == RUN_RECORD:
+                return dict(data)
+        return {}
+
+    def topics(self):
+        """Return ``[(channel id, dict(name, type, qos, hash))]`` in channel id order."""
+        out = []
+        for cid in sorted(self.channels):
+            channel = self.channels[cid]
+            schema = self.schemas.get(channel.schema_id)
+            out.append((cid, {'name': channel.topic, 'type': schema.name if schema else '',
+                              'qos': _qos_list(channel.metadata.get('offered_qos_profiles',
+                                                                    '')),
+                              'hash': channel.metadata.get('topic_type_hash', '')}))
+        return out
+
+
+class _PendingChunk:
+    """A chunk read whole, waiting for its message indexes."""
+
+    def __init__(self, index, records):
+        self.index = index
+        self.records = records
+        self.channels = {r.channel_id for r in records if isinstance(r, Message)}
+        self.indexed = set()
+        self.end = index.chunk_start_offset + index.chunk_length
+
+    def complete(self):
+        return self.channels <= self.indexed
+
+
+def _accept_chunk(contents, chunk):
+    for record in chunk.records:
+        if isinstance(record, Schema):
+            contents.schemas[record.id] = record
+        elif isinstance(record, Channel):
+            contents.channels[record.id] = record
+        elif isinstance(record, Message):
+            contents.counts[record.channel_id] = contents.counts.get(record.channel_id, 0) + 1
+            t = record.log_time
+            if contents.start_ns is None or t < contents.start_ns:
+                contents.start_ns = t
+            if contents.end_ns is None or t > contents.end_ns:
+                contents.end_ns = t
+    contents.chunk_indexes.append(chunk.index)
+    contents.end = chunk.end
+
+
+def scan_mcap(path):
+    """
+    Read an MCAP file with mcap's StreamReader up to its end or to where it is cut short.
+
+    A chunk counts only with all its message indexes (what the readers of an indexed
+    file need); a chunk cut short, or whose indexes are, ends the usable part.
+
+    Returns
+    -------
+    McapContents
+
+    Raises
+    ------
+    BagError
+        If the file cannot be read or is not an MCAP file.
+
+    """
+    contents = McapContents()
+    try:
+        contents.size = os.path.getsize(path)
+        fh = open(path, 'rb')
+    except OSError as exc:
+        raise BagError(path, 'cannot read: %s' % exc.strerror)
+    with fh:
+        if fh.read(len(MAGIC)) != MAGIC:
+            raise BagError(path, 'not an MCAP file (no MCAP magic at the start)')
+        fh.seek(0)
+        records = StreamReader(fh, emit_chunks=True, record_size_limit=contents.size).records
+        pos = 0
+        pending = None
+        data_end = False
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                break
+            except (McapError, struct.error, ValueError, UnicodeDecodeError):
+                break                                  # cut short (or damaged) here
+            start = len(MAGIC) if pos == 0 else pos
+            pos = fh.tell()
+            if isinstance(record, Header):
+                contents.header = record
+                contents.end = pos
+                continue
+            if contents.header is None:
+                raise BagError(path, 'not an MCAP file (first record is not a header)')
+            if data_end:                                # the summary section
+                if isinstance(record, Schema):
+                    contents.schemas.setdefault(record.id, record)
+                elif isinstance(record, Channel):
+                    contents.channels.setdefault(record.id, record)
+                elif isinstance(record, Footer):
+                    contents.finalised = True
+                continue
+            if isinstance(record, MessageIndex) and pending is not None:
+                pending.index.message_index_offsets[record.channel_id] = start
+                pending.index.message_index_length = pos - pending.end
+                pending.indexed.add(record.channel_id)
+                continue
+            if pending is not None:
+                if pending.complete():
+                    _accept_chunk(contents, pending)
+                pending = None
+            if isinstance(record, Chunk):
+                try:
+                    inner = breakup_chunk(record, validate_crc=True)
+                except (McapError, struct.error, ValueError, UnicodeDecodeError):
+                    break                               # a damaged chunk ends it
+                pending = _PendingChunk(ChunkIndex(
+                    message_start_time=record.message_start_time,
+                    message_end_time=record.message_end_time, chunk_start_offset=start,
+                    chunk_length=pos - start, message_index_offsets={},
+                    message_index_length=0, compression=record.compression,
+                    compressed_size=len(record.data),
+                    uncompressed_size=record.uncompressed_size), inner)
+            elif isinstance(record, Metadata):
+                contents.metadata.append((record.name, dict(record.metadata), start,
+                                          pos - start))
+                contents.end = pos
+            elif isinstance(record, DataEnd):
+                data_end = True
+            elif isinstance(record, Schema):          # outside chunks (other writers)
+                contents.schemas[record.id] = record
+                contents.end = pos
+            elif isinstance(record, Channel):
+                contents.channels[record.id] = record
+                contents.end = pos
+        if pending is not None and pending.complete():
+            _accept_chunk(contents, pending)
+    if contents.header is None:
+        raise BagError(path, 'MCAP file cut short before its header (%d bytes)' % contents.size)
+    return contents
+
+
+def _summary_records(contents, summary_start):
+    """Return the summary section bytes (schemas ... summary offsets) and its offsets start."""
+    builder = RecordBuilder()
+    offsets = []
+
+    def group(opcode, records):
+        begin = builder.count
+        for record in records:
+            record.write(builder)
+        offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + begin,
+                                     group_length=builder.count - begin))
+
+    counts = {cid: contents.counts.get(cid, 0) for cid in contents.channels}
+    statistics = Statistics(
+        attachment_count=0, channel_count=len(contents.channels),
+        channel_message_counts=counts, chunk_count=len(contents.chunk_indexes),
+        message_count=contents.message_count,
+        metadata_count=len(contents.metadata),
+        message_start_time=contents.start_ns or 0, message_end_time=contents.end_ns or 0,
+        schema_count=len(contents.schemas))
+    group(Opcode.SCHEMA, [contents.schemas[k] for k in sorted(contents.schemas)])
+    group(Opcode.CHANNEL, [contents.channels[k] for k in sorted(contents.channels)])
+    group(Opcode.STATISTICS, [statistics])
+    group(Opcode.CHUNK_INDEX, contents.chunk_indexes)
+    group(Opcode.METADATA_INDEX, [MetadataIndex(offset=offset, length=length, name=name)
+                                  for name, _, offset, length in contents.metadata])
+    offsets_start = summary_start + builder.count
+    for offset in offsets:
+        offset.write(builder)
+    return builder.end(), offsets_start
+
+
+def finalise_mcap(path, rosbag2_record=None, contents=None):
+    """
+    Give an MCAP file whose writer stopped early its summary and footer, in place.
+
+    The file is cut after its last complete record (a chunk counts with all its message
+    indexes), then gets the metadata record ``rosbag2`` (if given), the data end, the
+    summary (schemas, channels, statistics, chunk and metadata indexes, summary offsets)
+    and the footer: what mcap's writer writes on finish. A finalised file is left alone.
+
+    Parameters
+    ----------
+    path : str
+        The MCAP file.
+    rosbag2_record : dict of str to str, optional
+        Content of the ``rosbag2`` metadata record (``serialized_metadata``).
+    contents : McapContents, optional
+        The file's :func:`scan_mcap` (scanned here if not given).
+
+    Returns
+    -------
+    McapContents
+        What the finalised file holds.
+
+    Raises
+    ------
+    BagError
+        If the file cannot be read or written.
+
+    """
+    if contents is None:
+        contents = scan_mcap(path)
+    if contents.finalised:
+        return contents
+    try:
+        with open(path, 'r+b') as fh:
+            fh.truncate(contents.end)
+            fh.seek(contents.end)
+            builder = RecordBuilder()
+            if rosbag2_record is not None:
+                Metadata(name='rosbag2', metadata=dict(rosbag2_record)).write(builder)
+                contents.metadata.append(('rosbag2', dict(rosbag2_record), contents.end,
+                                          builder.count))
+            DataEnd(data_section_crc=0).write(builder)
+            summary_start = contents.end + builder.count
+            summary, offsets_start = _summary_records(contents, summary_start)
+            crc = zlib.crc32(summary)
+            crc = zlib.crc32(struct.pack('<BQQQ', Opcode.FOOTER, 8 + 8 + 4, summary_start,
+                                         offsets_start), crc)
+            footer = RecordBuilder()
+            Footer(summary_start=summary_start, summary_offset_start=offsets_start,
+                   summary_crc=crc).write(footer)
+            fh.write(builder.end() + summary + footer.end() + MAGIC)
+            fh.flush()
+            os.fsync(fh.fileno())
+    except OSError as exc:
+        raise BagError(path, 'cannot finalise: %s' % (exc.strerror or exc))
+    contents.finalised = True
+    return contents

@@ -63,6 +63,7 @@ add ``--exclude-topics /clock``).
 import bisect
 import datetime
 import importlib
+import math
 import operator
 import os
 import re
@@ -113,7 +114,12 @@ CLOCK_TOPIC = '/clock'
 _RECEIVED = operator.itemgetter(0)
 # Files an earlier run of the tools leaves in a bag directory (what overwrite may delete).
 _OWN_FILES = ('metadata.yaml', 'metrics.json')
-_OWN_SUFFIXES = ('.mcap', '.png', '.yaml.tmp', '.json.tmp')
+_OWN_SUFFIXES = ('.mcap', '.png', '.yaml.tmp', '.json.tmp', '.reserve')
+# A stream is on a grid (lockstep: t_k = k dt) if at least this many distinct stamps are all
+# a multiple of their smallest spacing, itself at least GRID_MIN_STEP_NS.
+GRID_MIN_STAMPS = 10
+GRID_MIN_STEP_NS = 1000
+_GAPS_KEPT = 1000
 
 
 def _descriptor(description, ptype, read_only=True, float_range=None, int_range=None):
@@ -143,6 +149,122 @@ def parse_custom_data(items):
             raise ValueError('custom_data key %r given twice' % key)
         out[key] = value.strip()
     return out
+
+
+class StampGrid:
+    """
+    The stamps of one recorded stream: the first one and, on a grid, the ticks missing.
+
+    Fed the header stamp (ns) of every message received, in receive order. The stream is
+    on a grid if its distinct stamps are all multiples of their smallest spacing (the sim's
+    ``joint_states`` in lockstep: ``t_k = k dt``); tick k is then ``stamp // step``, and
+    a grid anchored at zero (the first stamp a multiple of the step) misses the ticks
+    before the first stamp too. Repeated stamps (the sim's tick 0 while it waits for the
+    first command) count once; a stamp earlier than the latest is counted, not gridded.
+    """
+
+    __slots__ = ('first', 'last', 'count', 'step', 'min_diff', 'gaps', 'backwards',
+                 'off_grid')
+
+    def __init__(self):
+        self.first = None
+        self.last = None
+        self.count = 0           # distinct stamps, increasing
+        self.step = 0            # gcd of the spacings
+        self.min_diff = None
+        self.gaps = []           # (stamp before, stamp after) of the wider spacings
+        self.backwards = 0
+        self.off_grid = False    # the gcd fell below GRID_MIN_STEP_NS: never a grid
+
+    def add(self, t):
+        """Take the stamp ``t`` (ns) of the next message received."""
+        last = self.last
+        if last is None:
+            self.first = self.last = t
+            self.count = 1
+            return
+        d = t - last
+        if d <= 0:
+            if d:
+                self.backwards += 1
+            return
+        self.count += 1
+        self.last = t
+        if self.off_grid:
+            return
+        step = math.gcd(self.step, d)
+        self.step = step
+        if step < GRID_MIN_STEP_NS:
+            self.off_grid = True
+            self.gaps = []
+            return
+        if self.min_diff is None or d < self.min_diff:
+            first_diff = self.min_diff is None
+            self.min_diff = d
+            if not first_diff:
+                return
+        elif d == self.min_diff:
+            return
+        if len(self.gaps) < _GAPS_KEPT:
+            self.gaps.append((last, t))
+
+    def on_grid(self):
+        """Return True if the stamps lie on a grid (see the class notes)."""
+        return (not self.off_grid and not self.backwards and self.count >= GRID_MIN_STAMPS
+                and self.step == self.min_diff)
+
+    def missed(self):
+        """
+        Return ``(count, ranges)`` of the ticks missing, None if not on a grid.
+
+        ``ranges`` are ``(first tick, last tick)`` pairs (at most the first 1000 gaps;
+        ``count`` is exact): before the first stamp (grid anchored at zero) and between two.
+        """
+        if not self.on_grid():
+            return None
+        step = self.step
+        ranges = []
+        before = 0
+        if self.first % step == 0 and self.first:
+            before = self.first // step
+            ranges.append((0, before - 1))
+        inside = (self.last - self.first) // step + 1 - self.count
+        for a, b in self.gaps:
+            if b - a > step:
+                ranges.append((a // step + 1, b // step - 1))
+        return before + inside, ranges
+
+    def describe(self):
+        """Return the first stamp and the ticks missed, for the end-of-run summary."""
+        if self.first is None:
+            return 'no stamp'
+        text = 'first stamp %.6f s' % (self.first * 1e-9)
+        missed = self.missed()
+        if missed is None:
+            return text
+        step = self.step
+        if self.first % step == 0:
+            text += ' = tick %d' % (self.first // step)
+        count, ranges = missed
+        text += ' (grid %g ms), missed %s' % (step * 1e-6, _ticks_text(count, ranges))
+        return text
+
+
+def _ticks_text(count, ranges):
+    if not count:
+        return '0 ticks'
+    shown = ', '.join(str(a) if a == b else '%d-%d' % (a, b) for a, b in ranges[:10])
+    more = ', ...' if len(ranges) > 10 or sum(b - a + 1 for a, b in ranges) < count else ''
+    return '%d tick%s: %s%s' % (count, 's' if count > 1 else '', shown, more)
+
+
+def _is_stamped(msg_class, msgtype):
+    """Return True if the message starts with its stamp (std_msgs/Header, or a Clock)."""
+    if msgtype == 'rosgraph_msgs/msg/Clock':
+        return True
+    fields = msg_class.get_fields_and_field_types()
+    first = next(iter(fields.items()), None)
+    return first == ('header', 'std_msgs/Header')
 
 
 def _never_called(data):
@@ -244,7 +366,9 @@ class Recorder(Node):
         self._unconfirmed = {}   # pre-subscribed topic -> (contract type, QoS) until seen
         self.received = {}       # topic -> messages received
         self.lost = {}           # topic -> messages the middleware reported lost
-        self._write_errors = 0
+        self._grids = {}         # stamped topic -> StampGrid of what was received
+        self._write_errors = {}   # topic -> messages the writer refused (not written)
+        self.problem = None      # one line: why the bag is not whole (None: it is)
         self._skipped = set()
         self._warned = set()
         self._closed = False
@@ -389,6 +513,8 @@ class Recorder(Node):
             return False
         self.received.setdefault(name, 0)
         self.lost.setdefault(name, 0)
+        if _is_stamped(msg_class, msgtype):
+            self._grids.setdefault(name, StampGrid())
         sub = self._takes_node.create_subscription(
             msg_class, name, _never_called, qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(message_lost=self._lost_callback(name)))
@@ -482,6 +608,8 @@ class Recorder(Node):
             ready, self._pending = batch[:split], batch[split:]
         if ready:
             self._write(ready)
+            if self.writer.error is not None and self.problem is None:
+                self._stopped_writing()
         return count
 
     def _write(self, ready):
@@ -493,6 +621,7 @@ class Recorder(Node):
                 return
         write = self.writer.write
         channels = self._channels
+        grids = self._grids
         sim_time = self._sim_time
         clocks = self._clocks
         clock = self._clock_ns
@@ -504,6 +633,11 @@ class Recorder(Node):
                     clocks.append((received, t))
                 if name is None:
                     continue
+            grid = grids.get(name)
+            if grid is not None:
+                stamp = clock_ns(data)
+                if stamp is not None:
+                    grid.add(stamp)
             if not sim_time:
                 stamp = received
             elif clock is not None:
@@ -532,6 +666,9 @@ class Recorder(Node):
                     bisect.insort(clocks, (received, t), key=_RECEIVED)
                 if name is None:
                     continue
+            grid = self._grids.get(name)
+            if grid is not None and clock_ns(data) is not None:
+                grid.add(clock_ns(data))
             if self._sim_time:
                 at = bisect.bisect_right(clocks, received, key=_RECEIVED)
                 stamp = clocks[at - 1][1] if at else self.get_clock().now().nanoseconds
@@ -544,8 +681,22 @@ class Recorder(Node):
             except (OSError, ValueError) as exc:
                 self._write_error(name, exc)
 
+    def _stopped_writing(self):
+        """Say once that the file system refused a write; from then on the losses are counted."""
+        self.problem = '%s: %s; the bag ends at byte %d, every message from then on is ' \
+            'counted lost (not written)' % (self.writer.mcap_path, self.writer.error,
+                                            self.writer.error_at)
+        self.get_logger().error('cannot write the bag: %s' % self.problem)
+
+    def not_written(self):
+        """Return ``{topic: messages received that did not reach the file}``."""
+        out = {name: self.writer.lost(entry[0]) for name, entry in self._channels.items()}
+        for name, count in self._write_errors.items():
+            out[name] = out.get(name, 0) + count
+        return out
+
     def _write_error(self, name, exc):
-        self._write_errors += 1
+        self._write_errors[name] = self._write_errors.get(name, 0) + 1
         self.get_logger().error('cannot write a message of %s: %s' % (name, exc),
                                 throttle_duration_sec=5.0)
 
@@ -557,11 +708,12 @@ class Recorder(Node):
         """~/status: success once every ready topic has a matched publisher; the count so far."""
         matched = self.matched()
         waiting = [t for t in self._ready_topics if not matched.get(t)]
-        response.success = not waiting and not self._closed
-        response.message = '%s; received %d; matched publishers: %s' % (
-            'recording' if response.success else
-            ('closed' if self._closed else 'waiting for ' + ', '.join(waiting)),
-            sum(self.received.values()),
+        response.success = not waiting and not self._closed and self.problem is None
+        response.message = '%s; received %d; not written %d; matched publishers: %s' % (
+            'closed' if self._closed else
+            'cannot write the bag: %s' % self.problem if self.problem is not None else
+            'recording' if response.success else 'waiting for ' + ', '.join(waiting),
+            sum(self.received.values()), sum(self.not_written().values()),
             ', '.join('%s %d' % kv for kv in sorted(matched.items())))
         return response
 
@@ -578,18 +730,22 @@ class Recorder(Node):
     def _flush(self):
         if self._closed:
             return
-        try:
-            self.writer.flush()
-        except OSError as exc:
-            self.get_logger().error('cannot flush the bag: %s' % exc,
-                                    throttle_duration_sec=5.0)
+        self.writer.flush()
+        if self.writer.error is not None and self.problem is None:
+            self._stopped_writing()
 
     def total_received(self):
         """Return the number of messages received so far."""
         return sum(self.received.values())
 
     def close(self):
-        """Finalise the bag and log what was recorded per topic."""
+        """
+        Finalise the bag and log what was recorded per topic.
+
+        Whatever happened before (a write error), the bag gets its summary and
+        metadata.yaml if the file system allows it at all; ``problem`` then says what went
+        wrong (one line), and the run notes go into metadata.yaml ``custom_data``.
+        """
         if self._closed:
             return
         try:
@@ -604,19 +760,59 @@ class Recorder(Node):
                     self.remove_waitable(handler)
                 self._takes_node.destroy_subscription(sub)
             self._takers = []
-            self.writer.close()
-        lines = ['bag %s finalised: %d messages on %d topics'
-                 % (self.output, self.total_received(), len(self._channels))]
+            self.writer.flush()                # the last chunk: its messages written or lost
+            if self.writer.error is not None and self.problem is None:
+                self._stopped_writing()
+            self.writer.custom_data.update(self.run_notes())
+            try:
+                self.writer.close()
+            except (BagError, OSError) as exc:
+                self.problem = '%s%s' % (self.problem + '; ' if self.problem else '',
+                                         'cannot finalise the bag: %s' % exc)
+                self.get_logger().error(self.problem)
+        lines = ['bag %s %s: %d messages on %d topics' % (
+            self.output, 'finalised' if self.writer.closed and not self.problem else
+            'closed after a problem', self.total_received(), len(self._channels))]
+        not_written = self.not_written()
         for name in sorted(self._channels):
             written = self.writer.count(self._channels[name][0])
-            lines.append('  %s: received %d, written %d, lost (middleware) %d'
-                         % (name, self.received[name], written, self.lost[name]))
+            grid = self._grids.get(name)
+            lines.append('  %s: received %d, written %d, not written %d, lost (middleware) %d%s'
+                         % (name, self.received[name], written, not_written[name],
+                            self.lost[name], '; ' + grid.describe() if grid else ''))
+        if self.problem:
+            lines.append('  problem: %s' % self.problem)
         if self._write_errors:
-            lines.append('  %d message(s) could not be written' % self._write_errors)
+            lines.append('  %d message(s) refused by the bag writer'
+                         % sum(self._write_errors.values()))
         if self._late:
             lines.append('  %d message(s) taken after a later one was written (their log '
                          'time as if in order)' % self._late)
         self.get_logger().info('\n'.join(lines))
+
+    def run_notes(self):
+        """
+        Return what the recorder adds to ``custom_data`` at the end (only what went wrong).
+
+        ``recorder_not_written`` (messages received that did not reach the file, per
+        topic), ``recorder_error`` (why), ``recorder_missed_ticks`` (per stream on a grid:
+        how many ticks are missing and which, e.g. the first ones of a recorder started
+        after the run).
+        """
+        notes = {}
+        lost = {n: c for n, c in sorted(self.not_written().items()) if c}
+        if lost:
+            notes['recorder_not_written'] = ', '.join('%s %d' % kv for kv in lost.items())
+        if self.problem:
+            notes['recorder_error'] = self.problem
+        missed = []
+        for name in sorted(self._grids):
+            gaps = self._grids[name].missed()
+            if gaps and gaps[0]:
+                missed.append('%s %s' % (name, _ticks_text(*gaps)))
+        if missed:
+            notes['recorder_missed_ticks'] = '; '.join(missed)
+        return notes
 
     def destroy_node(self):
         """Destroy the node and the one that holds the recording subscriptions."""
@@ -742,7 +938,12 @@ def make_executor(kind='events'):
 
 
 def main(args=None):
-    """Run the recorder until SIGINT/SIGTERM; finalise the bag; exit 0 (1 if it cannot)."""
+    """
+    Run the recorder until SIGINT/SIGTERM; finalise the bag; exit 0.
+
+    Exit 1 with one line ``recorder: error: ...`` on stderr if the bag cannot be created,
+    or if not everything received reached it (a write error: the bag is still finalised).
+    """
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = _Stop()
     signal.signal(signal.SIGINT, stop)
@@ -765,6 +966,9 @@ def main(args=None):
         executor.remove_node(node)
         node.destroy_node()
         rclpy.try_shutdown()
+    if node.problem:
+        print('recorder: error: %s' % node.problem, file=sys.stderr)
+        return 1
     return 0
 
 
