@@ -16,4 +16,13 @@ if [ "${1:-}" != --no-install ] && [ -f "$_fj_root/install/local_setup.bash" ]; 
   # shellcheck disable=SC1091
   COLCON_CURRENT_PREFIX="$_fj_root/install" . "$_fj_root/install/local_setup.bash"
 fi
+if ! grep -qs system "$_fj_root/.stamps/venv"; then
+  # No ros2 on this path: the node executables (what `ros2 run` starts) and `fj` on PATH.
+  for _fj_lib in "$_fj_root"/install/*/lib/*/; do
+    _fj_lib=${_fj_lib%/}
+    [ "${_fj_lib##*/}" = "$(basename "$(dirname "$(dirname "$_fj_lib")")")" ] || continue
+    case ":$PATH:" in *":$_fj_lib:"*) ;; *) export PATH="$PATH:$_fj_lib" ;; esac
+  done
+  unset _fj_lib
+fi
 unset _fj_root

@@ -23,6 +23,7 @@ setup(
             'player = freejoint_tools.player:main',
             'analyze = freejoint_tools.analyze:main',
             'reindex = freejoint_tools.reindex:main',
+            'fj = freejoint_tools.cli:main',
         ],
     },
 )
