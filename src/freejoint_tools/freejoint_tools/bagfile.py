@@ -907,7 +907,7 @@ def _accept_chunk(contents, chunk):
             if contents.end_ns is None or t > contents.end_ns:
                 contents.end_ns = t
     contents.chunk_indexes.append(chunk.index)
-    contents.end = chunk.end
+    contents.end = chunk.end + chunk.index.message_index_length
 
 
 def scan_mcap(path):
