@@ -456,7 +456,9 @@ def shipped_urdf_path(name):
     for path in candidates:
         if os.path.isfile(path):
             return os.path.normpath(path)
-    raise FreejointValueError(f'name: {fname} not found in {candidates}')
+    raise FreejointValueError(
+        f'name: {fname} not found (share/freejoint_description/urdf of AMENT_PREFIX_PATH, '
+        f'and the source tree)')
 
 
 def paper_arm(case='horizontal'):
@@ -477,3 +479,28 @@ def paper_arm(case='horizontal'):
     if case not in GRAVITY_BY_CASE:
         raise FreejointValueError(f'case: expected one of {tuple(GRAVITY_BY_CASE)}, got {case!r}')
     return load_urdf(shipped_urdf_path('paper_arm'), ('joint3',), GRAVITY_BY_CASE[case])
+
+
+FOUR_LINK_PASSIVE = ('joint1',)
+"""Passive joint of the shipped 4-link example (see ``four_link_arm``)."""
+
+
+def four_link_arm(case='horizontal', passive_joints=FOUR_LINK_PASSIVE):
+    """
+    Return the shipped 4-link example URDF as a ``UrdfArm``.
+
+    Parameters
+    ----------
+    case : {'horizontal', 'vertical'}
+        The gravity vector ``GRAVITY_BY_CASE[case]``.
+    passive_joints : sequence of str
+        Its passive joint(s); default ``FOUR_LINK_PASSIVE``.
+
+    Returns
+    -------
+    UrdfArm
+
+    """
+    if case not in GRAVITY_BY_CASE:
+        raise FreejointValueError(f'case: expected one of {tuple(GRAVITY_BY_CASE)}, got {case!r}')
+    return load_urdf(shipped_urdf_path('four_link_arm'), passive_joints, GRAVITY_BY_CASE[case])

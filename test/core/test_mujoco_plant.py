@@ -1,0 +1,95 @@
+"""The MuJoCo plant (URDF imported by MuJoCo) equals the core's RK4 plant."""
+
+import math
+
+from freejoint_core import offline
+from freejoint_core.errors import FreejointValueError, PlantDivergedError
+from freejoint_core.mujoco_plant import MujocoPlant
+from freejoint_core.plant import Plant
+from freejoint_core.urdf import four_link_arm, paper_arm
+import numpy as np
+import pytest
+
+DT = 1e-3
+
+
+def _mujoco_plant_factory(case, built):
+    """Return a stand-in for ``Plant(params, dt_sub, dist_bound=, seed=, q0=)`` on MuJoCo."""
+    arm = paper_arm(case)
+
+    def factory(params, dt_sub, dist_bound, seed, q0):
+        assert params == arm.params
+        plant = MujocoPlant(arm, dt_sub, dist_bound=dist_bound, seed=seed, q0=q0)
+        built.append(plant)
+        return plant
+    return factory
+
+
+@pytest.mark.parametrize('case', ['horizontal', 'vertical'])
+def test_closed_loop_on_mujoco_equals_closed_loop_on_rk4_over_the_paper_circle(
+        case, monkeypatch):
+    _, rk4 = offline.run_case(case, 'robust', 0, record_trace=True)
+    built = []
+    monkeypatch.setattr(offline, 'Plant', _mujoco_plant_factory(case, built))
+    _, mj = offline.run_case(case, 'robust', 0, record_trace=True)
+    assert len(built) == 1 and built[0].k == 5000   # the loop really ran on MuJoCo
+    assert rk4['p'].shape == mj['p'].shape == (5000, 2)
+    err_mm = 1e3 * np.max(np.hypot(*(mj['p'] - rk4['p']).T))
+    assert err_mm <= 1e-6, f'{case}: MuJoCo vs RK4 closed loop differ by {err_mm:.3g} mm'
+    assert np.max(np.abs(mj['tau'] - rk4['tau'])) <= 1e-6
+    # and the loop tracked (not two equal divergences)
+    assert 1e3 * np.max(np.hypot(*mj['e'].T)) < 10.0
+
+
+@pytest.mark.parametrize('case', ['horizontal', 'vertical'])
+def test_four_link_mujoco_plant_follows_the_rk4_plant_open_loop(case):
+    arm = four_link_arm(case)
+    q0 = np.radians([20.0, 40.0, -30.0, 50.0])
+    rk4 = Plant(arm.params, seed=5, q0=q0, use_fast=False)
+    mj = MujocoPlant(arm, seed=5, q0=q0)
+    for k in range(500):
+        tau = [math.sin(3e-3 * k), 0.4, -0.2 * math.cos(2e-3 * k)]
+        rk4.step(tau, DT)
+        mj.step(tau, DT)
+        assert mj.last_disturbance == rk4.last_disturbance
+    assert np.max(np.abs(mj.q - rk4.q)) <= 1e-10
+    assert np.max(np.abs(mj.qd - rk4.qd)) <= 1e-9
+
+
+def test_mujoco_plant_reset_restarts_state_time_and_disturbance():
+    arm = paper_arm('vertical')
+    plant = MujocoPlant(arm, seed=2, q0=[0.1, 0.2, 0.3])
+    plant.step([0.5, -0.5], DT)
+    first = (plant.q, plant.last_disturbance)
+    for _ in range(10):
+        plant.step([0.5, -0.5], DT)
+    plant.reset()
+    assert plant.k == 0 and plant.t == 0.0
+    np.testing.assert_array_equal(plant.q, [0.1, 0.2, 0.3])
+    plant.step([0.5, -0.5], DT)
+    np.testing.assert_array_equal(plant.q, first[0])
+    assert plant.last_disturbance == first[1]
+
+
+def test_mujoco_plant_refuses_bad_torque_and_period():
+    plant = MujocoPlant(paper_arm('horizontal'))
+    with pytest.raises(FreejointValueError, match='tau_active: expected 2 finite values'):
+        plant.step([1.0, float('nan')], DT)
+    with pytest.raises(FreejointValueError, match='tau_active: expected 2 finite values'):
+        plant.step([1.0, 2.0, 3.0], DT)
+    with pytest.raises(FreejointValueError, match='dt: 0.00075 s is not an integer multiple'):
+        plant.step([1.0, 2.0], 0.00075)
+    with pytest.raises(FreejointValueError, match='seed: expected a non-negative int'):
+        MujocoPlant(paper_arm('horizontal'), seed=-1)
+    assert plant.k == 0
+
+
+def test_mujoco_plant_keeps_its_last_finite_state_when_the_integration_diverges():
+    plant = MujocoPlant(paper_arm('vertical'), dist_bound=0.0, q0=[0.1, 0.2, 0.3])
+    plant.step([1.0, 1.0], DT)
+    q, qd = plant.q, plant.qd
+    with pytest.raises(PlantDivergedError, match='tau_active: the integration over step 1'):
+        plant.step([1e300, -1e300], DT)
+    np.testing.assert_array_equal(plant.q, q)
+    np.testing.assert_array_equal(plant.qd, qd)
+    assert plant.k == 1
