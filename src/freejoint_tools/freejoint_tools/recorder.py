@@ -73,12 +73,13 @@ import struct
 import sys
 import time
 
+from freejoint_common.node_tools import parameter_error
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.exceptions import InvalidHandle, InvalidParameterValueException
+from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -683,9 +684,9 @@ class Recorder(Node):
 
     def _stopped_writing(self):
         """Say once that the file system refused a write; from then on the losses are counted."""
-        self.problem = '%s: %s; the bag ends at byte %d, every message from then on is ' \
-            'counted lost (not written)' % (self.writer.mcap_path, self.writer.error,
-                                            self.writer.error_at)
+        self.problem = '%s: %s; the bag keeps its first %d bytes, every message from then ' \
+            'on is counted lost (not written)' % (self.writer.mcap_path, self.writer.error,
+                                                  self.writer.error_at)
         self.get_logger().error('cannot write the bag: %s' % self.problem)
 
     def not_written(self):
@@ -942,7 +943,9 @@ def main(args=None):
     Run the recorder until SIGINT/SIGTERM; finalise the bag; exit 0.
 
     Exit 1 with one line ``recorder: error: ...`` on stderr if the bag cannot be created,
-    or if not everything received reached it (a write error: the bag is still finalised).
+    or if not everything received reached it (a write error: the bag is still finalised);
+    exit 2 with one fatal line ``bad parameter: <name>: <reason>`` on a bad start-up
+    parameter (rclpy's range and type checks, the set-parameters callback), as every node.
     """
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = _Stop()
@@ -951,7 +954,11 @@ def main(args=None):
     node = None
     try:
         node = Recorder()
-    except (BagError, InvalidParameterValueException, OSError) as exc:
+    except ParameterException as exc:  # the start-up failure policy of every node
+        rclpy.logging.get_logger('recorder').fatal('bad parameter: %s' % parameter_error(exc))
+        rclpy.try_shutdown()
+        return 2
+    except (BagError, OSError) as exc:
         print('recorder: error: %s' % exc, file=sys.stderr)
         rclpy.try_shutdown()
         return 1
