@@ -14,17 +14,20 @@ latched map and marker stay transient local), the messages as recorded (the seri
 bytes, no decode), in the bag's file order = the order the recorder received them, paced
 by their log times divided by ``rate``. At the end the player waits until every reliable
 subscriber acknowledged everything, logs what it played, and exits (code 0; 1 if the bag
-cannot be read: one line naming the file).
+cannot be read: one line naming the file; 2 on a bad parameter: one fatal line
+``bad parameter: <name>: <reason>``, as every node).
 """
 
 import sys
 import time
 
+from freejoint_common.node_tools import parameter_error
+from freejoint_core.errors import FreejointValueError
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 import rclpy
 from rclpy.duration import Duration
-from rclpy.exceptions import InvalidParameterValueException
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -79,7 +82,7 @@ class Player(Node):
             ParameterType.PARAMETER_INTEGER, int_range=(1, 1000000)))
         p = self._params
         if not p['bag']:
-            raise BagError('bag', 'no bag given (-p bag:=<directory>)')
+            raise FreejointValueError('bag: no bag given (-p bag:=<directory>)')
         self.bag = open_bag(p['bag'])
         for note in self.bag.notes:
             self.get_logger().warning(note)
@@ -119,7 +122,7 @@ class Player(Node):
         return SetParametersResult(successful=True)
 
     def wait_for_subscribers(self):
-        """Wait until each publisher (/clock too) has the wanted subscribers (bounded)."""
+        """Wait (bounded) until each publisher (/clock too) has the wanted subscribers; spin."""
         need = self._params['wait_for_subscribers']
         if not need:
             return True
@@ -128,7 +131,7 @@ class Player(Node):
         while time.monotonic() < deadline:
             if all(pub.get_subscription_count() >= need for pub in pubs):
                 return True
-            time.sleep(0.01)
+            rclpy.spin_once(self, timeout_sec=0.01)  # parameter services answer meanwhile
         self.get_logger().warning('not every topic has %d subscriber(s) after %.1f s; '
                                   'playing anyway' % (need, self._params['wait_timeout']))
         return False
@@ -170,7 +173,7 @@ class Player(Node):
 
 
 def main(args=None):
-    """Play the bag once and exit (0; 1 if it cannot be read)."""
+    """Play the bag once and exit (0; 1 if it cannot be read; 2: bad parameter)."""
     rclpy.init(args=args)
     node = None
     try:
@@ -178,7 +181,10 @@ def main(args=None):
         node.wait_for_subscribers()
         node.play()
         node.finish()
-    except (BagError, InvalidParameterValueException) as exc:
+    except (FreejointValueError, ParameterException) as exc:  # as every node
+        rclpy.logging.get_logger('player').fatal('bad parameter: %s' % parameter_error(exc))
+        return 2
+    except BagError as exc:
         print('player: error: %s' % exc, file=sys.stderr)
         return 1
     except (KeyboardInterrupt, ExternalShutdownException):
