@@ -93,3 +93,14 @@ def test_mujoco_plant_keeps_its_last_finite_state_when_the_integration_diverges(
     np.testing.assert_array_equal(plant.q, q)
     np.testing.assert_array_equal(plant.qd, qd)
     assert plant.k == 1
+    plant.step([1.0, 1.0], DT)      # and goes on from there
+    assert plant.k == 2 and np.all(np.isfinite(plant.q))
+
+
+def test_mujoco_plant_refuses_a_speed_beyond_what_mujoco_accepts_without_resetting():
+    plant = MujocoPlant(paper_arm('horizontal'), dist_bound=0.0, q0=[0.1, 0.2, 0.3],
+                        qd0=[2e10, 0.0, 0.0])
+    with pytest.raises(PlantDivergedError, match='MuJoCo: Nan, Inf or huge value in QVEL'):
+        plant.step([0.0, 0.0], DT)
+    np.testing.assert_array_equal(plant.q, [0.1, 0.2, 0.3])
+    np.testing.assert_array_equal(plant.qd, [2e10, 0.0, 0.0])

@@ -17,9 +17,10 @@ The model is MuJoCo's own URDF import of ``UrdfArm.urdf`` with:
   equations are eq. (1) exactly, ``M qdd + C qd + G = B tau_a + d``;
 * joints addressed by the URDF names, in the core's order.
 
-A state that MuJoCo flags as diverged (its bad-qacc warning, or a non-finite
-state) raises ``PlantDivergedError`` and the plant keeps its last finite state,
-as ``Plant`` does.
+A step that MuJoCo flags as diverged (its bad qpos / qvel / qacc warnings: it
+then resets its state) or that ends non-finite raises ``PlantDivergedError`` and
+the plant keeps its last finite state, as ``Plant`` does.  MuJoCo's warnings are
+taken by a handler during the step (not printed, no ``MUJOCO_LOG.TXT``).
 """
 
 import math
@@ -147,7 +148,9 @@ class MujocoPlant:
         self._qd0 = self._state(qd0, 'qd0')
         self._active = list(arm.params.active)
         self._dt_cache = (None, 0)
-        self._bad = int(mujoco.mjtWarning.mjWARN_BADQACC)
+        self._bad = [int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
+                                      mujoco.mjtWarning.mjWARN_BADQVEL,
+                                      mujoco.mjtWarning.mjWARN_BADQACC)]
         self.reset()
 
     @staticmethod
@@ -188,6 +191,10 @@ class MujocoPlant:
         self.k = 0
         self.last_disturbance = (0.0,) * self.n
 
+    def _bad_count(self):
+        warning = self.mj_data.warning
+        return sum(warning[i].number for i in self._bad)
+
     @property
     def q(self):
         """Return the joint angles [rad], numpy copy (n,)."""
@@ -225,9 +232,9 @@ class MujocoPlant:
         FreejointValueError
             Naming ``tau_active`` or ``dt`` if they are bad.
         PlantDivergedError
-            If MuJoCo flagged the integration (bad acceleration) or the state is not
-            finite; the plant keeps its last finite state, the disturbance draw of the
-            step is spent.
+            If MuJoCo flagged the integration (bad position, velocity or
+            acceleration) or the state is not finite; the plant keeps its last
+            finite state, the disturbance draw of the step is spent.
 
         """
         n_sub = self._substeps(dt)
@@ -249,16 +256,23 @@ class MujocoPlant:
         full[self._active] += np.asarray(tau, dtype=float)
         data = self.mj_data
         q_before, qd_before = data.qpos.copy(), data.qvel.copy()
-        bad_before = data.warning[self._bad].number
+        bad_before = self._bad_count()
         data.qfrc_applied[:] = 0.0
         data.qfrc_applied[self._vadr] = full
-        mujoco.mj_step(self.mj_model, data, n_sub)
+        messages = []
+        previous = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(messages.append)   # no print, no MUJOCO_LOG.TXT
+        try:
+            mujoco.mj_step(self.mj_model, data, n_sub)
+        finally:
+            mujoco.set_mju_user_warning(previous)
         finite = bool(np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel)))
-        if not finite or data.warning[self._bad].number != bad_before:
+        if not finite or self._bad_count() != bad_before or messages:
             data.qpos[:], data.qvel[:] = q_before, qd_before
+            why = ' '.join(' '.join(messages).split()) or 'non-finite state'
             raise PlantDivergedError(
-                f'tau_active: the integration over step {self.k} diverged (MuJoCo: bad '
-                f'acceleration or non-finite state from q = {q_before[self._qadr].tolist()}, '
-                f'qd = {qd_before[self._vadr].tolist()}); the state is left as it was')
+                f'tau_active: the integration over step {self.k} diverged (MuJoCo: {why}) '
+                f'from q = {q_before[self._qadr].tolist()}, qd = '
+                f'{qd_before[self._vadr].tolist()}; the state is left as it was')
         self.t += dt
         self.k += 1

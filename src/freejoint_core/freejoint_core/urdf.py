@@ -482,12 +482,28 @@ def paper_arm(case='horizontal'):
 
 
 FOUR_LINK_PASSIVE = ('joint1',)
-"""Passive joint of the shipped 4-link example (see ``four_link_arm``)."""
+"""Passive joint of the shipped 4-link example: the base joint (see ``four_link_arm``)."""
+
+FOUR_LINK_CIRCLE = {'centre': (0.25, 0.25), 'radius': 0.1}
+"""The 4-link example's circle [m] (``CircleQuintic`` arguments; start ``(0.35, 0.25)``).
+
+Its radial band about the base, 0.254-0.454 m, lies between the radii 0.2 and 0.5 m
+of the folded collinear configurations, where ``Da`` is singular."""
+
+FOUR_LINK_Q0 = (0.0, 1.0052314594852472, 1.3891119364177558, 2.2480117465074176)
+"""Initial joint angles [rad] of the 4-link example: at rest on the circle's start."""
 
 
 def four_link_arm(case='horizontal', passive_joints=FOUR_LINK_PASSIVE):
     """
     Return the shipped 4-link example URDF as a ``UrdfArm``.
+
+    One passive joint (the base joint ``joint1`` by default) leaves r = 3 active
+    joints for the 2-D task.  With the paper's law (70 % nominal, 0.5 N m
+    disturbance) it tracks ``FOUR_LINK_CIRCLE`` from ``FOUR_LINK_Q0`` in the
+    horizontal case (``test/core/test_four_link_example.py`` states the bound); in
+    the vertical case the free base pivot under gravity is not stabilised by that
+    law (the loop diverges within 0.2 s).
 
     Parameters
     ----------
