@@ -42,10 +42,14 @@ class Controller:
         self.states = {}
         self.ee = {}
         self.clock = []
+        self.diagnostics = []      # (level int, message, {key: value}) of the sim's status
+        self.arrivals = []         # every joint_states message, in order of arrival
         self.pub = node.create_publisher(Float64MultiArray, 'effort_controller/commands',
                                          _qos())
         node.create_subscription(JointState, 'joint_states', self._on_state, _qos())
         node.create_subscription(PointStamped, 'ee_position', self._on_ee, _qos())
+        from diagnostic_msgs.msg import DiagnosticArray
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         node.create_subscription(
             Clock, '/clock',
             lambda m: self.clock.append(m.clock.sec * 1_000_000_000 + m.clock.nanosec),
@@ -59,6 +63,13 @@ class Controller:
 
     def _on_state(self, msg):
         self.states.setdefault(self._ns(msg), msg)
+        self.arrivals.append(msg)
+
+    def _on_diagnostics(self, msg):
+        for status in msg.status:
+            if status.name == 'sim_node: simulator':
+                self.diagnostics.append((ord(status.level), status.message,
+                                         {v.key: v.value for v in status.values}))
 
     def _on_ee(self, msg):
         self.ee.setdefault(self._ns(msg), msg)
@@ -226,7 +237,21 @@ def test_lockstep_holds_at_max_steps_ignoring_commands_and_timeouts(
         procs.log(proc)
 
 
-def test_a_diverging_integration_holds_the_last_state_and_the_node_runs_on(
+def _call_reset(ros_node):
+    import rclpy
+    from std_srvs.srv import Trigger
+    client = ros_node.create_client(Trigger, '/sim_node/reset')
+    assert client.wait_for_service(timeout_sec=15.0), 'no ~/reset service'
+    future = client.call_async(Trigger.Request())
+    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
+    assert future.done() and future.result().success
+    return future.result().message
+
+
+ERROR = 2
+
+
+def test_a_diverged_plant_publishes_its_last_sane_state_reports_error_until_reset(
         procs, ros_node, wait):
     proc = _start(procs, '-p', 'dist_bound:=0.0')
     ctl = Controller(ros_node, wait)
@@ -235,30 +260,71 @@ def test_a_diverging_integration_holds_the_last_state_and_the_node_runs_on(
     before = ctl.state(1)
     ctl.command([1e306, -1e306], 1)     # finite, so accepted; RK4 cannot resolve it
     held = ctl.state(2, 'the state after the diverging step')
-    assert list(held.position) == list(before.position)
-    assert list(held.velocity) == list(before.velocity)
-    ctl.command([0.0, 0.0], 2)
-    ctl.state(3, 'a state after it: the node runs on')
-    assert 'step 1: tau_active: the integration over step 1 diverged' in procs.log(proc)
-    assert 'holding the last finite state (call ~/reset)' in procs.log(proc)
+    # ERROR at once (not only at the next 1 Hz status), with the reason
+    wait(lambda: any(d[0] == ERROR for d in ctl.diagnostics), 5.0, 'an ERROR status',
+         spin=ctl.spin)
+    level, message, values = next(d for d in ctl.diagnostics if d[0] == ERROR)
+    assert message.startswith('plant diverged at step 1: tau_active: the integration over '
+                              'step 1 diverged')
+    assert values['diverged'] == 'true' and values['divergences'] == '1'
+    # Commands go on being answered, the plant is not integrated further.
+    for k in (2, 3):
+        ctl.command([1.0, 1.0], k)
+        msg = ctl.state(k + 1, 'a state after the divergence')
+        assert list(msg.position) == list(before.position) == list(held.position)
+        assert list(msg.velocity) == list(before.velocity)
+        assert all(math.isfinite(v) for v in (*msg.position, *msg.velocity))
+        assert list(msg.effort) == [0.0, 0.0, 0.0]
+    log = procs.log(proc)
+    assert 'publishing the last sane state, no further integration (call ~/reset)' in log
+    assert 'divergence cleared' in _call_reset(ros_node)
+    ctl.command([0.0, 0.0], 4)
+    _same(ctl.state(5, 'the state after the reset'), _plant(dist=0.0), (0.0, 0.0))
+    ctl.command([1.0, 1.0], 5)
+    _same(ctl.state(6), _stepped(_plant(dist=0.0), (1.0, 1.0)), (1.0, 1.0))
+    # (OK, or WARN for the command timeouts once this test stops commanding)
+    wait(lambda: ctl.diagnostics[-1][2]['diverged'] == 'false', 5.0, 'a status without the '
+         'divergence after the reset', spin=ctl.spin)
+    assert ctl.diagnostics[-1][0] != ERROR
+    assert ctl.diagnostics[-1][2]['divergences'] == '1'
     assert procs.stop(proc) == 0
+    assert ' 0 refused commands, 1 divergences' in procs.log(proc)
+
+
+def test_a_joint_faster_than_divergence_speed_counts_as_a_diverged_plant(
+        procs, ros_node, wait):
+    proc = _start(procs, '-p', 'dist_bound:=0.0', '-p', 'divergence_speed:=2.0')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    plant = _plant(dist=0.0)
+    k = 0
+    last_sane = ctl.state(0)
+    while True:     # a strong constant torque: some joint passes 2 rad/s within 0.1 s
+        assert k < 100, 'no joint passed 2 rad/s'
+        ctl.command([20.0, -20.0], k)
+        msg = ctl.state(k + 1)
+        plant.step((20.0, -20.0), DT)
+        k += 1
+        if max(abs(v) for v in plant.qd) > 2.0:
+            break
+        _same(msg, plant, (20.0, -20.0))
+        last_sane = msg
+    # The step that went past the bound is not published: the last sane state is.
+    assert list(msg.position) == list(last_sane.position)
+    assert list(msg.velocity) == list(last_sane.velocity)
+    assert 'beyond divergence_speed 2 rad/s' in procs.log(proc)
+    assert procs.stop(proc) == 0
+    assert '1 divergences' in procs.log(proc)
 
 
 def test_reset_service_puts_the_arm_back_at_rest_and_time_runs_on(procs, ros_node, wait):
-    import rclpy
-    from std_srvs.srv import Trigger
     proc = _start(procs)
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
     for k in range(3):
         ctl.command([4.0, 4.0], k)
         ctl.state(k + 1)
-    client = ros_node.create_client(Trigger, '/sim_node/reset')
-    assert client.wait_for_service(timeout_sec=15.0), 'no ~/reset service'
-    future = client.call_async(Trigger.Request())
-    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
-    assert future.done() and future.result().success
-    assert 'from step 4 on' in future.result().message
+    assert 'from step 4 on' in _call_reset(ros_node)
     ctl.command([4.0, 4.0], 3)
     plant = _plant()
     _same(ctl.state(4, 'the state after the reset'), plant, (0.0, 0.0))
@@ -324,3 +390,117 @@ def test_realtime_applies_the_latest_command_and_zero_after_the_timeout(
     assert 'no command on /effort_controller/commands for 0.3 s: zero effort' in \
         procs.log(proc)
     assert procs.stop(proc) == 0
+
+
+def _realtime(procs, *extra):
+    return _start(procs, '-p', 'mode:=realtime', *extra)
+
+
+def test_realtime_states_are_stamped_on_the_step_grid_at_publish_rate(procs, ros_node, wait):
+    import time
+    # 1 kHz steps, joint_states at 500 Hz: the states a 500 Hz driver gives its controller.
+    proc = _realtime(procs, '-p', 'publish_rate:=500.0')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+
+    def commanding():
+        ctl.command([0.5, -0.5])
+        ctl.spin()
+
+    count = len(ctl.arrivals)
+    wait(lambda: len(ctl.arrivals) >= count + 200, 30.0, '200 states', spin=commanding)
+    stamps = [Controller._ns(m) for m in ctl.arrivals[count:]]
+    gaps = [b - a for a, b in zip(stamps, stamps[1:])]
+    # Every stamp is a step time on the grid (a late state keeps its step's time: late
+    # publications show as age), every other step at 500 Hz (a dropped step, under load,
+    # leaves a longer gap on the same grid).
+    assert all(g > 0 and g % DT_NS == 0 for g in gaps), gaps
+    assert max(set(gaps), key=gaps.count) == 2 * DT_NS
+    assert all(s % DT_NS == stamps[0] % DT_NS for s in stamps)
+    # The grid is system time: the newest stamp is within a few seconds of the clock.
+    assert abs(stamps[-1] - time.time_ns()) < 5_000_000_000
+    assert procs.stop(proc) == 0
+
+
+def test_realtime_holds_the_arm_at_q0_until_the_first_command_then_releases_it(
+        procs, ros_node, wait):
+    proc = _realtime(procs, '-p', 'case:=vertical', '-p', 'publish_rate:=100.0')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    q0 = initial_state(table1('vertical')).tolist()
+    # 0.3 s without a command: a vertical arm without brakes would have fallen.
+    wait(lambda: len(ctl.arrivals) >= 30, 30.0, '30 states before any command',
+         spin=ctl.spin)
+    for msg in ctl.arrivals:
+        assert list(msg.position) == q0
+        assert list(msg.velocity) == [0.0, 0.0, 0.0]
+        assert list(msg.effort) == [0.0, 0.0, 0.0]
+    wait(lambda: ctl.diagnostics, 5.0, 'a status', spin=ctl.spin)
+    # (OK 'brakes engaged: holding q0 until the first command', or WARN for steps dropped
+    # behind the wall clock on a loaded machine)
+    assert ctl.diagnostics[-1][0] != ERROR
+    assert ctl.diagnostics[-1][2]['brakes'] == 'engaged'
+    assert 'brakes engaged: the arm is held at q0 until the first command' in \
+        procs.log(proc)
+
+    def commanding():           # zero effort: released, the arm falls under gravity
+        ctl.command([0.0, 0.0])
+        ctl.spin()
+
+    wait(lambda: ctl.arrivals[-1].position.tolist() != q0, 15.0, 'the arm released',
+         spin=commanding)
+    assert 'brakes released at step' in procs.log(proc)
+    assert procs.stop(proc) == 0
+
+
+def test_realtime_without_start_braked_the_vertical_arm_falls_from_the_first_step(
+        procs, ros_node, wait):
+    proc = _realtime(procs, '-p', 'case:=vertical', '-p', 'publish_rate:=100.0',
+                     '-p', 'start_braked:=false')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    q0 = initial_state(table1('vertical')).tolist()
+    wait(lambda: ctl.arrivals[-1].position.tolist() != q0, 15.0, 'the arm falling',
+         spin=ctl.spin)
+    assert 'brakes' not in procs.log(proc)
+    assert procs.stop(proc) == 0
+
+
+def test_realtime_diverged_plant_freezes_reports_error_at_1hz_and_reset_brings_q0_braked(
+        procs, ros_node, wait):
+    proc = _realtime(procs, '-p', 'case:=vertical', '-p', 'publish_rate:=100.0',
+                     '-p', 'divergence_speed:=1.0', '-p', 'command_timeout:=0.2')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    q0 = initial_state(table1('vertical')).tolist()
+
+    def commanding():           # zero effort: the released arm falls past 1 rad/s
+        ctl.command([0.0, 0.0])
+        ctl.spin()
+
+    wait(lambda: 'plant diverged at step' in procs.log(proc), 15.0, 'the divergence',
+         spin=commanding)
+    wait(lambda: sum(d[0] == ERROR for d in ctl.diagnostics) >= 3, 10.0,
+         'ERROR at once and then at 1 Hz', spin=ctl.spin)
+    error = [d for d in ctl.diagnostics if d[0] == ERROR][-1]
+    assert 'beyond divergence_speed 1 rad/s' in error[1]
+    assert error[2]['divergences'] == '1'
+    count = len(ctl.arrivals)
+    wait(lambda: len(ctl.arrivals) >= count + 10, 10.0, 'states after the divergence',
+         spin=ctl.spin)
+    frozen = ctl.arrivals[count:]
+    assert all(m.position.tolist() == frozen[0].position.tolist() for m in frozen)
+    assert all(max(abs(v) for v in m.velocity) <= 1.0 for m in frozen)
+    assert all(m.header.stamp != frozen[0].header.stamp for m in frozen[1:])   # time runs
+    # No command after the reset: back at q0 at rest, brakes engaged, divergence cleared.
+    assert 'divergence cleared' in _call_reset(ros_node)
+    wait(lambda: ctl.arrivals[-1].position.tolist() == q0, 10.0, 'q0 after the reset',
+         spin=ctl.spin)
+    wait(lambda: ctl.diagnostics[-1][2]['diverged'] == 'false', 5.0, 'no ERROR after the '
+         'reset', spin=ctl.spin)
+    assert ctl.diagnostics[-1][0] != ERROR
+    assert ctl.diagnostics[-1][2]['brakes'] == 'engaged'
+    assert ctl.diagnostics[-1][2]['diverged'] == 'false'
+    assert ctl.arrivals[-1].velocity.tolist() == [0.0, 0.0, 0.0]
+    assert procs.stop(proc) == 0
+    assert ', 1 divergences' in procs.log(proc)

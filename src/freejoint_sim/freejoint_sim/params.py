@@ -19,6 +19,14 @@ from freejoint_core.offline import initial_state
 
 MODES = ('lockstep', 'realtime')
 EXECUTORS = ('single_threaded', 'events')
+MAX_DIST_BOUND = 10.0
+"""Upper bound [N m] of ``dist_bound``: 20 times the paper's 0.5 N m and about the peak
+actuator torque of the horizontal case (11 N m); a disturbance as large as what the
+actuators give is no longer one a tracking law rejects."""
+MAX_PASSIVE_DEG = 360.0
+"""Upper bound [deg] of ``|initial_passive_deg|``: one turn (larger angles repeat it)."""
+MAX_DIVERGENCE_SPEED = 1e5
+"""Upper bound [rad/s] of ``divergence_speed``."""
 
 
 SPECS = (
@@ -41,8 +49,9 @@ SPECS = (
          'RK4 integration step [s]; control_period must be an integer multiple; takes '
          'effect on reset', (1e-7, 1.0)),
     Spec('publish_rate', 1000.0,
-         'real time: rate [Hz] of joint_states and ee_position (a divisor of the step '
-         'rate); lockstep publishes every step', (0.1, 1e6)),
+         'real time: rate [Hz] of joint_states and ee_position, at most the step rate '
+         '1 / control_period and a divisor of it (500 with control_period 0.001: the '
+         'states of a 500 Hz driver); lockstep publishes every step', (0.1, 1e5)),
     Spec('clock_rate', 0.0,
          'lockstep: rate [Hz] of /clock in sim time (like gazebo_ros publish_rate): /clock '
          'goes out on the steps that are multiples of 1 / (clock_rate * control_period), '
@@ -51,17 +60,28 @@ SPECS = (
          'steps (the planner) needs a lookahead of at least N - 1 steps',
          (0.0, 1e6)),
     Spec('dist_bound', 0.5,
-         'bound [N m] of the uniform random joint disturbance (0 = off); takes effect on '
-         'reset', (0.0, 1e3)),
+         'bound [N m] of the uniform random joint disturbance (0 = off, at most %g); takes '
+         'effect on reset' % MAX_DIST_BOUND, (0.0, MAX_DIST_BOUND)),
     Spec('seed', 0, 'seed of the disturbance generator (>= 0); takes effect on reset'),
     Spec('initial_position', [0.2, 0.0],
          'initial end-effector position [m] (x, y); with initial_passive_deg gives q(0) by '
          'inverse kinematics (branch +1), at rest; takes effect on reset'),
     Spec('initial_passive_deg', 120.0,
-         'initial passive joint angle [deg]; takes effect on reset', (-1e4, 1e4)),
+         'initial passive joint angle [deg], within one turn; takes effect on reset',
+         (-MAX_PASSIVE_DEG, MAX_PASSIVE_DEG)),
     Spec('command_timeout', 0.5,
          'wall time [s] without a command after which zero effort is applied (and a '
          'warning given); lockstep: per step, after the first command', (1e-3, 3600.0)),
+    Spec('start_braked', True,
+         'real time: hold the arm at q(0) at rest (brakes engaged: no integration, the '
+         'states still published at publish_rate) until the first accepted command, and '
+         'again after ~/reset until the next one; false = the arm moves (a vertical arm '
+         'falls) from the first step. Lockstep waits for the first command anyway'),
+    Spec('divergence_speed', 1000.0,
+         'a joint speed above this [rad/s] (or a non-finite state, or an angle beyond 1e6 '
+         'rad) is a diverged plant: the simulator stops integrating, publishes its last '
+         'sane state and reports ERROR on /diagnostics until ~/reset',
+         (1.0, MAX_DIVERGENCE_SPEED)),
     Spec('max_steps', 0,
          'lockstep: once step max_steps is published the simulator holds (no further '
          'step, no further message; later commands are ignored); 0 = run until stopped. '
@@ -102,6 +122,8 @@ class Config:
     timing_steps: int = 0
     max_steps: int = 0
     clock_every: int = 1
+    start_braked: bool = True
+    divergence_speed: float = 1000.0
 
 
 def _multiple(name, big, small):
@@ -170,12 +192,18 @@ def build_config(values):
     rate = float(values['publish_rate'])
     if not (math.isfinite(rate) and rate > 0.0):
         raise FreejointValueError(f'publish_rate: must be > 0, got {rate}')
+    if rate > (1.0 / dt) * (1.0 + 1e-9):
+        raise FreejointValueError(f'publish_rate: {rate:g} Hz is above the step rate '
+                                  f'{1.0 / dt:g} Hz (1 / control_period): no more states '
+                                  'than steps')
     every = _multiple(f'publish_rate: {rate} Hz does not divide the step rate '
                       f'{1.0 / dt:g} Hz', 1.0 / rate, dt)
     clock_every = _clock_every(values['clock_rate'], dt)
     dist = float(values['dist_bound'])
-    if not (math.isfinite(dist) and dist >= 0.0):
-        raise FreejointValueError(f'dist_bound: must be >= 0, got {dist}')
+    if not (math.isfinite(dist) and 0.0 <= dist <= MAX_DIST_BOUND):
+        raise FreejointValueError(
+            f'dist_bound: must be in [0, {MAX_DIST_BOUND:g}] N m (the paper: 0.5; the '
+            f'horizontal case peaks near 11 N m of actuator torque), got {dist}')
     seed = values['seed']
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise FreejointValueError(f'seed: expected an integer >= 0, got {seed!r}')
@@ -183,8 +211,13 @@ def build_config(values):
     if len(start) != 2 or not all(isinstance(v, float) and math.isfinite(v) for v in start):
         raise FreejointValueError(
             f'initial_position: expected 2 finite numbers (x, y) [m], got {list(start)}')
+    passive = float(values['initial_passive_deg'])
+    if not (math.isfinite(passive) and abs(passive) <= MAX_PASSIVE_DEG):
+        raise FreejointValueError(
+            f'initial_passive_deg: must be within one turn, [-{MAX_PASSIVE_DEG:g}, '
+            f'{MAX_PASSIVE_DEG:g}] deg, got {passive}')
     try:
-        q0 = initial_state(params, values['initial_passive_deg'], start)
+        q0 = initial_state(params, passive, start)
     except FreejointValueError as exc:
         raise FreejointValueError(
             f'initial_position: unreachable with initial_passive_deg = '
@@ -207,6 +240,13 @@ def build_config(values):
     timing_file = str(values['timing_file'])
     if timing_file and timing_steps < 1:
         raise FreejointValueError('timing_steps: must be >= 1 when timing_file is set')
+    speed = float(values['divergence_speed'])
+    if not (math.isfinite(speed) and 1.0 <= speed <= MAX_DIVERGENCE_SPEED):
+        raise FreejointValueError(
+            f'divergence_speed: must be in [1, {MAX_DIVERGENCE_SPEED:g}] rad/s, got {speed}')
+    braked = values['start_braked']
+    if not isinstance(braked, bool):
+        raise FreejointValueError(f'start_braked: expected true or false, got {braked!r}')
     validate_priority(values['thread_priority'])
     validate_affinity(values['cpu_affinity'])
     return Config(params=params, q0=tuple(q0.tolist()), joint_names=joint_names,
@@ -216,4 +256,5 @@ def build_config(values):
                   dt_sub=dt_sub, publish_every=every, dist_bound=dist, seed=seed,
                   command_timeout=timeout, frame_id=str(values['frame_id']),
                   executor=values['executor'], timing_file=timing_file,
-                  timing_steps=timing_steps, max_steps=max_steps, clock_every=clock_every)
+                  timing_steps=timing_steps, max_steps=max_steps, clock_every=clock_every,
+                  start_braked=braked, divergence_speed=speed)

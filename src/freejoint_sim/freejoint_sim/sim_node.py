@@ -8,7 +8,10 @@ joint efforts on ``effort_controller/commands`` (std_msgs/Float64MultiArray in t
 parameter ``joints``, what ros2_control's JointGroupEffortController takes; remap it to
 ``/<controller>/commands``).  ``~/reset`` (std_srvs/Trigger) puts the arm back at its
 initial configuration, at rest, with a freshly seeded disturbance, at the next step (time
-keeps running).
+keeps running), and clears a divergence.  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray,
+one status named ``<node>: simulator``) at 1 Hz: OK / WARN with steps, step rate, command
+timeouts, refused commands, dropped steps, brakes; ERROR with the reason at once when the
+plant diverges.
 
 Modes (docs/GRAPH.md):
 
@@ -22,7 +25,16 @@ Modes (docs/GRAPH.md):
   node that streams ahead of ``/clock`` every N steps needs a lookahead of at least N - 1
   steps (the planner: ``docs/GRAPH.md``, lockstep item 5).
 * ``realtime``: steps on the wall clock at ``1 / control_period`` and applies the latest
-  command.
+  command.  Each state is stamped with its step's time on the stepping grid (the
+  monotonic grid mapped to system time once at start), so a late publication shows as
+  age, not as a wrong time.  With ``start_braked`` (default) the arm is held at q(0) at
+  rest until the first accepted command (brakes engaged; states still published), and
+  again after ``~/reset``.
+
+A diverged plant (non-finite, or a joint faster than ``divergence_speed``, or an angle
+beyond ``freejoint_sim.divergence.MAX_ANGLE``) is not integrated further: the simulator
+publishes its last sane state, reports ERROR on ``/diagnostics`` and counts the divergence
+in its end-of-run line until ``~/reset``.
 
 A command of the wrong length or with a non-finite value is refused (throttled error
 naming the problem) and zero effort is applied; no command for ``command_timeout`` wall
@@ -36,10 +48,12 @@ import threading
 import time
 
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from freejoint_common.node_tools import declare, plain, request_scheduling, run
 from freejoint_common.node_tools import scheduling_refusal, Throttle
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.plant import Plant
+from freejoint_sim.divergence import divergence_reason
 from freejoint_sim.params import build_config, SPECS
 from freejoint_sim.timing import StepTiming, WRITE_DELAY
 from geometry_msgs.msg import PointStamped
@@ -65,6 +79,8 @@ CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
 REPUBLISH_PERIOD = 0.2
 """Lockstep: wall period [s] of republishing step 0 until the first command arrives."""
 MAX_CATCH_UP = 20
+DIAGNOSTICS_PERIOD = 1.0
+"""Wall period [s] of the /diagnostics status (ros2_control's diagnostic_updater: 1 Hz)."""
 """Real time: steps integrated at most at one wake-up before dropping behind."""
 LABEL_PREFIX = 'stamp_ns='
 
@@ -104,6 +120,14 @@ class SimNode(Node):
         self._latest = None            # real time: (tau_active list, wall time)
         self._cmd_timed_out = False
         self._throttle = Throttle(1.0)
+        self._dropped = 0
+        self._divergences = 0
+        self._diverged = None          # reason while the plant is diverged, else None
+        self._braked = not cfg.lockstep and cfg.start_braked
+        self._braked_since = _monotonic()
+        self._rt_origin_ns = 0         # real time: system time [ns] of step 0 on the grid
+        self._take_state()
+        self._diag_window = (_monotonic(), 0, 0, 0, 0)
         self._timing = (StepTiming(cfg.timing_file, cfg.timing_steps) if cfg.timing_file
                         else None)
         self._timing_steps = cfg.timing_steps if cfg.timing_file else 0
@@ -124,7 +148,9 @@ class SimNode(Node):
         self.create_subscription(Float64MultiArray, 'effort_controller/commands',
                                  self._on_command, QOS)
         self.create_service(Trigger, '~/reset', self._on_reset)
+        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(DIAGNOSTICS_PERIOD, self._on_diagnostics_timer, clock=steady)
         if cfg.lockstep:
             period = max(0.001, min(0.05, cfg.command_timeout / 4.0))
             self.create_timer(period, self._lockstep_watchdog, clock=steady)
@@ -144,6 +170,9 @@ class SimNode(Node):
             self.get_logger().info('lockstep: waiting for the first command (step 0 is '
                                    'republished every %g s)' % REPUBLISH_PERIOD)
         else:
+            if self._braked:
+                self.get_logger().info('brakes engaged: the arm is held at q0 until the '
+                                       'first command')
             self._rt_thread.start()
 
     # -- parameters ------------------------------------------------------------
@@ -158,6 +187,7 @@ class SimNode(Node):
         self._cmd_map = cfg.cmd_to_active
         self._identity = cfg.cmd_to_active == tuple(range(len(cfg.cmd_to_active)))
         self._max_steps = cfg.max_steps
+        self._max_speed = cfg.divergence_speed
 
     def _on_set_parameters(self, params):
         values = dict(self._values)
@@ -184,8 +214,9 @@ class SimNode(Node):
         cfg = self.config
         response.success = True
         response.message = ('arm back at q0 = [%s] rad at rest, %s case, seed %d, from step '
-                            '%d on' % (', '.join('%.6f' % v for v in cfg.q0),
-                                       self._values['case'], cfg.seed, self._k + 1))
+                            '%d on%s' % (', '.join('%.6f' % v for v in cfg.q0),
+                                         self._values['case'], cfg.seed, self._k + 1,
+                                         '; divergence cleared' if self._diverged else ''))
         self.get_logger().info('reset requested: ' + response.message)
         return response
 
@@ -196,6 +227,12 @@ class SimNode(Node):
                             q0=cfg.q0)
         self._fk = self._plant.model.fk
         self._applied = [0.0] * cfg.params.n
+        self._diverged = None
+        self._take_state()
+        if not cfg.lockstep and cfg.start_braked:
+            self._braked = True
+            self._braked_since = _monotonic()
+            self.get_logger().info('reset: brakes engaged until the next command')
 
     # -- commands --------------------------------------------------------------
     def _command_effort(self, msg):
@@ -230,7 +267,7 @@ class SimNode(Node):
             answered = -1
             if self._timing is not None:
                 answered = self._note_realtime_command(msg, now)
-            self._latest = (self._zero if tau is None else tau, now, answered)
+            self._latest = (self._zero if tau is None else tau, now, answered, tau is not None)
             if self._cmd_timed_out:
                 self._cmd_timed_out = False
                 self.get_logger().info('commands are back')
@@ -292,18 +329,25 @@ class SimNode(Node):
         return 0 < self._max_steps <= self._k
 
     def _advance(self, tau):
-        """Integrate one control period with ``tau`` (active, model order); publish."""
+        """
+        Integrate one control period with ``tau`` (active, model order); publish.
+
+        Braked or diverged, the step passes without integration (zero effort applied).
+        """
         if self._reset_pending:
             self._do_reset()
         else:
-            try:
-                self._plant.step(tau, self._dt)
-            except PlantDivergedError as exc:
-                # Keep running on the last finite state; the run is no longer physical.
-                self._throttle(self.get_logger().error, 'diverged',
-                               'step %d: %s; holding the last finite state (call ~/reset)'
-                               % (self._k, exc))
+            if self._braked or self._diverged is not None:
                 tau = self._zero
+            else:
+                try:
+                    self._plant.step(tau, self._dt)
+                except PlantDivergedError as exc:
+                    self._diverge(str(exc))
+                    tau = self._zero
+                else:
+                    if not self._take_state():
+                        tau = self._zero
             applied = self._applied
             for i, v in zip(self._active, tau):
                 applied[i] = v
@@ -318,8 +362,34 @@ class SimNode(Node):
                                    % (self._k, self._t_ns * 1e-9))
             self.write_timing()     # no later command can be received: the run is over
 
+    def _take_state(self):
+        """Take the plant's state for publication if sane; else diverge, return False."""
+        plant = self._plant
+        q = plant.q
+        q_list = q.tolist()
+        qd_list = plant.qd.tolist()
+        reason = divergence_reason(q_list, qd_list, self._max_speed)
+        if reason is not None:
+            self._diverge('the integration over step %d gave an absurd state: %s'
+                          % (self._k, reason))
+            return False
+        self._q = q
+        self._q_list = q_list
+        self._qd_list = qd_list
+        return True
+
+    def _diverge(self, reason):
+        """Stop integrating: note, log and report (ERROR on /diagnostics) a divergence."""
+        self._diverged = 'step %d: %s' % (self._k, reason)
+        self._divergences += 1
+        self.get_logger().error('plant diverged at %s; publishing the last sane state, no '
+                                'further integration (call ~/reset)' % self._diverged)
+        self._publish_diagnostics(update=False)
+
     def _publish_state(self):
         t_ns = self._t_ns
+        if not self._lockstep:
+            t_ns += self._rt_origin_ns   # the step's time on the grid, not the wall clock
         stamp = self._stamp
         stamp.sec = t_ns // 1_000_000_000
         stamp.nanosec = t_ns % 1_000_000_000
@@ -328,16 +398,11 @@ class SimNode(Node):
             if k % self._clock_every == 0 or k == self._max_steps:
                 self._clock_msg.clock = stamp
                 self._pub_clock.publish(self._clock_msg)
-        else:
-            wall = self.get_clock().now()
-            stamp = wall.to_msg()
-            t_ns = wall.nanoseconds
-        plant = self._plant
-        q = plant.q
+        q = self._q
         js = self._js
         js.header.stamp = stamp
-        js.position = q.tolist()
-        js.velocity = plant.qd.tolist()
+        js.position = self._q_list
+        js.velocity = self._qd_list
         js.effort = self._applied
         k = self._k
         if k < self._timing_steps:
@@ -403,18 +468,31 @@ class SimNode(Node):
             self._rt_thread.join(1.0)
 
     def _realtime_step(self):
-        now = _monotonic()
         if self._rt_start is None:
+            # The grid: step k at rt_start + k dt on the monotonic clock, at
+            # rt_origin_ns + k dt_ns in system time (mapped once, here).
+            system_ns = self.get_clock().now().nanoseconds
+            now = _monotonic()
             self._rt_start = now - self._dt
+            self._rt_origin_ns = system_ns - self._dt_ns
+        now = _monotonic()
         due = int((now - self._rt_start) / self._dt) - self._k
         if due > MAX_CATCH_UP:
             self._throttle(self.get_logger().warn, 'behind',
                            'real time: %d steps behind the wall clock, dropping %d'
                            % (due, due - 1))
             self._rt_start += (due - 1) * self._dt
+            self._rt_origin_ns += (due - 1) * self._dt_ns
+            self._dropped += due - 1
             if self._timing is not None:
                 self._timing.dropped += due - 1
             due = 1
+        if self._braked:
+            latest = self._latest
+            if latest is not None and latest[3] and latest[1] >= self._braked_since:
+                self._braked = False
+                self.get_logger().info('brakes released at step %d (t = %.3f s): first '
+                                       'command' % (self._k, self._t_ns * 1e-9))
         for _ in range(due):
             latest = self._latest
             if latest is None:
@@ -436,10 +514,72 @@ class SimNode(Node):
     def _cmd_topic(self):
         return self.resolve_topic_name('effort_controller/commands')
 
+    # -- status ----------------------------------------------------------------
+    def _on_diagnostics_timer(self):
+        self._publish_diagnostics(update=True)
+
+    def _publish_diagnostics(self, update):
+        """Publish the status on /diagnostics; ``update`` starts a new rate window."""
+        now = _monotonic()
+        k = self._k
+        since, k0, refused0, timeouts0, dropped0 = self._diag_window
+        elapsed = now - since
+        rate = (k - k0) / elapsed if elapsed > 0.0 else 0.0
+        refused = self._refused - refused0
+        timeouts = self._timeouts - timeouts0
+        dropped = self._dropped - dropped0
+        if update:
+            self._diag_window = (now, k, self._refused, self._timeouts, self._dropped)
+        level = DiagnosticStatus.WARN
+        if self._diverged is not None:
+            level = DiagnosticStatus.ERROR
+            message = ('plant diverged at %s; publishing the last sane state (call ~/reset)'
+                       % self._diverged)
+        elif self._cmd_timed_out:
+            message = 'no command for %g s: zero effort' % self._timeout
+        elif timeouts:
+            message = '%d command timeouts in the last %.1f s: zero effort' % (
+                timeouts, elapsed)
+        elif refused:
+            message = '%d commands refused in the last %.1f s' % (refused, elapsed)
+        elif dropped:
+            message = 'behind the wall clock: %d steps dropped in the last %.1f s' % (
+                dropped, elapsed)
+        else:
+            level = DiagnosticStatus.OK
+            if self._braked:
+                message = 'brakes engaged: holding q0 until the first command'
+            elif not self._lockstep and self._latest is None:
+                message = 'no command yet: zero effort'
+            elif self._lockstep and not self._got_first:
+                message = 'waiting for the first command'
+            elif self._holding():
+                message = 'holding at max_steps'
+            else:
+                message = 'running'
+        status = DiagnosticStatus(level=level, name='%s: simulator' % self.get_name(),
+                                  message=message, hardware_id='freejoint_sim')
+        status.values = [KeyValue(key=key, value=str(value)) for key, value in (
+            ('mode', 'lockstep' if self._lockstep else 'realtime'),
+            ('step', k),
+            ('sim time [s]', '%.3f' % (self._t_ns * 1e-9)),
+            ('step rate [Hz]', '%.1f' % rate),
+            ('publish rate [Hz]', '%g' % (1.0 / (self._dt * self._every))),
+            ('command timeouts', self._timeouts),
+            ('refused commands', self._refused),
+            ('dropped steps', self._dropped),
+            ('brakes', 'engaged' if self._braked else 'released'),
+            ('divergences', self._divergences),
+            ('diverged', 'true' if self._diverged is not None else 'false'))]
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._pub_diag.publish(msg)
+
     def report(self):
-        """One line for the end of the run: steps, timeouts, refused commands."""
+        """One line for the end of the run: steps, timeouts, refused commands, divergences."""
         return 'simulator stopped at step %d (t = %.3f s): %d command timeouts, %d refused ' \
-            'commands' % (self._k, self._t_ns * 1e-9, self._timeouts, self._refused)
+            'commands, %d divergences' % (
+                self._k, self._t_ns * 1e-9, self._timeouts, self._refused, self._divergences)
 
 
 def _on_stop(node):
