@@ -168,6 +168,7 @@ class StatePredictor:
         self._hist.clear()
         self._bias = (0.0,) * self.n
         self._last = None
+        self._first = None
         self._pushes = 0
 
     @property
@@ -280,11 +281,21 @@ class StatePredictor:
                           + check_vector(qd, self.n, 'qd').tolist())
         if self.bias_gain > 0.0:
             self._observe(state, ticks)
-        out = np.array(self._integrate(state, cmds))
-        if not np.all(np.isfinite(out)):
+            if cmds:
+                # kept: the next call's observer needs this first period
+                first = self._integrate(state, cmds[:1])
+                self._first = (cmds[0], first)
+                out = self._integrate(first, cmds[1:])
+            else:
+                self._first = None
+                out = state
+        else:
+            out = self._integrate(state, cmds)
+        if not all(map(_isfinite, out)):
             raise FreejointValueError(
                 f'q: the prediction over {len(cmds)} periods left the finite range '
                 f'(from q = {q!r}, qd = {qd!r})')
+        out = np.array(out)
         n = self.n
         return out[:n], out[n:]
 
@@ -296,9 +307,14 @@ class StatePredictor:
         self._pushes = 0
         if last is None or pushes != 1:
             return
-        # The command that acted over the last period: pushed ticks + 1 ago.
+        # The command that acted over the last period: pushed ticks + 1 ago.  The last
+        # call integrated the same period already when its first command was this one.
         acted = self._window(1, ticks)
-        y = self._integrate(last, acted)
+        first = self._first
+        if first is not None and first[0] == acted[0]:
+            y = first[1]
+        else:
+            y = self._integrate(last, acted)
         n = self.n
         g = self.bias_gain / self.dt
         self._bias = tuple(b + g * (w - yw) for b, w, yw in zip(self._bias, state[n:], y[n:]))

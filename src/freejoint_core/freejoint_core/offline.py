@@ -323,7 +323,7 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
 
 
 def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
-            progress=None):
+            progress=None, delay_ticks=0, predict=False):
     """
     Run the offline study: robust and robust_off over seeds, exact once, per case.
 
@@ -339,6 +339,10 @@ def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
         Seeds of the ``robust_off`` runs; default the same as ``seeds``.
     progress : callable, optional
         Called with each record as it completes.
+    delay_ticks : int
+        Fixed command delay of every run (periods), see :func:`run_case`.
+    predict : bool
+        Compensate it with the state predictor.
 
     Returns
     -------
@@ -353,11 +357,78 @@ def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
         jobs = [('robust', s) for s in seeds] + [('robust_off', s) for s in off_seeds]
         jobs.append(('exact', 0))
         for variant, seed in jobs:
-            rec, _ = run_case(case, variant, seed, dt_sub=dt_sub)
+            rec, _ = run_case(case, variant, seed, dt_sub=dt_sub, delay_ticks=delay_ticks,
+                              predict=predict)
             records.append(rec)
             if progress is not None:
                 progress(rec)
     return records
+
+
+DELAY_STUDY_MS = (0, 1, 2, 3, 5, 10, 20)
+DELAY_STUDY_OUT = 'bags/offline/delay_study.json'
+
+
+def delay_study(delays_ms=DELAY_STUDY_MS, seeds=range(10), cases=CASES, progress=None):
+    """
+    Tracking versus a fixed command delay, without and with the predictor.
+
+    Parameters
+    ----------
+    delays_ms : iterable of int
+        Delays (ms; control periods at dt = 1 ms), >= 0.
+    seeds : iterable of int
+        Disturbance seeds of the ``robust`` variant.
+    cases : iterable of str
+        Cases.
+    progress : callable, optional
+        Called with each record as it completes.
+
+    Returns
+    -------
+    rows : list of dict
+        Per case, delay and option (``'off'``, ``'on'``; ``'on'`` is not run
+        at 0 ms, where it is the same loop): ``case``, ``delay_ms``,
+        ``option``, ``runs``, ``worst_rms_mm``, ``worst_max_mm`` (over all
+        seeds, a diverged run counted up to where it stopped), ``diverged``
+        (count), ``diverged_at_s`` (earliest, or None).
+    records : list of dict
+        Every run's record (variant labelled ``robust d<m>[+p]``).
+
+    """
+    seeds = list(seeds)
+    rows, records = [], []
+    for case in cases:
+        for m in delays_ms:
+            for option in ('off', 'on'):
+                if option == 'on' and m == 0:
+                    continue
+                recs = []
+                for seed in seeds:
+                    rec, _ = run_case(case, 'robust', seed, delay_ticks=m,
+                                      predict=option == 'on')
+                    recs.append(rec)
+                    if progress is not None:
+                        progress(rec)
+                stops = [r['diverged_at_s'] for r in recs if r['diverged_at_s'] is not None]
+                rows.append({
+                    'case': case, 'delay_ms': m, 'option': option, 'runs': len(recs),
+                    'worst_rms_mm': max(r['rms_mm'] for r in recs),
+                    'worst_max_mm': max(r['max_mm'] for r in recs),
+                    'diverged': len(stops), 'diverged_at_s': min(stops) if stops else None})
+                records.extend(recs)
+    return rows, records
+
+
+def format_delay_table(rows):
+    """Format :func:`delay_study` rows as a Markdown table."""
+    lines = ['| case | delay (ms) | predictor | runs | worst RMS (mm) | worst max (mm) '
+             '| diverged (first at) |', '|---|---:|---|---:|---:|---:|---|']
+    for r in rows:
+        div = '0' if not r['diverged'] else f'{r["diverged"]} ({r["diverged_at_s"]:.2f} s)'
+        lines.append(f'| {r["case"]} | {r["delay_ms"]} | {r["option"]} | {r["runs"]} '
+                     f'| {r["worst_rms_mm"]:.3g} | {r["worst_max_mm"]:.3g} | {div} |')
+    return '\n'.join(lines)
 
 
 _FIGURES = ('rms_mm', 'max_mm', 'final_mm', 'tau_peak_nm', 'theta_final', 'q3_range_deg',
@@ -411,8 +482,10 @@ def _parse(argv):
     ap = argparse.ArgumentParser(
         prog='offline', description='Offline closed-loop runs of the paper (no ROS): both '
         'cases, robust over seeds, robust_off, exact; prints the table, writes JSON.')
-    ap.add_argument('--out', default=DEFAULT_OUT,
-                    help=f'records JSON (default {DEFAULT_OUT}); "" to skip writing')
+    ap.add_argument('--out', default=None,
+                    help=f'records JSON (default {DEFAULT_OUT}; with a delay '
+                    'bags/offline/delay_m<m>[_p].json; with --delay-study '
+                    f'{DELAY_STUDY_OUT}); "" to skip writing')
     ap.add_argument('--seeds', type=int, default=10, help='seeds 0..N-1 (default 10)')
     ap.add_argument('--off-seeds', type=int, default=None,
                     help='seeds of robust_off (default: same as --seeds)')
@@ -422,6 +495,14 @@ def _parse(argv):
     ap.add_argument('--compare-dt-sub', action='store_true',
                     help='also run with dt_sub/10 and print the max change of every figure')
     ap.add_argument('--theta', action='store_true', help='show theta_final in the table')
+    ap.add_argument('--delay-ticks', type=int, default=0, metavar='M',
+                    help='fixed command delay: the command of tick k acts from tick k + M '
+                    '(default 0)')
+    ap.add_argument('--predict', action='store_true',
+                    help='compensate the delay with the nominal-model state predictor')
+    ap.add_argument('--delay-study', action='store_true',
+                    help='only the delay study of docs/delay.md: robust over the seeds, '
+                    f'delays {", ".join(map(str, DELAY_STUDY_MS))} ms, predictor off and on')
     return ap.parse_args(argv)
 
 
@@ -430,12 +511,23 @@ def main(argv=None):
     args = _parse(sys.argv[1:] if argv is None else argv)
     if args.seeds < 1:
         raise SystemExit('offline: --seeds must be >= 1')
+    if args.delay_ticks < 0:
+        raise SystemExit('offline: --delay-ticks must be >= 0')
+    if args.delay_study:
+        return _main_delay_study(args)
     off = None if args.off_seeds is None else range(args.off_seeds)
     t0 = time.perf_counter()
-    records = run_all(range(args.seeds), args.cases, args.dt_sub, off)
+    records = run_all(range(args.seeds), args.cases, args.dt_sub, off,
+                      delay_ticks=args.delay_ticks, predict=args.predict)
     wall = time.perf_counter() - t0
     print(f'offline: {len(records)} runs, dt = 1 ms, dt_sub = {args.dt_sub:g} s, '
           f'{wall:.1f} s wall')
+    if args.delay_ticks:
+        print(f'command delay {args.delay_ticks} ticks, predictor '
+              f'{"on" if args.predict else "off"}')
+    if args.out is None:
+        args.out = DEFAULT_OUT if not args.delay_ticks else (
+            f'bags/offline/delay_m{args.delay_ticks}{"_p" if args.predict else ""}.json')
     print(format_table(records, theta=args.theta))
     print()
     print(format_summary(records))
@@ -456,6 +548,19 @@ def main(argv=None):
             print(f'  {name:<14} {value:.3g} {units.get(name, "")}'.rstrip())
         print(f'  diverged in both: {diff["diverged"]} runs, divergence time changed by up to '
               f'{diff["diverged_at_s"]:.3g} s; diverged in one only: {diff["mismatch"]}')
+    return 0
+
+
+def _main_delay_study(args):
+    t0 = time.perf_counter()
+    rows, records = delay_study(seeds=range(args.seeds), cases=args.cases)
+    print(f'offline delay study: {len(records)} runs, seeds 0-{args.seeds - 1}, '
+          f'{time.perf_counter() - t0:.1f} s wall')
+    print(format_delay_table(rows))
+    out = DELAY_STUDY_OUT if args.out is None else args.out
+    if out:
+        write_records(out, records)
+        print(f'\nrecords written to {out}')
     return 0
 
 
