@@ -74,17 +74,20 @@ def _get(ros_node, client, names):
 class ClockDriver:
     """Publish `/clock` like the lockstep sim and collect the planner's setpoints."""
 
-    def __init__(self, ros_node):
+    def __init__(self, ros_node, lookahead=LOOKAHEAD):
         from freejoint_msgs.msg import CartesianSetpoint
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         self.node = ros_node
+        self.lookahead = lookahead
         self.got = []
         self.clock_pub = ros_node.create_publisher(Clock, '/clock', 10)
-        # GRAPH.md: reliable, keep-last 100, volatile (what a controller may use)
+        # GRAPH.md: reliable, keep-last 1000, transient local (what the controller uses: a
+        # match completed on the planner's side only after its first ticks loses nothing)
         self.sub = ros_node.create_subscription(
             CartesianSetpoint, 'setpoint', self.got.append,
-            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+            QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self._clock = Clock
 
     def matched(self):
@@ -105,7 +108,7 @@ class ClockDriver:
 
     def step(self, now_ns, wait, what=''):
         """Publish /clock = now and wait for the setpoints due (up to now + lookahead)."""
-        due = (now_ns + LOOKAHEAD * MS) // MS * MS
+        due = (now_ns + self.lookahead * MS) // MS * MS
 
         def spin():
             before = len(self.got)
@@ -175,9 +178,10 @@ def test_planner_yaml_loads_and_a_late_subscriber_gets_the_map_and_the_path(
 def test_setpoints_in_sim_time_are_the_circle_on_the_grid_each_stamp_once_in_order_ahead(
         procs, ros_node, wait):
     from freejoint_core.trajectory import CircleQuintic
-    proc = _start_planner(procs)
+    # lookahead 100 >= N - 1 for the jumps of 73 ticks below (the clock spacing rule)
+    proc = _start_planner(procs, ('-p', 'use_sim_time:=true', '-p', 'lookahead:=100'))
     _wait_ready(ros_node, procs, proc, wait)
-    clock = ClockDriver(ros_node)
+    clock = ClockDriver(ros_node, lookahead=100)
     wait(clock.matched, 30.0, 'the planner matching /clock and setpoint',
          spin=lambda: _spin(ros_node, 0.05))
     for _ in range(10):
@@ -189,7 +193,7 @@ def test_setpoints_in_sim_time_are_the_circle_on_the_grid_each_stamp_once_in_ord
     times += list(range(80 * MS, 5_100 * MS, 73 * MS)) + [5_100 * MS]
     for now in times:
         clock.step(now, wait, '(log: %s)' % procs.log(proc))
-    last = (5_100 + LOOKAHEAD)
+    last = (5_100 + 100)
     stamps = [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in clock.got]
     assert stamps == [k * MS for k in range(last + 1)]       # each once, in order, on the grid
     circle = CircleQuintic()                                  # the paper's, the default
@@ -201,7 +205,7 @@ def test_setpoints_in_sim_time_are_the_circle_on_the_grid_each_stamp_once_in_ord
     assert [m.final for m in clock.got].index(True) == 5001
 
 
-def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_order(
+def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_order_and_a_too_small_lookahead_is_refused_or_raised(  # noqa: E501
         procs, ros_node, wait):
     from freejoint_msgs.srv import PlanCircle
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -236,30 +240,42 @@ def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_
     wait(lambda: len(markers) == 2, 15.0, 'the new marker', spin=lambda: _spin(ros_node, 0.1))
     stamp = markers[1].header.stamp
     assert (stamp.sec, stamp.nanosec) == (0, 200 * MS)
-    # lookahead below the spacing: late ticks are named with the rule
-    assert _set(ros_node, params, 'lookahead', 5).successful
+    # the spacing N = 10 is known: a lookahead below N - 1 = 9 is refused, 0 always
+    result = _set(ros_node, params, 'lookahead', 5)
+    assert not result.successful
+    assert result.reason.startswith('lookahead: 5 ticks is below N - 1 = 9 for /clock every '
+                                    'N = 10 ticks'), result.reason
+    result = _set(ros_node, params, 'lookahead', 0)
+    assert not result.successful and 'lookahead' in result.reason and 'Min: 1' in \
+        result.reason, result.reason
+    assert _set(ros_node, params, 'lookahead', 9).successful
+    # /clock then jumps 30 ticks: 221 .. 239 due, 221 .. 229 late; N = 30 > lookahead + 1:
+    # a loud error and lookahead raised to 2 N - 1 = 59, the ticks up to 289 out at once
     clock.got.clear()
-    clock.publish(230 * MS)                   # 30 ticks on; 221 .. 235 due, 221 .. 229 late
-    wait(lambda: clock.last_stamp() == 235 * MS, 10.0, 'the setpoints after /clock 230 ms',
+    clock.publish(230 * MS)
+    wait(lambda: clock.last_stamp() == 289 * MS, 10.0, 'the setpoints after /clock 230 ms',
          spin=lambda: _spin(ros_node, 0.02))
-    assert [m.header.stamp.nanosec // MS for m in clock.got] == list(range(221, 236))
-    wait(lambda: 'went out only at' in procs.log(proc), 10.0, 'the late-ticks warning',
+    assert [m.header.stamp.nanosec // MS for m in clock.got] == list(range(221, 290))
+    wait(lambda: 'lookahead raised to' in procs.log(proc), 10.0, 'the raised lookahead',
          spin=lambda: _spin(ros_node, 0.02))
     log = procs.log(proc)
     assert '9 setpoint(s) went out only at /clock 0.230000 s, after ROS time had passed ' \
         'them' in log
     assert 'lookahead must be >= N - 1 = 29 ticks for /clock every N = 30 ticks, >= 2 N - 1 ' \
-        '= 59 to ride out a lost /clock; lookahead is 5' in log
+        '= 59 to ride out a lost /clock; lookahead is 9' in log
+    assert '[ERROR]' in log and '/clock every N = 30 ticks but lookahead is 9 < N - 1 = 29' \
+        in log and 'lookahead raised to 59' in log
+    assert _get(ros_node, params, ['lookahead']) == {'lookahead': 59}
 
 
 def test_a_path_into_the_semi_singular_region_is_refused_and_the_good_plan_keeps_streaming(
         procs, ros_node, wait):
     from freejoint_core.trajectory import CircleQuintic
     from freejoint_msgs.srv import PlanCircle
-    proc = _start_planner(procs)
+    proc = _start_planner(procs, ('-p', 'use_sim_time:=true', '-p', 'lookahead:=100'))
     client = _wait_ready(ros_node, procs, proc, wait)
     params = _param_client(ros_node, wait)
-    clock = ClockDriver(ros_node)
+    clock = ClockDriver(ros_node, lookahead=100)
     wait(clock.matched, 30.0, 'the planner matching /clock and setpoint',
          spin=lambda: _spin(ros_node, 0.05))
     clock.step(0, wait)
@@ -290,14 +306,14 @@ def test_a_path_into_the_semi_singular_region_is_refused_and_the_good_plan_keeps
     for now in (1 * MS, 30 * MS, 100 * MS):
         clock.step(now, wait, '(log: %s)' % procs.log(proc))
     circle = CircleQuintic()
-    assert len(clock.got) == 121
+    assert len(clock.got) == 201
     for k, m in enumerate(clock.got):
         assert m.plan_id == 1
         assert tuple(m.position) == circle.sample_tuple(k * DT)[:2], 'tick %d' % k
     assert 'refused' in procs.log(proc)
 
 
-def test_a_circle_change_starts_anew_at_the_next_tick_and_a_map_change_recomputes_the_map(
+def test_a_circle_change_starts_at_the_next_tick_by_a_transition_and_a_map_change_recomputes_the_map(  # noqa: E501
         procs, ros_node, wait):
     import numpy as np
     from freejoint_core.arm import table1
@@ -317,11 +333,15 @@ def test_a_circle_change_starts_anew_at_the_next_tick_and_a_map_change_recompute
     assert result.successful, result.reason
     clock.step(12 * MS, wait)                                 # ticks 31, 32 of plan 2
     assert [m.plan_id for m in clock.got] == [1] * 31 + [2, 2]
-    new = CircleQuintic(radius=0.3)
-    assert [m.plan_time for m in clock.got[31:]] == [0.0, MS * 1e-9]
-    assert [tuple(m.position) for m in clock.got[31:]] == [new.sample_tuple(0.0)[:2],
-                                                           new.sample_tuple(DT)[:2]]
+    # plan 1 was moving: plan 2 starts from its state at tick 31 by a transition (plan
+    # time < 0 until the new circle starts), no step
+    m = clock.got[31]
+    assert tuple(m.position) + tuple(m.velocity) + tuple(m.acceleration) == \
+        CircleQuintic().sample_tuple(31 * DT)
+    assert m.plan_time < 0.0 and clock.got[32].plan_time == m.plan_time + MS * 1e-9
+    assert not m.final
     assert 'plan 2 (configured) accepted' in procs.log(proc)
+    assert 'transition of' in procs.log(proc)
 
     grids = []
     ros_node.create_subscription(OccupancyGrid, 'semi_singular_map', grids.append,
@@ -363,3 +383,21 @@ def test_bad_parameter_values_at_start_are_named_and_fall_back_to_the_defaults(c
     err = capfd.readouterr().err
     for name in ('radius', 'centre', 'resolution_deg', 'case'):
         assert 'parameter %s:' % name in err and 'using the default' in err, err
+
+
+def test_lookahead_zero_at_start_is_refused_with_the_reason_and_the_default_used(capfd):
+    import rclpy
+    from freejoint_planner.planner_node import PlannerNode
+    rclpy.init(args=['--ros-args', '-p', 'lookahead:=0'])
+    try:
+        node = PlannerNode()
+        try:
+            value = node.get_parameter('lookahead').value
+            stream_lookahead = node._stream.lookahead
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown()
+    assert value == stream_lookahead == 20
+    err = capfd.readouterr().err
+    assert 'parameter lookahead:' in err and 'using the default 20' in err, err

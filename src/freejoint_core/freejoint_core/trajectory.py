@@ -7,6 +7,7 @@ normalised time ``tau = t / T``, so position, velocity and acceleration are
 continuous and the velocity and acceleration are zero at both ends.
 """
 
+from dataclasses import dataclass
 import math
 
 import numpy as np
@@ -246,3 +247,365 @@ class CircleQuintic:
         return (f'CircleQuintic(centre=({self._cx!r}, {self._cy!r}), radius={self._radius!r}, '
                 f'duration={self._duration!r}, start_angle={self._start!r}, '
                 f'direction={self._dir!r})')
+
+
+def circle_peaks(circle, num=20001):
+    """
+    Return the peak speed (m/s) and acceleration (m/s^2) of a ``CircleQuintic``.
+
+    The speed ``r |phi'|`` peaks at mid-revolution, ``1.875 * 2 pi r / T``; the
+    acceleration magnitude ``r sqrt(phi''^2 + phi'^4)`` is maximised over ``num``
+    evenly spaced normalised times (relative error below 1e-8 at the default).
+
+    Parameters
+    ----------
+    circle : CircleQuintic
+        The circle.
+    num : int
+        Samples of the normalised time for the acceleration, >= 3.
+
+    Returns
+    -------
+    tuple of float
+        ``(peak_speed, peak_acceleration)``.
+
+    """
+    if not isinstance(circle, CircleQuintic):
+        raise FreejointValueError(f'circle: expected CircleQuintic, got {type(circle).__name__}')
+    tau = np.linspace(0.0, 1.0, max(3, int(num)))
+    w = (TWO_PI / circle.duration) * tau * tau * (30.0 + tau * (-60.0 + 30.0 * tau))
+    wd = (TWO_PI / circle.duration ** 2) * tau * (60.0 + tau * (-180.0 + 120.0 * tau))
+    acc = circle.radius * np.sqrt(wd * wd + w ** 4)
+    return 1.875 * TWO_PI * circle.radius / circle.duration, float(acc.max())
+
+
+def circle_max_tick_step(circle, dt):
+    """
+    Return the largest distance (m) between the circle's setpoints one tick apart.
+
+    The setpoints are ``sample_tuple(j dt)``, ``j = 0, 1, ...`` (the stream's ticks
+    from the circle's start). The chord of tick ``j`` is ``2 r sin(|dphi_j| / 2)``
+    with ``dphi_j = 2 pi (s(tau_{j+1}) - s(tau_j))``; ``s'`` is unimodal about
+    ``tau = 1/2``, so the widest step is one of the few ticks around mid-revolution
+    (ticks near the middle and, for short circles, all of them, are evaluated with
+    ``sample_tuple`` exactly as streamed).
+
+    Parameters
+    ----------
+    circle : CircleQuintic
+        The circle.
+    dt : float
+        Control period (s), > 0.
+
+    Returns
+    -------
+    float
+
+    """
+    dt = _finite_float('dt', dt)
+    if dt <= 0.0:
+        raise FreejointValueError(f'dt: expected > 0 s, got {dt}')
+    last = int(math.ceil(circle.duration / dt)) + 1
+    mid = int(circle.duration / (2.0 * dt))
+    if last <= 4096:
+        ticks = range(0, last + 1)
+    else:
+        ticks = range(max(0, mid - 3), min(last, mid + 4) + 1)
+    pts = np.array([circle.sample_tuple(j * dt)[:2] for j in ticks])
+    return float(np.hypot(np.diff(pts[:, 0]), np.diff(pts[:, 1])).max())
+
+
+class QuinticTransition:
+    """
+    Quintic in task space from a moving state to a point at rest.
+
+    Each coordinate is the quintic polynomial ``p(t) = sum_i c_i t^i`` with
+    ``p(0) = p0``, ``p'(0) = v0``, ``p''(0) = a0`` and ``p(T) = p1``,
+    ``p'(T) = p''(T) = 0``: position, velocity and acceleration are continuous
+    at both joints when the segment starts from the state of the stream before
+    it and ends at the start of a ``CircleQuintic`` (at rest). Time is clipped
+    to ``[0, T]``: after ``T`` the end point is held.
+
+    Parameters
+    ----------
+    p0, v0, a0 : sequence of float, shape (2,)
+        Start position (m), velocity (m/s), acceleration (m/s^2).
+    p1 : sequence of float, shape (2,)
+        End position (m), reached at rest.
+    duration : float
+        ``T`` (s), > 0.
+
+    Raises
+    ------
+    FreejointValueError
+        If an argument is malformed; the message names it.
+
+    """
+
+    def __init__(self, p0, v0, a0, p1, duration):
+        vecs = []
+        for name, value in (('p0', p0), ('v0', v0), ('a0', a0), ('p1', p1)):
+            try:
+                arr = np.asarray(value, dtype=float)
+            except (TypeError, ValueError):
+                raise FreejointValueError(f'{name}: expected 2 numbers, got {value!r}') from None
+            if arr.shape != (2,) or not np.all(np.isfinite(arr)):
+                raise FreejointValueError(f'{name}: expected 2 finite numbers, got {value!r}')
+            vecs.append(arr)
+        p0, v0, a0, p1 = vecs
+        T = _finite_float('duration', duration)
+        if T <= 0.0:
+            raise FreejointValueError(f'duration: expected > 0 s, got {T}')
+        self._duration = T
+        self._p0, self._v0, self._a0, self._p1 = p0, v0, a0, p1
+        # end conditions of the part left after the Taylor terms p0 + v0 t + a0 t^2 / 2
+        d = p1 - p0 - v0 * T - 0.5 * a0 * T * T
+        e = -v0 - a0 * T
+        f = -a0
+        c3 = (10.0 * d - 4.0 * e * T + 0.5 * f * T * T) / T ** 3
+        c4 = (-15.0 * d + 7.0 * e * T - f * T * T) / T ** 4
+        c5 = (6.0 * d - 3.0 * e * T + 0.5 * f * T * T) / T ** 5
+        self._cx = tuple(float(v) for v in (p0[0], v0[0], 0.5 * a0[0], c3[0], c4[0], c5[0]))
+        self._cy = tuple(float(v) for v in (p0[1], v0[1], 0.5 * a0[1], c3[1], c4[1], c5[1]))
+
+    @property
+    def duration(self):
+        """Return ``T`` (s)."""
+        return self._duration
+
+    @property
+    def start(self):
+        """Return ``(p0, v0, a0)``, each numpy shape (2,)."""
+        return self._p0.copy(), self._v0.copy(), self._a0.copy()
+
+    @property
+    def end(self):
+        """Return the end point ``p1`` (m), numpy shape (2,)."""
+        return self._p1.copy()
+
+    @staticmethod
+    def _eval(c, t):
+        c0, c1, c2, c3, c4, c5 = c
+        p = c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * c5))))
+        v = c1 + t * (2.0 * c2 + t * (3.0 * c3 + t * (4.0 * c4 + t * (5.0 * c5))))
+        a = 2.0 * c2 + t * (6.0 * c3 + t * (12.0 * c4 + t * (20.0 * c5)))
+        return p, v, a
+
+    def sample_tuple(self, t):
+        """
+        Sample at time ``t`` (s) as plain floats, for hot loops (not validated).
+
+        Returns
+        -------
+        tuple of float
+            ``(px, py, vx, vy, ax, ay)`` in m, m/s, m/s^2.
+
+        """
+        if t <= 0.0:
+            t = 0.0
+        elif t >= self._duration:
+            return (float(self._p1[0]), float(self._p1[1]), 0.0, 0.0, 0.0, 0.0)
+        px, vx, ax = self._eval(self._cx, t)
+        py, vy, ay = self._eval(self._cy, t)
+        return (px, py, vx, vy, ax, ay)
+
+    def sample_ticks(self, dt, num):
+        """
+        Sample at ``t_j = j dt``, ``j = 0 .. num - 1``, as ``sample_tuple`` gives them.
+
+        Returns
+        -------
+        numpy.ndarray, shape (num, 6)
+            Columns ``px, py, vx, vy, ax, ay``; ticks at or past ``T`` hold ``p1``.
+
+        """
+        t = np.arange(int(num)) * float(dt)
+        px, vx, ax = self._eval(self._cx, t)
+        py, vy, ay = self._eval(self._cy, t)
+        out = np.column_stack((px, py, vx, vy, ax, ay))
+        out[t >= self._duration] = (self._p1[0], self._p1[1], 0.0, 0.0, 0.0, 0.0)
+        return out
+
+    def __repr__(self):
+        return (f'QuinticTransition(p0={self._p0.tolist()}, v0={self._v0.tolist()}, '
+                f'a0={self._a0.tolist()}, p1={self._p1.tolist()}, '
+                f'duration={self._duration!r})')
+
+
+# Hermite bases of a quintic on tau in [0, 1] that ends at rest: h0 takes 0 -> 1, h1 has
+# h1'(0) = 1, h2 has h2''(0) = 1, every other boundary value zero. First and second
+# derivatives, as polynomial coefficients in tau (lowest first).
+_H0 = (np.array([0.0, 0.0, 30.0, -60.0, 30.0]), np.array([0.0, 60.0, -180.0, 120.0]))
+_H1 = (np.array([1.0, 0.0, -18.0, 32.0, -15.0]), np.array([0.0, -36.0, 96.0, -60.0]))
+_H2 = (np.array([0.0, 1.0, -4.5, 6.0, -2.5]), np.array([1.0, -9.0, 18.0, -10.0]))
+
+
+@dataclass(frozen=True)
+class TransitionChoice:
+    """
+    Result of :func:`plan_transition`.
+
+    Attributes
+    ----------
+    ok : bool
+        True if a transition within the limits (and clear of ``path_check``) exists.
+    reason : str
+        Empty when ok, else why there is none.
+    segment : QuinticTransition or None
+        The transition (None when refused, or when none is needed).
+    ticks : int
+        ``T / dt``: the circle's start is tick ``ticks`` of the transition (0: none).
+    peak_speed, peak_acceleration, max_step : float
+        Largest speed (m/s), acceleration (m/s^2) and distance between consecutive
+        setpoints (m, the last one to the end point) over its ticks.
+    limits : tuple of float
+        ``(speed, acceleration, step)`` it was held to.
+    margin : float
+        ``path_check``'s margin (m) of its tick points (inf without ``path_check``).
+
+    """
+
+    ok: bool
+    reason: str
+    segment: object
+    ticks: int
+    peak_speed: float
+    peak_acceleration: float
+    max_step: float
+    limits: tuple
+    margin: float
+
+
+def transition_limits(circle, dt, v0, a0):
+    """
+    Return the ``(speed, acceleration, step)`` limits of a transition into ``circle``.
+
+    The circle's own peak speed ``V`` and acceleration ``A`` (:func:`circle_peaks`)
+    and its largest per-tick step ``S`` (:func:`circle_max_tick_step`), raised to the
+    start state's own ``|v0|``, ``|a0|`` (and ``S |v0| / V``) when that is faster:
+    a transition cannot start below the state it starts from.
+    """
+    speed, acc = circle_peaks(circle)
+    step = circle_max_tick_step(circle, dt)
+    v = float(np.hypot(*np.asarray(v0, dtype=float)))
+    a = float(np.hypot(*np.asarray(a0, dtype=float)))
+    return max(speed, v), max(acc, a), step * max(1.0, v / speed)
+
+
+def transition_candidates(max_ticks, growth=1.01, dense=32):
+    """Return the candidate durations in ticks: 1 .. dense, then growing by ``growth``."""
+    out = list(range(1, min(dense, max_ticks) + 1))
+    n = dense
+    while n < max_ticks:
+        n = min(max_ticks, max(n + 1, int(math.ceil(n * growth))))
+        out.append(n)
+    return out
+
+
+def plan_transition(p0, v0, a0, circle, dt, max_duration=60.0, path_check=None,
+                    limits=None, coarse=129, max_exact=400):
+    """
+    Choose the shortest quintic transition from a stream state into ``circle``'s start.
+
+    The candidate durations are whole numbers of ticks (the circle then starts on a
+    tick), in increasing order (:func:`transition_candidates`). A candidate is kept if,
+    over its ticks ``t_j = j dt`` (as streamed, ``QuinticTransition.sample_ticks``,
+    the last one the circle's start), its speed and acceleration stay within the
+    limits and no two consecutive setpoints are farther apart than the step limit,
+    and ``path_check`` accepts its tick points. A coarse test on ``coarse`` normalised
+    times (1 % slack) skips the hopeless candidates first.
+
+    Parameters
+    ----------
+    p0, v0, a0 : sequence of float, shape (2,)
+        The stream's state at the transition's first tick (m, m/s, m/s^2).
+    circle : CircleQuintic
+        The circle to start; the transition ends at ``circle.sample_tuple(0)`` at rest.
+    dt : float
+        Control period (s), > 0.
+    max_duration : float
+        Longest transition considered (s), > 0.
+    path_check : callable, optional
+        ``path_check(points) -> (ok, margin, reason)`` for points of shape (N, 2) (m).
+    limits : tuple of float, optional
+        ``(speed, acceleration, step)``; default :func:`transition_limits`.
+    coarse : int
+        Normalised samples of the coarse test, >= 3.
+    max_exact : int
+        At most this many candidates are checked tick by tick.
+
+    Returns
+    -------
+    TransitionChoice
+        ``ok`` with ``ticks == 0`` and no segment if the state already is the circle's
+        start at rest.
+
+    """
+    dt = _finite_float('dt', dt)
+    if dt <= 0.0:
+        raise FreejointValueError(f'dt: expected > 0 s, got {dt}')
+    max_duration = _finite_float('max_duration', max_duration)
+    if max_duration <= 0.0:
+        raise FreejointValueError(f'max_duration: expected > 0 s, got {max_duration}')
+    start = QuinticTransition(p0, v0, a0, p0, 1.0)     # validates the state
+    p0, v0, a0 = start.start
+    px, py = circle.sample_tuple(0.0)[:2]
+    p1 = np.array([px, py])
+    if limits is None:
+        limits = transition_limits(circle, dt, v0, a0)
+    v_lim, a_lim, s_lim = (float(x) for x in limits)
+    if (p0 == p1).all() and not v0.any() and not a0.any():
+        return TransitionChoice(True, '', None, 0, 0.0, 0.0, 0.0, (v_lim, a_lim, s_lim),
+                                math.inf)
+    max_ticks = max(1, int(math.floor(max_duration / dt + 1e-9)))
+    cand = np.array(transition_candidates(max_ticks), dtype=float)
+    # coarse test, all candidates at once: shape (candidates, coarse, 2)
+    tau = np.linspace(0.0, 1.0, max(3, int(coarse)))
+    T = (cand * dt)[:, None, None]
+    dp = (p1 - p0)[None, None, :]
+    h = [(np.polyval(d1[::-1], tau)[None, :, None], np.polyval(d2[::-1], tau)[None, :, None])
+         for d1, d2 in (_H0, _H1, _H2)]
+    vel = (dp * h[0][0] + v0 * T * h[1][0] + a0 * T * T * h[2][0]) / T
+    acc = (dp * h[0][1] + v0 * T * h[1][1] + a0 * T * T * h[2][1]) / (T * T)
+    vmax = np.sqrt((vel ** 2).sum(axis=2)).max(axis=1)
+    amax = np.sqrt((acc ** 2).sum(axis=2)).max(axis=1)
+    hopeful = np.nonzero((vmax <= 1.01 * v_lim) & (amax <= 1.01 * a_lim))[0]
+    best = (math.inf, None)                           # the closest miss, for the reason
+    path_reason = ''
+    for i in hopeful[:max(1, int(max_exact))]:
+        n = int(cand[i])
+        seg = QuinticTransition(p0, v0, a0, p1, n * dt)
+        s = seg.sample_ticks(dt, n + 1)
+        s[n] = (p1[0], p1[1], 0.0, 0.0, 0.0, 0.0)
+        speed = float(np.hypot(s[:, 2], s[:, 3]).max())
+        acc_n = float(np.hypot(s[:, 4], s[:, 5]).max())
+        step = float(np.hypot(np.diff(s[:, 0]), np.diff(s[:, 1])).max())
+        excess = max(speed / v_lim, acc_n / a_lim, step / s_lim)
+        if excess > 1.0:
+            if excess < best[0]:
+                best = (excess, (n, speed, acc_n, step))
+            continue
+        margin = math.inf
+        if path_check is not None:
+            ok, margin, reason = path_check(s[:, :2])
+            if not ok:
+                path_reason = path_reason or (
+                    f'the shortest transition within the limits ({n * dt:.6g} s) would '
+                    f'pass a point {reason}')
+                continue
+        return TransitionChoice(True, '', seg, n, speed, acc_n, step,
+                                (v_lim, a_lim, s_lim), float(margin))
+    lim = (f'speed {v_lim:.6g} m/s, acceleration {a_lim:.6g} m/s^2, step {s_lim:.6g} m '
+           f'per tick')
+    if path_reason:
+        reason = path_reason + ' (and every longer one up to ' \
+            f'{max_duration:g} s within {lim} too)'
+    elif best[1] is not None:
+        n, speed, acc_n, step = best[1]
+        reason = (f'no transition of at most {max_duration:g} s from the current state '
+                  f'stays within {lim}: the closest ({n * dt:.6g} s) reaches {speed:.6g} '
+                  f'm/s, {acc_n:.6g} m/s^2, {step:.6g} m')
+    else:
+        reason = f'no transition of at most {max_duration:g} s stays within {lim}'
+    return TransitionChoice(False, reason, None, 0, math.nan, math.nan, math.nan,
+                            (v_lim, a_lim, s_lim), math.nan)

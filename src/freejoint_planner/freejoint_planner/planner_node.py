@@ -40,6 +40,7 @@ import math
 
 from freejoint_common.node_tools import run
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.singularity import check_path
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_msgs.msg import CartesianSetpoint
 from freejoint_msgs.srv import PlanCircle
@@ -55,8 +56,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from visualization_msgs.msg import Marker
 
 from .conversions import occupancy_grid, path_marker, setpoint_msg, time_ns
-from .planning import CIRCLE_KEYS, compute_model, grid_extent, make_circle, MAP_KEYS, RANGES
-from .planning import validate
+from .planning import circle_bounds, CIRCLE_KEYS, compute_model, grid_extent, make_circle
+from .planning import MAP_KEYS, prepare_transition, RANGES, validate
 from .stream import Plan, SetpointStream
 
 NODE_NAME = 'freejoint_planner'
@@ -104,15 +105,27 @@ PARAMETERS = {
     'control_period': (0.001, 'Control period dt (s); setpoint k is stamped k * dt. Must '
                        'match the simulator and controller.',
                        dict(_range('control_period'), read_only=True)),
-    'lookahead': (20, 'Setpoints published ahead of ROS time (ticks).', _range('lookahead')),
+    'lookahead': (20, 'Setpoints published ahead of ROS time (ticks), >= 1. Sim time: with '
+                  '/clock every N ticks, >= N - 1 (a smaller value is refused once N is '
+                  'known; found too small when N is learnt, it is raised to 2 N - 1).',
+                  _range('lookahead')),
     'centre': ([0.0, 0.0], 'Circle centre (x, y) in m, base frame.', {}),
     'radius': (0.2, 'Circle radius (m), > 0.', _range('radius')),
     'duration': (5.0, 'Time of the revolution (s), > 0.', _range('duration')),
-    'start_angle': (0.0, 'Angle of the start point about the centre (rad), from +x.', {}),
+    'start_angle': (0.0, 'Angle of the start point about the centre (rad), from +x, '
+                    'within one revolution either way.', _range('start_angle')),
     'direction': (1, '+1 counter-clockwise, -1 clockwise.',
                   {'integer_range': [IntegerRange(from_value=-1, to_value=1, step=2)]}),
     'start_delay': (0.0, 'Delay from the start of a plan to its motion (s); the start point '
                     'is held meanwhile.', _range('start_delay')),
+    'max_speed': (1.0, 'Largest end-effector speed of a plan (m/s): a circle peaking above '
+                  'it is refused (paper circle: 0.471).', _range('max_speed')),
+    'max_acceleration': (5.0, 'Largest end-effector acceleration of a plan (m/s^2): a circle '
+                         'peaking above it is refused (paper circle: 1.11).',
+                         _range('max_acceleration')),
+    'transition_max_duration': (60.0, 'Longest transition (s) from the current setpoint into '
+                                "a new plan's start; none shorter within the bounds: the "
+                                'plan is refused.', _range('transition_max_duration')),
     'autostart': (True, 'Start the configured circle at activation and after every accepted '
                   'change of its parameters.', {}),
 }
@@ -143,13 +156,14 @@ class PlannerNode(Node):
         self._publish_map()
         if self._cfg['autostart']:
             circle = make_circle(self._cfg)
-            check = self._model.check(circle)
-            if check.ok:
-                self._execute(circle, self._cfg['start_delay'], check.margin, 'configured')
+            reason, margin, choice, tick = self._admit(circle, self._model, self._cfg)
+            if not reason:
+                self._execute(circle, self._cfg['start_delay'], margin, 'configured', choice,
+                              tick)
             else:
                 self.get_logger().error(
                     f'configured circle refused, nothing streams: {self._describe(circle)}: '
-                    f'{check.reason}')
+                    f'{reason}')
         self.create_subscription(ClockMsg, '/clock', self._on_clock, CLOCK_QOS)
         self._timer = self._make_timer()
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -193,6 +207,12 @@ class PlannerNode(Node):
         reason = validate(new)
         if reason:
             return self._refuse(reason)
+        n = self._stream.spacing
+        if sim and n > 1 and int(new['lookahead']) < n - 1:
+            return self._refuse(
+                f"lookahead: {new['lookahead']} ticks is below N - 1 = {n - 1} for /clock "
+                f'every N = {n} ticks (the clock spacing rule: the ticks between two /clock '
+                f'must be out when the first arrives); >= {2 * n - 1} rides out a lost /clock')
         changed = {k for k in new if new[k] != self._cfg[k]}
         model = self._model
         if changed & set(MAP_KEYS):
@@ -205,16 +225,19 @@ class PlannerNode(Node):
             plan = self._stream.plan
             if plan is not None:
                 check = model.check(plan.trajectory)
+                if check.ok and plan.transition is not None:
+                    check = check_path(model.region, plan.transition.sample_ticks(
+                        self._stream.dt, plan.transition_ticks + 1)[:, :2])
                 if not check.ok:
                     return self._refuse(f'the running plan {plan.plan_id} would enter the '
                                         f'semi-singular region of the new map: {check.reason}')
         circle = None
         if changed & set(CIRCLE_KEYS):
             circle = make_circle(new)
-            check = model.check(circle)
-            if not check.ok:
+            reason, margin, choice, tick = self._admit(circle, model, new)
+            if reason:
                 return self._refuse(f'circle refused, the running plan goes on: '
-                                    f'{self._describe(circle)}: {check.reason}')
+                                    f'{self._describe(circle)}: {reason}')
         # accepted: apply
         self._cfg = new
         self._stream.lookahead = int(new['lookahead'])
@@ -225,7 +248,7 @@ class PlannerNode(Node):
             self._model = model
             self._publish_map()
         if circle is not None and new['autostart']:
-            self._execute(circle, new['start_delay'], check.margin, 'configured')
+            self._execute(circle, new['start_delay'], margin, 'configured', choice, tick)
         elif 'frame_id' in changed and self._stream.plan is not None:
             self._publish_marker(self._stream.plan)
         if sim != self._sim:
@@ -299,20 +322,53 @@ class PlannerNode(Node):
         return (f'circle centre ({c[0]:.6g}, {c[1]:.6g}) m radius {circle.radius:.6g} m '
                 f'duration {circle.duration:.6g} s')
 
-    def _execute(self, circle, start_delay, margin, source):
+    def _admit(self, circle, model, cfg):
+        """
+        Check a circle and how it would join the stream (no ROS in the checks).
+
+        Returns ``(reason, margin, choice, tick)``: ``reason`` '' if accepted; the circle's
+        margin (m); the ``TransitionChoice`` (None: starts directly) and its first tick.
+        """
+        reason = circle_bounds(circle, model, cfg['max_speed'], cfg['max_acceleration'])
+        if reason:
+            return reason, math.nan, None, None
+        check = model.check(circle)
+        if not check.ok:
+            return check.reason, check.margin, None, None
+        reason, choice, tick = prepare_transition(self._stream, circle, model,
+                                                  cfg['transition_max_duration'])
+        return reason, check.margin, choice, tick
+
+    def _execute(self, circle, start_delay, margin, source, choice=None, tick=None):
         """Replace the running plan by ``circle``; it starts at the next trigger."""
         self._last_plan_id += 1
-        plan = Plan(self._last_plan_id, circle, round(float(start_delay) * 1e9))
+        segment = None if choice is None else choice.segment
+        plan = Plan(self._last_plan_id, circle, round(float(start_delay) * 1e9),
+                    transition=segment, ticks=0 if segment is None else choice.ticks,
+                    transition_tick=tick)
         self._stream.start(plan)
         self._publish_marker(plan)
+        if segment is None:
+            how = 'starts at its start point'
+        else:
+            how = (f'transition of {choice.ticks} ticks from tick {tick} (peaks '
+                   f'{choice.peak_speed:.4g} m/s, {choice.peak_acceleration:.4g} m/s^2, '
+                   f'{choice.max_step * 1e3:.4g} mm per tick; path margin '
+                   f'{choice.margin:.4f} m) into its start')
         self.get_logger().info(
             f'plan {plan.plan_id} ({source}) accepted with margin {margin:.4f} m: '
-            f'{self._describe(circle)}, start delay {float(start_delay):g} s')
+            f'{self._describe(circle)}, start delay {float(start_delay):g} s, {how}')
         return plan.plan_id
 
     def _on_plan_circle(self, request, response):
         """Check a requested circle; if accepted and ``execute``, start it now."""
         try:
+            problem = validate({'centre': list(request.centre), 'radius': request.radius,
+                                'duration': request.duration,
+                                'start_angle': request.start_angle,
+                                'direction': int(request.direction)})
+            if problem:
+                raise FreejointValueError(problem)
             circle = CircleQuintic(centre=tuple(float(v) for v in request.centre),
                                    radius=request.radius, duration=request.duration,
                                    start_angle=request.start_angle,
@@ -325,19 +381,27 @@ class PlannerNode(Node):
             self.get_logger().error(f'plan_circle: {response.reason}',
                                     throttle_duration_sec=1.0)
             return response
-        check = self._model.check(circle)
-        response.accepted = bool(check.ok)
-        response.margin = float(check.margin)
+        if request.execute:
+            reason, margin, choice, tick = self._admit(circle, self._model, self._cfg)
+        else:                       # a check only: the circle, no transition
+            reason = circle_bounds(circle, self._model, self._cfg['max_speed'],
+                                   self._cfg['max_acceleration'])
+            margin, choice, tick = math.nan, None, None
+            if not reason:
+                check = self._model.check(circle)
+                reason, margin = check.reason, check.margin
+        response.accepted = not reason
+        response.margin = float(margin)
         response.plan_id = 0
-        if not check.ok:
-            response.reason = f'{self._describe(circle)} refused: {check.reason}'
+        if reason:
+            response.reason = f'{self._describe(circle)} refused: {reason}'
             self.get_logger().warning(f'plan_circle: {response.reason}',
                                       throttle_duration_sec=1.0)
         elif request.execute:
-            response.plan_id = self._execute(circle, 0.0, check.margin, 'plan_circle')
+            response.plan_id = self._execute(circle, 0.0, margin, 'plan_circle', choice, tick)
         else:
             self.get_logger().info(f'plan_circle: {self._describe(circle)} accepted with '
-                                   f'margin {check.margin:.4f} m (not executed)')
+                                   f'margin {margin:.4f} m (not executed)')
         return response
 
     # ---- publishing -------------------------------------------------------------------
@@ -403,6 +467,30 @@ class PlannerNode(Node):
             stream = self._stream
             if stream.spacing > self._spacing_logged or stream.late != self._late_logged:
                 self._check_spacing(now_ns)
+                if stream.lookahead < stream.spacing - 1:
+                    self._raise_lookahead(now_ns)
+
+    def _raise_lookahead(self, now_ns):
+        """
+        Raise lookahead to 2 N - 1: the /clock spacing N learnt exceeds lookahead + 1.
+
+        The safe choice (loud): the ticks the controller waits for go out now, and one
+        lost /clock is ridden out; capped at the parameter's upper bound (the keep-last
+        depth). The parameter is set, so ``ros2 param get`` tells the truth.
+        """
+        n = self._stream.spacing
+        old = self._stream.lookahead
+        value = min(2 * n - 1, RANGES['lookahead'][1])
+        self.get_logger().error(
+            f'/clock every N = {n} ticks but lookahead is {old} < N - 1 = {n - 1} (clock '
+            f'spacing rule: in lockstep the controller waits for ticks only the next /clock '
+            f'would release): lookahead raised to {value}'
+            + ('' if value >= n - 1 else f', the most allowed: still below {n - 1}'))
+        result = self.set_parameters([Parameter('lookahead', value=value)])[0]
+        if not result.successful:
+            self.get_logger().error(f'lookahead could not be raised: {result.reason}')
+            return
+        self._advance(now_ns)
 
     def _on_timer(self):
         if not self._sim:

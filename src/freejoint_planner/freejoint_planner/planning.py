@@ -15,7 +15,7 @@ import time
 from freejoint_core.arm import CASES, table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path, det_map, semi_singular
-from freejoint_core.trajectory import CircleQuintic
+from freejoint_core.trajectory import circle_peaks, CircleQuintic, plan_transition
 import numpy as np
 
 # Parameters of the configured circle; an accepted change of any of them re-checks it.
@@ -33,8 +33,20 @@ RANGES = {
     'duration': (0.0, 3600.0),      # exclusive lower bound
     'start_delay': (0.0, 3600.0),
     'control_period': (1e-5, 1.0),
-    'lookahead': (0, 1000),
+    # >= 1: a setpoint must be out before its tick's state (0 races it); <= the keep-last
+    # depth of `setpoint` (1000): more at once could overrun a late reader's history.
+    'lookahead': (1, 1000),
+    # end-effector bounds of every plan (circle and transition); the paper's circle peaks
+    # at 0.471 m/s and 1.11 m/s^2
+    'max_speed': (0.0, 10.0),             # exclusive lower bound
+    'max_acceleration': (0.0, 100.0),     # exclusive lower bound
+    'transition_max_duration': (0.0, 600.0),   # exclusive lower bound
+    # one revolution either way: a huge angle would lose the quintic's increments to
+    # rounding (at 1e17 rad the ulp is 16 rad: the point would jump, not move)
+    'start_angle': (-2.0 * math.pi, 2.0 * math.pi),
 }
+OPEN_LOW = ('eps_d', 'radius', 'duration', 'max_speed', 'max_acceleration',
+            'transition_max_duration')
 
 # Largest arc length (m) between the points of a circle handed to check_path.
 CHECK_STEP = 5e-4
@@ -70,10 +82,10 @@ def validate(cfg):
             if name not in cfg:
                 continue
             value = number(name)
-            open_lo = name in ('eps_d', 'radius', 'duration')
+            open_lo = name in OPEN_LOW
             if value < lo or (open_lo and value <= lo) or value > hi:
-                bound = f'({lo:g}' if open_lo else f'[{lo:g}'
-                raise FreejointValueError(f'{name}: expected a value in {bound}, {hi:g}], '
+                bound = f'({lo:.6g}' if open_lo else f'[{lo:.6g}'
+                raise FreejointValueError(f'{name}: expected a value in {bound}, {hi:.6g}], '
                                           f'got {value:g}')
         if 'lookahead' in cfg and cfg['lookahead'] != int(cfg['lookahead']):
             raise FreejointValueError(f"lookahead: expected an integer, got {cfg['lookahead']}")
@@ -101,12 +113,40 @@ def validate(cfg):
             if not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                        and math.isfinite(v) for v in centre):
                 raise FreejointValueError(f'centre: expected finite numbers, got {centre}')
-        if 'start_angle' in cfg:
-            number('start_angle')
         if 'frame_id' in cfg and not str(cfg['frame_id']).strip():
             raise FreejointValueError('frame_id: expected a frame name, got an empty string')
     except FreejointValueError as exc:
         return str(exc)
+    return ''
+
+
+def circle_bounds(circle, model, max_speed, max_acceleration):
+    """
+    Return why a circle exceeds what the arm and the bounds allow, or '' if it does not.
+
+    The nominal arm's reach annulus ``[r_min, r_max]`` gives the largest radius,
+    ``(r_max - r_min) / 2``, and the farthest centre, ``r_max`` (the semi-singular check
+    refines both); ``max_speed`` / ``max_acceleration`` bound the circle's peak speed and
+    acceleration (``freejoint_core.trajectory.circle_peaks``), i.e. a shortest duration.
+    The reason names the parameter (``radius``, ``centre``, ``duration``) to change.
+    """
+    lo, hi = model.region.reach
+    if circle.radius > (hi - lo) / 2.0:
+        return (f'radius: {circle.radius:g} m exceeds the largest circle the reach annulus '
+                f'[{lo:.6g}, {hi:.6g}] m of the arm holds, {(hi - lo) / 2.0:.6g} m')
+    dist = float(np.hypot(*circle.centre))
+    if dist > hi:
+        return (f'centre: ({circle.centre[0]:g}, {circle.centre[1]:g}) m is {dist:.6g} m from '
+                f'the base, beyond the reach {hi:.6g} m')
+    speed, acc = circle_peaks(circle)
+    if speed > max_speed:
+        return (f'duration: {circle.duration:g} s for radius {circle.radius:g} m peaks at '
+                f'{speed:.6g} m/s, above max_speed {max_speed:g} m/s (duration >= '
+                f'{circle.duration * speed / max_speed:.6g} s)')
+    if acc > max_acceleration:
+        return (f'duration: {circle.duration:g} s for radius {circle.radius:g} m peaks at '
+                f'{acc:.6g} m/s^2, above max_acceleration {max_acceleration:g} m/s^2 '
+                f'(duration >= {circle.duration * math.sqrt(acc / max_acceleration):.6g} s)')
     return ''
 
 
@@ -181,6 +221,11 @@ class SingularityModel:
         """Return the ``PathCheck`` of a circle against this region (and the reach)."""
         return check_path(self.region, circle_check_points(circle))
 
+    def check_points(self, points):
+        """Return ``(ok, margin, reason)`` of path points, shape (N, 2) m (transitions)."""
+        check = check_path(self.region, points)
+        return check.ok, check.margin, check.reason
+
     def describe(self):
         """Return a one-line summary of the region (for the log)."""
         lo, hi = self.region.reach
@@ -228,3 +273,45 @@ def grid_extent(reach, cell):
     """
     half = math.ceil(float(reach[1]) / cell - 1e-9) * cell
     return (-half, half, -half, half)
+
+
+def prepare_transition(stream, circle, model, max_duration):
+    """
+    Decide how a newly accepted ``circle`` joins the stream: directly or by a transition.
+
+    Parameters
+    ----------
+    stream : SetpointStream
+        The planner's stream (read only).
+    circle : CircleQuintic
+        The new plan's circle (checked against the region before).
+    model : SingularityModel
+        Region and reach the transition's path is checked against.
+    max_duration : float
+        Longest transition (s).
+
+    Returns
+    -------
+    tuple
+        ``(reason, choice, tick)``: ``reason`` '' if the plan may start, else why not;
+        ``choice`` the ``TransitionChoice`` (None when nothing streamed yet on this time
+        base: the plan starts as the first one always did); ``tick`` the transition's
+        first tick (the stream's first unpublished tick) or None.
+
+    """
+    pending = stream.pending()
+    if pending is None:
+        return '', None, None
+    k, state = pending
+    busy = stream.in_transition(k)
+    if busy is not None:
+        end = busy.transition_end() * stream.dt_ns * 1e-9
+        return (f'the transition into plan {busy.plan_id} runs until t = {end:.6g} s (ROS '
+                'time); a transition is never cut short (its circle is reached): try again '
+                'after it'), None, None
+    px, py, vx, vy, ax, ay = state
+    choice = plan_transition((px, py), (vx, vy), (ax, ay), circle, stream.dt,
+                             max_duration=max_duration, path_check=model.check_points)
+    if not choice.ok:
+        return f'no safe transition from the current setpoint: {choice.reason}', choice, None
+    return '', choice, (k if choice.segment is not None else None)

@@ -16,7 +16,15 @@ A plan starts at the first trigger after it was accepted, on the first tick at o
 ``now + start_delay`` that has not been published yet (ticks already published belong to
 the previous plan). With no plan at all nothing is published and the stream only follows
 the clock. If ROS time goes backwards (a simulator reset, a looped bag) the stream starts
-over on the new time base and the running plan starts again.
+over on the new time base and the running plan starts again (without its transition).
+
+Transitions (no step in the reference). A plan accepted once the stream has published a
+tick on its time base may carry a transition (``freejoint_core.trajectory.
+QuinticTransition``) anchored at the first unpublished tick ``kt`` (``next_tick`` when it
+was accepted, ``state_at(kt)`` its start state): tick ``kt + j`` carries the transition at
+``j dt`` until its ``n`` ticks are out, the circle then starts on tick ``k0 = max(kt + n,
+ceil((now + start_delay) / dt))`` (its start point held in between). Transition ticks carry
+the new plan's id, ``plan_time = (k - k0) dt < 0`` and ``final = False``.
 
 Clock spacing rule (sim time). ROS time only advances with ``/clock``, and the lockstep
 simulator may publish it every ``N``-th step only (its ``clock_rate``). The ticks strictly
@@ -108,17 +116,39 @@ class Plan:
     start_delay_ns : int
         Delay (ns, >= 0) from the trigger at which the plan starts to its first tick.
 
+    transition : object, optional
+        Has ``sample_tuple(t)``: the segment into the trajectory's start, ``ticks`` long,
+        from tick ``transition_tick`` on (both required with it).
+    ticks : int
+        Length of the transition in ticks (> 0 with a transition).
+    transition_tick : int
+        Its first tick: the stream's first unpublished tick when the plan was accepted.
+
     """
 
-    def __init__(self, plan_id, trajectory, start_delay_ns=0):
+    def __init__(self, plan_id, trajectory, start_delay_ns=0, transition=None, ticks=0,
+                 transition_tick=None):
         self.plan_id = int(plan_id)
         self.trajectory = trajectory
         self.start_delay_ns = int(start_delay_ns)
         self.start_tick = None          # fixed by SetpointStream.advance
+        self.transition = transition
+        self.transition_ticks = int(ticks) if transition is not None else 0
+        self.transition_tick = None if transition is None else int(transition_tick)
+        if transition is not None and self.transition_ticks <= 0:
+            raise ValueError(f'ticks: expected > 0 with a transition, got {ticks}')
+
+    def transition_end(self):
+        """Return the first tick after the transition (None without one)."""
+        if self.transition is None:
+            return None
+        return self.transition_tick + self.transition_ticks
 
     def __repr__(self):
         return (f'Plan(plan_id={self.plan_id}, trajectory={self.trajectory!r}, '
-                f'start_delay_ns={self.start_delay_ns}, start_tick={self.start_tick})')
+                f'start_delay_ns={self.start_delay_ns}, start_tick={self.start_tick}, '
+                f'transition={self.transition!r}, transition_tick={self.transition_tick}, '
+                f'ticks={self.transition_ticks})')
 
 
 class SetpointStream:
@@ -162,6 +192,7 @@ class SetpointStream:
         self.skipped = 0                # late ticks skipped (skip_late only)
         self.late = 0                   # ticks published after ROS time passed them
         self.spacing = 0                # largest advance (ticks) between two triggers
+        self.streamed = False           # a tick was published on this time base
 
     def start(self, plan):
         """Replace the running plan by ``plan``; it starts at the next ``advance``."""
@@ -173,8 +204,42 @@ class SetpointStream:
         self.next_tick = None
         self.last_now_ns = None
         self.spacing = 0
+        self.streamed = False
         if self.plan is not None:
             self.plan.start_tick = None
+            self.plan.transition = None
+            self.plan.transition_tick = None
+            self.plan.transition_ticks = 0
+
+    def pending(self):
+        """
+        Return ``(k, state)`` of the first unpublished tick, or None if nothing streamed.
+
+        ``state`` is ``(px, py, vx, vy, ax, ay)``: what the running plan publishes at tick
+        ``k`` (a plan accepted but not started yet: as if it started at ``k``). None
+        before the first tick on this time base was published (the first plan then
+        starts as it always did, without a transition).
+        """
+        if not self.streamed or self.plan is None or self.next_tick is None:
+            return None
+        k = self.next_tick
+        return k, self.state_at(k)
+
+    def in_transition(self, k):
+        """Return the running plan if tick ``k`` is one of its transition ticks, else None."""
+        plan = self.plan
+        if plan is None or plan.transition is None:
+            return None
+        return plan if plan.transition_tick <= k < plan.transition_end() else None
+
+    def state_at(self, k):
+        """Return ``(px, py, vx, vy, ax, ay)`` of the running plan at tick ``k``."""
+        plan = self.plan
+        if plan.transition is not None and k < plan.transition_end():
+            return plan.transition.sample_tuple((k - plan.transition_tick) * self.dt)
+        if plan.start_tick is None:
+            return plan.trajectory.sample_tuple(0.0)
+        return plan.trajectory.sample_tuple((k - plan.start_tick) * self.dt)
 
     def advance(self, now_ns):
         """
@@ -213,13 +278,15 @@ class SetpointStream:
         if plan is None:
             return []
         if plan.start_tick is None:
-            plan.start_tick = max(self.next_tick,
+            plan.start_tick = max(self.next_tick if plan.transition is None
+                                  else plan.transition_end(),
                                   first_tick_at_or_after(now_ns + plan.start_delay_ns, dt_ns))
         last = last_tick_due(now_ns, dt_ns, self.lookahead)
         start = self.next_tick
         out = [self.setpoint(k) for k in range(start, last + 1)]
         if last >= start:
             self.next_tick = last + 1
+            self.streamed = True
             if start < first:           # sim time: ticks ROS time had already passed
                 self.late += min(last + 1, first) - start
         return out
@@ -229,6 +296,11 @@ class SetpointStream:
         plan = self.plan
         traj = plan.trajectory
         k_plan = k - plan.start_tick
+        if plan.transition is not None and k < plan.transition_tick + plan.transition_ticks:
+            px, py, vx, vy, ax, ay = plan.transition.sample_tuple(
+                (k - plan.transition_tick) * self.dt)
+            return Setpoint(k * self.dt_ns, px, py, vx, vy, ax, ay, plan.plan_id,
+                            (k_plan * self.dt_ns) * 1e-9, False)
         t = k_plan * self.dt
         px, py, vx, vy, ax, ay = traj.sample_tuple(t)
         return Setpoint(k * self.dt_ns, px, py, vx, vy, ax, ay, plan.plan_id,

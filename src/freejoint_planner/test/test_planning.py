@@ -4,8 +4,8 @@ import re
 from freejoint_core.arm import table1
 from freejoint_core.singularity import det_map, semi_singular
 from freejoint_core.trajectory import CircleQuintic
-from freejoint_planner.planning import circle_check_points, compute_model, grid_extent
-from freejoint_planner.planning import make_circle, validate
+from freejoint_planner.planning import circle_bounds, circle_check_points, compute_model
+from freejoint_planner.planning import grid_extent, make_circle, validate
 import numpy as np
 import pytest
 
@@ -14,6 +14,7 @@ DEFAULTS = {
     'grid_resolution': 0.01, 'frame_id': 'base_link', 'control_period': 0.001,
     'lookahead': 20, 'centre': [0.0, 0.0], 'radius': 0.2, 'duration': 5.0,
     'start_angle': 0.0, 'direction': 1, 'start_delay': 0.0, 'autostart': True,
+    'max_speed': 1.0, 'max_acceleration': 5.0, 'transition_max_duration': 60.0,
 }
 
 
@@ -42,6 +43,13 @@ def test_the_paper_configuration_is_valid():
     ('duration', 0.0, 'duration'),
     ('start_delay', -1.0, 'start_delay'),
     ('lookahead', -1, 'lookahead'),
+    ('lookahead', 0, r'lookahead: expected a value in \[1, 1000\], got 0'),
+    ('lookahead', 1001, 'lookahead'),
+    ('start_angle', 7.0, r'start_angle: expected a value in \[-6.28319, 6.28319\]'),
+    ('start_angle', 1e17, 'start_angle'),
+    ('max_speed', 0.0, r'max_speed: expected a value in \(0, 10\]'),
+    ('max_acceleration', 101.0, 'max_acceleration'),
+    ('transition_max_duration', 0.0, 'transition_max_duration'),
     ('control_period', 0.0010000005, 'control_period: .* not a whole number'),
     ('grid_resolution', 1.0, 'grid_resolution'),
     ('frame_id', ' ', 'frame_id'),
@@ -112,3 +120,23 @@ def test_grid_extent_is_a_square_of_whole_cells_covering_the_reach():
     assert grid_extent((0.0, 1.5), 0.01) == pytest.approx((-1.5, 1.5, -1.5, 1.5))
     assert grid_extent((0.0, 1.5), 0.4) == pytest.approx((-1.6, 1.6, -1.6, 1.6))
     assert grid_extent((0.2, 1.0), 0.25) == pytest.approx((-1.0, 1.0, -1.0, 1.0))
+
+
+@pytest.mark.parametrize('circle,match', [
+    (CircleQuintic(radius=0.76), r'radius: 0.76 m exceeds the largest circle the reach '
+                                 r'annulus \[0, 1.5\] m of the arm holds, 0.75 m'),
+    (CircleQuintic(centre=(1.2, 1.0), radius=0.1), r'centre: \(1.2, 1\) m is 1.56205 m from '
+                                                   r'the base, beyond the reach 1.5 m'),
+    (CircleQuintic(duration=2.0), r'duration: 2 s for radius 0.2 m peaks at 1.1781 m/s, above '
+                                  r'max_speed 1 m/s \(duration >= 2.35619 s\)'),
+    (CircleQuintic(radius=0.02, duration=0.5), r'duration: 0.5 s .* peaks at 11.1033 m/s\^2, '
+                                               r'above max_acceleration 5 m/s\^2'),
+])
+def test_a_circle_beyond_the_arm_or_the_speed_bounds_is_refused_naming_the_parameter(
+        model, circle, match):
+    reason = circle_bounds(circle, model, 1.0, 5.0)
+    assert re.search(match, reason), reason
+
+
+def test_the_paper_circle_is_within_the_default_bounds(model):
+    assert circle_bounds(CircleQuintic(), model, 1.0, 5.0) == ''

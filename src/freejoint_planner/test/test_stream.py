@@ -224,3 +224,127 @@ def test_the_clock_spacing_is_learnt_from_the_triggers_and_forgotten_on_a_new_ti
     assert s.spacing == 10
     s.advance(2 * MS)                            # backwards: a new time base
     assert (s.restarts, s.spacing) == (1, 0)
+
+
+# ---- transitions: a new plan joins the stream without a step ----------------------------
+
+def _planned(stream, circle, plan_id, model=None, max_duration=60.0):
+    """Accept ``circle`` as the node does: prepare its transition, start the plan."""
+    from freejoint_planner.planning import prepare_transition
+    reason, choice, tick = prepare_transition(stream, circle, model or _NoRegion(),
+                                              max_duration)
+    if reason:
+        return reason
+    seg = None if choice is None else choice.segment
+    stream.start(Plan(plan_id, circle, 0, transition=seg,
+                      ticks=0 if seg is None else choice.ticks, transition_tick=tick))
+    return choice
+
+
+class _NoRegion:
+    """A model whose region is empty: every path is clear."""
+
+    @staticmethod
+    def check_points(points):
+        return True, 1.0, ''
+
+
+def _steps(setpoints):
+    import numpy as np
+    p = np.array([(sp.px, sp.py) for sp in setpoints])
+    return np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
+
+
+def test_the_first_plan_with_nothing_streamed_starts_as_always_without_a_transition():
+    s = _stream()
+    s.advance(0)                                 # the clock runs, nothing published yet
+    assert s.pending() is None
+    choice = _planned(s, CircleQuintic(radius=0.1), 1)
+    assert choice is None
+    out = s.advance(0)
+    assert (out[0].plan_time, out[0].px, out[0].vx) == (0.0, 0.1, -0.0)
+
+
+def test_a_plan_accepted_while_a_circle_runs_starts_from_the_first_unpublished_tick_state():
+    from freejoint_core.trajectory import circle_max_tick_step
+    old, new = CircleQuintic(), CircleQuintic(centre=(0.05, 0.05))
+    s = _stream()
+    s.start(Plan(1, old))
+    out = [sp for k in range(0, 2501, 10) for sp in s.advance(k * MS)]   # ticks 0 .. 2520
+    k, state = s.pending()
+    assert k == 2521 and state == old.sample_tuple(2521 * 0.001)
+    choice = _planned(s, new, 2)
+    n = choice.ticks
+    assert choice.ok and n > 0
+    out2 = [sp for t in range(2510, 2530 + n + 200, 10) for sp in s.advance(t * MS)]
+    assert _ticks(out2) == list(range(2521, 2521 + len(out2)))
+    # tick 2521: exactly what plan 1 would have published (p, v, a), under plan 2's id
+    first = out2[0]
+    assert (first.px, first.py, first.vx, first.vy, first.ax, first.ay) == state
+    assert (first.plan_id, first.final) == (2, False)
+    # transition ticks: plan_time < 0 counting up to the circle's start at tick 2521 + n
+    k0 = 2521 + n
+    trans = out2[:n]
+    assert [sp.plan_time for sp in trans] == [((k - k0) * MS) * 1e-9 for k in range(2521, k0)]
+    circ = out2[n:]
+    assert circ[0].plan_time == 0.0
+    assert (circ[0].px, circ[0].py, circ[0].vx, circ[0].vy) == new.sample_tuple(0.0)[:4]
+    assert (circ[1].px, circ[1].py) == new.sample_tuple(0.001)[:2]
+    # no step: across both joints no two setpoints are farther apart than the circle's own
+    assert _steps(out[-1:] + out2).max() <= circle_max_tick_step(new, 0.001)
+
+
+def test_a_plan_during_a_transition_is_refused_and_after_it_accepted():
+    s = _stream()
+    s.start(Plan(1, CircleQuintic()))
+    for k in range(0, 1001, 10):
+        s.advance(k * MS)
+    choice = _planned(s, CircleQuintic(centre=(0.0, 0.1)), 2)
+    reason = _planned(s, CircleQuintic(centre=(0.1, 0.0)), 3)
+    assert isinstance(reason, str)
+    assert reason.startswith('the transition into plan 2 runs until t = ')
+    end = s.plan.transition_end()
+    for k in range(1010, end + 1, 10):
+        s.advance(k * MS)
+    assert s.in_transition(s.next_tick) is None
+    assert _planned(s, CircleQuintic(centre=(0.1, 0.0)), 3).ok
+    assert choice.ok
+
+
+def test_a_held_end_point_away_from_the_new_start_gets_a_rest_to_rest_transition():
+    import numpy as np
+    s = _stream()
+    short = CircleQuintic(duration=0.5)
+    s.start(Plan(1, short))
+    for k in range(0, 601, 10):
+        s.advance(k * MS)                       # plan 1 ended: (0.2, 0) held, final
+    _, state = s.pending()
+    assert state == short.sample_tuple(0.5) and state[2:] == (-0.0, 0.0, -0.0, -0.0)
+    choice = _planned(s, CircleQuintic(centre=(-0.1, 0.0), radius=0.1), 2)   # start (0, 0)
+    assert choice.ok and choice.ticks > 0
+    out = [sp for t in range(610, 610 + choice.ticks + 40, 10) for sp in s.advance(t * MS)]
+    p = np.array([(sp.px, sp.py) for sp in out[:choice.ticks]])
+    assert np.all(abs(p[:, 1]) <= 1e-16) and np.all(np.diff(p[:, 0]) <= 0.0)   # straight
+    assert out[choice.ticks].plan_time == 0.0 and out[choice.ticks].px == 0.0
+
+
+def test_a_held_start_point_away_from_the_new_start_gets_a_transition_too():
+    s = _stream()
+    s.start(Plan(1, CircleQuintic(), start_delay_ns=1_000 * MS))    # holds (0.2, 0) for 1 s
+    s.advance(0)
+    choice = _planned(s, CircleQuintic(radius=0.25), 2)
+    assert choice.ok and choice.ticks > 0
+    out = s.advance(30 * MS)
+    assert (out[0].px, out[0].py, out[0].plan_id) == (0.2, 0.0, 2)
+
+
+def test_a_new_time_base_drops_the_transition_and_restarts_the_circle():
+    s = _stream()
+    s.start(Plan(1, CircleQuintic()))
+    s.advance(0)
+    s.advance(500 * MS)
+    _planned(s, CircleQuintic(radius=0.1), 2)
+    s.advance(520 * MS)
+    out = s.advance(1 * MS)                      # backwards: a reset simulator
+    assert s.plan.transition is None and s.pending() is not None
+    assert (out[0].plan_time, out[0].px, out[0].plan_id) == (0.0, 0.1, 2)
