@@ -10,7 +10,7 @@ network between processes of one machine, is switched off with
 ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``).  The lockstep run, recorded in the planner's
 namespace, equals the offline runner at every tick.
 
-Creating namespaces needs ``ip`` (iproute2) and root or CAP_NET_ADMIN with CAP_SYS_ADMIN;
+Creating namespaces needs ``ip`` (iproute2) and CAP_NET_ADMIN with CAP_SYS_ADMIN (root);
 without them the test is skipped, naming what is missing.  The namespaces (and with them
 the veth pair and its addresses) are removed at the end, whatever happened.
 """
@@ -35,12 +35,12 @@ CAP_NET_ADMIN = 12
 CAP_SYS_ADMIN = 21
 
 
-def _missing():
+def _missing(status='/proc/self/status'):
     """Return why network namespaces cannot be made here, or None."""
     if shutil.which('ip') is None:
         return 'no `ip` command (iproute2; Debian/Ubuntu: apt-get install iproute2)'
     try:
-        with open('/proc/self/status') as f:
+        with open(status) as f:
             caps = int(next(line for line in f if line.startswith('CapEff:')).split()[1], 16)
     except (OSError, StopIteration, ValueError):
         caps = -1 if os.geteuid() == 0 else 0
@@ -48,8 +48,9 @@ def _missing():
                                       (CAP_SYS_ADMIN, 'CAP_SYS_ADMIN'))
                if not caps & (1 << bit)]
     if lacking:
-        return ('creating network namespaces needs root or %s (this process: uid %d, '
-                'without %s)' % (' and '.join(lacking), os.geteuid(), ', '.join(lacking)))
+        return ('creating network namespaces needs root with CAP_NET_ADMIN and '
+                'CAP_SYS_ADMIN (this process: uid %d, without %s)'
+                % (os.geteuid(), ' and '.join(lacking)))
     return None
 
 
@@ -120,6 +121,21 @@ def hosts(procs):
         made.remove()
         left = subprocess.run(['ip', 'netns', 'list'], capture_output=True, text=True)
         assert not any(ns in left.stdout for ns in made.names.values()), left.stdout
+
+
+def test_without_ip_or_the_privilege_the_netns_test_is_skipped_saying_why(
+        monkeypatch, tmp_path):
+    status = tmp_path / 'status'
+    status.write_text('Name:\tpython\nCapEff:\t0000000000001000\n')     # CAP_NET_ADMIN only
+    monkeypatch.setattr(shutil, 'which', lambda name: '/usr/sbin/ip')
+    assert _missing(str(status)) == (
+        'creating network namespaces needs root with CAP_NET_ADMIN and CAP_SYS_ADMIN (this '
+        'process: uid %d, without CAP_SYS_ADMIN)' % os.geteuid())
+    status.write_text('CapEff:\t0000000000201000\n')
+    assert _missing(str(status)) is None
+    monkeypatch.setattr(shutil, 'which', lambda name: None)
+    assert _missing(str(status)) == ('no `ip` command (iproute2; Debian/Ubuntu: apt-get '
+                                     'install iproute2)')
 
 
 def test_lockstep_graph_over_two_network_namespaces_equals_the_offline_runner(

@@ -1,4 +1,4 @@
-"""The simulator's parameter validation (no ROS): the /clock rate of lockstep."""
+"""The simulator's parameter validation (no ROS): /clock rate, publish rate, physical bounds."""
 from freejoint_common.node_tools import SCHEDULING_SPECS
 from freejoint_core.errors import FreejointValueError
 from freejoint_sim.params import build_config, SPECS
@@ -44,3 +44,43 @@ def test_the_declared_default_publishes_clock_every_step_for_any_control_period(
     # 0 Hz is "every step": a file that sets only control_period still starts
     for period in (0.001, 0.0025, 0.01):
         assert build_config(_values(control_period=period)).clock_every == 1
+
+
+@pytest.mark.parametrize('changes,match', [
+    ({'dist_bound': 10.5}, r'dist_bound: must be in \[0, 10\] N m \(the paper: 0.5; the '
+                           r'horizontal case peaks near 11 N m of actuator torque\), got 10.5'),
+    ({'dist_bound': -0.1}, r'dist_bound: must be in \[0, 10\] N m'),
+    ({'initial_passive_deg': 400.0}, r'initial_passive_deg: must be within one turn, '
+                                     r'\[-360, 360\] deg, got 400.0'),
+    ({'initial_passive_deg': float('nan')}, 'initial_passive_deg: must be within one turn'),
+    ({'initial_position': [5.0, 0.0]}, 'initial_position: unreachable'),
+    ({'divergence_speed': 0.5}, r'divergence_speed: must be in \[1, 100000\] rad/s, got 0.5'),
+    ({'divergence_speed': 1e6}, r'divergence_speed: must be in \[1, 100000\] rad/s'),
+    ({'start_braked': 'yes'}, "start_braked: expected true or false, got 'yes'")])
+def test_values_beyond_the_physical_bounds_are_refused_with_the_reason(changes, match):
+    with pytest.raises(FreejointValueError, match=match):
+        build_config(_values(**changes))
+
+
+def test_publish_rate_above_the_step_rate_is_refused_naming_the_step_rate():
+    values = _values()
+    values['publish_rate'] = 2000.0
+    with pytest.raises(FreejointValueError, match=r'publish_rate: 2000 Hz is above the step '
+                                                  r'rate 1000 Hz \(1 / control_period\)'):
+        build_config(values)
+
+
+def test_publish_rate_500_hz_at_1_khz_publishes_every_other_step():
+    values = _values()
+    values['publish_rate'] = 500.0      # the states of a 500 Hz driver
+    assert build_config(values).publish_every == 2
+
+
+def test_the_declared_ranges_are_the_validated_bounds():
+    bounds = {spec.name: spec.bounds for spec in SPECS}
+    assert bounds['dist_bound'] == (0.0, 10.0)
+    assert bounds['initial_passive_deg'] == (-360.0, 360.0)
+    assert bounds['divergence_speed'] == (1.0, 1e5)
+    cfg = build_config(_values(dist_bound=10.0, initial_passive_deg=-240.0,
+                               divergence_speed=1e5))
+    assert (cfg.dist_bound, cfg.divergence_speed) == (10.0, 1e5)
