@@ -17,7 +17,7 @@ def _mujoco_plant_factory(case, built):
     """Return a stand-in for ``Plant(params, dt_sub, dist_bound=, seed=, q0=)`` on MuJoCo."""
     arm = paper_arm(case)
 
-    def factory(params, dt_sub, dist_bound, seed, q0):
+    def factory(params, dt_sub, dist_bound=0.5, seed=0, q0=None):
         assert params == arm.params
         plant = MujocoPlant(arm, dt_sub, dist_bound=dist_bound, seed=seed, q0=q0)
         built.append(plant)
@@ -104,3 +104,9 @@ def test_mujoco_plant_refuses_a_speed_beyond_what_mujoco_accepts_without_resetti
         plant.step([0.0, 0.0], DT)
     np.testing.assert_array_equal(plant.q, [0.1, 0.2, 0.3])
     np.testing.assert_array_equal(plant.qd, [2e10, 0.0, 0.0])
+    # MuJoCo prints a warning only the first time; its counter still tells
+    with pytest.raises(PlantDivergedError, match='tau_active: the integration over step 0'):
+        plant.step([0.0, 0.0], DT)
+    plant.reset(qd0=[0.0, 0.0, 0.0])
+    plant.step([0.0, 0.0], DT)
+    assert plant.k == 1
