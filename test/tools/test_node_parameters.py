@@ -1,0 +1,143 @@
+"""
+The parameters of every freejoint node, as ros2 param, rqt_reconfigure and Foxglove see them.
+
+- Every name ``list_parameters`` gives comes back from one ``get_parameters`` call with a
+  value (rclpy's GetParameters answers nothing at all when one requested name has no value:
+  ``ros2 param dump`` then prints ``ros__parameters: {}``).
+- ``fj param dump`` (ros2 param dump's YAML) given back as ``--params-file`` starts a node
+  with equal parameters.
+- A bad start-up parameter (range, type, the node's validator) ends the process with one
+  line naming the parameter and the reason, exit status 2, no traceback.
+
+Every node process is started as ``ros2 run`` would (install/<pkg>/lib/<pkg>/<exe>).
+"""
+import os
+import subprocess
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CONFIG = os.path.join(ROOT, 'config')
+FJ = os.path.join(ROOT, 'install', 'freejoint_tools', 'lib', 'freejoint_tools', 'fj')
+NODES = ('sim_node', 'controller_node', 'planner_node', 'recorder', 'player')
+
+
+def _node(kind, tmp_path, make_bag, config=True):
+    """
+    Return (package, executable, node name, ros arguments) of the node ``kind``.
+
+    ``config``: with its file of config/ (else on its defaults: rcl drops a ``-p`` whose
+    type differs from the params file's value of the same name, without a word).
+    """
+    if not config and kind in ('sim_node', 'controller_node', 'planner_node'):
+        return _node(kind, tmp_path, make_bag)[:3] + ([],)
+    if kind == 'sim_node':
+        return ('freejoint_sim', 'sim_node', '/sim_node',
+                ['--params-file', os.path.join(CONFIG, 'sim.yaml')])
+    if kind == 'controller_node':
+        return ('freejoint_control', 'controller_node', '/controller_node',
+                ['--params-file', os.path.join(CONFIG, 'controller.yaml')])
+    if kind == 'planner_node':
+        return ('freejoint_planner', 'planner_node', '/freejoint_planner',
+                ['--params-file', os.path.join(CONFIG, 'planner.yaml')])
+    if kind == 'recorder':
+        return ('freejoint_tools', 'recorder', '/recorder',
+                ['-p', 'output:=%s' % (tmp_path / 'recorded'), '-p', 'overwrite:=true',
+                 '-p', 'graph_topics:=false'])
+    bag = str(tmp_path / 'played')
+    if not os.path.isdir(bag):
+        make_bag(bag, 20)
+    # It waits (and answers parameter services) until its topics have a subscriber.
+    return ('freejoint_tools', 'player', '/player',
+            ['-p', 'bag:=%s' % bag, '-p', 'wait_for_subscribers:=1',
+             '-p', 'wait_timeout:=120.0'])
+
+
+def _call(node, future, what, timeout=20.0):
+    import rclpy
+    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
+    assert future.done(), 'no answer from %s within %g s' % (what, timeout)
+    return future.result()
+
+
+def _all_parameters(node, name):
+    """Return {name: ParameterValue} from one list_parameters and one get_parameters call."""
+    from rclpy.parameter_client import AsyncParameterClient
+    client = AsyncParameterClient(node, name)
+    assert client.wait_for_services(timeout_sec=30.0), 'no parameter services of ' + name
+    names = sorted(_call(node, client.list_parameters(), name + '/list_parameters')
+                   .result.names)
+    values = _call(node, client.get_parameters(names), name + '/get_parameters').values
+    assert len(values) == len(names), (
+        '%s/get_parameters answered %d values for the %d names of list_parameters (a '
+        'parameter without a value?)' % (name, len(values), len(names)))
+    unset = [n for n, v in zip(names, values) if v.type == 0]
+    assert not unset, '%s: parameters without a value: %s' % (name, unset)
+    return dict(zip(names, values))
+
+
+def _plain(values):
+    from rclpy.parameter import parameter_value_to_python
+    return {n: parameter_value_to_python(v) for n, v in values.items()}
+
+
+@pytest.mark.parametrize('kind', NODES)
+def test_every_parameter_has_a_value_in_one_get_and_its_dump_restarts_an_equal_node(
+        kind, procs, ros_node, tmp_path, make_bag):
+    pkg, exe, name, args = _node(kind, tmp_path, make_bag)
+    first = procs.start_node(pkg, exe, exe, ['--ros-args', *args])
+    before = _all_parameters(ros_node, name)
+    assert len(before) >= 5, sorted(before)
+    dumped = subprocess.run([FJ, 'param', 'dump', name, '--timeout', '30'],
+                            capture_output=True, text=True, timeout=120)
+    assert dumped.returncode == 0, dumped.stderr
+    assert dumped.stdout.startswith('%s:\n  ros__parameters:\n' % name), dumped.stdout[:200]
+    assert first.poll() is None, procs.log(first)
+    procs.stop(first)
+    params_file = tmp_path / 'dump.yaml'
+    params_file.write_text(dumped.stdout)
+    second = procs.start_node(pkg, exe, exe + '_again',
+                              ['--ros-args', '--params-file', str(params_file)])
+    after = _all_parameters(ros_node, name)
+    assert second.poll() is None, procs.log(second)
+    assert _plain(after) == _plain(before)
+    assert {n: v.type for n, v in after.items()} == {n: v.type for n, v in before.items()}
+
+
+BAD_START = [
+    # node, parameter, bad value, what is wrong (a word of the reason)
+    ('sim_node', 'dt_sub', '-1.0', 'range'),
+    ('sim_node', 'seed', 'abc', 'type'),
+    ('sim_node', 'mode', 'bogus', 'mode'),
+    ('controller_node', 'nominal_scale', '1000.0', 'range'),
+    ('controller_node', 'K', '[150, 150]', 'type'),
+    ('controller_node', 'K', '[-1.0, 100.0]', '> 0'),
+    ('recorder', 'chunk_size', '1', 'range'),
+    ('recorder', 'discovery_period', 'abc', 'type'),
+    ('recorder', 'executor', 'bogus', 'executor'),
+    ('player', 'rate', '0.0', 'range'),
+    ('player', 'rate', 'abc', 'type'),
+    ('player', 'bag', "''", 'no bag given'),
+]
+
+
+@pytest.mark.parametrize('kind, param, value, reason', BAD_START,
+                         ids=['%s-%s=%s' % row[:3] for row in BAD_START])
+def test_a_bad_start_up_parameter_ends_the_node_with_one_line_naming_it_and_exit_2(
+        kind, param, value, reason, tmp_path, make_bag):
+    pkg, exe, _, args = _node(kind, tmp_path, make_bag, config=False)
+    cmd = [os.path.join(ROOT, 'install', pkg, 'lib', pkg, exe), '--ros-args', *args,
+           '-p', '%s:=%s' % (param, value)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    out = done.stdout + done.stderr
+    assert done.returncode == 2, 'exit %s, expected 2:\n%s' % (done.returncode, out)
+    assert 'Traceback' not in out, out
+    failures = [line for line in out.splitlines()
+                if 'FATAL' in line or 'ERROR' in line or 'error' in line.lower()]
+    assert len(failures) == 1, 'expected one line, got:\n%s' % out
+    line = failures[0]
+    assert 'bad parameter: %s: ' % param in line, line
+    reasons = {'range': 'out of range', 'type': 'of type'}
+    assert reasons.get(reason, reason) in line, line
