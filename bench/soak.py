@@ -172,6 +172,7 @@ class Session:
         self.graph = bench_graph.Graph(os.path.join(self.dir, 'logs'), 'run', self.env)
         self.codes = {}
         self.restarts = {}
+        self.killed = set()
 
     def __enter__(self):
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -196,7 +197,7 @@ class Session:
         """Spin ``seconds`` s (asking for circles if ``loop``); raise if a node exited."""
         end = time.monotonic() + seconds
         while time.monotonic() < end:
-            exited = self.graph.exited()
+            exited = [n for n in self.graph.exited() if n not in self.killed]
             if exited:
                 raise RuntimeError('%s exited (logs in %s): %s' % (
                     ', '.join(exited), self.graph.log_dir,
@@ -213,6 +214,7 @@ class Session:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(10.0)
         proc.log_file.close()
+        self.killed.add(name)
         return now
 
     def restart(self, name, replace=None):
@@ -222,6 +224,7 @@ class Session:
         self.restarts[name] = self.restarts.get(name, 0) + 1
         now = time.time()
         self.graph.start(name, cmd, log_name='%s_%d' % (name, self.restarts[name] + 1))
+        self.killed.discard(name)
         return now
 
     def diverged_lines(self):
@@ -310,6 +313,56 @@ def controller_ticks(bag_path):
         except (TypeError, ValueError):
             pass
     return out
+
+
+def plant_ticks(bag_path, joints=('joint1', 'joint2')):
+    """
+    Return what the plant did, from the simulator's and the planner's topics of the bag.
+
+    Independent of the controller (a restarted controller's first ticks can reach the
+    recorder seconds late, after discovery): the end effector (``ee_position``) against the
+    planner's newest setpoint stamped at most half a period after the state (the
+    controller's rule), and the effort the simulator applied (``joint_states.effort``).
+
+    Returns
+    -------
+    dict of numpy.ndarray
+        ``log_ns``, ``stamp_ns``, ``p`` (n, 2) [m], ``pd`` (n, 2) (NaN before the first
+        setpoint), ``err_mm``, ``effort`` (n, len(joints)) [N m] (NaN where the
+        joint_states of the stamp is missing).
+
+    """
+    import numpy as np
+    from freejoint_tools.bagfile import open_bag
+    bag = open_bag(bag_path)
+    ee = bag.decode('/ee_position')
+    if not ee:
+        raise RuntimeError('no ee_position in %s' % bag_path)
+    log_ns = np.array([lt for lt, _ in ee], dtype=np.int64)
+    stamps = np.array([stamp_ns(m) for _, m in ee], dtype=np.int64)
+    p = np.array([(m.point.x, m.point.y) for _, m in ee])
+    by_stamp = {}
+    if '/setpoint' in bag.topics:
+        for _, msg in bag.decode('/setpoint'):
+            by_stamp[stamp_ns(msg)] = (msg.position[0], msg.position[1])
+    pd = np.full_like(p, np.nan)
+    if by_stamp:
+        sp_stamps = np.array(sorted(by_stamp), dtype=np.int64)
+        sp = np.array([by_stamp[k] for k in sp_stamps])
+        half = int(np.median(np.diff(sp_stamps)) // 2) if len(sp_stamps) > 1 else 0
+        i = np.searchsorted(sp_stamps, stamps + half, side='right') - 1
+        ok = i >= 0
+        pd[ok] = sp[i[ok]]
+    effort = np.full((len(ee), len(joints)), np.nan)
+    index = {k: j for j, k in enumerate(stamps.tolist())}
+    for _, msg in bag.decode('/joint_states'):
+        j = index.get(stamp_ns(msg))
+        if j is not None and msg.effort is not None and len(msg.effort):
+            names = list(msg.name)
+            effort[j] = [msg.effort[names.index(n)] if n in names else np.nan
+                         for n in joints]
+    return {'log_ns': log_ns, 'stamp_ns': stamps, 'p': p, 'pd': pd, 'effort': effort,
+            'err_mm': 1000.0 * np.hypot(*(p - pd).T)}
 
 
 def diagnostics_diverged(bag_path):

@@ -1,0 +1,510 @@
+"""
+Real-time scenarios of issues 10 and 11, on demand (not in ``make test``): figures and JSON.
+
+Each scenario starts the real-time graph as ``bench/soak.py`` does (a process per node, the
+recorder on, sim and controller at SCHED_FIFO ``--priority``, a ROS domain per run, every
+process stopped whatever happens), prints its figures with the acceptance met / NOT met and
+writes ``bags/soak/scenario_<name>.json`` (bags and logs in ``bags/soak/<name>_<case>/``).
+The tracking bound is 1.5 x the offline runner's worst max error of seeds 0-9 of the case.
+
+``replan``  (a) both cases: a ``plan_circle`` call every ``--replan-period`` s (1.3) while
+    circles run, ``--seconds`` (20) s: the largest change between consecutive setpoints
+    (the ``setpoint`` stream by stamp, and the ``position_desired`` the controller used) vs
+    the quintic circle's own largest per-tick change; the largest |effort| per joint vs the
+    limits of config/controller.yaml; tracking vs the bound.
+``planner_kill``  (b) vertical: kill -9 the planner mid-circle: the end effector's drift
+    over 5 s from the first HOLDING tick (<= 5 mm; also from the kill), HOLDING ticks; the
+    planner restarted (autostart off), the circle asked for again: tracking while it runs.
+``controller_restart``  (c) both cases, ``--cycles`` (5) times: kill -9 the controller
+    mid-circle, restart it ``--down`` (1.0) s later: the largest |effort| after the restart
+    vs the limit, divergence, time from the restart until the tracking error stays within
+    the bound (<= 2 s).
+``driver500``  (d) both cases: the simulator publishing joint_states at 500 Hz
+    (``publish_rate: 500``; ``--control-period`` for the controller, default: as
+    configured), circles for ``--seconds``: tracking vs the bound, stale periods.
+``start_order``  (e) vertical: each of the 6 start orders of sim, controller and planner
+    (recorder first, ``--gap`` (1.5) s between nodes, no ``~/reset``, no plan): the end
+    effector's largest deviation from ``initial_position`` before the plan (<= 2 mm); then
+    one circle: tracking vs the bound.
+
+Usage: ``. tools/env.sh && python bench/scenarios.py replan [planner_kill ...] | all
+[--cases ...] [--seconds S] [--priority 50]``.
+"""
+
+import argparse
+import itertools
+import json
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+if HERE not in sys.path:
+    sys.path.insert(0, HERE)
+
+import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
+import soak  # noqa: E402 - bench/soak.py, the session and the bag analysis
+
+SCENARIOS = ('replan', 'planner_kill', 'controller_restart', 'driver500', 'start_order')
+NS = 1_000_000_000
+
+
+def say(text):
+    """Print a progress line at once."""
+    print('[scenario] ' + text, flush=True)
+
+
+def verdict(ok):
+    """Return 'met' / 'NOT met' (None: 'n/a')."""
+    return 'n/a' if ok is None else ('met' if ok else 'NOT met')
+
+
+def quintic_step_mm():
+    """Return the configured circle's largest change between consecutive ticks [mm]."""
+    import numpy as np
+    from freejoint_core.trajectory import CircleQuintic
+    plan = bench_graph.ros_params('planner.yaml')
+    dt = float(plan['control_period'])
+    circle = CircleQuintic(centre=plan['centre'], radius=plan['radius'],
+                           duration=plan['duration'], start_angle=plan['start_angle'],
+                           direction=plan['direction'])
+    n = int(round(float(plan['duration']) / dt))
+    p = np.array([circle.sample(k * dt)[0] for k in range(n + 1)])
+    return 1000.0 * float(np.max(np.hypot(*np.diff(p, axis=0).T)))
+
+
+def setpoint_steps_mm(bag_path, lo_ns, hi_ns, dt_ns):
+    """
+    Return the largest change between setpoints of consecutive ticks [mm] in the window.
+
+    The ``setpoint`` stream by stamp (the newest message of each stamp counts, as the
+    controller takes the newest), consecutive = stamps one control period apart.
+    """
+    import numpy as np
+    from freejoint_tools.bagfile import open_bag
+    by_stamp = {}
+    for log_ns, msg in open_bag(bag_path).decode('/setpoint'):
+        if lo_ns <= log_ns <= hi_ns:
+            by_stamp[soak.stamp_ns(msg)] = (msg.position[0], msg.position[1])
+    stamps = np.array(sorted(by_stamp), dtype=np.int64)
+    if len(stamps) < 2:
+        return None, 0
+    p = np.array([by_stamp[s] for s in stamps])
+    step = np.hypot(*np.diff(p, axis=0).T)
+    consecutive = np.diff(stamps) == dt_ns
+    return (1000.0 * float(step[consecutive].max()) if consecutive.any() else None,
+            int(len(stamps)))
+
+
+def desired_steps_mm(ticks, mask):
+    """Return the largest change of ``position_desired`` between consecutive ticks [mm]."""
+    import numpy as np
+    pd = ticks['pd'][mask]
+    if len(pd) < 2:
+        return None
+    order = np.argsort(ticks['stamp_ns'][mask], kind='stable')
+    return 1000.0 * float(np.max(np.hypot(*np.diff(pd[order], axis=0).T)))
+
+
+def active_joints():
+    """Return the simulator's commanded joints (config/sim.yaml ``joints``)."""
+    return [str(j) for j in bench_graph.ros_params('sim.yaml')['joints']]
+
+
+def effort_verdict(effort_max, limits):
+    """Return whether every joint's largest |effort| is within its limit (None: no limit)."""
+    if effort_max is None or not limits:
+        return None
+    return all(e <= lim * (1.0 + 1e-9) for e, lim in zip(effort_max, limits))
+
+
+def log_window(ticks, lo_s, hi_s):
+    """Return the mask of the ticks the recorder took between system times lo_s and hi_s."""
+    return (ticks['log_ns'] >= int(lo_s * NS)) & (ticks['log_ns'] <= int(hi_s * NS))
+
+
+# -- (a) replan -------------------------------------------------------------------------
+def replan(args, index):
+    """Ask for a circle every 1.3 s while circles run: no setpoint step."""
+    results = []
+    quintic = quintic_step_mm()
+    limits = soak.effort_limits()
+    dt_ns = int(round(float(bench_graph.ros_params('planner.yaml')['control_period']) * NS))
+    for case in args.cases:
+        bound, _factor, _worst = soak.bound_of(case, 0)
+        with soak.Session('replan_' + case, index, case, args.seconds) as s:
+            index += 1
+            s.up()
+            loop = bench_graph.CircleLoop(s.client, period=args.replan_period, strict=False)
+            t0 = time.time()
+            s.wait(args.seconds, loop)
+            t1 = time.time()
+        ticks = soak.controller_ticks(s.bag)
+        lo = loop.accepted_wall[0] if loop.accepted_wall else t0
+        mask = log_window(ticks, lo, t1)
+        summary = soak.summarise(ticks, mask)
+        sp_step, n_sp = setpoint_steps_mm(s.bag, int(lo * NS), int(t1 * NS), dt_ns)
+        pd_step = desired_steps_mm(ticks, mask)
+        row = {'case': case, 'seconds': args.seconds, 'requests': len(loop.accepted)
+               + len(loop.refused), 'accepted': len(loop.accepted),
+               'refused': len(loop.refused),
+               'refusal_reasons': sorted({r for _, r in loop.refused}),
+               'quintic_step_mm': quintic, 'setpoint_step_mm': sp_step,
+               'setpoints': n_sp, 'desired_step_mm': pd_step, 'effort_limits': limits,
+               'bound_mm': bound, 'diverged_log_lines': s.diverged_lines(),
+               'exit_codes': s.codes, 'bag': os.path.relpath(s.bag, ROOT)}
+        row.update(summary)
+        row['no_step'] = (sp_step is not None and sp_step <= quintic * (1.0 + 1e-6)
+                          and pd_step is not None and pd_step <= quintic * (1.0 + 1e-6))
+        row['efforts_within'] = effort_verdict(row['effort_max'], limits)
+        row['tracking_within'] = row['max_mm'] is not None and row['max_mm'] <= bound
+        say('replan %s: %d requests (%d accepted, %d refused%s); largest step: setpoints '
+            '%s mm, position_desired %s mm, quintic %.4f mm -> %s; |effort| max %s vs '
+            'limits %s -> %s; tracking max %s mm rms %s mm vs %.3f -> %s; holds %d'
+            % (case, row['requests'], row['accepted'], row['refused'],
+               (': ' + '; '.join(row['refusal_reasons'])) if row['refused'] else '',
+               _f(sp_step), _f(pd_step), quintic, verdict(row['no_step']),
+               _fl(row['effort_max']), limits, verdict(row['efforts_within']),
+               _f(row['max_mm']), _f(row['rms_mm']), bound, verdict(row['tracking_within']),
+               row['holds']))
+        results.append(row)
+    return results, index
+
+
+# -- (b) planner kill -------------------------------------------------------------------
+def planner_kill(args, index):
+    """Vertical: kill -9 the planner mid-circle; the arm holds; restart, plan, follow."""
+    import numpy as np
+    case = 'vertical'
+    bound, _factor, _worst = soak.bound_of(case, 0)
+    with soak.Session('planner_kill_' + case, index, case, 30.0) as s:
+        index += 1
+        s.up()
+        loop = bench_graph.CircleLoop(s.client)
+        loop.poll()
+        s.wait(args.mid)
+        t_kill = s.kill('planner_node')
+        s.wait(args.hold_seconds + 1.0)
+        t_restart = s.restart('planner_node', {'autostart:=true': 'autostart:=false'})
+        again = bench_graph.CircleLoop(s.client, strict=False)
+        deadline = time.monotonic() + 60.0
+        while not again.accepted and time.monotonic() < deadline:
+            again.next = 0.0
+            again.poll()
+            s.wait(0.5)
+        t_plan = again.accepted_wall[0] if again.accepted_wall else None
+        if t_plan is not None:
+            s.wait(float(again.plan['duration']) + 0.5)
+        t_end = time.time()
+    ticks = soak.controller_ticks(s.bag)
+    hold = ticks['status'] & soak.holding_bit() != 0
+    after = log_window(ticks, t_kill, t_restart)
+    first_hold = np.nonzero(after & hold)[0]
+    row = {'case': case, 'kill_after_s': args.mid, 'holding_ticks': int(np.count_nonzero(
+        after & hold)), 'ticks_after_kill': int(np.count_nonzero(after)),
+        'exit_codes': s.codes, 'bag': os.path.relpath(s.bag, ROOT)}
+    p = ticks['p']
+    at_kill = np.nonzero(after)[0]
+    if len(at_kill):
+        w = log_window(ticks, t_kill, t_kill + args.hold_seconds)
+        row['drift_from_kill_mm'] = 1000.0 * float(np.max(np.hypot(*(p[w] - p[at_kill[0]]).T)))
+    if len(first_hold):
+        i = first_hold[0]
+        th = ticks['log_ns'][i] * 1e-9
+        w = log_window(ticks, th, th + args.hold_seconds)
+        row['hold_started_after_kill_s'] = th - t_kill
+        row['drift_from_hold_mm'] = 1000.0 * float(np.max(np.hypot(*(p[w] - p[i]).T)))
+        w = log_window(ticks, th, t_restart)
+        row['drift_until_restart_mm'] = 1000.0 * float(np.max(np.hypot(*(p[w] - p[i]).T)))
+        row['held_until_restart_s'] = t_restart - th
+        row['holding_at_restart'] = bool(hold[np.nonzero(after)[0][-1]])
+    row['drift_within'] = (row.get('drift_from_hold_mm') is not None
+                           and row['drift_from_hold_mm'] <= 5.0)
+    row['status_says_holding'] = bool(row['holding_ticks'])
+    row['replan_accepted'] = t_plan is not None
+    row['replan_refusals'] = sorted({r for _, r in again.refused})
+    if t_plan is not None:
+        follow = log_window(ticks, t_plan, t_end)
+        row['after_replan'] = soak.summarise(ticks, follow)
+        row['follows'] = (row['after_replan']['max_mm'] is not None
+                          and row['after_replan']['max_mm'] <= bound)
+    else:
+        row['follows'] = False
+    row['bound_mm'] = bound
+    row['diverged_log_lines'] = s.diverged_lines()
+    say('planner_kill vertical: killed %.1f s into the circle; HOLDING ticks %d of %d '
+        '(first %s s after the kill) -> %s; drift over %g s from the first HOLDING tick %s mm '
+        '(from the kill %s mm; until the restart %s s later %s mm) <= 5 -> %s; restarted '
+        'planner: plan %s%s; tracking after it max %s mm vs %.3f -> %s'
+        % (args.mid, row['holding_ticks'], row['ticks_after_kill'],
+           _f(row.get('hold_started_after_kill_s')), verdict(row['status_says_holding']),
+           args.hold_seconds, _f(row.get('drift_from_hold_mm')),
+           _f(row.get('drift_from_kill_mm')), _f(row.get('held_until_restart_s')),
+           _f(row.get('drift_until_restart_mm')), verdict(row['drift_within']),
+           'accepted' if t_plan else 'NOT accepted',
+           (' (%s)' % '; '.join(row['replan_refusals'])) if row['replan_refusals'] else '',
+           _f(row.get('after_replan', {}).get('max_mm')), bound, verdict(row['follows'])))
+    return [row], index
+
+
+# -- (c) controller restart -------------------------------------------------------------
+def controller_restart(args, index):
+    """Both cases: kill -9 and restart the controller mid-circle, ``--cycles`` times."""
+    import numpy as np
+    results = []
+    limits = soak.effort_limits()
+    for case in args.cases:
+        bound, _factor, _worst = soak.bound_of(case, 0)
+        cycles = []
+        seconds = args.cycles * (args.down + args.recover + 6.0) + 10.0
+        with soak.Session('controller_restart_' + case, index, case, seconds) as s:
+            index += 1
+            s.up()
+            loop = bench_graph.CircleLoop(s.client)
+            for _ in range(args.cycles):
+                # mid-circle: args.mid s after the latest circle was accepted
+                loop.poll()
+                while time.monotonic() < loop.accepted[-1] + args.mid:
+                    s.wait(0.02)
+                t_kill = s.kill('controller_node')
+                s.wait(args.down, loop)
+                t_restart = s.restart('controller_node')
+                s.wait(args.recover, loop)
+                cycles.append((t_kill, t_restart, time.time()))
+        ticks = soak.controller_ticks(s.bag)
+        plant = soak.plant_ticks(s.bag, active_joints())
+        rows = []
+        for t_kill, t_restart, t_end in cycles:
+            w = log_window(plant, t_restart, t_end)
+            idx = np.nonzero(w)[0]
+            row = {'kill': t_kill, 'restart': t_restart, 'plant_ticks': int(len(idx))}
+            answers = np.nonzero(log_window(ticks, t_restart, t_end))[0]
+            row['first_controller_state_s'] = (float(ticks['log_ns'][answers[0]] * 1e-9
+                                                     - t_restart) if len(answers) else None)
+            down = log_window(plant, t_kill, t_restart)
+            row['max_mm_while_down'] = (float(np.nanmax(plant['err_mm'][down]))
+                                        if down.any() else None)
+            if len(idx):
+                err = plant['err_mm'][idx]
+                t = plant['log_ns'][idx] * 1e-9
+                out = np.nonzero(~(err <= bound))[0]
+                if not len(out):
+                    row['back_within_s'] = 0.0
+                elif out[-1] + 1 < len(t):
+                    row['back_within_s'] = float(t[out[-1] + 1] - t_restart)
+                else:
+                    row['back_within_s'] = None     # not back by the end of the window
+                row['effort_max'] = [float(v) for v in np.nanmax(np.abs(
+                    plant['effort'][idx]), axis=0)]
+                row['max_mm_after'] = float(np.nanmax(err))
+            rows.append(row)
+        diverged = s.diverged_lines()
+        backs = [r.get('back_within_s') for r in rows]
+        efforts = [r.get('effort_max') for r in rows if r.get('effort_max')]
+        worst_effort = ([max(e[j] for e in efforts) for j in range(len(efforts[0]))]
+                        if efforts else None)
+        res = {'case': case, 'cycles': rows, 'down_s': args.down, 'bound_mm': bound,
+               'effort_limits': limits, 'effort_max': worst_effort,
+               'diverged_log_lines': diverged,
+               'diverged_diagnostics': soak.diagnostics_diverged(s.bag),
+               'worst_back_within_s': (None if any(b is None for b in backs) or not backs
+                                       else max(backs)),
+               'exit_codes': s.codes, 'bag': os.path.relpath(s.bag, ROOT)}
+        res['efforts_within'] = effort_verdict(worst_effort, limits)
+        res['no_divergence'] = not (diverged or res['diverged_diagnostics'])
+        res['back_within_2s'] = (res['worst_back_within_s'] is not None
+                                 and res['worst_back_within_s'] <= 2.0)
+        say('controller_restart %s: %d kill -9 / restarts (%g s down): first answer after '
+            '%s s; end effector back within %.3f mm of the setpoint after %s s (worst; <= 2 s '
+            '-> %s); largest |effort| applied after a restart %s vs limits %s -> %s; '
+            'diverged: %d log lines, %d diagnostics -> %s'
+            % (case, len(rows), args.down,
+               ', '.join(_f(r.get('first_controller_state_s')) for r in rows), bound,
+               ', '.join(_f(b) for b in backs), verdict(res['back_within_2s']),
+               _fl(worst_effort), limits, verdict(res['efforts_within']), diverged,
+               res['diverged_diagnostics'], verdict(res['no_divergence'])))
+        results.append(res)
+    return results, index
+
+
+# -- (d) a 500 Hz driver ----------------------------------------------------------------
+def driver500(args, index):
+    """Both cases: joint_states at 500 Hz; tracking within the bound."""
+    results = []
+    ctl = ['control_period:=%g' % args.control_period] if args.control_period else []
+    for case in args.cases:
+        bound, _factor, _worst = soak.bound_of(case, 0)
+        with soak.Session('driver500_' + case, index, case, args.seconds,
+                          sim=['publish_rate:=500.0'], ctl=ctl) as s:
+            index += 1
+            s.up()
+            loop = bench_graph.CircleLoop(s.client)
+            start = time.monotonic()
+            s.wait(args.seconds, loop)
+            end = time.monotonic()
+        row = {'case': case, 'publish_rate': 500.0, 'controller_overrides': ctl,
+               'bound_mm': bound, 'plans': len(loop.accepted), 'exit_codes': s.codes,
+               'bag': os.path.relpath(s.bag, ROOT)}
+        timing = soak.stale_periods(s.timing_path, (start, end))
+        lo, hi = timing.pop('stamp_window_ns')
+        row.update(timing)
+        ticks = soak.controller_ticks(s.bag)
+        row.update(soak.summarise(ticks, (ticks['stamp_ns'] >= lo) & (ticks['stamp_ns'] <= hi)))
+        row['diverged_log_lines'] = s.diverged_lines()
+        row['tracking_within'] = row['max_mm'] is not None and row['max_mm'] <= bound
+        say('driver500 %s: joint_states at 500 Hz%s, %d circles: tracking max %s mm rms %s '
+            'mm vs %.3f -> %s; stale periods %d (longest %d); holds %d; diverged %d'
+            % (case, ' (controller %s)' % ', '.join(ctl) if ctl else '', row['plans'],
+               _f(row['max_mm']), _f(row['rms_mm']), bound, verdict(row['tracking_within']),
+               row['stale'], row['longest_stale'], row['holds'], row['diverged_log_lines']))
+        results.append(row)
+    return results, index
+
+
+# -- (e) start order --------------------------------------------------------------------
+def start_order(args, index):
+    """Vertical: every start order of the three nodes; deviation before the plan."""
+    import numpy as np
+    from freejoint_tools.bagfile import open_bag
+    case = 'vertical'
+    bound, _factor, _worst = soak.bound_of(case, 0)
+    initial = [float(v) for v in bench_graph.ros_params('sim.yaml')['initial_position']]
+    sched = bench_graph.scheduling_overrides()
+    nodes = {
+        'sim': ('sim_node', 'freejoint_sim', 'sim_node', 'sim.yaml',
+                ['case:=' + case, 'seed:=%d' % bench_graph.SEED, 'mode:=realtime'] + sched),
+        'controller': ('controller_node', 'freejoint_control', 'controller_node',
+                       'controller.yaml', ['case:=' + case, 'lockstep:=false'] + sched),
+        'planner': ('planner_node', 'freejoint_planner', 'planner_node', 'planner.yaml',
+                    ['case:=' + case, 'use_sim_time:=false', 'autostart:=false'])}
+    results = []
+    for order in itertools.permutations(('sim', 'controller', 'planner')):
+        name = 'start_order_' + '_'.join(order)
+        with soak.Session(name, index, case, 30.0, timing=False) as s:
+            index += 1
+            s.graph.start('recorder', [
+                bench_graph.executable('freejoint_tools', 'recorder'), '--ros-args',
+                '-p', 'output:=' + s.bag, '-p', 'topics:=[]', '-p', 'overwrite:=true',
+                '-p', 'use_sim_time:=false',
+                '-p', 'custom_data:=[case=%s, start_order=%s]' % (case, '-'.join(order))])
+            if not s.client.spin_until(lambda: s.graph.exited() or bool(
+                    s.client.recorder_status(1.0)), 60.0) or s.graph.exited():
+                raise RuntimeError('the recorder does not answer ~/status after 60 s (logs '
+                                   'in %s)' % s.graph.log_dir)
+            t_first = time.time()
+            for node in order:
+                proc, pkg, exe, config, overrides = nodes[node]
+                s.graph.start(proc, bench_graph.node_cmd(pkg, exe, config, overrides))
+                s.wait(args.gap)
+            if not s.client.controller_answers(60.0):
+                raise RuntimeError('the controller does not answer after 60 s')
+            s.wait(args.settle)
+            loop = bench_graph.CircleLoop(s.client, strict=False)
+            t_plan = time.time()
+            loop.poll()
+            s.wait(float(loop.plan['duration']) + 0.5)
+            t_end = time.time()
+        bag = open_bag(s.bag)
+        ee = [(lt, m.point.x, m.point.y) for lt, m in bag.decode('/ee_position')
+              if lt <= int(t_plan * NS)]
+        row = {'case': case, 'order': list(order), 'gap_s': args.gap,
+               'ee_samples_before_plan': len(ee), 'exit_codes': s.codes,
+               'bag': os.path.relpath(s.bag, ROOT)}
+        if ee:
+            xy = np.array([(x, y) for _, x, y in ee])
+            dev = 1000.0 * np.hypot(*(xy - initial).T)
+            row['deviation_max_mm'] = float(dev.max())
+            row['first_ee_after_first_node_s'] = ee[0][0] * 1e-9 - t_first
+        row['deviation_within'] = (row.get('deviation_max_mm') is not None
+                                   and row['deviation_max_mm'] <= 2.0)
+        ticks = soak.controller_ticks(s.bag)
+        before = log_window(ticks, 0.0, t_plan)
+        row['holds_before_plan'] = int(np.count_nonzero(
+            ticks['status'][before] & soak.holding_bit()))
+        row['plan_accepted'] = bool(loop.accepted)
+        if loop.accepted:
+            row['after_plan'] = soak.summarise(ticks, log_window(ticks, loop.accepted_wall[0],
+                                                                 t_end))
+            row['follows'] = (row['after_plan']['max_mm'] is not None
+                              and row['after_plan']['max_mm'] <= bound)
+        row['diverged_log_lines'] = s.diverged_lines()
+        say('start_order %-28s deviation before the plan %s mm (<= 2 -> %s) over %d samples; '
+            'HOLDING ticks %d; circle after: max %s mm vs %.3f -> %s'
+            % (' '.join(order), _f(row.get('deviation_max_mm')),
+               verdict(row['deviation_within']), len(ee), row['holds_before_plan'],
+               _f(row.get('after_plan', {}).get('max_mm')), bound,
+               verdict(row.get('follows'))))
+        results.append(row)
+    return results, index
+
+
+def _f(value):
+    return 'n/a' if value is None else '%.3f' % value
+
+
+def _fl(values):
+    return 'n/a' if values is None else '[%s]' % ', '.join('%.1f' % v for v in values)
+
+
+RUNNERS = {'replan': replan, 'planner_kill': planner_kill,
+           'controller_restart': controller_restart, 'driver500': driver500,
+           'start_order': start_order}
+
+
+def parse(argv):
+    """Return the command-line options."""
+    ap = argparse.ArgumentParser(prog='scenarios', description=__doc__.strip().splitlines()[0])
+    ap.add_argument('scenarios', nargs='+', choices=SCENARIOS + ('all',))
+    ap.add_argument('--cases', nargs='+', choices=soak.CASES, default=list(soak.CASES))
+    ap.add_argument('--seconds', type=float, default=20.0,
+                    help='replan / driver500: seconds of circles (default 20)')
+    ap.add_argument('--replan-period', type=float, default=1.3)
+    ap.add_argument('--mid', type=float, default=2.5,
+                    help='kill this many s after a circle was accepted (default 2.5)')
+    ap.add_argument('--hold-seconds', type=float, default=5.0)
+    ap.add_argument('--cycles', type=int, default=5, help='controller_restart cycles')
+    ap.add_argument('--down', type=float, default=1.0,
+                    help='controller_restart: seconds without a controller (default 1)')
+    ap.add_argument('--recover', type=float, default=4.0,
+                    help='controller_restart: seconds measured after a restart (default 4)')
+    ap.add_argument('--control-period', type=float, default=None,
+                    help='driver500: the controller control_period (default: configured)')
+    ap.add_argument('--gap', type=float, default=1.5, help='start_order: s between nodes')
+    ap.add_argument('--settle', type=float, default=3.0,
+                    help='start_order: s after the controller answers, before the plan')
+    ap.add_argument('--priority', type=int, default=50)
+    return ap.parse_args(argv)
+
+
+def main(argv=None):
+    """Run the scenarios asked for; return 1 if one could not be made."""
+    args = parse(sys.argv[1:] if argv is None else argv)
+    bench_graph.PRIORITY = args.priority
+    names = SCENARIOS if 'all' in args.scenarios else args.scenarios
+    os.makedirs(soak.OUT, exist_ok=True)
+    failed = 0
+    index = 40      # domains apart from a soak started by the same process id
+    for name in names:
+        cond = soak.conditions(args.priority, 0)
+        say('%s: priority %d, %d CPUs, load %.2f' % (name, args.priority, os.cpu_count(),
+                                                     os.getloadavg()[0]))
+        try:
+            rows, index = RUNNERS[name](args, index)
+            error = None
+        except (RuntimeError, OSError) as exc:
+            say('%s could not be made: %s' % (name, exc))
+            rows, error = [], str(exc)
+            failed += 1
+            index += 8
+        cond['load_average_end'] = list(os.getloadavg())
+        out = os.path.join(soak.OUT, 'scenario_%s.json' % name)
+        with open(out, 'w') as f:
+            json.dump({'scenario': name, 'conditions': cond, 'options': vars(args),
+                       'results': rows, 'error': error}, f, indent=2, default=str)
+        say('%s: written to %s' % (name, os.path.relpath(out, ROOT)))
+    return 1 if failed else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
