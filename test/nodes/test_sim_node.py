@@ -77,11 +77,13 @@ class Controller:
     def spin(self):
         self.rclpy.spin_once(self.node, timeout_sec=0.05)
 
-    def command(self, data, k=None):
-        """Publish efforts; labelled with the stamp of step k unless k is None."""
+    def command(self, data, k=None, stamp_ns=None):
+        """Publish efforts; labelled with the stamp of step k (or ``stamp_ns``) if given."""
         msg = self.Float64MultiArray()
         if k is not None:
-            msg.layout.dim = [self.MultiArrayDimension(label='stamp_ns=%d' % (k * DT_NS),
+            stamp_ns = k * DT_NS
+        if stamp_ns is not None:
+            msg.layout.dim = [self.MultiArrayDimension(label='stamp_ns=%d' % stamp_ns,
                                                        size=len(data), stride=len(data))]
         msg.data = [float(v) for v in data]
         self.pub.publish(msg)
@@ -419,6 +421,17 @@ def test_realtime_states_are_stamped_on_the_step_grid_at_publish_rate(procs, ros
     assert all(s % DT_NS == stamps[0] % DT_NS for s in stamps)
     # The grid is system time: the newest stamp is within a few seconds of the clock.
     assert abs(stamps[-1] - time.time_ns()) < 5_000_000_000
+
+    def answering():            # labelled with the stamp of the newest state
+        ctl.command([0.5, -0.5], stamp_ns=Controller._ns(ctl.arrivals[-1]))
+        ctl.spin()
+
+    wait(lambda: ctl.diagnostics and ctl.diagnostics[-1][2]['command latency max [ms]'] != '-',
+         10.0, 'a status with the command latency', spin=answering)
+    values = ctl.diagnostics[-1][2]
+    assert 0.0 <= float(values['command latency mean [ms]']) <= \
+        float(values['command latency max [ms]'])
+    assert values['publish rate [Hz]'] == '500'
     assert procs.stop(proc) == 0
 
 

@@ -10,8 +10,8 @@ parameter ``joints``, what ros2_control's JointGroupEffortController takes; rema
 initial configuration, at rest, with a freshly seeded disturbance, at the next step (time
 keeps running), and clears a divergence.  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray,
 one status named ``<node>: simulator``) at 1 Hz: OK / WARN with steps, step rate, command
-timeouts, refused commands, dropped steps, brakes; ERROR with the reason at once when the
-plant diverges.
+latency (state to command), command timeouts, refused commands, dropped steps, brakes;
+ERROR with the reason at once when the plant diverges.
 
 Modes (docs/GRAPH.md):
 
@@ -86,6 +86,7 @@ LABEL_PREFIX = 'stamp_ns='
 
 _isfinite = math.isfinite
 _monotonic = time.monotonic
+_time_ns = time.time_ns
 
 
 class SimNode(Node):
@@ -128,6 +129,9 @@ class SimNode(Node):
         self._rt_origin_ns = 0         # real time: system time [ns] of step 0 on the grid
         self._take_state()
         self._diag_window = (_monotonic(), 0, 0, 0, 0)
+        self._lat_n = 0                # state-to-command latencies of the status window
+        self._lat_sum = 0
+        self._lat_max = 0
         self._timing = (StepTiming(cfg.timing_file, cfg.timing_steps) if cfg.timing_file
                         else None)
         self._timing_steps = cfg.timing_steps if cfg.timing_file else 0
@@ -264,6 +268,12 @@ class SimNode(Node):
         now = _monotonic()
         if not self._lockstep:
             tau = self._command_effort(msg)
+            dims = msg.layout.dim
+            if dims and dims[0].label.startswith(LABEL_PREFIX):
+                try:   # the age of the state it answers (its grid time) at its receipt
+                    self._note_latency(_time_ns() - int(dims[0].label[len(LABEL_PREFIX):]))
+                except ValueError:
+                    pass
             answered = -1
             if self._timing is not None:
                 answered = self._note_realtime_command(msg, now)
@@ -287,6 +297,7 @@ class SimNode(Node):
                                             '(t = %d ns)' % (ns, self._k, self._t_ns))
                     return
         tau = self._command_effort(msg)
+        self._note_latency(int((now - self._last_publish) * 1e9))
         k = self._k
         if k < self._timing_steps:
             timing = self._timing
@@ -297,6 +308,13 @@ class SimNode(Node):
             self._got_first = True
             self.get_logger().info('first command: running')
         self._advance(self._zero if tau is None else tau)
+
+    def _note_latency(self, ns):
+        """Note a state-to-command latency [ns] for the status (executor thread only)."""
+        self._lat_n += 1
+        self._lat_sum += ns
+        if ns > self._lat_max:
+            self._lat_max = ns
 
     def _note_realtime_command(self, msg, now):
         """Note the receipt time of a real-time command; return the step it answers or -1."""
@@ -528,8 +546,12 @@ class SimNode(Node):
         refused = self._refused - refused0
         timeouts = self._timeouts - timeouts0
         dropped = self._dropped - dropped0
+        lat_n = self._lat_n
+        latency = (('%.3f' % (self._lat_sum / lat_n * 1e-6), '%.3f' % (self._lat_max * 1e-6))
+                   if lat_n else ('-', '-'))
         if update:
             self._diag_window = (now, k, self._refused, self._timeouts, self._dropped)
+            self._lat_n = self._lat_sum = self._lat_max = 0
         level = DiagnosticStatus.WARN
         if self._diverged is not None:
             level = DiagnosticStatus.ERROR
@@ -565,6 +587,8 @@ class SimNode(Node):
             ('sim time [s]', '%.3f' % (self._t_ns * 1e-9)),
             ('step rate [Hz]', '%.1f' % rate),
             ('publish rate [Hz]', '%g' % (1.0 / (self._dt * self._every))),
+            ('command latency mean [ms]', latency[0]),
+            ('command latency max [ms]', latency[1]),
             ('command timeouts', self._timeouts),
             ('refused commands', self._refused),
             ('dropped steps', self._dropped),
