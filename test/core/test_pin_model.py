@@ -101,8 +101,22 @@ def test_continuous_joints_map_to_the_same_dynamics():
     arm = parse_urdf(text, ['joint3'], GRAVITY_BY_CASE['vertical'])
     model = PinArmModel(arm)
     assert model.pin_model.nq == 6 and model.pin_model.nv == 3
-    worst = _max_errors(model, Arm3Model(table1('vertical')), 3, seed=18)
+    ref = Arm3Model(table1('vertical'))
+    worst = _max_errors(model, ref, 3, seed=18)
     assert all(v <= TOL for v in worst.values()), worst
+    for q, qd in _states(3, seed=19):
+        for got, want in zip(model.decoupling(q, qd), ref.decoupling(q, qd)):
+            assert np.max(np.abs(got - want)) <= 1e-12 * max(1.0, np.max(np.abs(want)))
+
+
+@pytest.mark.parametrize('case', ['horizontal', 'vertical'])
+def test_four_link_pinocchio_decoupling_equals_the_general_model(case):
+    arm = four_link_arm(case)
+    model, ref = PinArmModel(arm, scale=0.7), ArmModel(arm.nominal(0.7))
+    for q, qd in _states(4, seed=20):
+        for got, want in zip(model.decoupling(q, qd), ref.decoupling(q, qd)):
+            assert got.shape == want.shape
+            assert np.max(np.abs(got - want)) <= 1e-12 * max(1.0, np.max(np.abs(want)))
 
 
 def test_pinocchio_model_validates_its_arguments():

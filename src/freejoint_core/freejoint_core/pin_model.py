@@ -6,7 +6,8 @@ Dynamics of a URDF arm from Pinocchio (rigid-body algorithms on the robot descri
 ``decoupling``, plus the inherited ``partition``, ``effective``, ``energy``, ``ik``),
 computed by Pinocchio from the URDF text of a :class:`freejoint_core.urdf.UrdfArm`:
 
-* ``M(q)``: ``crba`` (upper triangle, mirrored);
+* ``M(q)``: ``crba`` (the Python bindings return both triangles; the tests compare
+  the full matrix); ``decoupling`` uses ``computeMinverse`` for ``J M^-1``;
 * ``C(q, qd) qd = nonLinearEffects(q, qd) - computeGeneralizedGravity(q)``;
 * ``G(q)``: ``computeGeneralizedGravity`` with the model's gravity set to the arm's
   gravity vector in the base frame;
@@ -22,6 +23,8 @@ and rotational inertia by ``scale``, as ``ArmParams.scaled``.  Continuous joints
 ``terms(q, qd)`` gives ``M``, ``h = C qd + G``, ``J``, ``Jdot qd`` and ``fk`` from one
 pass (the per-tick cost measured in ``bench/core_urdf.py``).
 """
+
+import math
 
 from freejoint_core.arm import ArmModel, check_vector
 from freejoint_core.errors import FreejointValueError
@@ -85,6 +88,18 @@ class PinArmModel(ArmModel):
         self._zero = np.zeros(model.nv)
 
     # -- conversions --------------------------------------------------------
+    def _q(self, q, name='q'):
+        """Return ``q`` validated as ``check_vector`` does (fast path for float arrays)."""
+        if (type(q) is np.ndarray and q.dtype == np.float64 and q.shape == (self.n,)
+                and math.isfinite(q.sum())):
+            return q
+        return check_vector(q, self.n, name)
+
+    @staticmethod
+    def _sym(mat):
+        """Return a copy of a Pinocchio joint-space matrix (the bindings fill both triangles)."""
+        return np.array(mat)
+
     def _config(self, q):
         """Pinocchio configuration of the core's joint angles (validated)."""
         q = self._q(q)
@@ -192,9 +207,8 @@ class PinArmModel(ArmModel):
 
         """
         m, d = self.pin_model, self.pin_data
-        mass = pin.crba(m, d, self._config(q))
-        mass = np.triu(mass) + np.triu(mass, 1).T
-        return self._back_mat(mass)
+        mass = self._sym(pin.crba(m, d, self._config(q)))
+        return mass if self._identity else self._back_mat(mass)
 
     def coriolis(self, q, qd):
         """
@@ -307,8 +321,7 @@ class PinArmModel(ArmModel):
         """
         m, d = self.pin_model, self.pin_data
         cfg, vel = self._config(q), self._vel(qd)
-        mass = pin.crba(m, d, cfg)
-        mass = np.triu(mass) + np.triu(mass, 1).T
+        mass = self._sym(pin.crba(m, d, cfg))
         h = np.array(pin.nonLinearEffects(m, d, cfg, vel))
         # The joint Jacobians, then the zero-acceleration kinematics the frame's classical
         # acceleration reads (velocities and accelerations of the joints).
@@ -342,6 +355,16 @@ class PinArmModel(ArmModel):
             ``Jdot qd - J M^-1 (C qd + G)`` [m/s^2].
 
         """
-        mass, h, jac, jdqd, _ = self.terms(q, qd)
-        w = np.linalg.solve(mass, jac.T).T
+        m, d = self.pin_model, self.pin_data
+        cfg, vel = self._config(q), self._vel(qd)
+        minv = self._sym(pin.computeMinverse(m, d, cfg))
+        h = np.array(pin.nonLinearEffects(m, d, cfg, vel))
+        pin.computeJointJacobians(m, d, cfg)
+        pin.forwardKinematics(m, d, cfg, vel, self._zero)
+        pin.updateFramePlacement(m, d, self._frame)
+        jac = pin.getFrameJacobian(m, d, self._frame, _LWA)[:2]
+        jdqd = pin.getFrameClassicalAcceleration(m, d, self._frame, _LWA).linear[:2]
+        w = jac @ minv                       # J M^-1 in Pinocchio's velocity order
+        if not self._identity:
+            w, h = w[:, self._vperm], h[self._vperm]
         return w @ self._B, jdqd - w @ h
