@@ -25,7 +25,8 @@ declared array type), where ros2 param load re-parses each value from its ``str(
 Values are parsed as ``ros2 param set`` parses them (YAML:
 ``rclpy.parameter.get_parameter_value``). Unlike ros2cli there is no daemon: each command
 waits for discovery itself, at most ``--timeout`` s for the node or service it names
-(``--spin-time`` s for the lists), and every answer at most ``--service-timeout`` s.
+(the lists: ``--spin-time`` s, then until nothing new was discovered for 1 s, at most
+``--timeout`` s more), and every answer at most ``--service-timeout`` s.
 
 Exit status: 0 on success; 1 when the node or service is not found, an answer does not
 come, a parameter is not set, or a set / load is refused (ros2 param prints the same
@@ -102,6 +103,22 @@ class Session:
         while time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=min(0.05, max(0.0, deadline - time.monotonic())))
 
+    def settled(self, look, quiet=1.0):
+        """
+        Return ``look()`` once discovery settled: ``--spin-time`` s, then until it gave the
+        same answer for ``quiet`` s (endpoints are discovered after their node), at most
+        ``--timeout`` s more.
+        """
+        self.spin_for(self.args.spin_time)
+        deadline = time.monotonic() + self.args.timeout
+        seen, since = look(), time.monotonic()
+        while time.monotonic() - since < quiet and time.monotonic() < deadline:
+            self.spin_for(0.1)
+            now = look()
+            if now != seen:
+                seen, since = now, time.monotonic()
+        return seen
+
     def node_names(self, include_hidden=False):
         """Full names of the nodes seen now (hidden ones only if asked), sorted."""
         names = {_full_name(n, ns) for n, ns in self.node.get_node_names_and_namespaces()}
@@ -154,10 +171,10 @@ def _param_list(s, args):
         s.wait_for_node(name)
         nodes = [name]
     else:
-        s.spin_for(args.spin_time)
-        services = {n for n, _ in s.node.get_service_names_and_types()}
-        nodes = [n for n in s.node_names(args.include_hidden_nodes)
-                 if n + '/list_parameters' in services]
+        nodes, services = s.settled(lambda: (
+            s.node_names(args.include_hidden_nodes),
+            sorted(n for n, _ in s.node.get_service_names_and_types())))
+        nodes = [n for n in nodes if n + '/list_parameters' in services]
     for name in nodes:
         client = s.parameter_client(name)
         result = s.wait_future(client.list_parameters(prefixes=args.param_prefixes or None),
@@ -351,8 +368,7 @@ def _param_load(s, args):
 
 # -- node, topic, service ------------------------------------------------------------------
 def _node_list(s, args):
-    s.spin_for(args.spin_time)
-    for name in s.node_names(args.all):
+    for name in s.settled(lambda: s.node_names(args.all)):
         print(name)
     return 0
 
@@ -364,13 +380,11 @@ def _names_and_types(pairs, show_types):
 
 
 def _topic_list(s, args):
-    s.spin_for(args.spin_time)
-    return _names_and_types(s.node.get_topic_names_and_types(), args.show_types)
+    return _names_and_types(s.settled(s.node.get_topic_names_and_types), args.show_types)
 
 
 def _service_list(s, args):
-    s.spin_for(args.spin_time)
-    return _names_and_types(s.node.get_service_names_and_types(), args.show_types)
+    return _names_and_types(s.settled(s.node.get_service_names_and_types), args.show_types)
 
 
 def interface_class(type_name):
@@ -494,8 +508,9 @@ def _waits(parser, spin=False):
     parser.add_argument('--service-timeout', type=float, default=10.0, metavar='N',
                         help='wait N s for each answer (default %(default)s)')
     if spin:
-        parser.add_argument('--spin-time', type=float, default=1.5, metavar='N',
-                            help='discover for N s before listing (default %(default)s)')
+        parser.add_argument('--spin-time', type=float, default=1.0, metavar='N',
+                            help='discover for N s before listing, then until nothing new '
+                            'came for 1 s (default %(default)s)')
 
 
 def build_parser():

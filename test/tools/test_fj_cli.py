@@ -1,0 +1,222 @@
+"""
+``fj``, the ROS user's commands without ros2cli, against running freejoint nodes.
+
+The controller, the planner and the recorder run as ``ros2 run`` starts them; every
+command runs as the user types it (the installed ``fj`` console script, a process of its
+own) and must print what ``ros2`` prints, with a non-zero exit status on failure.
+"""
+import os
+import signal
+import subprocess
+import time
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CONFIG = os.path.join(ROOT, 'config')
+FJ = os.path.join(ROOT, 'install', 'freejoint_tools', 'lib', 'freejoint_tools', 'fj')
+
+
+def fj(*args, timeout=120):
+    """Run ``fj args...``; return the CompletedProcess (text)."""
+    return subprocess.run([FJ, *args], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope='module')
+def graph(tmp_path_factory):
+    """The controller, the planner (system time) and the recorder, up for the module."""
+    logs = tmp_path_factory.mktemp('fj_nodes')
+    started = []
+
+    def start(pkg, exe, *args):
+        log = open(os.path.join(logs, exe + '.log'), 'w')
+        proc = subprocess.Popen([os.path.join(ROOT, 'install', pkg, 'lib', pkg, exe),
+                                 '--ros-args', *args], stdout=log, stderr=subprocess.STDOUT,
+                                start_new_session=True)
+        proc.log = log
+        started.append(proc)
+
+    start('freejoint_control', 'controller_node', '--params-file',
+          os.path.join(CONFIG, 'controller.yaml'))
+    start('freejoint_planner', 'planner_node', '--params-file',
+          os.path.join(CONFIG, 'planner.yaml'), '-p', 'use_sim_time:=false',
+          '-p', 'autostart:=false')
+    start('freejoint_tools', 'recorder', '-p', 'output:=%s' % (logs / 'bag'),
+          '-p', 'graph_topics:=false')
+    for name in ('/controller_node', '/freejoint_planner', '/recorder'):
+        up = fj('param', 'list', name, '--timeout', '60')
+        assert up.returncode == 0, 'node %s not up: %s' % (name, up.stderr)
+    yield logs
+    for proc in reversed(started):
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(10.0)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(5.0)
+        proc.log.close()
+
+
+def test_fj_node_list_shows_the_running_nodes_but_not_itself(graph):
+    done = fj('node', 'list')
+    assert done.returncode == 0, done.stderr
+    names = done.stdout.split()
+    assert {'/controller_node', '/freejoint_planner', '/recorder'} <= set(names)
+    assert names == sorted(names) and not any('/_' in n for n in names)
+
+
+def test_fj_topic_list_shows_the_graph_topics_with_their_types(graph):
+    done = fj('topic', 'list', '-t')
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    for line in ('/joint_states [sensor_msgs/msg/JointState]',
+                 '/setpoint [freejoint_msgs/msg/CartesianSetpoint]',
+                 '/controller_state [freejoint_msgs/msg/ControllerState]'):
+        assert line in lines, done.stdout
+    assert fj('topic', 'list').stdout.splitlines() == [line.split()[0] for line in lines]
+
+
+def test_fj_param_list_names_each_declared_parameter_indented_as_ros2_param(graph):
+    done = fj('param', 'list', '/controller_node')
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert {'  K', '  nominal_scale', '  robust', '  cpu_affinity'} <= set(lines)
+    assert lines == sorted(lines)
+    typed = fj('param', 'list', 'controller_node', '--param-type').stdout.splitlines()
+    assert '  K (type: double array)' in typed and '  robust (type: boolean)' in typed
+    every = fj('param', 'list').stdout.splitlines()
+    assert '/controller_node:' in every and '/freejoint_planner:' in every
+
+
+def test_fj_param_set_then_get_reads_the_new_value_back(graph):
+    done = fj('param', 'set', '/controller_node', 'K', '[150.0, 150.0]')
+    assert (done.returncode, done.stdout) == (0, 'Set parameter successful\n'), done.stderr
+    got = fj('param', 'get', '/controller_node', 'K')
+    assert got.stdout == "Double values are: array('d', [150.0, 150.0])\n", got.stderr
+    assert fj('param', 'set', '/controller_node', 'nominal_scale', '0.8').returncode == 0
+    assert fj('param', 'get', '/controller_node', 'nominal_scale').stdout == \
+        'Double value is: 0.8\n'
+    assert fj('param', 'set', '/controller_node', 'robust', 'false').returncode == 0
+    assert fj('param', 'get', '/controller_node', 'robust', '--hide-type').stdout == 'False\n'
+    assert fj('param', 'set', '/controller_node', 'robust', 'true').returncode == 0
+
+
+def test_fj_param_set_refused_prints_the_nodes_reason_and_exits_1(graph):
+    done = fj('param', 'set', '/controller_node', 'K', '[-1.0, 100.0]')
+    assert done.returncode == 1
+    assert done.stdout == ''
+    assert done.stderr.startswith('Setting parameter failed: K: '), done.stderr
+    assert '> 0' in done.stderr
+    typed = fj('param', 'set', '/controller_node', 'K', '[150, 150]')  # integers
+    assert typed.returncode == 1 and 'Setting parameter failed: ' in typed.stderr
+    assert fj('param', 'get', '/controller_node', 'K', '--hide-type').stdout != \
+        "array('d', [-1.0, 100.0])\n"
+
+
+def test_fj_param_describe_shows_type_description_and_range(graph):
+    done = fj('param', 'describe', '/controller_node', 'nominal_scale')
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[:2] == ['Parameter name: nominal_scale', '  Type: double']
+    assert lines[2].startswith('  Description: ')
+    assert lines[3:] == ['  Constraints:', '    Min value: 0.01', '    Max value: 100.0']
+    ro = fj('param', 'describe', '/controller_node', 'control_period').stdout
+    assert '    Read only: true' in ro
+
+
+def test_fj_param_dump_prints_ros2_param_yaml_and_load_sets_a_file(graph, tmp_path):
+    import yaml
+    done = fj('param', 'dump', '/controller_node')
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith('/controller_node:\n  ros__parameters:\n')
+    dumped = yaml.safe_load(done.stdout)['/controller_node']['ros__parameters']
+    assert dumped['case'] == 'horizontal' and dumped['cpu_affinity'] == []
+    assert isinstance(dumped['det_threshold'], float)
+    params = tmp_path / 'tuned.yaml'
+    params.write_text('/controller_node:\n  ros__parameters:\n    nominal_scale: 0.75\n'
+                      '    det_threshold: 2.0e-07\n    Lambda: [40.0, 40.0]\n'
+                      '    cpu_affinity: []\n')
+    loaded = fj('param', 'load', '/controller_node', str(params))
+    assert loaded.returncode == 0, loaded.stderr
+    assert loaded.stdout.splitlines() == [
+        'Set parameter nominal_scale successful', 'Set parameter det_threshold successful',
+        'Set parameter Lambda successful', 'Set parameter cpu_affinity successful']
+    after = yaml.safe_load(fj('param', 'dump', 'controller_node').stdout)
+    after = after['/controller_node']['ros__parameters']
+    assert (after['nominal_scale'], after['det_threshold'], after['Lambda']) == \
+        (0.75, 2e-07, [40.0, 40.0])
+    params.write_text('/**:\n  ros__parameters:\n    nominal_scale: -3.0\n')
+    refused = fj('param', 'load', '/controller_node', str(params), '--use-wildcard')
+    assert refused.returncode == 1
+    assert refused.stderr.startswith('Set parameter nominal_scale failed: '), refused.stderr
+    assert fj('param', 'load', '/controller_node', str(params)).returncode == 1  # no section
+
+
+def test_fj_service_call_plan_circle_answers_accepted_or_refused_with_the_reason(graph):
+    done = fj('service', 'call', '/freejoint_planner/plan_circle',
+              'freejoint_msgs/srv/PlanCircle',
+              '{centre: [0.0, 0.0], radius: 0.2, duration: 5.0, start_angle: 0.0, '
+              'direction: 1, execute: false}')
+    assert done.returncode == 0, done.stderr
+    assert 'requester: making request: freejoint_msgs.srv.PlanCircle_Request(' in done.stdout
+    response = done.stdout.split('response:\n', 1)[1]
+    assert response.startswith('freejoint_msgs.srv.PlanCircle_Response(accepted=True')
+    refused = fj('service', 'call', '/freejoint_planner/plan_circle',
+                 'freejoint_msgs/srv/PlanCircle', '{centre: [0, 0], radius: 2, duration: 5}')
+    assert refused.returncode == 0, refused.stderr
+    response = refused.stdout.split('response:\n', 1)[1]
+    assert 'accepted=False' in response and "reason=''" not in response, response
+
+
+def test_fj_service_call_trigger_and_bad_requests(graph):
+    done = fj('service', 'call', '/recorder/status', 'std_srvs/srv/Trigger')
+    assert done.returncode == 0, done.stderr
+    assert 'response:\nstd_srvs.srv.Trigger_Response(success=' in done.stdout
+    bad_field = fj('service', 'call', '/freejoint_planner/plan_circle',
+                   'freejoint_msgs/srv/PlanCircle', '{radios: 0.2}')
+    assert bad_field.returncode == 1
+    assert bad_field.stderr.startswith('Failed to populate field radios: ')
+    bad_type = fj('service', 'call', '/recorder/status', 'std_srvs/srv/Nothing')
+    assert bad_type.returncode == 1 and 'std_srvs/srv/Nothing' in bad_type.stderr
+
+
+def test_fj_says_node_not_found_within_its_timeout_and_exits_1(graph):
+    start = time.monotonic()
+    done = fj('param', 'get', '/no_such_node', 'K', '--timeout', '1')
+    assert done.returncode == 1
+    assert done.stderr.startswith('Node not found: /no_such_node'), done.stderr
+    assert time.monotonic() - start < 60.0
+    missing = fj('service', 'call', '/no_such_service', 'std_srvs/srv/Trigger',
+                 '--timeout', '1')
+    assert missing.returncode == 1
+    assert missing.stderr.startswith('Service not available: /no_such_service')
+    unset = fj('param', 'get', '/controller_node', 'no_such_parameter')
+    assert unset.returncode == 1 and unset.stderr == 'Parameter not set\n'
+
+
+def test_fj_run_starts_an_executable_of_a_package_as_ros2_run():
+    done = fj('run', 'freejoint_tools', 'analyze', '--help', timeout=60)
+    assert done.returncode == 0 and 'usage' in done.stdout.lower(), done.stderr
+    nothing = fj('run', 'freejoint_tools', 'nothing')
+    assert nothing.returncode == 1 and 'No executable found' in nothing.stderr
+    assert fj('run', 'no_such_package', 'x').stderr.startswith('Package not found')
+
+
+@pytest.mark.skipif(not os.path.isfile(os.path.join(ROOT, '.stamps', 'venv'))
+                    or 'system' in open(os.path.join(ROOT, '.stamps', 'venv')).read(),
+                    reason='set up on a sourced ROS 2: ros2 run starts the nodes there')
+def test_env_sh_puts_the_node_executables_and_fj_on_path():
+    exes = ['sim_node', 'controller_node', 'planner_node', 'recorder', 'player', 'fj']
+    done = subprocess.run(['bash', '-c', '. tools/env.sh && . tools/env.sh && '
+                           'command -v %s && echo "$PATH"' % ' '.join(exes)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=60,
+                          env={k: v for k, v in os.environ.items() if k != 'PATH'}
+                          | {'PATH': '/usr/bin:/bin'})
+    assert done.returncode == 0, done.stderr
+    found = done.stdout.splitlines()
+    assert [os.path.basename(p) for p in found[:-1]] == exes
+    assert all(p.startswith(os.path.join(ROOT, 'install')) for p in found[:-1])
+    path = found[-1].split(':')
+    assert len(path) == len(set(path)), 'sourcing twice repeats PATH entries'
