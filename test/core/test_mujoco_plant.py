@@ -6,7 +6,8 @@ from freejoint_core import offline
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.mujoco_plant import MujocoPlant
 from freejoint_core.plant import Plant
-from freejoint_core.urdf import four_link_arm, paper_arm
+from freejoint_core.urdf import (four_link_arm, GRAVITY_VERTICAL_VECTOR, paper_arm, parse_urdf,
+                                 shipped_urdf_path)
 import numpy as np
 import pytest
 
@@ -110,3 +111,25 @@ def test_mujoco_plant_refuses_a_speed_beyond_what_mujoco_accepts_without_resetti
     plant.reset(qd0=[0.0, 0.0, 0.0])
     plant.step([0.0, 0.0], DT)
     assert plant.k == 1
+
+
+def test_urdf_mounted_on_a_world_link_gives_the_same_pinocchio_model_and_mujoco_plant():
+    from freejoint_core.fast3 import Arm3Model
+    from freejoint_core.pin_model import PinArmModel
+    from freejoint_core.arm import table1
+    with open(shipped_urdf_path('paper_arm'), encoding='utf-8') as f:
+        text = f.read().replace(
+            '<link name="base_link"/>', '<link name="world"/><joint name="mount" type="fixed">'
+            '<parent link="world"/><child link="base_link"/><origin xyz="0 0 0.8"/></joint>'
+            '<link name="base_link"/>')
+    arm = parse_urdf(text, ['joint3'], GRAVITY_VERTICAL_VECTOR)
+    q, qd = np.array([0.3, 0.5, -0.2]), np.array([1.0, 2.0, -1.0])
+    pin_model, ref = PinArmModel(arm), Arm3Model(table1('vertical'))
+    assert np.max(np.abs(pin_model.fk(q) - ref.fk(q))) <= 1e-12
+    assert np.max(np.abs(pin_model.gravity_torque(q) - ref.gravity_torque(q))) <= 1e-12
+    assert np.max(np.abs(pin_model.coriolis(q, qd) - ref.coriolis(q, qd))) <= 1e-12
+    mj, rk4 = MujocoPlant(arm, q0=q, qd0=qd), Plant(arm.params, q0=q, qd0=qd)
+    for _ in range(200):
+        mj.step([0.1, 0.2], DT)
+        rk4.step([0.1, 0.2], DT)
+    assert np.max(np.abs(mj.q - rk4.q)) <= 1e-12

@@ -81,6 +81,25 @@ def test_inertial_rotated_about_x_moves_iyy_into_izz():
     assert parse_urdf(text, ['joint3']).params.inertias[1] == pytest.approx(0.07, abs=1e-15)
 
 
+def test_fixed_mount_before_joint1_is_part_of_the_base():
+    text = _paper_text().replace(
+        '<link name="base_link"/>', '<link name="world"/><joint name="mount" type="fixed">'
+        '<parent link="world"/><child link="base_link"/><origin xyz="0 0 0.8"/></joint>'
+        '<link name="base_link"/>')
+    arm = parse_urdf(text, ['joint3'], GRAVITY_VERTICAL_VECTOR)
+    assert arm.params == table1('vertical') and arm.base_link == 'base_link'
+
+
+def test_fixed_mount_shifting_the_base_in_the_plane_is_refused():
+    text = _paper_text().replace(
+        '<link name="base_link"/>', '<link name="world"/><joint name="mount" type="fixed">'
+        '<parent link="world"/><child link="base_link"/><origin xyz="0.1 0 0"/></joint>'
+        '<link name="base_link"/>')
+    with pytest.raises(FreejointValueError, match="joint 'mount': a fixed joint before joint 1 "
+                       'must sit at the base origin'):
+        parse_urdf(text, ['joint3'])
+
+
 REFUSALS = [
     ('prismatic', lambda t: _replace_in_joint(t, 'joint2', 'type="revolute"', 'type="prismatic"'),
      ['joint3'], "joint 'joint2': type 'prismatic' is not supported"),

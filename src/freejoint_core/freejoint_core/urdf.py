@@ -3,7 +3,8 @@ Planar serial arms from URDF: the core's ``ArmParams`` from a robot description.
 
 Supported descriptions (anything else is refused with one line naming the problem):
 
-* one serial chain from the root link: revolute (or continuous) joints, every axis
+* one serial chain from the root link (fixed mounts before joint 1 allowed if they
+  neither rotate nor shift in x-y): revolute (or continuous) joints, every axis
   ``0 0 1`` in its joint frame and every joint origin without rotation, so all axes are
   parallel to the base z axis and the arm moves in the base x-y plane;
 * joint 1 at the base origin (``x = y = 0``); joint i + 1 at ``(L_i, 0, z)`` in the
@@ -314,10 +315,7 @@ def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
                     f'{what}: continuous joint with position limits (lower/upper); use a '
                     f'revolute joint')
         elif jtype == 'fixed':
-            if not joint_names:
-                raise FreejointValueError(
-                    f'{what}: fixed joint before the first revolute joint; the base link '
-                    f'must carry joint 1')
+            pass
         else:
             raise FreejointValueError(
                 f'{what}: type {jtype!r} is not supported (revolute or continuous joints '
@@ -328,9 +326,13 @@ def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
                 f'model needs rpy = 0 0 0 (links along x, axes along z)')
         if not joint_names:
             if abs(xyz[0]) > _TOL or abs(xyz[1]) > _TOL:
+                first = 'a fixed joint before joint 1' if jtype == 'fixed' else 'the first joint'
                 raise FreejointValueError(
-                    f'{what}: the first joint must sit at the base origin (x = y = 0), got '
+                    f'{what}: {first} must sit at the base origin (x = y = 0), got '
                     f'xyz = ({_fmt(xyz)})')
+            if jtype == 'fixed':    # a mount (e.g. world -> base_link): same x-y frame
+                base = current = child
+                continue
         else:
             if abs(xyz[1]) > _TOL or xyz[0] <= 0.0:
                 raise FreejointValueError(
