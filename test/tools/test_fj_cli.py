@@ -26,7 +26,7 @@ def fj(*args, timeout=120):
 
 @pytest.fixture(scope='module')
 def graph(tmp_path_factory):
-    """The controller, the planner (system time) and the recorder, up for the module."""
+    """Start the controller, the planner (system time) and the recorder for the module."""
     logs = tmp_path_factory.mktemp('fj_nodes')
     started = []
 

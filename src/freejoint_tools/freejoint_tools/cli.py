@@ -105,9 +105,10 @@ class Session:
 
     def settled(self, look, quiet=1.0):
         """
-        Return ``look()`` once discovery settled: ``--spin-time`` s, then until it gave the
-        same answer for ``quiet`` s (endpoints are discovered after their node), at most
-        ``--timeout`` s more.
+        Return ``look()`` once discovery settled.
+
+        That is after ``--spin-time`` s, then once it gave the same answer for ``quiet`` s
+        (endpoints are discovered after their node), at most ``--timeout`` s more.
         """
         self.spin_for(self.args.spin_time)
         deadline = time.monotonic() + self.args.timeout
