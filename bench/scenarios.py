@@ -480,6 +480,7 @@ def parse(argv):
 def main(argv=None):
     """Run the scenarios asked for; return 1 if one could not be made."""
     args = parse(sys.argv[1:] if argv is None else argv)
+    soak.stop_on_sigterm()
     bench_graph.PRIORITY = args.priority
     names = SCENARIOS if 'all' in args.scenarios else args.scenarios
     os.makedirs(soak.OUT, exist_ok=True)
@@ -492,8 +493,8 @@ def main(argv=None):
         try:
             rows, index = RUNNERS[name](args, index)
             error = None
-        except (RuntimeError, OSError) as exc:
-            say('%s could not be made: %s' % (name, exc))
+        except Exception as exc:  # noqa: B902 - one scenario must not cost the others
+            say('%s could not be made: %s: %s' % (name, type(exc).__name__, exc))
             rows, error = [], str(exc)
             failed += 1
             index += 8

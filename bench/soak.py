@@ -516,9 +516,17 @@ def parse(argv):
     return args
 
 
+def stop_on_sigterm():
+    """Make SIGTERM unwind like SIGINT (every ``finally`` runs: no node left running)."""
+    def _exit(signum, _frame):
+        raise SystemExit(128 + signum)
+    signal.signal(signal.SIGTERM, _exit)
+
+
 def main(argv=None):
     """Run the soak; print and write the tables; return the exit code."""
     args = parse(sys.argv[1:] if argv is None else argv)
+    stop_on_sigterm()
     bench_graph.PRIORITY = args.priority
     os.makedirs(OUT, exist_ok=True)
     cond = conditions(args.priority, args.hogs)
@@ -540,8 +548,8 @@ def main(argv=None):
                 say('%s run %d/%d: %g s' % (case, run + 1, args.runs, args.seconds))
                 try:
                     row = soak_run(case, index, run, args.seconds, args.hogs)
-                except (RuntimeError, OSError) as exc:
-                    say('%s run %d failed: %s' % (case, run, exc))
+                except Exception as exc:  # noqa: B902 - one bad run must not cost the soak
+                    say('%s run %d failed: %s: %s' % (case, run, type(exc).__name__, exc))
                     row = {'case': case, 'run': run, 'error': str(exc), 'met': False}
                     failed += 1
                 index += 1
