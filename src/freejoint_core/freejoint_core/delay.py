@@ -63,7 +63,7 @@ import numpy as np
 DEFAULT_MAX_TICKS = 20
 """Default capacity of the command history (periods)."""
 
-DEFAULT_BIAS_GAIN = 0.1
+DEFAULT_BIAS_GAIN = 0.05
 """Default gain of the acceleration-bias observer (per period)."""
 
 _isfinite = math.isfinite
