@@ -257,3 +257,15 @@ def test_bad_setpoint_shift_and_runner_arguments_raise_naming_the_argument():
     with pytest.raises(FreejointValueError, match='^bias_gain:'):
         offline.run_case('horizontal', 'robust', 0, duration=0.01, delay_ticks=1,
                          predict=True, bias_gain=-0.1)
+
+
+def test_delay_study_rows_summarise_the_runs_and_zero_delay_is_the_paper_run():
+    rows, records = offline.delay_study((0, 2), seeds=[0], cases=['horizontal'])
+    assert [(r['delay_ms'], r['option']) for r in rows] == [(0, 'off'), (2, 'off'), (2, 'on')]
+    assert [r['variant'] for r in records] == ['robust', 'robust d2', 'robust d2+p']
+    paper, _ = offline.run_case('horizontal', 'robust', 0)
+    assert records[0] == paper
+    assert rows[0]['worst_rms_mm'] == paper['rms_mm'] and rows[0]['diverged'] == 0
+    assert rows[2]['worst_max_mm'] == records[2]['max_mm']
+    table = offline.format_delay_table(rows).splitlines()
+    assert len(table) == 5 and table[4].startswith('| horizontal | 2 | on | 1 |')

@@ -323,7 +323,7 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
 
 
 def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
-            progress=None, delay_ticks=0, predict=False):
+            progress=None, delay_ticks=0, predict=False, bias_gain=DEFAULT_BIAS_GAIN):
     """
     Run the offline study: robust and robust_off over seeds, exact once, per case.
 
@@ -343,6 +343,8 @@ def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
         Fixed command delay of every run (periods), see :func:`run_case`.
     predict : bool
         Compensate it with the state predictor.
+    bias_gain : float
+        The predictor's bias observer gain.
 
     Returns
     -------
@@ -358,7 +360,7 @@ def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
         jobs.append(('exact', 0))
         for variant, seed in jobs:
             rec, _ = run_case(case, variant, seed, dt_sub=dt_sub, delay_ticks=delay_ticks,
-                              predict=predict)
+                              predict=predict, bias_gain=bias_gain)
             records.append(rec)
             if progress is not None:
                 progress(rec)
@@ -369,7 +371,8 @@ DELAY_STUDY_MS = (0, 1, 2, 3, 5, 10, 20)
 DELAY_STUDY_OUT = 'bags/offline/delay_study.json'
 
 
-def delay_study(delays_ms=DELAY_STUDY_MS, seeds=range(10), cases=CASES, progress=None):
+def delay_study(delays_ms=DELAY_STUDY_MS, seeds=range(10), cases=CASES, progress=None,
+                bias_gain=DEFAULT_BIAS_GAIN):
     """
     Tracking versus a fixed command delay, without and with the predictor.
 
@@ -383,6 +386,8 @@ def delay_study(delays_ms=DELAY_STUDY_MS, seeds=range(10), cases=CASES, progress
         Cases.
     progress : callable, optional
         Called with each record as it completes.
+    bias_gain : float
+        The predictor's bias observer gain (0: plain nominal prediction).
 
     Returns
     -------
@@ -406,7 +411,7 @@ def delay_study(delays_ms=DELAY_STUDY_MS, seeds=range(10), cases=CASES, progress
                 recs = []
                 for seed in seeds:
                     rec, _ = run_case(case, 'robust', seed, delay_ticks=m,
-                                      predict=option == 'on')
+                                      predict=option == 'on', bias_gain=bias_gain)
                     recs.append(rec)
                     if progress is not None:
                         progress(rec)
@@ -500,6 +505,9 @@ def _parse(argv):
                     '(default 0)')
     ap.add_argument('--predict', action='store_true',
                     help='compensate the delay with the nominal-model state predictor')
+    ap.add_argument('--bias-gain', type=float, default=DEFAULT_BIAS_GAIN,
+                    help='bias observer gain of the predictor (default '
+                    f'{DEFAULT_BIAS_GAIN:g}; 0: plain nominal prediction)')
     ap.add_argument('--delay-study', action='store_true',
                     help='only the delay study of docs/delay.md: robust over the seeds, '
                     f'delays {", ".join(map(str, DELAY_STUDY_MS))} ms, predictor off and on')
@@ -513,18 +521,21 @@ def main(argv=None):
         raise SystemExit('offline: --seeds must be >= 1')
     if args.delay_ticks < 0:
         raise SystemExit('offline: --delay-ticks must be >= 0')
+    if not 0.0 <= args.bias_gain <= 1.0:
+        raise SystemExit('offline: --bias-gain must lie in [0, 1]')
     if args.delay_study:
         return _main_delay_study(args)
     off = None if args.off_seeds is None else range(args.off_seeds)
     t0 = time.perf_counter()
     records = run_all(range(args.seeds), args.cases, args.dt_sub, off,
-                      delay_ticks=args.delay_ticks, predict=args.predict)
+                      delay_ticks=args.delay_ticks, predict=args.predict,
+                      bias_gain=args.bias_gain)
     wall = time.perf_counter() - t0
     print(f'offline: {len(records)} runs, dt = 1 ms, dt_sub = {args.dt_sub:g} s, '
           f'{wall:.1f} s wall')
     if args.delay_ticks:
         print(f'command delay {args.delay_ticks} ticks, predictor '
-              f'{"on" if args.predict else "off"}')
+              f'{f"on (bias_gain {args.bias_gain:g})" if args.predict else "off"}')
     if args.out is None:
         args.out = DEFAULT_OUT if not args.delay_ticks else (
             f'bags/offline/delay_m{args.delay_ticks}{"_p" if args.predict else ""}.json')
@@ -553,9 +564,10 @@ def main(argv=None):
 
 def _main_delay_study(args):
     t0 = time.perf_counter()
-    rows, records = delay_study(seeds=range(args.seeds), cases=args.cases)
-    print(f'offline delay study: {len(records)} runs, seeds 0-{args.seeds - 1}, '
-          f'{time.perf_counter() - t0:.1f} s wall')
+    rows, records = delay_study(seeds=range(args.seeds), cases=args.cases,
+                                bias_gain=args.bias_gain)
+    print(f'offline delay study: {len(records)} runs, seeds 0-{args.seeds - 1}, bias_gain '
+          f'{args.bias_gain:g}, {time.perf_counter() - t0:.1f} s wall')
     print(format_delay_table(rows))
     out = DELAY_STUDY_OUT if args.out is None else args.out
     if out:
