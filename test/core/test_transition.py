@@ -133,9 +133,16 @@ def test_a_rest_to_rest_transition_takes_the_quintic_time_of_its_tightest_bound(
     assert np.allclose(pts[:, 0], 0.2, rtol=0, atol=1e-15)        # a straight line
 
 
-def test_no_transition_when_the_state_is_the_circle_start_at_rest():
+def test_no_transition_when_the_state_is_the_circle_start_at_rest_within_a_nanometre():
     choice = plan_transition((0.2, 0.0), (0.0, 0.0), (0.0, 0.0), PAPER, DT)
     assert choice.ok and choice.segment is None and choice.ticks == 0
+    end = PAPER.sample_tuple(5.0)                       # (0.2, -4.9e-17): the same point
+    assert end[1] != 0.0
+    assert plan_transition(end[:2], end[2:4], end[4:], PAPER, DT).segment is None
+    choice = plan_transition((0.2, 2e-9), (0.0, 0.0), (0.0, 0.0), PAPER, DT)
+    assert choice.ok and choice.ticks > 0
+    choice = plan_transition((0.2, 0.0), (1e-12, 0.0), (0.0, 0.0), PAPER, DT)
+    assert choice.ok and choice.ticks > 0               # moving: always a transition
 
 
 def test_a_faster_start_state_raises_the_limits_to_its_own_speed():

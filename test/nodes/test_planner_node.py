@@ -360,44 +360,108 @@ def test_a_circle_change_starts_at_the_next_tick_by_a_transition_and_a_map_chang
     assert _get(ros_node, params, ['eps_d']) == {'eps_d': 0.1}
 
 
-def test_bad_parameter_values_at_start_are_named_and_fall_back_to_the_defaults(capfd):
-    import rclpy
-    from freejoint_planner.planner_node import PlannerNode
-    rclpy.init(args=['--ros-args', '-p', 'radius:=-1.0', '-p', 'centre:=[0.1]',
-                     '-p', 'resolution_deg:=0.7', '-p', 'case:=diagonal', '-p', 'lookahead:=5'])
-    try:
-        node = PlannerNode()
-        try:
-            values = {n: node.get_parameter(n).value
-                      for n in ('radius', 'resolution_deg', 'case', 'lookahead')}
-            centre = list(node.get_parameter('centre').value)
-            plan = node._stream.plan
-        finally:
-            node.destroy_node()
-    finally:
-        rclpy.try_shutdown()
-    assert values == {'radius': 0.2, 'resolution_deg': 0.25, 'case': 'horizontal',
-                      'lookahead': 5}                         # lookahead:=5 is good: kept
-    assert centre == [0.0, 0.0]
-    assert plan is not None and plan.trajectory.radius == 0.2  # the default circle runs
-    err = capfd.readouterr().err
-    for name in ('radius', 'centre', 'resolution_deg', 'case'):
-        assert 'parameter %s:' % name in err and 'using the default' in err, err
+BAD_START = [
+    # parameter, bad value, what the one line says after 'bad parameter: <name>: '
+    ('radius', '-1.0', 'out of range'),
+    ('lookahead', '0', 'out of range'),
+    ('start_angle', '7.0', 'out of range'),
+    ('centre', '[0.1]', 'expected 2 values (x, y) in m, got 1'),
+    ('resolution_deg', '0.7', '360 / 0.7 must be an even integer'),
+    ('case', 'diagonal', "expected one of ('horizontal', 'vertical'), got 'diagonal'"),
+    ('radius', '0.8', 'exceeds the largest circle the reach annulus [0, 1.5] m of the arm '
+                      'holds, 0.75 m'),
+    ('duration', '1.0', 'peaks at 2.35619 m/s, above max_speed 1 m/s (duration >= 2.35619 s)'),
+]
 
 
-def test_lookahead_zero_at_start_is_refused_with_the_reason_and_the_default_used(capfd):
-    import rclpy
-    from freejoint_planner.planner_node import PlannerNode
-    rclpy.init(args=['--ros-args', '-p', 'lookahead:=0'])
-    try:
-        node = PlannerNode()
-        try:
-            value = node.get_parameter('lookahead').value
-            stream_lookahead = node._stream.lookahead
-        finally:
-            node.destroy_node()
-    finally:
-        rclpy.try_shutdown()
-    assert value == stream_lookahead == 20
-    err = capfd.readouterr().err
-    assert 'parameter lookahead:' in err and 'using the default 20' in err, err
+@pytest.mark.parametrize('param, value, reason', BAD_START,
+                         ids=['%s=%s' % row[:2] for row in BAD_START])
+def test_a_bad_start_up_parameter_ends_the_planner_with_one_line_naming_it_and_exit_2(
+        param, value, reason):
+    import subprocess
+    exe = os.path.join(ROOT, 'install', 'freejoint_planner', 'lib', 'freejoint_planner',
+                       'planner_node')
+    done = subprocess.run([exe, '--ros-args', '-p', '%s:=%s' % (param, value)],
+                          capture_output=True, text=True, timeout=120)
+    out = done.stdout + done.stderr
+    assert done.returncode == 2, 'exit %s, expected 2:\n%s' % (done.returncode, out)
+    assert 'Traceback' not in out, out
+    failures = [line for line in out.splitlines()
+                if 'FATAL' in line or 'ERROR' in line or 'error' in line.lower()]
+    assert len(failures) == 1, 'expected one line, got:\n%s' % out
+    assert 'bad parameter: %s: ' % param in failures[0] and reason in failures[0], failures[0]
+
+
+def test_plan_circle_every_1_3_s_while_circles_run_never_steps_the_setpoint_and_every_accepted_circle_is_reached(  # noqa: E501
+        procs, ros_node, wait):
+    """Issue 10's acceptance, in sim time: plan requests while moving make no step."""
+    import math
+    import numpy as np
+    from freejoint_core.trajectory import CircleQuintic
+    from freejoint_msgs.srv import PlanCircle
+    proc = _start_planner(procs)                      # the paper circle starts at t = 0
+    client = _wait_ready(ros_node, procs, proc, wait)
+    clock = ClockDriver(ros_node)
+    wait(clock.matched, 30.0, 'the planner matching /clock and setpoint',
+         spin=lambda: _spin(ros_node, 0.05))
+
+    def own_step(circle):
+        """Return the circle's largest change between consecutive ticks, from its ticks."""
+        ref = np.array([circle.sample_tuple(j * DT)[:2] for j in range(5002)])
+        return np.hypot(np.diff(ref[:, 0]), np.diff(ref[:, 1])).max()
+
+    requests = [((0.05, 0.05), math.pi / 2, 1), ((-0.05, 0.02), math.pi, -1),
+                ((0.02, -0.06), -math.pi / 2, 1), ((0.0, 0.0), 0.0, -1),
+                ((0.06, -0.02), 2.0, 1), ((-0.03, -0.04), -2.5, -1)]
+    circles = {1: CircleQuintic()}
+    answers = []
+    period = 1300                                     # ticks between requests: 1.3 s
+    end = period * (len(requests) + 1) + 5200         # room for the last circle to start
+    for now in range(0, end, 10):                     # /clock every 10 ticks (100 Hz)
+        clock.step(now * MS, wait, '(log: %s)' % procs.log(proc))
+        i = now // period - 1
+        if now % period == 0 and 0 <= i < len(requests):
+            centre, angle, direction = requests[i]
+            answer = _call(ros_node, client, PlanCircle.Request(
+                centre=list(centre), radius=0.2, duration=5.0, start_angle=angle,
+                direction=direction, execute=True), 'plan_circle at %d ms' % now)
+            answers.append((now, answer.accepted, answer.plan_id, answer.reason))
+            if answer.accepted:
+                circles[answer.plan_id] = CircleQuintic(centre=centre, radius=0.2,
+                                                        duration=5.0, start_angle=angle,
+                                                        direction=direction)
+            else:
+                assert answer.reason.startswith(
+                    'circle centre') and ('the transition into plan' in answer.reason
+                                          or 'no safe transition' in answer.reason), answer
+    stamps = [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in clock.got]
+    assert stamps == [k * MS for k in range(len(stamps))]      # each tick once, in order
+    p = np.array([tuple(m.position) for m in clock.got])
+    steps = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
+    # all of one radius and duration: the same largest step but for the rounding of centre
+    # + r (cos, sin), ~3e-17 m
+    circle_step = max(own_step(c) for c in circles.values())
+    assert circle_step - own_step(CircleQuintic()) < 1e-15
+    assert steps.max() <= circle_step, (
+        'setpoint step %.6g m at tick %d > the circle\'s own %.6g m' % (
+            steps.max(), int(steps.argmax()) + 1, circle_step))
+    accepted = [a for a in answers if a[1]]
+    assert len(accepted) >= 3, answers                # most requests get through
+    assert sorted(circles) == [1] + [a[2] for a in accepted]
+    ids = [m.plan_id for m in clock.got]
+    for plan_id, circle in circles.items():           # every accepted circle is reached
+        ticks = [k for k, m in enumerate(clock.got)
+                 if m.plan_id == plan_id and m.plan_time >= 0.0]
+        assert ticks, 'plan %d never reached its circle (answers %s)' % (plan_id, answers)
+        k0 = ticks[0]
+        assert clock.got[k0].plan_time == 0.0
+        for k in ticks[:2000]:
+            m = clock.got[k]
+            assert tuple(m.position) + tuple(m.velocity) + tuple(m.acceleration) == \
+                circle.sample_tuple((k - k0) * DT), (plan_id, k)
+        # before its circle: the transition, under its id with plan_time < 0
+        before = [k for k in range(len(ids)) if ids[k] == plan_id and k < k0]
+        assert all(clock.got[k].plan_time < 0.0 for k in before)
+        assert plan_id == 1 or before, 'plan %d started without a transition' % plan_id
+    log = procs.log(proc)
+    assert log.count('transition of') == len(accepted)

@@ -502,6 +502,11 @@ def transition_candidates(max_ticks, growth=1.01, dense=32):
     return out
 
 
+# A state at rest this close to a circle's start needs no transition (m): rounding, as
+# between the paper circle's end (0.2, -4.9e-17) and its start (0.2, 0).
+AT_START = 1e-9
+
+
 def plan_transition(p0, v0, a0, circle, dt, max_duration=60.0, path_check=None,
                     limits=None, coarse=129, max_exact=400):
     """
@@ -537,8 +542,8 @@ def plan_transition(p0, v0, a0, circle, dt, max_duration=60.0, path_check=None,
     Returns
     -------
     TransitionChoice
-        ``ok`` with ``ticks == 0`` and no segment if the state already is the circle's
-        start at rest.
+        ``ok`` with ``ticks == 0`` and no segment if the state is at rest (zero velocity
+        and acceleration) within ``AT_START`` of the circle's start.
 
     """
     dt = _finite_float('dt', dt)
@@ -554,7 +559,7 @@ def plan_transition(p0, v0, a0, circle, dt, max_duration=60.0, path_check=None,
     if limits is None:
         limits = transition_limits(circle, dt, v0, a0)
     v_lim, a_lim, s_lim = (float(x) for x in limits)
-    if (p0 == p1).all() and not v0.any() and not a0.any():
+    if float(np.hypot(*(p1 - p0))) <= AT_START and not v0.any() and not a0.any():
         return TransitionChoice(True, '', None, 0, 0.0, 0.0, 0.0, (v_lim, a_lim, s_lim),
                                 math.inf)
     max_ticks = max(1, int(math.floor(max_duration / dt + 1e-9)))

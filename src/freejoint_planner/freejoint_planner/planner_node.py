@@ -141,6 +141,10 @@ class PlannerNode(Node):
         self._ros_clock = self.get_clock()
         self._own_clock = self._detach_time_source()
         self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS))
+        reason = circle_bounds(make_circle(self._cfg), self._model, self._cfg['max_speed'],
+                               self._cfg['max_acceleration'])
+        if reason:
+            raise FreejointValueError(reason)
         self.get_logger().info(
             f'singularity map computed in {self._model.seconds * 1e3:.0f} ms: '
             f'{self._model.describe()}')
@@ -174,25 +178,21 @@ class PlannerNode(Node):
 
     # ---- parameters -------------------------------------------------------------------
     def _declare_parameters(self):
-        """Declare every parameter once; fall back to the default on a bad override."""
+        """
+        Declare every parameter once; a bad value raises, naming it.
+
+        rclpy's range and type checks raise ``ParameterException``, ``validate``'s reason
+        a ``FreejointValueError``: ``node_tools.run`` turns either into one fatal line
+        'bad parameter: <name>: <reason>' and exit status 2 (as every freejoint node).
+        """
         cfg = {}
         for name, (default, description, extra) in PARAMETERS.items():
             descriptor = ParameterDescriptor(description=description, **extra)
-            try:
-                value = self.declare_parameter(name, default, descriptor).value
-            except Exception as exc:  # bad type or out of range in the overrides
-                self.get_logger().error(f'parameter {name}: {exc}; using the default '
-                                        f'{default!r}')
-                value = self.declare_parameter(name, default, descriptor,
-                                               ignore_override=True).value
-            if name == 'centre':
-                value = list(value)
-            reason = validate({name: value})
-            if reason:
-                self.get_logger().error(f'parameter {reason}; using the default {default!r}')
-                self.set_parameters([Parameter(name, value=default)])
-                value = default
-            cfg[name] = value
+            value = self.declare_parameter(name, default, descriptor).value
+            cfg[name] = list(value) if name == 'centre' else value
+        reason = validate(cfg)
+        if reason:
+            raise FreejointValueError(reason)
         return cfg
 
     def _on_set_parameters(self, params):
@@ -234,7 +234,8 @@ class PlannerNode(Node):
         circle = None
         if changed & set(CIRCLE_KEYS):
             circle = make_circle(new)
-            reason, margin, choice, tick = self._admit(circle, model, new)
+            reason, margin, choice, tick = self._admit(circle, model, new,
+                                                       transition=new['autostart'])
             if reason:
                 return self._refuse(f'circle refused, the running plan goes on: '
                                     f'{self._describe(circle)}: {reason}')
@@ -322,18 +323,19 @@ class PlannerNode(Node):
         return (f'circle centre ({c[0]:.6g}, {c[1]:.6g}) m radius {circle.radius:.6g} m '
                 f'duration {circle.duration:.6g} s')
 
-    def _admit(self, circle, model, cfg):
+    def _admit(self, circle, model, cfg, transition=True):
         """
         Check a circle and how it would join the stream (no ROS in the checks).
 
         Returns ``(reason, margin, choice, tick)``: ``reason`` '' if accepted; the circle's
         margin (m); the ``TransitionChoice`` (None: starts directly) and its first tick.
+        ``transition`` false: the circle alone (it is not to be started).
         """
         reason = circle_bounds(circle, model, cfg['max_speed'], cfg['max_acceleration'])
         if reason:
             return reason, math.nan, None, None
         check = model.check(circle)
-        if not check.ok:
+        if not check.ok or not transition:
             return check.reason, check.margin, None, None
         reason, choice, tick = prepare_transition(self._stream, circle, model,
                                                   cfg['transition_max_duration'])
@@ -381,15 +383,8 @@ class PlannerNode(Node):
             self.get_logger().error(f'plan_circle: {response.reason}',
                                     throttle_duration_sec=1.0)
             return response
-        if request.execute:
-            reason, margin, choice, tick = self._admit(circle, self._model, self._cfg)
-        else:                       # a check only: the circle, no transition
-            reason = circle_bounds(circle, self._model, self._cfg['max_speed'],
-                                   self._cfg['max_acceleration'])
-            margin, choice, tick = math.nan, None, None
-            if not reason:
-                check = self._model.check(circle)
-                reason, margin = check.reason, check.margin
+        reason, margin, choice, tick = self._admit(circle, self._model, self._cfg,
+                                                   transition=request.execute)
         response.accepted = not reason
         response.margin = float(margin)
         response.plan_id = 0
