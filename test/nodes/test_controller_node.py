@@ -69,10 +69,16 @@ class Driver:
     def spin(self):
         self.rclpy.spin_once(self.node, timeout_sec=0.05)
 
-    @staticmethod
-    def stamp(msg, k):
-        msg.header.stamp.sec = (k * DT_NS) // 1_000_000_000
-        msg.header.stamp.nanosec = (k * DT_NS) % 1_000_000_000
+    offset_ns = 0
+    """Added to every stamp (a jump of the stamps, as after a stall of the driver)."""
+
+    def ns(self, k):
+        return k * DT_NS + self.offset_ns
+
+    def stamp(self, msg, k):
+        ns = self.ns(k)
+        msg.header.stamp.sec = ns // 1_000_000_000
+        msg.header.stamp.nanosec = ns % 1_000_000_000
 
     def setpoint(self, k, values):
         msg = self.CartesianSetpoint()
@@ -81,6 +87,29 @@ class Driver:
         msg.velocity = list(values[2:4])
         msg.acceleration = list(values[4:6])
         self.pub_sp.publish(msg)
+
+    def setpoints_ahead(self, k, values_of, ahead=5):
+        """Publish the setpoints of ticks k..k+ahead not yet out (values_of(j) None: none).
+
+        Real time pairs a state with the newest setpoint already received: sending them
+        ahead, as the planner does (and waiting for the first ones to be acknowledged),
+        keeps the pairing free of the race between topics.
+        """
+        from rclpy.duration import Duration
+        sent = self.__dict__.setdefault('_sent', set())
+        published = False
+        for j in range(k, k + ahead + 1):
+            if j not in sent:
+                sent.add(j)
+                values = values_of(j)
+                if values is not None:
+                    self.setpoint(j, values)
+                    published = True
+        if published and not self.__dict__.get('_acked'):
+            # The first ones: delivered before the first state goes out.
+            self._acked = True
+            assert self.pub_sp.wait_for_all_acked(Duration(seconds=15.0)), \
+                'setpoints not acknowledged within 15 s'
 
     def joint_state(self, k, q, qd, names=NAMES):
         msg = self.JointState()
@@ -93,7 +122,7 @@ class Driver:
 
     def answer(self, k, what='the answer', timeout=15.0):
         """Wait for the ControllerState of tick k; return it and the command."""
-        ns = k * DT_NS
+        ns = self.ns(k)
         self.wait(lambda: ns in self.states and 'stamp_ns=%d' % ns in self.commands,
                   timeout, '%s to tick %d' % (what, k), spin=self.spin)
         return self.states[ns][0], self.commands['stamp_ns=%d' % ns][0]
@@ -299,4 +328,404 @@ def test_with_on_stale_zero_stale_setpoint_and_stale_state_command_zero_effort_a
          'the stale-state message', spin=drv.spin)
     assert drv.commands['stamp_ns=%d' % DT_NS][-1] == [0.0, 0.0]
     assert 'no joint_states for 0.3 s: zero effort' in procs.log(proc)
+    assert procs.stop(proc) == 0
+
+
+# -- hold, resume, limits, dt from stamps, reset, faults (issues 10 and 11) ------------------
+LIMITS = (300.0, 200.0)     # effort_limits of config/controller.yaml
+STALE_JUMP_NS = 2_100_000_000   # a jump of the stamps beyond the tests' stale_timeout 2 s
+RATE = 20000.0              # effort_rate_limit of config/controller.yaml [N m/s]
+
+
+class Replica:
+    """What the node must answer, from the core: law, hold / blend reference, limits."""
+
+    def __init__(self, case, lockstep, resume=0.5, limits=LIMITS, rate=RATE, dt=DT):
+        from freejoint_core.reference import ReferenceShaper
+        self.ctl = RobustController(table1(case).scaled(0.7),
+                                    Gains(tau_limit=limits, theta_max=(100.0,) * 5))
+        self.shaper = ReferenceShaper(resume, blend_on_start=not lockstep)
+        self.lockstep = lockstep
+        self.limits = limits
+        self.rate = rate
+        self.dt = dt
+        self.prev = None if lockstep else [0.0, 0.0]
+        self.armed = not lockstep
+        self.last_ns = -1
+
+    def fk(self, q):
+        return self.ctl.model.fk(q).tolist()
+
+    def tick(self, ns, q, qd, sp):
+        """Return (effort, reference, dt, ControlOutput) for the state stamped ns."""
+        from freejoint_core.reference import clamp_dt, limit_effort, MODE_HOLD, MODE_NONE
+        if self.lockstep or self.last_ns < 0:
+            dt = self.dt
+        else:
+            dt = clamp_dt((ns - self.last_ns) * 1e-9, self.dt)[0]
+        if sp is None:
+            if self.shaper.mode != MODE_HOLD:
+                ref = self.shaper.hold(self.fk(q))
+                self.armed = self.prev is not None
+            else:
+                ref = self.shaper.hold(None)
+        else:
+            p_now = self.fk(q) if self.shaper.mode == MODE_NONE else None
+            ref, _ = self.shaper.track(ns * 1e-9, sp, p_now)
+        out = self.ctl.step(q, qd, ref[0:2], ref[2:4], ref[4:6], dt)
+        effort = out.tau.tolist()
+        if self.armed:
+            effort, _, rated = limit_effort(effort, self.limits, self.prev, self.rate * dt)
+            self.armed = rated
+        self.prev = effort
+        self.last_ns = ns
+        return effort, ref, dt, out
+
+    def zero(self, ns):
+        """The node answered ns with zero effort."""
+        self.prev = [0.0, 0.0]
+        self.armed = True
+        self.last_ns = ns
+
+    def reset(self):
+        self.ctl.reset()
+        self.shaper.reset()
+        self.armed = self.prev is not None
+
+
+def _finite_within(cmd, limits=LIMITS):
+    return all(math.isfinite(x) and abs(x) <= lim for x, lim in zip(cmd, limits))
+
+
+def _moving_setpoint(k, base):
+    """A setpoint moving at 0.1 m/s along x from `base` (3 cm away from it at k = 0)."""
+    return (base[0] + 0.03 + 1e-4 * k, base[1] - 0.02, 0.1, 0.0, 0.0, 0.0)
+
+
+def test_real_time_controller_holds_against_gravity_before_the_first_setpoint_and_resumes_without_a_step(  # noqa: E501
+        procs, ros_node, wait):
+    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false',
+                  '-p', 'resume_time:=0.05', '-p', 'stale_timeout:=2.0')
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    rep = Replica('vertical', lockstep=False, resume=0.05)
+    q, qd = Q0, (0.0, 0.0, 0.0)
+    hold = rep.fk(q)
+    base = hold
+    prev_cmd = [0.0, 0.0]
+    refs = []
+    for k in range(160):
+        def values_of(j):
+            return _moving_setpoint(j, base) if 10 <= j < 80 or j >= 120 else None
+        sp = values_of(k)
+        drv.setpoints_ahead(k, values_of)
+        if k == 100:
+            q = (Q0[0] + 0.01, Q0[1], Q0[2])       # the arm moved: a new hold starts here
+            drv.offset_ns = STALE_JUMP_NS          # and 2.1 s of stamps passed meanwhile
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        # Between 80 and 100 the setpoint of tick 79 is still fresh (< stale_timeout).
+        used = _moving_setpoint(min(k, 79), base) if 80 <= k < 100 else sp
+        effort, ref, dt, out = rep.tick(drv.ns(k), q, qd, used)
+        assert cmd == effort, k
+        assert list(st.position_desired) == list(ref[0:2]), k
+        assert list(st.theta_hat) == out.theta.tolist(), k
+        assert st.dt == dt
+        assert _finite_within(cmd)
+        if k in (0, 100):
+            # No torque jump at the start (from zero) nor at the onset of a hold.
+            assert max(abs(a - b) for a, b in zip(cmd, prev_cmd)) <= RATE * dt + 1e-9, k
+        prev_cmd = cmd
+        refs.append(list(ref[0:2]))
+        holding = bool(st.status & STATUS_HOLDING)
+        if k < 10:
+            # Before the first setpoint: hold where the arm is, against gravity (not zero).
+            assert holding and not st.status & STATUS_STALE_SETPOINT, st.message
+            assert list(st.position_desired) == hold
+            assert 'holding at' in st.message and 'no setpoint yet' in st.message
+            assert st.setpoint_stamp.sec == 0 and st.setpoint_stamp.nanosec == 0
+        elif k < 60 or 120 <= k < 170:
+            assert st.status & STATUS_RESUMING and not holding, (k, st.message)
+            assert (st.setpoint_stamp.sec * 1_000_000_000 + st.setpoint_stamp.nanosec
+                    == drv.ns(k))
+        elif 100 <= k < 120:
+            # Stale: held at fk(q) of the first stale tick, not zero effort.
+            assert holding and st.status & STATUS_STALE_SETPOINT, (k, st.message)
+            assert list(st.position_desired) == rep.fk(q)
+            assert 'stale setpoint' in st.message
+        else:
+            assert not holding and not st.status & STATUS_RESUMING, (k, st.message)
+        if 80 <= k < 100:
+            assert st.setpoint_age == pytest.approx((k - 79) * DT, abs=1e-12)
+        assert st.state_age > 0.0
+    # Gravity is held: the hold efforts are the vertical arm's, far from zero.
+    assert max(abs(x) for x in drv.commands['stamp_ns=%d' % (9 * DT_NS)][0]) > 5.0
+    # The reference has no step: per 1 ms tick at most what the 50 ms quintic blend of the
+    # 3.6 cm offset and the 0.1 m/s stream give ((1.875 x 0.036 / 0.05 + 0.1) m/s x 1 ms =
+    # 1.45 mm, a little more with the velocity offset); a step would be the 36 mm offset.
+    steps = [math.dist(a, b) for a, b in zip(refs, refs[1:])]
+    assert max(steps[:99]) < 2e-3 and max(steps[101:]) < 2e-3
+    assert procs.stop(proc) == 0
+
+
+def test_lockstep_holds_when_setpoints_go_stale_and_answers_at_once_while_holding(
+        procs, ros_node, wait):
+    proc = _start(procs, '-p', 'case:=vertical', '-p', 'stale_timeout:=1.0')
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    rep = Replica('vertical', lockstep=True)
+    q, qd = Q0, QD0
+    drv.setpoint(0, _setpoint(0))
+    drv.joint_state(0, q, qd)
+    st, cmd = drv.answer(0)
+    effort, _, _, _ = rep.tick(0, q, qd, _setpoint(0))
+    assert cmd == effort and st.status == 0
+    # State 1 without its setpoint: after stale_timeout, the hold (the law, not zero).
+    q1 = (Q0[0] + 0.002, Q0[1], Q0[2])
+    drv.joint_state(1, q1, qd)
+    st, cmd = drv.answer(1, 'the hold answer')
+    effort, ref, _, out = rep.tick(DT_NS, q1, qd, None)
+    assert cmd == effort and cmd != [0.0, 0.0]
+    assert st.status & STATUS_HOLDING and st.status & STATUS_STALE_SETPOINT, st.message
+    assert list(st.position_desired) == rep.fk(q1)
+    assert list(st.theta_hat) == out.theta.tolist()
+    wait(lambda: 'holding position' in procs.log(proc), 10.0, 'the hold in the log')
+    # While holding, a state without setpoint is answered (no stale_timeout per tick), with
+    # the same frozen reference.
+    drv.joint_state(2, q, qd)
+    st, cmd = drv.answer(2)
+    effort, _, _, _ = rep.tick(2 * DT_NS, q, qd, None)
+    assert cmd == effort and list(st.position_desired) == rep.fk(q1)
+    # The setpoints return: the reference blends from the hold.
+    for k in (3, 4):
+        drv.setpoint(k, _setpoint(k))
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        effort, ref, _, _ = rep.tick(k * DT_NS, q, qd, _setpoint(k))
+        assert cmd == effort and st.status & STATUS_RESUMING
+        assert list(st.position_desired) == list(ref[0:2])
+    assert list(drv.states[3 * DT_NS][0].position_desired) == pytest.approx(rep.fk(q1),
+                                                                           abs=1e-15)
+    assert procs.stop(proc) == 0
+
+
+def test_real_time_dt_comes_from_the_state_stamps_bounded_to_four_periods(
+        procs, ros_node, wait):
+    from freejoint_msgs.msg import ControllerState as CS
+    proc = _start(procs, '-p', 'lockstep:=false', '-p', 'resume_time:=0.0',
+                  '-p', 'stale_timeout:=2.0')
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    rep = Replica('horizontal', lockstep=False, resume=0.0)
+    # A driver at 500 Hz (2 ms), then a 30 ms gap (clamped to 4 ms).
+    ticks = ((0, DT), (2, 0.002), (4, 0.002), (6, 0.002), (36, 0.004), (38, 0.002))
+    stamps = [k for k, _ in ticks]
+    for k, want in ticks:
+        q, qd = _state_q(k)
+        drv.setpoints_ahead(k, lambda j: _setpoint(j) if j in stamps else None, ahead=32)
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        effort, _, dt, out = rep.tick(k * DT_NS, q, qd, _setpoint(k))
+        assert dt == want and st.dt == want
+        assert cmd == effort and list(st.theta_hat) == out.theta.tolist()
+        assert bool(st.status & CS.STATUS_DT_CLAMPED) == (k == 36), st.message
+    wait(lambda: 'outside [0.25, 4] x control_period' in procs.log(proc), 10.0,
+         'the clamp warning')
+    assert procs.stop(proc) == 0
+
+
+def test_per_joint_effort_limits_clip_each_joint_and_bad_limits_or_gains_are_refused(
+        procs, ros_node, wait):
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    import rclpy
+    proc = _start(procs, '-p', 'effort_limits:=[5.0, 3.0]')
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    ctl = RobustController(table1('horizontal').scaled(0.7), Gains())
+    for k in range(3):
+        q, qd = _state_q(k)
+        drv.setpoint(k, _setpoint(k))
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        tau = _expect(ctl, q, qd, _setpoint(k)).tau.tolist()
+        assert cmd == [max(-5.0, min(5.0, tau[0])), max(-3.0, min(3.0, tau[1]))]
+        assert abs(tau[0]) > 5.0 and st.status & ControllerState.STATUS_TORQUE_LIMITED
+        assert 'torque limited to [5.0, 3.0] N m' in st.message
+    client = AsyncParameterClient(ros_node, 'controller_node')
+    assert client.wait_for_services(timeout_sec=15.0), 'no parameter services'
+    bad = [(Parameter('effort_limits', value=[1.0]), r'^effort_limits: expected 2 values'),
+           (Parameter('effort_limits', value=[-1.0, 2.0]), r'^effort_limits: expected 2'),
+           (Parameter('K', value=[1e300, 100.0]), r'^K: values must be <= 10000'),
+           (Parameter('K', value=[990.0, 100.0]), r'^K: K\[0\] \+ Lambda\[0\] = 1040'),
+           (Parameter('Lambda', value=[1e5, 50.0]), r'^Lambda: values must be <= 10000'),
+           (Parameter('R', value=[1e4, 2.0]), r'^R: values must be <= 1000'),
+           (Parameter('Gamma', value=[1e9] * 5), r'^Gamma: values must be <= 1000'),
+           (Parameter('sigma', value=[1e9] * 5), r'^sigma: values must be <= 1000'),
+           (Parameter('theta0', value=[1e3] * 5), r'^theta0: values must be <= theta_max'),
+           (Parameter('theta_max', value=[1e300] * 5), r'^theta_max: expected 5 values'),
+           (Parameter('joint_velocity_limit', value=[1.0]), r'^joint_velocity_limit: exp'),
+           (Parameter('on_stale_setpoint', value='drop'), r'^on_stale_setpoint: expected')]
+    for param, reason in bad:
+        future = client.set_parameters([param])
+        rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
+        (res,) = future.result().results
+        assert not res.successful and re.match(reason, res.reason), (param.name, res.reason)
+    (res,) = _set(ros_node, client, Parameter('effort_limits', value=[2.0, 300.0]))
+    assert res.successful, res.reason
+    q, qd = _state_q(3)
+    drv.setpoint(3, _setpoint(3))
+    drv.joint_state(3, q, qd)
+    _, cmd = drv.answer(3)
+    tau = _expect(ctl, q, qd, _setpoint(3)).tau.tolist()
+    assert cmd == [max(-2.0, min(2.0, tau[0])), tau[1]]
+    assert procs.stop(proc) == 0
+
+
+def _set(node, client, *params):
+    import rclpy
+    future = client.set_parameters(list(params))
+    rclpy.spin_until_future_complete(node, future, timeout_sec=15.0)
+    assert future.done(), 'no answer from set_parameters within 15 s'
+    return future.result().results
+
+
+def test_restarted_real_time_controller_ramps_its_torque_from_zero_without_a_spike(
+        procs, ros_node, wait):
+    # As after kill -9 mid-circle: the arm moves, 3.6 cm off the stream, vertical.
+    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false',
+                  '-p', 'stale_timeout:=2.0')
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    rep = Replica('vertical', lockstep=False)
+    base = rep.fk(Q0)
+    prev = [0.0, 0.0]
+    limited = []
+    for k in range(30):
+        q = tuple(v + 1e-4 * k for v in Q0)
+        qd = (0.1, -0.1, 0.5)
+        drv.setpoints_ahead(k, lambda j: _moving_setpoint(j, base))
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        effort, _, _, _ = rep.tick(k * DT_NS, q, qd, _moving_setpoint(k, base))
+        assert cmd == effort, (k, st.status, st.dt, st.setpoint_stamp.nanosec, st.message)
+        assert max(abs(a - b) for a, b in zip(cmd, prev)) <= RATE * DT + 1e-9
+        limited.append(bool(st.status & STATUS_RATE_LIMITED))
+        prev = cmd
+    assert limited[0], 'the first command after the start was not rate limited'
+    assert not limited[-1], 'the command never caught up with the law'
+    assert procs.stop(proc) == 0
+
+
+def test_reset_service_restarts_theta_hat_and_the_hold(procs, ros_node, wait):
+    from std_srvs.srv import Trigger
+    import rclpy
+    proc = _start(procs, '-p', 'lockstep:=false', '-p', 'resume_time:=0.01',
+                  '-p', 'stale_timeout:=2.0')
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    rep = Replica('horizontal', lockstep=False, resume=0.01)
+    client = ros_node.create_client(Trigger, '/controller_node/reset')
+    assert client.wait_for_service(timeout_sec=15.0), 'no ~/reset service'
+    q, qd = Q0, (1.0, -2.0, 3.0)          # fast: theta_hat grows
+    for k in range(25):
+        drv.setpoints_ahead(k, _setpoint)
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        effort, _, _, out = rep.tick(k * DT_NS, q, qd, _setpoint(k))
+        assert cmd == effort, (k, st.status, st.dt, st.setpoint_stamp.nanosec, st.message)
+    assert max(st.theta_hat) > 0.0 and not st.status & STATUS_RESUMING
+    future = client.call_async(Trigger.Request())
+    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
+    assert future.done() and future.result().success, 'no answer from ~/reset'
+    assert 'theta_hat reset to theta0' in future.result().message
+    rep.reset()
+    k = 25
+    drv.setpoints_ahead(k, _setpoint)
+    drv.joint_state(k, q, qd)
+    st, cmd = drv.answer(k)
+    effort, ref, _, out = rep.tick(k * DT_NS, q, qd, _setpoint(k))
+    assert cmd == effort and list(st.theta_hat) == out.theta.tolist()
+    # Blends in again from the arm's position, like a start.
+    assert st.status & STATUS_RESUMING and list(st.position_desired) == rep.fk(q)
+    assert procs.stop(proc) == 0
+
+
+FAULTS = {
+    'qd_1e10': ('state', lambda q, qd: (q, (qd[0], 1e10, qd[2])), 'joint 1 velocity 10000000000.0'),
+    'qd_1e160': ('state', lambda q, qd: (q, (1e160, qd[1], qd[2])),
+                 'joint 0 velocity 1e+160'),
+    'q_1e6': ('state', lambda q, qd: ((q[0], q[1], 1e6), qd), 'joint 2 position 1000000.0'),
+    'setpoint_1e300': ('setpoint', None, 'beyond the reach'),
+    'K_1e300': ('param', None, 'K: values must be <= 10000'),
+}
+
+
+@pytest.mark.parametrize('fault', sorted(FAULTS))
+def test_absurd_input_is_refused_with_a_reason_and_tracking_resumes_within_half_a_second(
+        procs, ros_node, wait, fault):
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    kind, corrupt, reason = FAULTS[fault]
+    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false',
+                  '-p', 'resume_time:=0.01', '-p', 'stale_timeout:=2.0')
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    rep = Replica('vertical', lockstep=False, resume=0.01)
+    q, qd = Q0, QD0
+    clean = {0, ControllerState.STATUS_NEAR_SINGULAR}
+    k_fault = 20
+
+    def values_of(j):
+        if kind == 'setpoint' and j == k_fault:
+            return (1e300, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return _setpoint(j)
+    for k in range(k_fault):
+        drv.setpoints_ahead(k, values_of)
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        assert cmd == rep.tick(k * DT_NS, q, qd, _setpoint(k))[0]
+    assert st.status in clean, st.message
+    theta_before = list(st.theta_hat)
+    k = k_fault
+    drv.setpoints_ahead(k, values_of)
+    if kind == 'state':
+        bad_q, bad_qd = corrupt(q, qd)
+        drv.joint_state(k, bad_q, bad_qd)
+        st, cmd = drv.answer(k, 'the refusal')
+        assert cmd == [0.0, 0.0] and st.status == STATUS_BAD_INPUT, st.message
+        assert reason in st.message and list(st.theta_hat) == theta_before
+        rep.zero(k * DT_NS)
+        wait(lambda: 'implausible state' in procs.log(proc), 10.0, 'the refusal in the log')
+    elif kind == 'setpoint':
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        # Dropped: the previous setpoint (1 ms old, still fresh) is tracked.
+        assert cmd == rep.tick(k * DT_NS, q, qd, _setpoint(k - 1))[0]
+        assert list(st.position_desired) == list(_setpoint(k - 1)[0:2])
+        wait(lambda: reason in procs.log(proc), 10.0, 'the setpoint refusal in the log')
+        assert 'setpoint stamped %d ns refused' % (k * DT_NS) in procs.log(proc)
+    else:
+        client = AsyncParameterClient(ros_node, 'controller_node')
+        assert client.wait_for_services(timeout_sec=15.0), 'no parameter services'
+        (res,) = _set(ros_node, client, Parameter('K', value=[1e300, 1e300]))
+        assert not res.successful and res.reason.startswith(reason), res.reason
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        assert cmd == rep.tick(k * DT_NS, q, qd, _setpoint(k))[0]
+    assert _finite_within(cmd) and all(math.isfinite(x) for x in st.theta_hat)
+    # Good input again: the law's own command (no hold, no ramp, no fault) within 0.5 s of
+    # stamps, every effort finite and within the limits, theta_hat finite.
+    resumed = None
+    for k in range(k_fault + 1, k_fault + 1 + 500):
+        drv.setpoints_ahead(k, values_of)
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        assert cmd == rep.tick(k * DT_NS, q, qd, _setpoint(k))[0]
+        assert _finite_within(cmd) and all(math.isfinite(x) for x in st.theta_hat)
+        if st.status in clean:
+            resumed = k
+            break
+    assert resumed is not None, 'tracking did not resume within 0.5 s: %s' % st.message
+    assert (resumed - k_fault) * DT <= 0.5
     assert procs.stop(proc) == 0

@@ -84,7 +84,8 @@ class ControllerNode(Node):
         self._pending = None          # lockstep: (ns, stamp, q, qd, since) waiting for a setpoint
         self._setpoints = {}          # lockstep: stamp_ns -> (px, py, vx, vy, ax, ay)
         self._recent = []             # real time: [(stamp_ns, values)], in arrival order
-        self._setpoint_seen = False
+        self._setpoint_seen = False     # a setpoint was received (lockstep: stale timeout on)
+        self._setpoint_used = False     # a setpoint was tracked (else: 'no setpoint yet')
         self._last_sp = (0.0, 0.0)
         self._last_state_wall = None
         self._stale_reported = False
@@ -260,7 +261,7 @@ class ControllerNode(Node):
 
     def _no_setpoint(self, ns, stamp, q, qd):
         """Answer a state without a fresh setpoint: hold (default) or zero effort."""
-        if self._setpoint_seen:
+        if self._setpoint_used:
             why = ('stale setpoint: none stamped within %g s before the state%s'
                    % (self._stale, self._sp_refusal_note()))
         else:
@@ -350,11 +351,12 @@ class ControllerNode(Node):
             else:
                 ref = shaper.hold(None)
             status |= STATUS_HOLDING
-            if self._setpoint_seen:
+            if self._setpoint_used:
                 status |= STATUS_STALE_SETPOINT
         else:
             p_now = self._ctl.model.fk(q).tolist() if shaper.mode == MODE_NONE else None
             ref, blending = shaper.track(ns * 1e-9, sp, p_now)
+            self._setpoint_used = True
             if blending:
                 status |= STATUS_RESUMING
         px, py, vx, vy, ax, ay = ref
