@@ -19,6 +19,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 PARAMS = os.path.join(ROOT, 'config', 'sim.yaml')
 DT = 0.001
 DT_NS = 1_000_000
+WARN = 1     # diagnostic_msgs/DiagnosticStatus levels
+ERROR = 2
 
 
 def _qos():
@@ -191,6 +193,12 @@ def test_wrong_length_and_nan_commands_are_refused_and_zero_effort_applied(
     assert "command refused: expected 2 efforts for ['joint1', 'joint2'], got 3; zero " \
         'effort applied' in log
     assert 'command refused: non-finite effort in [1.0, nan]; zero effort applied' in log
+    wait(lambda: any(d[2]['refused commands'] == '2' for d in ctl.diagnostics), 5.0,
+         'the refusals in the status', spin=ctl.spin)
+    # WARN: 'N commands refused in the last 1.0 s' (with the timeouts once this test is
+    # silent, '; '-joined)
+    first = next(d for d in ctl.diagnostics if d[2]['refused commands'] != '0')
+    assert first[0] == WARN and ' commands refused in the last ' in first[1]
     assert procs.stop(proc) == 0
 
 
@@ -250,7 +258,6 @@ def _call_reset(ros_node):
     return future.result().message
 
 
-ERROR = 2
 
 
 def test_a_diverged_plant_publishes_its_last_sane_state_reports_error_until_reset(
@@ -391,6 +398,12 @@ def test_realtime_applies_the_latest_command_and_zero_after_the_timeout(
          spin=ctl.spin)
     assert 'no command on /effort_controller/commands for 0.3 s: zero effort' in \
         procs.log(proc)
+    # ... and says so in its status: WARN with the reason, the timeout counted.
+    wait(lambda: ctl.diagnostics and ctl.diagnostics[-1][1].startswith(
+         'no command for 0.3 s: zero effort'), 5.0, 'the timeout in the status', spin=ctl.spin)
+    level, _, values = ctl.diagnostics[-1]
+    assert level == WARN and values['command timeouts'] == '1'
+    assert values['brakes'] == 'released' and values['diverged'] == 'false'
     assert procs.stop(proc) == 0
 
 

@@ -552,21 +552,24 @@ class SimNode(Node):
         if update:
             self._diag_window = (now, k, self._refused, self._timeouts, self._dropped)
             self._lat_n = self._lat_sum = self._lat_max = 0
-        level = DiagnosticStatus.WARN
+        warnings = []
+        if self._cmd_timed_out:
+            warnings.append('no command for %g s: zero effort' % self._timeout)
+        elif timeouts:
+            warnings.append('%d command timeouts in the last %.1f s: zero effort' % (
+                timeouts, elapsed))
+        if refused:
+            warnings.append('%d commands refused in the last %.1f s' % (refused, elapsed))
+        if dropped:
+            warnings.append('behind the wall clock: %d steps dropped in the last %.1f s' % (
+                dropped, elapsed))
         if self._diverged is not None:
             level = DiagnosticStatus.ERROR
             message = ('plant diverged at %s; publishing the last sane state (call ~/reset)'
                        % self._diverged)
-        elif self._cmd_timed_out:
-            message = 'no command for %g s: zero effort' % self._timeout
-        elif timeouts:
-            message = '%d command timeouts in the last %.1f s: zero effort' % (
-                timeouts, elapsed)
-        elif refused:
-            message = '%d commands refused in the last %.1f s' % (refused, elapsed)
-        elif dropped:
-            message = 'behind the wall clock: %d steps dropped in the last %.1f s' % (
-                dropped, elapsed)
+        elif warnings:
+            level = DiagnosticStatus.WARN
+            message = '; '.join(warnings)
         else:
             level = DiagnosticStatus.OK
             if self._braked:
