@@ -134,6 +134,11 @@ def test_fj_param_dump_prints_ros2_param_yaml_and_load_sets_a_file(graph, tmp_pa
     dumped = yaml.safe_load(done.stdout)['/controller_node']['ros__parameters']
     assert dumped['case'] == 'horizontal' and dumped['cpu_affinity'] == []
     assert isinstance(dumped['det_threshold'], float)
+    (tmp_path / 'dump.yaml').write_text(done.stdout)
+    back = fj('param', 'load', '/controller_node', str(tmp_path / 'dump.yaml'))
+    assert back.returncode == 0, back.stderr  # read-only ones unchanged: skipped, said
+    assert 'Set parameter control_period skipped: read-only, already 0.001' in back.stdout
+    assert 'Set parameter K successful' in back.stdout
     params = tmp_path / 'tuned.yaml'
     params.write_text('/controller_node:\n  ros__parameters:\n    nominal_scale: 0.75\n'
                       '    det_threshold: 2.0e-07\n    Lambda: [40.0, 40.0]\n'

@@ -21,7 +21,9 @@ Built on rclpy: the graph API, rclpy's parameter client
 ``~/get_parameters``, ``~/set_parameters``, ``~/describe_parameters`` calls ros2param makes)
 and the service client. ``param load`` sets the node's own section of the file (and
 ``/**`` with ``--use-wildcard``) with the YAML types kept (``1.0e-07`` a double, ``[]`` the
-declared array type), where ros2 param load re-parses each value from its ``str()``.
+declared array type), where ros2 param load re-parses each value from its ``str()``;
+a read-only parameter the node already has is skipped (ros2 param load reports it failed),
+so what ``param dump`` wrote loads back.
 Values are parsed as ``ros2 param set`` parses them (YAML:
 ``rclpy.parameter.get_parameter_value``). Unlike ros2cli there is no daemon: each command
 waits for discovery itself, at most ``--timeout`` s for the node or service it names
@@ -333,6 +335,32 @@ def file_parameters(path, node_name, use_wildcard=False):
     return values
 
 
+def _drop_unchanged_read_only(s, client, name, params):
+    """
+    Return ``params`` without the read-only ones the node already has (each said).
+
+    So a file ``param dump`` wrote loads back into a node without a refusal for each
+    read-only parameter (ros2 param load prints them as failed).
+    """
+    from rclpy.parameter import parameter_value_to_python
+    names = [p.name for p in params]
+    descriptors = s.wait_future(client.describe_parameters(names),
+                                name + '/describe_parameters').descriptors
+    read_only = [d.name for d in descriptors if d.read_only]  # none if one is undeclared
+    if not read_only:
+        return params
+    values = s.wait_future(client.get_parameters(read_only), name + '/get_parameters').values
+    current = {n: parameter_value_to_python(v) for n, v in zip(read_only, values)}
+    kept = []
+    for param in params:
+        if param.name in current and param.value == current[param.name]:
+            print('Set parameter %s skipped: read-only, already %r'
+                  % (param.name, param.value))
+        else:
+            kept.append(param)
+    return kept
+
+
 def _param_load(s, args):
     from rclpy.parameter import Parameter
     name = absolute_name(args.node_name)
@@ -355,6 +383,7 @@ def _param_load(s, args):
                 raise CommandError('Cannot load %s: %s: %s' % (args.parameter_file, pname,
                                                                exc))
         params.append(param)
+    params = _drop_unchanged_read_only(s, client, name, params)
     results = s.wait_future(client.set_parameters(params), name + '/set_parameters').results
     status = 0
     for param, result in zip(params, results):

