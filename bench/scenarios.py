@@ -223,6 +223,7 @@ def planner_kill(args, index):
                            and row['drift_from_hold_mm'] <= 5.0)
     row['status_says_holding'] = bool(row['holding_ticks'])
     row['replan_accepted'] = t_plan is not None
+    row['plan_accepted_after_restart_s'] = None if t_plan is None else t_plan - t_restart
     row['replan_refusals'] = sorted({r for _, r in again.refused})
     if t_plan is not None:
         follow = log_window(ticks, t_plan, t_end)
@@ -236,13 +237,15 @@ def planner_kill(args, index):
     say('planner_kill vertical: killed %.1f s into the circle; HOLDING ticks %d of %d '
         '(first %s s after the kill) -> %s; drift over %g s from the first HOLDING tick %s mm '
         '(from the kill %s mm; until the restart %s s later %s mm) <= 5 -> %s; restarted '
-        'planner: plan %s%s; tracking after it max %s mm vs %.3f -> %s'
+        'planner: plan %s %s s after the restart%s; tracking after it max %s mm vs %.3f '
+        '-> %s'
         % (args.mid, row['holding_ticks'], row['ticks_after_kill'],
            _f(row.get('hold_started_after_kill_s')), verdict(row['status_says_holding']),
            args.hold_seconds, _f(row.get('drift_from_hold_mm')),
            _f(row.get('drift_from_kill_mm')), _f(row.get('held_until_restart_s')),
            _f(row.get('drift_until_restart_mm')), verdict(row['drift_within']),
            'accepted' if t_plan else 'NOT accepted',
+           _f(row['plan_accepted_after_restart_s']),
            (' (%s)' % '; '.join(row['replan_refusals'])) if row['replan_refusals'] else '',
            _f(row.get('after_replan', {}).get('max_mm')), bound, verdict(row['follows'])))
     return [row], index
