@@ -7,6 +7,7 @@ so and does not run otherwise) and always unmounted at the end.
 """
 import os
 import re
+import signal
 import subprocess
 import time
 
@@ -92,8 +93,9 @@ def _status(ros_node, wait):
 
 
 @pytest.mark.ros
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_recorder_on_a_full_disk_reports_the_loss_finalises_and_exits_with_one_line(
-        procs, wait, ros_node, tmp_path, small_disk):
+        procs, wait, ros_node, tmp_path, small_disk, signum):
     from freejoint_tools.bagfile import open_bag
     bag_path = os.path.join(small_disk(3 << 20), 'run')
     recorder = procs.start_node('freejoint_tools', 'recorder', 'recorder', [
@@ -108,7 +110,8 @@ def test_recorder_on_a_full_disk_reports_the_loss_finalises_and_exits_with_one_l
     assert not answer.success and 'disk full' in answer.message, answer.message
     assert int(re.search(r'; not written (\d+);', answer.message).group(1)) > 0
     time.sleep(0.5)                            # messages keep coming: counted lost
-    code = procs.stop(recorder, 30.0)
+    recorder.send_signal(signum)
+    code = recorder.wait(30.0)
     procs.stop(publisher)
     log = procs.log(recorder)
     assert code == 1, log
