@@ -7,8 +7,9 @@ Figures (printed; nothing is asserted):
   tick, for the shipped Table I URDF and the 4-link example, and
   ``PinArmModel.decoupling`` (Da, b) per tick, with the closed-form models'
   ``decoupling`` beside them for reference;
-* ``MujocoPlant.step`` per 1 ms control period at ``DEFAULT_DT_SUB`` (3-link and
-  4-link), with the RK4 ``Plant`` of the same arms for reference;
+* ``MujocoPlant.step`` and ``PinPlant.step`` (RK4 on Pinocchio's ABA) per 1 ms control
+  period at ``DEFAULT_DT_SUB`` (3-link and 4-link), with the RK4 ``Plant`` of the same
+  arms for reference;
 * agreement: the largest difference Pinocchio - closed form (M, Cqd, G, J, Jdot qd, fk)
   over random states, and the closed loop on the paper's circle on MuJoCo vs RK4
   (largest end-effector difference over the 5000 ticks, mm), both cases.
@@ -32,6 +33,7 @@ from freejoint_core import offline  # noqa: E402
 from freejoint_core.arm import ArmModel, make_model, table1  # noqa: E402
 from freejoint_core.mujoco_plant import MujocoPlant  # noqa: E402
 from freejoint_core.pin_model import PinArmModel  # noqa: E402
+from freejoint_core.pin_plant import PinPlant  # noqa: E402
 from freejoint_core.plant import DEFAULT_DT_SUB, Plant  # noqa: E402
 from freejoint_core.urdf import four_link_arm, FOUR_LINK_Q0, paper_arm  # noqa: E402
 import numpy as np  # noqa: E402
@@ -73,11 +75,14 @@ def _model_timings(arm, label, calls):
 def _plant_timings(arm, label, q0, periods):
     tau = [0.1] * arm.params.r
     mj = MujocoPlant(arm, DEFAULT_DT_SUB, seed=0, q0=q0)
+    pin_plant = PinPlant(arm, DEFAULT_DT_SUB, seed=0, q0=q0)
     rk4 = Plant(arm.params, DEFAULT_DT_SUB, seed=0, q0=q0)
     kind = 'scalar kernel' if arm.params.n == 3 else 'general numpy'
     return [
         {'name': f'MuJoCo plant per 1 ms period, dt_sub = {DEFAULT_DT_SUB * 1e3:g} ms, {label}',
          'value': _per_call_us(lambda: mj.step(tau, DT), periods), 'unit': 'us'},
+        {'name': f'RK4 plant on Pinocchio ABA per 1 ms period, {label}',
+         'value': _per_call_us(lambda: pin_plant.step(tau, DT), periods), 'unit': 'us'},
         {'name': f'RK4 plant per 1 ms period, {label} ({kind}, reference)',
          'value': _per_call_us(lambda: rk4.step(tau, DT), max(periods // 10, 20)),
          'unit': 'us'},
