@@ -443,7 +443,7 @@ def test_plan_circle_every_1_3_s_while_circles_run_never_steps_the_setpoint_and_
     circle_step = max(own_step(c) for c in circles.values())
     assert circle_step - own_step(CircleQuintic()) < 1e-15
     assert steps.max() <= circle_step, (
-        'setpoint step %.6g m at tick %d > the circle\'s own %.6g m' % (
+        "setpoint step %.6g m at tick %d > the circle's own %.6g m" % (
             steps.max(), int(steps.argmax()) + 1, circle_step))
     accepted = [a for a in answers if a[1]]
     assert len(accepted) >= 3, answers                # most requests get through

@@ -8,6 +8,7 @@ continuous and the velocity and acceleration are zero at both ends.
 """
 
 from dataclasses import dataclass
+import functools
 import math
 
 import numpy as np
@@ -492,6 +493,15 @@ def transition_limits(circle, dt, v0, a0):
     return max(speed, v), max(acc, a), step * max(1.0, v / speed)
 
 
+# Candidates coarse-tested at once (the search stops at the first chunk that has one).
+CHUNK = 64
+
+
+@functools.lru_cache(maxsize=8)
+def _candidates(max_ticks):
+    return np.array(transition_candidates(max_ticks), dtype=np.int64)
+
+
 def transition_candidates(max_ticks, growth=1.01, dense=32):
     """Return the candidate durations in ticks: 1 .. dense, then growing by ``growth``."""
     out = list(range(1, min(dense, max_ticks) + 1))
@@ -508,7 +518,7 @@ AT_START = 1e-9
 
 
 def plan_transition(p0, v0, a0, circle, dt, max_duration=60.0, path_check=None,
-                    limits=None, coarse=129, max_exact=400):
+                    limits=None, coarse=65, max_exact=400):
     """
     Choose the shortest quintic transition from a stream state into ``circle``'s start.
 
@@ -518,7 +528,7 @@ def plan_transition(p0, v0, a0, circle, dt, max_duration=60.0, path_check=None,
     the last one the circle's start), its speed and acceleration stay within the
     limits and no two consecutive setpoints are farther apart than the step limit,
     and ``path_check`` accepts its tick points. A coarse test on ``coarse`` normalised
-    times (1 % slack) skips the hopeless candidates first.
+    times (1 % slack), ``CHUNK`` candidates at a time, skips the hopeless ones first.
 
     Parameters
     ----------
@@ -563,43 +573,53 @@ def plan_transition(p0, v0, a0, circle, dt, max_duration=60.0, path_check=None,
         return TransitionChoice(True, '', None, 0, 0.0, 0.0, 0.0, (v_lim, a_lim, s_lim),
                                 math.inf)
     max_ticks = max(1, int(math.floor(max_duration / dt + 1e-9)))
-    cand = np.array(transition_candidates(max_ticks), dtype=float)
-    # coarse test, all candidates at once: shape (candidates, coarse, 2)
+    cand = _candidates(max_ticks)
     tau = np.linspace(0.0, 1.0, max(3, int(coarse)))
-    T = (cand * dt)[:, None, None]
-    dp = (p1 - p0)[None, None, :]
-    h = [(np.polyval(d1[::-1], tau)[None, :, None], np.polyval(d2[::-1], tau)[None, :, None])
+    h = [(np.polyval(d1[::-1], tau)[None, :], np.polyval(d2[::-1], tau)[None, :])
          for d1, d2 in (_H0, _H1, _H2)]
-    vel = (dp * h[0][0] + v0 * T * h[1][0] + a0 * T * T * h[2][0]) / T
-    acc = (dp * h[0][1] + v0 * T * h[1][1] + a0 * T * T * h[2][1]) / (T * T)
-    vmax = np.sqrt((vel ** 2).sum(axis=2)).max(axis=1)
-    amax = np.sqrt((acc ** 2).sum(axis=2)).max(axis=1)
-    hopeful = np.nonzero((vmax <= 1.01 * v_lim) & (amax <= 1.01 * a_lim))[0]
+    dp = p1 - p0
     best = (math.inf, None)                           # the closest miss, for the reason
     path_reason = ''
-    for i in hopeful[:max(1, int(max_exact))]:
-        n = int(cand[i])
-        seg = QuinticTransition(p0, v0, a0, p1, n * dt)
-        s = seg.sample_ticks(dt, n + 1)
-        s[n] = (p1[0], p1[1], 0.0, 0.0, 0.0, 0.0)
-        speed = float(np.hypot(s[:, 2], s[:, 3]).max())
-        acc_n = float(np.hypot(s[:, 4], s[:, 5]).max())
-        step = float(np.hypot(np.diff(s[:, 0]), np.diff(s[:, 1])).max())
-        excess = max(speed / v_lim, acc_n / a_lim, step / s_lim)
-        if excess > 1.0:
-            if excess < best[0]:
-                best = (excess, (n, speed, acc_n, step))
-            continue
-        margin = math.inf
-        if path_check is not None:
-            ok, margin, reason = path_check(s[:, :2])
-            if not ok:
-                path_reason = path_reason or (
-                    f'the shortest transition within the limits ({n * dt:.6g} s) would '
-                    f'pass a point {reason}')
+    exact = 0
+    for lo in range(0, len(cand), CHUNK):
+        # coarse test of a chunk of candidates at once: shape (chunk, coarse) per axis
+        n_chunk = cand[lo:lo + CHUNK]
+        T = (n_chunk * dt)[:, None]
+        v2 = np.zeros((len(n_chunk), tau.size))
+        a2 = np.zeros_like(v2)
+        for ax in (0, 1):
+            v = (dp[ax] * h[0][0] + v0[ax] * T * h[1][0] + a0[ax] * T * T * h[2][0]) / T
+            a = (dp[ax] * h[0][1] + v0[ax] * T * h[1][1] + a0[ax] * T * T * h[2][1]) / (T * T)
+            v2 += v * v
+            a2 += a * a
+        hopeful = np.nonzero((v2.max(axis=1) <= (1.01 * v_lim) ** 2)
+                             & (a2.max(axis=1) <= (1.01 * a_lim) ** 2))[0]
+        for i in hopeful:
+            if exact >= max_exact:
+                break
+            exact += 1
+            n = int(n_chunk[i])
+            seg = QuinticTransition(p0, v0, a0, p1, n * dt)
+            s = seg.sample_ticks(dt, n + 1)
+            s[n] = (p1[0], p1[1], 0.0, 0.0, 0.0, 0.0)
+            speed = float(np.hypot(s[:, 2], s[:, 3]).max())
+            acc_n = float(np.hypot(s[:, 4], s[:, 5]).max())
+            step = float(np.hypot(np.diff(s[:, 0]), np.diff(s[:, 1])).max())
+            excess = max(speed / v_lim, acc_n / a_lim, step / s_lim)
+            if excess > 1.0:
+                if excess < best[0]:
+                    best = (excess, (n, speed, acc_n, step))
                 continue
-        return TransitionChoice(True, '', seg, n, speed, acc_n, step,
-                                (v_lim, a_lim, s_lim), float(margin))
+            margin = math.inf
+            if path_check is not None:
+                ok, margin, reason = path_check(s[:, :2])
+                if not ok:
+                    path_reason = path_reason or (
+                        f'the shortest transition within the limits ({n * dt:.6g} s) would '
+                        f'pass a point {reason}')
+                    continue
+            return TransitionChoice(True, '', seg, n, speed, acc_n, step,
+                                    (v_lim, a_lim, s_lim), float(margin))
     lim = (f'speed {v_lim:.6g} m/s, acceleration {a_lim:.6g} m/s^2, step {s_lim:.6g} m '
            f'per tick')
     if path_reason:

@@ -34,6 +34,14 @@ the ROS clock here.
 With ``autostart`` the configured circle (parameters ``centre``, ``radius``, ``duration``,
 ``start_angle``, ``direction``, ``start_delay``) starts at activation and again, anew,
 after every accepted change of those parameters.
+
+No step in the reference (``docs/GRAPH.md``, Plan changes): a plan accepted once the stream
+has published a tick starts from the stream's state at its first unpublished tick, by a
+quintic transition into the circle's start (``planning.prepare_transition``,
+``freejoint_core.trajectory.plan_transition``), refused with the reason when none fits the
+bounds or its path enters the region, and while another transition runs. Every circle is
+held to the arm's reach and to ``max_speed`` / ``max_acceleration``. ``lookahead`` is checked
+against the clock spacing rule at run time.
 """
 
 import math
