@@ -120,6 +120,10 @@ BAD_START = [
     ('player', 'rate', '0.0', 'range'),
     ('player', 'rate', 'abc', 'type'),
     ('player', 'bag', "''", 'no bag given'),
+    # freejoint_bringup graph: the nodes in one process, overrides per node
+    ('graph', 'controller.nominal_scale', '1000.0', 'range'),
+    ('graph', 'sim.seed', 'abc', 'type'),
+    ('graph', 'controller.K', '[-1.0,100.0]', '> 0'),
 ]
 
 
@@ -127,9 +131,15 @@ BAD_START = [
                          ids=['%s-%s=%s' % row[:3] for row in BAD_START])
 def test_a_bad_start_up_parameter_ends_the_node_with_one_line_naming_it_and_exit_2(
         kind, param, value, reason, tmp_path, make_bag):
-    pkg, exe, _, args = _node(kind, tmp_path, make_bag, config=False)
-    cmd = [os.path.join(ROOT, 'install', pkg, 'lib', pkg, exe), '--ros-args', *args,
-           '-p', '%s:=%s' % (param, value)]
+    if kind == 'graph':
+        node, param = param.split('.')
+        cmd = [os.path.join(ROOT, 'install', 'freejoint_bringup', 'lib', 'freejoint_bringup',
+                            'graph'), '--nodes', 'sim', 'controller',
+               '--%s' % node, '%s=%s' % (param, value)]
+    else:
+        pkg, exe, _, args = _node(kind, tmp_path, make_bag, config=False)
+        cmd = [os.path.join(ROOT, 'install', pkg, 'lib', pkg, exe), '--ros-args', *args,
+               '-p', '%s:=%s' % (param, value)]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     out = done.stdout + done.stderr
     assert done.returncode == 2, 'exit %s, expected 2:\n%s' % (done.returncode, out)

@@ -94,9 +94,11 @@ def finish(name, node):
 def main(args=None):
     """Run the hosted nodes until SIGINT/SIGTERM."""
     import rclpy
+    from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
     from rclpy.utilities import remove_ros_args
+    from freejoint_common.node_tools import parameter_error
     from freejoint_core.errors import FreejointValueError
     argv = sys.argv if args is None else args
     options = parse(remove_ros_args(argv)[1:])
@@ -110,8 +112,8 @@ def main(args=None):
                 nodes[name] = classes[name](cli_args=node_args(
                     getattr(options, '%s_params' % name), getattr(options, name)))
         spin(nodes)
-    except FreejointValueError as exc:
-        rclpy.logging.get_logger('graph').fatal('bad parameter: %s' % exc)
+    except (FreejointValueError, ParameterException) as exc:  # as every node alone
+        rclpy.logging.get_logger('graph').fatal('bad parameter: %s' % parameter_error(exc))
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
