@@ -13,7 +13,7 @@ EXECUTABLES = {
     'freejoint_sim': ['sim_node'],
     'freejoint_planner': ['planner_node'],
     'freejoint_control': ['controller_node'],
-    'freejoint_tools': ['recorder', 'player', 'analyze'],
+    'freejoint_tools': ['recorder', 'player', 'analyze', 'fj'],
     'freejoint_bringup': ['graph'],
 }
 PACKAGES = sorted(EXECUTABLES) + ['freejoint_common', 'freejoint_msgs']
