@@ -118,7 +118,7 @@ class SimNode(Node):
         self._waiting_since = _monotonic()
         self._last_publish = 0.0
         self._reset_pending = False
-        self._latest = None            # real time: (tau_active list, wall time)
+        self._latest = None            # real time: (tau, receipt, step answered, accepted)
         self._cmd_timed_out = False
         self._throttle = Throttle(1.0)
         self._dropped = 0
