@@ -729,3 +729,45 @@ def test_absurd_input_is_refused_with_a_reason_and_tracking_resumes_within_half_
     assert resumed is not None, 'tracking did not resume within 0.5 s: %s' % st.message
     assert (resumed - k_fault) * DT <= 0.5
     assert procs.stop(proc) == 0
+
+
+def test_delay_compensation_predict_runs_the_law_on_the_predicted_state_in_real_time(
+        procs, ros_node, wait):
+    from freejoint_core.delay import extrapolate_setpoint, StatePredictor
+    from freejoint_core.reference import limit_effort
+    # The test's stamps start at 0 (1970): the state age is huge, so the horizon is the
+    # predictor's longest, max_ticks periods: deterministic.
+    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false',
+                  '-p', 'stale_timeout:=2.0', '-p', 'delay_compensation:=predict')
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    ctl = RobustController(table1('vertical').scaled(0.7),
+                           Gains(tau_limit=LIMITS, theta_max=(100.0,) * 5))
+    pred = StatePredictor(table1('vertical').scaled(0.7), DT)
+    m = pred.max_ticks
+    # The arm at rest where the hold starts: the hold reference has no velocity, so the
+    # reference shifted by the horizon is the hold itself.
+    q, qd = Q0, (0.0, 0.0, 0.0)
+    hold = ctl.model.fk(q).tolist()
+    prev = [0.0, 0.0]
+    armed = True
+    for k in range(5):
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        assert st.status & STATUS_HOLDING, st.message
+        q_pred, qd_pred = pred.predict(q, qd, m)
+        p, v, a = extrapolate_setpoint(hold, (0.0, 0.0), (0.0, 0.0), m * DT)
+        out = ctl.step(q_pred, qd_pred, p, v, a, DT)
+        effort = out.tau.tolist()
+        if armed:
+            effort, _, armed = limit_effort(effort, LIMITS, prev, RATE * DT)
+        pred.push(effort)
+        prev = effort
+        assert cmd == effort, k
+        # Published: the measured position, the reference at the state's time.
+        assert list(st.position) == hold and list(st.position_desired) == hold
+    assert procs.stop(proc) == 0
+    # Lockstep has no delay to compensate: refused at start-up with the reason.
+    proc = _start(procs, '-p', 'delay_compensation:=predict')
+    assert proc.wait(30.0) == 2
+    assert "delay_compensation: 'predict' is for real time" in procs.log(proc)

@@ -23,6 +23,7 @@ from freejoint_control.params import build_config, SPECS
 from freejoint_core.control import (RobustController, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
                                     STATUS_TORQUE_LIMITED)
+from freejoint_core.delay import extrapolate_setpoint, StatePredictor
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.reference import (clamp_dt, limit_effort, MODE_HOLD, MODE_NONE,
                                       ReferenceShaper, setpoint_refusal, state_refusal)
@@ -69,6 +70,7 @@ class ControllerNode(Node):
         cfg = self.config
         self._ctl = RobustController(cfg.nominal, cfg.gains)
         self._shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep)
+        self._predictor = None
         self._install(cfg)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
@@ -138,6 +140,12 @@ class ControllerNode(Node):
         self._shaper.set_resume_time(cfg.resume_time)
         self._sp_bounds = (cfg.reach, cfg.setpoint_max_velocity, cfg.setpoint_max_acceleration)
         self._state_bounds = (cfg.position_lower, cfg.position_upper, cfg.velocity_limit)
+        if cfg.delay_compensation == 'predict':
+            if self._predictor is None or self._predictor.params != cfg.nominal:
+                self._predictor = StatePredictor(cfg.nominal, cfg.dt)
+        else:
+            self._predictor = None
+        self._active_of_cmd = cfg.cmd_index
 
     def _on_set_parameters(self, params):
         values = dict(self._values)
@@ -360,7 +368,11 @@ class ControllerNode(Node):
             if blending:
                 status |= STATUS_RESUMING
         px, py, vx, vy, ax, ay = ref
-        out = self._ctl.step(q, qd, (px, py), (vx, vy), (ax, ay), dt)
+        pred = self._predictor
+        if pred is None:
+            out = self._ctl.step(q, qd, (px, py), (vx, vy), (ax, ay), dt)
+        else:
+            out = self._predicted_step(pred, ns, q, qd, ref, dt)
         tau = out.tau.tolist()
         theta = out.theta.tolist()
         effort = tau if self._identity else [tau[i] for i in self.config.cmd_index]
@@ -393,6 +405,8 @@ class ControllerNode(Node):
             else:
                 self._rate_armed = False
         self._prev_cmd = effort
+        if pred is not None:
+            self._push(effort)
         cmd = self._cmd
         cmd.data = effort
         self._dim.label = 'stamp_ns=%d' % ns
@@ -407,7 +421,7 @@ class ControllerNode(Node):
         st.delta_v = out.dv
         st.effort = effort
         st.det_dd = out.det
-        st.position = out.p
+        st.position = out.p if pred is None else self._ctl.model.fk(q)
         st.position_desired = (px, py)
         st.status = status
         st.message = _status_message(status, out.det, self._values, hold_reason,
@@ -428,6 +442,28 @@ class ControllerNode(Node):
         self._last_sp = (px, py)
         self._last_det = out.det
         self._ticks += 1
+
+    def _predicted_step(self, pred, ns, q, qd, ref, dt):
+        """Run the law on the state predicted to when the command takes effect."""
+        age = (self._clock.now().nanoseconds - ns) * 1e-9
+        ticks = min(pred.max_ticks, max(1, math.ceil(age / self._dt - 1e-9)))
+        try:
+            q_pred, qd_pred = pred.predict(q, qd, ticks)
+            h = ticks * self._dt
+            p, v, a = extrapolate_setpoint(ref[0:2], ref[2:4], ref[4:6], h)
+        except FreejointValueError as exc:
+            self._throttle(self.get_logger().error, 'predict',
+                           'state prediction failed (%s): the law uses the measured state'
+                           % exc)
+            return self._ctl.step(q, qd, ref[0:2], ref[2:4], ref[4:6], dt)
+        return self._ctl.step(q_pred, qd_pred, p, v, a, dt)
+
+    def _push(self, effort):
+        """Record the command sent (command order) in the predictor (model order)."""
+        tau = [0.0] * len(effort)
+        for j, i in enumerate(self._active_of_cmd):
+            tau[i] = effort[j]
+        self._predictor.push(tau)
 
     def _answer_zero(self, ns, stamp, status, message):
         """Command zero effort for the state stamped ns; say why in the state message."""
@@ -464,6 +500,8 @@ class ControllerNode(Node):
         # The arm got zero: the next computed command ramps up from it.
         self._prev_cmd = list(self._zero)
         self._rate_armed = True
+        if self._predictor is not None:
+            self._push(self._zero)
 
     def _restart_state(self):
         """theta_hat back to theta0, hold / blend forgotten, the rate limit armed."""
@@ -471,6 +509,8 @@ class ControllerNode(Node):
         self._good_theta = self._ctl.theta
         self._shaper.reset()
         self._rate_armed = self._prev_cmd is not None
+        if self._predictor is not None:
+            self._predictor.reset()
 
     def _on_reset(self, request, response):
         """~/reset: restart theta_hat and the hold / blend state (std_srvs/Trigger)."""

@@ -79,6 +79,10 @@ SPECS = (
          (1e-6, 1e3)),
     Spec('setpoint_max_acceleration', 50.0,
          'largest plausible setpoint acceleration [m/s^2]', (1e-6, 1e5)),
+    Spec('delay_compensation', 'off',
+         "'off' or 'predict' (real time only): the law runs on the state predicted with the "
+         'nominal model (freejoint_core.delay.StatePredictor) to when the command takes '
+         'effect, ceil(state age / control_period) periods (at least 1) ahead'),
     Spec('executor', 'single_threaded',
          "rclpy executor: 'single_threaded' or 'events' (rclpy.experimental.EventsExecutor)",
          read_only=True),
@@ -87,6 +91,7 @@ SPECS = (
 DEFAULTS = {s.name: s.default for s in SPECS}
 EXECUTORS = ('single_threaded', 'events')
 ON_STALE = ('hold', 'zero')
+DELAY_COMPENSATION = ('off', 'predict')
 GAIN_MAX = {'K': 1e4, 'Lambda': 1e4, 'R': 1e3, 'Gamma': 1e3, 'sigma': 1e3}
 """Upper bounds of the gain vectors (K, Lambda in 1/s; beyond them the law is meaningless
 at any control rate this node runs; (K + Lambda) * control_period <= 1 is checked too)."""
@@ -118,6 +123,7 @@ class Config:
     reach: float
     setpoint_max_velocity: float
     setpoint_max_acceleration: float
+    delay_compensation: str
 
 
 def build_config(values):
@@ -202,6 +208,14 @@ def build_config(values):
     resume = float(values['resume_time'])
     if not resume >= 0.0:
         raise FreejointValueError(f'resume_time: must be >= 0, got {resume}')
+    comp = values['delay_compensation']
+    if comp not in DELAY_COMPENSATION:
+        raise FreejointValueError(
+            f'delay_compensation: expected one of {DELAY_COMPENSATION}, got {comp!r}')
+    if comp == 'predict' and bool(values['lockstep']):
+        raise FreejointValueError(
+            "delay_compensation: 'predict' is for real time (lockstep: false); in lockstep "
+            'the simulator waits for the command, there is no delay to compensate')
     n = nominal.n
     lower = _floats('joint_position_lower', values['joint_position_lower'])
     upper = _floats('joint_position_upper', values['joint_position_upper'])
@@ -232,7 +246,8 @@ def build_config(values):
                   position_lower=lower, position_upper=upper, velocity_limit=vlim,
                   reach=float(sum(nominal.lengths)),
                   setpoint_max_velocity=float(values['setpoint_max_velocity']),
-                  setpoint_max_acceleration=float(values['setpoint_max_acceleration']))
+                  setpoint_max_acceleration=float(values['setpoint_max_acceleration']),
+                  delay_compensation=comp)
 
 
 def _floats(name, value):
