@@ -371,6 +371,7 @@ BAD_START = [
     ('radius', '0.8', 'exceeds the largest circle the reach annulus [0, 1.5] m of the arm '
                       'holds, 0.75 m'),
     ('duration', '1.0', 'peaks at 2.35619 m/s, above max_speed 1 m/s (duration >= 2.35619 s)'),
+    ('grid_resolution', '0.001', '3000 x 3000 cells for the reach 1.5 m, above 2000 a side'),
 ]
 
 
@@ -465,3 +466,38 @@ def test_plan_circle_every_1_3_s_while_circles_run_never_steps_the_setpoint_and_
         assert plan_id == 1 or before, 'plan %d started without a transition' % plan_id
     log = procs.log(proc)
     assert log.count('transition of') == len(accepted)
+
+
+def test_circles_beyond_the_reach_or_the_bounds_are_refused_at_run_time_naming_the_parameter(
+        procs, ros_node, wait):
+    from freejoint_msgs.srv import PlanCircle
+    proc = _start_planner(procs)
+    client = _wait_ready(ros_node, procs, proc, wait)
+    params = _param_client(ros_node, wait)
+    for name, value, words in [
+            ('radius', 0.8, 'radius: 0.8 m exceeds the largest circle the reach annulus'),
+            ('centre', [1.6, 0.0], 'centre: (1.6, 0) m is 1.6 m from the base, beyond the '
+                                   'reach 1.5 m'),
+            ('duration', 1.0, 'duration: 1 s for radius 0.2 m peaks at 2.35619 m/s, above '
+                              'max_speed 1 m/s'),
+            ('grid_resolution', 0.001, 'grid_resolution: 0.001 m gives a semi_singular_map '
+                                       'of 3000 x 3000 cells'),
+            ('start_angle', 7.0, 'start_angle'),
+            ('max_speed', 0.0, 'max_speed')]:
+        result = _set(ros_node, params, name, value)
+        assert not result.successful and words in result.reason, (name, result.reason)
+    assert _set(ros_node, params, 'max_speed', 0.3).successful
+    for request, words in [
+            (dict(radius=0.2, duration=5.0, start_angle=0.0), 'above max_speed 0.3 m/s '
+                                                              '(duration >= 7.85398 s)'),
+            (dict(radius=0.2, duration=8.0, start_angle=7.0), 'bad request: start_angle: '
+                                                              'expected a value in'),
+            (dict(radius=0.76, duration=60.0, start_angle=0.0), 'radius: 0.76 m exceeds')]:
+        answer = _call(ros_node, client, PlanCircle.Request(centre=[0.0, 0.0], direction=1,
+                                                            execute=True, **request),
+                       'plan_circle %s' % request)
+        assert not answer.accepted and words in answer.reason, answer.reason
+    answer = _call(ros_node, client, PlanCircle.Request(
+        centre=[0.0, 0.0], radius=0.2, duration=8.0, start_angle=0.0, direction=1,
+        execute=False), 'plan_circle (slow enough)')
+    assert answer.accepted, answer.reason

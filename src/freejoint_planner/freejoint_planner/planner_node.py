@@ -64,8 +64,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from visualization_msgs.msg import Marker
 
 from .conversions import occupancy_grid, path_marker, setpoint_msg, time_ns
-from .planning import circle_bounds, CIRCLE_KEYS, compute_model, grid_extent, make_circle
-from .planning import MAP_KEYS, prepare_transition, RANGES, validate
+from .planning import circle_bounds, CIRCLE_KEYS, compute_model, grid_bound, grid_extent
+from .planning import make_circle, MAP_KEYS, prepare_transition, RANGES, validate
 from .stream import Plan, SetpointStream
 
 NODE_NAME = 'freejoint_planner'
@@ -149,8 +149,9 @@ class PlannerNode(Node):
         self._ros_clock = self.get_clock()
         self._own_clock = self._detach_time_source()
         self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS))
-        reason = circle_bounds(make_circle(self._cfg), self._model, self._cfg['max_speed'],
-                               self._cfg['max_acceleration'])
+        reason = (grid_bound(self._model.region.reach, self._cfg['grid_resolution'])
+                  or circle_bounds(make_circle(self._cfg), self._model,
+                                   self._cfg['max_speed'], self._cfg['max_acceleration']))
         if reason:
             raise FreejointValueError(reason)
         self.get_logger().info(
@@ -239,6 +240,9 @@ class PlannerNode(Node):
                 if not check.ok:
                     return self._refuse(f'the running plan {plan.plan_id} would enter the '
                                         f'semi-singular region of the new map: {check.reason}')
+        reason = grid_bound(model.region.reach, new['grid_resolution'])
+        if reason:
+            return self._refuse(reason)
         circle = None
         if changed & set(CIRCLE_KEYS):
             circle = make_circle(new)

@@ -264,6 +264,21 @@ def compute_model(case, nominal_scale, resolution_deg, eps_d):
                             seconds=time.perf_counter() - start)
 
 
+# Largest semi_singular_map a side (cells): 2000 x 2000 int8 is a 4 MB message, and
+# rasterising it takes about 20 float arrays of that many cells.
+GRID_MAX_CELLS = 2000
+
+
+def grid_bound(reach, cell):
+    """Return why ``grid_resolution`` = ``cell`` makes the map too large, or ''."""
+    side = 2 * math.ceil(float(reach[1]) / cell - 1e-9)
+    if side > GRID_MAX_CELLS:
+        return (f'grid_resolution: {cell:g} m gives a semi_singular_map of {side} x {side} '
+                f'cells for the reach {reach[1]:.6g} m, above {GRID_MAX_CELLS} a side '
+                f'(grid_resolution >= {2.0 * reach[1] / GRID_MAX_CELLS:.6g} m)')
+    return ''
+
+
 def grid_extent(reach, cell):
     """
     Return the occupancy grid's ``(x_min, x_max, y_min, y_max)`` (m) for a reach annulus.

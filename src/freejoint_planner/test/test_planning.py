@@ -5,7 +5,7 @@ from freejoint_core.arm import table1
 from freejoint_core.singularity import det_map, semi_singular
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_planner.planning import circle_bounds, circle_check_points, compute_model
-from freejoint_planner.planning import grid_extent, make_circle, validate
+from freejoint_planner.planning import grid_bound, grid_extent, make_circle, validate
 import numpy as np
 import pytest
 
@@ -140,3 +140,10 @@ def test_a_circle_beyond_the_arm_or_the_speed_bounds_is_refused_naming_the_param
 
 def test_the_paper_circle_is_within_the_default_bounds(model):
     assert circle_bounds(CircleQuintic(), model, 1.0, 5.0) == ''
+
+
+def test_a_grid_resolution_giving_more_than_2000_cells_a_side_is_refused_naming_the_smallest():
+    assert grid_bound((0.0, 1.5), 0.0015) == ''                  # 2000 cells a side
+    reason = grid_bound((0.0, 1.5), 0.001)
+    assert reason == ('grid_resolution: 0.001 m gives a semi_singular_map of 3000 x 3000 cells '
+                      'for the reach 1.5 m, above 2000 a side (grid_resolution >= 0.0015 m)')
