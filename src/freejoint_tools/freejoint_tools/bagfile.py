@@ -64,6 +64,7 @@ RESERVE_SUFFIX = '.reserve'
 # Space kept free for finalising (summary, metadata record, metadata.yaml): this much plus
 # twice the size the chunk indexes have reached.
 RESERVE_BASE = 256 * 1024
+_NO_TIME = 1 << 63
 
 
 class BagError(Exception):
@@ -278,7 +279,9 @@ class BagWriter:
         self._counts = {}      # channel id -> messages in the file
         self._pending = {}     # channel id -> messages handed to the writer, not in the file
         self._lost = {}        # channel id -> messages that did not reach the file
-        self._pending_range = None   # (first, last) log time of the pending messages
+        self._pend_first = _NO_TIME  # log times of the pending messages
+        self._pend_last = -_NO_TIME
+        self._stopped = False        # closed or failed: nothing more reaches the file
         self._chunks = 0
         self.start_ns = None
         self.end_ns = None
@@ -313,8 +316,8 @@ class BagWriter:
     def _commit(self):
         """Hand what the mcap writer produced to the file; account its messages."""
         if self.error is None and self._sink.commit():
-            if self._pending_range is not None:
-                first, last = self._pending_range
+            first, last = self._pend_first, self._pend_last
+            if first <= last:
                 if self.start_ns is None or first < self.start_ns:
                     self.start_ns = first
                 if self.end_ns is None or last > self.end_ns:
@@ -328,11 +331,12 @@ class BagWriter:
                 self.error_at = self._sink.committed
                 if exc.errno == errno.ENOSPC:
                     self.error = 'disk full (%s)' % self.error
+                self._stopped = True
             for channel, n in self._pending.items():
                 self._lost[channel] += n
         for channel in self._pending:
             self._pending[channel] = 0
-        self._pending_range = None
+        self._pend_first, self._pend_last = _NO_TIME, -_NO_TIME
 
     def add_topic(self, topic, msgtype, msgdef, type_hash='', qos_profiles=()):
         """
@@ -373,20 +377,21 @@ class BagWriter:
 
     def write(self, channel, log_time, data, publish_time=None):
         """Write serialized ``data`` (CDR bytes) received at ``log_time`` (ns)."""
-        if self.error is not None or self.closed:
+        if self._stopped:
             self._lost[channel] += 1
             return
-        n = self._counts[channel] + self._pending[channel]
-        sent = log_time if publish_time is None else publish_time
-        before = self._sink.pending
-        self._writer.add_message(channel, log_time, data, sent, n & 0xffffffff)
-        self._pending[channel] += 1
-        span = self._pending_range
-        if span is None:
-            self._pending_range = (log_time, log_time)
-        elif log_time < span[0] or log_time > span[1]:
-            self._pending_range = (min(span[0], log_time), max(span[1], log_time))
-        if self._sink.pending != before:      # a chunk closed: every message is in it
+        pending = self._pending
+        sink = self._sink
+        before = sink.pending
+        self._writer.add_message(channel, log_time, data,
+                                 log_time if publish_time is None else publish_time,
+                                 (self._counts[channel] + pending[channel]) & 0xffffffff)
+        pending[channel] += 1
+        if log_time > self._pend_last:
+            self._pend_last = log_time
+        if log_time < self._pend_first:
+            self._pend_first = log_time
+        if sink.pending != before:            # a chunk closed: every message is in it
             self._chunks += 1
             self._commit()
 
@@ -431,6 +436,7 @@ class BagWriter:
         if self.closed:
             return
         self.closed = True
+        self._stopped = True
         self._free_reserve()
         if self.error is None:
             self._writer.flush()
@@ -466,7 +472,7 @@ class BagWriter:
             self._sink.commit()
             os.close(self._fd)
             self._free_reserve()
-            self.closed = True
+            self.closed = self._stopped = True
 
 
 class Topic:

@@ -185,6 +185,10 @@ class StampGrid:
             self.count = 1
             return
         d = t - last
+        if d == self.min_diff:                 # the usual spacing: nothing new to learn
+            self.count += 1
+            self.last = t
+            return
         if d <= 0:
             if d:
                 self.backwards += 1
