@@ -488,11 +488,11 @@ def test_circles_beyond_the_reach_or_the_bounds_are_refused_at_run_time_naming_t
         assert not result.successful and words in result.reason, (name, result.reason)
     assert _set(ros_node, params, 'max_speed', 0.3).successful
     for request, words in [
-            (dict(radius=0.2, duration=5.0, start_angle=0.0), 'above max_speed 0.3 m/s '
-                                                              '(duration >= 7.85398 s)'),
-            (dict(radius=0.2, duration=8.0, start_angle=7.0), 'bad request: start_angle: '
-                                                              'expected a value in'),
-            (dict(radius=0.76, duration=60.0, start_angle=0.0), 'radius: 0.76 m exceeds')]:
+            ({'radius': 0.2, 'duration': 5.0, 'start_angle': 0.0},
+             'above max_speed 0.3 m/s (duration >= 7.85398 s)'),
+            ({'radius': 0.2, 'duration': 8.0, 'start_angle': 7.0},
+             'bad request: start_angle: expected a value in'),
+            ({'radius': 0.76, 'duration': 60.0, 'start_angle': 0.0}, 'radius: 0.76 m exceeds')]:
         answer = _call(ros_node, client, PlanCircle.Request(centre=[0.0, 0.0], direction=1,
                                                             execute=True, **request),
                        'plan_circle %s' % request)
