@@ -135,3 +135,29 @@ def test_recorder_on_a_full_disk_reports_the_loss_finalises_and_exits_with_one_l
     from freejoint_control.records import stamp_ns
     stamps = [stamp_ns(m) for _, m in bag.decode('/joint_states')]
     assert stamps == [stamps[0] + k * 1_000_000 for k in range(len(stamps))]   # no hole
+
+
+def test_reindex_of_a_killed_bag_on_a_full_disk_uses_the_space_kept_in_reserve(small_disk):
+    """A recorder killed after the disk filled up: reindex still finalises its bag."""
+    from freejoint_tools.bagfile import BagWriter, default_qos_dict, open_bag
+    from freejoint_tools.reindex import reindex
+    disk = small_disk(1 << 20)
+    path = os.path.join(disk, 'killed')
+    # small chunks: a summary larger than the slack of the file's last page
+    writer = BagWriter(path, {'case': 'vertical'}, chunk_size=4096)
+    channel = writer.add_topic('/a', 'std_msgs/msg/String', '', '', [default_qos_dict()])
+    k = 0
+    while writer.error is None:
+        writer.write(channel, k * 1000,
+                     b'\x00\x01\x00\x00' + k.to_bytes(4, 'little') + bytes(60))
+        k += 1
+    writer.abandon()                           # killed: no summary, the reserve left behind
+    with open(os.path.join(disk, 'filler'), 'wb', buffering=0) as fh:
+        with pytest.raises(OSError, match='No space left'):   # nothing else fits
+            while True:
+                fh.write(bytes(4096))
+    assert 'summary rebuilt' in reindex(path)
+    bag = open_bag(path)
+    assert bag.finalised and bag.topics['/a'].count == writer.count(channel) > 1000
+    assert bag.custom_data == {'case': 'vertical'}
+    assert sorted(os.listdir(path)) == ['killed_0.mcap', 'metadata.yaml']

@@ -467,11 +467,10 @@ class BagWriter:
         os.close(self._fd)
 
     def abandon(self):
-        """Close the file as it is (no summary, no metadata.yaml), like a crash would."""
+        """Close the file as it is (no summary, no metadata.yaml, the reserve), as a crash."""
         if not self.closed:
             self._sink.commit()
             os.close(self._fd)
-            self._free_reserve()
             self.closed = self._stopped = True
 
 
@@ -1010,7 +1009,7 @@ def scan_mcap(path):
     return contents
 
 
-def _summary_records(contents, summary_start):
+def _summary_records(contents, metadata, summary_start):
     """Return the summary section bytes (schemas ... summary offsets) and its offsets start."""
     builder = RecordBuilder()
     offsets = []
@@ -1027,7 +1026,7 @@ def _summary_records(contents, summary_start):
         attachment_count=0, channel_count=len(contents.channels),
         channel_message_counts=counts, chunk_count=len(contents.chunk_indexes),
         message_count=contents.message_count,
-        metadata_count=len(contents.metadata),
+        metadata_count=len(metadata),
         message_start_time=contents.start_ns or 0, message_end_time=contents.end_ns or 0,
         schema_count=len(contents.schemas))
     group(Opcode.SCHEMA, [contents.schemas[k] for k in sorted(contents.schemas)])
@@ -1035,7 +1034,7 @@ def _summary_records(contents, summary_start):
     group(Opcode.STATISTICS, [statistics])
     group(Opcode.CHUNK_INDEX, contents.chunk_indexes)
     group(Opcode.METADATA_INDEX, [MetadataIndex(offset=offset, length=length, name=name)
-                                  for name, _, offset, length in contents.metadata])
+                                  for name, _, offset, length in metadata])
     offsets_start = summary_start + builder.count
     for offset in offsets:
         offset.write(builder)
@@ -1080,13 +1079,14 @@ def finalise_mcap(path, rosbag2_record=None, contents=None):
             fh.truncate(contents.end)
             fh.seek(contents.end)
             builder = RecordBuilder()
+            metadata = list(contents.metadata)
             if rosbag2_record is not None:
                 Metadata(name='rosbag2', metadata=dict(rosbag2_record)).write(builder)
-                contents.metadata.append(('rosbag2', dict(rosbag2_record), contents.end,
-                                          builder.count))
+                metadata.append(('rosbag2', dict(rosbag2_record), contents.end,
+                                 builder.count))
             DataEnd(data_section_crc=0).write(builder)
             summary_start = contents.end + builder.count
-            summary, offsets_start = _summary_records(contents, summary_start)
+            summary, offsets_start = _summary_records(contents, metadata, summary_start)
             crc = zlib.crc32(summary)
             crc = zlib.crc32(struct.pack('<BQQQ', Opcode.FOOTER, 8 + 8 + 4, summary_start,
                                          offsets_start), crc)
@@ -1097,6 +1097,11 @@ def finalise_mcap(path, rosbag2_record=None, contents=None):
             fh.flush()
             os.fsync(fh.fileno())
     except OSError as exc:
+        try:                                    # leave it as it was (a later try can work)
+            os.truncate(path, contents.end)
+        except OSError:
+            pass
         raise BagError(path, 'cannot finalise: %s' % (exc.strerror or exc))
+    contents.metadata = metadata
     contents.finalised = True
     return contents

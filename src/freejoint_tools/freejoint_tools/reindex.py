@@ -64,10 +64,11 @@ def reindex(path, ros_distro=None):
                            contents.start_ns, contents.end_ns, contents.run_record(),
                            ros_distro or os.environ.get('ROS_DISTRO') or 'jazzy')
     was_finalised = contents.finalised
-    finalise_mcap(mcap_path, {'serialized_metadata': _dump_yaml(info)}, contents)
-    write_metadata_yaml(path, info)
+    # the space the recorder kept for finalising (left behind when it was killed)
     for stale in glob.glob(os.path.join(glob.escape(path), '.*' + RESERVE_SUFFIX)):
         os.remove(stale)
+    finalise_mcap(mcap_path, {'serialized_metadata': _dump_yaml(info)}, contents)
+    write_metadata_yaml(path, info)
     what = ('MCAP file finalised already' if was_finalised else
             'summary rebuilt from %d complete chunk(s)%s' % (
                 len(contents.chunk_indexes),
