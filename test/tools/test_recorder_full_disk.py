@@ -161,3 +161,28 @@ def test_reindex_of_a_killed_bag_on_a_full_disk_uses_the_space_kept_in_reserve(s
     assert bag.finalised and bag.topics['/a'].count == writer.count(channel) > 1000
     assert bag.custom_data == {'case': 'vertical'}
     assert sorted(os.listdir(path)) == ['killed_0.mcap', 'metadata.yaml']
+
+
+def test_a_last_chunk_that_does_not_fit_at_close_is_counted_lost_and_the_bag_finalised(
+        small_disk):
+    from freejoint_tools.bagfile import BagWriter, default_qos_dict, open_bag
+    disk = small_disk(2 << 20)
+    path = os.path.join(disk, 'last')
+    writer = BagWriter(path, chunk_size=1 << 30)           # a chunk per flush only
+    channel = writer.add_topic('/a', 'std_msgs/msg/String', '', '', [default_qos_dict()])
+    for k in range(1000):
+        writer.write(channel, k, bytes(100))
+    writer.flush()                                          # in the file: 1000
+    with open(os.path.join(disk, 'filler'), 'wb', buffering=0) as fh:
+        with pytest.raises(OSError, match='No space left'):
+            while True:
+                fh.write(bytes(4096))
+    for k in range(1000, 6000):                             # ~600 kB: more than the reserve
+        writer.write(channel, k, bytes(100))
+    assert writer.error is None                             # still in memory
+    writer.close()
+    assert writer.error.startswith('disk full')
+    assert (writer.count(channel), writer.lost(channel)) == (1000, 5000)
+    bag = open_bag(path)
+    assert bag.finalised and bag.topics['/a'].count == 1000
+    assert bag.metadata['message_count'] == 1000
