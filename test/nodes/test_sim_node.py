@@ -7,6 +7,7 @@ missing command.
 """
 import math
 import os
+import time
 
 from freejoint_core.arm import make_model, table1
 from freejoint_core.offline import initial_state
@@ -241,6 +242,14 @@ def test_lockstep_holds_at_max_steps_ignoring_commands_and_timeouts(
     assert max(ctl.states) == 3 * DT_NS
     # The run is over at max_steps: the timing file is written then, not at the stop.
     wait(lambda: os.path.exists(timing), 10.0, 'the timing file while holding')
+    # One last status says so, then nothing more (a recorder of the run drains).
+    wait(lambda: any(d[1] == 'holding at max_steps' for d in ctl.diagnostics), 5.0,
+         'the last status', spin=ctl.spin)
+    count = len(ctl.diagnostics)
+    quiet_until = time.monotonic() + 2.5    # two status periods and more
+    while time.monotonic() < quiet_until:
+        ctl.spin()
+    assert len(ctl.diagnostics) == count and ctl.diagnostics[-1][0] == 0
     assert proc.poll() is None
     assert procs.stop(proc) == 0
     assert 'simulator stopped at step 3 (t = 0.003 s): 0 command timeouts' in \
@@ -412,7 +421,6 @@ def _realtime(procs, *extra):
 
 
 def test_realtime_states_are_stamped_on_the_step_grid_at_publish_rate(procs, ros_node, wait):
-    import time
     # 1 kHz steps, joint_states at 500 Hz: the states a 500 Hz driver gives its controller.
     proc = _realtime(procs, '-p', 'publish_rate:=500.0')
     ctl = Controller(ros_node, wait)

@@ -129,6 +129,7 @@ class SimNode(Node):
         self._rt_origin_ns = 0         # real time: system time [ns] of step 0 on the grid
         self._take_state()
         self._diag_window = (_monotonic(), 0, 0, 0, 0)
+        self._final_status_sent = False
         self._lat_n = 0                # state-to-command latencies of the status window
         self._lat_sum = 0
         self._lat_max = 0
@@ -534,6 +535,12 @@ class SimNode(Node):
 
     # -- status ----------------------------------------------------------------
     def _on_diagnostics_timer(self):
+        if self._holding():
+            # A lockstep run over at max_steps sends nothing more (a recorder's count then
+            # stays steady: drained), after one last status saying so.
+            if self._final_status_sent:
+                return
+            self._final_status_sent = True
         self._publish_diagnostics(update=True)
 
     def _publish_diagnostics(self, update):
