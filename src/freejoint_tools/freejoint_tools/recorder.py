@@ -26,7 +26,13 @@ What ``ros2 bag record -s mcap`` does, for this workspace where rosbag2 is not i
 * the MCAP chunk is closed and handed to the OS every ``flush_period`` (wall s), so a
   SIGKILL loses at most that much of the tail; SIGINT and SIGTERM take what is already
   queued, then finalise the bag (summary, statistics, ``metadata.yaml``) and print what
-  was received per topic (and any loss the middleware reported).
+  was received per topic (and any loss the middleware reported), the first stamp it got
+  and, for a stream on a grid (lockstep ``joint_states``: ``t_k = k dt``), the ticks it
+  missed (:class:`StampGrid`; also metadata.yaml ``custom_data`` ``recorder_missed_ticks``);
+* a write error (full disk) stops the writing (the bag stays readable up to it, see
+  ``bagfile``), is logged once, and every message received from then on is counted ``not
+  written`` for its topic (summary, ``~/status``, ``custom_data`` ``recorder_not_written``);
+  the bag is still finalised on SIGINT/SIGTERM and the recorder exits 1 with one line.
 
 Readiness: publishers that start together with the run (lockstep starts at the first
 command) can be discovered late - Fast DDS sometimes needs seconds to discover one of
