@@ -6,20 +6,28 @@ Starts `planner_node` (use_sim_time, the paper's circle) and drives `/clock` fro
 * closed loop: publish /clock = k dt, wait for the setpoint of tick k + lookahead, repeat
   (the planner's trigger -> publish -> delivery round trip, as in lockstep);
 * open loop: advance /clock one tick at a fixed rate (1, 2, 5, 10 kHz) for a while and
-  count what arrives; "keeps up" means the last setpoint stays within the lookahead.
+  count what arrives; "keeps up" means the last setpoint stays within the lookahead;
+* replan: ``--replans`` ``~/plan_circle`` calls (execute) while the circle moves, one every
+  1.3 s of sim time (/clock every 10 ticks between them): the answer time (the transition
+  search from the current setpoint state), accepted / refused, and the largest change
+  between consecutive setpoints vs the quintic circle's own.
 
-Usage: `. tools/env.sh && python test/nodes/planner_rate.py [--ticks 3000] [--seconds 2]`.
+Usage: `. tools/env.sh && python test/nodes/planner_rate.py [--ticks 3000] [--seconds 2]
+[--replans 12]`.
 Prints one line per measurement and a JSON summary on the last line.
 """
 import argparse
 import json
+import math
 import os
 import signal
 import subprocess
 import sys
 import time
 
+from freejoint_core.trajectory import CircleQuintic
 from freejoint_msgs.msg import CartesianSetpoint
+from freejoint_msgs.srv import PlanCircle
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -48,22 +56,28 @@ def main():
     ap.add_argument('--ticks', type=int, default=3000, help='closed-loop ticks')
     ap.add_argument('--seconds', type=float, default=2.0, help='open-loop time per rate')
     ap.add_argument('--rates', default='1000,2000,5000,10000', help='open-loop rates (Hz)')
+    ap.add_argument('--replans', type=int, default=12, help='plan_circle calls while moving')
     args = ap.parse_args()
     # 215-232: valid on Linux and outside the 1-100 the test runs take (test/conftest.py)
     os.environ.setdefault('ROS_DOMAIN_ID', str(215 + os.getpid() % 18))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     planner = subprocess.Popen([EXE, '--ros-args', '-p', 'use_sim_time:=true',
-                                '-p', 'duration:=1000.0'],
+                                '-p', 'duration:=60.0'],
                                stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
     rclpy.init()
     node = rclpy.create_node('planner_rate_probe')
     executor = EventsExecutor()
     executor.add_node(node)
     spin_once = executor.spin_once
-    state = {'last': -1, 'count': 0}
+    state = {'last': -1, 'count': 0, 'p': None, 'step': 0.0}
 
     def on_setpoint(msg):
-        state['last'] = _stamp(msg)
+        stamp = _stamp(msg)
+        if state['p'] is not None and stamp == state['last'] + MS:
+            state['step'] = max(state['step'], math.hypot(msg.position[0] - state['p'][0],
+                                                          msg.position[1] - state['p'][1]))
+        state['p'] = tuple(msg.position)
+        state['last'] = stamp
         state['count'] += 1
 
     node.create_subscription(CartesianSetpoint, 'setpoint', on_setpoint,
@@ -72,7 +86,8 @@ def main():
     summary = {}
     try:
         deadline = time.monotonic() + 30.0
-        while pub.get_subscription_count() < 2 and time.monotonic() < deadline:
+        # the planner takes /clock once (its own subscription; rclpy's TimeSource detached)
+        while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
             spin_once(timeout_sec=0.05)
 
         def publish(now_ns):
@@ -130,6 +145,43 @@ def main():
                   f'{state["last"] >= (k + LOOKAHEAD) * MS}')
             summary[f'open_loop_{hz}_hz_max_lag_ticks'] = max_lag
             summary[f'open_loop_{hz}_hz_sent_per_s'] = round(n / sent_s)
+        # replan while moving
+        client = node.create_client(PlanCircle, '/freejoint_planner/plan_circle')
+        ready = time.monotonic() + 30.0
+        while not client.service_is_ready() and time.monotonic() < ready:
+            spin_once(timeout_sec=0.05)
+        circles = [((0.05, 0.05), math.pi / 2, 1), ((-0.05, 0.02), math.pi, -1),
+                   ((0.02, -0.06), -math.pi / 2, 1), ((0.0, 0.0), 0.0, -1)]
+        state['step'] = 0.0
+        k = (k + 9) // 10 * 10
+        times, accepted = [], 0
+        for i in range(args.replans):
+            centre, angle, direction = circles[i % len(circles)]
+            start = time.perf_counter()
+            future = client.call_async(PlanCircle.Request(
+                centre=list(centre), radius=0.2, duration=5.0, start_angle=angle,
+                direction=direction, execute=True))
+            while not future.done():
+                spin_once(timeout_sec=0.1)
+            times.append(time.perf_counter() - start)
+            accepted += bool(future.result().accepted)
+            for _ in range(130):                          # 1.3 s of sim time
+                k += 10
+                publish(k * MS)
+                while state['last'] < (k + LOOKAHEAD) * MS:
+                    spin_once(timeout_sec=1.0)
+        ref = [CircleQuintic().sample_tuple(j * 1e-3)[:2] for j in range(5002)]
+        own = max(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(ref, ref[1:]))
+        times.sort()
+        print(f'replan: {args.replans} plan_circle calls every 1.3 s while moving: '
+              f'{accepted} accepted; answer median {times[len(times) // 2] * 1e3:.1f} ms, '
+              f'max {times[-1] * 1e3:.1f} ms; largest setpoint step '
+              f'{state["step"] * 1e3:.6f} mm (the circle\'s own {own * 1e3:.6f} mm)')
+        summary['replan_accepted'] = accepted
+        summary['replan_answer_median_ms'] = round(times[len(times) // 2] * 1e3, 1)
+        summary['replan_answer_max_ms'] = round(times[-1] * 1e3, 1)
+        summary['replan_largest_step_mm'] = state['step'] * 1e3
+        summary['circle_own_step_mm'] = own * 1e3
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
