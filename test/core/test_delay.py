@@ -269,3 +269,9 @@ def test_delay_study_rows_summarise_the_runs_and_zero_delay_is_the_paper_run():
     assert rows[2]['worst_max_mm'] == records[2]['max_mm']
     table = offline.format_delay_table(rows).splitlines()
     assert len(table) == 5 and table[4].startswith('| horizontal | 2 | on | 1 |')
+
+
+@pytest.mark.parametrize('argv', [['--delay-ticks', '-1'], ['--bias-gain', '1.5']])
+def test_offline_cli_refuses_a_negative_delay_and_an_observer_gain_out_of_range(argv):
+    with pytest.raises(SystemExit, match='offline: --'):
+        offline.main(argv + ['--out', ''])
