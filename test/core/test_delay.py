@@ -257,6 +257,19 @@ def test_bad_setpoint_shift_and_runner_arguments_raise_naming_the_argument():
     with pytest.raises(FreejointValueError, match='^bias_gain:'):
         offline.run_case('horizontal', 'robust', 0, duration=0.01, delay_ticks=1,
                          predict=True, bias_gain=-0.1)
+    for value in (-1, 2.0, False):
+        with pytest.raises(FreejointValueError, match='^predict_ticks:'):
+            offline.run_case('horizontal', 'robust', 0, duration=0.01, delay_ticks=1,
+                             predict=True, predict_ticks=value)
+
+
+def test_offline_predictor_horizon_defaults_to_the_delay_and_can_be_mis_set():
+    kw = {'duration': 0.1, 'delay_ticks': 3, 'predict': True}
+    ref, _ = offline.run_case('vertical', 'robust', 1, **kw)
+    same, _ = offline.run_case('vertical', 'robust', 1, predict_ticks=3, **kw)
+    short, _ = offline.run_case('vertical', 'robust', 1, predict_ticks=2, **kw)
+    assert same == ref and ref['variant'] == 'robust d3+p'
+    assert short['variant'] == 'robust d3+p2' and short['rms_mm'] != ref['rms_mm']
 
 
 def test_delay_study_rows_summarise_the_runs_and_zero_delay_is_the_paper_run():

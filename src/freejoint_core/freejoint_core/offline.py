@@ -116,7 +116,7 @@ def initial_state(params, q3_0_deg=120.0, start=(0.2, 0.0)):
 def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_SUB,
              duration=5.0, nominal_scale=0.7, dist_bound=0.5, gains=None, record_trace=False,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0, delay_ticks=0, predict=False,
-             bias_gain=DEFAULT_BIAS_GAIN):
+             bias_gain=DEFAULT_BIAS_GAIN, predict_ticks=None):
     """
     Run one closed-loop case and return its metrics record (and trace).
 
@@ -157,6 +157,9 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
         Compensate the delay with ``delay.StatePredictor`` (no effect at m = 0).
     bias_gain : float
         The predictor's ``bias_gain`` (0: plain nominal prediction).
+    predict_ticks : int, optional
+        Horizon of the predictor (periods), >= 0; default ``delay_ticks`` (a
+        different value measures a mis-estimated delay).
 
     Returns
     -------
@@ -188,6 +191,13 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
     if not isinstance(predict, (bool, np.bool_)):
         raise FreejointValueError(f'predict: expected a bool, got {predict!r}')
     delay_ticks = int(delay_ticks)
+    if predict_ticks is None:
+        predict_ticks = delay_ticks
+    elif isinstance(predict_ticks, bool) or not isinstance(predict_ticks, (int, np.integer)) \
+            or predict_ticks < 0:
+        raise FreejointValueError(
+            f'predict_ticks: expected None or an int >= 0, got {predict_ticks!r}')
+    predict_ticks = int(predict_ticks)
     if gains is None:
         gains = Gains()
     elif not isinstance(gains, Gains):
@@ -219,10 +229,12 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
     pred = None
     if delay_ticks:
         label = f'{variant} d{delay_ticks}' + ('+p' if predict else '')
+        if predict and predict_ticks != delay_ticks:
+            label += f'{predict_ticks}'
         if predict:
-            pred = StatePredictor(nominal, dt, dt_sub, max_ticks=delay_ticks,
+            pred = StatePredictor(nominal, dt, dt_sub, max_ticks=max(delay_ticks, predict_ticks),
                                   bias_gain=bias_gain)
-            h_pred = delay_ticks * dt
+            h_pred = predict_ticks * dt
             fk_real = make_model(real).fk
 
     # Setpoints of every tick, through the same scalar path the graph uses.
@@ -257,7 +269,7 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
             if pred is None:
                 out = ctrl.step(q, qd, (pdx, pdy), (vdx, vdy), (adx, ady), dt)
             else:
-                qp, qdp = pred.predict(q, qd, delay_ticks)
+                qp, qdp = pred.predict(q, qd, predict_ticks)
                 sp = extrapolate_setpoint((pdx, pdy), (vdx, vdy), (adx, ady), h_pred)
                 out = ctrl.step(qp, qdp, *sp, dt)
                 if not all(map(isfinite, out.theta.tolist() + qdp.tolist())):
