@@ -486,6 +486,12 @@ def test_circles_beyond_the_reach_or_the_bounds_are_refused_at_run_time_naming_t
             ('max_speed', 0.0, 'max_speed')]:
         result = _set(ros_node, params, name, value)
         assert not result.successful and words in result.reason, (name, result.reason)
+    # the configured circle (the paper's, 0.471 m/s) must stay within the bounds
+    result = _set(ros_node, params, 'max_speed', 0.3)
+    assert not result.successful and result.reason.startswith(
+        'max_speed: the configured circle would exceed the bounds: duration: 5 s for radius '
+        '0.2 m peaks at 0.471239 m/s, above max_speed 0.3 m/s'), result.reason
+    assert _set(ros_node, params, 'duration', 8.0).successful      # 0.295 m/s
     assert _set(ros_node, params, 'max_speed', 0.3).successful
     for request, words in [
             ({'radius': 0.2, 'duration': 5.0, 'start_angle': 0.0},

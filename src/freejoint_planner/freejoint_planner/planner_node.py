@@ -217,7 +217,8 @@ class PlannerNode(Node):
         if reason:
             return self._refuse(reason)
         n = self._stream.spacing
-        if sim and n > 1 and int(new['lookahead']) < n - 1:
+        if (sim and n > 1 and new['lookahead'] != self._cfg['lookahead']
+                and int(new['lookahead']) < n - 1):
             return self._refuse(
                 f"lookahead: {new['lookahead']} ticks is below N - 1 = {n - 1} for /clock "
                 f'every N = {n} ticks (the clock spacing rule: the ticks between two /clock '
@@ -243,6 +244,14 @@ class PlannerNode(Node):
         reason = grid_bound(model.region.reach, new['grid_resolution'])
         if reason:
             return self._refuse(reason)
+        if changed and not changed & set(CIRCLE_KEYS):
+            # the bounds or the map changed: the configured circle must still be valid (a
+            # restart with these values would end at start-up otherwise)
+            reason = circle_bounds(make_circle(new), model, new['max_speed'],
+                                   new['max_acceleration'])
+            if reason:
+                return self._refuse(f"{', '.join(sorted(changed))}: the configured circle "
+                                    f'would exceed the bounds: {reason}')
         circle = None
         if changed & set(CIRCLE_KEYS):
             circle = make_circle(new)
