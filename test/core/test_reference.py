@@ -132,3 +132,23 @@ def test_theta_max_clamps_the_update_and_set_theta_restores_an_estimate():
                                Gains(Gamma=(1e3,) * 5, theta_max=(1e-3,) * 5), use_fast=False)
     general.step(q, (1.0, -2.0, 3.0), (0.3, 0.1), (0.0, 0.0), (0.0, 0.0), 1e-3)
     assert max(general.theta) == 1e-3
+
+
+def test_a_large_offset_blends_for_longer_within_the_speed_and_acceleration_bounds():
+    sh = ReferenceShaper(0.5, True, max_velocity=0.5, max_acceleration=2.0)
+    sh.hold((0.2, -0.7))                       # the arm fell 0.7 m below the stream
+    sp = (0.2, 0.0, 0.0, 0.0, 0.0, 0.0)
+    dt = 1e-3
+    refs = [sh.track(k * dt, sp, None)[0] for k in range(4000)]
+    assert sh.blend_duration == pytest.approx(1.875 * 0.7 / 0.5)       # 2.625 s > 0.5 s
+    speed = max(math.hypot(r[2], r[3]) for r in refs)
+    acc = max(math.hypot(r[4], r[5]) for r in refs)
+    assert speed <= 0.5 + 1e-9 and acc <= 2.0 + 1e-9
+    assert refs[-1] == sp
+    # A small offset keeps resume_time.
+    sh.reset()
+    sh.hold((0.2, -0.01))
+    sh.track(0.0, sp, None)
+    assert sh.blend_duration == 0.5
+    with pytest.raises(FreejointValueError, match='^max_velocity'):
+        sh.set_bounds(0.0, None)

@@ -340,11 +340,12 @@ RATE = 20000.0              # effort_rate_limit of config/controller.yaml [N m/s
 class Replica:
     """What the node must answer, from the core: law, hold / blend reference, limits."""
 
-    def __init__(self, case, lockstep, resume=0.5, limits=LIMITS, rate=RATE, dt=DT):
+    def __init__(self, case, lockstep, resume=0.5, limits=LIMITS, rate=RATE, dt=DT,
+                 resume_bounds=(0.5, 2.0)):
         from freejoint_core.reference import ReferenceShaper
         self.ctl = RobustController(table1(case).scaled(0.7),
                                     Gains(tau_limit=limits, theta_max=(100.0,) * 5))
-        self.shaper = ReferenceShaper(resume, blend_on_start=not lockstep)
+        self.shaper = ReferenceShaper(resume, not lockstep, *resume_bounds)
         self.lockstep = lockstep
         self.limits = limits
         self.rate = rate
@@ -405,10 +406,11 @@ def _moving_setpoint(k, base):
 def test_real_time_controller_holds_against_gravity_before_the_first_setpoint_and_resumes_without_a_step(  # noqa: E501
         procs, ros_node, wait):
     proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false',
-                  '-p', 'resume_time:=0.05', '-p', 'stale_timeout:=2.0')
+                  '-p', 'resume_time:=0.05', '-p', 'stale_timeout:=2.0',
+                  '-p', 'resume_max_velocity:=100.0', '-p', 'resume_max_acceleration:=1e4')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
-    rep = Replica('vertical', lockstep=False, resume=0.05)
+    rep = Replica('vertical', lockstep=False, resume=0.05, resume_bounds=(100.0, 1e4))
     q, qd = Q0, (0.0, 0.0, 0.0)
     hold = rep.fk(q)
     base = hold
@@ -771,3 +773,65 @@ def test_delay_compensation_predict_runs_the_law_on_the_predicted_state_in_real_
     proc = _start(procs, '-p', 'delay_compensation:=predict')
     assert proc.wait(30.0) == 2
     assert "delay_compensation: 'predict' is for real time" in procs.log(proc)
+
+
+def test_a_non_finite_law_result_is_never_published_and_theta_hat_is_restored(
+        ros_node, monkeypatch):
+    """In-process: the law fed, past the guards, the q-dot of 1e160 that issue 11 found."""
+    from freejoint_control.controller_node import ControllerNode
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import JointState
+    from freejoint_msgs.msg import CartesianSetpoint
+    node = ControllerNode(parameter_overrides=[
+        Parameter('case', value='vertical'), Parameter('lockstep', value=False),
+        Parameter('stale_timeout', value=2.0), Parameter('resume_time', value=0.0)])
+    try:
+        published = []
+        monkeypatch.setattr(node._pub_cmd, 'publish',
+                            lambda msg: published.append(list(msg.data)))
+        states = []
+        monkeypatch.setattr(node._pub_state, 'publish', lambda msg: states.append(
+            (msg.status, msg.message, list(msg.theta_hat), list(msg.effort))))
+        ctl = node._ctl
+        real_step = ctl.step
+        k_bad = 5
+
+        def step(q, qd, p_d, pd_d, pdd_d, dt):
+            if tick['k'] == k_bad:
+                qd = (1e160, qd[1], qd[2])
+            return real_step(q, qd, p_d, pd_d, pdd_d, dt)
+        monkeypatch.setattr(ctl, 'step', step)
+        tick = {'k': 0}
+        rep = Replica('vertical', lockstep=False, resume=0.0)
+        q, qd = Q0, QD0
+        for k in range(8):
+            tick['k'] = k
+            sp = CartesianSetpoint()
+            sp.header.stamp.nanosec = k * DT_NS
+            values = _setpoint(k)
+            sp.position, sp.velocity, sp.acceleration = values[0:2], values[2:4], values[4:6]
+            node._on_setpoint(sp)
+            js = JointState()
+            js.header.stamp.nanosec = k * DT_NS
+            js.name = NAMES
+            js.position, js.velocity = list(q), list(qd)
+            node._on_joint_state(js)
+            status, message, theta, effort = states[-1]
+            assert published[-1] == effort and _finite_within(effort)
+            assert all(math.isfinite(x) for x in theta)
+            if k == k_bad:
+                assert status & ControllerState.STATUS_LAW_FAULT, message
+                assert 'law fault' in message
+                assert effort == published[-2]            # the previous command again
+                assert theta == states[-2][2] == ctl.theta.tolist()   # restored
+                rep.shaper.track(k * DT_NS * 1e-9, values, None)
+                rep.last_ns = k * DT_NS
+                rep.armed = False
+            else:
+                expected, _, _, out = rep.tick(k * DT_NS, q, qd, values)
+                assert effort == expected and theta == out.theta.tolist(), k
+                assert not status & ControllerState.STATUS_LAW_FAULT, message
+        assert 'law fault' not in states[-1][1]
+        assert "1 law faults" in node.report()
+    finally:
+        node.destroy_node()

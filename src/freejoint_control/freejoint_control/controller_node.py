@@ -20,7 +20,8 @@ import time
 from freejoint_common.node_tools import declare, plain, request_scheduling, run
 from freejoint_common.node_tools import scheduling_refusal, Throttle
 from freejoint_control.params import build_config, SPECS
-from freejoint_core.control import (RobustController, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
+from freejoint_core.control import (ControlOutput, RobustController, STATUS_BAD_INPUT,
+                                    STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
                                     STATUS_TORQUE_LIMITED)
 from freejoint_core.delay import extrapolate_setpoint, StatePredictor
@@ -28,6 +29,7 @@ from freejoint_core.errors import FreejointValueError
 from freejoint_core.reference import (clamp_dt, limit_effort, MODE_HOLD, MODE_NONE,
                                       ReferenceShaper, setpoint_refusal, state_refusal)
 from freejoint_msgs.msg import CartesianSetpoint, ControllerState
+import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -138,6 +140,7 @@ class ControllerNode(Node):
         self._rate = cfg.effort_rate_limit
         self._hold_on_stale = cfg.on_stale_setpoint == 'hold'
         self._shaper.set_resume_time(cfg.resume_time)
+        self._shaper.set_bounds(cfg.resume_max_velocity, cfg.resume_max_acceleration)
         self._sp_bounds = (cfg.reach, cfg.setpoint_max_velocity, cfg.setpoint_max_acceleration)
         self._state_bounds = (cfg.position_lower, cfg.position_upper, cfg.velocity_limit)
         if cfg.delay_compensation == 'predict':
@@ -369,22 +372,27 @@ class ControllerNode(Node):
                 status |= STATUS_RESUMING
         px, py, vx, vy, ax, ay = ref
         pred = self._predictor
-        if pred is None:
-            out = self._ctl.step(q, qd, (px, py), (vx, vy), (ax, ay), dt)
-        else:
-            out = self._predicted_step(pred, ns, q, qd, ref, dt)
-        tau = out.tau.tolist()
-        theta = out.theta.tolist()
-        effort = tau if self._identity else [tau[i] for i in self.config.cmd_index]
         limits = self._limits
         fault = None
-        for i, x in enumerate(effort):
-            if not -limits[i] <= x <= limits[i]:
-                fault = 'torque %r' % (effort,)
-        tmax = self.config.gains.theta_max
-        for i, x in enumerate(theta):
-            if not 0.0 <= x <= tmax[i]:
-                fault = 'theta_hat %r' % (theta,)
+        try:
+            if pred is None:
+                out = self._ctl.step(q, qd, (px, py), (vx, vy), (ax, ay), dt)
+            else:
+                out = self._predicted_step(pred, ns, q, qd, ref, dt)
+        except (FreejointValueError, ArithmeticError) as exc:
+            out = None
+            fault = 'result (%s: %s)' % (type(exc).__name__, exc)
+        if out is not None:
+            tau = out.tau.tolist()
+            theta = out.theta.tolist()
+            effort = tau if self._identity else [tau[i] for i in self.config.cmd_index]
+            for i, x in enumerate(effort):
+                if not -limits[i] <= x <= limits[i]:
+                    fault = 'torque %r' % (effort,)
+            tmax = self.config.gains.theta_max
+            for i, x in enumerate(theta):
+                if not 0.0 <= x <= tmax[i]:
+                    fault = 'theta_hat %r' % (theta,)
         if fault is not None:
             self._faults += 1
             self._ctl.set_theta(self._good_theta)
@@ -394,6 +402,7 @@ class ControllerNode(Node):
             self._throttle(self.get_logger().error, 'fault',
                            'the law gave a non-finite or out-of-range %s: not published, '
                            'theta_hat restored, previous command repeated' % fault)
+            out = self._fault_output(q, theta)
         else:
             self._good_theta = out.theta
         status |= out.status
@@ -442,6 +451,13 @@ class ControllerNode(Node):
         self._last_sp = (px, py)
         self._last_det = out.det
         self._ticks += 1
+
+    def _fault_output(self, q, theta):
+        """Return the published terms of a tick whose law result was refused."""
+        zero2 = np.zeros(2)
+        return ControlOutput(np.zeros(len(self._zero)), zero2, zero2, zero2,
+                             np.array(theta), 0.0, zero2, self._last_det,
+                             self._ctl.model.fk(q), 0)
 
     def _predicted_step(self, pred, ns, q, qd, ref, dt):
         """Run the law on the state predicted to when the command takes effect."""
@@ -556,8 +572,8 @@ def _status_message(status, det, values, hold_reason, shaper):
         hold = shaper.hold_position
         parts.append('holding at (%.4f, %.4f) m: %s' % (hold[0], hold[1], hold_reason))
     if status & STATUS_RESUMING:
-        parts.append('resuming: blending from the hold to the setpoint over %g s'
-                     % values['resume_time'])
+        parts.append('resuming: blending from the hold to the setpoint over %.3g s'
+                     % shaper.blend_duration)
     if status & STATUS_NEAR_SINGULAR:
         parts.append('near singular: |det(Da Da^T)| = %.3g < %.3g, damped pseudo-inverse'
                      % (det, values['det_threshold']))

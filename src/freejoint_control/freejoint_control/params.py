@@ -67,6 +67,12 @@ SPECS = (
     Spec('resume_time', 0.5,
          'time [s of state stamps] of the quintic blend from the hold to the streamed '
          'setpoint (0: switch at once)', (0.0, 60.0)),
+    Spec('resume_max_velocity', 0.5,
+         'bound [m/s] on the peak speed of the blend: a larger offset blends for longer '
+         'than resume_time (1.875 offset / resume_max_velocity)', (1e-3, 100.0)),
+    Spec('resume_max_acceleration', 2.0,
+         'bound [m/s^2] on the peak acceleration of the blend: a larger offset blends for '
+         'longer than resume_time (sqrt(5.77 offset / resume_max_acceleration))', (1e-3, 1e4)),
     Spec('theta_max', [100.0] * 5,
          'element-wise bound of theta_hat (5 values > 0, <= 1e6), clamped inside the update'),
     Spec('joint_position_lower', [-62.83, -62.83, -62.83],
@@ -117,6 +123,8 @@ class Config:
     effort_rate_limit: float
     on_stale_setpoint: str
     resume_time: float
+    resume_max_velocity: float
+    resume_max_acceleration: float
     position_lower: tuple
     position_upper: tuple
     velocity_limit: tuple
@@ -243,6 +251,8 @@ def build_config(values):
                   lockstep=bool(values['lockstep']), stale_timeout=stale,
                   executor=values['executor'], effort_limits=limits, effort_rate_limit=rate,
                   on_stale_setpoint=values['on_stale_setpoint'], resume_time=resume,
+                  resume_max_velocity=float(values['resume_max_velocity']),
+                  resume_max_acceleration=float(values['resume_max_acceleration']),
                   position_lower=lower, position_upper=upper, velocity_limit=vlim,
                   reach=float(sum(nominal.lengths)),
                   setpoint_max_velocity=float(values['setpoint_max_velocity']),

@@ -83,18 +83,45 @@ class ReferenceShaper:
         True (real time): the first setpoint is blended in from the end-effector position
         measured then (a controller (re)started against an arm that is not at the stream's
         position).  False (lockstep): the first setpoint is tracked as it is.
+    max_velocity, max_acceleration : float, optional
+        Bounds [m/s, m/s^2] on the blend's own peak speed and acceleration for its
+        position offset ``d``: the blend lasts ``max(resume_time, 1.875 d / max_velocity,
+        sqrt(5.7735 d / max_acceleration))`` (the peaks of a rest-to-rest quintic), so an
+        arm found far from the stream is brought back gently.  None: no bound.
 
     Attributes
     ----------
     mode : str
         ``'none'`` (nothing yet), ``'hold'``, ``'blend'`` or ``'stream'``.
+    blend_duration : float
+        Duration [s] of the current (or last) blend.
 
     """
 
-    def __init__(self, resume_time, blend_on_start=True):
+    def __init__(self, resume_time, blend_on_start=True, max_velocity=None,
+                 max_acceleration=None):
         self.set_resume_time(resume_time)
+        self.set_bounds(max_velocity, max_acceleration)
         self.blend_on_start = bool(blend_on_start)
+        self.blend_duration = self.resume_time
         self.reset()
+
+    def set_bounds(self, max_velocity, max_acceleration):
+        """
+        Set the bounds of the blend's peak speed and acceleration (next blend).
+
+        Parameters
+        ----------
+        max_velocity, max_acceleration : float or None
+            [m/s, m/s^2], > 0; None: no bound.
+
+        """
+        for name, value in (('max_velocity', max_velocity),
+                            ('max_acceleration', max_acceleration)):
+            if value is not None and not (_isfinite(value) and value > 0.0):
+                raise FreejointValueError(f'{name}: must be finite and > 0, got {value!r}')
+        self.max_velocity = max_velocity
+        self.max_acceleration = max_acceleration
 
     def set_resume_time(self, resume_time):
         """
@@ -188,14 +215,22 @@ class ReferenceShaper:
             self._off0 = tuple(last[i] - sp[i] for i in range(6))
             self._t0 = t
             self.mode = MODE_BLEND
+            d = math.hypot(self._off0[0], self._off0[1])
+            duration = self.resume_time
+            if self.max_velocity is not None:
+                duration = max(duration, 1.875 * d / self.max_velocity)
+            if self.max_acceleration is not None:
+                duration = max(duration, math.sqrt(5.7735 * d / self.max_acceleration))
+            self.blend_duration = duration
         tau = t - self._t0
-        if tau >= self.resume_time:
+        duration = self.blend_duration
+        if tau >= duration:
             self.mode = MODE_STREAM
             self._last = sp
             return sp, False
         o = self._off0
-        dx, vx, ax = quintic_offset(o[0], o[2], o[4], self.resume_time, tau)
-        dy, vy, ay = quintic_offset(o[1], o[3], o[5], self.resume_time, tau)
+        dx, vx, ax = quintic_offset(o[0], o[2], o[4], duration, tau)
+        dy, vy, ay = quintic_offset(o[1], o[3], o[5], duration, tau)
         ref = (sp[0] + dx, sp[1] + dy, sp[2] + vx, sp[3] + vy, sp[4] + ax, sp[5] + ay)
         self._last = ref
         return ref, True
