@@ -75,7 +75,9 @@ def test_fj_topic_list_shows_the_graph_topics_with_their_types(graph):
                  '/setpoint [freejoint_msgs/msg/CartesianSetpoint]',
                  '/controller_state [freejoint_msgs/msg/ControllerState]'):
         assert line in lines, done.stdout
-    assert fj('topic', 'list').stdout.splitlines() == [line.split()[0] for line in lines]
+    names = fj('topic', 'list').stdout.splitlines()
+    assert {'/joint_states', '/setpoint', '/controller_state'} <= set(names)
+    assert names == sorted(names) and not any(' ' in n for n in names)
 
 
 def test_fj_param_list_names_each_declared_parameter_indented_as_ros2_param(graph):
@@ -225,3 +227,24 @@ def test_env_sh_puts_the_node_executables_and_fj_on_path():
     assert all(p.startswith(os.path.join(ROOT, 'install')) for p in found[:-1])
     path = found[-1].split(':')
     assert len(path) == len(set(path)), 'sourcing twice repeats PATH entries'
+
+
+def test_fj_fills_nested_and_sequence_fields_of_a_request_from_yaml():
+    import yaml
+
+    from freejoint_tools.cli import CommandError, interface_class, set_message_fields
+    srv = interface_class('rcl_interfaces/srv/SetParameters')
+    request = srv.Request(check_fields=True)
+    set_message_fields(request, yaml.safe_load(
+        '{parameters: [{name: K, value: {type: 8, double_array_value: [150, 150.5]}}]}'))
+    assert request.parameters[0].name == 'K'
+    assert list(request.parameters[0].value.double_array_value) == [150.0, 150.5]
+    circle = interface_class('freejoint_msgs/srv/PlanCircle').Request(check_fields=True)
+    set_message_fields(circle, {'centre': [0, 1], 'radius': 1, 'direction': -1})
+    assert (list(circle.centre), circle.radius, circle.direction) == ([0.0, 1.0], 1.0, -1)
+    with pytest.raises(CommandError, match='parameters\\[0\\].nme'):
+        set_message_fields(srv.Request(check_fields=True), {'parameters': [{'nme': 'K'}]})
+    with pytest.raises(CommandError, match='Failed to populate field radius'):
+        set_message_fields(circle, {'radius': 'big'})
+    with pytest.raises(CommandError, match='direction'):
+        set_message_fields(circle, {'direction': 300})  # int8

@@ -109,11 +109,16 @@ class Session:
         """
         Return ``look()`` once discovery settled.
 
-        That is after ``--spin-time`` s, then once it gave the same answer for ``quiet`` s
-        (endpoints are discovered after their node), at most ``--timeout`` s more.
+        That is after ``--spin-time`` s and once another node was seen, then once it gave
+        the same answer for ``quiet`` s (endpoints are discovered after their node), at
+        most ``--timeout`` s more in all.
         """
         self.spin_for(self.args.spin_time)
         deadline = time.monotonic() + self.args.timeout
+        me = self.node.get_fully_qualified_name()
+        while set(self.node_names(include_hidden=True)) <= {me} \
+                and time.monotonic() < deadline:
+            self.spin_for(0.1)
         seen, since = look(), time.monotonic()
         while time.monotonic() - since < quiet and time.monotonic() < deadline:
             self.spin_for(0.1)
@@ -446,7 +451,7 @@ def set_message_fields(msg, values, where=''):
 
     Integers are accepted for float fields, lists for arrays and sequences (of messages:
     a list of dicts). Raises CommandError naming the field on an unknown field or a
-    value of the wrong type.
+    value of the wrong type or range (``msg`` built with ``check_fields=True``).
     """
     if not isinstance(values, dict):
         raise CommandError('Failed to populate field%s: expected a mapping, got %r'
@@ -462,20 +467,22 @@ def set_message_fields(msg, values, where=''):
         sub = _slot_class(slots[key])
         try:
             if sub is not None and isinstance(value, dict):
-                set_message_fields(current, value, path)
-                continue
-            if sub is not None and isinstance(value, list):
+                value_msg = type(current)(check_fields=True)
+                set_message_fields(value_msg, value, path)
+                value = value_msg
+            elif sub is not None and isinstance(value, list):
                 items = []
                 for i, item in enumerate(value):
-                    obj = sub()
+                    obj = sub(check_fields=True)
                     set_message_fields(obj, item, '%s[%d]' % (path, i))
                     items.append(obj)
                 value = items
             elif isinstance(current, float) and isinstance(value, int) \
                     and not isinstance(value, bool):
                 value = float(value)
-            elif isinstance(value, list) and 'float' in str(getattr(current, 'dtype', '')) \
-                    + str(getattr(current, 'typecode', '')):
+            elif isinstance(value, list) and (
+                    getattr(getattr(current, 'dtype', None), 'kind', '') == 'f'
+                    or getattr(current, 'typecode', '') in ('f', 'd')):
                 value = [float(v) if isinstance(v, int) and not isinstance(v, bool) else v
                          for v in value]
             setattr(msg, key, value)
@@ -487,7 +494,7 @@ def _service_call(s, args):
     import yaml
     service = absolute_name(args.service_name)
     srv = interface_class(args.service_type)
-    request = srv.Request()
+    request = srv.Request(check_fields=True)  # a value of the wrong type raises, named
     try:
         values = yaml.safe_load(args.values) if args.values else {}
     except yaml.YAMLError as exc:
