@@ -507,3 +507,39 @@ def test_circles_beyond_the_reach_or_the_bounds_are_refused_at_run_time_naming_t
         centre=[0.0, 0.0], radius=0.2, duration=8.0, start_angle=0.0, direction=1,
         execute=False), 'plan_circle (slow enough)')
     assert answer.accepted, answer.reason
+
+
+def test_the_planner_takes_thread_priority_and_cpu_affinity_for_every_thread_like_the_sim(
+        procs, ros_node, wait):
+    """In real time the stream must not be starved by SCHED_FIFO sim and controller."""
+    import subprocess
+    import sys
+    permitted = subprocess.run(
+        [sys.executable, '-c', 'import os; os.sched_setscheduler(0, os.SCHED_FIFO, '
+         'os.sched_param(1))'], capture_output=True, timeout=30).returncode == 0
+    cpu = sorted(os.sched_getaffinity(0))[-1]
+    proc = _start_planner(procs, ('-p', 'use_sim_time:=false', '-p', 'thread_priority:=10',
+                                  '-p', 'cpu_affinity:=[%d]' % cpu))
+    _wait_ready(ros_node, procs, proc, wait)
+    params = _param_client(ros_node, wait)
+
+    def threads():
+        out = set()
+        for tid in map(int, os.listdir('/proc/%d/task' % proc.pid)):
+            try:
+                out.add((os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority,
+                         tuple(sorted(os.sched_getaffinity(tid)))))
+            except OSError:                       # the thread ended meanwhile
+                pass
+        return out
+    if permitted:
+        assert threads() == {(os.SCHED_FIFO, 10, (cpu,))}, procs.log(proc)
+        assert _get(ros_node, params, ['thread_priority']) == {'thread_priority': 10}
+    else:
+        assert 'thread_priority 10 not applied' in procs.log(proc)
+        assert _get(ros_node, params, ['thread_priority']) == {'thread_priority': 0}
+    result = _set(ros_node, params, 'cpu_affinity', [4096])
+    assert not result.successful and 'cpu_affinity: CPU 4096' in result.reason, result.reason
+    assert _set(ros_node, params, 'thread_priority', 0).successful
+    wait(lambda: {t[:2] for t in threads()} == {(os.SCHED_OTHER, 0)}, 10.0,
+         'every thread back on the default scheduler', spin=lambda: _spin(ros_node, 0.1))

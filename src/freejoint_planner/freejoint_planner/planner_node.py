@@ -46,7 +46,8 @@ against the clock spacing rule at run time.
 
 import math
 
-from freejoint_common.node_tools import run
+from freejoint_common.node_tools import declare, plain, request_scheduling, run
+from freejoint_common.node_tools import scheduling_refusal, SCHEDULING_SPECS
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
 from freejoint_core.trajectory import CircleQuintic
@@ -145,6 +146,10 @@ class PlannerNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self._cfg = self._declare_parameters()
+        # thread_priority / cpu_affinity (ros2_control's names), as the sim and controller:
+        # in real time the stream must not be starved by SCHED_FIFO neighbours
+        self._sched = declare(self, SCHEDULING_SPECS)
+        request_scheduling(self, self._sched, at_start=True)
         self._sim = self.get_parameter('use_sim_time').value
         self._ros_clock = self.get_clock()
         self._own_clock = self._detach_time_source()
@@ -260,6 +265,17 @@ class PlannerNode(Node):
             if reason:
                 return self._refuse(f'circle refused, the running plan goes on: '
                                     f'{self._describe(circle)}: {reason}')
+        sched = dict(self._sched)
+        for p in params:
+            if p.name in sched:
+                sched[p.name] = plain(p.value)
+        try:
+            reason = scheduling_refusal(self, params, sched)
+        except FreejointValueError as exc:     # a CPU the process may not use, ...
+            reason = str(exc)
+        if reason is not None:
+            return self._refuse(reason)
+        self._sched = sched
         # accepted: apply
         self._cfg = new
         self._stream.lookahead = int(new['lookahead'])
