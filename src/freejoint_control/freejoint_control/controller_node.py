@@ -110,7 +110,13 @@ class ControllerNode(Node):
         # the paper's; real time starts from the zero effort the arm had).
         self._prev_cmd = None if cfg.lockstep else list(self._zero)
         self._rate_armed = not cfg.lockstep
-        self._clock = self.get_clock()
+        # Clock of the state ages: system time (what real-time stamps are on), read without
+        # rclpy's Clock.now() (tens of microseconds per call); the ROS clock under sim time.
+        if self.get_parameter('use_sim_time').value:
+            clock = self.get_clock()
+            self._now_ns = lambda: clock.now().nanoseconds
+        else:
+            self._now_ns = time.time_ns
         self._throttle = Throttle(1.0)
 
         self._pub_cmd = self.create_publisher(Float64MultiArray, 'effort_controller/commands',
@@ -445,7 +451,7 @@ class ControllerNode(Node):
             st.setpoint_age = (ns - sp_ns) * 1e-9
         st.dt = dt
         st.state_age = 0.0 if self._lockstep else (
-            self._clock.now().nanoseconds - ns) * 1e-9
+            self._now_ns() - ns) * 1e-9
         self._pub_state.publish(st)
         self._last_ns = ns
         self._last_sp = (px, py)
@@ -461,7 +467,7 @@ class ControllerNode(Node):
 
     def _predicted_step(self, pred, ns, q, qd, ref, dt):
         """Run the law on the state predicted to when the command takes effect."""
-        age = (self._clock.now().nanoseconds - ns) * 1e-9
+        age = (self._now_ns() - ns) * 1e-9
         ticks = min(pred.max_ticks, max(1, math.ceil(age / self._dt - 1e-9)))
         try:
             q_pred, qd_pred = pred.predict(q, qd, ticks)
@@ -508,7 +514,7 @@ class ControllerNode(Node):
         st.setpoint_age = 0.0
         st.dt = 0.0
         st.state_age = 0.0 if self._lockstep or ns < 0 else (
-            self._clock.now().nanoseconds - ns) * 1e-9
+            self._now_ns() - ns) * 1e-9
         self._pub_state.publish(st)
         if ns >= 0:
             self._last_ns = ns
