@@ -65,9 +65,13 @@ def test_too_few_stamps_or_stamps_going_back_are_not_a_grid():
 
 @pytest.mark.ros
 def test_a_recorder_started_after_the_run_names_the_first_tick_and_the_ticks_it_missed(
-        procs, wait, tmp_path):
+        procs, wait, ros_node, tmp_path):
+    import rclpy
+    from std_srvs.srv import Trigger
+
     from freejoint_control.records import stamp_ns
     from freejoint_tools.bagfile import open_bag
+    from freejoint_tools.recorder import received_count
     publisher = procs.start_script(PUBLISHER, 'publisher', [
         '--ticks', '0', '--rate', '1000', '--subscribers', '0'])
     wait(lambda: 'publishing' in procs.log(publisher) or publisher.poll() is not None, 30.0,
@@ -77,8 +81,17 @@ def test_a_recorder_started_after_the_run_names_the_first_tick_and_the_ticks_it_
     recorder = procs.start_node('freejoint_tools', 'recorder', 'recorder', [
         '--ros-args', '-p', 'output:=%s' % bag_path,
         '-p', 'topics:=[/joint_states, /controller_state]'])
-    wait(lambda: '/joint_states [' in procs.log(recorder), 30.0, 'the recorder to subscribe')
-    time.sleep(1.0)
+    client = ros_node.create_client(Trigger, '/recorder/status')
+
+    def received():
+        if not client.service_is_ready():
+            return 0
+        future = client.call_async(Trigger.Request())
+        rclpy.spin_until_future_complete(ros_node, future, timeout_sec=5.0)
+        return (received_count(future.result().message) if future.done() else 0) or 0
+
+    wait(lambda: received() > 1000, 60.0, 'the recorder to receive the run',
+         spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.1))
     assert procs.stop(recorder) == 0
     procs.stop(publisher)
     log = procs.log(recorder)
@@ -88,7 +101,13 @@ def test_a_recorder_started_after_the_run_names_the_first_tick_and_the_ticks_it_
         k = first // MS
         assert k > 100, (topic, k)                 # it did join late
         summary = re.search(r'  %s: received .*' % re.escape(topic), log).group(0)
-        assert ('first stamp %.6f s = tick %d (grid 1 ms), missed %d ticks: 0-%d'
-                % (first * 1e-9, k, k, k - 1)) in summary, summary
-        assert '%s %d ticks: 0-%d' % (topic, k, k - 1) in \
+        head = 'first stamp %.6f s = tick %d (grid 1 ms), missed ' % (first * 1e-9, k)
+        assert head in summary, summary
+        missed = re.search(r'missed (\d+) ticks: 0-%d(, |$)' % (k - 1), summary)
+        assert missed, summary
+        # on a loaded machine a publisher's history can overrun while the recorder is
+        # starved: such holes are named too, and the middleware reported them lost
+        lost = int(re.search(r'lost \(middleware\) (\d+)', summary).group(1))
+        assert k <= int(missed.group(1)) <= k + lost, summary
+        assert '%s %s ticks: 0-%d' % (topic, missed.group(1), k - 1) in \
             bag.metadata['custom_data']['recorder_missed_ticks']
