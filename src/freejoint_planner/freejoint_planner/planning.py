@@ -321,9 +321,10 @@ def prepare_transition(stream, circle, model, max_duration):
     busy = stream.in_transition(k)
     if busy is not None:
         end = busy.transition_end() * stream.dt_ns * 1e-9
-        return (f'the transition into plan {busy.plan_id} runs until t = {end:.6g} s (ROS '
-                'time); a transition is never cut short (its circle is reached): try again '
-                'after it'), None, None
+        left = (busy.transition_end() - k) * stream.dt
+        return (f'the transition into plan {busy.plan_id} runs until t = {end:.3f} s (ROS '
+                f'time, {left:.3f} s from the first unpublished setpoint); a transition is '
+                'never cut short (its circle is reached): try again after it'), None, None
     px, py, vx, vy, ax, ay = state
     choice = plan_transition((px, py), (vx, vy), (ax, ay), circle, stream.dt,
                              max_duration=max_duration, path_check=model.check_points)

@@ -302,8 +302,10 @@ def test_a_plan_during_a_transition_is_refused_and_after_it_accepted():
     choice = _planned(s, CircleQuintic(centre=(0.0, 0.1)), 2)
     reason = _planned(s, CircleQuintic(centre=(0.1, 0.0)), 3)
     assert isinstance(reason, str)
-    assert reason.startswith('the transition into plan 2 runs until t = ')
     end = s.plan.transition_end()
+    assert reason.startswith('the transition into plan 2 runs until t = %.3f s (ROS time, '
+                             '%.3f s from the first unpublished setpoint)'
+                             % (end * 1e-3, (end - 1021) * 1e-3)), reason
     for k in range(1010, end + 1, 10):
         s.advance(k * MS)
     assert s.in_transition(s.next_tick) is None
