@@ -288,3 +288,53 @@ def test_delay_study_rows_summarise_the_runs_and_zero_delay_is_the_paper_run():
 def test_offline_cli_refuses_a_negative_delay_and_an_observer_gain_out_of_range(argv):
     with pytest.raises(SystemExit, match='offline: --'):
         offline.main(argv + ['--out', ''])
+
+
+def test_ticks_since_finds_the_applied_command_in_the_history():
+    pred = StatePredictor(table1('vertical'), DT, max_ticks=3)
+    assert pred.ticks_since((0.0, 0.0)) is None          # nothing pushed yet
+    for k in range(6):
+        pred.push((float(k), -float(k)))
+    assert pred.ticks_since((5.0, -5.0)) == 0
+    assert pred.ticks_since(np.array([3.0, -3.0])) == 2
+    assert pred.ticks_since((2.0, -2.0)) == 3             # the oldest held: max_ticks
+    assert pred.ticks_since((1.0, -1.0)) is None          # no longer held
+    assert pred.ticks_since((3.0, -3.0000001)) is None    # exact match only
+    pred.push((5.0, -5.0))
+    assert pred.ticks_since((5.0, -5.0)) == 0             # the latest of equal pushes
+    with pytest.raises(FreejointValueError, match='^applied:'):
+        pred.ticks_since((1.0, math.nan))
+
+
+def test_applied_command_replaces_the_assumed_one_in_the_bias_observer():
+    nominal = table1('vertical').scaled(0.7)
+    told = StatePredictor(nominal, DT, max_ticks=2)
+    assumed = StatePredictor(nominal, DT, max_ticks=2)
+    for pred in (told, assumed):
+        pred.predict(Q0, QD0, 2)
+        pred.push((5.0, 1.0))
+    # the command pushed ticks + 1 = 3 ago does not exist: the oldest push (5, 1) pads the
+    # history, so the observer would assume (5, 1); told that zero torque acted, it learns
+    # the residual of a zero-torque period instead
+    told.predict(Q0, QD0, 2, applied=(0.0, 0.0))
+    assumed.predict(Q0, QD0, 2)
+    assert told.bias.tolist() != assumed.bias.tolist()
+    plain = StatePredictor(nominal, DT, bias_gain=0.0)
+    _, qd_zero = plain.predict(Q0, QD0, 1)            # one period under zero torque
+    np.testing.assert_allclose(told.bias, DEFAULT_BIAS_GAIN / DT * (np.array(QD0) - qd_zero),
+                               rtol=1e-12)
+    with pytest.raises(FreejointValueError, match='^applied:'):
+        told.predict(Q0, QD0, 1, applied=(1.0,))
+
+
+def test_offline_echo_recovers_the_delay_from_the_applied_command():
+    kw = {'duration': 0.3, 'delay_ticks': 4, 'predict': True}
+    matched, _ = offline.run_case('vertical', 'robust', 1, **kw)
+    for guess in (1, 4, 6):
+        rec, _ = offline.run_case('vertical', 'robust', 1, predict_ticks=guess, echo=True, **kw)
+        assert rec['variant'].endswith('e')
+        # after the start-up (where tau_0 repeats and the echo is ambiguous) it is the
+        # matched loop: same tracking to a few percent
+        assert rec['max_mm'] == pytest.approx(matched['max_mm'], rel=0.05)
+    with pytest.raises(FreejointValueError, match='^echo:'):
+        offline.run_case('vertical', 'robust', 1, echo='yes', **kw)

@@ -190,6 +190,11 @@ class StatePredictor:
             Active joint torques [N m], in ``params.active`` order, finite.
 
         """
+        self._hist.append(self._full(tau_active, 'tau_active'))
+        self._pushes += 1
+
+    def _full(self, tau_active, name):
+        """Validate (r,) active torques; return them as (n,) with zeros on passive joints."""
         tau = tau_active.tolist() if isinstance(tau_active, np.ndarray) else tau_active
         try:
             ok = len(tau) == self.r and all(_isfinite(v) for v in tau)
@@ -198,13 +203,43 @@ class StatePredictor:
         if not ok:
             shape = np.shape(tau_active) if not isinstance(tau_active, (str, bytes)) else '?'
             raise FreejointValueError(
-                f'tau_active: expected {self.r} finite values (shape ({self.r},)), '
+                f'{name}: expected {self.r} finite values (shape ({self.r},)), '
                 f'got {tau_active!r} with shape {shape}')
         full = [0.0] * self.n
         for j, v in zip(self._active, tau):
             full[j] += float(v)
-        self._hist.append(tuple(full))
-        self._pushes += 1
+        return tuple(full)
+
+    def ticks_since(self, applied):
+        """
+        Return how many commands were pushed after the one the plant last applied.
+
+        With a plant that reports the command it applied over the period that led to
+        the measured state (e.g. ``joint_states.effort`` of the active joints), this is
+        the delay in periods, and those commands are the ones still to act: use it as
+        ``predict``'s ``ticks``.
+
+        Parameters
+        ----------
+        applied : array_like, (r,)
+            Active joint torques [N m] applied over the last period, ``params.active``
+            order.
+
+        Returns
+        -------
+        int or None
+            Pushes after the latest push equal to ``applied`` (exact match), 0 ..
+            ``max_ticks``; None if no held push equals it (e.g. a refused command or
+            zero effort at start).
+
+        """
+        full = self._full(applied, 'applied')
+        hist = self._hist
+        for back in range(len(hist) - 1, -1, -1):
+            if hist[back] == full:
+                since = len(hist) - 1 - back
+                return since if since <= self.max_ticks else None
+        return None
 
     def commands(self, ticks):
         """
@@ -237,7 +272,7 @@ class StatePredictor:
         pad = full[0] if full else self._zero
         return [pad] * (ticks - have) + hist
 
-    def predict(self, q, qd, ticks):
+    def predict(self, q, qd, ticks, applied=None):
         """
         Integrate the nominal model over ``ticks`` periods under the pushed commands.
 
@@ -249,6 +284,10 @@ class StatePredictor:
             Measured joint velocities [rad/s], passive joints included.
         ticks : int
             Horizon ``m`` [periods], 0 .. ``max_ticks``; ``h = m dt``.
+        applied : array_like, (r,), optional
+            Active torques [N m] the plant applied over the period that led to
+            ``(q, qd)`` (e.g. ``joint_states.effort``): the bias observer then uses
+            it instead of assuming the command pushed ``ticks + 1`` pushes ago.
 
         Returns
         -------
@@ -279,8 +318,9 @@ class StatePredictor:
         else:
             state = tuple(check_vector(q, self.n, 'q').tolist()
                           + check_vector(qd, self.n, 'qd').tolist())
+        acted = None if applied is None else self._full(applied, 'applied')
         if self.bias_gain > 0.0:
-            self._observe(state, ticks)
+            self._observe(state, ticks, acted)
             if cmds:
                 # kept: the next call's observer needs this first period
                 first = self._integrate(state, cmds[:1])
@@ -299,7 +339,7 @@ class StatePredictor:
         n = self.n
         return out[:n], out[n:]
 
-    def _observe(self, state, ticks):
+    def _observe(self, state, ticks, acted):
         """Update the acceleration bias from the last period's velocity residual."""
         last = self._last
         pushes = self._pushes
@@ -309,7 +349,7 @@ class StatePredictor:
             return
         # The command that acted over the last period: pushed ticks + 1 ago.  The last
         # call integrated the same period already when its first command was this one.
-        acted = self._window(1, ticks)
+        acted = self._window(1, ticks) if acted is None else [acted]
         first = self._first
         if first is not None and first[0] == acted[0]:
             y = first[1]

@@ -116,7 +116,7 @@ def initial_state(params, q3_0_deg=120.0, start=(0.2, 0.0)):
 def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_SUB,
              duration=5.0, nominal_scale=0.7, dist_bound=0.5, gains=None, record_trace=False,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0, delay_ticks=0, predict=False,
-             bias_gain=DEFAULT_BIAS_GAIN, predict_ticks=None):
+             bias_gain=DEFAULT_BIAS_GAIN, predict_ticks=None, echo=False):
     """
     Run one closed-loop case and return its metrics record (and trace).
 
@@ -160,6 +160,10 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
     predict_ticks : int, optional
         Horizon of the predictor (periods), >= 0; default ``delay_ticks`` (a
         different value measures a mis-estimated delay).
+    echo : bool
+        The predictor is told the command applied over the last period (as
+        ``joint_states.effort`` reports it) and takes its horizon from it
+        (``StatePredictor.ticks_since``; ``predict_ticks`` when that fails).
 
     Returns
     -------
@@ -198,6 +202,8 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
         raise FreejointValueError(
             f'predict_ticks: expected None or an int >= 0, got {predict_ticks!r}')
     predict_ticks = int(predict_ticks)
+    if not isinstance(echo, (bool, np.bool_)):
+        raise FreejointValueError(f'echo: expected a bool, got {echo!r}')
     if gains is None:
         gains = Gains()
     elif not isinstance(gains, Gains):
@@ -231,6 +237,8 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
         label = f'{variant} d{delay_ticks}' + ('+p' if predict else '')
         if predict and predict_ticks != delay_ticks:
             label += f'{predict_ticks}'
+        if predict and echo:
+            label += 'e'
         if predict:
             pred = StatePredictor(nominal, dt, dt_sub, max_ticks=max(delay_ticks, predict_ticks),
                                   bias_gain=bias_gain)
@@ -269,8 +277,15 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
             if pred is None:
                 out = ctrl.step(q, qd, (pdx, pdy), (vdx, vdy), (adx, ady), dt)
             else:
-                qp, qdp = pred.predict(q, qd, predict_ticks)
-                sp = extrapolate_setpoint((pdx, pdy), (vdx, vdy), (adx, ady), h_pred)
+                if echo and k:
+                    applied = tau_buf[max(k - 1 - delay_ticks, 0)]
+                    m_k = pred.ticks_since(applied)
+                    m_k = predict_ticks if m_k is None else m_k
+                    qp, qdp = pred.predict(q, qd, m_k, applied)
+                    sp = extrapolate_setpoint((pdx, pdy), (vdx, vdy), (adx, ady), m_k * dt)
+                else:
+                    qp, qdp = pred.predict(q, qd, predict_ticks)
+                    sp = extrapolate_setpoint((pdx, pdy), (vdx, vdy), (adx, ady), h_pred)
                 out = ctrl.step(qp, qdp, *sp, dt)
                 if not all(map(isfinite, out.theta.tolist() + qdp.tolist())):
                     raise ArithmeticError('non-finite prediction or estimate')
