@@ -353,18 +353,33 @@ class Replica:
         self.prev = None if lockstep else [0.0, 0.0]
         self.armed = not lockstep
         self.last_ns = -1
+        self.late = False
 
     def fk(self, q):
         return self.ctl.model.fk(q).tolist()
 
-    def tick(self, ns, q, qd, sp):
-        """Return (effort, reference, dt, ControlOutput) for the state stamped ns."""
-        from freejoint_core.reference import clamp_dt, limit_effort, MODE_HOLD, MODE_NONE
+    def tick(self, ns, q, qd, sp, sp_ns=None):
+        """Return (effort, reference, dt, ControlOutput) for the state stamped ns.
+
+        ``sp_ns``: the stamp of ``sp`` when older than the state (real time: carried
+        forward to the state's time, late beyond 10 periods).
+        """
+        from freejoint_core.reference import (clamp_dt, extrapolate, limit_effort,
+                                              MODE_HOLD, MODE_NONE)
         if self.lockstep or self.last_ns < 0:
             dt = self.dt
         else:
             dt = clamp_dt((ns - self.last_ns) * 1e-9, self.dt)[0]
+        if sp is not None and not self.lockstep:
+            age = ns - (ns if sp_ns is None else sp_ns)
+            if age > 0:
+                sp = extrapolate(sp, age * 1e-9)
+            late = age > 10 * DT_NS
+            if not late and self.late:
+                self.shaper.restart_blend()
+            self.late = late
         if sp is None:
+            self.late = False
             if self.shaper.mode != MODE_HOLD:
                 ref = self.shaper.hold(self.fk(q))
                 self.armed = self.prev is not None
@@ -428,7 +443,8 @@ def test_real_time_controller_holds_against_gravity_before_the_first_setpoint_an
         st, cmd = drv.answer(k)
         # Between 80 and 100 the setpoint of tick 79 is still fresh (< stale_timeout).
         used = _moving_setpoint(min(k, 79), base) if 80 <= k < 100 else sp
-        effort, ref, dt, out = rep.tick(drv.ns(k), q, qd, used)
+        effort, ref, dt, out = rep.tick(drv.ns(k), q, qd, used,
+                                        drv.ns(79) if 80 <= k < 100 else None)
         assert cmd == effort, k
         assert list(st.position_desired) == list(ref[0:2]), k
         assert list(st.theta_hat) == out.theta.tolist(), k
@@ -702,9 +718,10 @@ def test_absurd_input_is_refused_with_a_reason_and_tracking_resumes_within_half_
     elif kind == 'setpoint':
         drv.joint_state(k, q, qd)
         st, cmd = drv.answer(k)
-        # Dropped: the previous setpoint (1 ms old, still fresh) is tracked.
-        assert cmd == rep.tick(k * DT_NS, q, qd, _setpoint(k - 1))[0]
-        assert list(st.position_desired) == list(_setpoint(k - 1)[0:2])
+        # Dropped: the previous setpoint (1 ms old, still fresh) is tracked, carried
+        # forward by its age.
+        effort, ref, _, _ = rep.tick(k * DT_NS, q, qd, _setpoint(k - 1), (k - 1) * DT_NS)
+        assert cmd == effort and list(st.position_desired) == list(ref[0:2])
         wait(lambda: reason in procs.log(proc), 10.0, 'the setpoint refusal in the log')
         assert 'setpoint stamped %d ns refused' % (k * DT_NS) in procs.log(proc)
     else:
@@ -835,3 +852,55 @@ def test_a_non_finite_law_result_is_never_published_and_theta_hat_is_restored(
         assert "1 law faults" in node.report()
     finally:
         node.destroy_node()
+
+
+def test_a_late_setpoint_stream_is_carried_forward_and_rejoined_without_a_step(
+        procs, ros_node, wait):
+    """A starved planner (gaps of 0.3 s seen): no frozen reference, no step when it returns."""
+    proc = _start(procs, '-p', 'lockstep:=false', '-p', 'stale_timeout:=2.0',
+                  '-p', 'resume_time:=0.02')
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    rep = Replica('horizontal', lockstep=False, resume=0.02)
+    q, qd = Q0, (0.0, 0.0, 0.0)
+    base = rep.fk(q)
+
+    def circle_like(j):
+        # Moving, accelerating and with jerk (30 m/s^3): carried forward over the 60 ms
+        # gap, the reference misses the stream by 1.1 mm, a step without the blend.
+        t = j * DT
+        return (base[0] + 0.1 * t + 0.5 * t * t + 5.0 * t ** 3, base[1],
+                0.1 + t + 15.0 * t * t, 0.0, 1.0 + 30.0 * t, 0.0)
+
+    def values_of(j):
+        return None if 30 <= j < 90 else circle_like(j)
+    refs = []
+    blend_end = 10 ** 9
+    for k in range(180):
+        drv.setpoints_ahead(k, values_of)
+        drv.joint_state(k, q, qd)
+        st, cmd = drv.answer(k)
+        sp_k = min(k, 29) if 30 <= k < 90 else k
+        effort, ref, _, _ = rep.tick(k * DT_NS, q, qd, circle_like(sp_k), sp_k * DT_NS)
+        assert cmd == effort, k
+        assert list(st.position_desired) == list(ref[0:2]), k
+        late = bool(st.status & ControllerState.STATUS_SETPOINT_LATE)
+        assert late == (40 <= k < 90), (k, st.message)
+        if late:
+            assert 'setpoint late' in st.message
+        if k == 90:
+            blend_end = 90 + math.ceil(rep.shaper.blend_duration / DT - 1e-9)
+            assert rep.shaper.blend_duration > 0.02       # the 1.1 mm offset, bounded
+        assert bool(st.status & STATUS_RESUMING) == (k < 20 or 90 <= k < blend_end), (
+            k, st.message)
+        refs.append(list(ref[0:2]))
+    assert blend_end < 180
+    # The reference moved on through the gap (carried forward, not frozen at tick 29) ...
+    assert refs[89][0] - refs[29][0] > 0.01
+    # ... and has no step: per tick at most the stream's own motion plus a little blend
+    # (a step would be the stream's 0.3 mm per tick plus the 1.1 mm miss).
+    stream = [circle_like(j)[0:2] for j in range(180)]
+    own = max(math.dist(a, b) for a, b in zip(stream, stream[1:]))
+    steps = [math.dist(a, b) for a, b in zip(refs, refs[1:])]
+    assert max(steps[80:]) < own + 1e-4, (max(steps[80:]), own)
+    assert procs.stop(proc) == 0

@@ -26,8 +26,9 @@ from freejoint_core.control import (ControlOutput, RobustController, STATUS_BAD_
                                     STATUS_TORQUE_LIMITED)
 from freejoint_core.delay import extrapolate_setpoint, StatePredictor
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.reference import (clamp_dt, limit_effort, MODE_HOLD, MODE_NONE,
-                                      ReferenceShaper, setpoint_refusal, state_refusal)
+from freejoint_core.reference import (clamp_dt, extrapolate, limit_effort, MODE_HOLD,
+                                      MODE_NONE, ReferenceShaper, setpoint_refusal,
+                                      state_refusal)
 from freejoint_msgs.msg import CartesianSetpoint, ControllerState
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -55,6 +56,9 @@ STATUS_RATE_LIMITED = ControllerState.STATUS_RATE_LIMITED
 STATUS_LAW_FAULT = ControllerState.STATUS_LAW_FAULT
 STATUS_RESUMING = ControllerState.STATUS_RESUMING
 STATUS_DT_CLAMPED = ControllerState.STATUS_DT_CLAMPED
+STATUS_SETPOINT_LATE = ControllerState.STATUS_SETPOINT_LATE
+LATE_PERIODS = 10
+"""Real time: a setpoint older than this many control periods is late (carried forward)."""
 
 _isfinite = math.isfinite
 _monotonic = time.monotonic
@@ -90,6 +94,7 @@ class ControllerNode(Node):
         self._recent = []             # real time: [(stamp_ns, values)], in arrival order
         self._setpoint_seen = False     # a setpoint was received (lockstep: stale timeout on)
         self._setpoint_used = False     # a setpoint was tracked (else: 'no setpoint yet')
+        self._late = False              # real time: the last setpoint used was late
         self._last_sp = (0.0, 0.0)
         self._last_state_wall = None
         self._stale_reported = False
@@ -139,6 +144,7 @@ class ControllerNode(Node):
         self.config = cfg
         self._dt = cfg.dt
         self._half_ns = cfg.dt_ns // 2
+        self._late_ns = LATE_PERIODS * cfg.dt_ns
         self._stale = cfg.stale_timeout
         self._lockstep = cfg.lockstep
         self._identity = cfg.cmd_index == tuple(range(len(cfg.cmd_index)))
@@ -362,6 +368,7 @@ class ControllerNode(Node):
                                'state stamps %g s apart, outside [0.25, 4] x control_period: '
                                'the law uses dt = %g s' % ((ns - self._last_ns) * 1e-9, dt))
         if sp is None:
+            self._late = False
             if shaper.mode != MODE_HOLD:
                 ref = shaper.hold(self._ctl.model.fk(q).tolist())
                 self._rate_armed = self._prev_cmd is not None
@@ -371,6 +378,16 @@ class ControllerNode(Node):
             if self._setpoint_used:
                 status |= STATUS_STALE_SETPOINT
         else:
+            if not self._lockstep:
+                age_ns = ns - sp_ns
+                if age_ns > 0:
+                    sp = extrapolate(sp, age_ns * 1e-9)
+                late = age_ns > self._late_ns
+                if late:
+                    status |= STATUS_SETPOINT_LATE
+                elif self._late:
+                    shaper.restart_blend()       # the stream is back: no step to it
+                self._late = late
             p_now = self._ctl.model.fk(q).tolist() if shaper.mode == MODE_NONE else None
             ref, blending = shaper.track(ns * 1e-9, sp, p_now)
             self._setpoint_used = True
@@ -589,6 +606,9 @@ def _status_message(status, det, values, hold_reason, shaper):
         parts.append('torque change limited to %g N m/s' % values['effort_rate_limit'])
     if status & STATUS_LAW_FAULT:
         parts.append('law fault: non-finite or out-of-range output, previous command repeated')
+    if status & STATUS_SETPOINT_LATE:
+        parts.append('setpoint late: the newest is older than %d control periods, carried '
+                     'forward along its velocity and acceleration' % LATE_PERIODS)
     if status & STATUS_DT_CLAMPED:
         parts.append('state stamps outside [0.25, 4] x control_period: dt clamped')
     return '; '.join(parts)

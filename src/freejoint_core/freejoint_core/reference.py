@@ -16,7 +16,8 @@ A real arm must not go limp when its setpoints stop, nor jump when they come bac
 
 Besides, :func:`clamp_dt`, :func:`limit_effort`, :func:`state_refusal` and
 :func:`setpoint_refusal` are the controller's input and output guards (plausibility of a
-state or a setpoint, the torque limit and rate limit, the law's time step from stamps).
+state or a setpoint, the torque limit and rate limit, the law's time step from stamps), and
+:func:`extrapolate` carries a late setpoint forward to the state's time.
 Plain floats and tuples, no ROS types.
 
 """
@@ -151,6 +152,11 @@ class ReferenceShaper:
         """Return the frozen hold position ``(x, y)`` [m], or None when not holding."""
         return self._hold if self.mode == MODE_HOLD else None
 
+    def restart_blend(self):
+        """Blend again from the last reference at the next ``track`` (the stream jumped)."""
+        if self._last is not None and self.mode in (MODE_STREAM, MODE_BLEND):
+            self.mode = MODE_HOLD
+
     def hold(self, p_now):
         """
         Return the hold reference; the hold starts (frozen at ``p_now``) if not holding.
@@ -234,6 +240,28 @@ class ReferenceShaper:
         ref = (sp[0] + dx, sp[1] + dy, sp[2] + vx, sp[3] + vy, sp[4] + ax, sp[5] + ay)
         self._last = ref
         return ref, True
+
+
+def extrapolate(sp, h):
+    """
+    Shift a setpoint by ``h`` along its Taylor polynomial (acceleration held).
+
+    Parameters
+    ----------
+    sp : tuple of float, (6,)
+        ``(px, py, vx, vy, ax, ay)`` [m, m/s, m/s^2] at ``t``.
+    h : float
+        Shift [s].
+
+    Returns
+    -------
+    tuple of float, (6,)
+        The setpoint at ``t + h``.
+
+    """
+    px, py, vx, vy, ax, ay = sp
+    hh = 0.5 * h * h
+    return (px + h * vx + hh * ax, py + h * vy + hh * ay, vx + h * ax, vy + h * ay, ax, ay)
 
 
 def clamp_dt(dt, nominal, low=0.25, high=4.0):
