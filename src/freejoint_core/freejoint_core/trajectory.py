@@ -572,6 +572,12 @@ def plan_transition(p0, v0, a0, circle, dt, max_duration=60.0, path_check=None,
     if float(np.hypot(*(p1 - p0))) <= AT_START and not v0.any() and not a0.any():
         return TransitionChoice(True, '', None, 0, 0.0, 0.0, 0.0, (v_lim, a_lim, s_lim),
                                 math.inf)
+    speed0, acc0 = float(np.hypot(*v0)), float(np.hypot(*a0))
+    if speed0 > v_lim or acc0 > a_lim:
+        return TransitionChoice(
+            False, f'the current state ({speed0:.6g} m/s, {acc0:.6g} m/s^2) is already above '
+            f'the limits (speed {v_lim:.6g} m/s, acceleration {a_lim:.6g} m/s^2)', None, 0,
+            math.nan, math.nan, math.nan, (v_lim, a_lim, s_lim), math.nan)
     max_ticks = max(1, int(math.floor(max_duration / dt + 1e-9)))
     cand = _candidates(max_ticks)
     tau = np.linspace(0.0, 1.0, max(3, int(coarse)))

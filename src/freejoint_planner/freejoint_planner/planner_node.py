@@ -374,8 +374,9 @@ class PlannerNode(Node):
         check = model.check(circle)
         if not check.ok or not transition:
             return check.reason, check.margin, None, None
-        reason, choice, tick = prepare_transition(self._stream, circle, model,
-                                                  cfg['transition_max_duration'])
+        reason, choice, tick = prepare_transition(
+            self._stream, circle, model, cfg['transition_max_duration'],
+            bounds=(cfg['max_speed'], cfg['max_acceleration']))
         return reason, check.margin, choice, tick
 
     def _execute(self, circle, start_delay, margin, source, choice=None, tick=None):

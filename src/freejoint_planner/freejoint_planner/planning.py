@@ -16,6 +16,7 @@ from freejoint_core.arm import CASES, table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path, det_map, semi_singular
 from freejoint_core.trajectory import circle_peaks, CircleQuintic, plan_transition
+from freejoint_core.trajectory import transition_limits
 import numpy as np
 
 # Parameters of the configured circle; an accepted change of any of them re-checks it.
@@ -290,7 +291,7 @@ def grid_extent(reach, cell):
     return (-half, half, -half, half)
 
 
-def prepare_transition(stream, circle, model, max_duration):
+def prepare_transition(stream, circle, model, max_duration, bounds=None):
     """
     Decide how a newly accepted ``circle`` joins the stream: directly or by a transition.
 
@@ -304,6 +305,9 @@ def prepare_transition(stream, circle, model, max_duration):
         Region and reach the transition's path is checked against.
     max_duration : float
         Longest transition (s).
+    bounds : tuple of float, optional
+        ``(max_speed, max_acceleration)`` (m/s, m/s^2): caps on the transition's limits
+        (the circle's own peaks, or the start state's when faster).
 
     Returns
     -------
@@ -326,8 +330,12 @@ def prepare_transition(stream, circle, model, max_duration):
                 f'time, {left:.3f} s from the first unpublished setpoint); a transition is '
                 'never cut short (its circle is reached): try again after it'), None, None
     px, py, vx, vy, ax, ay = state
+    limits = transition_limits(circle, stream.dt, (vx, vy), (ax, ay))
+    if bounds is not None:
+        limits = (min(limits[0], bounds[0]), min(limits[1], bounds[1]), limits[2])
     choice = plan_transition((px, py), (vx, vy), (ax, ay), circle, stream.dt,
-                             max_duration=max_duration, path_check=model.check_points)
+                             max_duration=max_duration, path_check=model.check_points,
+                             limits=limits)
     if not choice.ok:
         return f'no safe transition from the current setpoint: {choice.reason}', choice, None
     return '', choice, (k if choice.segment is not None else None)

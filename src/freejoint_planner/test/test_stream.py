@@ -350,3 +350,20 @@ def test_a_new_time_base_drops_the_transition_and_restarts_the_circle():
     out = s.advance(1 * MS)                      # backwards: a reset simulator
     assert s.plan.transition is None and s.pending() is not None
     assert (out[0].plan_time, out[0].px, out[0].plan_id) == (0.0, 0.1, 2)
+
+
+def test_a_transition_starting_faster_than_max_speed_is_refused_with_the_bound():
+    from freejoint_planner.planning import prepare_transition
+    s = _stream()
+    s.start(Plan(1, CircleQuintic()))
+    for k in range(0, 2501, 10):
+        s.advance(k * MS)                            # 0.47 m/s at mid-circle
+    reason, choice, _ = prepare_transition(s, CircleQuintic(centre=(0.05, 0.0)), _NoRegion(),
+                                           60.0, bounds=(0.3, 5.0))
+    assert reason.startswith('no safe transition from the current setpoint: the current '
+                             'state (0.471172 m/s, 1.11004 m/s^2)'), reason
+    assert 'is already above the limits (speed 0.3 m/s, acceleration 1.11033 m/s^2)' in reason
+    assert choice.limits[:2] == (0.3, choice.limits[1])
+    reason, choice, _ = prepare_transition(s, CircleQuintic(centre=(0.05, 0.0)), _NoRegion(),
+                                           60.0, bounds=(1.0, 5.0))
+    assert reason == '' and choice.peak_speed <= choice.limits[0] < 1.0
