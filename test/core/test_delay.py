@@ -284,7 +284,8 @@ def test_delay_study_rows_summarise_the_runs_and_zero_delay_is_the_paper_run():
     assert len(table) == 5 and table[4].startswith('| horizontal | 2 | on | 1 |')
 
 
-@pytest.mark.parametrize('argv', [['--delay-ticks', '-1'], ['--bias-gain', '1.5']])
+@pytest.mark.parametrize('argv', [['--delay-ticks', '-1'], ['--bias-gain', '1.5'],
+                                  ['--delay-jitter', '-2'], ['--predict-ticks', '-1']])
 def test_offline_cli_refuses_a_negative_delay_and_an_observer_gain_out_of_range(argv):
     with pytest.raises(SystemExit, match='offline: --'):
         offline.main(argv + ['--out', ''])
@@ -338,3 +339,35 @@ def test_offline_echo_recovers_the_delay_from_the_applied_command():
         assert rec['max_mm'] == pytest.approx(matched['max_mm'], rel=0.05)
     with pytest.raises(FreejointValueError, match='^echo:'):
         offline.run_case('vertical', 'robust', 1, echo='yes', **kw)
+
+
+def test_offline_jitter_applies_the_newest_command_arrived_in_order():
+    m, jit, seed = 1, 3, 5
+    rec, tr = offline.run_case('vertical', 'robust', seed, duration=0.2, record_trace=True,
+                               delay_ticks=m, delay_jitter=jit)
+    assert rec['variant'] == 'robust d1~3'
+    # Hand replay of the documented rule: command k arrives at k + m + j_k (j_k from
+    # default_rng([7919, seed]) in 0..jit), never before the previous one; step j applies
+    # the newest arrived (tau_0 before any).
+    draws = np.random.default_rng([7919, seed]).integers(0, jit + 1, len(tr['t'])).tolist()
+    assert set(draws) == set(range(jit + 1))
+    arrive, last = [], 0
+    for k, d in enumerate(draws):
+        last = max(k + m + d, last)
+        arrive.append(last)
+    plant = Plant(table1('vertical'), dist_bound=0.5, seed=seed,
+                  q0=offline.initial_state(table1('vertical')))
+    held = skipped = prev = 0
+    for j in range(len(tr['t'])):
+        assert plant.q.tolist() == tr['q'][j].tolist()
+        arrived = [k for k in range(j + 1) if arrive[k] <= j]
+        newest = arrived[-1] if arrived else 0
+        plant.step(tr['tau'][newest], 1e-3)
+        if j and newest == prev:
+            held += 1
+        elif j and newest > prev + 1:
+            skipped += 1
+        prev = newest
+    assert held > 0 and skipped > 0     # the jitter both holds and skips commands
+    with pytest.raises(FreejointValueError, match='^delay_jitter:'):
+        offline.run_case('vertical', 'robust', 0, duration=0.01, delay_jitter=-1)

@@ -116,7 +116,7 @@ def initial_state(params, q3_0_deg=120.0, start=(0.2, 0.0)):
 def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_SUB,
              duration=5.0, nominal_scale=0.7, dist_bound=0.5, gains=None, record_trace=False,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0, delay_ticks=0, predict=False,
-             bias_gain=DEFAULT_BIAS_GAIN, predict_ticks=None, echo=False):
+             bias_gain=DEFAULT_BIAS_GAIN, predict_ticks=None, echo=False, delay_jitter=0):
     """
     Run one closed-loop case and return its metrics record (and trace).
 
@@ -164,6 +164,12 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
         The predictor is told the command applied over the last period (as
         ``joint_states.effort`` reports it) and takes its horizon from it
         (``StatePredictor.ticks_since``; ``predict_ticks`` when that fails).
+    delay_jitter : int
+        Variable delay (periods), >= 0: command k arrives at tick
+        ``k + delay_ticks + j_k``, ``j_k`` uniform in ``0 .. delay_jitter`` (its own
+        generator, seeded from ``seed``), in order (never before the previous
+        one); each plant step applies the newest command arrived (a late one
+        is held, one overtaken before its step is never applied).
 
     Returns
     -------
@@ -204,6 +210,10 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
     predict_ticks = int(predict_ticks)
     if not isinstance(echo, (bool, np.bool_)):
         raise FreejointValueError(f'echo: expected a bool, got {echo!r}')
+    if isinstance(delay_jitter, bool) or not isinstance(delay_jitter, (int, np.integer)) \
+            or delay_jitter < 0:
+        raise FreejointValueError(f'delay_jitter: expected an int >= 0, got {delay_jitter!r}')
+    delay_jitter = int(delay_jitter)
     if gains is None:
         gains = Gains()
     elif not isinstance(gains, Gains):
@@ -233,17 +243,24 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
     ctrl = RobustController(nominal, gains)
     label = variant
     pred = None
-    if delay_ticks:
-        label = f'{variant} d{delay_ticks}' + ('+p' if predict else '')
+    pipeline = bool(delay_ticks or delay_jitter)
+    if pipeline:
+        label = f'{variant} d{delay_ticks}' + (f'~{delay_jitter}' if delay_jitter else '') \
+            + ('+p' if predict else '')
         if predict and predict_ticks != delay_ticks:
             label += f'{predict_ticks}'
         if predict and echo:
             label += 'e'
         if predict:
-            pred = StatePredictor(nominal, dt, dt_sub, max_ticks=max(delay_ticks, predict_ticks),
-                                  bias_gain=bias_gain)
+            pred = StatePredictor(nominal, dt, dt_sub, bias_gain=bias_gain,
+                                  max_ticks=max(delay_ticks + delay_jitter, predict_ticks, 1))
             h_pred = predict_ticks * dt
             fk_real = make_model(real).fk
+        jitter = np.random.default_rng([7919, 0 if seed is None else int(seed)]).integers(
+            0, delay_jitter + 1, n_ticks).tolist() if delay_jitter else [0] * n_ticks
+        arrive = []         # tick at which each computed command reaches the plant
+        applied_at = []     # index of the command each plant step applied
+        cur = 0
 
     # Setpoints of every tick, through the same scalar path the graph uses.
     sample = trajectory.sample_tuple
@@ -278,7 +295,7 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
                 out = ctrl.step(q, qd, (pdx, pdy), (vdx, vdy), (adx, ady), dt)
             else:
                 if echo and k:
-                    applied = tau_buf[max(k - 1 - delay_ticks, 0)]
+                    applied = tau_buf[applied_at[k - 1]]
                     m_k = pred.ticks_since(applied)
                     m_k = predict_ticks if m_k is None else m_k
                     qp, qdp = pred.predict(q, qd, m_k, applied)
@@ -324,7 +341,14 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
             diverged = t
             break
         try:
-            plant.step(tau_buf[max(k - delay_ticks, 0)] if delay_ticks else out.tau, dt)
+            if pipeline:
+                arrive.append(max(k + delay_ticks + jitter[k], arrive[-1] if k else 0))
+                while cur < k and arrive[cur + 1] <= k:
+                    cur += 1
+                applied_at.append(cur)
+                plant.step(tau_buf[cur], dt)
+            else:
+                plant.step(out.tau, dt)
         except _BLOWUP:
             diverged = (k + 1) * dt
             break
@@ -350,7 +374,8 @@ def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_
 
 
 def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
-            progress=None, delay_ticks=0, predict=False, bias_gain=DEFAULT_BIAS_GAIN):
+            progress=None, delay_ticks=0, predict=False, bias_gain=DEFAULT_BIAS_GAIN,
+            **delay_options):
     """
     Run the offline study: robust and robust_off over seeds, exact once, per case.
 
@@ -372,6 +397,8 @@ def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
         Compensate it with the state predictor.
     bias_gain : float
         The predictor's bias observer gain.
+    **delay_options
+        ``predict_ticks``, ``echo``, ``delay_jitter`` of :func:`run_case`.
 
     Returns
     -------
@@ -387,7 +414,7 @@ def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
         jobs.append(('exact', 0))
         for variant, seed in jobs:
             rec, _ = run_case(case, variant, seed, dt_sub=dt_sub, delay_ticks=delay_ticks,
-                              predict=predict, bias_gain=bias_gain)
+                              predict=predict, bias_gain=bias_gain, **delay_options)
             records.append(rec)
             if progress is not None:
                 progress(rec)
@@ -535,6 +562,14 @@ def _parse(argv):
     ap.add_argument('--bias-gain', type=float, default=DEFAULT_BIAS_GAIN,
                     help='bias observer gain of the predictor (default '
                     f'{DEFAULT_BIAS_GAIN:g}; 0: plain nominal prediction)')
+    ap.add_argument('--delay-jitter', type=int, default=0, metavar='J',
+                    help='variable delay: each command arrives 0..J ticks later still '
+                    '(in order; the plant applies the newest arrived)')
+    ap.add_argument('--predict-ticks', type=int, default=None, metavar='P',
+                    help='predictor horizon (default: --delay-ticks)')
+    ap.add_argument('--echo', action='store_true',
+                    help='predictor horizon and observer from the applied command the plant '
+                    'reports (joint_states.effort)')
     ap.add_argument('--delay-study', action='store_true',
                     help='only the delay study of docs/delay.md: robust over the seeds, '
                     f'delays {", ".join(map(str, DELAY_STUDY_MS))} ms, predictor off and on')
@@ -546,8 +581,9 @@ def main(argv=None):
     args = _parse(sys.argv[1:] if argv is None else argv)
     if args.seeds < 1:
         raise SystemExit('offline: --seeds must be >= 1')
-    if args.delay_ticks < 0:
-        raise SystemExit('offline: --delay-ticks must be >= 0')
+    if args.delay_ticks < 0 or args.delay_jitter < 0 or (args.predict_ticks or 0) < 0:
+        raise SystemExit('offline: --delay-ticks, --delay-jitter and --predict-ticks must be '
+                         '>= 0')
     if not 0.0 <= args.bias_gain <= 1.0:
         raise SystemExit('offline: --bias-gain must lie in [0, 1]')
     if args.delay_study:
@@ -556,16 +592,20 @@ def main(argv=None):
     t0 = time.perf_counter()
     records = run_all(range(args.seeds), args.cases, args.dt_sub, off,
                       delay_ticks=args.delay_ticks, predict=args.predict,
-                      bias_gain=args.bias_gain)
+                      bias_gain=args.bias_gain, predict_ticks=args.predict_ticks,
+                      echo=args.echo, delay_jitter=args.delay_jitter)
     wall = time.perf_counter() - t0
     print(f'offline: {len(records)} runs, dt = 1 ms, dt_sub = {args.dt_sub:g} s, '
           f'{wall:.1f} s wall')
-    if args.delay_ticks:
-        print(f'command delay {args.delay_ticks} ticks, predictor '
+    delayed = args.delay_ticks or args.delay_jitter
+    if delayed:
+        print(f'command delay {args.delay_ticks} + 0..{args.delay_jitter} ticks, predictor '
               f'{f"on (bias_gain {args.bias_gain:g})" if args.predict else "off"}')
     if args.out is None:
-        args.out = DEFAULT_OUT if not args.delay_ticks else (
-            f'bags/offline/delay_m{args.delay_ticks}{"_p" if args.predict else ""}.json')
+        args.out = DEFAULT_OUT if not delayed else (
+            f'bags/offline/delay_m{args.delay_ticks}'
+            f'{f"j{args.delay_jitter}" if args.delay_jitter else ""}'
+            f'{"_p" if args.predict else ""}.json')
     print(format_table(records, theta=args.theta))
     print()
     print(format_summary(records))
