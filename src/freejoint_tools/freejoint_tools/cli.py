@@ -28,7 +28,8 @@ Values are parsed as ``ros2 param set`` parses them (YAML:
 ``rclpy.parameter.get_parameter_value``). Unlike ros2cli there is no daemon: each command
 waits for discovery itself, at most ``--timeout`` s for the node or service it names
 (the lists: ``--spin-time`` s, then until nothing new was discovered for 1 s, at most
-``--timeout`` s more), and every answer at most ``--service-timeout`` s.
+``--timeout`` s more), and every answer at most ``--service-timeout`` s (a parameter
+request, idempotent, is sent again once after half of it).
 
 Exit status: 0 on success; 1 when the node or service is not found, an answer does not
 come, a parameter is not set, or a set / load is refused (ros2 param prints the same
@@ -146,10 +147,23 @@ class Session:
             self.spin_for(0.05)
 
     def wait_future(self, future, what):
-        """Spin until ``future`` is done, at most ``--service-timeout`` s; return its result."""
-        deadline = time.monotonic() + self.args.service_timeout
+        """
+        Spin until ``future`` is done, at most ``--service-timeout`` s; return its result.
+
+        ``future`` may be a callable that sends the request and returns its future (an
+        idempotent request: the parameter services'): it is sent again once if half of
+        the time passed without an answer (a response can be lost while the server's side
+        of a service just discovered has not matched this client yet).
+        """
+        send = future if callable(future) else None
+        future = send() if send else future
+        start = time.monotonic()
+        deadline = start + self.args.service_timeout
         while not future.done() and time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.05)
+            if send is not None and time.monotonic() - start > 0.5 * self.args.service_timeout:
+                future.cancel()
+                future, send = send(), None
         if not future.done():
             future.cancel()
             raise CommandError('No answer from %s within %g s'
@@ -185,14 +199,15 @@ def _param_list(s, args):
         nodes = [n for n in nodes if n + '/list_parameters' in services]
     for name in nodes:
         client = s.parameter_client(name)
-        result = s.wait_future(client.list_parameters(prefixes=args.param_prefixes or None),
+        prefixes = args.param_prefixes or None
+        result = s.wait_future(lambda: client.list_parameters(prefixes=prefixes),
                                name + '/list_parameters')
         names = sorted(result.result.names)
         if not args.node_name:
             print(name + ':')
         types = {}
         if args.param_type and names:
-            described = s.wait_future(client.describe_parameters(names),
+            described = s.wait_future(lambda: client.describe_parameters(names),
                                       name + '/describe_parameters')
             types = {d.name: TYPE_NAMES.get(d.type, str(d.type))
                      for d in described.descriptors}
@@ -205,7 +220,7 @@ def _param_list(s, args):
 def _param_get(s, args):
     name = absolute_name(args.node_name)
     client = s.parameter_client(name)
-    values = s.wait_future(client.get_parameters([args.parameter_name]),
+    values = s.wait_future(lambda: client.get_parameters([args.parameter_name]),
                            name + '/get_parameters').values
     if not values:
         raise CommandError('Parameter not set')
@@ -231,7 +246,8 @@ def _param_set(s, args):
     name = absolute_name(args.node_name)
     client = s.parameter_client(name)
     params = [Parameter(name=pname, value=get_parameter_value(text)) for pname, text in pairs]
-    results = s.wait_future(client.set_parameters(params), name + '/set_parameters').results
+    results = s.wait_future(lambda: client.set_parameters(params),
+                            name + '/set_parameters').results
     status = 0
     for (pname, _), result in zip(pairs, results):
         msg = 'Set parameter successful' if result.successful else 'Setting parameter failed'
@@ -247,7 +263,7 @@ def _param_set(s, args):
 def _param_describe(s, args):
     name = absolute_name(args.node_name)
     client = s.parameter_client(name)
-    descriptors = s.wait_future(client.describe_parameters(args.parameter_names),
+    descriptors = s.wait_future(lambda: client.describe_parameters(args.parameter_names),
                                 name + '/describe_parameters').descriptors
     if not descriptors:
         raise CommandError('Parameter not declared: %s' % ', '.join(args.parameter_names))
@@ -287,9 +303,9 @@ def _param_dump(s, args):
     import yaml
     name = absolute_name(args.node_name)
     client = s.parameter_client(name)
-    names = sorted(s.wait_future(client.list_parameters(),
+    names = sorted(s.wait_future(lambda: client.list_parameters(),
                                  name + '/list_parameters').result.names)
-    values = s.wait_future(client.get_parameters(names), name + '/get_parameters').values
+    values = s.wait_future(lambda: client.get_parameters(names), name + '/get_parameters').values
     if len(values) != len(names):
         raise CommandError('%s/get_parameters answered %d values for %d parameters (a '
                            'parameter without a value?)' % (name, len(values), len(names)))
@@ -349,12 +365,13 @@ def _drop_unchanged_read_only(s, client, name, params):
     """
     from rclpy.parameter import parameter_value_to_python
     names = [p.name for p in params]
-    descriptors = s.wait_future(client.describe_parameters(names),
+    descriptors = s.wait_future(lambda: client.describe_parameters(names),
                                 name + '/describe_parameters').descriptors
     read_only = [d.name for d in descriptors if d.read_only]  # none if one is undeclared
     if not read_only:
         return params
-    values = s.wait_future(client.get_parameters(read_only), name + '/get_parameters').values
+    values = s.wait_future(lambda: client.get_parameters(read_only),
+                           name + '/get_parameters').values
     current = {n: parameter_value_to_python(v) for n, v in zip(read_only, values)}
     kept = []
     for param in params:
@@ -374,7 +391,7 @@ def _param_load(s, args):
     types = {}
     empty = [k for k, v in values.items() if v == []]
     if empty:  # an empty list has no type of its own: take the declared one
-        answer = s.wait_future(client.get_parameter_types(empty),
+        answer = s.wait_future(lambda: client.get_parameter_types(empty),
                                name + '/get_parameter_types')
         types = dict(zip(empty, answer.types))
     params = []
@@ -389,7 +406,8 @@ def _param_load(s, args):
                                                                exc))
         params.append(param)
     params = _drop_unchanged_read_only(s, client, name, params)
-    results = s.wait_future(client.set_parameters(params), name + '/set_parameters').results
+    results = s.wait_future(lambda: client.set_parameters(params),
+                            name + '/set_parameters').results
     status = 0
     for param, result in zip(params, results):
         msg = 'Set parameter %s %s' % (param.name,
