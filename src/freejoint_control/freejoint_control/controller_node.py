@@ -145,6 +145,7 @@ class ControllerNode(Node):
         self._dt = cfg.dt
         self._half_ns = cfg.dt_ns // 2
         self._late_ns = LATE_PERIODS * cfg.dt_ns
+        self._carry_ns = round(cfg.carry_forward_time * 1e9)
         self._stale = cfg.stale_timeout
         self._lockstep = cfg.lockstep
         self._identity = cfg.cmd_index == tuple(range(len(cfg.cmd_index)))
@@ -280,11 +281,17 @@ class ControllerNode(Node):
             if found is None:
                 self._no_setpoint(ns, stamp, q, qd)
                 return
+            if ns - found[0] > self._carry_ns and self._hold_on_stale:
+                self._no_setpoint(ns, stamp, q, qd, (ns - found[0]) * 1e-9)
+                return
             self._tick(ns, stamp, q, qd, found[0], found[1])
 
-    def _no_setpoint(self, ns, stamp, q, qd):
-        """Answer a state without a fresh setpoint: hold (default) or zero effort."""
-        if self._setpoint_used:
+    def _no_setpoint(self, ns, stamp, q, qd, late=None):
+        """Answer a state without a fresh (or timely) setpoint: hold or zero effort."""
+        if late is not None:
+            why = ('setpoint stream late: the newest is %.3g s old, carried forward %g s at '
+                   'most' % (late, self.config.carry_forward_time))
+        elif self._setpoint_used:
             why = ('stale setpoint: none stamped within %g s before the state%s'
                    % (self._stale, self._sp_refusal_note()))
         else:
@@ -296,7 +303,7 @@ class ControllerNode(Node):
         if self._shaper.mode != MODE_HOLD:
             self._holds += 1
             self._throttle(self.get_logger().warn, 'hold', why + ': holding position')
-        self._tick(ns, stamp, q, qd, None, None, why)
+        self._tick(ns, stamp, q, qd, None, None, why, late is not None)
 
     def _sp_refusal_note(self):
         text = self._last_sp_refusal
@@ -354,7 +361,7 @@ class ControllerNode(Node):
                     del setpoints[key]
 
     # -- outputs ---------------------------------------------------------------
-    def _tick(self, ns, stamp, q, qd, sp_ns, sp, hold_reason=''):
+    def _tick(self, ns, stamp, q, qd, sp_ns, sp, hold_reason='', late=False):
         """Compute and publish the command for the state stamped ns (sp None: hold)."""
         status = 0
         shaper = self._shaper
@@ -375,7 +382,9 @@ class ControllerNode(Node):
             else:
                 ref = shaper.hold(None)
             status |= STATUS_HOLDING
-            if self._setpoint_used:
+            if late:
+                status |= STATUS_SETPOINT_LATE
+            elif self._setpoint_used:
                 status |= STATUS_STALE_SETPOINT
         else:
             if not self._lockstep:
@@ -606,7 +615,7 @@ def _status_message(status, det, values, hold_reason, shaper):
         parts.append('torque change limited to %g N m/s' % values['effort_rate_limit'])
     if status & STATUS_LAW_FAULT:
         parts.append('law fault: non-finite or out-of-range output, previous command repeated')
-    if status & STATUS_SETPOINT_LATE:
+    if status & STATUS_SETPOINT_LATE and not status & STATUS_HOLDING:
         parts.append('setpoint late: the newest is older than %d control periods, carried '
                      'forward along its velocity and acceleration' % LATE_PERIODS)
     if status & STATUS_DT_CLAMPED:

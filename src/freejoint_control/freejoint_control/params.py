@@ -73,6 +73,10 @@ SPECS = (
     Spec('resume_max_acceleration', 2.0,
          'bound [m/s^2] on the peak acceleration of the blend: a larger offset blends for '
          'longer than resume_time (sqrt(5.77 offset / resume_max_acceleration))', (1e-3, 1e4)),
+    Spec('carry_forward_time', 0.05,
+         'real time: a late setpoint (older than the state) is carried forward along its '
+         'velocity and acceleration for at most this long [s]; older, the controller holds '
+         '(with on_stale_setpoint: hold)', (0.0, 3600.0)),
     Spec('theta_max', [100.0] * 5,
          'element-wise bound of theta_hat (5 values > 0, <= 1e6), clamped inside the update'),
     Spec('joint_position_lower', [-1000.0, -1000.0, -1000.0],
@@ -125,6 +129,7 @@ class Config:
     resume_time: float
     resume_max_velocity: float
     resume_max_acceleration: float
+    carry_forward_time: float
     position_lower: tuple
     position_upper: tuple
     velocity_limit: tuple
@@ -253,6 +258,7 @@ def build_config(values):
                   on_stale_setpoint=values['on_stale_setpoint'], resume_time=resume,
                   resume_max_velocity=float(values['resume_max_velocity']),
                   resume_max_acceleration=float(values['resume_max_acceleration']),
+                  carry_forward_time=float(values['carry_forward_time']),
                   position_lower=lower, position_upper=upper, velocity_limit=vlim,
                   reach=float(sum(nominal.lengths)),
                   setpoint_max_velocity=float(values['setpoint_max_velocity']),
