@@ -31,15 +31,20 @@ than without it (docs/delay.md).  The predictor therefore learns an
 acceleration bias ``a_b`` (n,), added to the nominal ``qdd`` in the
 integration: at each ``predict`` that follows exactly one ``push``, the last
 measured state is integrated over one period under the command that acted
-over it (pushed ``ticks + 1`` pushes ago) and, with the velocity residual
+over it (``applied`` if the caller knows it, e.g. from ``joint_states.effort``;
+else the one pushed ``ticks + 1`` pushes ago) and, with the velocity residual
 ``r = qd_measured - qd_predicted``::
 
     a_b <- a_b + bias_gain * r / dt
 
 an integrating observer (``bias_gain`` 0 .. 1; 0 turns it off).  It converges
 to the model error along the path within a few tens of periods and averages
-out the random disturbance.  The default ``bias_gain`` is the one measured
-best (docs/delay.md).
+out the random disturbance.  The default ``bias_gain`` (0.05) is the best
+compromise measured between accuracy and delay margin (docs/delay.md).
+
+The pipeline must be right: with the 70 % model a horizon one period off the
+real delay diverges the vertical case.  ``ticks_since(applied)`` reads the
+delay from the command the plant reports it applied (docs/delay.md).
 
 History before enough commands were sent: the missing (older) commands are
 taken equal to the oldest pushed one, and as zero torque when none has been
