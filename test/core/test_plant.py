@@ -252,3 +252,14 @@ def test_a_step_from_an_infinite_angle_is_a_divergence_not_a_math_error():
     plant._q = [math.inf, 0.2, 0.3]   # what a blown-up earlier step would leave in fast3
     with pytest.raises(PlantDivergedError, match='diverged'):
         plant.step([0.0, 0.0], 0.001)
+
+
+def test_stop_zeroes_every_velocity_and_keeps_the_position():
+    plant = Plant(table1('vertical'), dist_bound=0.0)
+    for _ in range(50):
+        plant.step([0.0, 0.0], 0.001)
+    q = plant.q.tolist()
+    assert any(v != 0.0 for v in plant.qd.tolist())   # the released arm was falling
+    plant.stop()
+    assert plant.q.tolist() == q
+    assert plant.qd.tolist() == [0.0, 0.0, 0.0]

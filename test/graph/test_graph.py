@@ -242,7 +242,8 @@ def test_stopping_the_controller_makes_the_sim_apply_zero_effort_within_its_time
     ros_node.create_subscription(JointState, 'joint_states',
                                  lambda m: efforts.append(list(m.effort)),
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-    sim = run.start('sim', 'mode:=realtime', 'command_timeout:=0.3', 'publish_rate:=100.0')
+    sim = run.start('sim', 'mode:=realtime', 'command_timeout:=0.3', 'publish_rate:=100.0',
+                    'brake_timeout:=0.0')
     controller = run.start('controller', 'lockstep:=false')
     run.start('planner', 'use_sim_time:=false')
     wait(lambda: efforts and efforts[-1][:2] != [0.0, 0.0], 60.0,

@@ -267,8 +267,6 @@ def _call_reset(ros_node):
     return future.result().message
 
 
-
-
 def test_a_diverged_plant_publishes_its_last_sane_state_reports_error_until_reset(
         procs, ros_node, wait):
     proc = _start(procs, '-p', 'dist_bound:=0.0')
@@ -389,7 +387,7 @@ def test_bad_parameter_values_are_refused_with_a_reason_and_it_keeps_running(
 def test_realtime_applies_the_latest_command_and_zero_after_the_timeout(
         procs, ros_node, wait):
     proc = _start(procs, '-p', 'mode:=realtime', '-p', 'command_timeout:=0.3',
-                  '-p', 'publish_rate:=100.0')
+                  '-p', 'publish_rate:=100.0', '-p', 'brake_timeout:=0.0')
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
 
@@ -487,6 +485,47 @@ def test_realtime_holds_the_arm_at_q0_until_the_first_command_then_releases_it(
     assert procs.stop(proc) == 0
 
 
+def test_realtime_no_command_for_brake_timeout_stops_the_arm_where_it_is_until_the_next(
+        procs, ros_node, wait):
+    proc = _realtime(procs, '-p', 'case:=vertical', '-p', 'publish_rate:=100.0',
+                     '-p', 'brake_timeout:=0.05')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    q0 = initial_state(table1('vertical')).tolist()
+
+    def commanding():           # zero effort: released, the arm falls under gravity
+        ctl.command([0.0, 0.0])
+        ctl.spin()
+
+    wait(lambda: ctl.arrivals[-1].position.tolist() != q0, 15.0, 'the arm released',
+         spin=commanding)
+    # The controller goes silent: within brake_timeout the watchdog stops the arm where it
+    # is (velocity zero, no integration) and holds it there.
+    wait(lambda: 'brakes engaged at step' in procs.log(proc), 15.0, 'the watchdog',
+         spin=ctl.spin)
+    wait(lambda: len(ctl.arrivals) >= 2 and list(ctl.arrivals[-1].velocity) == [0.0] * 3,
+         5.0, 'a braked state', spin=ctl.spin)
+    held = ctl.arrivals[-1].position.tolist()
+    assert held != q0
+    n = len(ctl.arrivals)
+    wait(lambda: len(ctl.arrivals) >= n + 20, 10.0, '0.2 s more states', spin=ctl.spin)
+    for msg in ctl.arrivals[n:]:
+        assert msg.position.tolist() == held
+        assert list(msg.velocity) == [0.0, 0.0, 0.0]
+    wait(lambda: ctl.diagnostics and 'brakes engaged (no command for 0.05 s)' in
+         ctl.diagnostics[-1][1], 5.0, 'the brakes in the status', spin=ctl.spin)
+    level, _, values = ctl.diagnostics[-1]
+    assert level == WARN and values['brakes'] == 'engaged'
+    assert int(values['brake engagements (no command)']) >= 1
+    # The next command releases them: the arm moves on from where it was held.
+    wait(lambda: ctl.arrivals[-1].position.tolist() != held, 15.0, 'released again',
+         spin=commanding)
+    log = procs.log(proc)
+    assert log.count('brakes released at step') >= 2
+    assert procs.stop(proc) == 0
+    assert 'brake engagements' in procs.log(proc)
+
+
 def test_realtime_without_start_braked_the_vertical_arm_falls_from_the_first_step(
         procs, ros_node, wait):
     proc = _realtime(procs, '-p', 'case:=vertical', '-p', 'publish_rate:=100.0',
@@ -503,7 +542,8 @@ def test_realtime_without_start_braked_the_vertical_arm_falls_from_the_first_ste
 def test_realtime_diverged_plant_freezes_reports_error_at_1hz_and_reset_brings_q0_braked(
         procs, ros_node, wait):
     proc = _realtime(procs, '-p', 'case:=vertical', '-p', 'publish_rate:=100.0',
-                     '-p', 'divergence_speed:=1.0', '-p', 'command_timeout:=0.2')
+                     '-p', 'divergence_speed:=1.0', '-p', 'command_timeout:=0.2',
+                     '-p', 'brake_timeout:=0.0')
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
     q0 = initial_state(table1('vertical')).tolist()

@@ -22,8 +22,8 @@ CONFIG = os.path.join(ROOT, 'config')
 TICKS = 1500
 
 
-def test_readme_order_recorder_first_records_the_run_from_tick_0(procs, ros_node, wait,
-                                                                  tmp_path):
+def test_readme_order_recorder_first_records_the_run_from_tick_0(
+        procs, ros_node, wait, tmp_path):
     import rclpy
     from freejoint_msgs.srv import PlanCircle
     from std_srvs.srv import Trigger

@@ -1,6 +1,7 @@
 """
-A full disk: the bag stays readable up to the error, every message that did not reach the
-file is counted lost for its topic, and the bag is still finalised.
+A full disk: the bag stays readable up to the error, and is still finalised.
+
+Every message that did not reach the file is counted lost for its topic.
 
 The disk is a small tmpfs mounted for the test (needs root or CAP_SYS_ADMIN; the test says
 so and does not run otherwise) and always unmounted at the end.
@@ -41,8 +42,8 @@ def small_disk(tmp_path):
             subprocess.run(['umount', '-l', str(point)], timeout=30)
 
 
-def test_writer_on_a_full_disk_counts_what_did_not_reach_the_file_and_finalises(small_disk,
-                                                                                 make_bag):
+def test_writer_on_a_full_disk_counts_what_did_not_reach_the_file_and_finalises(
+        small_disk, make_bag):
     from rosbags.rosbag2 import Reader
 
     from freejoint_tools.bagfile import BagWriter, default_qos_dict, open_bag

@@ -90,8 +90,8 @@ def _killed_bag(make_bag, path, ticks=300, flush_every=100):
     return _mcap_file(path)
 
 
-def test_reindex_of_a_killed_bag_gives_every_flushed_chunk_to_every_reader(tmp_path,
-                                                                           make_bag):
+def test_reindex_of_a_killed_bag_gives_every_flushed_chunk_to_every_reader(
+        tmp_path, make_bag):
     from freejoint_tools.bagfile import open_bag
     from freejoint_tools.reindex import reindex
     path = str(tmp_path / 'killed')
@@ -110,9 +110,8 @@ def test_reindex_of_a_killed_bag_gives_every_flushed_chunk_to_every_reader(tmp_p
 
 @pytest.mark.parametrize('cut', [20000, 60, 3], ids=['in_a_chunk', 'in_its_indexes',
                                                      'in_a_record_header'])
-def test_a_chunk_cut_short_or_without_all_its_indexes_is_left_out_and_cut_off(tmp_path,
-                                                                             make_bag,
-                                                                             cut):
+def test_a_chunk_cut_short_or_without_all_its_indexes_is_left_out_and_cut_off(
+        tmp_path, make_bag, cut):
     """Every complete chunk (a chunk with all its message indexes) is kept, nothing else."""
     from freejoint_tools.bagfile import open_bag
     from freejoint_tools.reindex import reindex

@@ -133,6 +133,10 @@ class Plant:
         self.k = 0
         self.last_disturbance = (0.0,) * self.n
 
+    def stop(self):
+        """Zero every joint velocity: the arm stops where it is (brakes engaged)."""
+        self._qd = [0.0] * self.n
+
     @property
     def q(self):
         """Return the joint angles [rad], numpy copy (n,)."""

@@ -77,6 +77,11 @@ SPECS = (
          'states still published at publish_rate) until the first accepted command, and '
          'again after ~/reset until the next one; false = the arm moves (a vertical arm '
          'falls) from the first step. Lockstep waits for the first command anyway'),
+    Spec('brake_timeout', 0.05,
+         'real time: no command for this long [s] after the last one engages the brakes, '
+         'as a drive watchdog does: the arm stops where it is (every joint, the passive one '
+         'included) and is held until the next accepted command; 0 = never (the last '
+         'command is applied until command_timeout, then zero effort)', (0.0, 3600.0)),
     Spec('divergence_speed', 1000.0,
          'a joint speed above this [rad/s] (or a non-finite state, or an angle beyond 1e6 '
          'rad) is a diverged plant: the simulator stops integrating, publishes its last '
@@ -124,6 +129,7 @@ class Config:
     clock_every: int = 1
     start_braked: bool = True
     divergence_speed: float = 1000.0
+    brake_timeout: float = 0.05
 
 
 def _multiple(name, big, small):
@@ -247,6 +253,10 @@ def build_config(values):
     braked = values['start_braked']
     if not isinstance(braked, bool):
         raise FreejointValueError(f'start_braked: expected true or false, got {braked!r}')
+    brake_timeout = float(values['brake_timeout'])
+    if not (math.isfinite(brake_timeout) and 0.0 <= brake_timeout <= 3600.0):
+        raise FreejointValueError(
+            f'brake_timeout: must be in [0, 3600] s (0 = never), got {brake_timeout}')
     validate_priority(values['thread_priority'])
     validate_affinity(values['cpu_affinity'])
     return Config(params=params, q0=tuple(q0.tolist()), joint_names=joint_names,
@@ -257,4 +267,5 @@ def build_config(values):
                   command_timeout=timeout, frame_id=str(values['frame_id']),
                   executor=values['executor'], timing_file=timing_file,
                   timing_steps=timing_steps, max_steps=max_steps, clock_every=clock_every,
-                  start_braked=braked, divergence_speed=speed)
+                  start_braked=braked, divergence_speed=speed,
+                  brake_timeout=brake_timeout)

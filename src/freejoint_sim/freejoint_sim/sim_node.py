@@ -29,7 +29,8 @@ Modes (docs/GRAPH.md):
   monotonic grid mapped to system time once at start), so a late publication shows as
   age, not as a wrong time.  With ``start_braked`` (default) the arm is held at q(0) at
   rest until the first accepted command (brakes engaged; states still published), and
-  again after ``~/reset``.
+  again after ``~/reset``; once running, no command for ``brake_timeout`` engages the
+  brakes where the arm is (a drive watchdog) until the next accepted command.
 
 A diverged plant (non-finite, or a joint faster than ``divergence_speed``, or an angle
 beyond ``freejoint_sim.divergence.MAX_ANGLE``) is not integrated further: the simulator
@@ -126,6 +127,8 @@ class SimNode(Node):
         self._diverged = None          # reason while the plant is diverged, else None
         self._braked = not cfg.lockstep and cfg.start_braked
         self._braked_since = _monotonic()
+        self._brake_reason = ''
+        self._brake_engagements = 0
         self._rt_origin_ns = 0         # real time: system time [ns] of step 0 on the grid
         self._take_state()
         self._diag_window = (_monotonic(), 0, 0, 0, 0)
@@ -186,6 +189,7 @@ class SimNode(Node):
         self._dt = cfg.dt
         self._dt_ns = cfg.dt_ns
         self._timeout = cfg.command_timeout
+        self._brake_timeout = 0.0 if cfg.lockstep else cfg.brake_timeout
         self._every = cfg.publish_every
         self._clock_every = cfg.clock_every
         self._lockstep = cfg.lockstep
@@ -237,6 +241,7 @@ class SimNode(Node):
         if not cfg.lockstep and cfg.start_braked:
             self._braked = True
             self._braked_since = _monotonic()
+            self._brake_reason = ''
             self.get_logger().info('reset: brakes engaged until the next command')
 
     # -- commands --------------------------------------------------------------
@@ -506,12 +511,16 @@ class SimNode(Node):
             if self._timing is not None:
                 self._timing.dropped += due - 1
             due = 1
+        latest = self._latest
         if self._braked:
-            latest = self._latest
             if latest is not None and latest[3] and latest[1] >= self._braked_since:
                 self._braked = False
+                self._brake_reason = ''
                 self.get_logger().info('brakes released at step %d (t = %.3f s): first '
                                        'command' % (self._k, self._t_ns * 1e-9))
+        elif (latest is not None and self._brake_timeout > 0.0
+              and now - latest[1] > self._brake_timeout and self._diverged is None):
+            self._engage_brakes(now)
         for _ in range(due):
             latest = self._latest
             if latest is None:
@@ -529,6 +538,20 @@ class SimNode(Node):
                 if self._k < self._timing_steps:
                     self._timing.applied[self._k] = latest[2]
             self._advance(tau)
+
+    def _engage_brakes(self, now):
+        """Drive watchdog: no command for brake_timeout, the arm stops and is held."""
+        self._plant.stop()
+        self._take_state()
+        self._braked = True
+        self._braked_since = now
+        self._brake_engagements += 1
+        self._brake_reason = 'no command for %g s' % self._brake_timeout
+        self.get_logger().warn(
+            'no command on %s for %g s: brakes engaged at step %d (t = %.3f s), the arm '
+            'is held where it is until the next command' % (
+                self._cmd_topic(), self._brake_timeout, self._k, self._t_ns * 1e-9))
+        self._publish_diagnostics(update=False)
 
     def _cmd_topic(self):
         return self.resolve_topic_name('effort_controller/commands')
@@ -565,6 +588,9 @@ class SimNode(Node):
         elif timeouts:
             warnings.append('%d command timeouts in the last %.1f s: zero effort' % (
                 timeouts, elapsed))
+        if self._braked and self._brake_reason:
+            warnings.append('brakes engaged (%s): the arm is held until the next command'
+                            % self._brake_reason)
         if refused:
             warnings.append('%d commands refused in the last %.1f s' % (refused, elapsed))
         if dropped:
@@ -603,6 +629,7 @@ class SimNode(Node):
             ('refused commands', self._refused),
             ('dropped steps', self._dropped),
             ('brakes', 'engaged' if self._braked else 'released'),
+            ('brake engagements (no command)', self._brake_engagements),
             ('divergences', self._divergences),
             ('diverged', 'true' if self._diverged is not None else 'false'))]
         msg = DiagnosticArray(status=[status])
@@ -610,10 +637,11 @@ class SimNode(Node):
         self._pub_diag.publish(msg)
 
     def report(self):
-        """One line for the end of the run: steps, timeouts, refused commands, divergences."""
+        """One line for the end of the run: steps, timeouts, refusals, brakes, divergences."""
         return 'simulator stopped at step %d (t = %.3f s): %d command timeouts, %d refused ' \
-            'commands, %d divergences' % (
-                self._k, self._t_ns * 1e-9, self._timeouts, self._refused, self._divergences)
+            'commands, %d divergences, %d brake engagements' % (
+                self._k, self._t_ns * 1e-9, self._timeouts, self._refused,
+                self._divergences, self._brake_engagements)
 
 
 def _on_stop(node):
