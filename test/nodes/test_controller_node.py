@@ -334,6 +334,8 @@ def test_with_on_stale_zero_stale_setpoint_and_stale_state_command_zero_effort_a
 # -- hold, resume, limits, dt from stamps, reset, faults (issues 10 and 11) ------------------
 LIMITS = (300.0, 200.0)     # effort_limits of config/controller.yaml
 STALE_JUMP_NS = 2_100_000_000   # a jump of the stamps beyond the tests' stale_timeout 2 s
+OLD_STAMPS = ('-p', 'max_state_age:=0.0')
+"""Real time with the tests' stamps (from 0, i.e. 1970): no state is skipped as too old."""
 RATE = 20000.0              # effort_rate_limit of config/controller.yaml [N m/s]
 
 
@@ -420,7 +422,7 @@ def _moving_setpoint(k, base):
 
 def test_real_time_controller_holds_against_gravity_before_the_first_setpoint_and_resumes_without_a_step(  # noqa: E501
         procs, ros_node, wait):
-    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false',
+    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false', *OLD_STAMPS,
                   '-p', 'resume_time:=0.05', '-p', 'stale_timeout:=2.0',
                   '-p', 'resume_max_velocity:=100.0', '-p', 'resume_max_acceleration:=1e4')
     drv = Driver(ros_node, wait)
@@ -530,7 +532,7 @@ def test_lockstep_holds_when_setpoints_go_stale_and_answers_at_once_while_holdin
 def test_real_time_dt_comes_from_the_state_stamps_bounded_to_four_periods(
         procs, ros_node, wait):
     from freejoint_msgs.msg import ControllerState as CS
-    proc = _start(procs, '-p', 'lockstep:=false', '-p', 'resume_time:=0.0',
+    proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS, '-p', 'resume_time:=0.0',
                   '-p', 'stale_timeout:=2.0')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
@@ -611,7 +613,7 @@ def _set(node, client, *params):
 def test_restarted_real_time_controller_ramps_its_torque_from_zero_without_a_spike(
         procs, ros_node, wait):
     # As after kill -9 mid-circle: the arm moves, 3.6 cm off the stream, vertical.
-    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false',
+    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false', *OLD_STAMPS,
                   '-p', 'stale_timeout:=2.0')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
@@ -638,7 +640,7 @@ def test_restarted_real_time_controller_ramps_its_torque_from_zero_without_a_spi
 def test_reset_service_restarts_theta_hat_and_the_hold(procs, ros_node, wait):
     from std_srvs.srv import Trigger
     import rclpy
-    proc = _start(procs, '-p', 'lockstep:=false', '-p', 'resume_time:=0.01',
+    proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS, '-p', 'resume_time:=0.01',
                   '-p', 'stale_timeout:=2.0')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
@@ -685,7 +687,7 @@ def test_absurd_input_is_refused_with_a_reason_and_tracking_resumes_within_half_
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient
     kind, corrupt, reason = FAULTS[fault]
-    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false',
+    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false', *OLD_STAMPS,
                   '-p', 'resume_time:=0.01', '-p', 'stale_timeout:=2.0')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
@@ -756,7 +758,7 @@ def test_delay_compensation_predict_runs_the_law_on_the_predicted_state_in_real_
     from freejoint_core.reference import limit_effort
     # The test's stamps start at 0 (1970): the state age is huge, so the horizon is the
     # predictor's longest, max_ticks periods: deterministic.
-    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false',
+    proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false', *OLD_STAMPS,
                   '-p', 'stale_timeout:=2.0', '-p', 'delay_compensation:=predict')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
@@ -801,7 +803,8 @@ def test_a_non_finite_law_result_is_never_published_and_theta_hat_is_restored(
     from freejoint_msgs.msg import CartesianSetpoint
     node = ControllerNode(parameter_overrides=[
         Parameter('case', value='vertical'), Parameter('lockstep', value=False),
-        Parameter('stale_timeout', value=2.0), Parameter('resume_time', value=0.0)])
+        Parameter('stale_timeout', value=2.0), Parameter('resume_time', value=0.0),
+        Parameter('max_state_age', value=0.0)])
     try:
         published = []
         monkeypatch.setattr(node._pub_cmd, 'publish',
@@ -857,7 +860,7 @@ def test_a_non_finite_law_result_is_never_published_and_theta_hat_is_restored(
 def test_a_late_setpoint_stream_is_carried_forward_then_held_and_rejoined_without_a_step(
         procs, ros_node, wait):
     """A starved planner (gaps of 0.3 s seen): no frozen reference, no step when it returns."""
-    proc = _start(procs, '-p', 'lockstep:=false', '-p', 'stale_timeout:=2.0',
+    proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS, '-p', 'stale_timeout:=2.0',
                   '-p', 'resume_time:=0.02')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
@@ -910,3 +913,25 @@ def test_a_late_setpoint_stream_is_carried_forward_then_held_and_rejoined_withou
             moved = refs[k][0] - refs[k - 1][0]
             assert abs(moved - refs[k - 1][2] * DT) < 2e-5, (k, moved, refs[k - 1][2] * DT)
     assert procs.stop(proc) == 0
+
+
+def test_real_time_skips_a_state_older_than_max_state_age_without_a_command(
+        procs, ros_node, wait):
+    """A backlog of old states (start-up, a stall) must not be answered late."""
+    import time
+    # 2 s: generous for this loaded test machine's own delays (the default is 0.1 s).
+    proc = _start(procs, '-p', 'lockstep:=false', '-p', 'max_state_age:=2.0')
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    k_old = time.time_ns() // DT_NS - 10_000        # stamps on the system clock: 10 s old
+    drv.joint_state(k_old, Q0, QD0)
+    wait(lambda: 'skipped, no command from it' in procs.log(proc), 15.0, 'the skip logged',
+         spin=drv.spin)
+    k_now = time.time_ns() // DT_NS
+    drv.joint_state(k_now, Q0, QD0)                 # fresh: answered (a hold: no setpoint)
+    st, cmd = drv.answer(k_now)
+    assert st.status & STATUS_HOLDING and _finite_within(cmd)
+    assert 0.0 <= st.state_age < 2.0
+    assert 'stamp_ns=%d' % drv.ns(k_old) not in drv.commands
+    assert procs.stop(proc) == 0
+    assert '1 states skipped as too old' in procs.log(proc)

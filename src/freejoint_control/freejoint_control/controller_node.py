@@ -45,6 +45,9 @@ for less than that loses nothing (docs/GRAPH.md)."""
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
                  reliability=ReliabilityPolicy.RELIABLE)
 """QoS of joint_states, commands and controller_state (docs/GRAPH.md)."""
+REALTIME_STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                                reliability=ReliabilityPolicy.RELIABLE)
+"""QoS of the controller's joint_states subscription in real time: the newest state only."""
 SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
                           reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -109,6 +112,7 @@ class ControllerNode(Node):
         self._faults = 0
         self._refused_setpoints = 0
         self._refused_states = 0
+        self._old_states = 0
         self._last_sp_refusal = ''
         self._good_theta = self._ctl.theta
         # Last command sent, in command order (None: none yet in lockstep, whose start is
@@ -127,7 +131,10 @@ class ControllerNode(Node):
         self._pub_cmd = self.create_publisher(Float64MultiArray, 'effort_controller/commands',
                                               QOS)
         self._pub_state = self.create_publisher(ControllerState, 'controller_state', QOS)
-        self.create_subscription(JointState, 'joint_states', self._on_joint_state, QOS)
+        # Real time: only the newest state matters (a queue of old ones would be answered
+        # late, a delay the loop cannot take); lockstep: every state, the sim waits.
+        self.create_subscription(JointState, 'joint_states', self._on_joint_state,
+                                 QOS if cfg.lockstep else REALTIME_STATE_QOS)
         self.create_subscription(CartesianSetpoint, 'setpoint', self._on_setpoint, SETPOINT_QOS)
         self.create_service(Trigger, '~/reset', self._on_reset)
         period = min(0.05, cfg.stale_timeout / 4.0)
@@ -146,6 +153,7 @@ class ControllerNode(Node):
         self._half_ns = cfg.dt_ns // 2
         self._late_ns = LATE_PERIODS * cfg.dt_ns
         self._carry_ns = round(cfg.carry_forward_time * 1e9)
+        self._max_age_ns = 0 if cfg.lockstep else round(cfg.max_state_age * 1e9)
         self._stale = cfg.stale_timeout
         self._lockstep = cfg.lockstep
         self._identity = cfg.cmd_index == tuple(range(len(cfg.cmd_index)))
@@ -214,6 +222,15 @@ class ControllerNode(Node):
         ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         self._last_state_wall = _monotonic()
         self._stale_reported = False
+        if self._max_age_ns:
+            age_ns = self._now_ns() - ns
+            if age_ns > self._max_age_ns:
+                self._old_states += 1
+                self._throttle(self.get_logger().warn, 'old_state',
+                               'state stamped %d ns is %.3f s old (> max_state_age %g s): '
+                               'skipped, no command from it' % (
+                                   ns, age_ns * 1e-9, self.config.max_state_age))
+                return
         if ns == self._last_ns:
             # A repeated state (the sim's start-up republication): same answer, no new update.
             self._pub_cmd.publish(self._cmd)
@@ -593,9 +610,10 @@ class ControllerNode(Node):
     def report(self):
         """One line for the end of the run: ticks, zero-effort answers, holds, refusals."""
         return ('controller stopped: %d ticks computed, %d zero-effort answers (stale or bad '
-                'input), %d holds, %d states and %d setpoints refused, %d law faults'
+                'input), %d holds, %d states and %d setpoints refused, %d law faults, %d '
+                'states skipped as too old'
                 % (self._ticks, self._zero_answers, self._holds, self._refused_states,
-                   self._refused_setpoints, self._faults))
+                   self._refused_setpoints, self._faults, self._old_states))
 
 
 def _status_message(status, det, values, hold_reason, shaper):

@@ -73,6 +73,9 @@ SPECS = (
     Spec('resume_max_acceleration', 2.0,
          'bound [m/s^2] on the peak acceleration of the blend: a larger offset blends for '
          'longer than resume_time (sqrt(5.77 offset / resume_max_acceleration))', (1e-3, 1e4)),
+    Spec('max_state_age', 0.1,
+         'real time: a state older than this [s] when it is taken (a backlog after a stall '
+         'or at start-up) is skipped without a command (0 = never skip)', (0.0, 3600.0)),
     Spec('carry_forward_time', 0.05,
          'real time: a late setpoint (older than the state) is carried forward along its '
          'velocity and acceleration for at most this long [s]; older, the controller holds '
@@ -130,6 +133,7 @@ class Config:
     resume_max_velocity: float
     resume_max_acceleration: float
     carry_forward_time: float
+    max_state_age: float
     position_lower: tuple
     position_upper: tuple
     velocity_limit: tuple
@@ -259,6 +263,7 @@ def build_config(values):
                   resume_max_velocity=float(values['resume_max_velocity']),
                   resume_max_acceleration=float(values['resume_max_acceleration']),
                   carry_forward_time=float(values['carry_forward_time']),
+                  max_state_age=float(values['max_state_age']),
                   position_lower=lower, position_upper=upper, velocity_limit=vlim,
                   reach=float(sum(nominal.lengths)),
                   setpoint_max_velocity=float(values['setpoint_max_velocity']),
