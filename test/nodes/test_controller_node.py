@@ -343,7 +343,7 @@ class Replica:
     """What the node must answer, from the core: law, hold / blend reference, limits."""
 
     def __init__(self, case, lockstep, resume=0.5, limits=LIMITS, rate=RATE, dt=DT,
-                 resume_bounds=(0.5, 2.0)):
+                 resume_bounds=(1.0, 5.0)):
         from freejoint_core.reference import ReferenceShaper
         self.ctl = RobustController(table1(case).scaled(0.7),
                                     Gains(tau_limit=limits, theta_max=(100.0,) * 5))

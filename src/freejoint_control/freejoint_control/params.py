@@ -67,10 +67,10 @@ SPECS = (
     Spec('resume_time', 0.5,
          'time [s of state stamps] of the quintic blend from the hold to the streamed '
          'setpoint (0: switch at once)', (0.0, 60.0)),
-    Spec('resume_max_velocity', 0.5,
+    Spec('resume_max_velocity', 1.0,
          'bound [m/s] on the peak speed of the blend: a larger offset blends for longer '
          'than resume_time (1.875 offset / resume_max_velocity)', (1e-3, 100.0)),
-    Spec('resume_max_acceleration', 2.0,
+    Spec('resume_max_acceleration', 5.0,
          'bound [m/s^2] on the peak acceleration of the blend: a larger offset blends for '
          'longer than resume_time (sqrt(5.77 offset / resume_max_acceleration))', (1e-3, 1e4)),
     Spec('max_state_age', 0.1,
