@@ -27,9 +27,10 @@ so what ``param dump`` wrote loads back.
 Values are parsed as ``ros2 param set`` parses them (YAML:
 ``rclpy.parameter.get_parameter_value``). Unlike ros2cli there is no daemon: each command
 waits for discovery itself, at most ``--timeout`` s for the node or service it names
-(the lists: ``--spin-time`` s, then until nothing new was discovered for 1 s, at most
-``--timeout`` s more), and every answer at most ``--service-timeout`` s (a parameter
-request, idempotent, is sent again once after half of it).
+(the lists: ``--spin-time`` s, then until nothing new was discovered for 1.5 s, at most
+``--timeout`` s more: under load a node can be discovered seconds after the others),
+and every answer at most ``--service-timeout`` s (a parameter request, idempotent, is
+sent again once after half of it).
 
 Exit status: 0 on success; 1 when the node or service is not found, an answer does not
 come, a parameter is not set, or a set / load is refused (ros2 param prints the same
@@ -106,7 +107,7 @@ class Session:
         while time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=min(0.05, max(0.0, deadline - time.monotonic())))
 
-    def settled(self, look, quiet=1.0):
+    def settled(self, look, quiet=1.5):
         """
         Return ``look()`` once discovery settled.
 
@@ -563,9 +564,9 @@ def _waits(parser, spin=False):
     parser.add_argument('--service-timeout', type=float, default=10.0, metavar='N',
                         help='wait N s for each answer (default %(default)s)')
     if spin:
-        parser.add_argument('--spin-time', type=float, default=1.0, metavar='N',
+        parser.add_argument('--spin-time', type=float, default=2.0, metavar='N',
                             help='discover for N s before listing, then until nothing new '
-                            'came for 1 s (default %(default)s)')
+                            'came for 1.5 s (default %(default)s)')
 
 
 def build_parser():
