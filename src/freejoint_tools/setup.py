@@ -24,6 +24,7 @@ setup(
             'analyze = freejoint_tools.analyze:main',
             'reindex = freejoint_tools.reindex:main',
             'fj = freejoint_tools.cli:main',
+            'viewer = freejoint_tools.viewer:main',
         ],
     },
 )

@@ -1,0 +1,517 @@
+"""
+Live view of the freejoint graph in Foxglove: ``viewer`` (foxglove-sdk's WebSocket server).
+
+What a Foxglove client (the app, or any client of Foxglove's WebSocket protocol) gets:
+
+* every graph topic (the recorder's ``GRAPH_TOPICS`` and whatever else is discovered, e.g.
+  ``/diagnostics``) as raw CDR with the ``ros2msg`` schema the recorder writes to its bags
+  (``freejoint_tools.typedefs``);
+* ``/tf``: the arm's link frames as ``foxglove.FrameTransforms``, computed from
+  ``joint_states`` with the URDF's kinematic tree (``freejoint_core.kinematic_tree``), one
+  transform per URDF joint, parent and child named as the URDF's links; at most
+  ``tf_rate`` per second;
+* ``/robot_description``: the URDF text (``std_msgs/msg/String``), for the 3D panel's URDF
+  layer;
+* the parameters of every node of the graph, as ``<node>.<parameter>``
+  (``/controller_node.K``), read and set through rclpy's ``AsyncParameterClient``; a
+  refused set is answered with the unchanged value and a warning status naming the
+  parameter and the node's reason;
+* the services named in ``services`` (default the planner's ``plan_circle``), called
+  with CDR requests.
+
+Nothing is taken from the graph while no client looks: a ROS subscription exists only
+while at least one client subscribes to its channel (best effort, so a slow viewer never
+holds back a reliable publisher; the latched map and path transient local), and the
+discovery of new topics is a graph query every ``discovery_period`` seconds. All rclpy
+work happens on the executor thread: the server's callbacks (its own threads) queue it and
+wake the executor with a guard condition, and wait for parameter and service answers.
+"""
+
+import concurrent.futures
+import math
+import os
+import queue
+import sys
+import threading
+import time
+
+from freejoint_common.node_tools import declare, run, Spec
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.kinematic_tree import KinematicTree
+from freejoint_core.urdf import shipped_urdf_path
+from rcl_interfaces.msg import ParameterType as RosType
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.parameter import Parameter as RosParameter
+from rclpy.parameter import parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+
+from .recorder import _is_hidden, _message_class, GRAPH_TOPICS
+from .typedefs import DefinitionError, Definitions
+
+TF_TOPIC = '/tf'
+DESCRIPTION_TOPIC = '/robot_description'
+# Topics low-rate and latched: subscribed reliable, transient local (the last one arrives
+# when a client subscribes); every other one best effort, volatile.
+LATCHED = ('semi_singular_map', 'planned_path')
+
+SPECS = (
+    Spec('host', '127.0.0.1', 'address the Foxglove WebSocket server binds to (0.0.0.0: '
+         'every interface; the default serves this machine only)', read_only=True),
+    Spec('port', 8765, 'TCP port of the Foxglove WebSocket server (0: any free port, '
+         'logged)', (0, 65535), read_only=True),
+    Spec('description_file', '', 'URDF of the arm for /tf and /robot_description; empty = '
+         'the shipped paper_arm.urdf (freejoint_description)', read_only=True),
+    Spec('joint_states_topic', 'joint_states', 'JointState topic the transforms are '
+         'computed from', read_only=True),
+    Spec('tf_rate', 50.0, 'most /tf updates per second sent to clients (joint_states '
+         'arrive at up to 1 kHz)', (0.1, 1000.0)),
+    Spec('services', ['/freejoint_planner/plan_circle=freejoint_msgs/srv/PlanCircle'],
+         'services offered to clients, each as name=pkg/srv/Type', read_only=True),
+    Spec('call_timeout', 5.0, 'seconds to wait for a node to answer a parameter request or '
+         'a service call', (0.1, 60.0)),
+    Spec('discovery_period', 2.0, 'seconds between looks for new topics and nodes',
+         (0.1, 60.0)),
+)
+
+_HINTS = {RosType.PARAMETER_DOUBLE: 'Float64', RosType.PARAMETER_DOUBLE_ARRAY: 'Float64Array',
+          RosType.PARAMETER_BYTE_ARRAY: 'ByteArray'}
+
+
+def service_definitions(defs, srvtype):
+    """
+    Return the ``ros2msg`` texts ``(request, response)`` of a service type.
+
+    Parameters
+    ----------
+    defs : Definitions
+        The recorder's definitions (its type store gets the two message types).
+    srvtype : str
+        ``pkg/srv/Type``.
+
+    Raises
+    ------
+    DefinitionError
+        Naming the type if its ``.srv`` cannot be found or parsed.
+
+    """
+    from rosbags.typesys import get_types_from_msg
+
+    from .typedefs import _share_dir
+    pkg, kind, name = (srvtype.split('/') + ['', '', ''])[:3]
+    if kind != 'srv' or not pkg or not name:
+        raise DefinitionError('%s: not a service type name (pkg/srv/Type)' % srvtype)
+    path = os.path.join(_share_dir(pkg), 'srv', name + '.srv')
+    try:
+        with open(path, encoding='utf-8') as fh:
+            text = fh.read()
+    except OSError:
+        raise DefinitionError('%s: no definition file %s' % (srvtype, path))
+    parts = text.split('\n---')
+    if len(parts) != 2:
+        raise DefinitionError('%s: %s is not request --- response' % (srvtype, path))
+    out = []
+    for suffix, part in zip(('_Request', '_Response'), parts):
+        full = '%s/srv/%s%s' % (pkg, name, suffix)
+        if full not in defs.store.fielddefs:
+            try:
+                # rosbags names a parsed type pkg/srv/msg/Name: registered as pkg/srv/Name
+                types = {full: get_types_from_msg(part.lstrip('-\n'), full).popitem()[1]}
+            except Exception as exc:  # rosbags parser errors
+                raise DefinitionError('%s: cannot parse %s: %s' % (srvtype, path, exc))
+            for _, fields in types.values():
+                for dep in Definitions._nested(fields):
+                    defs.lookup(dep)
+            defs.store.register(types)
+        out.append(defs.store.generate_msgdef(full, ros_version=2)[0])
+    return tuple(out)
+
+
+def to_foxglove(name, value_msg):
+    """Return a foxglove ``Parameter`` from an rcl_interfaces ``ParameterValue``."""
+    import foxglove
+    if value_msg is None or value_msg.type == RosType.PARAMETER_NOT_SET:
+        return foxglove.Parameter(name)
+    value = parameter_value_to_python(value_msg)
+    if not isinstance(value, (str, bool, int, float, bytes)):
+        value = bytes(value) if value_msg.type == RosType.PARAMETER_BYTE_ARRAY else list(value)
+    hint = _HINTS.get(value_msg.type)
+    return foxglove.Parameter(name, value=value, type=getattr(foxglove.ParameterType, hint)
+                              if hint else None)
+
+
+def from_foxglove(name, value, current):
+    """
+    Return the rclpy ``Parameter`` to set from a client's value.
+
+    Whole numbers become floats where the parameter holds floats (a client typing
+    ``[-1, 100]`` for ``K``); other types are as the client sent them, and the node's
+    own checks refuse what does not fit.
+    """
+    floats = (RosType.PARAMETER_DOUBLE, RosType.PARAMETER_DOUBLE_ARRAY)
+    if current is not None and current.type in floats:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            value = float(value)
+        elif isinstance(value, list) and all(isinstance(v, (int, float)) and
+                                             not isinstance(v, bool) for v in value):
+            value = [float(v) for v in value]
+    if value is None:
+        return RosParameter(name, RosParameter.Type.NOT_SET)
+    return RosParameter(name, value=value)
+
+
+class _Config:
+    executor = 'single'   # guard conditions wake it (rclpy's SingleThreadedExecutor)
+
+
+class Viewer(Node):
+    """The graph's topics, transforms, parameters and services over Foxglove's protocol."""
+
+    config = _Config()
+
+    def __init__(self, **kwargs):
+        super().__init__('viewer', **kwargs)
+        self.values = declare(self, SPECS)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        path = self.values['description_file'] or shipped_urdf_path('paper_arm')
+        try:
+            with open(path, encoding='utf-8') as fh:
+                self.urdf = fh.read()
+        except OSError as exc:
+            raise FreejointValueError('description_file: cannot read %r (%s)' % (path, exc))
+        self.tree = KinematicTree(self.urdf)
+        self.defs = Definitions()
+        self._tasks = queue.SimpleQueue()
+        self._wake = self.create_guard_condition(self._run_tasks)
+        self._lock = threading.Lock()
+        self._channels = {}      # topic -> (foxglove.Channel, msgtype)
+        self._subscribed = {}    # foxglove channel topic -> number of client subscriptions
+        self._ros_subs = {}      # ROS topic -> Subscription
+        self._param_clients = {}
+        self._service_clients = {}
+        self._tf_last = 0.0
+        self._tf_period = 1.0 / self.values['tf_rate']
+        self._server = self._start_server()
+        self._advertise_graph()
+        self.create_timer(self.values['discovery_period'], self._discover)
+        self.get_logger().info(
+            'viewer ready: ws://%s:%d (Foxglove: open connection, Foxglove WebSocket); URDF %s'
+            % (self.values['host'], self._server.port, path))
+
+    # -- parameters of the viewer itself ------------------------------------------------
+    def _on_set_parameters(self, params):
+        for p in params:
+            if p.name == 'tf_rate':
+                if not isinstance(p.value, float) or not 0.1 <= p.value <= 1000.0:
+                    return SetParametersResult(successful=False,
+                                               reason='tf_rate: expected 0.1..1000 Hz')
+                self._tf_period = 1.0 / p.value
+        return SetParametersResult(successful=True)
+
+    # -- the executor thread ------------------------------------------------------------
+    def _submit(self, fn, *args):
+        """Run ``fn(*args)`` on the executor thread; return a concurrent Future of it."""
+        fut = concurrent.futures.Future()
+        self._tasks.put((fut, fn, args))
+        self._wake.trigger()
+        return fut
+
+    def _run_tasks(self):
+        while True:
+            try:
+                fut, fn, args = self._tasks.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                fut.set_result(fn(*args))
+            except Exception as exc:  # handed to the waiting server thread
+                fut.set_exception(exc)
+
+    def _await(self, make_future):
+        """From a server thread: start an rclpy request on the executor thread, wait for it."""
+        timeout = self.values['call_timeout']
+        done = concurrent.futures.Future()
+
+        def start():
+            ros_future = make_future()
+
+            def finished(f):
+                if f.exception() is not None:
+                    done.set_exception(f.exception())
+                else:
+                    done.set_result(f.result())
+            ros_future.add_done_callback(finished)
+        self._submit(start).result(timeout)
+        return done.result(timeout)
+
+    # -- the server ----------------------------------------------------------------------
+    def _start_server(self):
+        import foxglove
+        from foxglove.websocket import Capability
+        services = []
+        for item in self.values['services']:
+            name, sep, srvtype = item.partition('=')
+            if not sep or not name.startswith('/'):
+                raise FreejointValueError(
+                    'services: expected /name=pkg/srv/Type, got %r' % item)
+            try:
+                req, resp = service_definitions(self.defs, srvtype)
+            except DefinitionError as exc:
+                raise FreejointValueError('services: %s' % exc)
+            schema = foxglove.ServiceSchema(
+                name=srvtype,
+                request=foxglove.MessageSchema(encoding='cdr', schema=foxglove.Schema(
+                    name=srvtype + '_Request', encoding='ros2msg', data=req.encode())),
+                response=foxglove.MessageSchema(encoding='cdr', schema=foxglove.Schema(
+                    name=srvtype + '_Response', encoding='ros2msg', data=resp.encode())))
+            services.append(foxglove.Service(name, schema=schema,
+                                             handler=self._service_handler(name, srvtype)))
+        try:
+            return foxglove.start_server(
+                name='freejoint viewer', host=self.values['host'], port=self.values['port'],
+                capabilities=[Capability.Parameters, Capability.Services],
+                supported_encodings=['cdr'], services=services, server_listener=self)
+        except Exception as exc:  # address in use, bad host
+            raise FreejointValueError('port: cannot serve on %s:%d (%s)'
+                                      % (self.values['host'], self.values['port'], exc))
+
+    def _advertise(self, topic, msgtype):
+        import foxglove
+        if topic in self._channels:
+            return
+        try:
+            text, _ = self.defs.lookup(msgtype)
+        except DefinitionError as exc:
+            self.get_logger().warn('not served: %s (%s)' % (topic, exc))
+            self._channels[topic] = (None, msgtype)
+            return
+        schema = foxglove.Schema(name=msgtype, encoding='ros2msg', data=text.encode())
+        self._channels[topic] = (foxglove.Channel(topic, schema=schema, message_encoding='cdr'),
+                                 msgtype)
+
+    def _advertise_graph(self):
+        from foxglove.channels import FrameTransformsChannel
+        self._tf = FrameTransformsChannel(TF_TOPIC)
+        self._advertise(DESCRIPTION_TOPIC, 'std_msgs/msg/String')
+        for rel, msgtype, _ in GRAPH_TOPICS:
+            self._advertise(self.resolve_topic_name(rel), msgtype)
+
+    def _discover(self):
+        for topic, types in self.get_topic_names_and_types():
+            if len(types) == 1 and topic not in self._channels and not _is_hidden(topic) \
+                    and topic not in (TF_TOPIC, '/rosout', '/parameter_events'):
+                self._advertise(topic, types[0])
+
+    # -- subscriptions: only while a client looks ----------------------------------------
+    def on_subscribe(self, client, channel):
+        """Server callback: a client subscribed to ``channel``."""
+        with self._lock:
+            self._subscribed[channel.topic] = self._subscribed.get(channel.topic, 0) + 1
+        self._submit(self._update_subscriptions, channel.topic)
+
+    def on_unsubscribe(self, client, channel):
+        """Server callback: a client unsubscribed (or left)."""
+        with self._lock:
+            count = self._subscribed.get(channel.topic, 0) - 1
+            if count > 0:
+                self._subscribed[channel.topic] = count
+            else:
+                self._subscribed.pop(channel.topic, None)
+        self._submit(self._update_subscriptions, None)
+
+    def _wanted(self):
+        with self._lock:
+            topics = set(self._subscribed)
+        wanted = {t for t in topics if t not in (TF_TOPIC, DESCRIPTION_TOPIC)}
+        js = self.resolve_topic_name(self.values['joint_states_topic'])
+        if TF_TOPIC in topics:
+            wanted.add(js)
+        return wanted
+
+    def _update_subscriptions(self, new_topic):
+        wanted = self._wanted()
+        for topic in list(self._ros_subs):
+            if topic not in wanted:
+                self.destroy_subscription(self._ros_subs.pop(topic))
+        for topic in wanted - set(self._ros_subs):
+            msgtype = self._channels.get(topic, (None, None))[1]
+            if msgtype is None:
+                continue
+            latched = topic.rsplit('/', 1)[-1] in LATCHED
+            qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST, depth=10,
+                reliability=ReliabilityPolicy.RELIABLE if latched
+                else ReliabilityPolicy.BEST_EFFORT,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
+                else DurabilityPolicy.VOLATILE)
+            self._ros_subs[topic] = self.create_subscription(
+                _message_class(msgtype), topic, self._forwarder(topic), qos, raw=True)
+        if new_topic == DESCRIPTION_TOPIC:
+            from std_msgs.msg import String
+            self._channels[DESCRIPTION_TOPIC][0].log(serialize_message(String(data=self.urdf)),
+                                                     log_time=time.time_ns())
+
+    def _forwarder(self, topic):
+        channel = self._channels[topic][0]
+        js = topic == self.resolve_topic_name(self.values['joint_states_topic'])
+        from sensor_msgs.msg import JointState
+
+        def forward(raw):
+            now = time.time_ns()
+            if channel is not None and topic in self._subscribed:
+                channel.log(raw, log_time=now)
+            if js and TF_TOPIC in self._subscribed and \
+                    now * 1e-9 - self._tf_last >= self._tf_period:
+                self._tf_last = now * 1e-9
+                self._send_tf(deserialize_message(raw, JointState), now)
+        return forward
+
+    def _send_tf(self, msg, now):
+        from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Vector3
+        from foxglove.schemas import Timestamp
+        positions = {n: p for n, p in zip(msg.name, msg.position) if math.isfinite(p)}
+        stamp = Timestamp(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        try:
+            frames = self.tree.transforms(positions)
+        except FreejointValueError:   # non-finite positions were left out above
+            return
+        self._tf.log(FrameTransforms(transforms=[
+            FrameTransform(timestamp=stamp, parent_frame_id=parent, child_frame_id=child,
+                           translation=Vector3(x=t[0], y=t[1], z=t[2]),
+                           rotation=Quaternion(x=r[0], y=r[1], z=r[2], w=r[3]))
+            for parent, child, t, r in frames]), log_time=now)
+
+    # -- parameters of the graph's nodes --------------------------------------------------
+    def _nodes(self):
+        own = self.get_fully_qualified_name()
+        out = []
+        for name, ns in self.get_node_names_and_namespaces():
+            full = (ns.rstrip('/') + '/' + name) if ns != '/' else '/' + name
+            if full != own and not _is_hidden(full):
+                out.append(full)
+        return sorted(set(out))
+
+    def _client(self, node):
+        client = self._param_clients.get(node)
+        if client is None:
+            client = self._param_clients[node] = AsyncParameterClient(self, node)
+        return client
+
+    def _ready(self, node):
+        client = self._submit(self._client, node).result(self.values['call_timeout'])
+        deadline = time.monotonic() + self.values['call_timeout']
+        while not client.services_are_ready():
+            if time.monotonic() > deadline:
+                return None
+            time.sleep(0.02)
+        return client
+
+    def _get(self, node, names=None):
+        """Return ``{name: ParameterValue}`` of ``node`` (every parameter if ``names`` None)."""
+        client = self._ready(node)
+        if client is None:
+            return {}
+        if names is None:
+            names = list(self._await(lambda: client.list_parameters()).result.names)
+        if not names:
+            return {}
+        values = self._await(lambda: client.get_parameters(names)).values
+        if len(values) != len(names):   # a value-less parameter: ask one by one
+            values = [(self._await(lambda n=n: client.get_parameters([n])).values or [None])[0]
+                      for n in names]
+        return dict(zip(names, values))
+
+    def on_get_parameters(self, client, param_names, request_id=None):
+        """Server callback: the values of ``param_names`` (every node's if empty)."""
+        wanted = {}
+        if param_names:
+            for full in param_names:
+                node, _, name = full.partition('.')
+                wanted.setdefault(node, []).append(name)
+        else:
+            wanted = dict.fromkeys(self._nodes())
+        out = []
+        for node, names in wanted.items():
+            try:
+                values = self._get(node, names)
+            except Exception as exc:  # timeout, node gone
+                self._status_warning('get parameters of %s: %s' % (node, exc or 'timed out'))
+                continue
+            out.extend(to_foxglove('%s.%s' % (node, n), v) for n, v in values.items())
+        return out
+
+    def on_set_parameters(self, client, parameters, request_id=None):
+        """Server callback: set parameters; answer every one with its value afterwards."""
+        by_node = {}
+        for p in parameters:
+            node, _, name = p.name.partition('.')
+            by_node.setdefault(node, []).append((name, p.get_value()))
+        out = []
+        for node, items in by_node.items():
+            try:
+                current = self._get(node, [n for n, _ in items])
+                client_ = self._ready(node)
+                if client_ is None:
+                    raise TimeoutError('node %s not found' % node)
+                request = [from_foxglove(n, v, current.get(n)) for n, v in items]
+                results = self._await(lambda: client_.set_parameters(request)).results
+                for (name, _), result in zip(items, results):
+                    if not result.successful:
+                        self._status_warning('set %s.%s refused: %s'
+                                             % (node, name, result.reason))
+                after = self._get(node, [n for n, _ in items])
+            except Exception as exc:  # timeout, node gone, unconvertible value
+                self._status_warning('set parameters of %s failed: %s'
+                                     % (node, exc or 'timed out'))
+                continue
+            out.extend(to_foxglove('%s.%s' % (node, n), v) for n, v in after.items())
+        return out
+
+    def _status_warning(self, text):
+        from foxglove import StatusLevel
+        self.get_logger().warn(text)
+        self._server.publish_status(text, StatusLevel.Warning)
+
+    # -- services --------------------------------------------------------------------------
+    def _service_handler(self, name, srvtype):
+        srv_class = _message_class(srvtype)
+
+        def handler(request):
+            if request.encoding != 'cdr':
+                raise ValueError('%s: expected a cdr request, got %s' % (name, request.encoding))
+            ros_request = deserialize_message(request.payload, srv_class.Request)
+
+            def client():
+                c = self._service_clients.get(name)
+                if c is None:
+                    c = self._service_clients[name] = self.create_client(srv_class, name)
+                return c
+            cli = self._submit(client).result(self.values['call_timeout'])
+            deadline = time.monotonic() + self.values['call_timeout']
+            while not cli.service_is_ready():
+                if time.monotonic() > deadline:
+                    raise RuntimeError('%s: service not available' % name)
+                time.sleep(0.02)
+            try:
+                response = self._await(lambda: cli.call_async(ros_request))
+            except concurrent.futures.TimeoutError:
+                raise RuntimeError('%s: no answer within %.1f s'
+                                   % (name, self.values['call_timeout']))
+            return serialize_message(response)
+        return handler
+
+    def close(self):
+        """Stop the server (clients see the connection close)."""
+        self._server.stop()
+
+
+def main(args=None):
+    """Run the viewer until SIGINT/SIGTERM; exit 2 on a bad start-up parameter."""
+    run(Viewer, 'viewer', args=args, on_stop=lambda node: node.close())
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

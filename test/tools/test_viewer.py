@@ -1,0 +1,242 @@
+"""
+The viewer seen by Foxglove's own WebSocket protocol client while the lockstep graph runs.
+
+The client is ``@foxglove/ws-protocol``'s ``FoxgloveClient`` (npm, pinned in
+``test/tools/ws_client/package.json``, installed there once with ``npm ci``), driven by
+``ws_client/client.js``: commands on its stdin, events on its stdout, as JSON lines.
+"""
+import base64
+import json
+import math
+import os
+import queue
+import re
+import shutil
+import struct
+import subprocess
+import threading
+import time
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+CONFIG = os.path.join(ROOT, 'config')
+CLIENT_DIR = os.path.join(HERE, 'ws_client')
+NODES = (('freejoint_sim', 'sim_node', 'sim.yaml', 'simulator ready'),
+         ('freejoint_control', 'controller_node', 'controller.yaml', 'controller ready'),
+         ('freejoint_planner', 'planner_node', 'planner.yaml', 'ready:'))
+
+
+@pytest.fixture(scope='module')
+def ws_client_dir():
+    """Give the client's directory with node_modules installed (``npm ci`` once if missing)."""
+    if not shutil.which('node') or not shutil.which('npm'):
+        pytest.fail("node and npm are needed for Foxglove's protocol client "
+                    '(@foxglove/ws-protocol): not on PATH')
+    if not os.path.isdir(os.path.join(CLIENT_DIR, 'node_modules', '@foxglove', 'ws-protocol')):
+        done = subprocess.run(['npm', 'ci', '--no-audit', '--no-fund'], cwd=CLIENT_DIR,
+                              capture_output=True, text=True, timeout=300)
+        if done.returncode != 0:
+            pytest.fail("cannot install Foxglove's protocol client (npm ci in %s, the "
+                        'npm registry is needed once): %s' % (CLIENT_DIR,
+                                                              done.stderr[-2000:]))
+    return CLIENT_DIR
+
+
+class Client:
+    """The node client process: send commands, wait for events."""
+
+    def __init__(self, directory, url):
+        self.proc = subprocess.Popen(['node', os.path.join(directory, 'client.js'), url],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, bufsize=1)
+        self.events = queue.Queue()
+        self.seen = []
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            try:
+                self.events.put(json.loads(line))
+            except ValueError:
+                self.events.put({'event': 'output', 'text': line})
+
+    def send(self, **cmd):
+        self.proc.stdin.write(json.dumps(cmd) + '\n')
+        self.proc.stdin.flush()
+
+    def wait(self, predicate, timeout, what):
+        """Return the first event (new or seen before) for which ``predicate`` holds."""
+        for event in self.seen:
+            if predicate(event):
+                self.seen.remove(event)
+                return event
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                event = self.events.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            if predicate(event):
+                return event
+            self.seen.append(event)
+        raise AssertionError('timed out after %.0f s waiting for %s; events: %s'
+                             % (timeout, what, [str(e)[:200] for e in self.seen[-20:]]))
+
+    def close(self):
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait(5.0)
+
+
+def _pb_fields(buf):
+    """Decode one protobuf message's wire format: yield (field number, wire type, value)."""
+    i = 0
+
+    def varint():
+        nonlocal i
+        shift = value = 0
+        while True:
+            b = buf[i]
+            i += 1
+            value |= (b & 0x7F) << shift
+            shift += 7
+            if not b & 0x80:
+                return value
+    while i < len(buf):
+        key = varint()
+        field, wire = key >> 3, key & 7
+        if wire == 0:
+            yield field, wire, varint()
+        elif wire == 1:
+            yield field, wire, struct.unpack_from('<d', buf, i)[0]
+            i += 8
+        elif wire == 2:
+            n = varint()
+            yield field, wire, bytes(buf[i:i + n])
+            i += n
+        elif wire == 5:
+            yield field, wire, buf[i:i + 4]
+            i += 4
+        else:
+            raise ValueError('wire type %d' % wire)
+
+
+def decode_frame_transforms(data):
+    """Decode ``foxglove.FrameTransforms`` (protobuf): list of (parent, child, xyz, xyzw)."""
+    out = []
+    for field, _, payload in _pb_fields(data):
+        assert field == 1
+        parent = child = ''
+        xyz, rot = [0.0] * 3, [0.0] * 4   # proto3 leaves zeros out
+        for f, _, v in _pb_fields(payload):
+            if f == 2:
+                parent = v.decode()
+            elif f == 3:
+                child = v.decode()
+            elif f == 4:
+                for g, _, c in _pb_fields(v):
+                    xyz[g - 1] = c
+            elif f == 5:
+                for g, _, c in _pb_fields(v):
+                    rot[g - 1] = c
+        out.append((parent, child, xyz, rot))
+    return out
+
+
+def _cdr(msgtype, data):
+    from freejoint_tools.typedefs import Definitions
+    defs = Definitions()
+    defs.lookup(msgtype)
+    return defs.store.deserialize_cdr(data, msgtype)
+
+
+def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_client_dir):
+    viewer = procs.start_node('freejoint_tools', 'viewer', 'viewer',
+                              ['--ros-args', '-p', 'port:=0'])
+    wait(lambda: 'viewer ready' in procs.log(viewer) or viewer.poll() is not None, 30.0,
+         'the viewer to start')
+    port = int(re.search(r'ws://127\.0\.0\.1:(\d+)', procs.log(viewer)).group(1))
+    for pkg, exe, params, ready in NODES:
+        proc = procs.start_node(pkg, exe, exe, ['--ros-args', '--params-file',
+                                                os.path.join(CONFIG, params)])
+        wait(lambda: ready in procs.log(proc) or proc.poll() is not None, 60.0,
+             '%s to start' % exe)
+        assert proc.poll() is None, procs.log(proc)
+
+    client = Client(ws_client_dir, 'ws://127.0.0.1:%d' % port)
+    try:
+        info = client.wait(lambda e: e['event'] == 'serverInfo', 30.0, 'serverInfo')
+        assert {'parameters', 'services'} <= set(info['capabilities'])
+        channels = {}
+        while not {'/joint_states', '/tf', '/controller_state'} <= set(channels):
+            event = client.wait(lambda e: e['event'] == 'advertise', 30.0, 'channels')
+            channels.update({c['topic']: c for c in event['channels']})
+        assert channels['/joint_states']['encoding'] == 'cdr'
+        assert channels['/joint_states']['schemaEncoding'] == 'ros2msg'
+        assert channels['/tf']['schemaName'] == 'foxglove.FrameTransforms'
+
+        # Subscribe: messages of the running graph, decodable with the advertised schemas.
+        client.send(op='subscribe', topics=['/joint_states', '/tf', '/controller_state'],
+                    count=3)
+        got = {}
+        while len(got) < 3:
+            event = client.wait(lambda e: e['event'] == 'message', 60.0, 'messages')
+            got.setdefault(event['topic'], base64.b64decode(event['data']))
+        js = _cdr('sensor_msgs/msg/JointState', got['/joint_states'])
+        assert list(js.name) == ['joint1', 'joint2', 'joint3']
+        assert all(math.isfinite(p) for p in js.position)
+        state = _cdr('freejoint_msgs/msg/ControllerState', got['/controller_state'])
+        assert len(state.effort) == 2 and all(math.isfinite(t) for t in state.effort)
+        frames = decode_frame_transforms(got['/tf'])
+        assert [(p, c) for p, c, _, _ in frames] == [
+            ('base_link', 'link1'), ('link1', 'link2'), ('link2', 'link3'),
+            ('link3', 'ee_link')]
+        for parent, child, xyz, rot in frames:
+            assert xyz == pytest.approx([0.0, 0.0, 0.0] if child == 'link1'
+                                        else [0.5, 0.0, 0.0])
+            assert rot[0] == rot[1] == 0.0 and math.hypot(rot[2], rot[3]) == pytest.approx(1)
+
+        # Parameters through the viewer: read K, set it (accepted), set [-1, 100] (refused).
+        client.send(op='getParameters', names=['/controller_node.K'], id='get')
+        values = client.wait(lambda e: e.get('id') == 'get', 30.0, 'K')['parameters']
+        assert values == [{'name': '/controller_node.K', 'value': [100.0, 100.0],
+                           'type': 'float64_array'}]
+        client.send(op='setParameters', id='ok', parameters=[
+            {'name': '/controller_node.K', 'value': [120.0, 130.0], 'type': 'float64_array'}])
+        values = client.wait(lambda e: e.get('id') == 'ok', 30.0, 'K set')['parameters']
+        assert values[0]['value'] == [120.0, 130.0]
+        client.send(op='setParameters', id='bad', parameters=[
+            {'name': '/controller_node.K', 'value': [-1, 100]}])
+        values = client.wait(lambda e: e.get('id') == 'bad', 30.0, 'K refused')['parameters']
+        assert values[0]['value'] == [120.0, 130.0]
+        status = client.wait(lambda e: e['event'] == 'status', 10.0, 'the refusal')
+        assert 'set /controller_node.K refused' in status['message']
+        assert 'K' in status['message'].split('refused:', 1)[1], status['message']
+
+        # Every parameter of every node at once (what the parameter panel asks).
+        client.send(op='getParameters', names=[], id='all')
+        names = {p['name'] for p in client.wait(lambda e: e.get('id') == 'all', 60.0,
+                                                'all parameters')['parameters']}
+        assert {'/controller_node.nominal_scale', '/sim_node.case',
+                '/freejoint_planner.autostart'} <= names
+
+        # The planner's service: a path check (execute false leaves the run alone).
+        from freejoint_msgs.srv import PlanCircle
+        from rclpy.serialization import deserialize_message, serialize_message
+        request = PlanCircle.Request(centre=[0.0, 0.0], radius=0.2, duration=5.0,
+                                     start_angle=0.0, direction=1, execute=False)
+        client.wait(lambda e: e['event'] == 'advertiseServices', 10.0, 'services')
+        client.send(op='callService', service='/freejoint_planner/plan_circle', callId=7,
+                    data=base64.b64encode(serialize_message(request)).decode())
+        answer = client.wait(lambda e: e.get('callId') == 7, 30.0, 'plan_circle')
+        assert answer['event'] == 'serviceCallResponse', answer
+        response = deserialize_message(base64.b64decode(answer['data']), PlanCircle.Response)
+        assert response.accepted, response.reason
+        assert response.margin > 0.2
+    finally:
+        client.close()
+    assert procs.stop(viewer) == 0
