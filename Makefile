@@ -20,7 +20,7 @@ setup:
 	@bash tools/setup.sh
 
 demo: setup
-	@$(ENV) python tools/demo.py
+	@$(ENV) python tools/demo.py $(if $(VIEW),--view)
 
 test: setup
 	@$(ENV) python -m pytest -c pytest.ini

@@ -485,6 +485,9 @@ def _parse(argv):
     ap.add_argument('--out', default=os.path.join(ROOT, 'bags', 'demo'),
                     help='output directory (default bags/demo)')
     ap.add_argument('--no-record', action='store_true', help='do not start the recorder')
+    ap.add_argument('--view', action='store_true',
+                    help='also start the viewer (Foxglove WebSocket on ws://127.0.0.1:8765, '
+                    'layout config/foxglove_layout.json; make demo VIEW=1)')
     return ap.parse_args(argv)
 
 
@@ -531,7 +534,15 @@ def main(argv=None):
     executor.add_node(node)
     graph_records, offline_records, runs = [], [], []
     failed = False
+    view = Graph(log_dir, 'view')
     try:
+        if args.view:
+            proc = view.start('viewer', [executable('freejoint_tools', 'viewer')])
+            deadline = time.monotonic() + 30.0
+            while time.monotonic() < deadline and proc.poll() is None and \
+                    'viewer ready' not in open(proc.log_path).read():
+                time.sleep(0.1)
+            say('viewer: %s' % view.tail(proc, 1).split(']: ')[-1].strip())
         for i, case in enumerate(args.cases):
             who = 'recorder, ' if record_bags else ''
             say('case %d/%d: %s - starting %ssim_node, controller_node, planner_node '
@@ -571,6 +582,7 @@ def main(argv=None):
             offline_records.append(off)
             runs.append(run)
     finally:
+        view.stop_all()
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
