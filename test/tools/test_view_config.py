@@ -1,0 +1,134 @@
+"""The view's shipped files: the Foxglove layout, the URDF (robot_state_publisher), RViz."""
+import json
+import os
+import re
+import xml.etree.ElementTree as ET
+
+from freejoint_core.kinematic_tree import KinematicTree
+from freejoint_core.urdf import parse_urdf, shipped_urdf_path
+from freejoint_tools.recorder import GRAPH_TOPICS
+from freejoint_tools.viewer import DESCRIPTION_TOPIC, SPECS, TF_TOPIC
+import pytest
+import yaml
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+LAYOUT = os.path.join(ROOT, 'config', 'foxglove_layout.json')
+RVIZ = os.path.join(ROOT, 'config', 'freejoint.rviz')
+SERVED = {'/' + rel.lstrip('/'): msgtype for rel, msgtype, _ in GRAPH_TOPICS}
+SERVED[DESCRIPTION_TOPIC] = 'std_msgs/msg/String'
+_PATH = re.compile(r'^(/[A-Za-z0-9_/]+)\.([A-Za-z0-9_]+)(?:\[(\d+)\])?$')
+
+
+def _message_class(msgtype):
+    import importlib
+    pkg, kind, name = msgtype.split('/')
+    return getattr(importlib.import_module('%s.%s' % (pkg, kind)), name)
+
+
+def _leaves(node):
+    if isinstance(node, str):
+        return [node]
+    return _leaves(node['first']) + _leaves(node['second'])
+
+
+def _spec(name):
+    return next(s.default for s in SPECS if s.name == name)
+
+
+def test_foxglove_layout_panels_all_configured_and_every_plot_path_is_a_served_field():
+    with open(LAYOUT) as f:
+        layout = json.load(f)
+    panels = _leaves(layout['layout'])
+    assert sorted(panels) == sorted(layout['configById'])
+    kinds = {p.split('!')[0] for p in panels}
+    assert {'3D', 'Plot', 'StateTransitions', 'Parameters', 'CallService'} <= kinds
+    paths = [p['value'] for panel, cfg in layout['configById'].items()
+             if panel.startswith(('Plot!', 'StateTransitions!')) for p in cfg['paths']]
+    assert len(paths) >= 12
+    for path in paths:
+        m = _PATH.match(path)
+        assert m, path
+        topic, field, index = m.groups()
+        assert topic in SERVED, path
+        fields = _message_class(SERVED[topic]).get_fields_and_field_types()
+        assert field in fields, path
+        assert (index is not None) == ('[' in fields[field] or 'sequence' in fields[field]), path
+    wanted = {'/controller_state.error[0]', '/controller_state.effort[0]',
+              '/joint_states.position[2]', '/controller_state.theta_hat[0]',
+              '/controller_state.status'}
+    assert wanted <= set(paths)
+
+
+def test_foxglove_layout_3d_panel_shows_the_urdf_from_the_viewers_topics():
+    with open(LAYOUT) as f:
+        cfg = json.load(f)['configById']['3D!arm']
+    urdf_layers = [v for v in cfg['layers'].values() if v['layerId'] == 'foxglove.Urdf']
+    assert urdf_layers and urdf_layers[0]['topic'] == DESCRIPTION_TOPIC
+    assert cfg['followTf'] == KinematicTree(_urdf()).root
+    assert TF_TOPIC in cfg['topics']
+
+
+def test_foxglove_layout_service_panel_request_is_a_plan_circle_request():
+    from freejoint_msgs.srv import PlanCircle
+    with open(LAYOUT) as f:
+        cfg = json.load(f)['configById']['CallService!plan']
+    served = [s.split('=')[0] for s in _spec('services')]
+    assert cfg['serviceName'] in served
+    request = json.loads(cfg['requestPayload'])
+    assert set(request) == set(PlanCircle.Request.get_fields_and_field_types())
+    PlanCircle.Request(**request)   # every value of the right type
+
+
+def _urdf():
+    with open(shipped_urdf_path('paper_arm')) as f:
+        return f.read()
+
+
+def test_shipped_urdf_is_one_consistent_tree_robot_state_publisher_can_publish():
+    text = _urdf()
+    root = ET.fromstring(text)
+    links = {link.get('name') for link in root.findall('link')}
+    joints = root.findall('joint')
+    assert len({j.get('name') for j in joints}) == len(joints)
+    for joint in joints:
+        assert joint.find('parent').get('link') in links
+        assert joint.find('child').get('link') in links
+        if joint.get('type') == 'revolute':   # robot_state_publisher needs the limits
+            limit = joint.find('limit')
+            assert limit is not None and float(limit.get('lower')) < float(limit.get('upper'))
+    tree = KinematicTree(text)
+    children = [j.child for j in tree.joints]
+    assert {tree.root, *children} == links and len(children) == len(links) - 1
+    assert parse_urdf(text, ('joint3',)).joint_names == tree.moving
+
+
+def test_urdf_joint_names_are_the_nodes_joint_names_defaults():
+    from freejoint_control.params import SPECS as CONTROL_SPECS
+    from freejoint_sim.params import SPECS as SIM_SPECS
+    moving = list(KinematicTree(_urdf()).moving)
+    for specs in (SIM_SPECS, CONTROL_SPECS):
+        assert next(s.default for s in specs if s.name == 'joint_names') == moving
+    with open(os.path.join(ROOT, 'config', 'sim.yaml')) as f:
+        sim = yaml.safe_load(f)['/**']['ros__parameters']
+    assert sim.get('joint_names', moving) == moving
+
+
+def test_rviz_config_shows_robot_model_tf_and_the_graphs_markers():
+    with open(RVIZ) as f:
+        cfg = yaml.safe_load(f)
+    manager = cfg['Visualization Manager']
+    assert manager['Global Options']['Fixed Frame'] == KinematicTree(_urdf()).root
+    displays = {d['Class']: d for d in manager['Displays']}
+    model = displays['rviz_default_plugins/RobotModel']
+    assert model['Description Source'] == 'Topic'
+    assert model['Description Topic']['Value'] == DESCRIPTION_TOPIC
+    assert 'rviz_default_plugins/TF' in displays
+    for cls in ('Marker', 'Map', 'PointStamped'):
+        topic = displays['rviz_default_plugins/' + cls]['Topic']['Value']
+        assert topic in SERVED, topic
+
+
+@pytest.mark.parametrize('name', ['host', 'port'])
+def test_viewer_serves_this_machine_only_by_default(name):
+    assert _spec(name) == {'host': '127.0.0.1', 'port': 8765}[name]
