@@ -154,7 +154,13 @@ def _cdr(msgtype, data):
     return defs.store.deserialize_cdr(data, msgtype)
 
 
-def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_client_dir):
+def _viewer_subscribes(ros_node, topic):
+    return any(info.node_name == 'viewer'
+               for info in ros_node.get_subscriptions_info_by_topic(topic))
+
+
+def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_client_dir,
+                                                              ros_node):
     viewer = procs.start_node('freejoint_tools', 'viewer', 'viewer',
                               ['--ros-args', '-p', 'port:=0'])
     wait(lambda: 'viewer ready' in procs.log(viewer) or viewer.poll() is not None, 30.0,
@@ -166,6 +172,12 @@ def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_cl
         wait(lambda: ready in procs.log(proc) or proc.poll() is not None, 60.0,
              '%s to start' % exe)
         assert proc.poll() is None, procs.log(proc)
+
+    # No client: the viewer takes nothing from the graph.
+    wait(lambda: ros_node.get_publishers_info_by_topic('/joint_states'), 30.0,
+         'joint_states discovered')
+    assert not _viewer_subscribes(ros_node, '/joint_states')
+    assert not _viewer_subscribes(ros_node, '/controller_state')
 
     client = Client(ws_client_dir, 'ws://127.0.0.1:%d' % port)
     try:
@@ -186,6 +198,8 @@ def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_cl
         while len(got) < 3:
             event = client.wait(lambda e: e['event'] == 'message', 60.0, 'messages')
             got.setdefault(event['topic'], base64.b64decode(event['data']))
+        wait(lambda: _viewer_subscribes(ros_node, '/joint_states'), 30.0,
+             'the viewer to subscribe to joint_states', spin=None)
         js = _cdr('sensor_msgs/msg/JointState', got['/joint_states'])
         assert list(js.name) == ['joint1', 'joint2', 'joint3']
         assert all(math.isfinite(p) for p in js.position)
@@ -239,4 +253,8 @@ def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_cl
         assert response.margin > 0.2
     finally:
         client.close()
+    # The client gone: no subscription left.
+    wait(lambda: not _viewer_subscribes(ros_node, '/joint_states')
+         and not _viewer_subscribes(ros_node, '/controller_state'), 30.0,
+         'the viewer to drop its subscriptions')
     assert procs.stop(viewer) == 0

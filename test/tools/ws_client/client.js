@@ -1,7 +1,8 @@
 // Foxglove's own WebSocket protocol client (@foxglove/ws-protocol FoxgloveClient), driven by
 // the viewer's test: commands as JSON lines on stdin, events as JSON lines on stdout.
 //   usage: node client.js ws://127.0.0.1:PORT
-// Commands: {"op": "subscribe", "topics": [...], "count": N}  (first N messages per topic)
+// Commands: {"op": "subscribe", "topics": [...], "count": N}  (first N messages per topic
+//           shown; the subscription stays until the client closes)
 //           {"op": "getParameters", "names": [...], "id": "..."}
 //           {"op": "setParameters", "parameters": [{"name", "value", "type"?}], "id": "..."}
 //           {"op": "callService", "service": "/name", "callId": N, "data": "<base64 CDR>"}
@@ -47,7 +48,6 @@ client.on("message", (m) => {
   if (!sub || sub.left <= 0) return;
   sub.left -= 1;
   out({ event: "message", topic: sub.topic, timestamp: String(m.timestamp), data: b64(m.data) });
-  if (sub.left === 0) client.unsubscribe(m.subscriptionId);
 });
 client.on("parameterValues", (p) => out({ event: "parameterValues", id: p.id,
   parameters: p.parameters }));
