@@ -861,7 +861,7 @@ def test_a_late_setpoint_stream_is_carried_forward_then_held_and_rejoined_withou
         procs, ros_node, wait):
     """A starved planner (gaps of 0.3 s seen): no frozen reference, no step when it returns."""
     proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS, '-p', 'stale_timeout:=2.0',
-                  '-p', 'resume_time:=0.02')
+                  '-p', 'resume_time:=0.02', '-p', 'carry_forward_time:=0.05')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
     rep = Replica('horizontal', lockstep=False, resume=0.02)

@@ -76,7 +76,7 @@ SPECS = (
     Spec('max_state_age', 0.1,
          'real time: a state older than this [s] when it is taken (a backlog after a stall '
          'or at start-up) is skipped without a command (0 = never skip)', (0.0, 3600.0)),
-    Spec('carry_forward_time', 0.05,
+    Spec('carry_forward_time', 0.02,
          'real time: a late setpoint (older than the state) is carried forward along its '
          'velocity and acceleration for at most this long [s]; older, the controller holds '
          '(with on_stale_setpoint: hold)', (0.0, 3600.0)),
