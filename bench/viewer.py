@@ -93,8 +93,8 @@ def run():
 def main():
     """Print the rows."""
     for row in run():
-        print('%-62s %10.4g %-4s %s' % (row['name'], row['value'], row['unit'],
-                                         row['target'] or ''))
+        target = row['target'] or ''
+        print('%-62s %10.4g %-4s %s' % (row['name'], row['value'], row['unit'], target))
     return 0
 
 
