@@ -18,6 +18,7 @@ import threading
 import time
 
 import pytest
+import rclpy
 
 pytestmark = pytest.mark.ros
 
@@ -231,6 +232,22 @@ def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_cl
         assert 'set /controller_node.K refused' in status['message']
         assert 'K' in status['message'].split('refused:', 1)[1], status['message']
 
+        # A change made elsewhere (as ros2 param set) reaches a client that subscribed.
+        from rclpy.parameter import Parameter
+        from rclpy.parameter_client import AsyncParameterClient
+        client.send(op='subscribeParameterUpdates', names=['/controller_node.K'])
+        time.sleep(0.5)   # the subscription request reaches the viewer first
+        params = AsyncParameterClient(ros_node, '/controller_node')
+        wait(lambda: params.services_are_ready(), 30.0, 'controller parameter services')
+        future = params.set_parameters([Parameter('K', value=[110.0, 100.0])])
+        wait(future.done, 30.0, 'set K from ROS', spin=lambda: rclpy.spin_once(
+            ros_node, timeout_sec=0.05))
+        assert future.result().results[0].successful
+        update = client.wait(lambda e: e['event'] == 'parameterValues' and not e.get('id')
+                             and e['parameters'][0]['value'] == [110.0, 100.0], 30.0,
+                             'the K update')
+        assert update['parameters'][0]['name'] == '/controller_node.K'
+
         # Every parameter of every node at once (what the parameter panel asks).
         client.send(op='getParameters', names=[], id='all')
         names = {p['name'] for p in client.wait(lambda e: e.get('id') == 'all', 60.0,
@@ -258,3 +275,21 @@ def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_cl
          and not _viewer_subscribes(ros_node, '/controller_state'), 30.0,
          'the viewer to drop its subscriptions')
     assert procs.stop(viewer) == 0
+
+
+@pytest.mark.parametrize('override, named', [
+    ('port:=70000', 'port'),
+    ('services:=[plan_circle]', 'services'),
+    ('services:=[/x=freejoint_msgs/srv/Nothing]', 'services'),
+    ('description_file:=/nonexistent.urdf', 'description_file'),
+    ('tf_rate:=0.0', 'tf_rate'),
+])
+def test_viewer_bad_start_up_parameter_is_one_line_and_exit_2(override, named, procs, wait):
+    proc = procs.start_node('freejoint_tools', 'viewer', 'viewer',
+                            ['--ros-args', '-p', 'port:=0', '-p', override])
+    wait(lambda: proc.poll() is not None, 30.0, 'the viewer to exit')
+    log = procs.log(proc)
+    assert proc.returncode == 2, log
+    assert 'Traceback' not in log
+    fatal = [line for line in log.splitlines() if 'FATAL' in line]
+    assert len(fatal) == 1 and 'bad parameter: %s' % named in fatal[0], log

@@ -15,7 +15,9 @@ What a Foxglove client (the app, or any client of Foxglove's WebSocket protocol)
 * the parameters of every node of the graph, as ``<node>.<parameter>``
   (``/controller_node.K``), read and set through rclpy's ``AsyncParameterClient``; a
   refused set is answered with the unchanged value and a warning status naming the
-  parameter and the node's reason;
+  parameter and the node's reason; changes made elsewhere (``ros2 param set``) reach the
+  clients that subscribed to parameter updates (``/parameter_events``, subscribed only
+  while one does);
 * the services named in ``services`` (default the planner's ``plan_circle``), called
   with CDR requests.
 
@@ -191,6 +193,8 @@ class Viewer(Node):
         self._ros_subs = {}      # ROS topic -> Subscription
         self._param_clients = {}
         self._service_clients = {}
+        self._param_watch = set()    # parameters clients want updates of
+        self._events_sub = None
         self._tf_last = 0.0
         self._tf_period = 1.0 / self.values['tf_rate']
         self._server = self._start_server()
@@ -468,6 +472,36 @@ class Viewer(Node):
                 continue
             out.extend(to_foxglove('%s.%s' % (node, n), v) for n, v in after.items())
         return out
+
+    def on_parameters_subscribe(self, param_names):
+        """Server callback: clients want updates of ``param_names`` (/parameter_events)."""
+        with self._lock:
+            self._param_watch.update(param_names)
+        self._submit(self._update_parameter_events)
+
+    def on_parameters_unsubscribe(self, param_names):
+        """Server callback: no client wants updates of ``param_names`` any more."""
+        with self._lock:
+            self._param_watch.difference_update(param_names)
+        self._submit(self._update_parameter_events)
+
+    def _update_parameter_events(self):
+        from rcl_interfaces.msg import ParameterEvent
+        from rclpy.qos import qos_profile_parameter_events
+        if self._param_watch and self._events_sub is None:
+            self._events_sub = self.create_subscription(
+                ParameterEvent, '/parameter_events', self._on_parameter_event,
+                qos_profile_parameter_events)
+        elif not self._param_watch and self._events_sub is not None:
+            self.destroy_subscription(self._events_sub)
+            self._events_sub = None
+
+    def _on_parameter_event(self, event):
+        changed = [to_foxglove('%s.%s' % (event.node, p.name), p.value)
+                   for p in list(event.new_parameters) + list(event.changed_parameters)
+                   if '%s.%s' % (event.node, p.name) in self._param_watch]
+        if changed:
+            self._server.publish_parameter_values(changed)
 
     def _status_warning(self, text):
         from foxglove import StatusLevel

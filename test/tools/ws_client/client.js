@@ -5,6 +5,7 @@
 //           shown; the subscription stays until the client closes)
 //           {"op": "getParameters", "names": [...], "id": "..."}
 //           {"op": "setParameters", "parameters": [{"name", "value", "type"?}], "id": "..."}
+//           {"op": "subscribeParameterUpdates", "names": [...]}
 //           {"op": "callService", "service": "/name", "callId": N, "data": "<base64 CDR>"}
 //           {"op": "close"}
 // Events:   open, serverInfo, advertise (topic, schemaName, encoding, schemaEncoding,
@@ -67,6 +68,8 @@ readline.createInterface({ input: process.stdin }).on("line", (line) => {
     }
   } else if (cmd.op === "getParameters") {
     client.getParameters(cmd.names, cmd.id);
+  } else if (cmd.op === "subscribeParameterUpdates") {
+    client.subscribeParameterUpdates(cmd.names);
   } else if (cmd.op === "setParameters") {
     client.setParameters(cmd.parameters, cmd.id);
   } else if (cmd.op === "callService") {
