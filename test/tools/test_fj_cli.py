@@ -250,3 +250,14 @@ def test_fj_fills_nested_and_sequence_fields_of_a_request_from_yaml():
         set_message_fields(circle, {'radius': 'big'})
     with pytest.raises(CommandError, match='direction'):
         set_message_fields(circle, {'direction': 300})  # int8
+
+
+def test_fj_output_stays_clean_of_what_libraries_write_to_stdout():
+    import sys
+    code = ('import os; from freejoint_tools.cli import keep_stdout_for_output; '
+            'keep_stdout_for_output(); os.write(1, b"[RTPS_TRANSPORT_SHM Error]\\n"); '
+            'print("/controller_node:")')
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          timeout=60)
+    assert (done.returncode, done.stdout) == (0, '/controller_node:\n'), done.stderr
+    assert '[RTPS_TRANSPORT_SHM Error]' in done.stderr

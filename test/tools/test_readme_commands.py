@@ -57,7 +57,8 @@ def readme_blocks(title):
     blocks = []
     for block in re.findall(r'```bash\n(.*?)```', section, re.S):
         joined = re.sub(r'\\\n\s*', ' ', block)
-        blocks.append([line.strip() for line in joined.splitlines() if line.strip()])
+        blocks.append([line.strip() for line in joined.splitlines()
+                       if line.strip() and not line.strip().startswith('#')])
     assert blocks, 'no ```bash block in %r' % title
     return blocks
 

@@ -650,12 +650,28 @@ def build_parser():
     return parser
 
 
+def keep_stdout_for_output():
+    """
+    Keep the process's stdout for fj's own output; what libraries write there goes to stderr.
+
+    Fast DDS logs to the C++ standard output (e.g. its shared-memory transport's 'Failed
+    init_port ... open_and_lock_file failed', harmless: it falls back to UDP), which would
+    land in ``fj param dump > file.yaml``. File descriptor 1 becomes a copy of 2, and
+    ``sys.stdout`` writes to the original stdout.
+    """
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    sys.stdout = os.fdopen(saved, 'w', buffering=1)
+
+
 def main(argv=None):
     """Run one ``fj`` command; return its exit status."""
     args = build_parser().parse_args(argv)
     try:
         if not getattr(args, 'session', True):
             return args.func(args)
+        keep_stdout_for_output()
         with Session(args) as session:
             return args.func(session, args)
     except CommandError as exc:
