@@ -127,14 +127,17 @@ def _pb_fields(buf):
 
 
 def decode_frame_transforms(data):
-    """Decode ``foxglove.FrameTransforms`` (protobuf): list of (parent, child, xyz, xyzw)."""
+    """Decode ``foxglove.FrameTransforms`` (protobuf): (parent, child, xyz, xyzw, stamp s)."""
     out = []
     for field, _, payload in _pb_fields(data):
         assert field == 1
         parent = child = ''
         xyz, rot = [0.0] * 3, [0.0] * 4   # proto3 leaves zeros out
+        stamp = 0.0
         for f, _, v in _pb_fields(payload):
-            if f == 2:
+            if f == 1:
+                stamp = sum(c * (1.0 if g == 1 else 1e-9) for g, _, c in _pb_fields(v))
+            elif f == 2:
                 parent = v.decode()
             elif f == 3:
                 child = v.decode()
@@ -144,7 +147,7 @@ def decode_frame_transforms(data):
             elif f == 5:
                 for g, _, c in _pb_fields(v):
                     rot[g - 1] = c
-        out.append((parent, child, xyz, rot))
+        out.append((parent, child, xyz, rot, stamp))
     return out
 
 
@@ -207,10 +210,11 @@ def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_cl
         state = _cdr('freejoint_msgs/msg/ControllerState', got['/controller_state'])
         assert len(state.effort) == 2 and all(math.isfinite(t) for t in state.effort)
         frames = decode_frame_transforms(got['/tf'])
-        assert [(p, c) for p, c, _, _ in frames] == [
+        assert [(p, c) for p, c, _, _, _ in frames] == [
             ('base_link', 'link1'), ('link1', 'link2'), ('link2', 'link3'),
             ('link3', 'ee_link')]
-        for parent, child, xyz, rot in frames:
+        for parent, child, xyz, rot, stamp in frames:
+            assert abs(stamp - time.time()) < 60.0   # the live view's clock
             assert xyz == pytest.approx([0.0, 0.0, 0.0] if child == 'link1'
                                         else [0.5, 0.0, 0.0])
             assert rot[0] == rot[1] == 0.0 and math.hypot(rot[2], rot[3]) == pytest.approx(1)

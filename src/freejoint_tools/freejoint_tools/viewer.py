@@ -9,7 +9,9 @@ What a Foxglove client (the app, or any client of Foxglove's WebSocket protocol)
 * ``/tf``: the arm's link frames as ``foxglove.FrameTransforms``, computed from
   ``joint_states`` with the URDF's kinematic tree (``freejoint_core.kinematic_tree``), one
   transform per URDF joint, parent and child named as the URDF's links; at most
-  ``tf_rate`` per second;
+  ``tf_rate`` per second, stamped with the time the viewer received the joint state (the
+  clock of Foxglove's live view, as the other messages' log times: a lockstep run's sim
+  time starts at 0 again with the next run, and older frames would stay ahead of it);
 * ``/robot_description``: the URDF text (``std_msgs/msg/String``), for the 3D panel's URDF
   layer;
 * the parameters of every node of the graph, as ``<node>.<parameter>``
@@ -376,7 +378,7 @@ class Viewer(Node):
         from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Vector3
         from foxglove.schemas import Timestamp
         positions = {n: p for n, p in zip(msg.name, msg.position) if math.isfinite(p)}
-        stamp = Timestamp(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        stamp = Timestamp(now // 1_000_000_000, now % 1_000_000_000)
         try:
             frames = self.tree.transforms(positions)
         except FreejointValueError:   # non-finite positions were left out above
