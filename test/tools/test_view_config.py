@@ -132,3 +132,10 @@ def test_rviz_config_shows_robot_model_tf_and_the_graphs_markers():
 @pytest.mark.parametrize('name', ['host', 'port'])
 def test_viewer_serves_this_machine_only_by_default(name):
     assert _spec(name) == {'host': '127.0.0.1', 'port': 8765}[name]
+
+
+def test_viewer_requirement_is_the_pin_of_the_pypi_install():
+    from freejoint_tools.viewer import FOXGLOVE_SDK
+    with open(os.path.join(ROOT, 'tools', 'requirements.txt')) as f:
+        pins = [line.strip() for line in f if line.startswith('foxglove-sdk==')]
+    assert pins == [FOXGLOVE_SDK]

@@ -543,8 +543,18 @@ class Viewer(Node):
         self._server.stop()
 
 
+FOXGLOVE_SDK = 'foxglove-sdk==0.30.3'
+"""The pip requirement of the viewer (pinned in tools/requirements.txt; no rosdep key)."""
+
+
 def main(args=None):
     """Run the viewer until SIGINT/SIGTERM; exit 2 on a bad start-up parameter."""
+    try:
+        import foxglove  # noqa: F401
+    except ImportError as exc:
+        print('viewer: error: foxglove-sdk is not installed (%s): pip install %s'
+              % (exc, FOXGLOVE_SDK), file=sys.stderr)
+        return 1
     run(Viewer, 'viewer', args=args, on_stop=lambda node: node.close())
     return 0
 
