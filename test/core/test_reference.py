@@ -152,3 +152,52 @@ def test_a_large_offset_blends_for_longer_within_the_speed_and_acceleration_boun
     assert sh.blend_duration == 0.5
     with pytest.raises(FreejointValueError, match='^max_velocity'):
         sh.set_bounds(0.0, None)
+
+
+def test_a_stiffer_step_equals_a_controller_built_with_the_scaled_gains_exactly():
+    nominal = table1('vertical').scaled(0.7)
+    scaled = RobustController(nominal, Gains(K=(200.0, 200.0), Lam=(100.0, 100.0)))
+    stiff = RobustController(nominal, Gains())
+    stiff.set_stiffness(2.0)
+    q, qd = (0.3, 1.2, 2.0), (0.1, -0.2, 0.3)
+    a = scaled.step(q, qd, (0.21, 0.01), (0.0, 0.0), (0.0, 0.0), 1e-3)
+    b = stiff.step(q, qd, (0.21, 0.01), (0.0, 0.0), (0.0, 0.0), 1e-3)
+    assert a.tau.tolist() == b.tau.tolist() and a.theta.tolist() == b.theta.tolist()
+    # ... and back to 1 it equals the paper's gains again, bit for bit.
+    plain = RobustController(nominal, Gains())
+    stiff.set_stiffness(1.0)
+    stiff.reset()
+    c = plain.step(q, qd, (0.21, 0.01), (0.0, 0.0), (0.0, 0.0), 1e-3)
+    d = stiff.step(q, qd, (0.21, 0.01), (0.0, 0.0), (0.0, 0.0), 1e-3)
+    assert c.tau.tolist() == d.tau.tolist()
+
+
+def test_new_gains_keep_the_stiffness_and_a_bad_scale_is_refused_naming_it():
+    ctl = RobustController(table1('horizontal').scaled(0.7), Gains())
+    ctl.set_stiffness(3.0)
+    ctl.set_gains(Gains(K=(40.0, 60.0)))
+    ref = RobustController(table1('horizontal').scaled(0.7),
+                           Gains(K=(120.0, 180.0), Lam=(150.0, 150.0)))
+    args = ((0.3, 1.2, 2.0), (0.1, -0.2, 0.3), (0.2, 0.0), (0.1, 0.0), (0.0, 0.0), 1e-3)
+    assert ctl.step(*args).tau.tolist() == ref.step(*args).tau.tolist()
+    for bad in (0.0, -1.0, float('nan'), float('inf')):
+        with pytest.raises(FreejointValueError, match=r'^scale: '):
+            ctl.set_stiffness(bad)
+
+
+def test_the_hold_is_stiffer_and_the_blend_hands_back_smoothly_to_the_law_gains():
+    shaper = ReferenceShaper(0.5, blend_on_start=True)
+    assert shaper.stiffness(2.0) == 1.0            # nothing yet: the law's own gains
+    shaper.hold((0.2, 0.0))
+    assert shaper.stiffness(2.0) == 2.0
+    sp = (0.25, 0.0, 0.0, 0.0, 0.0, 0.0)
+    seen = []
+    for k in range(600):
+        shaper.track(k * 1e-3, sp, None)
+        seen.append(shaper.stiffness(2.0))
+    assert seen[0] == 2.0                          # the blend starts where the hold was
+    assert seen[-1] == 1.0 and shaper.mode == 'stream'
+    assert all(a >= b for a, b in zip(seen, seen[1:]))    # monotone, no step:
+    assert max(abs(a - b) for a, b in zip(seen, seen[1:])) < 2 * 1.875 / 500
+    # at the middle of the blend the smoothstep is exactly 1/2
+    assert seen[250] == pytest.approx(1.5, abs=1e-12)

@@ -89,7 +89,8 @@ class Driver:
         self.pub_sp.publish(msg)
 
     def setpoints_ahead(self, k, values_of, ahead=5):
-        """Publish the setpoints of ticks k..k+ahead not yet out (values_of(j) None: none).
+        """
+        Publish the setpoints of ticks k..k+ahead not yet out (values_of(j) None: none).
 
         Real time pairs a state with the newest setpoint already received: sending them
         ahead, as the planner does (and waiting for the first ones to be acknowledged),
@@ -337,18 +338,20 @@ STALE_JUMP_NS = 2_100_000_000   # a jump of the stamps beyond the tests' stale_t
 OLD_STAMPS = ('-p', 'max_state_age:=0.0')
 """Real time with the tests' stamps (from 0, i.e. 1970): no state is skipped as too old."""
 RATE = 20000.0              # effort_rate_limit of config/controller.yaml [N m/s]
+STIFFNESS = 2.0             # hold_stiffness of config/controller.yaml
 
 
 class Replica:
     """What the node must answer, from the core: law, hold / blend reference, limits."""
 
     def __init__(self, case, lockstep, resume=0.5, limits=LIMITS, rate=RATE, dt=DT,
-                 resume_bounds=(1.0, 5.0)):
+                 resume_bounds=(1.0, 5.0), stiffness=STIFFNESS):
         from freejoint_core.reference import ReferenceShaper
         self.ctl = RobustController(table1(case).scaled(0.7),
                                     Gains(tau_limit=limits, theta_max=(100.0,) * 5))
         self.shaper = ReferenceShaper(resume, not lockstep, *resume_bounds)
         self.lockstep = lockstep
+        self.stiffness = stiffness
         self.limits = limits
         self.rate = rate
         self.dt = dt
@@ -361,7 +364,8 @@ class Replica:
         return self.ctl.model.fk(q).tolist()
 
     def tick(self, ns, q, qd, sp, sp_ns=None):
-        """Return (effort, reference, dt, ControlOutput) for the state stamped ns.
+        """
+        Return (effort, reference, dt, ControlOutput) for the state stamped ns.
 
         ``sp_ns``: the stamp of ``sp`` when older than the state (real time: carried
         forward to the state's time, late beyond 10 periods).
@@ -390,6 +394,9 @@ class Replica:
         else:
             p_now = self.fk(q) if self.shaper.mode == MODE_NONE else None
             ref, _ = self.shaper.track(ns * 1e-9, sp, p_now)
+        scale = self.shaper.stiffness(self.stiffness)
+        if scale != self.ctl.stiffness:
+            self.ctl.set_stiffness(scale)
         out = self.ctl.step(q, qd, ref[0:2], ref[2:4], ref[4:6], dt)
         effort = out.tau.tolist()
         if self.armed:
@@ -400,7 +407,7 @@ class Replica:
         return effort, ref, dt, out
 
     def zero(self, ns):
-        """The node answered ns with zero effort."""
+        """Note that the node answered ns with zero effort."""
         self.prev = [0.0, 0.0]
         self.armed = True
         self.last_ns = ns
@@ -416,7 +423,7 @@ def _finite_within(cmd, limits=LIMITS):
 
 
 def _moving_setpoint(k, base):
-    """A setpoint moving at 0.1 m/s along x from `base` (3 cm away from it at k = 0)."""
+    """Return a setpoint moving at 0.1 m/s along x from `base` (3 cm away at k = 0)."""
     return (base[0] + 0.03 + 1e-4 * k, base[1] - 0.02, 0.1, 0.0, 0.0, 0.0)
 
 
@@ -524,8 +531,8 @@ def test_lockstep_holds_when_setpoints_go_stale_and_answers_at_once_while_holdin
         effort, ref, _, _ = rep.tick(k * DT_NS, q, qd, _setpoint(k))
         assert cmd == effort and st.status & STATUS_RESUMING
         assert list(st.position_desired) == list(ref[0:2])
-    assert list(drv.states[3 * DT_NS][0].position_desired) == pytest.approx(rep.fk(q1),
-                                                                           abs=1e-15)
+    assert list(drv.states[3 * DT_NS][0].position_desired) == pytest.approx(
+        rep.fk(q1), abs=1e-15)
     assert procs.stop(proc) == 0
 
 
@@ -672,7 +679,8 @@ def test_reset_service_restarts_theta_hat_and_the_hold(procs, ros_node, wait):
 
 
 FAULTS = {
-    'qd_1e10': ('state', lambda q, qd: (q, (qd[0], 1e10, qd[2])), 'joint 1 velocity 10000000000.0'),
+    'qd_1e10': ('state', lambda q, qd: (q, (qd[0], 1e10, qd[2])),
+                'joint 1 velocity 10000000000.0'),
     'qd_1e160': ('state', lambda q, qd: (q, (1e160, qd[1], qd[2])),
                  'joint 0 velocity 1e+160'),
     'q_1e6': ('state', lambda q, qd: ((q[0], q[1], 1e6), qd), 'joint 2 position 1000000.0'),
@@ -764,6 +772,7 @@ def test_delay_compensation_predict_runs_the_law_on_the_predicted_state_in_real_
     drv.connect(proc, procs)
     ctl = RobustController(table1('vertical').scaled(0.7),
                            Gains(tau_limit=LIMITS, theta_max=(100.0,) * 5))
+    ctl.set_stiffness(STIFFNESS)       # holding throughout: the stiffer hold
     pred = StatePredictor(table1('vertical').scaled(0.7), DT)
     m = pred.max_ticks
     # The arm at rest where the hold starts: the hold reference has no velocity, so the
@@ -852,7 +861,7 @@ def test_a_non_finite_law_result_is_never_published_and_theta_hat_is_restored(
                 assert effort == expected and theta == out.theta.tolist(), k
                 assert not status & ControllerState.STATUS_LAW_FAULT, message
         assert 'law fault' not in states[-1][1]
-        assert "1 law faults" in node.report()
+        assert '1 law faults' in node.report()
     finally:
         node.destroy_node()
 

@@ -161,6 +161,7 @@ class ControllerNode(Node):
         self._rate = cfg.effort_rate_limit
         self._hold_on_stale = cfg.on_stale_setpoint == 'hold'
         self._shaper.set_resume_time(cfg.resume_time)
+        self._hold_stiffness = cfg.hold_stiffness
         self._shaper.set_bounds(cfg.resume_max_velocity, cfg.resume_max_acceleration)
         self._sp_bounds = (cfg.reach, cfg.setpoint_max_velocity, cfg.setpoint_max_acceleration)
         self._state_bounds = (cfg.position_lower, cfg.position_upper, cfg.velocity_limit)
@@ -419,6 +420,9 @@ class ControllerNode(Node):
             self._setpoint_used = True
             if blending:
                 status |= STATUS_RESUMING
+        stiffness = shaper.stiffness(self._hold_stiffness)
+        if stiffness != self._ctl.stiffness:
+            self._ctl.set_stiffness(stiffness)
         px, py, vx, vy, ax, ay = ref
         pred = self._predictor
         limits = self._limits

@@ -67,6 +67,12 @@ SPECS = (
     Spec('resume_time', 0.5,
          'time [s of state stamps] of the quintic blend from the hold to the streamed '
          'setpoint (0: switch at once)', (0.0, 60.0)),
+    Spec('hold_stiffness', 2.0,
+         'K and Lambda are multiplied by this while holding (and brought back to 1 over '
+         'the resume blend): the static error of the law against the error of the nominal '
+         'model, e.g. its 70 % gravity, is 1 / (K Lambda), so 2 quarters the sag of a held '
+         'arm; 1 = the gains of the paper throughout; hold_stiffness * (K + Lambda) * '
+         'control_period <= 1', (1.0, 10.0)),
     Spec('resume_max_velocity', 1.0,
          'bound [m/s] on the peak speed of the blend: a larger offset blends for longer '
          'than resume_time (1.875 offset / resume_max_velocity)', (1e-3, 100.0)),
@@ -130,6 +136,7 @@ class Config:
     effort_rate_limit: float
     on_stale_setpoint: str
     resume_time: float
+    hold_stiffness: float
     resume_max_velocity: float
     resume_max_acceleration: float
     carry_forward_time: float
@@ -193,6 +200,16 @@ def build_config(values):
             raise FreejointValueError(
                 f'K: K[{i}] + Lambda[{i}] = {k + lam:g} 1/s is beyond 1 / control_period = '
                 f'{1.0 / dt:g} 1/s (the discrete loop would be unstable)')
+    stiff = float(values['hold_stiffness'])
+    if not 1.0 <= stiff <= 10.0:
+        raise FreejointValueError(f'hold_stiffness: must be in [1, 10], got {stiff}')
+    for i, (k, lam) in enumerate(zip(_floats('K', values['K']),
+                                     _floats('Lambda', values['Lambda']))):
+        if stiff * (k + lam) * dt > 1.0:
+            raise FreejointValueError(
+                f'hold_stiffness: {stiff:g} x (K[{i}] + Lambda[{i}]) = {stiff * (k + lam):g} '
+                f'1/s is beyond 1 / control_period = {1.0 / dt:g} 1/s (the held loop would '
+                f'be unstable)')
     theta_max = _floats('theta_max', values['theta_max'])
     if len(theta_max) != 5 or any(not 0.0 < v <= THETA_MAX_MAX for v in theta_max):
         raise FreejointValueError(
@@ -260,6 +277,7 @@ def build_config(values):
                   lockstep=bool(values['lockstep']), stale_timeout=stale,
                   executor=values['executor'], effort_limits=limits, effort_rate_limit=rate,
                   on_stale_setpoint=values['on_stale_setpoint'], resume_time=resume,
+                  hold_stiffness=stiff,
                   resume_max_velocity=float(values['resume_max_velocity']),
                   resume_max_acceleration=float(values['resume_max_acceleration']),
                   carry_forward_time=float(values['carry_forward_time']),

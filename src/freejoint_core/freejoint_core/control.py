@@ -266,6 +266,7 @@ class RobustController:
         self._use_fast = bool(use_fast)
         self.set_nominal(nominal_params)
         self._theta = None
+        self.stiffness = 1.0
         self.set_gains(Gains() if gains is None else gains)
         self.reset()
 
@@ -320,11 +321,7 @@ class RobustController:
         limit = self._resolve_limit(gains.tau_limit, self.r)
         self.gains = gains
         self._limit = limit
-        kx, ky = gains.K
-        lx, ly = gains.Lam
-        self._lam = (lx, ly)
-        self._kl = (kx + lx, ky + ly)
-        self._kxl = (kx * lx, ky * ly)
+        self._scale_gains()
         self._rr = gains.R
         self._eps = gains.eps
         self._sum = gains.h_form == 'sum'
@@ -336,6 +333,43 @@ class RobustController:
         self._theta_max = gains.theta_max
         if self._theta_max is not None and self._theta is not None:
             self._theta = [min(th, tm) for th, tm in zip(self._theta, self._theta_max)]
+
+    def set_stiffness(self, scale):
+        """
+        Scale K and Lambda by ``scale`` from the next step (1: the gains as given).
+
+        Holding a point against a constant model error ``eta`` [m/s^2], the law's static
+        error is ``eta / (K Lambda)``: ``scale`` 2 quarters it (a stiffer hold).  The step
+        then equals a controller built with ``K * scale`` and ``Lam * scale`` exactly.
+
+        Parameters
+        ----------
+        scale : float
+            Factor, finite and > 0; ``scale * (K + Lam)`` should stay well below
+            ``1 / dt`` (the caller's parameters check it).
+
+        Raises
+        ------
+        FreejointValueError
+            If ``scale`` is not finite and > 0.
+
+        """
+        value = float(scale)
+        if not (math.isfinite(value) and value > 0.0):
+            raise FreejointValueError(f'scale: must be finite and > 0, got {scale!r}')
+        self.stiffness = value
+        self._scale_gains()
+
+    def _scale_gains(self):
+        """Cache the (scaled) K, Lambda terms of the step."""
+        kx, ky = self.gains.K
+        lx, ly = self.gains.Lam
+        s = self.stiffness
+        if s != 1.0:
+            kx, ky, lx, ly = s * kx, s * ky, s * lx, s * ly
+        self._lam = (lx, ly)
+        self._kl = (kx + lx, ky + ly)
+        self._kxl = (kx * lx, ky * ly)
 
     def reset(self):
         """Set theta back to ``gains.theta0``."""

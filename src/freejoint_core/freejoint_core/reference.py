@@ -142,6 +142,7 @@ class ReferenceShaper:
     def reset(self):
         """Forget the hold and any blend: the next tick starts as at construction."""
         self.mode = MODE_NONE
+        self.progress = 1.0
         self._hold = None
         self._last = None        # (px, py, vx, vy, ax, ay) of the last reference
         self._t0 = 0.0
@@ -156,6 +157,32 @@ class ReferenceShaper:
         """Blend again from the last reference at the next ``track`` (the stream jumped)."""
         if self._last is not None and self.mode in (MODE_STREAM, MODE_BLEND):
             self.mode = MODE_HOLD
+
+    def stiffness(self, scale):
+        """
+        Return the gain factor for the current mode (``RobustController.set_stiffness``).
+
+        ``scale`` while holding, 1 on the stream (and before anything), and in a blend a
+        smooth (C2, quintic smoothstep) return from ``scale`` to 1 over the blend, so the
+        stiffer hold hands over to the law's own gains without a step.
+
+        Parameters
+        ----------
+        scale : float
+            The hold's factor (>= 1).
+
+        Returns
+        -------
+        float
+
+        """
+        mode = self.mode
+        if mode == MODE_HOLD:
+            return scale
+        if mode != MODE_BLEND or scale == 1.0:
+            return 1.0
+        p = self.progress
+        return 1.0 + (scale - 1.0) * (1.0 - p * p * p * (10.0 - 15.0 * p + 6.0 * p * p))
 
     def hold(self, p_now):
         """
@@ -234,6 +261,7 @@ class ReferenceShaper:
             self.mode = MODE_STREAM
             self._last = sp
             return sp, False
+        self.progress = tau / duration
         o = self._off0
         dx, vx, ax = quintic_offset(o[0], o[2], o[4], duration, tau)
         dy, vy, ay = quintic_offset(o[1], o[3], o[5], duration, tau)
