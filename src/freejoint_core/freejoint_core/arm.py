@@ -552,9 +552,41 @@ class ArmModel:
         x = np.linalg.solve(mpp, mpa)
         return ja - jp @ x, maa - map_ @ x
 
+    def terms(self, q, qd):
+        """
+        Return the joint-space terms the task-space quantities are derived from.
+
+        Parameters
+        ----------
+        q : array_like, (n,)
+            Joint angles [rad].
+        qd : array_like, (n,)
+            Joint velocities [rad/s].
+
+        Returns
+        -------
+        mass : numpy.ndarray, (n, n)
+            ``M(q)`` [kg m^2].
+        h : numpy.ndarray, (n,)
+            ``C(q, qd) qd + G(q)`` [N m].
+        jac : numpy.ndarray, (2, n)
+            End-effector Jacobian [m/rad].
+        jdqd : numpy.ndarray, (2,)
+            ``Jdot qd`` [m/s^2].
+        p : numpy.ndarray, (2,)
+            End-effector position [m].
+
+        """
+        q = self._q(q)
+        qd = self._q(qd, 'qd')
+        return (self.mass_matrix(q), self.coriolis(q, qd) + self.gravity_torque(q),
+                self.jacobian(q), self.jdot_qdot(q, qd), self.fk(q))
+
     def decoupling(self, q, qd):
         """
         Decoupling matrix and drift of the task-space dynamics (eqs. 4, 5).
+
+        Computed by :func:`task_space` from the model's ``terms``.
 
         Parameters
         ----------
@@ -571,12 +603,8 @@ class ArmModel:
             ``Jdot qd - J M^-1 (C qd + G)`` [m/s^2].
 
         """
-        q = self._q(q)
-        qd = self._q(qd, 'qd')
-        w = np.linalg.solve(self.mass_matrix(q), self.jacobian(q).T).T  # J M^-1 (M sym.)
-        da = w @ self._B
-        b = self.jdot_qdot(q, qd) - w @ (self.coriolis(q, qd) + self.gravity_torque(q))
-        return da, b
+        mass, h, jac, jdqd, _ = self.terms(q, qd)
+        return task_space(mass, h, jac, jdqd, self._B)
 
     def energy(self, q, qd):
         """
@@ -682,6 +710,35 @@ class ArmModel:
         q[a] = _wrap(shoulder - mu)
         q[b] = _wrap(gamma - theta_u + mu - nu)
         return q
+
+
+def task_space(mass, h, jac, jdqd, selection):
+    """
+    Decoupling matrix and drift of eqs. (4, 5) from the joint-space terms.
+
+    Parameters
+    ----------
+    mass : numpy.ndarray, (n, n)
+        ``M(q)`` [kg m^2], symmetric positive definite.
+    h : numpy.ndarray, (n,)
+        ``C(q, qd) qd + G(q)`` [N m].
+    jac : numpy.ndarray, (2, n)
+        End-effector Jacobian [m/rad].
+    jdqd : numpy.ndarray, (2,)
+        ``Jdot qd`` [m/s^2].
+    selection : numpy.ndarray, (n, r)
+        Actuation matrix ``B`` (columns of the identity at the active joints).
+
+    Returns
+    -------
+    Da : numpy.ndarray, (2, r)
+        ``J M^-1 B`` [m/(s^2 N m)].
+    b : numpy.ndarray, (2,)
+        ``Jdot qd - J M^-1 h`` [m/s^2].
+
+    """
+    w = np.linalg.solve(mass, jac.T).T  # J M^-1 (M symmetric)
+    return w @ selection, jdqd - w @ h
 
 
 def _wrap(angle):

@@ -62,7 +62,7 @@ import operator
 
 from freejoint_core.arm import ArmModel, ArmParams, check_vector, make_model
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.plant import DEFAULT_DT_SUB
+from freejoint_core.plant import check_torques, DEFAULT_DT_SUB
 import numpy as np
 
 DEFAULT_MAX_TICKS = 20
@@ -200,16 +200,7 @@ class StatePredictor:
 
     def _full(self, tau_active, name):
         """Validate (r,) active torques; return them as (n,) with zeros on passive joints."""
-        tau = tau_active.tolist() if isinstance(tau_active, np.ndarray) else tau_active
-        try:
-            ok = len(tau) == self.r and all(_isfinite(v) for v in tau)
-        except TypeError:
-            ok = False
-        if not ok:
-            shape = np.shape(tau_active) if not isinstance(tau_active, (str, bytes)) else '?'
-            raise FreejointValueError(
-                f'{name}: expected {self.r} finite values (shape ({self.r},)), '
-                f'got {tau_active!r} with shape {shape}')
+        tau = check_torques(tau_active, self.r, name)
         full = [0.0] * self.n
         for j, v in zip(self._active, tau):
             full[j] += float(v)

@@ -116,6 +116,38 @@ def quat_rotate(q, v):
     return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)
 
 
+def robot_root(text):
+    """
+    Parse URDF text and return its ``<robot>`` element.
+
+    Parameters
+    ----------
+    text : str
+        The URDF text (``robot_description``).
+
+    Returns
+    -------
+    xml.etree.ElementTree.Element
+        The root element, tag ``robot``.
+
+    Raises
+    ------
+    FreejointValueError
+        ``robot_description: ...`` if the text is empty, not XML or not a ``<robot>``.
+
+    """
+    if not isinstance(text, str) or not text.strip():
+        raise FreejointValueError('robot_description: expected URDF text, got an empty value')
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise FreejointValueError(f'robot_description: not well-formed XML ({exc})') from None
+    if root.tag != 'robot':
+        raise FreejointValueError(
+            f'robot_description: root element is <{root.tag}>, expected <robot>')
+    return root
+
+
 class KinematicTree:
     """
     The joints of a URDF, in an order where every parent comes before its children.
@@ -135,15 +167,7 @@ class KinematicTree:
     """
 
     def __init__(self, text):
-        if not isinstance(text, str) or not text.strip():
-            raise FreejointValueError('robot_description: expected URDF text, got an empty value')
-        try:
-            root = ET.fromstring(text)
-        except ET.ParseError as exc:
-            raise FreejointValueError(f'robot_description: not well-formed XML ({exc})') from None
-        if root.tag != 'robot':
-            raise FreejointValueError(
-                f'robot_description: root element is <{root.tag}>, expected <robot>')
+        root = robot_root(text)
         links = [link.get('name') for link in root.findall('link')]
         if not all(links) or len(set(links)) != len(links):
             raise FreejointValueError(

@@ -23,25 +23,12 @@ the plant keeps its last finite state, as ``Plant`` does.  MuJoCo's warnings are
 taken by a handler during the step (not printed, no ``MUJOCO_LOG.TXT``).
 """
 
-import math
-
-from freejoint_core.arm import check_vector, make_model
-from freejoint_core.errors import FreejointValueError, PlantDivergedError
-from freejoint_core.plant import DEFAULT_DT_SUB
+from freejoint_core.arm import make_model
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.plant import _positive, DEFAULT_DT_SUB, PeriodPlant
 from freejoint_core.urdf import UrdfArm
 import mujoco
 import numpy as np
-
-
-def _positive(value, name, allow_zero=False):
-    try:
-        value = float(value)
-    except (TypeError, ValueError) as exc:
-        raise FreejointValueError(f'{name}: expected a number, got {value!r}') from exc
-    if not math.isfinite(value) or value < 0.0 or (value == 0.0 and not allow_zero):
-        bound = '>= 0' if allow_zero else '> 0'
-        raise FreejointValueError(f'{name}: must be finite and {bound}, got {value}')
-    return value
 
 
 def build_mj_model(arm, dt_sub=DEFAULT_DT_SUB):
@@ -96,7 +83,7 @@ def build_mj_model(arm, dt_sub=DEFAULT_DT_SUB):
     return model, np.array(qpos_adr), np.array(dof_adr)
 
 
-class MujocoPlant:
+class MujocoPlant(PeriodPlant):
     """
     The URDF arm simulated by MuJoCo, with bounded random joint disturbances.
 
@@ -136,61 +123,18 @@ class MujocoPlant:
         self.mj_model, self._qadr, self._vadr = build_mj_model(arm, dt_sub)
         self.mj_data = mujoco.MjData(self.mj_model)
         self.arm = arm
-        self.params = arm.params
-        self.model = make_model(arm.params)
-        self.n = arm.params.n
-        self.r = arm.params.r
-        self.dt_sub = float(self.mj_model.opt.timestep)
-        self.dist_bound = _positive(dist_bound, 'dist_bound', allow_zero=True)
-        self._check_seed(seed)
-        self._seed0 = seed
-        self._q0 = self._state(q0, 'q0')
-        self._qd0 = self._state(qd0, 'qd0')
-        self._active = list(arm.params.active)
-        self._dt_cache = (None, 0)
         self._bad = [int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
                                       mujoco.mjtWarning.mjWARN_BADQVEL,
                                       mujoco.mjtWarning.mjWARN_BADQACC)]
+        self._setup(arm.params, make_model(arm.params), float(self.mj_model.opt.timestep),
+                    dist_bound, seed, q0, qd0)
         self.reset()
 
-    @staticmethod
-    def _check_seed(seed):
-        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))
-                                 or seed < 0):
-            raise FreejointValueError(f'seed: expected a non-negative int or None, got {seed!r}')
-
-    def _state(self, x, name):
-        if x is None:
-            return np.zeros(self.n)
-        return check_vector(x, self.n, name)
-
-    def reset(self, q0=None, qd0=None, seed=None):
-        """
-        Restart at t = 0, k = 0 with a freshly seeded disturbance generator.
-
-        Parameters
-        ----------
-        q0, qd0 : array_like, (n,), optional
-            New initial state; None keeps the previous one.
-        seed : int, optional
-            New seed; None keeps the previous one.
-
-        """
-        if q0 is not None:
-            self._q0 = self._state(q0, 'q0')
-        if qd0 is not None:
-            self._qd0 = self._state(qd0, 'qd0')
-        if seed is not None:
-            self._check_seed(seed)
-            self._seed0 = seed
+    def _set_state(self, q0, qd0):
         mujoco.mj_resetData(self.mj_model, self.mj_data)
-        self.mj_data.qpos[self._qadr] = self._q0
-        self.mj_data.qvel[self._vadr] = self._qd0
-        self._rng = np.random.default_rng(self._seed0)
+        self.mj_data.qpos[self._qadr] = q0
+        self.mj_data.qvel[self._vadr] = qd0
         self._take_bad_warnings()
-        self.t = 0.0
-        self.k = 0
-        self.last_disturbance = (0.0,) * self.n
 
     def _take_bad_warnings(self):
         """Return how many bad-state warnings MuJoCo counted, and zero the counters."""
@@ -212,59 +156,11 @@ class MujocoPlant:
         """Return the joint velocities [rad/s], numpy copy (n,)."""
         return self.mj_data.qvel[self._vadr].copy()
 
-    def _substeps(self, dt):
-        if dt == self._dt_cache[0]:
-            return self._dt_cache[1]
-        dt_f = _positive(dt, 'dt')
-        n_sub = round(dt_f / self.dt_sub)
-        if n_sub < 1 or abs(n_sub * self.dt_sub - dt_f) > 1e-9 * dt_f:
-            raise FreejointValueError(
-                f'dt: {dt_f} s is not an integer multiple of dt_sub = {self.dt_sub} s')
-        self._dt_cache = (dt, n_sub)
-        return n_sub
-
-    def step(self, tau_active, dt):
-        """
-        Advance by one control period with torque and disturbance held.
-
-        Parameters
-        ----------
-        tau_active : array_like, (r,)
-            Actuator torques on the active joints, in ``params.active`` order [N m].
-        dt : float
-            Control period [s], an integer multiple of ``dt_sub``.
-
-        Raises
-        ------
-        FreejointValueError
-            Naming ``tau_active`` or ``dt`` if they are bad.
-        PlantDivergedError
-            If MuJoCo flagged the integration (bad position, velocity or
-            acceleration) or the state is not finite; the plant keeps its last
-            finite state, the disturbance draw of the step is spent.
-
-        """
-        n_sub = self._substeps(dt)
-        tau = tau_active.tolist() if isinstance(tau_active, np.ndarray) else tau_active
-        try:
-            ok = len(tau) == self.r and all(math.isfinite(v) for v in tau)
-        except TypeError:
-            ok = False
-        if not ok:
-            shape = np.shape(tau_active) if not isinstance(tau_active, (str, bytes)) else '?'
-            raise FreejointValueError(
-                f'tau_active: expected {self.r} finite values (shape ({self.r},)), '
-                f'got {tau_active!r} with shape {shape}')
-        if self.dist_bound > 0.0:
-            full = self._rng.uniform(-self.dist_bound, self.dist_bound, self.n)
-            self.last_disturbance = tuple(full.tolist())
-        else:
-            full = np.zeros(self.n)
-        full[self._active] += np.asarray(tau, dtype=float)
+    def _advance(self, n_sub, force):
         data = self.mj_data
         q_before, qd_before = data.qpos.copy(), data.qvel.copy()
         data.qfrc_applied[:] = 0.0
-        data.qfrc_applied[self._vadr] = full
+        data.qfrc_applied[self._vadr] = force
         messages = []
         previous = mujoco.get_mju_user_warning()
         mujoco.set_mju_user_warning(messages.append)   # no print, no MUJOCO_LOG.TXT
@@ -272,13 +168,8 @@ class MujocoPlant:
             mujoco.mj_step(self.mj_model, data, n_sub)
         finally:
             mujoco.set_mju_user_warning(previous)
-        finite = math.isfinite(float(data.qpos.sum() + data.qvel.sum()))
-        if self._take_bad_warnings() or messages or not finite:
-            data.qpos[:], data.qvel[:] = q_before, qd_before
-            why = ' '.join(' '.join(messages).split()) or 'non-finite state'
-            raise PlantDivergedError(
-                f'tau_active: the integration over step {self.k} diverged (MuJoCo: {why}) '
-                f'from q = {q_before[self._qadr].tolist()}, qd = '
-                f'{qd_before[self._vadr].tolist()}; the state is left as it was')
-        self.t += dt
-        self.k += 1
+        finite = np.isfinite(data.qpos.sum() + data.qvel.sum())
+        if not self._take_bad_warnings() and not messages and finite:
+            return None
+        data.qpos[:], data.qvel[:] = q_before, qd_before
+        return 'MuJoCo: ' + (' '.join(' '.join(messages).split()) or 'non-finite state')

@@ -3,11 +3,11 @@ Dynamics of a URDF arm from Pinocchio (rigid-body algorithms on the robot descri
 
 ``PinArmModel`` has the ``ArmModel`` interface (``fk``, ``jacobian``, ``jdot_qdot``,
 ``mass_matrix``, ``coriolis``, ``gravity_torque``, ``forward_dynamics``,
-``decoupling``, plus the inherited ``partition``, ``effective``, ``energy``, ``ik``),
+``terms``, plus the inherited ``decoupling``, ``partition``, ``effective``, ``energy``, ``ik``),
 computed by Pinocchio from the URDF text of a :class:`freejoint_core.urdf.UrdfArm`:
 
 * ``M(q)``: ``crba`` (the Python bindings return both triangles; the tests compare
-  the full matrix); ``decoupling`` uses ``computeMinverse`` for ``J M^-1``;
+  the full matrix);
 * ``C(q, qd) qd = nonLinearEffects(q, qd) - computeGeneralizedGravity(q)``;
 * ``G(q)``: ``computeGeneralizedGravity`` with the model's gravity set to the arm's
   gravity vector in the base frame;
@@ -21,7 +21,8 @@ and rotational inertia by ``scale``, as ``ArmParams.scaled``.  Continuous joints
 (two configuration entries, cos and sin) are mapped from the core's angles.
 
 ``terms(q, qd)`` gives ``M``, ``h = C qd + G``, ``J``, ``Jdot qd`` and ``fk`` from one
-pass (the per-tick cost measured in ``bench/core_urdf.py``).
+pass (the per-tick cost measured in ``bench/core_urdf.py``); ``decoupling`` is
+``ArmModel``'s, :func:`freejoint_core.arm.task_space` of those terms.
 """
 
 import math
@@ -130,60 +131,19 @@ class PinArmModel(ArmModel):
 
     # -- kinematics ---------------------------------------------------------
     def fk(self, q):
-        """
-        End-effector position from the frame placement.
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-
-        Returns
-        -------
-        numpy.ndarray, (2,)
-            End-effector (x, y) [m] in the base frame.
-
-        """
+        """End-effector position from the frame placement, see ``ArmModel.fk``."""
         m, d = self.pin_model, self.pin_data
         pin.framesForwardKinematics(m, d, self._config(q))
         return np.array(d.oMf[self._frame].translation[:2])
 
     def jacobian(self, q):
-        """
-        End-effector Jacobian, x and y rows of the frame Jacobian.
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-
-        Returns
-        -------
-        numpy.ndarray, (2, n)
-            [m/rad].
-
-        """
+        """x, y rows of the frame Jacobian, see ``ArmModel.jacobian``."""
         m, d = self.pin_model, self.pin_data
         jac = pin.computeFrameJacobian(m, d, self._config(q), self._frame, _LWA)
         return np.array(jac[:2][:, self._vperm])
 
     def jdot_qdot(self, q, qd):
-        """
-        ``Jdot qd``: the end-effector classical acceleration at zero joint acceleration.
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-        qd : array_like, (n,)
-            Joint velocities [rad/s].
-
-        Returns
-        -------
-        numpy.ndarray, (2,)
-            [m/s^2].
-
-        """
+        """Frame's classical acceleration at zero qdd, see ``ArmModel.jdot_qdot``."""
         m, d = self.pin_model, self.pin_data
         pin.forwardKinematics(m, d, self._config(q), self._vel(qd), self._zero)
         pin.updateFramePlacement(m, d, self._frame)
@@ -192,133 +152,37 @@ class PinArmModel(ArmModel):
 
     # -- dynamics -----------------------------------------------------------
     def mass_matrix(self, q):
-        """
-        Inertia matrix ``M(q)`` (crba).
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-
-        Returns
-        -------
-        numpy.ndarray, (n, n)
-            [kg m^2].
-
-        """
+        """Inertia matrix ``M(q)`` (crba), see ``ArmModel.mass_matrix``."""
         m, d = self.pin_model, self.pin_data
         mass = self._sym(pin.crba(m, d, self._config(q)))
         return mass if self._identity else self._back_mat(mass)
 
     def coriolis(self, q, qd):
-        """
-        ``C(q, qd) qd`` = nonLinearEffects - generalized gravity.
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-        qd : array_like, (n,)
-            Joint velocities [rad/s].
-
-        Returns
-        -------
-        numpy.ndarray, (n,)
-            [N m].
-
-        """
+        """Coriolis torques: nonLinearEffects - gravity, see ``ArmModel.coriolis``."""
         m, d = self.pin_model, self.pin_data
         cfg = self._config(q)
         nle = np.array(pin.nonLinearEffects(m, d, cfg, self._vel(qd)))
         return self._back(nle - pin.computeGeneralizedGravity(m, d, cfg))
 
     def gravity_torque(self, q):
-        """
-        Gravity torques ``G(q)`` for the arm's gravity vector.
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-
-        Returns
-        -------
-        numpy.ndarray, (n,)
-            [N m].
-
-        """
+        """Generalized gravity, see ``ArmModel.gravity_torque``."""
         m, d = self.pin_model, self.pin_data
         return self._back(pin.computeGeneralizedGravity(m, d, self._config(q)))
 
     def coriolis_matrix(self, q, qd):
-        """
-        Coriolis matrix ``C(q, qd)`` from Pinocchio (``computeCoriolisMatrix``).
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-        qd : array_like, (n,)
-            Joint velocities [rad/s].
-
-        Returns
-        -------
-        numpy.ndarray, (n, n)
-            [kg m^2/s].
-
-        """
+        """``C(q, qd)`` from ``computeCoriolisMatrix``, see ``ArmModel.coriolis_matrix``."""
         m, d = self.pin_model, self.pin_data
         cmat = pin.computeCoriolisMatrix(m, d, self._config(q), self._vel(qd))
         return self._back_mat(np.array(cmat))
 
     def forward_dynamics(self, q, qd, tau):
-        """
-        Joint accelerations ``qdd = M^-1 (tau - C qd - G)`` (ABA).
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-        qd : array_like, (n,)
-            Joint velocities [rad/s].
-        tau : array_like, (n,)
-            Generalised force on every joint [N m].
-
-        Returns
-        -------
-        numpy.ndarray, (n,)
-            [rad/s^2].
-
-        """
+        """Joint accelerations by ABA, see ``ArmModel.forward_dynamics``."""
         m, d = self.pin_model, self.pin_data
         tau = self._vel(check_vector(tau, self.n, 'tau'), 'tau')
         return self._back(pin.aba(m, d, self._config(q), self._vel(qd), tau))
 
     def terms(self, q, qd):
-        """
-        Everything the control law needs, from one kinematics pass.
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-        qd : array_like, (n,)
-            Joint velocities [rad/s].
-
-        Returns
-        -------
-        mass : numpy.ndarray, (n, n)
-            ``M(q)`` [kg m^2].
-        h : numpy.ndarray, (n,)
-            ``C(q, qd) qd + G(q)`` [N m].
-        jac : numpy.ndarray, (2, n)
-            End-effector Jacobian [m/rad].
-        jdqd : numpy.ndarray, (2,)
-            ``Jdot qd`` [m/s^2].
-        p : numpy.ndarray, (2,)
-            End-effector position [m].
-
-        """
+        """Return the five terms from one Pinocchio pass, see ``ArmModel.terms``."""
         m, d = self.pin_model, self.pin_data
         cfg, vel = self._config(q), self._vel(qd)
         mass = self._sym(pin.crba(m, d, cfg))
@@ -335,36 +199,3 @@ class PinArmModel(ArmModel):
             return mass, h, np.array(jac), np.array(acc), np.array(p)
         return (self._back_mat(mass), self._back(h), np.array(jac[:, self._vperm]),
                 np.array(acc), np.array(p))
-
-    def decoupling(self, q, qd):
-        """
-        Decoupling matrix and drift of the task-space dynamics (eqs. 4, 5).
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-        qd : array_like, (n,)
-            Joint velocities [rad/s].
-
-        Returns
-        -------
-        Da : numpy.ndarray, (2, r)
-            ``J M^-1 B`` [m/(s^2 N m)].
-        b : numpy.ndarray, (2,)
-            ``Jdot qd - J M^-1 (C qd + G)`` [m/s^2].
-
-        """
-        m, d = self.pin_model, self.pin_data
-        cfg, vel = self._config(q), self._vel(qd)
-        minv = self._sym(pin.computeMinverse(m, d, cfg))
-        h = np.array(pin.nonLinearEffects(m, d, cfg, vel))
-        pin.computeJointJacobians(m, d, cfg)
-        pin.forwardKinematics(m, d, cfg, vel, self._zero)
-        pin.updateFramePlacement(m, d, self._frame)
-        jac = pin.getFrameJacobian(m, d, self._frame, _LWA)[:2]
-        jdqd = pin.getFrameClassicalAcceleration(m, d, self._frame, _LWA).linear[:2]
-        w = jac @ minv                       # J M^-1 in Pinocchio's velocity order
-        if not self._identity:
-            w, h = w[:, self._vperm], h[self._vperm]
-        return w @ self._B, jdqd - w @ h

@@ -43,7 +43,169 @@ def _positive(value, name, allow_zero=False):
     return value
 
 
-class Plant:
+def check_torques(tau_active, r, name='tau_active'):
+    """
+    Return the active joint torques as a list of ``r`` finite numbers, or raise.
+
+    Parameters
+    ----------
+    tau_active : array_like, (r,)
+        Actuator torques on the active joints [N m].
+    r : int
+        Number of active joints.
+    name : str
+        Argument name used in the error message.
+
+    Returns
+    -------
+    list of float or list of int, (r,)
+        The values (``tolist`` of an array, else the sequence itself).
+
+    """
+    tau = tau_active.tolist() if isinstance(tau_active, np.ndarray) else tau_active
+    try:
+        ok = len(tau) == r and all(math.isfinite(v) for v in tau)
+    except TypeError:
+        ok = False
+    if not ok:
+        shape = np.shape(tau_active) if not isinstance(tau_active, (str, bytes)) else '?'
+        raise FreejointValueError(
+            f'{name}: expected {r} finite values (shape ({r},)), '
+            f'got {tau_active!r} with shape {shape}')
+    return tau
+
+
+class PeriodPlant:
+    """
+    What every plant does per control period, whatever integrates eq. (1).
+
+    The torque and one seeded disturbance draw are held over the period (see the
+    module docstring), ``dt`` is split into ``dt / dt_sub`` sub-steps, the arguments
+    are validated and a diverged step leaves the state as it was.  A subclass calls
+    ``_setup`` then ``reset`` in its constructor and supplies the engine:
+    ``_set_state(q0, qd0)`` (lists, (n,)), the ``q`` / ``qd`` properties and
+    ``_advance(n_sub, force)``, which integrates ``n_sub`` sub-steps under the held
+    generalised force (list, (n,)) and returns None, or, after putting the state back
+    as it was, a short reason why the step diverged.
+
+    Attributes
+    ----------
+    params : ArmParams
+        Real physical parameters.
+    model : ArmModel
+        A model of ``params`` (the one integrated, or one for fk and the like).
+    t : float
+        Simulated time [s] (sum of the ``dt`` passed to ``step``).
+    k : int
+        Number of ``step`` calls since construction/reset.
+    last_disturbance : tuple of float
+        The disturbance [N m] held over the last step (zeros if disabled).
+
+    """
+
+    def _setup(self, params, model, dt_sub, dist_bound, seed, q0, qd0):
+        """Validate and store what ``reset`` and ``step`` use (not the engine)."""
+        self.params = params
+        self.model = model
+        self.n = params.n
+        self.r = params.r
+        self.dt_sub = _positive(dt_sub, 'dt_sub')
+        self.dist_bound = _positive(dist_bound, 'dist_bound', allow_zero=True)
+        self._check_seed(seed)
+        self._seed0 = seed
+        self._q0 = self._state(q0, 'q0')
+        self._qd0 = self._state(qd0, 'qd0')
+        self._active = params.active
+        self._dt_cache = (None, 0)
+
+    @staticmethod
+    def _check_seed(seed):
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))
+                                 or seed < 0):
+            raise FreejointValueError(f'seed: expected a non-negative int or None, got {seed!r}')
+
+    def _state(self, x, name):
+        if x is None:
+            return [0.0] * self.n
+        return check_vector(x, self.n, name).tolist()
+
+    def reset(self, q0=None, qd0=None, seed=None):
+        """
+        Restart at t = 0, k = 0 with a freshly seeded disturbance generator.
+
+        Parameters
+        ----------
+        q0, qd0 : array_like, (n,), optional
+            New initial state; None keeps the one given at construction
+            (or the last reset).
+        seed : int, optional
+            New seed; None keeps the previous one.
+
+        """
+        if q0 is not None:
+            self._q0 = self._state(q0, 'q0')
+        if qd0 is not None:
+            self._qd0 = self._state(qd0, 'qd0')
+        if seed is not None:
+            self._check_seed(seed)
+            self._seed0 = seed
+        self._set_state(self._q0, self._qd0)
+        self._rng = np.random.default_rng(self._seed0)
+        self.t = 0.0
+        self.k = 0
+        self.last_disturbance = (0.0,) * self.n
+
+    def _substeps(self, dt):
+        if dt == self._dt_cache[0]:
+            return self._dt_cache[1]
+        dt_f = _positive(dt, 'dt')
+        n_sub = round(dt_f / self.dt_sub)
+        if n_sub < 1 or abs(n_sub * self.dt_sub - dt_f) > 1e-9 * dt_f:
+            raise FreejointValueError(
+                f'dt: {dt_f} s is not an integer multiple of dt_sub = {self.dt_sub} s')
+        self._dt_cache = (dt, n_sub)
+        return n_sub
+
+    def step(self, tau_active, dt):
+        """
+        Advance by one control period with torque and disturbance held.
+
+        Parameters
+        ----------
+        tau_active : array_like, (r,)
+            Actuator torques on the active joints, in ``params.active`` order [N m].
+        dt : float
+            Control period [s], an integer multiple of ``dt_sub``.
+
+        Raises
+        ------
+        FreejointValueError
+            Naming ``tau_active`` or ``dt`` if they are bad.
+        PlantDivergedError
+            If the integration produced a non-finite state (torques far beyond what
+            ``dt_sub`` resolves) or the engine flagged it; the plant keeps its last
+            finite state, the disturbance draw of the step is spent.
+
+        """
+        n_sub = self._substeps(dt)
+        tau = check_torques(tau_active, self.r)
+        if self.dist_bound > 0.0:
+            full = self._rng.uniform(-self.dist_bound, self.dist_bound, self.n).tolist()
+            self.last_disturbance = tuple(full)
+        else:
+            full = [0.0] * self.n
+        for j, v in zip(self._active, tau):
+            full[j] += float(v)
+        why = self._advance(n_sub, full)
+        if why is not None:
+            raise PlantDivergedError(
+                f'tau_active: the integration over step {self.k} diverged ({why}) from '
+                f'q = {self.q.tolist()}, qd = {self.qd.tolist()}; the state is left as it was')
+        self.t += dt
+        self.k += 1
+
+
+class Plant(PeriodPlant):
     """
     The simulated manipulator with bounded random joint disturbances.
 
@@ -80,58 +242,15 @@ class Plant:
                  qd0=None, use_fast=True):
         if not isinstance(params, ArmParams):
             raise FreejointValueError(f'params: expected ArmParams, got {type(params).__name__}')
-        self.params = params
-        self.model = make_model(params) if use_fast else ArmModel(params)
-        self.n = params.n
-        self.r = params.r
-        self.dt_sub = _positive(dt_sub, 'dt_sub')
-        self.dist_bound = _positive(dist_bound, 'dist_bound', allow_zero=True)
-        self._check_seed(seed)
-        self._seed0 = seed
-        self._q0 = self._state(q0, 'q0')
-        self._qd0 = self._state(qd0, 'qd0')
-        self._active = params.active
+        model = make_model(params) if use_fast else ArmModel(params)
+        self._setup(params, model, dt_sub, dist_bound, seed, q0, qd0)
         self._fast = hasattr(self.model, 'qdd')
-        self._dt_cache = (None, 0)
+        self._qdd = self.model.forward_dynamics
         self.reset()
 
-    @staticmethod
-    def _check_seed(seed):
-        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))
-                                 or seed < 0):
-            raise FreejointValueError(f'seed: expected a non-negative int or None, got {seed!r}')
-
-    def _state(self, x, name):
-        if x is None:
-            return [0.0] * self.n
-        return check_vector(x, self.n, name).tolist()
-
-    def reset(self, q0=None, qd0=None, seed=None):
-        """
-        Restart at t = 0, k = 0 with a freshly seeded disturbance generator.
-
-        Parameters
-        ----------
-        q0, qd0 : array_like, (n,), optional
-            New initial state; None keeps the one given at construction
-            (or the last reset).
-        seed : int, optional
-            New seed; None keeps the previous one.
-
-        """
-        if q0 is not None:
-            self._q0 = self._state(q0, 'q0')
-        if qd0 is not None:
-            self._qd0 = self._state(qd0, 'qd0')
-        if seed is not None:
-            self._check_seed(seed)
-            self._seed0 = seed
-        self._q = list(self._q0)
-        self._qd = list(self._qd0)
-        self._rng = np.random.default_rng(self._seed0)
-        self.t = 0.0
-        self.k = 0
-        self.last_disturbance = (0.0,) * self.n
+    def _set_state(self, q0, qd0):
+        self._q = list(q0)
+        self._qd = list(qd0)
 
     def stop(self):
         """Zero every joint velocity: the arm stops where it is (brakes engaged)."""
@@ -147,72 +266,21 @@ class Plant:
         """Return the joint velocities [rad/s], numpy copy (n,)."""
         return np.array(self._qd)
 
-    def _substeps(self, dt):
-        if dt == self._dt_cache[0]:
-            return self._dt_cache[1]
-        dt_f = _positive(dt, 'dt')
-        n_sub = round(dt_f / self.dt_sub)
-        if n_sub < 1 or abs(n_sub * self.dt_sub - dt_f) > 1e-9 * dt_f:
-            raise FreejointValueError(
-                f'dt: {dt_f} s is not an integer multiple of dt_sub = {self.dt_sub} s')
-        self._dt_cache = (dt, n_sub)
-        return n_sub
-
-    def step(self, tau_active, dt):
-        """
-        Advance by one control period with torque and disturbance held.
-
-        Parameters
-        ----------
-        tau_active : array_like, (r,)
-            Actuator torques on the active joints, in ``params.active`` order [N m].
-        dt : float
-            Control period [s], an integer multiple of ``dt_sub``.
-
-        Raises
-        ------
-        FreejointValueError
-            Naming ``tau_active`` or ``dt`` if they are bad.
-        PlantDivergedError
-            If the integration produced a non-finite state (torques far beyond what
-            ``dt_sub`` resolves); the plant keeps its last finite state, the disturbance
-            draw of the step is spent.
-
-        """
-        n_sub = self._substeps(dt)
-        tau = tau_active.tolist() if isinstance(tau_active, np.ndarray) else tau_active
-        try:
-            ok = len(tau) == self.r and all(math.isfinite(v) for v in tau)
-        except TypeError:
-            ok = False
-        if not ok:
-            shape = np.shape(tau_active) if not isinstance(tau_active, (str, bytes)) else '?'
-            raise FreejointValueError(
-                f'tau_active: expected {self.r} finite values (shape ({self.r},)), '
-                f'got {tau_active!r} with shape {shape}')
-        if self.dist_bound > 0.0:
-            full = self._rng.uniform(-self.dist_bound, self.dist_bound, self.n).tolist()
-            self.last_disturbance = tuple(full)
-        else:
-            full = [0.0] * self.n
-        for j, v in zip(self._active, tau):
-            full[j] += float(v)
+    def _advance(self, n_sub, force):
         q_before, qd_before = self._q, self._qd
         try:
             if self._fast:
-                self._rk4_fast3(n_sub, full)
+                self._rk4_fast3(n_sub, force)
             else:
-                self._rk4_general(n_sub, np.array(full))
+                with np.errstate(all='ignore'):
+                    self._rk4_general(n_sub, np.array(force))
             finite = all(map(math.isfinite, self._q + self._qd))
-        except (ArithmeticError, ValueError):   # e.g. math.cos(inf): a math domain error
+        except (ArithmeticError, ValueError, RuntimeError):  # e.g. math.cos(inf)
             finite = False
-        if not finite:
-            self._q, self._qd = q_before, qd_before
-            raise PlantDivergedError(
-                f'tau_active: the integration over step {self.k} diverged (non-finite state '
-                f'from q = {q_before}, qd = {qd_before}); the state is left as it was')
-        self.t += dt
-        self.k += 1
+        if finite:
+            return None
+        self._q, self._qd = q_before, qd_before
+        return 'non-finite state'
 
     def _rk4_fast3(self, n_sub, tau):
         qdd = self.model.qdd
@@ -246,7 +314,7 @@ class Plant:
         self._qd = [w0, w1, w2]
 
     def _rk4_general(self, n_sub, tau):
-        f = self.model.forward_dynamics
+        f = self._qdd
         h = self.dt_sub
         q = np.array(self._q)
         w = np.array(self._qd)

@@ -29,10 +29,10 @@ and COM offsets of the URDF times ``scale``, as ``ArmParams.scaled``.
 from dataclasses import dataclass
 import math
 import os
-import xml.etree.ElementTree as ET
 
 from freejoint_core.arm import ArmParams, GRAVITY_VERTICAL
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.kinematic_tree import robot_root
 import numpy as np
 
 GRAVITY_HORIZONTAL = (0.0, 0.0, -GRAVITY_VERTICAL)
@@ -214,15 +214,7 @@ def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
         ``passive_joints: ...`` or ``gravity: ...`` for the other arguments.
 
     """
-    if not isinstance(text, str) or not text.strip():
-        raise FreejointValueError('robot_description: expected URDF text, got an empty value')
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise FreejointValueError(f'robot_description: not well-formed XML ({exc})') from None
-    if root.tag != 'robot':
-        raise FreejointValueError(
-            f'robot_description: root element is <{root.tag}>, expected <robot>')
+    root = robot_root(text)
     if isinstance(passive_joints, str):
         raise FreejointValueError(
             f'passive_joints: expected a list of joint names, got the string {passive_joints!r}')
