@@ -10,24 +10,14 @@ the Table I nominal 3-link arm (vertical, 70 %) at dt = 1 ms, dt_sub = 0.5 ms
 * m = 5 with plain prediction (``bias_gain = 0``) and with dt_sub = 1 ms;
 * m = 1 on the general numpy path (reference).
 
-Timings are the median over a few repeats of ``time.perf_counter`` around many
-calls.  Usage: ``PYTHONPATH=src/freejoint_core python bench/core_delay.py``.
+Timings: ``core_timing.per_call_us``.  Usage:
+``PYTHONPATH=src/freejoint_core python bench/core_delay.py``.
 """
 
-import os
-import statistics
-import sys
-import time
-
-try:
-    import freejoint_core  # noqa: F401
-except ImportError:  # run from a source checkout without the workspace installed
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(
-        os.path.abspath(__file__))), 'src', 'freejoint_core'))
-
-from freejoint_core.arm import table1  # noqa: E402
-from freejoint_core.delay import StatePredictor  # noqa: E402
-import numpy as np  # noqa: E402
+from core_timing import per_call_us, print_rows
+from freejoint_core.arm import table1
+from freejoint_core.delay import StatePredictor
+import numpy as np
 
 DT = 1e-3
 
@@ -41,14 +31,11 @@ def _tick_us(ticks, calls, repeats=5, **kwargs):
     tau = np.array([8.0, 4.0])
     for _ in range(ticks + 1):
         pred.push(tau)
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(calls):
-            pred.predict(q, qd, ticks)
-            pred.push(tau)
-        times.append((time.perf_counter() - start) / calls * 1e6)
-    return statistics.median(times)
+
+    def tick():
+        pred.predict(q, qd, ticks)
+        pred.push(tau)
+    return per_call_us(tick, calls, repeats)
 
 
 def run():
@@ -68,10 +55,7 @@ def run():
 
 def main():
     """Print the table."""
-    rows = run()
-    print('%-64s %12s %-5s %s' % ('figure', 'value', 'unit', 'target'))
-    for r in rows:
-        print('%-64s %12.4g %-5s %s' % (r['name'], r['value'], r['unit'], r['target'] or ''))
+    print_rows(run())
 
 
 if __name__ == '__main__':

@@ -12,41 +12,21 @@ Figures (printed; nothing is asserted):
   so the worst case) and for the 5-s robust closed loop on the paper's circle
   (tracking error, target 1e-6 mm).
 
-Timings are the median over a few repeats of ``time.perf_counter`` around many
-calls.  Usage: ``PYTHONPATH=src/freejoint_core python bench/core_law_plant.py``.
+Timings: ``core_timing.per_call_us``.  Usage:
+``PYTHONPATH=src/freejoint_core python bench/core_law_plant.py``.
 """
 
 import math
-import os
-import statistics
-import sys
-import time
 
-try:
-    import freejoint_core  # noqa: F401
-except ImportError:  # run from a source checkout without the workspace installed
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(
-        os.path.abspath(__file__))), 'src', 'freejoint_core'))
-
-from freejoint_core.arm import make_model, table1  # noqa: E402
-from freejoint_core.control import Gains, RobustController  # noqa: E402
-from freejoint_core.plant import DEFAULT_DT_SUB, Plant  # noqa: E402
-from freejoint_core.trajectory import CircleQuintic  # noqa: E402
-import numpy as np  # noqa: E402
+from core_timing import per_call_us, print_rows
+from freejoint_core.arm import make_model, table1
+from freejoint_core.control import Gains, RobustController
+from freejoint_core.plant import DEFAULT_DT_SUB, Plant
+from freejoint_core.trajectory import CircleQuintic
+import numpy as np
 
 DT = 1e-3
 Q3_0 = math.radians(120.0)
-
-
-def _per_call_us(fun, calls, repeats=5):
-    """Median over ``repeats`` of the mean time per call [us]."""
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(calls):
-            fun()
-        times.append((time.perf_counter() - start) / calls * 1e6)
-    return statistics.median(times)
 
 
 def _tick_timing(use_fast, calls):
@@ -54,14 +34,14 @@ def _tick_timing(use_fast, calls):
     q = np.array([0.3, 1.2, 2.0])
     qd = np.array([0.4, -0.3, 0.8])
     p_d, pd_d, pdd_d = np.array([0.2, 0.05]), np.array([0.1, 0.2]), np.array([0.5, -0.4])
-    return _per_call_us(lambda: ctl.step(q, qd, p_d, pd_d, pdd_d, DT), calls)
+    return per_call_us(lambda: ctl.step(q, qd, p_d, pd_d, pdd_d, DT), calls)
 
 
 def _plant_timing(dt_sub, use_fast, calls):
     plant = Plant(table1('vertical'), dt_sub, dist_bound=0.5, seed=0,
                   q0=[0.3, 1.2, 2.0], use_fast=use_fast)
     tau = np.array([0.5, -0.2])
-    return _per_call_us(lambda: plant.step(tau, DT), calls)
+    return per_call_us(lambda: plant.step(tau, DT), calls)
 
 
 def _free_swing(dt_sub, seconds=5.0):
@@ -117,10 +97,7 @@ def run():
 
 def main():
     """Print the table."""
-    rows = run()
-    print('%-64s %12s %-5s %s' % ('figure', 'value', 'unit', 'target'))
-    for r in rows:
-        print('%-64s %12.4g %-5s %s' % (r['name'], r['value'], r['unit'], r['target'] or ''))
+    print_rows(run())
 
 
 if __name__ == '__main__':

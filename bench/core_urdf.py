@@ -14,42 +14,21 @@ Figures (printed; nothing is asserted):
   over random states, and the closed loop on the paper's circle on MuJoCo vs RK4
   (largest end-effector difference over the 5000 ticks, mm), both cases.
 
-Timings are the median over a few repeats of ``time.perf_counter`` around many calls.
+Timings: ``core_timing.per_call_us``.
 Usage: ``python bench/core_urdf.py`` in the workspace (``. tools/env.sh``).
 """
 
-import os
-import statistics
-import sys
-import time
-
-try:
-    import freejoint_core  # noqa: F401
-except ImportError:  # run from a source checkout without the workspace installed
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(
-        os.path.abspath(__file__))), 'src', 'freejoint_core'))
-
-from freejoint_core import offline  # noqa: E402
-from freejoint_core.arm import ArmModel, make_model, table1  # noqa: E402
-from freejoint_core.mujoco_plant import MujocoPlant  # noqa: E402
-from freejoint_core.pin_model import PinArmModel  # noqa: E402
-from freejoint_core.pin_plant import PinPlant  # noqa: E402
-from freejoint_core.plant import DEFAULT_DT_SUB, Plant  # noqa: E402
-from freejoint_core.urdf import four_link_arm, FOUR_LINK_Q0, paper_arm  # noqa: E402
-import numpy as np  # noqa: E402
+from core_timing import per_call_us, print_rows
+from freejoint_core import offline
+from freejoint_core.arm import ArmModel, make_model, table1
+from freejoint_core.mujoco_plant import MujocoPlant
+from freejoint_core.pin_model import PinArmModel
+from freejoint_core.pin_plant import PinPlant
+from freejoint_core.plant import DEFAULT_DT_SUB, Plant
+from freejoint_core.urdf import four_link_arm, FOUR_LINK_Q0, paper_arm
+import numpy as np
 
 DT = 1e-3
-
-
-def _per_call_us(fun, calls, repeats=5):
-    """Return the median over ``repeats`` of the mean time per call [us]."""
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(calls):
-            fun()
-        times.append((time.perf_counter() - start) / calls * 1e6)
-    return statistics.median(times)
 
 
 def _state(n):
@@ -64,11 +43,11 @@ def _model_timings(arm, label, calls):
     kind = 'scalar kernel' if arm.params.n == 3 else 'general numpy'
     return [
         {'name': f'Pinocchio M, h, J, Jdot qd, fk per tick, {label}',
-         'value': _per_call_us(lambda: pin_model.terms(q, qd), calls), 'unit': 'us'},
+         'value': per_call_us(lambda: pin_model.terms(q, qd), calls), 'unit': 'us'},
         {'name': f'Pinocchio Da, b per tick, {label}',
-         'value': _per_call_us(lambda: pin_model.decoupling(q, qd), calls), 'unit': 'us'},
+         'value': per_call_us(lambda: pin_model.decoupling(q, qd), calls), 'unit': 'us'},
         {'name': f'closed-form Da, b per tick, {label} ({kind}, reference)',
-         'value': _per_call_us(lambda: ref.decoupling(q, qd), calls), 'unit': 'us'},
+         'value': per_call_us(lambda: ref.decoupling(q, qd), calls), 'unit': 'us'},
     ]
 
 
@@ -80,11 +59,11 @@ def _plant_timings(arm, label, q0, periods):
     kind = 'scalar kernel' if arm.params.n == 3 else 'general numpy'
     return [
         {'name': f'MuJoCo plant per 1 ms period, dt_sub = {DEFAULT_DT_SUB * 1e3:g} ms, {label}',
-         'value': _per_call_us(lambda: mj.step(tau, DT), periods), 'unit': 'us'},
+         'value': per_call_us(lambda: mj.step(tau, DT), periods), 'unit': 'us'},
         {'name': f'RK4 plant on Pinocchio ABA per 1 ms period, {label}',
-         'value': _per_call_us(lambda: pin_plant.step(tau, DT), periods), 'unit': 'us'},
+         'value': per_call_us(lambda: pin_plant.step(tau, DT), periods), 'unit': 'us'},
         {'name': f'RK4 plant per 1 ms period, {label} ({kind}, reference)',
-         'value': _per_call_us(lambda: rk4.step(tau, DT), max(periods // 10, 20)),
+         'value': per_call_us(lambda: rk4.step(tau, DT), max(periods // 10, 20)),
          'unit': 'us'},
     ]
 
@@ -142,10 +121,7 @@ def run():
 
 def main():
     """Print the table."""
-    rows = run()
-    print('%-72s %12s %-5s %s' % ('figure', 'value', 'unit', 'target'))
-    for r in rows:
-        print('%-72s %12.4g %-5s %s' % (r['name'], r['value'], r['unit'], r['target'] or ''))
+    print_rows(run(), width=72)
 
 
 if __name__ == '__main__':
