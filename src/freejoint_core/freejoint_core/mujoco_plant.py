@@ -93,12 +93,8 @@ class MujocoPlant(PeriodPlant):
         The real arm (URDF, passive joints, gravity vector).
     dt_sub : float
         MuJoCo RK4 step [s], > 0.
-    dist_bound : float
-        Disturbance bound [N m], >= 0 (0 disables the disturbance).
-    seed : int or None
-        Seed of ``numpy.random.default_rng``.
-    q0, qd0 : array_like, (n,), optional
-        Initial joint angles [rad] and velocities [rad/s]; zeros if None.
+    dist_bound, seed, q0, qd0
+        As :class:`freejoint_core.plant.Plant`.
 
     Attributes
     ----------
@@ -108,14 +104,8 @@ class MujocoPlant(PeriodPlant):
         The core's model of ``params`` (for fk and the like, as ``Plant.model``).
     mj_model, mj_data : mujoco.MjModel, mujoco.MjData
         The MuJoCo model and state.
-    q, qd : numpy.ndarray, (n,)
-        Copies of the current joint angles [rad] and velocities [rad/s].
-    t : float
-        Simulated time [s] (sum of the ``dt`` passed to ``step``).
-    k : int
-        Number of ``step`` calls since construction/reset.
-    last_disturbance : tuple of float
-        The disturbance [N m] held over the last step (zeros if disabled).
+    q, qd, t, k, last_disturbance
+        As :class:`freejoint_core.plant.PeriodPlant`.
 
     """
 

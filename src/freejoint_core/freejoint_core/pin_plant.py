@@ -25,14 +25,8 @@ class PinPlant(Plant):
     ----------
     arm : UrdfArm
         The real arm (URDF, passive joints, gravity vector).
-    dt_sub : float
-        RK4 step [s], > 0.
-    dist_bound : float
-        Disturbance bound [N m], >= 0 (0 disables the disturbance).
-    seed : int or None
-        Seed of ``numpy.random.default_rng``.
-    q0, qd0 : array_like, (n,), optional
-        Initial joint angles [rad] and velocities [rad/s]; zeros if None.
+    dt_sub, dist_bound, seed, q0, qd0
+        As :class:`freejoint_core.plant.Plant`.
 
     Attributes
     ----------
@@ -40,14 +34,8 @@ class PinPlant(Plant):
         ``arm.params``.
     model : PinArmModel
         The Pinocchio model it integrates.
-    q, qd : numpy.ndarray, (n,)
-        Copies of the current joint angles [rad] and velocities [rad/s].
-    t : float
-        Simulated time [s] (sum of the ``dt`` passed to ``step``).
-    k : int
-        Number of ``step`` calls since construction/reset.
-    last_disturbance : tuple of float
-        The disturbance [N m] held over the last step (zeros if disabled).
+    q, qd, t, k, last_disturbance
+        As :class:`freejoint_core.plant.PeriodPlant`.
 
     """
 

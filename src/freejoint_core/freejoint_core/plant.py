@@ -94,6 +94,8 @@ class PeriodPlant:
         Real physical parameters.
     model : ArmModel
         A model of ``params`` (the one integrated, or one for fk and the like).
+    q, qd : numpy.ndarray, (n,)
+        Copies of the current joint angles [rad] and velocities [rad/s].
     t : float
         Simulated time [s] (sum of the ``dt`` passed to ``step``).
     k : int
@@ -227,14 +229,8 @@ class Plant(PeriodPlant):
 
     Attributes
     ----------
-    q, qd : numpy.ndarray, (n,)
-        Copies of the current joint angles [rad] and velocities [rad/s].
-    t : float
-        Simulated time [s] (sum of the ``dt`` passed to ``step``).
-    k : int
-        Number of ``step`` calls since construction/reset.
-    last_disturbance : tuple of float
-        The disturbance [N m] held over the last step (zeros if disabled).
+    q, qd, t, k, last_disturbance
+        As :class:`PeriodPlant`.
 
     """
 
