@@ -1,7 +1,5 @@
 """The MuJoCo plant (URDF imported by MuJoCo) equals the core's RK4 plant."""
 
-import math
-
 from freejoint_core import offline
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.mujoco_plant import MujocoPlant
@@ -43,16 +41,12 @@ def test_closed_loop_on_mujoco_equals_closed_loop_on_rk4_over_the_paper_circle(
 
 
 @pytest.mark.parametrize('case', ['horizontal', 'vertical'])
-def test_four_link_mujoco_plant_follows_the_rk4_plant_open_loop(case):
+def test_four_link_mujoco_plant_follows_the_rk4_plant_open_loop(case, step_alongside):
     arm = four_link_arm(case)
     q0 = np.radians([20.0, 40.0, -30.0, 50.0])
     rk4 = Plant(arm.params, seed=5, q0=q0, use_fast=False)
     mj = MujocoPlant(arm, seed=5, q0=q0)
-    for k in range(500):
-        tau = [math.sin(3e-3 * k), 0.4, -0.2 * math.cos(2e-3 * k)]
-        rk4.step(tau, DT)
-        mj.step(tau, DT)
-        assert mj.last_disturbance == rk4.last_disturbance
+    step_alongside(mj, rk4, 500)
     assert np.max(np.abs(mj.q - rk4.q)) <= 1e-10
     assert np.max(np.abs(mj.qd - rk4.qd)) <= 1e-9
 

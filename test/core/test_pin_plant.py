@@ -1,7 +1,5 @@
 """The RK4 plant on Pinocchio's ABA equals the core's RK4 plant."""
 
-import math
-
 from freejoint_core import offline
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.pin_plant import PinPlant
@@ -14,15 +12,11 @@ DT = 1e-3
 
 
 @pytest.mark.parametrize('case', ['horizontal', 'vertical'])
-def test_four_link_pinocchio_plant_equals_the_general_rk4_plant(case):
+def test_four_link_pinocchio_plant_equals_the_general_rk4_plant(case, step_alongside):
     arm = four_link_arm(case)
     ref = Plant(arm.params, seed=4, q0=FOUR_LINK_Q0, use_fast=False)
     plant = PinPlant(arm, seed=4, q0=FOUR_LINK_Q0)
-    for k in range(300):
-        tau = [math.sin(3e-3 * k), 0.4, -0.2 * math.cos(2e-3 * k)]
-        ref.step(tau, DT)
-        plant.step(tau, DT)
-        assert plant.last_disturbance == ref.last_disturbance
+    step_alongside(plant, ref, 300)
     assert plant.k == ref.k == 300 and plant.t == ref.t
     assert np.max(np.abs(plant.q - ref.q)) <= 1e-11
     assert np.max(np.abs(plant.qd - ref.qd)) <= 1e-10

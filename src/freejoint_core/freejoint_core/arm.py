@@ -558,10 +558,8 @@ class ArmModel:
 
         Parameters
         ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-        qd : array_like, (n,)
-            Joint velocities [rad/s].
+        q, qd : array_like, (n,)
+            Joint angles [rad] and velocities [rad/s].
 
         Returns
         -------
@@ -718,14 +716,10 @@ def task_space(mass, h, jac, jdqd, selection):
 
     Parameters
     ----------
-    mass : numpy.ndarray, (n, n)
-        ``M(q)`` [kg m^2], symmetric positive definite.
-    h : numpy.ndarray, (n,)
-        ``C(q, qd) qd + G(q)`` [N m].
-    jac : numpy.ndarray, (2, n)
-        End-effector Jacobian [m/rad].
-    jdqd : numpy.ndarray, (2,)
-        ``Jdot qd`` [m/s^2].
+    mass, h, jac, jdqd : numpy.ndarray
+        ``M(q)`` (n, n) [kg m^2] (symmetric positive definite), ``C qd + G`` (n,)
+        [N m], ``J`` (2, n) [m/rad] and ``Jdot qd`` (2,) [m/s^2], as returned by
+        ``ArmModel.terms``.
     selection : numpy.ndarray, (n, r)
         Actuation matrix ``B`` (columns of the identity at the active joints).
 

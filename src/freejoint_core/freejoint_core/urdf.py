@@ -402,6 +402,7 @@ def load_urdf(path, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
     Returns
     -------
     UrdfArm
+        The arm the file describes.
 
     Raises
     ------
