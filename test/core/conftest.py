@@ -2,6 +2,8 @@
 
 import math
 
+from freejoint_core.errors import PlantDivergedError
+import numpy as np
 import pytest
 
 DT = 1e-3
@@ -20,3 +22,20 @@ def _step_alongside(plant, ref, periods):
 def step_alongside():
     """Return ``f(plant, ref, periods)``: both stepped at 1 ms, the same disturbances checked."""
     return _step_alongside
+
+
+def _diverges_keeping_state(plant, huge):
+    """Step ``plant`` (k = 0, r = 2) once, then with ``[huge, -huge]``: refused, state kept."""
+    plant.step([1.0, 1.0], DT)
+    q, qd = plant.q, plant.qd
+    with pytest.raises(PlantDivergedError, match='tau_active: the integration over step 1'):
+        plant.step([huge, -huge], DT)
+    np.testing.assert_array_equal(plant.q, q)
+    np.testing.assert_array_equal(plant.qd, qd)
+    assert plant.k == 1
+
+
+@pytest.fixture
+def diverges_keeping_state():
+    """Return ``f(plant, huge)``: a diverging step is refused and the state kept."""
+    return _diverges_keeping_state
