@@ -190,6 +190,19 @@ def _gravity(gravity):
     return g
 
 
+def _named(root, tag):
+    """Yield ``(name, element)`` of each ``<tag>``; refuse a missing or repeated name."""
+    seen = set()
+    for elem in root.findall(tag):
+        name = elem.get('name')
+        if not name:
+            raise FreejointValueError(f'robot_description: a <{tag}> has no name')
+        if name in seen:
+            raise FreejointValueError(f'robot_description: {tag} {name!r} is defined twice')
+        seen.add(name)
+        yield name, elem
+
+
 def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
     """
     Read a planar serial arm from URDF text.
@@ -224,24 +237,10 @@ def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
             f'passive_joints: expected joint names (strings), got {passive_joints!r}')
     gvec = _gravity(gravity)
 
-    links = {}
-    for link in root.findall('link'):
-        lname = link.get('name')
-        if not lname:
-            raise FreejointValueError('robot_description: a <link> has no name')
-        if lname in links:
-            raise FreejointValueError(f'robot_description: link {lname!r} is defined twice')
-        links[lname] = link
+    links = dict(_named(root, 'link'))
     children = {}   # parent link -> joints
     child_links = set()
-    names = set()
-    for joint in root.findall('joint'):
-        jname = joint.get('name')
-        if not jname:
-            raise FreejointValueError('robot_description: a <joint> has no name')
-        if jname in names:
-            raise FreejointValueError(f'robot_description: joint {jname!r} is defined twice')
-        names.add(jname)
+    for jname, joint in _named(root, 'joint'):
         parent, child = joint.find('parent'), joint.find('child')
         if parent is None or child is None or not parent.get('link') or not child.get('link'):
             raise FreejointValueError(
