@@ -87,6 +87,7 @@ def conditions(priority, hogs):
     return {'cpu_count': os.cpu_count(), 'machine': platform.machine(),
             'kernel': platform.release(), 'load_average': list(os.getloadavg()),
             'thread_priority': priority, 'scheduling': 'SCHED_FIFO' if priority else 'OTHER',
+            'planner_thread_priority': priority - 10 if priority > 10 else 0,
             'layout': 'a process per node (make demo)', 'hogs': hogs,
             'time_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}
 
