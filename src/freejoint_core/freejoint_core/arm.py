@@ -584,7 +584,7 @@ class ArmModel:
         """
         Decoupling matrix and drift of the task-space dynamics (eqs. 4, 5).
 
-        Computed by :func:`task_space` from the model's ``terms``.
+        Computed by :func:`task_space` from the model's ``J M^-1``, ``h`` and ``Jdot qd``.
 
         Parameters
         ----------
@@ -601,8 +601,12 @@ class ArmModel:
             ``Jdot qd - J M^-1 (C qd + G)`` [m/s^2].
 
         """
+        return task_space(*self._task_terms(q, qd), self._B)
+
+    def _task_terms(self, q, qd):
+        """``J M^-1`` (2, n), ``h`` (n,) and ``Jdot qd`` (2,): what ``task_space`` takes."""
         mass, h, jac, jdqd, _ = self.terms(q, qd)
-        return task_space(mass, h, jac, jdqd, self._B)
+        return np.linalg.solve(mass, jac.T).T, h, jdqd  # J M^-1 (M symmetric)
 
     def energy(self, q, qd):
         """
@@ -710,15 +714,16 @@ class ArmModel:
         return q
 
 
-def task_space(mass, h, jac, jdqd, selection):
+def task_space(jac_minv, h, jdqd, selection):
     """
     Decoupling matrix and drift of eqs. (4, 5) from the joint-space terms.
 
     Parameters
     ----------
-    mass, h, jac, jdqd : numpy.ndarray
-        ``M(q)`` (n, n) [kg m^2] (symmetric positive definite), ``C qd + G`` (n,)
-        [N m], ``J`` (2, n) [m/rad] and ``Jdot qd`` (2,) [m/s^2], as returned by
+    jac_minv : numpy.ndarray, (2, n)
+        ``J M^-1`` [m/(rad kg m^2)].
+    h, jdqd : numpy.ndarray
+        ``C qd + G`` (n,) [N m] and ``Jdot qd`` (2,) [m/s^2], as returned by
         ``ArmModel.terms``.
     selection : numpy.ndarray, (n, r)
         Actuation matrix ``B`` (columns of the identity at the active joints).
@@ -731,8 +736,7 @@ def task_space(mass, h, jac, jdqd, selection):
         ``Jdot qd - J M^-1 h`` [m/s^2].
 
     """
-    w = np.linalg.solve(mass, jac.T).T  # J M^-1 (M symmetric)
-    return w @ selection, jdqd - w @ h
+    return jac_minv @ selection, jdqd - jac_minv @ h
 
 
 def _wrap(angle):

@@ -22,7 +22,8 @@ and rotational inertia by ``scale``, as ``ArmParams.scaled``.  Continuous joints
 
 ``terms(q, qd)`` gives ``M``, ``h = C qd + G``, ``J``, ``Jdot qd`` and ``fk`` from one
 pass (the per-tick cost measured in ``bench/core_urdf.py``); ``decoupling`` is
-``ArmModel``'s, :func:`freejoint_core.arm.task_space` of those terms.
+``ArmModel``'s, :func:`freejoint_core.arm.task_space` of ``h``, ``Jdot qd`` and
+``J M^-1`` from ``computeMinverse``.
 """
 
 import math
@@ -181,11 +182,9 @@ class PinArmModel(ArmModel):
         tau = self._vel(check_vector(tau, self.n, 'tau'), 'tau')
         return self._back(pin.aba(m, d, self._config(q), self._vel(qd), tau))
 
-    def terms(self, q, qd):
-        """Return the five terms from one Pinocchio pass, see ``ArmModel.terms``."""
+    def _pass(self, cfg, vel):
+        """``h``, ``J`` (x, y rows; Pinocchio's velocity order) and ``Jdot qd``, one pass."""
         m, d = self.pin_model, self.pin_data
-        cfg, vel = self._config(q), self._vel(qd)
-        mass = self._sym(pin.crba(m, d, cfg))
         h = np.array(pin.nonLinearEffects(m, d, cfg, vel))
         # The joint Jacobians, then the zero-acceleration kinematics the frame's classical
         # acceleration reads (velocities and accelerations of the joints).
@@ -194,8 +193,24 @@ class PinArmModel(ArmModel):
         pin.updateFramePlacement(m, d, self._frame)
         jac = pin.getFrameJacobian(m, d, self._frame, _LWA)[:2]
         acc = pin.getFrameClassicalAcceleration(m, d, self._frame, _LWA).linear[:2]
-        p = d.oMf[self._frame].translation[:2]
+        return h, jac, np.array(acc)
+
+    def terms(self, q, qd):
+        """Return the five terms from one Pinocchio pass, see ``ArmModel.terms``."""
+        cfg, vel = self._config(q), self._vel(qd)
+        mass = self._sym(pin.crba(self.pin_model, self.pin_data, cfg))
+        h, jac, jdqd = self._pass(cfg, vel)
+        p = np.array(self.pin_data.oMf[self._frame].translation[:2])
         if self._identity:
-            return mass, h, np.array(jac), np.array(acc), np.array(p)
-        return (self._back_mat(mass), self._back(h), np.array(jac[:, self._vperm]),
-                np.array(acc), np.array(p))
+            return mass, h, np.array(jac), jdqd, p
+        return self._back_mat(mass), self._back(h), np.array(jac[:, self._vperm]), jdqd, p
+
+    def _task_terms(self, q, qd):
+        """``J M^-1`` from ``computeMinverse``, ``h`` and ``Jdot qd``, one pass (core order)."""
+        cfg, vel = self._config(q), self._vel(qd)
+        minv = self._sym(pin.computeMinverse(self.pin_model, self.pin_data, cfg))
+        h, jac, jdqd = self._pass(cfg, vel)
+        w = jac @ minv                       # J M^-1 in Pinocchio's velocity order
+        if not self._identity:
+            w, h = w[:, self._vperm], h[self._vperm]
+        return w, h, jdqd
