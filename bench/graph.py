@@ -607,9 +607,11 @@ class CircleLoop:
     plan instead of cutting the running one off.
     """
 
-    def __init__(self, client, plan=None, period=None, strict=True):
+    def __init__(self, client, plan=None, period=None, strict=True, before=None):
         self.client = client
         self.strict = strict
+        self.before = before
+        """Called before each request but the first (e.g. the arm back at rest at q(0))."""
         self.refused = []
         """(monotonic time, reason) of the refused requests (``strict=False``)."""
         self.plan = plan or ros_params('planner.yaml')
@@ -624,6 +626,8 @@ class CircleLoop:
         """Ask for the next circle if due; a refusal or silence raises if ``strict``."""
         if time.monotonic() < self.next:
             return False
+        if self.before is not None and self.accepted:
+            self.before()
         answer = self.client.plan_circle(self.plan)
         now = time.monotonic()
         if answer is None or not answer.accepted:

@@ -264,7 +264,7 @@ def controller_restart(args, index):
         with soak.Session('controller_restart_' + case, index, case, seconds) as s:
             index += 1
             s.up()
-            loop = bench_graph.CircleLoop(s.client)
+            loop = bench_graph.CircleLoop(s.client, before=lambda: soak.rest_at_q0(s.client))
             for _ in range(args.cycles):
                 # mid-circle: args.mid s after the latest circle was accepted
                 loop.poll()
@@ -342,7 +342,7 @@ def driver500(args, index):
                           sim=['publish_rate:=500.0'], ctl=ctl) as s:
             index += 1
             s.up()
-            loop = bench_graph.CircleLoop(s.client)
+            loop = bench_graph.CircleLoop(s.client, before=lambda: soak.rest_at_q0(s.client))
             start = time.monotonic()
             s.wait(args.seconds, loop)
             end = time.monotonic()
