@@ -944,3 +944,147 @@ def test_real_time_skips_a_state_older_than_max_state_age_without_a_command(
     assert 'stamp_ns=%d' % drv.ns(k_old) not in drv.commands
     assert procs.stop(proc) == 0
     assert '1 states skipped as too old' in procs.log(proc)
+
+
+JS_RELIABILITY = 'qos_overrides./joint_states.subscription.reliability'
+
+
+def _parameters(node, names):
+    """Return {name: value} of the controller's parameters ``names`` (one get call)."""
+    import rclpy
+    from rclpy.parameter import parameter_value_to_python
+    from rclpy.parameter_client import AsyncParameterClient
+    client = AsyncParameterClient(node, 'controller_node')
+    assert client.wait_for_services(timeout_sec=30.0), 'no parameter services'
+    future = client.get_parameters(list(names))
+    rclpy.spin_until_future_complete(node, future, timeout_sec=15.0)
+    assert future.done(), 'no answer from get_parameters within 15 s'
+    return {n: parameter_value_to_python(v) for n, v in zip(names, future.result().values)}
+
+
+@pytest.mark.parametrize('override', [True, False], ids=['override', 'no_override'])
+def test_a_best_effort_joint_states_driver_drives_the_controller_only_with_the_qos_override(
+        override, procs, ros_node, wait):
+    """A sensor-data (best-effort) joint_states, as many real drivers publish it."""
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import JointState
+    extra = ('-p', JS_RELIABILITY + ':=best_effort') if override else ()
+    proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS, *extra)
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)      # the controller is up: its reliable joint_states matched
+    params = _parameters(ros_node, [
+        JS_RELIABILITY, 'qos_overrides./joint_states.subscription.depth',
+        'qos_overrides./joint_states.subscription.history',
+        'qos_overrides./setpoint.subscription.reliability',
+        'qos_overrides./effort_controller/commands.publisher.reliability',
+        'qos_overrides./controller_state.publisher.depth'])
+    assert params == {
+        JS_RELIABILITY: 'best_effort' if override else 'reliable',
+        'qos_overrides./joint_states.subscription.depth': 1,     # real time: newest only
+        'qos_overrides./joint_states.subscription.history': 'keep_last',
+        'qos_overrides./setpoint.subscription.reliability': 'reliable',
+        'qos_overrides./effort_controller/commands.publisher.reliability': 'reliable',
+        'qos_overrides./controller_state.publisher.depth': 1000}
+    sensor = ros_node.create_publisher(JointState, 'joint_states', qos_profile_sensor_data)
+    drv.pub_js = sensor           # the driver's states now go out best effort only
+    if override:
+        wait(lambda: sensor.get_subscription_count() > 0, 30.0,
+             'the best-effort publisher to match the controller', spin=drv.spin)
+        for k in range(3):
+            # Best effort: a state sent before the controller matched this publisher is
+            # lost, not queued, so it is sent again until answered.
+            ns = drv.ns(k)
+            wait(lambda: drv.joint_state(k, Q0, (0.0, 0.0, 0.0)) or (
+                drv.spin() or ns in drv.states), 15.0,
+                 'the answer to best-effort state %d' % k)
+            st, cmd = drv.answer(k, 'the answer to a best-effort state')
+            assert st.status & STATUS_HOLDING and _finite_within(cmd), st.message
+    else:
+        # Reliable subscription, best-effort publisher: incompatible QoS, no match, so the
+        # states never reach the controller (documented; the override is the remedy).
+        for _ in range(40):
+            drv.spin()
+        assert sensor.get_subscription_count() == 0, 'matched without the override'
+        for k in range(3):
+            drv.joint_state(k, Q0, (0.0, 0.0, 0.0))
+        for _ in range(20):
+            drv.spin()
+        assert not drv.states and not drv.commands
+    assert procs.stop(proc) == 0
+
+
+class Diagnostics:
+    """The controller's statuses on /diagnostics: (level, message, {key: value})."""
+
+    NAME = 'controller_node: controller'
+
+    def __init__(self, node):
+        from diagnostic_msgs.msg import DiagnosticArray
+        self.statuses = []
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_array, 10)
+
+    def _on_array(self, msg):
+        for status in msg.status:
+            if status.name == self.NAME:
+                self.statuses.append((ord(status.level), status.message,
+                                      {v.key: v.value for v in status.values}))
+
+    def find(self, level, text):
+        """Return the last status of ``level`` whose message has ``text``, or None."""
+        found = [s for s in self.statuses if s[0] == level and text in s[1]]
+        return found[-1] if found else None
+
+
+def test_diagnostics_say_holding_with_warn_without_setpoints_and_ok_while_tracking(
+        procs, ros_node, wait):
+    import time
+    ok, warn, error = 0, 1, 2
+    proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS, '-p', 'resume_time:=0.05')
+    diag = Diagnostics(ros_node)
+    drv = Driver(ros_node, wait)
+    drv.connect(proc, procs)
+    # No state yet: the arm is not controlled.
+    wait(lambda: diag.find(error, 'no joint_states yet on /joint_states'), 10.0,
+         'ERROR: no joint_states yet', spin=drv.spin)
+    drv.offset_ns = time.time_ns()
+    q, qd = Q0, (0.0, 0.0, 0.0)
+    base = Replica('horizontal', lockstep=False).fk(q)
+    rest = (base[0], base[1], 0.0, 0.0, 0.0, 0.0)     # a setpoint where the arm is, at rest
+    k = 0
+
+    def run_until(found, what, values_of, timeout=30.0):
+        nonlocal k
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            drv.setpoints_ahead(k, values_of)
+            drv.joint_state(k, q, qd)
+            k += 1
+            for _ in range(3):       # the state, the command, now and then a status
+                drv.rclpy.spin_once(drv.node, timeout_sec=0.001)
+            status = found()
+            if status is not None:
+                return status
+        raise AssertionError('timed out after %g s waiting for %s (statuses: %s)'
+                             % (timeout, what, diag.statuses[-3:]))
+
+    level, message, values = run_until(
+        lambda: diag.find(warn, 'holding at'), 'WARN: holding', lambda j: None)
+    assert 'no setpoint yet' in message, message
+    assert values['holds'] == '1' and values['stale setpoint periods'] == '0', values
+    assert float(values['answer rate [Hz]']) > 0.0 and values['latency max [ms]'] != '-'
+    assert int(values['status']) & STATUS_HOLDING
+    # Setpoints where the arm is: tracking, OK (after the blend and the first period).
+    level, message, values = run_until(
+        lambda: diag.find(ok, 'tracking'), 'OK: tracking', lambda j: rest)
+    assert values['status'] == '0' and values['law faults'] == '0', values
+    assert values['mode'] == 'realtime' and float(values['answer rate [Hz]']) > 0.0
+    # The stream stops: held again, a stale setpoint period.
+    level, message, values = run_until(
+        lambda: diag.find(warn, 'stale setpoint'), 'WARN: stale setpoint',
+        lambda j: None)
+    # (A stall of this test beyond stale_timeout between states would add a hold.)
+    assert values['stale setpoint periods'] == '1' and int(values['holds']) >= 2, values
+    # No more states: ERROR, zero effort.
+    wait(lambda: diag.find(error, 'no joint_states for'), 10.0, 'ERROR: no joint_states',
+         spin=drv.spin)
+    assert procs.stop(proc) == 0

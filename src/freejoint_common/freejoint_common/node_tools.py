@@ -5,9 +5,13 @@ Node plumbing shared by the freejoint nodes.
 :func:`unique_names` validates a joint-name list; :class:`Throttle` rate-limits log lines
 per kind of problem; :func:`spin` runs a node until SIGINT/SIGTERM, stopping between
 callbacks; ``SCHEDULING_SPECS`` and :func:`request_scheduling` give a node the
-``thread_priority`` / ``cpu_affinity`` parameters of ros2_control's controller_manager.
+``thread_priority`` / ``cpu_affinity`` parameters of ros2_control's controller_manager;
+:func:`overridable` and ``QOS_OVERRIDES`` make a publisher's or subscription's QoS
+overridable by ros2's ``qos_overrides.<topic>.<publisher|subscription>.<policy>``
+parameters.
 """
 
+import copy
 from dataclasses import dataclass
 import gc
 import signal
@@ -18,6 +22,7 @@ from freejoint_core.errors import FreejointValueError
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rclpy.qos_overriding_options import QoSOverridingOptions
 
 _monotonic = time.monotonic
 
@@ -156,6 +161,23 @@ def scheduling_refusal(node, params, values):
     if not any(p.name in SCHEDULING_NAMES for p in params):
         return None
     return request_scheduling(node, values)
+
+
+QOS_OVERRIDES = QoSOverridingOptions.with_default_policies()
+"""rclpy's standard QoS overriding options (history, depth, reliability): with
+``qos_overriding_options=QOS_OVERRIDES`` a publisher or subscription declares the read-only
+parameters ``qos_overrides.<resolved topic>.<publisher|subscription>.<policy>`` with the
+profile's values, and takes a value given at start-up (``-p``, ``--params-file``) instead."""
+
+
+def overridable(profile):
+    """
+    Return a copy of ``profile`` for one publisher or subscription with ``QOS_OVERRIDES``.
+
+    rclpy writes the overridden policies into the profile it is given: a profile shared
+    by several entities would carry one topic's override to the others.
+    """
+    return copy.copy(profile)
 
 
 def plain(value):

@@ -10,15 +10,19 @@ ros2_control's JointGroupEffortController) and a ``controller_state``
 hold / resume reference and the guards are ``freejoint_core.reference``; this node only
 converts messages, pairs states with setpoints, guards its inputs and outputs and offers
 ``~/reset`` (std_srvs/Trigger: theta_hat back to theta0, hold / blend state forgotten)
-(docs/GRAPH.md: lockstep protocol, staleness, hold, limits, parameters).
+(docs/GRAPH.md: lockstep protocol, staleness, hold, limits, parameters).  Its status goes
+to ``/diagnostics`` once a second (answer rate, latency, holds, refusals, law faults; per
+tick only counters), and the QoS of its topics can be overridden at start-up with ros2's
+``qos_overrides.<topic>.<publisher|subscription>.<history|depth|reliability>`` parameters.
 
 """
 
 import math
 import time
 
-from freejoint_common.node_tools import declare, plain, request_scheduling, run
-from freejoint_common.node_tools import scheduling_refusal, Throttle
+from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
+from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
+from freejoint_common.node_tools import request_scheduling, run, scheduling_refusal, Throttle
 from freejoint_control.params import build_config, SPECS
 from freejoint_core.control import (ControlOutput, RobustController, STATUS_BAD_INPUT,
                                     STATUS_NEAR_SINGULAR,
@@ -113,6 +117,12 @@ class ControllerNode(Node):
         self._refused_setpoints = 0
         self._refused_states = 0
         self._old_states = 0
+        self._stale_periods = 0         # onsets of a stale (or late) setpoint stream
+        self._stale_now = False
+        self._period_bits = 0           # status bits of the answers of the status period
+        self._latency = LatencyWindow()
+        self._diag_window = None
+        self._quiet_sent = False
         self._last_sp_refusal = ''
         self._good_theta = self._ctl.theta
         # Last command sent, in command order (None: none yet in lockstep, whose start is
@@ -128,15 +138,26 @@ class ControllerNode(Node):
             self._now_ns = time.time_ns
         self._throttle = Throttle(1.0)
 
-        self._pub_cmd = self.create_publisher(Float64MultiArray, 'effort_controller/commands',
-                                              QOS)
-        self._pub_state = self.create_publisher(ControllerState, 'controller_state', QOS)
+        # Each QoS overridable (qos_overrides.<topic>.<publisher|subscription>.<policy>,
+        # e.g. a best-effort joint_states of a real driver), defaults as in GRAPH.md.
+        self._pub_cmd = self.create_publisher(
+            Float64MultiArray, 'effort_controller/commands', overridable(QOS),
+            qos_overriding_options=QOS_OVERRIDES)
+        self._pub_state = self.create_publisher(ControllerState, 'controller_state',
+                                                overridable(QOS),
+                                                qos_overriding_options=QOS_OVERRIDES)
         # Real time: only the newest state matters (a queue of old ones would be answered
         # late, a delay the loop cannot take); lockstep: every state, the sim waits.
         self.create_subscription(JointState, 'joint_states', self._on_joint_state,
-                                 QOS if cfg.lockstep else REALTIME_STATE_QOS)
-        self.create_subscription(CartesianSetpoint, 'setpoint', self._on_setpoint, SETPOINT_QOS)
+                                 overridable(QOS if cfg.lockstep else REALTIME_STATE_QOS),
+                                 qos_overriding_options=QOS_OVERRIDES)
+        self.create_subscription(CartesianSetpoint, 'setpoint', self._on_setpoint,
+                                 overridable(SETPOINT_QOS),
+                                 qos_overriding_options=QOS_OVERRIDES)
         self.create_service(Trigger, '~/reset', self._on_reset)
+        self._diagnostics = Diagnostics(self, 'controller', 'freejoint_control',
+                                        self._on_diagnostics_timer)
+        self._diag_window = self._window(_monotonic())
         period = min(0.05, cfg.stale_timeout / 4.0)
         self.create_timer(period, self._watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
@@ -173,6 +194,9 @@ class ControllerNode(Node):
         self._active_of_cmd = cfg.cmd_index
 
     def _on_set_parameters(self, params):
+        if not any(param.name in self._values for param in params):
+            # Not ours (the read-only qos_overrides.* rclpy declares): nothing to check.
+            return SetParametersResult(successful=True)
         values = dict(self._values)
         for param in params:
             if param.name in values:
@@ -314,6 +338,9 @@ class ControllerNode(Node):
                    % (self._stale, self._sp_refusal_note()))
         else:
             why = 'no setpoint yet' + self._sp_refusal_note()
+        if not self._stale_now and (late is not None or self._setpoint_used):
+            self._stale_now = True
+            self._stale_periods += 1
         if not self._hold_on_stale:
             self._throttle(self.get_logger().warn, 'stale_setpoint', why + ': zero effort')
             self._answer_zero(ns, stamp, STATUS_STALE_SETPOINT, why + ': zero effort')
@@ -418,6 +445,7 @@ class ControllerNode(Node):
             p_now = self._ctl.model.fk(q).tolist() if shaper.mode == MODE_NONE else None
             ref, blending = shaper.track(ns * 1e-9, sp, p_now)
             self._setpoint_used = True
+            self._stale_now = False
             if blending:
                 status |= STATUS_RESUMING
         stiffness = shaper.stiffness(self._hold_stiffness)
@@ -497,9 +525,17 @@ class ControllerNode(Node):
             st.setpoint_stamp.nanosec = sp_ns % 1_000_000_000
             st.setpoint_age = (ns - sp_ns) * 1e-9
         st.dt = dt
-        st.state_age = 0.0 if self._lockstep else (
-            self._now_ns() - ns) * 1e-9
+        if self._lockstep:
+            # Sim time stands still until the command; the status gives the wall time
+            # from the state's receipt to its command.
+            st.state_age = 0.0
+            self._latency.note(int((_monotonic() - self._last_state_wall) * 1e9))
+        else:
+            age_ns = self._now_ns() - ns
+            st.state_age = age_ns * 1e-9
+            self._latency.note(age_ns)
         self._pub_state.publish(st)
+        self._period_bits |= status
         self._last_ns = ns
         self._last_sp = (px, py)
         self._last_det = out.det
@@ -563,6 +599,7 @@ class ControllerNode(Node):
         st.state_age = 0.0 if self._lockstep or ns < 0 else (
             self._now_ns() - ns) * 1e-9
         self._pub_state.publish(st)
+        self._period_bits |= status
         if ns >= 0:
             self._last_ns = ns
         self._zero_answers += 1
@@ -610,6 +647,99 @@ class ControllerNode(Node):
             if not self._lockstep:
                 # The arm moved under zero effort: the next state starts a hold / blend.
                 self._shaper.reset()
+
+    # -- status ----------------------------------------------------------------
+    def _window(self, now):
+        """Return what a status period starts from: its time and the counters."""
+        return (now, self._ticks + self._zero_answers, self._faults, self._refused_states,
+                self._refused_setpoints, self._old_states)
+
+    def _on_diagnostics_timer(self):
+        """Every second: the status on /diagnostics (lockstep: once while no state comes)."""
+        last = self._last_state_wall
+        silent = last is None or last < self._diag_window[0]
+        if self._lockstep and silent:
+            # Sim time stands still (the simulator waits, holds at max_steps or is gone):
+            # one status says so, then nothing until states come (a recorder drains).
+            if self._quiet_sent:
+                self._diag_window = self._window(_monotonic())
+                return
+            self._quiet_sent = True
+        else:
+            self._quiet_sent = False
+        self._publish_diagnostics(silent)
+
+    def _publish_diagnostics(self, silent):
+        """Build and publish the status of the period now ending (once a second)."""
+        now = _monotonic()
+        since, answers0, faults0, refused_states0, refused_sp0, old0 = self._diag_window
+        self._diag_window = self._window(now)
+        elapsed = now - since
+        answers = self._ticks + self._zero_answers - answers0
+        faults = self._faults - faults0
+        refused_states = self._refused_states - refused_states0
+        refused_sp = self._refused_setpoints - refused_sp0
+        old = self._old_states - old0
+        bits = self._period_bits
+        self._period_bits = 0
+        latency = self._latency.take()
+        st = self._state
+        current = st.status
+        period = 'in the last %.1f s' % elapsed
+        errors = []
+        warnings = []
+        no_state = None
+        if self._last_state_wall is None:
+            no_state = 'no joint_states yet on %s' % self.resolve_topic_name('joint_states')
+        elif self._stale_reported:
+            no_state = 'no joint_states for %g s: zero effort commanded' % self._stale
+        elif silent:
+            no_state = 'no joint_states %s' % period
+        if no_state is not None:
+            if self._lockstep:
+                warnings.append(no_state + ' (lockstep: simulation time stands still)')
+            else:
+                errors.append(no_state)
+        if faults:
+            errors.append('%d law faults %s: the previous command repeated, theta_hat '
+                          'restored' % (faults, period))
+        if current & STATUS_HOLDING or (current & STATUS_STALE_SETPOINT
+                                        and not self._hold_on_stale):
+            warnings.append(st.message)
+        elif bits & STATUS_HOLDING:
+            warnings.append('held %s' % period)
+        for bit, text in ((STATUS_RATE_LIMITED, 'torque change rate limited'),
+                          (STATUS_TORQUE_LIMITED, 'torque limited'),
+                          (STATUS_SETPOINT_LATE, 'setpoint stream late (carried forward)'),
+                          (STATUS_DT_CLAMPED, 'state stamps irregular: dt clamped')):
+            if bits & bit:
+                warnings.append('%s %s' % (text, period))
+        for count, what in ((refused_states, 'states refused'),
+                            (refused_sp, 'setpoints refused'),
+                            (old, 'states skipped as too old')):
+            if count:
+                warnings.append('%d %s %s' % (count, what, period))
+        if self._pending is not None:
+            ok = ('waiting for the setpoint of the state stamped %d ns (lockstep)'
+                  % self._pending[0])
+        else:
+            ok = st.message or 'tracking'
+        level, message = level_and_message(errors, warnings, ok)
+        self._diagnostics.publish(level, message, (
+            ('mode', 'lockstep' if self._lockstep else 'realtime'),
+            ('answer rate [Hz]', '%.1f' % (answers / elapsed if elapsed > 0.0 else 0.0)),
+            ('latency mean [ms]', latency[0]),
+            ('latency max [ms]', latency[1]),
+            ('status', current),
+            ('status message', st.message),
+            ('ticks', self._ticks),
+            ('zero-effort answers', self._zero_answers),
+            ('holds', self._holds),
+            ('stale setpoint periods', self._stale_periods),
+            ('refused states', self._refused_states),
+            ('refused setpoints', self._refused_setpoints),
+            ('law faults', self._faults),
+            ('old states skipped', self._old_states)))
 
     def report(self):
         """One line for the end of the run: ticks, zero-effort answers, holds, refusals."""

@@ -46,7 +46,8 @@ against the clock spacing rule at run time.
 
 import math
 
-from freejoint_common.node_tools import declare, plain, request_scheduling, run
+from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
+from freejoint_common.node_tools import request_scheduling, run
 from freejoint_common.node_tools import scheduling_refusal, SCHEDULING_SPECS
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
@@ -162,7 +163,10 @@ class PlannerNode(Node):
         self.get_logger().info(
             f'singularity map computed in {self._model.seconds * 1e3:.0f} ms: '
             f'{self._model.describe()}')
-        self._setpoint_pub = self.create_publisher(CartesianSetpoint, 'setpoint', SETPOINT_QOS)
+        # QoS overridable (qos_overrides./setpoint.publisher.<history|depth|reliability>).
+        self._setpoint_pub = self.create_publisher(CartesianSetpoint, 'setpoint',
+                                                   overridable(SETPOINT_QOS),
+                                                   qos_overriding_options=QOS_OVERRIDES)
         self._map_pub = self.create_publisher(OccupancyGrid, 'semi_singular_map', LATCHED_QOS)
         self._marker_pub = self.create_publisher(Marker, 'planned_path', LATCHED_QOS)
         self._stream = SetpointStream(self._cfg['control_period'], self._cfg['lookahead'],

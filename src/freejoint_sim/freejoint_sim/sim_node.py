@@ -49,9 +49,9 @@ import threading
 import time
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from freejoint_common.node_tools import declare, plain, request_scheduling, run
-from freejoint_common.node_tools import scheduling_refusal, Throttle
+from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
+from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
+from freejoint_common.node_tools import request_scheduling, run, scheduling_refusal, Throttle
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.plant import Plant
 from freejoint_sim.divergence import divergence_reason
@@ -80,8 +80,6 @@ CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
 REPUBLISH_PERIOD = 0.2
 """Lockstep: wall period [s] of republishing step 0 until the first command arrives."""
 MAX_CATCH_UP = 20
-DIAGNOSTICS_PERIOD = 1.0
-"""Wall period [s] of the /diagnostics status (ros2_control's diagnostic_updater: 1 Hz)."""
 """Real time: steps integrated at most at one wake-up before dropping behind."""
 LABEL_PREFIX = 'stamp_ns='
 
@@ -133,9 +131,8 @@ class SimNode(Node):
         self._take_state()
         self._diag_window = (_monotonic(), 0, 0, 0, 0)
         self._final_status_sent = False
-        self._lat_n = 0                # state-to-command latencies of the status window
-        self._lat_sum = 0
-        self._lat_max = 0
+        self._latency = LatencyWindow()   # state-to-command latencies of the status window
+        self._note_latency = self._latency.note
         self._timing = (StepTiming(cfg.timing_file, cfg.timing_steps) if cfg.timing_file
                         else None)
         self._timing_steps = cfg.timing_steps if cfg.timing_file else 0
@@ -149,16 +146,20 @@ class SimNode(Node):
         self._clock_msg = ClockMsg()
         self._stamp = Time()
 
-        self._pub_js = self.create_publisher(JointState, 'joint_states', QOS)
-        self._pub_ee = self.create_publisher(PointStamped, 'ee_position', QOS)
+        # QoS overridable (qos_overrides.<topic>.<publisher|subscription>.<policy>).
+        self._pub_js = self.create_publisher(JointState, 'joint_states', overridable(QOS),
+                                             qos_overriding_options=QOS_OVERRIDES)
+        self._pub_ee = self.create_publisher(PointStamped, 'ee_position', overridable(QOS),
+                                             qos_overriding_options=QOS_OVERRIDES)
         self._pub_clock = (self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
                            if cfg.lockstep else None)
         self.create_subscription(Float64MultiArray, 'effort_controller/commands',
-                                 self._on_command, QOS)
+                                 self._on_command, overridable(QOS),
+                                 qos_overriding_options=QOS_OVERRIDES)
         self.create_service(Trigger, '~/reset', self._on_reset)
-        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._diagnostics = Diagnostics(self, 'simulator', 'freejoint_sim',
+                                        self._on_diagnostics_timer)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(DIAGNOSTICS_PERIOD, self._on_diagnostics_timer, clock=steady)
         if cfg.lockstep:
             period = max(0.001, min(0.05, cfg.command_timeout / 4.0))
             self.create_timer(period, self._lockstep_watchdog, clock=steady)
@@ -199,6 +200,9 @@ class SimNode(Node):
         self._max_speed = cfg.divergence_speed
 
     def _on_set_parameters(self, params):
+        if not any(param.name in self._values for param in params):
+            # Not ours (the read-only qos_overrides.* rclpy declares): nothing to check.
+            return SetParametersResult(successful=True)
         values = dict(self._values)
         for param in params:
             if param.name in values:
@@ -314,13 +318,6 @@ class SimNode(Node):
             self._got_first = True
             self.get_logger().info('first command: running')
         self._advance(self._zero if tau is None else tau)
-
-    def _note_latency(self, ns):
-        """Note a state-to-command latency [ns] for the status (executor thread only)."""
-        self._lat_n += 1
-        self._lat_sum += ns
-        if ns > self._lat_max:
-            self._lat_max = ns
 
     def _note_realtime_command(self, msg, now):
         """Note the receipt time of a real-time command; return the step it answers or -1."""
@@ -576,12 +573,9 @@ class SimNode(Node):
         refused = self._refused - refused0
         timeouts = self._timeouts - timeouts0
         dropped = self._dropped - dropped0
-        lat_n = self._lat_n
-        latency = (('%.3f' % (self._lat_sum / lat_n * 1e-6), '%.3f' % (self._lat_max * 1e-6))
-                   if lat_n else ('-', '-'))
+        latency = self._latency.take(restart=update)
         if update:
             self._diag_window = (now, k, self._refused, self._timeouts, self._dropped)
-            self._lat_n = self._lat_sum = self._lat_max = 0
         warnings = []
         if self._cmd_timed_out:
             warnings.append('no command for %g s: zero effort' % self._timeout)
@@ -596,28 +590,21 @@ class SimNode(Node):
         if dropped:
             warnings.append('behind the wall clock: %d steps dropped in the last %.1f s' % (
                 dropped, elapsed))
-        if self._diverged is not None:
-            level = DiagnosticStatus.ERROR
-            message = ('plant diverged at %s; publishing the last sane state (call ~/reset)'
-                       % self._diverged)
-        elif warnings:
-            level = DiagnosticStatus.WARN
-            message = '; '.join(warnings)
+        if self._braked:
+            ok = 'brakes engaged: holding q0 until the first command'
+        elif not self._lockstep and self._latest is None:
+            ok = 'no command yet: zero effort'
+        elif self._lockstep and not self._got_first:
+            ok = 'waiting for the first command'
+        elif self._holding():
+            ok = 'holding at max_steps'
         else:
-            level = DiagnosticStatus.OK
-            if self._braked:
-                message = 'brakes engaged: holding q0 until the first command'
-            elif not self._lockstep and self._latest is None:
-                message = 'no command yet: zero effort'
-            elif self._lockstep and not self._got_first:
-                message = 'waiting for the first command'
-            elif self._holding():
-                message = 'holding at max_steps'
-            else:
-                message = 'running'
-        status = DiagnosticStatus(level=level, name='%s: simulator' % self.get_name(),
-                                  message=message, hardware_id='freejoint_sim')
-        status.values = [KeyValue(key=key, value=str(value)) for key, value in (
+            ok = 'running'
+        errors = [] if self._diverged is None else [
+            'plant diverged at %s; publishing the last sane state (call ~/reset)'
+            % self._diverged]
+        level, message = level_and_message(errors, warnings, ok)
+        self._diagnostics.publish(level, message, (
             ('mode', 'lockstep' if self._lockstep else 'realtime'),
             ('step', k),
             ('sim time [s]', '%.3f' % (self._t_ns * 1e-9)),
@@ -631,10 +618,7 @@ class SimNode(Node):
             ('brakes', 'engaged' if self._braked else 'released'),
             ('brake engagements (no command)', self._brake_engagements),
             ('divergences', self._divergences),
-            ('diverged', 'true' if self._diverged is not None else 'false'))]
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self._pub_diag.publish(msg)
+            ('diverged', 'true' if self._diverged is not None else 'false')))
 
     def report(self):
         """One line for the end of the run: steps, timeouts, refusals, brakes, divergences."""
