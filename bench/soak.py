@@ -414,9 +414,10 @@ def bound_of(case, hogs):
 # -- one soak run -----------------------------------------------------------------------
 def rest_at_q0(client):
     """
-    Put the arm back at rest at q(0) and theta_hat at theta0 (the sim's and the controller's
-    ``~/reset``): the next circle starts as the offline runner's does, so its tracking is
-    comparable with the offline bound.
+    Put the arm back at rest at q(0) and theta_hat at theta0 (``~/reset`` of sim, controller).
+
+    The next circle then starts as the offline runner's does, so its tracking is comparable
+    with the offline bound.
 
     Back to back (``--back-to-back``) the vertical arm is not comparable: after a circle
     the end effector stops but the passive link keeps swinging (joint speeds of 1-4 rad/s,
