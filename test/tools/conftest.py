@@ -116,3 +116,18 @@ def assert_same_record(bag_record, graph_record, tol=1e-9):
 def same_record():
     """Give the record check: a bag record agrees with a graph record within 1e-9."""
     return assert_same_record
+
+
+@pytest.fixture
+def call_service(ros_node, wait):
+    """Give the test ``call(client, request, what)``: wait for the service, call it, answer."""
+    import rclpy
+
+    def call(client, request, what):
+        wait(client.service_is_ready, 30.0, what,
+             spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.05))
+        future = client.call_async(request)
+        rclpy.spin_until_future_complete(ros_node, future, timeout_sec=10.0)
+        assert future.done(), 'no answer from %s' % what
+        return future.result()
+    return call

@@ -19,7 +19,7 @@ SETTLE = 1.0
 
 
 def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, tmp_path,
-                                                         same_record):
+                                                         same_record, call_service):
     import rclpy
     from freejoint_msgs.msg import ControllerState
     from freejoint_msgs.srv import PlanCircle
@@ -51,13 +51,7 @@ def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, 
             '-p', 'autostart:=false'] if exe == 'planner_node' else [
             '--ros-args', '--params-file', os.path.join(CONFIG, conf)]))
 
-    def call(client, request, what):
-        wait(client.service_is_ready, 30.0, what,
-             spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.05))
-        future = client.call_async(request)
-        rclpy.spin_until_future_complete(ros_node, future, timeout_sec=10.0)
-        assert future.done(), 'no answer from %s' % what
-        return future.result()
+    call = call_service
 
     status = ros_node.create_client(Trigger, '/recorder/status')
     answers = []

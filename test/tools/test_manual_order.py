@@ -23,7 +23,7 @@ TICKS = 1500
 
 
 def test_readme_order_recorder_first_records_the_run_from_tick_0(
-        procs, ros_node, wait, tmp_path):
+        procs, ros_node, wait, tmp_path, call_service):
     import rclpy
     from freejoint_msgs.srv import PlanCircle
     from std_srvs.srv import Trigger
@@ -45,13 +45,7 @@ def test_readme_order_recorder_first_records_the_run_from_tick_0(
         return procs.start_node(pkg, exe, exe, ['--ros-args', '--params-file',
                                                 os.path.join(CONFIG, conf), *extra])
 
-    def call(client, request, what):
-        wait(client.service_is_ready, 30.0, what,
-             spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.05))
-        future = client.call_async(request)
-        rclpy.spin_until_future_complete(ros_node, future, timeout_sec=10.0)
-        assert future.done(), 'no answer from %s' % what
-        return future.result()
+    call = call_service
 
     # the README's lines, in its order; the simulator holds after TICKS ticks (ends quiet)
     recorder = procs.start_node('freejoint_tools', 'recorder', 'recorder', [
