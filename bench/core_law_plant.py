@@ -19,8 +19,9 @@ Timings: ``core_timing.per_call_us``.  Usage:
 import math
 
 from core_timing import per_call_us, print_rows
-from freejoint_core.arm import make_model, table1
+from freejoint_core.arm import table1
 from freejoint_core.control import Gains, RobustController
+from freejoint_core.models import make_model
 from freejoint_core.plant import DEFAULT_DT_SUB, Plant
 from freejoint_core.trajectory import CircleQuintic
 import numpy as np

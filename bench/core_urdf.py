@@ -20,7 +20,8 @@ Usage: ``python bench/core_urdf.py`` in the workspace (``. tools/env.sh``).
 
 from core_timing import per_call_us, print_rows
 from freejoint_core import offline
-from freejoint_core.arm import ArmModel, make_model, table1
+from freejoint_core.arm import ArmModel, table1
+from freejoint_core.models import make_model
 from freejoint_core.mujoco_plant import MujocoPlant
 from freejoint_core.pin_model import PinArmModel
 from freejoint_core.pin_plant import PinPlant

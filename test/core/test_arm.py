@@ -9,9 +9,10 @@ centre-of-mass positions), never from the models' own code paths.
 import cmath
 import math
 
-from freejoint_core.arm import ArmModel, ArmParams, CASES, make_model, table1
+from freejoint_core.arm import ArmModel, ArmParams, CASES, table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.fast3 import Arm3Model
+from freejoint_core.models import make_model
 import numpy as np
 import pytest
 

@@ -1,9 +1,9 @@
 """The URDF's link frames (what the viewer sends as /tf) against the arm model's kinematics."""
 import math
 
-from freejoint_core.arm import make_model
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.kinematic_tree import KinematicTree, quat_mul, quat_rotate
+from freejoint_core.models import make_model
 from freejoint_core.urdf import four_link_arm, FOUR_LINK_Q0, paper_arm
 import numpy as np
 import pytest

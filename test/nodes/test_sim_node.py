@@ -9,7 +9,8 @@ import math
 import os
 import time
 
-from freejoint_core.arm import make_model, table1
+from freejoint_core.arm import table1
+from freejoint_core.models import make_model
 from freejoint_core.offline import initial_state
 from freejoint_core.plant import Plant
 import pytest

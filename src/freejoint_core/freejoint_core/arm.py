@@ -18,8 +18,8 @@ eqs. (4)-(5): ``pdd - b(q, qd) = Da(q) tau_a + J M^-1 d`` with
 ``Da = J M^-1 B`` and ``b = Jdot qd - J M^-1 (C qd + G)``.
 
 ``ArmModel`` is the general numpy reference, derived directly in joint
-coordinates (link Jacobians, Christoffel symbols).  ``make_model`` returns the
-specialised 3-link kernel (``freejoint_core.fast3.Arm3Model``, derived in
+coordinates (link Jacobians, Christoffel symbols).  ``freejoint_core.models.make_model``
+returns the specialised 3-link kernel (``freejoint_core.fast3.Arm3Model``, derived in
 absolute link angles) when ``n == 3``; both expose the same interface.
 
 """
@@ -743,27 +743,3 @@ def _wrap(angle):
     """Wrap an angle to (-pi, pi]."""
     w = math.remainder(angle, 2.0 * math.pi)
     return math.pi if w == -math.pi else w
-
-
-def make_model(params):
-    """
-    Return the fastest model implementation for ``params``.
-
-    Parameters
-    ----------
-    params : ArmParams
-        Physical parameters.
-
-    Returns
-    -------
-    ArmModel
-        ``freejoint_core.fast3.Arm3Model`` (closed-form scalar kernel, same
-        interface) when ``params.n == 3``, else the general ``ArmModel``.
-
-    """
-    if not isinstance(params, ArmParams):
-        raise FreejointValueError(f'params: expected ArmParams, got {type(params).__name__}')
-    if params.n == 3:
-        from freejoint_core.fast3 import Arm3Model
-        return Arm3Model(params)
-    return ArmModel(params)

@@ -54,8 +54,9 @@ from dataclasses import dataclass
 import math
 from typing import NamedTuple
 
-from freejoint_core.arm import ArmModel, ArmParams, check_vector, make_model
+from freejoint_core.arm import ArmModel, ArmParams, check_vector
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.models import make_model
 import numpy as np
 
 STATUS_OK = 0

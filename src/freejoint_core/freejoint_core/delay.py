@@ -60,8 +60,9 @@ from collections import deque
 import math
 import operator
 
-from freejoint_core.arm import ArmModel, ArmParams, check_vector, make_model
+from freejoint_core.arm import ArmModel, ArmParams, check_vector
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.models import make_model
 from freejoint_core.plant import check_torques, DEFAULT_DT_SUB
 import numpy as np
 

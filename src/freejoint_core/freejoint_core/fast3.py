@@ -27,7 +27,7 @@ method works on plain Python floats with ``math`` only: no numpy call per
 evaluation and no argument checks (the callers validate where data enters).
 
 ``Arm3Model`` has the ``ArmModel`` interface (numpy in, numpy out, validated)
-on top of those kernels; ``make_model`` returns it for n == 3.
+on top of those kernels; ``freejoint_core.models.make_model`` returns it for n == 3.
 
 """
 

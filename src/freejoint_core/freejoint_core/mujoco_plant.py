@@ -23,8 +23,8 @@ the plant keeps its last finite state, as ``Plant`` does.  MuJoCo's warnings are
 taken by a handler during the step (not printed, no ``MUJOCO_LOG.TXT``).
 """
 
-from freejoint_core.arm import make_model
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.models import make_model
 from freejoint_core.plant import _positive, DEFAULT_DT_SUB, PeriodPlant
 from freejoint_core.urdf import UrdfArm
 import mujoco

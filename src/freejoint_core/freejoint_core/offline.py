@@ -57,11 +57,12 @@ import time
 
 import numpy as np
 
-from .arm import ArmModel, CASES, make_model, table1
+from .arm import ArmModel, CASES, table1
 from .control import Gains, RobustController
 from .delay import DEFAULT_BIAS_GAIN, extrapolate_setpoint, StatePredictor
 from .errors import FreejointValueError
 from .metrics import compute_record, format_summary, format_table, write_records
+from .models import make_model
 from .plant import DEFAULT_DT_SUB, Plant
 from .trajectory import CircleQuintic
 

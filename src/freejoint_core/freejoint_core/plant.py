@@ -24,8 +24,9 @@ horizontal), versus 1e-6 mm at dt_sub = 1 ms; a free swing with disturbance
 
 import math
 
-from freejoint_core.arm import ArmModel, ArmParams, check_vector, make_model
+from freejoint_core.arm import ArmModel, ArmParams, check_vector
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
+from freejoint_core.models import make_model
 import numpy as np
 
 DEFAULT_DT_SUB = 0.0005
