@@ -15,7 +15,7 @@ def test_player_republishes_a_bag_in_order_with_its_clock(procs, ros_node, wait,
     from rosgraph_msgs.msg import Clock
 
     from freejoint_tools.bagfile import open_bag
-    from freejoint_tools.recorder import _message_class
+    from freejoint_tools.typedefs import message_class
     path = str(tmp_path / 'run')
     written = make_bag(path, 300)
     bag = open_bag(path)
@@ -24,7 +24,7 @@ def test_player_republishes_a_bag_in_order_with_its_clock(procs, ros_node, wait,
         latched = bag.topics[topic].qos[0]['durability'] == 'transient_local'
         qos = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
                          else DurabilityPolicy.VOLATILE)
-        ros_node.create_subscription(_message_class(bag.topics[topic].type), topic,
+        ros_node.create_subscription(message_class(bag.topics[topic].type), topic,
                                      got[topic].append, qos, raw=True)
     clocks = []
     ros_node.create_subscription(Clock, '/clock', clocks.append, 1000)
@@ -37,7 +37,7 @@ def test_player_republishes_a_bag_in_order_with_its_clock(procs, ros_node, wait,
     wait(lambda: all(len(got[t]) == len(written[t]) for t in TOPICS), 10.0,
          'every message', spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.01))
     for topic in TOPICS:
-        cls = _message_class(bag.topics[topic].type)
+        cls = message_class(bag.topics[topic].type)
         # compared as decoded (float32 fields round, the wire form may carry padding)
         sent = [deserialize_message(serialize_message(m), cls) for m in written[topic]]
         assert [deserialize_message(d, cls) for d in got[topic]] == sent, topic

@@ -62,7 +62,7 @@ def test_recorder_holds_every_message_of_a_1khz_lockstep_like_run(procs, wait, t
     from freejoint_core.metrics import compute_record
     from freejoint_tools.analyze import analyse_bag
     from freejoint_tools.bagfile import open_bag
-    from freejoint_tools.recorder import _message_class
+    from freejoint_tools.typedefs import message_class
     bag_path = str(tmp_path / 'horizontal')
     summary_path = str(tmp_path / 'published.json')
     recorder = _start_recorder(procs, bag_path, '-p', 'use_sim_time:=true', '-p',
@@ -86,7 +86,7 @@ def test_recorder_holds_every_message_of_a_1khz_lockstep_like_run(procs, wait, t
         assert bag.topics[topic].count == sent['count'], topic
         last = [data for name, _, _, data in bag.messages if name == topic][-1]
         # (the wire form may carry trailing CDR padding the in-process form lacks)
-        msg_type = _message_class(bag.topics[topic].type)
+        msg_type = message_class(bag.topics[topic].type)
         assert deserialize_message(last, msg_type) == \
             deserialize_message(bytes.fromhex(sent['last']), msg_type), topic
     with open(os.path.join(bag_path, 'metadata.yaml')) as fh:
@@ -182,14 +182,15 @@ def test_sigkill_leaves_a_bag_the_analysis_reads_up_to_the_last_chunk(procs, wai
 def _tick_sequence(bag):
     """Return ``[(topic, k, log time)]`` of the bag's /clock and tick messages, in bag order."""
     from freejoint_control.records import stamp_ns
-    from freejoint_tools.recorder import _message_class, clock_ns
+    from freejoint_tools.recorder import clock_ns
+    from freejoint_tools.typedefs import message_class
     from rclpy.serialization import deserialize_message
     out = []
     for name, log_time, _, data in bag.messages:
         if name == '/clock':
             t_ns = clock_ns(data)
         elif name in TICK_TOPICS:
-            t_ns = stamp_ns(deserialize_message(data, _message_class(bag.topics[name].type)))
+            t_ns = stamp_ns(deserialize_message(data, message_class(bag.topics[name].type)))
         else:
             continue
         out.append((name, t_ns // 1_000_000, log_time))

@@ -7,6 +7,7 @@ import xml.etree.ElementTree as ET
 from freejoint_core.kinematic_tree import KinematicTree
 from freejoint_core.urdf import parse_urdf, shipped_urdf_path
 from freejoint_tools.recorder import GRAPH_TOPICS
+from freejoint_tools.typedefs import message_class
 from freejoint_tools.viewer import DESCRIPTION_TOPIC, SPECS, TF_TOPIC
 import pytest
 import yaml
@@ -18,12 +19,6 @@ RVIZ = os.path.join(ROOT, 'config', 'freejoint.rviz')
 SERVED = {'/' + rel.lstrip('/'): msgtype for rel, msgtype, _ in GRAPH_TOPICS}
 SERVED[DESCRIPTION_TOPIC] = 'std_msgs/msg/String'
 _PATH = re.compile(r'^(/[A-Za-z0-9_/]+)\.([A-Za-z0-9_]+)(?:\[(\d+)\])?$')
-
-
-def _message_class(msgtype):
-    import importlib
-    pkg, kind, name = msgtype.split('/')
-    return getattr(importlib.import_module('%s.%s' % (pkg, kind)), name)
 
 
 def _leaves(node):
@@ -51,7 +46,7 @@ def test_foxglove_layout_panels_all_configured_and_every_plot_path_is_a_served_f
         assert m, path
         topic, field, index = m.groups()
         assert topic in SERVED, path
-        fields = _message_class(SERVED[topic]).get_fields_and_field_types()
+        fields = message_class(SERVED[topic]).get_fields_and_field_types()
         assert field in fields, path
         assert (index is not None) == ('[' in fields[field] or 'sequence' in fields[field]), path
     wanted = {'/controller_state.error[0]', '/controller_state.effort[0]',

@@ -35,7 +35,7 @@ from rosgraph_msgs.msg import Clock
 
 from .bagfile import BagError, open_bag
 from .qos import publisher_qos
-from .recorder import _message_class
+from .typedefs import message_class
 
 
 def _descriptor(description, ptype, float_range=None, int_range=None):
@@ -95,7 +95,7 @@ class Player(Node):
             if (wanted and name not in wanted) or name in excluded or not topic.count:
                 continue
             try:
-                msg_class = _message_class(topic.type)
+                msg_class = message_class(topic.type)
             except (ImportError, AttributeError, ValueError):
                 self.get_logger().error('not playing %s: type %s is not installed'
                                         % (name, topic.type))

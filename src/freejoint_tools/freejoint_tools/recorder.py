@@ -68,7 +68,6 @@ add ``--exclude-topics /clock``).
 
 import bisect
 import datetime
-import importlib
 import math
 import operator
 import os
@@ -94,7 +93,7 @@ from std_srvs.srv import Trigger
 
 from .bagfile import BagError, BagWriter
 from .qos import profile_to_dict, subscription_qos
-from .typedefs import DefinitionError, Definitions
+from .typedefs import DefinitionError, Definitions, message_class
 
 DEFAULT_DIR = 'bags'
 # The freejoint graph's topics (docs/GRAPH.md): name (relative = in the recorder's
@@ -286,12 +285,6 @@ def _is_hidden(name):
     return any(part.startswith('_') for part in name.split('/') if part)
 
 
-def _message_class(msgtype):
-    pkg, kind, name = msgtype.split('/')
-    module = importlib.import_module('%s.%s' % (pkg, kind))
-    return getattr(module, name)
-
-
 class Recorder(Node):
     """Record the run's topics into a rosbag2 (v9, MCAP) bag; see the module notes."""
 
@@ -393,7 +386,7 @@ class Recorder(Node):
             self._presubscribe()
         if self._sim_time and not self._selected(CLOCK_TOPIC):
             self._clock_only = self._takes_node.create_subscription(
-                _message_class('rosgraph_msgs/msg/Clock'), CLOCK_TOPIC, _never_called,
+                message_class('rosgraph_msgs/msg/Clock'), CLOCK_TOPIC, _never_called,
                 QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=p['queue_depth'],
                            reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
             self._update_takers()
@@ -516,7 +509,7 @@ class Recorder(Node):
 
     def _subscribe(self, name, msgtype, qos):
         try:
-            msg_class = _message_class(msgtype)
+            msg_class = message_class(msgtype)
         except (ImportError, AttributeError, ValueError) as exc:
             self._skipped.add(name)
             self.get_logger().error('not recording %s: type %s is not installed (%s)'

@@ -9,6 +9,7 @@ written to the bag is the type store's normalised definition followed by one
 ``MSG: pkg/Type`` section per dependency, which every rosbag2/MCAP reader understands.
 """
 
+import importlib
 import os
 import re
 
@@ -19,6 +20,25 @@ _TYPE = re.compile(r'^([A-Za-z_][A-Za-z0-9_]*)/(msg)/([A-Za-z_][A-Za-z0-9_]*)$')
 
 class DefinitionError(Exception):
     """A type whose definition cannot be found or parsed (message names the type)."""
+
+
+def message_class(typename):
+    """
+    Return the Python class of a ROS 2 interface type (message or service).
+
+    Parameters
+    ----------
+    typename : str
+        ``'<package>/msg/<Type>'`` or ``'<package>/srv/<Type>'``.
+
+    Returns
+    -------
+    type
+        The class from the package's generated Python module.
+
+    """
+    pkg, kind, name = typename.split('/')
+    return getattr(importlib.import_module('%s.%s' % (pkg, kind)), name)
 
 
 def _share_dir(package):

@@ -52,8 +52,8 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 
-from .recorder import _is_hidden, _message_class, GRAPH_TOPICS
-from .typedefs import DefinitionError, Definitions
+from .recorder import _is_hidden, GRAPH_TOPICS
+from .typedefs import DefinitionError, Definitions, message_class
 
 TF_TOPIC = '/tf'
 DESCRIPTION_TOPIC = '/robot_description'
@@ -353,7 +353,7 @@ class Viewer(Node):
                 durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
                 else DurabilityPolicy.VOLATILE)
             self._ros_subs[topic] = self.create_subscription(
-                _message_class(msgtype), topic, self._forwarder(topic), qos, raw=True)
+                message_class(msgtype), topic, self._forwarder(topic), qos, raw=True)
         if new_topic == DESCRIPTION_TOPIC:
             from std_msgs.msg import String
             self._channels[DESCRIPTION_TOPIC][0].log(serialize_message(String(data=self.urdf)),
@@ -512,7 +512,7 @@ class Viewer(Node):
 
     # -- services --------------------------------------------------------------------------
     def _service_handler(self, name, srvtype):
-        srv_class = _message_class(srvtype)
+        srv_class = message_class(srvtype)
 
         def handler(request):
             if request.encoding != 'cdr':
