@@ -28,8 +28,8 @@ logs it with the verdict, and warns, naming the rule, when ticks went out after 
 had passed them. It takes ``/clock`` once: its own subscription triggers the stream and
 sets the node's ROS clock (``ROSClock.set_ros_time_override``), in place of rclpy's
 ``TimeSource``, which would subscribe ``/clock`` a second time (a delivery and a Python
-callback per message); the TimeSource is detached at start and ``use_sim_time`` switches
-the ROS clock here.
+callback per message); ``freejoint_common.clock.own_clock`` removes the TimeSource's
+subscription (the TimeSource still switches the ROS clock on ``use_sim_time``).
 
 With ``autostart`` the configured circle (parameters ``centre``, ``radius``, ``duration``,
 ``start_angle``, ``direction``, ``start_delay``) starts at activation and again, anew,
@@ -46,6 +46,7 @@ against the clock spacing rule at run time.
 
 import math
 
+from freejoint_common.clock import own_clock, set_ros_time
 from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import request_scheduling, run
 from freejoint_common.node_tools import scheduling_refusal, SCHEDULING_SPECS
@@ -61,7 +62,6 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMsg
 from visualization_msgs.msg import Marker
 
@@ -152,8 +152,7 @@ class PlannerNode(Node):
         self._sched = declare(self, SCHEDULING_SPECS)
         request_scheduling(self, self._sched, at_start=True)
         self._sim = self.get_parameter('use_sim_time').value
-        self._ros_clock = self.get_clock()
-        self._own_clock = self._detach_time_source()
+        own_clock(self)     # one /clock delivery: _on_clock sets the ROS clock
         self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS))
         reason = (grid_bound(self._model.region.reach, self._cfg['grid_resolution'])
                   or circle_bounds(make_circle(self._cfg), self._model,
@@ -316,37 +315,9 @@ class PlannerNode(Node):
             timer.cancel()
         return timer
 
-    def _detach_time_source(self):
-        """
-        Take /clock once: detach rclpy's TimeSource; return False if it cannot be.
-
-        Every rclpy Node has a TimeSource that, with ``use_sim_time``, subscribes /clock
-        and sets the node's ROS clock from it: a second delivery of each /clock besides
-        the subscription that triggers the stream. Detached from the node (its
-        subscription destroyed, its ``use_sim_time`` callback removed), the ROS clock is
-        set by ``_on_clock`` and switched by ``_switch_time_source`` instead. Should a
-        future rclpy not have these internals, the TimeSource stays (correct, one more
-        delivery per /clock).
-        """
-        source = getattr(self, '_time_source', None)
-        callback = getattr(source, '_on_parameter_event', None)
-        if callback is None or not hasattr(source, 'detach_node'):
-            self.get_logger().warning('rclpy TimeSource internals not found: /clock is '
-                                      'delivered twice (TimeSource and the stream)')
-            return False
-        try:
-            self.remove_on_set_parameters_callback(callback)
-        except ValueError:
-            pass
-        source.detach_node()
-        self._ros_clock._set_ros_time_is_active(bool(self._sim))
-        return True
-
     def _switch_time_source(self, sim):
         """Trigger on /clock (sim time) or the wall timer; restart on the new time base."""
         self._sim = sim
-        if self._own_clock:
-            self._ros_clock._set_ros_time_is_active(sim)
         self._stream.skip_late = not sim
         self._stream.reset_time_base()
         if sim:
@@ -497,9 +468,7 @@ class PlannerNode(Node):
     def _on_clock(self, msg):
         if self._sim:
             now_ns = time_ns(msg.clock)
-            if self._own_clock:
-                self._ros_clock.set_ros_time_override(
-                    Time(nanoseconds=now_ns, clock_type=ClockType.ROS_TIME))
+            set_ros_time(self, now_ns)
             self._advance(now_ns)
             stream = self._stream
             if stream.spacing > self._spacing_logged or stream.late != self._late_logged:

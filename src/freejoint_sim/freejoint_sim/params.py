@@ -11,13 +11,15 @@ Parameters of the simulator node: declaration table and validation (no ROS types
 from dataclasses import dataclass
 import math
 
+from freejoint_common.arm_description import ARM_SPECS, joint_list, PAPER_JOINTS, resolve_arm
 from freejoint_common.node_tools import SCHEDULING_SPECS, Spec, unique_names
 from freejoint_common.scheduling import validate_affinity, validate_priority
-from freejoint_core.arm import ArmParams, table1
+from freejoint_core.arm import ArmParams
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.offline import initial_state
 
 MODES = ('lockstep', 'realtime')
+ENGINES = ('rk4', 'mujoco')
 EXECUTORS = ('single_threaded', 'events')
 MAX_DIST_BOUND = 10.0
 """Upper bound [N m] of ``dist_bound``: 20 times the paper's 0.5 N m and about the peak
@@ -32,15 +34,22 @@ MAX_DIVERGENCE_SPEED = 1e5
 SPECS = (
     Spec('case', 'horizontal',
          "arm case (Table I real parameters): 'horizontal' (no gravity) or 'vertical' "
-         '(9.81 m/s^2 along -y); takes effect on reset'),
+         '(9.81 m/s^2 along -y); the gravity of a URDF arm unless gravity is set; takes '
+         'effect on reset'),
+) + ARM_SPECS + (
+    Spec('engine', 'rk4',
+         "plant: 'rk4' (classic RK4 at dt_sub: the closed-form 3-link model, Pinocchio's "
+         "ABA for other URDF arms) or 'mujoco' (MuJoCo's RK4 on the URDF, "
+         'freejoint_core.mujoco_plant); takes effect on reset'),
     Spec('mode', 'lockstep',
          "'lockstep': own /clock, advance one control period per command; 'realtime': "
          'step on the wall clock and apply the latest command', read_only=True),
-    Spec('joint_names', ['joint1', 'joint2', 'joint3'],
-         'names of all joints in model order (base to tip), passive ones included',
-         read_only=True),
+    Spec('joint_names', list(PAPER_JOINTS),
+         'names of all joints in model order (base to tip), passive ones included; left '
+         "at this default with a URDF arm: the URDF's revolute joints", read_only=True),
     Spec('joints', ['joint1', 'joint2'],
-         'active joints in the order of the effort command (JointGroupEffortController)',
+         'active joints in the order of the effort command (JointGroupEffortController); '
+         "left at this default with a URDF arm: the arm's active joints, base to tip",
          read_only=True),
     Spec('control_period', 0.001,
          'step [s]: one command and one disturbance draw are held over it (the lockstep '
@@ -69,6 +78,10 @@ SPECS = (
     Spec('initial_passive_deg', 120.0,
          'initial passive joint angle [deg], within one turn; takes effect on reset',
          (-MAX_PASSIVE_DEG, MAX_PASSIVE_DEG)),
+    Spec('initial_joint_positions', '',
+         "q(0) [rad], every joint base to tip, as space-separated numbers (e.g. '0 1.0 1.4 "
+         "2.2'), instead of initial_position and initial_passive_deg (which need an arm "
+         "with one passive and two active joints); '' = those; takes effect on reset"),
     Spec('command_timeout', 0.5,
          'wall time [s] without a command after which zero effort is applied (and a '
          'warning given); lockstep: per step, after the first command', (1e-3, 3600.0)),
@@ -109,6 +122,8 @@ class Config:
     """Validated simulator configuration."""
 
     params: ArmParams
+    arm: object
+    engine: str
     q0: tuple
     joint_names: tuple
     joints: tuple
@@ -155,6 +170,22 @@ def _clock_every(rate, dt):
                      'Hz (1 / (clock_rate * control_period) must be an integer)', 1.0 / rate, dt)
 
 
+def _initial_joints(text, params):
+    """Return ``initial_joint_positions`` as n floats, None if empty, or raise naming it."""
+    if not str(text).strip():
+        return None
+    try:
+        q0 = [float(v) for v in str(text).split()]
+    except ValueError:
+        q0 = None
+    if q0 is None or len(q0) != params.n or not all(
+            math.isfinite(v) and abs(v) <= 1e6 for v in q0):
+        raise FreejointValueError(
+            f'initial_joint_positions: expected {params.n} finite joint angles [rad] (one per '
+            f'joint, base to tip), got {text!r}')
+    return q0
+
+
 def build_config(values):
     """
     Validate a complete parameter dict; return the :class:`Config`.
@@ -174,14 +205,20 @@ def build_config(values):
         The message starts with the offending parameter's name.
 
     """
-    params = table1(values['case'])
+    arm = resolve_arm(values)
+    params = arm.params
+    if values['engine'] not in ENGINES:
+        raise FreejointValueError(
+            f'engine: expected one of {ENGINES}, got {values["engine"]!r}')
     if values['mode'] not in MODES:
         raise FreejointValueError(f'mode: expected one of {MODES}, got {values["mode"]!r}')
-    joint_names = unique_names('joint_names', values['joint_names'])
+    joint_names = unique_names('joint_names', joint_list(
+        'joint_names', values['joint_names'], arm, PAPER_JOINTS, arm.joint_names))
     if len(joint_names) != params.n:
         raise FreejointValueError(
             f'joint_names: the arm has {params.n} joints, got {len(joint_names)} names')
-    joints = unique_names('joints', values['joints'])
+    joints = unique_names('joints', joint_list('joints', values['joints'], arm,
+                                               ('joint1', 'joint2'), arm.active_names))
     active_names = [joint_names[i] for i in params.active]
     if sorted(joints) != sorted(active_names):
         raise FreejointValueError(
@@ -222,12 +259,19 @@ def build_config(values):
         raise FreejointValueError(
             f'initial_passive_deg: must be within one turn, [-{MAX_PASSIVE_DEG:g}, '
             f'{MAX_PASSIVE_DEG:g}] deg, got {passive}')
-    try:
-        q0 = initial_state(params, passive, start)
-    except FreejointValueError as exc:
+    q0 = _initial_joints(values['initial_joint_positions'], params)
+    if q0 is None and (params.r != 2 or params.p != 1):
         raise FreejointValueError(
-            f'initial_position: unreachable with initial_passive_deg = '
-            f'{values["initial_passive_deg"]}: {exc}') from None
+            f'initial_joint_positions: the arm has {params.r} active and {params.p} passive '
+            f'joints: initial_position and initial_passive_deg need 2 and 1; give the '
+            f'{params.n} joint angles')
+    if q0 is None:
+        try:
+            q0 = initial_state(params, passive, start)
+        except FreejointValueError as exc:
+            raise FreejointValueError(
+                f'initial_position: unreachable with initial_passive_deg = '
+                f'{values["initial_passive_deg"]}: {exc}') from None
     timeout = float(values['command_timeout'])
     if not (math.isfinite(timeout) and timeout > 0.0):
         raise FreejointValueError(f'command_timeout: must be > 0, got {timeout}')
@@ -259,7 +303,8 @@ def build_config(values):
             f'brake_timeout: must be in [0, 3600] s (0 = never), got {brake_timeout}')
     validate_priority(values['thread_priority'])
     validate_affinity(values['cpu_affinity'])
-    return Config(params=params, q0=tuple(q0.tolist()), joint_names=joint_names,
+    return Config(params=params, arm=arm, engine=values['engine'],
+                  q0=tuple(float(v) for v in q0), joint_names=joint_names,
                   joints=joints,
                   cmd_to_active=tuple(active_names.index(name) for name in joints),
                   lockstep=values['mode'] == 'lockstep', dt=dt, dt_ns=round(dt * 1e9),

@@ -78,6 +78,7 @@ import struct
 import sys
 import time
 
+from freejoint_common.clock import own_clock
 from freejoint_common.node_tools import parameter_error
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
@@ -340,7 +341,7 @@ class Recorder(Node):
         # the node's TimeSource need not take every /clock too (a dispatch per tick).
         self._sim_time = self.get_parameter('use_sim_time').value is True
         if self._sim_time:
-            self._time_source.detach_node()
+            own_clock(self)
         # The recorded topics' subscriptions live on a node no executor spins: nothing
         # dispatches them; take() takes what they hold every batch_period. Services, timers,
         # parameters and the message-lost events stay on this node, in the executor.

@@ -1,0 +1,201 @@
+"""
+The arm a node works on: the paper's Table I arm, or a planar arm read from URDF.
+
+The simulator, the controller and the planner take the arm from the same parameters
+(``ARM_SPECS``), as ros2_control's controller_manager and robot_state_publisher take it:
+
+* ``robot_description``: the URDF text, or ``description_file``: a path to it (not both);
+* ``passive_joints``: the names of the free joints (a URDF has no such element);
+* ``gravity``: the gravity vector in the URDF's base frame; ``[0, 0, 0]`` (default) takes
+  the vector of the node's ``case`` (``horizontal``: ``0 0 -9.81``, ``vertical``:
+  ``0 -9.81 0``, ``freejoint_core.urdf.GRAVITY_BY_CASE``). A zero vector loses no arm:
+  gravity along the joint axes exerts no torque, so it is the horizontal case.
+
+With none of them given (the defaults: no description, ``passive_joints = [joint3]``,
+gravity from ``case``) the arm is ``freejoint_core.arm.table1(case)`` exactly as before
+(the closed-form 3-link kernel; the lockstep graph equals the offline runner to 0 m).
+Anything else is parsed by ``freejoint_core.urdf.parse_urdf`` (the shipped
+``paper_arm.urdf`` when no description is given), which refuses an arm the core does not
+model with one line naming the problem. :func:`resolve_arm` is plain Python (no ROS).
+"""
+
+from dataclasses import dataclass
+import math
+
+from freejoint_common.node_tools import Spec
+from freejoint_core.arm import ArmParams, table1
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.urdf import GRAVITY_BY_CASE, load_urdf, parse_urdf, shipped_urdf_path
+
+PAPER_JOINTS = ('joint1', 'joint2', 'joint3')
+"""Joint names of the paper's arm (``paper_arm.urdf``), base to tip."""
+PAPER_PASSIVE = ['joint3']
+"""Passive joint of the paper's arm: the default of ``passive_joints``."""
+NO_GRAVITY = [0.0, 0.0, 0.0]
+"""Default of ``gravity``: take the vector of ``case``."""
+
+ARM_SPECS = (
+    Spec('robot_description', '',
+         'URDF text of the arm (as robot_state_publisher and ros2_control take it): a '
+         'planar serial chain of revolute joints about parallel z axes ending in a fixed '
+         "end-effector joint (freejoint_core.urdf); '' = description_file, or the paper's "
+         'Table I arm if that is empty too', read_only=True),
+    Spec('description_file', '',
+         "path of the arm's URDF, read at start-up (when robot_description is empty); the "
+         'shipped ones are share/freejoint_description/urdf/paper_arm.urdf and '
+         'four_link_arm.urdf', read_only=True),
+    Spec('passive_joints', list(PAPER_PASSIVE),
+         'names of the passive (free, unactuated) joints of the arm; at least two joints '
+         "stay active (the task is the end effector's x, y); the paper's arm: joint3",
+         read_only=True),
+    Spec('gravity', list(NO_GRAVITY),
+         'gravity [m/s^2] in the base frame of the URDF, its in-plane part along -y; '
+         '[0, 0, 0] = the vector of case (horizontal: 0 0 -9.81, vertical: 0 -9.81 0)'),
+)
+"""The arm parameters, the same entries in every node that needs the arm."""
+
+
+@dataclass(frozen=True)
+class NodeArm:
+    """
+    The arm a node was configured with.
+
+    Attributes
+    ----------
+    params : ArmParams
+        The real parameters (``table1(case)`` for the default arm).
+    joint_names : tuple of str, (n,)
+        All joints, base to tip (the order of the model).
+    active_names : tuple of str, (r,)
+        The active joints, base to tip.
+    urdf_arm : UrdfArm or None
+        The parsed description; None for the default arm (no URDF parsed).
+    source : str
+        What the arm was taken from, for the start-up line.
+
+    """
+
+    params: ArmParams
+    joint_names: tuple
+    active_names: tuple
+    urdf_arm: object
+    source: str
+
+    def description(self):
+        """
+        Return the arm as a ``UrdfArm`` (the shipped ``paper_arm.urdf`` for the default).
+
+        Raises
+        ------
+        FreejointValueError
+            If the shipped URDF cannot be found or read.
+
+        """
+        if self.urdf_arm is not None:
+            return self.urdf_arm
+        gravity = -self.params.gravity
+        case = 'vertical' if gravity else 'horizontal'
+        return load_urdf(shipped_urdf_path('paper_arm'), PAPER_PASSIVE, GRAVITY_BY_CASE[case])
+
+
+def _gravity(value, case):
+    try:
+        vec = [float(v) for v in value]
+    except (TypeError, ValueError):
+        raise FreejointValueError(
+            f'gravity: expected 3 numbers [m/s^2] (x, y, z in the base frame), got '
+            f'{value!r}') from None
+    if len(vec) != 3 or not all(math.isfinite(v) for v in vec):
+        raise FreejointValueError(
+            f'gravity: expected 3 finite numbers [m/s^2] (x, y, z in the base frame), got '
+            f'{vec}')
+    if vec == NO_GRAVITY:
+        return None, GRAVITY_BY_CASE[case]
+    return vec, tuple(vec)
+
+
+def resolve_arm(values):
+    """
+    Return the arm of the node's parameters.
+
+    Parameters
+    ----------
+    values : dict
+        ``case`` and the entries of ``ARM_SPECS``.
+
+    Returns
+    -------
+    NodeArm
+
+    Raises
+    ------
+    FreejointValueError
+        One line naming the parameter (``robot_description: ...``,
+        ``passive_joints: ...``, ...).
+
+    """
+    case = values['case']
+    if case not in GRAVITY_BY_CASE:
+        raise FreejointValueError(f'case: expected one of {tuple(GRAVITY_BY_CASE)}, got '
+                                  f'{case!r}')
+    text = values['robot_description'] or ''
+    path = values['description_file'] or ''
+    if text and path:
+        raise FreejointValueError(
+            'description_file: give robot_description or description_file, not both')
+    passive = list(values['passive_joints'] or ())
+    given, gravity = _gravity(values['gravity'], case)
+    if not text and not path and passive == PAPER_PASSIVE and given is None:
+        params = table1(case)
+        return NodeArm(params=params, joint_names=PAPER_JOINTS,
+                       active_names=tuple(PAPER_JOINTS[i] for i in params.active),
+                       urdf_arm=None, source=f'Table I ({case})')
+    if text:
+        arm = parse_urdf(text, passive, gravity)
+        source = f'robot_description ({arm.name})'
+    elif path:
+        arm = load_urdf(path, passive, gravity)
+        source = f'description_file {path}'
+    else:
+        arm = parse_urdf(_paper_text(), passive, gravity)
+        source = 'paper_arm.urdf'
+    active = tuple(name for name in arm.joint_names if name not in arm.passive_joints)
+    return NodeArm(params=arm.params, joint_names=arm.joint_names, active_names=active,
+                   urdf_arm=arm, source='%s, passive %s, gravity (%s)' % (
+                       source, list(arm.passive_joints), ' '.join('%g' % g for g in gravity)))
+
+
+def _paper_text():
+    path = shipped_urdf_path('paper_arm')
+    with open(path, encoding='utf-8') as fh:
+        return fh.read()
+
+
+def joint_list(name, value, arm, default, names_of_arm):
+    """
+    Return a joint-name parameter: the arm's names when left at the paper default.
+
+    Parameters
+    ----------
+    name : str
+        The parameter (``joint_names`` or ``joints``).
+    value : sequence of str
+        Its value.
+    arm : NodeArm
+        The arm.
+    default : sequence of str
+        The parameter's default (the paper arm's names).
+    names_of_arm : tuple of str
+        What the default stands for on ``arm`` (all joints, or the active ones).
+
+    Returns
+    -------
+    tuple of str
+        ``names_of_arm`` if ``value`` is the default, else ``value`` (the caller checks it
+        against the arm).
+
+    """
+    names = tuple(value)
+    if arm.urdf_arm is not None and list(names) == list(default):
+        return tuple(names_of_arm)
+    return names

@@ -1,0 +1,46 @@
+"""
+The simulator's plant engines (parameter ``engine``), built from its configuration.
+
+* ``rk4``: classic RK4 at ``dt_sub`` (``freejoint_core.plant.Plant``): the closed-form
+  3-link kernel for the paper's arm and any 3-link arm, Pinocchio's ABA
+  (``freejoint_core.pin_plant.PinPlant``) for URDF arms of other lengths of chain;
+* ``mujoco``: MuJoCo's RK4 on the URDF (``freejoint_core.mujoco_plant.MujocoPlant``; the
+  shipped ``paper_arm.urdf`` for the default arm).
+
+Every engine holds the torque and one disturbance draw per control period with the same
+seeded draws, so the engines differ only by their integration of the same equations:
+closed loop over the paper's circle, MuJoCo = RK4 to 1e-6 mm in both cases
+(``test/core/test_mujoco_plant.py``).  Pinocchio and MuJoCo are imported only when used.
+"""
+
+from freejoint_core.plant import Plant
+
+
+def make_plant(cfg):
+    """
+    Return a new plant for a simulator configuration, at ``cfg.q0``, at rest.
+
+    Parameters
+    ----------
+    cfg : freejoint_sim.params.Config
+        ``arm``, ``engine``, ``dt_sub``, ``dist_bound``, ``seed``, ``q0``.
+
+    Returns
+    -------
+    freejoint_core.plant.PeriodPlant
+        ``step(tau, dt)``, ``q``, ``qd``, ``stop()``, ``model.fk``.
+
+    Raises
+    ------
+    FreejointValueError
+        If the description cannot be built by the engine (naming ``arm``).
+
+    """
+    kwargs = {'dist_bound': cfg.dist_bound, 'seed': cfg.seed, 'q0': cfg.q0}
+    if cfg.engine == 'mujoco':
+        from freejoint_core.mujoco_plant import MujocoPlant
+        return MujocoPlant(cfg.arm.description(), cfg.dt_sub, **kwargs)
+    if cfg.arm.urdf_arm is None or cfg.params.n == 3:
+        return Plant(cfg.params, cfg.dt_sub, **kwargs)
+    from freejoint_core.pin_plant import PinPlant
+    return PinPlant(cfg.arm.urdf_arm, cfg.dt_sub, **kwargs)
