@@ -2,8 +2,8 @@
 Parameters of the simulator node: declaration table and validation (no ROS types).
 
 ``SPECS`` lists every parameter once; :func:`build_config` turns a complete
-``{name: value}`` dict into a validated :class:`Config` (real arm, initial state from
-``freejoint_core.offline.initial_state``, command mapping) or raises
+``{name: value}`` dict into a validated :class:`Config` (real arm, initial state by the
+active joints' inverse kinematics ``ArmModel.ik``, branch +1, command mapping) or raises
 ``FreejointValueError`` naming the parameter.
 
 """
@@ -14,9 +14,8 @@ import math
 from freejoint_common.arm_description import ARM_SPECS, joint_list, PAPER_JOINTS, resolve_arm
 from freejoint_common.node_tools import SCHEDULING_SPECS, Spec, unique_names
 from freejoint_common.scheduling import validate_affinity, validate_priority
-from freejoint_core.arm import ArmParams
+from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.offline import initial_state
 
 MODES = ('lockstep', 'realtime')
 ENGINES = ('rk4', 'mujoco')
@@ -267,7 +266,7 @@ def build_config(values):
             f'{params.n} joint angles')
     if q0 is None:
         try:
-            q0 = initial_state(params, passive, start)
+            q0 = ArmModel(params).ik(start, [math.radians(passive)], branch=1)
         except FreejointValueError as exc:
             raise FreejointValueError(
                 f'initial_position: unreachable with initial_passive_deg = '
