@@ -742,7 +742,6 @@ RUNS = (('lockstep', 'separate', CASE), ('lockstep', 'composed', CASE),
         ('realtime', 'loop', CASE))
 """The runs of ``make bench``: both modes in each layout (the horizontal case), and the
 vertical case in real time, a process per node."""
-ALL_RUNS = RUNS
 
 
 def run(which=RUNS):
@@ -782,8 +781,7 @@ def run(which=RUNS):
 
 def main(argv):
     """Run the benchmark from the command line; print the rows."""
-    runs = ALL_RUNS if '--loop-only' in argv else RUNS
-    which = [(k, lay, case) for k, lay, case in runs
+    which = [(k, lay, case) for k, lay, case in RUNS
              if not ('--lockstep-only' in argv and k != 'lockstep')
              and not ('--realtime-only' in argv and k != 'realtime')
              and not ('--separate-only' in argv and lay != 'separate')

@@ -258,16 +258,3 @@ def test_larger_eps_widens_the_annulus():
     rows = set(np.nonzero(loose.singular_mask)[0].tolist())
     assert {176, 177, 178, 179, 180, 181, 182, 183, 184} <= rows
     assert loose.intervals[0, 0] < strict.intervals[0, 0] - 0.02
-
-
-def test_figure2_data_lists_the_flagged_samples(region_1deg):
-    dmap = sing.det_map(NOMINAL, 1.0)
-    fig = sing.figure2_data(dmap, region_1deg)
-    # flagged rows at 1 deg: q2 = 0, 1 (no: sign flips at 359|0 and 180|181) -> 359, 0, 180, 181
-    assert sorted(set(fig['q2_deg'])) == pytest.approx([0.0, 180.0, 181.0, 359.0])
-    assert len(fig['q3_deg']) == 4 * 360
-    np.testing.assert_allclose(np.hypot(fig['x'], fig['y']), fig['radius'], atol=1e-15)
-    assert fig['intervals'] == region_1deg.intervals.tolist()
-    assert fig['reach'] == [0.0, 1.5]
-    with pytest.raises(FreejointValueError, match='^region:'):
-        sing.figure2_data(sing.det_map(NOMINAL, 10.0), region_1deg)

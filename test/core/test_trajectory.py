@@ -119,21 +119,3 @@ def test_workspace_annulus_of_equal_links_reaches_the_base():
     assert workspace_annulus((1.0, 0.3, 0.2)) == pytest.approx((0.5, 1.5))
     with pytest.raises(FreejointValueError, match='lengths'):
         workspace_annulus((0.5, -0.5))
-
-
-def test_paper_circle_is_reachable():
-    CircleQuintic().check_reachable(PAPER_LENGTHS)  # does not raise
-
-
-def test_circle_wider_than_the_workspace_names_radius():
-    with pytest.raises(FreejointValueError, match='^radius:'):
-        CircleQuintic(radius=0.8).check_reachable(PAPER_LENGTHS)
-
-
-def test_circle_shifted_out_of_reach_names_centre():
-    with pytest.raises(FreejointValueError, match='^centre:'):
-        CircleQuintic(centre=(1.4, 0.0), radius=0.2).check_reachable(PAPER_LENGTHS)
-    # Reach with an inner hole: a circle around the base falls into the hole.
-    with pytest.raises(FreejointValueError, match='^centre:'):
-        CircleQuintic(radius=0.2).check_reachable((1.0, 0.3, 0.2))
-    CircleQuintic(centre=(1.0, 0.0), radius=0.2).check_reachable((1.0, 0.3, 0.2))

@@ -3,8 +3,7 @@ Node plumbing shared by the freejoint nodes.
 
 ``Spec`` and :func:`declare` declare each parameter once with its descriptor;
 :func:`unique_names` validates a joint-name list; :class:`Throttle` rate-limits log lines
-per kind of problem; :func:`spin` runs a node until SIGINT/SIGTERM, stopping between
-callbacks; ``SCHEDULING_SPECS`` and :func:`request_scheduling` give a node the
+per kind of problem; ``SCHEDULING_SPECS`` and :func:`request_scheduling` give a node the
 ``thread_priority`` / ``cpu_affinity`` parameters of ros2_control's controller_manager;
 :func:`overridable` and ``QOS_OVERRIDES`` make a publisher's or subscription's QoS
 overridable by ros2's ``qos_overrides.<topic>.<publisher|subscription>.<policy>``
@@ -14,13 +13,11 @@ parameters.
 import copy
 from dataclasses import dataclass
 import gc
-import signal
 import time
 
 from freejoint_common.scheduling import MAX_PRIORITY, process_scheduling
 from freejoint_core.errors import FreejointValueError
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
@@ -187,31 +184,6 @@ def plain(value):
     return list(value)
 
 
-def spin(node, executor):
-    """
-    Spin ``node`` until SIGINT/SIGTERM, with the executor the parameter ``executor`` names.
-
-    The signal only sets a flag, so the callback that runs finishes and the node shuts down
-    between callbacks (rclpy's own handler invalidates the context under a running
-    callback, whose next publish then fails).  ``EventsExecutor.spin()`` of the rclpy 7.1.6
-    wheels never runs a timer and busy-waits, so both executors are driven by ``spin_once``.
-    """
-    stop = []
-
-    def on_signal(signum, frame):
-        stop.append(signum)
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    if executor == 'events':
-        from rclpy.experimental import EventsExecutor
-        ex = EventsExecutor()
-    else:
-        ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    spin_until(ex.spin_once, node.context.ok, stop)
-
-
 class GcPauses:
     """
     The garbage collector's runs and longest pauses in this process, per generation.
@@ -254,22 +226,7 @@ class GcPauses:
 
 
 GC_PAUSES = GcPauses()
-"""This process's collector statistics (started by :func:`spin_until`)."""
-
-REFRESH_PERIOD = 1.0
-"""Wall period [s] of applying the process scheduling to threads started meanwhile."""
-
-
-def spin_until(spin_once, ok, stop):
-    """Call ``spin_once`` until ``stop`` is non-empty or not ``ok()``; keep new threads' RT."""
-    GC_PAUSES.start()
-    refresh = process_scheduling().refresh
-    next_refresh = _monotonic() + REFRESH_PERIOD
-    while not stop and ok():
-        spin_once(timeout_sec=0.2)
-        if _monotonic() >= next_refresh:
-            next_refresh = _monotonic() + REFRESH_PERIOD
-            refresh()
+"""This process's collector statistics (started by ``runner.spin_until``)."""
 
 
 def parameter_error(exc):
@@ -285,47 +242,3 @@ def parameter_error(exc):
     reason, sep, names = text.rpartition(': ')
     return '%s: %s' % (names, reason) if sep else text
 
-
-def run(make_node, name, args=None, on_stop=None):
-    """
-    Run a freejoint node process: init, spin until SIGINT/SIGTERM, stop between callbacks.
-
-    Parameters
-    ----------
-    make_node : callable
-        Builds the node (after ``rclpy.init``); its ``config.executor`` names the executor
-        (``'events'`` if it has none).
-    name : str
-        Logger name for a start-up failure.
-    args : list of str, optional
-        Command-line arguments for ``rclpy.init``.
-    on_stop : callable, optional
-        Called with the node before it is destroyed (final report, files).
-
-    A bad start-up parameter (the node's own validation, ``FreejointValueError``, or
-    rclpy's range and type checks of the overrides) is one fatal line naming it and the
-    reason, and the process exits with status 2, without a traceback.
-
-    """
-    import rclpy
-    from rclpy.exceptions import ParameterException
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.signals import SignalHandlerOptions
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = make_node()
-        config = getattr(node, 'config', None)
-        spin(node, getattr(config, 'executor', 'events'))
-    except (FreejointValueError, ParameterException) as exc:
-        rclpy.logging.get_logger(name).fatal('bad parameter: %s' % parameter_error(exc))
-        raise SystemExit(2)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            if on_stop is not None:
-                on_stop(node)
-            node.get_logger().info(GC_PAUSES.report())
-            node.destroy_node()
-        rclpy.try_shutdown()

@@ -576,11 +576,6 @@ class PathCheck:
     margin: float
     reason: str
 
-    @property
-    def margin_m(self):
-        """Return ``margin`` (m), alias."""
-        return self.margin
-
 
 def check_path(region, points, times=None):
     """
@@ -640,46 +635,3 @@ def check_path(region, points, times=None):
     reason = (f'point {k}{when} at ({pts[k, 0]:.6g}, {pts[k, 1]:.6g}) m, r = {rk:.6g} m, is '
               f'{where}')
     return PathCheck(False, margin, reason)
-
-
-def figure2_data(det_map, region):
-    """
-    Return the data of the paper's Fig. 2 (joint-space map and Cartesian annuli).
-
-    Parameters
-    ----------
-    det_map : DetMap
-        From :func:`det_map`.
-    region : SemiSingularRegion
-        Computed from ``det_map``.
-
-    Returns
-    -------
-    dict
-        ``'q2_deg', 'q3_deg'`` (k,): flagged joint-space samples (deg, any q1);
-        ``'x', 'y'`` (k,): their end-effector positions at ``q1 = 0`` (m);
-        ``'radius'`` (k,): their base distance (m); ``'intervals'`` (list of
-        [lo, hi], m), ``'nonsingular'`` (list of [lo, hi], m), ``'reach'``
-        ([r_min, r_max], m), ``'eps_d'``, ``'resolution_deg'``. Plain lists.
-
-    """
-    if not isinstance(det_map, DetMap):
-        raise FreejointValueError(f'det_map: expected DetMap, got {type(det_map).__name__}')
-    if not isinstance(region, SemiSingularRegion):
-        raise FreejointValueError(
-            f'region: expected SemiSingularRegion, got {type(region).__name__}')
-    if region.singular_mask.shape != det_map.det.shape:
-        raise FreejointValueError('region: was not computed from this det_map (grid differs)')
-    i, j = np.nonzero(region.singular_mask)
-    q2, q3 = det_map.q[i], det_map.q[j]
-    l1, l2, l3 = det_map.lengths
-    x = l1 + l2 * np.cos(q2) + l3 * np.cos(q2 + q3)
-    y = l2 * np.sin(q2) + l3 * np.sin(q2 + q3)
-    return {
-        'q2_deg': np.degrees(q2).tolist(), 'q3_deg': np.degrees(q3).tolist(),
-        'x': x.tolist(), 'y': y.tolist(), 'radius': np.hypot(x, y).tolist(),
-        'intervals': region.intervals.tolist(),
-        'nonsingular': region.nonsingular_intervals.tolist(),
-        'reach': list(region.reach), 'eps_d': region.eps_d,
-        'resolution_deg': det_map.resolution_deg,
-    }

@@ -212,38 +212,6 @@ class CircleQuintic:
         return np.column_stack((self._cx + self._radius * np.cos(phi),
                                 self._cy + self._radius * np.sin(phi)))
 
-    def check_reachable(self, params):
-        """
-        Raise unless the whole circle lies in the arm's reach annulus.
-
-        Parameters
-        ----------
-        params : ArmParams or sequence of float
-            The arm (only its ``lengths`` are used) or the link lengths (m).
-
-        Raises
-        ------
-        FreejointValueError
-            Naming ``radius`` when no centre could fit a circle of this radius
-            in the annulus (``2 radius > r_max - r_min``), else ``centre`` when
-            this centre puts part of the circle out of reach.
-
-        """
-        lengths = getattr(params, 'lengths', params)
-        r_min, r_max = workspace_annulus(lengths)
-        if 2.0 * self._radius > r_max - r_min:
-            raise FreejointValueError(
-                f'radius: {self._radius} m does not fit the reach annulus '
-                f'[{r_min:.6g}, {r_max:.6g}] m of the arm')
-        dist = math.hypot(self._cx, self._cy)
-        near = abs(dist - self._radius)   # closest base distance on the circle
-        far = dist + self._radius
-        if far > r_max or near < r_min:
-            raise FreejointValueError(
-                f'centre: circle about ({self._cx:.6g}, {self._cy:.6g}) m with radius '
-                f'{self._radius} m spans base distances [{near:.6g}, {far:.6g}] m, outside '
-                f'the reach annulus [{r_min:.6g}, {r_max:.6g}] m')
-
     def __repr__(self):
         return (f'CircleQuintic(centre=({self._cx!r}, {self._cy!r}), radius={self._radius!r}, '
                 f'duration={self._duration!r}, start_angle={self._start!r}, '
