@@ -22,7 +22,8 @@ import time
 
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
 from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
-from freejoint_common.node_tools import request_scheduling, run, scheduling_refusal, Throttle
+from freejoint_common.node_tools import request_scheduling, scheduling_refusal, Throttle
+from freejoint_common.runner import Lifecycle, run
 from freejoint_control.params import build_config, SPECS
 from freejoint_core.control import (ControlOutput, RobustController, STATUS_BAD_INPUT,
                                     STATUS_NEAR_SINGULAR,
@@ -72,7 +73,7 @@ _monotonic = time.monotonic
 _NAME_MAP_CACHE = 16
 
 
-class ControllerNode(Node):
+class ControllerNode(Node, Lifecycle):
     """The robust controller between JointState/CartesianSetpoint and effort commands."""
 
     def __init__(self, **kwargs):
@@ -749,6 +750,11 @@ class ControllerNode(Node):
                 % (self._ticks, self._zero_answers, self._holds, self._refused_states,
                    self._refused_setpoints, self._faults, self._old_states))
 
+    @property
+    def executor_kind(self):
+        """The executor of the parameter ``executor`` (the runner spins the node with it)."""
+        return self.config.executor
+
 
 def _status_message(status, det, values, hold_reason, shaper):
     parts = []
@@ -776,9 +782,8 @@ def _status_message(status, det, values, hold_reason, shaper):
 
 
 def main(args=None):
-    """Run the node until SIGINT/SIGTERM."""
-    run(ControllerNode, 'controller_node', args,
-        lambda node: node.get_logger().info(node.report()))
+    """Run the node until SIGINT/SIGTERM; exit 2 on a bad start-up parameter."""
+    return run(ControllerNode, 'controller_node', args)
 
 
 if __name__ == '__main__':

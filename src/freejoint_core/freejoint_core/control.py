@@ -369,8 +369,8 @@ class RobustController:
         if s != 1.0:
             kx, ky, lx, ly = s * kx, s * ky, s * lx, s * ly
         self._lam = (lx, ly)
-        self._kl = (kx + lx, ky + ly)
-        self._kxl = (kx * lx, ky * ly)
+        self._k_plus_lam = (kx + lx, ky + ly)    # gain on the velocity error
+        self._k_times_lam = (kx * lx, ky * ly)   # gain on the position error
 
     def reset(self):
         """Set theta back to ``gains.theta0``."""
@@ -464,10 +464,10 @@ class RobustController:
         lx, ly = self._lam
         sx = edx + lx * ex
         sy = edy + ly * ey
-        klx, kly = self._kl
-        kx, ky = self._kxl
-        vvx = adx - klx * edx - kx * ex
-        vvy = ady - kly * edy - ky * ey
+        gdx, gdy = self._k_plus_lam
+        gpx, gpy = self._k_times_lam
+        vvx = adx - gdx * edx - gpx * ex
+        vvy = ady - gdy * edy - gpy * ey
         theta = self._theta
         if self._robust:
             rx, ry = self._rr
@@ -539,7 +539,7 @@ class RobustController:
         edot = model.jacobian(q) @ qd - pd_d
         lam = np.array(self._lam)
         s = edot + lam * e
-        v = pdd_d - np.array(self._kl) * edot - np.array(self._kxl) * e
+        v = pdd_d - np.array(self._k_plus_lam) * edot - np.array(self._k_times_lam) * e
         if self._robust:
             alpha = np.array(self._rr) * s
             na = float(np.linalg.norm(alpha))

@@ -48,8 +48,9 @@ import math
 
 from freejoint_common.clock import own_clock, set_ros_time
 from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
-from freejoint_common.node_tools import request_scheduling, run
+from freejoint_common.node_tools import request_scheduling
 from freejoint_common.node_tools import scheduling_refusal, SCHEDULING_SPECS
+from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
 from freejoint_core.trajectory import CircleQuintic
@@ -141,7 +142,7 @@ PARAMETERS = {
 }
 
 
-class PlannerNode(Node):
+class PlannerNode(Node, Lifecycle):
     """Thin ROS wrapper around freejoint_core's singularity analysis and CircleQuintic."""
 
     def __init__(self, **kwargs):
@@ -199,7 +200,7 @@ class PlannerNode(Node):
         Declare every parameter once; a bad value raises, naming it.
 
         rclpy's range and type checks raise ``ParameterException``, ``validate``'s reason
-        a ``FreejointValueError``: ``node_tools.run`` turns either into one fatal line
+        a ``FreejointValueError``: ``runner.run`` turns either into one fatal line
         'bad parameter: <name>: <reason>' and exit status 2 (as every freejoint node).
         """
         cfg = {}
@@ -504,8 +505,8 @@ class PlannerNode(Node):
 
 
 def main(args=None):
-    """Run the node until SIGINT/SIGTERM."""
-    run(PlannerNode, 'freejoint_planner', args)
+    """Run the node until SIGINT/SIGTERM; exit 2 on a bad start-up parameter."""
+    return run(PlannerNode, 'freejoint_planner', args)
 
 
 if __name__ == '__main__':

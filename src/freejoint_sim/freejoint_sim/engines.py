@@ -10,10 +10,12 @@ The simulator's plant engines (parameter ``engine``), built from its configurati
 Every engine holds the torque and one disturbance draw per control period with the same
 seeded draws, so the engines differ only by their integration of the same equations:
 closed loop over the paper's circle, MuJoCo = RK4 to 1e-6 mm in both cases
-(``test/core/test_mujoco_plant.py``).  Pinocchio and MuJoCo are imported only when used.
+(``test/core/test_mujoco_plant.py``).  The choice for a URDF arm is
+``freejoint_core.urdf_offline.make_plant``, the offline runner's.
 """
 
 from freejoint_core.plant import Plant
+from freejoint_core.urdf_offline import make_plant as urdf_plant
 
 
 def make_plant(cfg):
@@ -36,11 +38,8 @@ def make_plant(cfg):
         If the description cannot be built by the engine (naming ``arm``).
 
     """
-    kwargs = {'dist_bound': cfg.dist_bound, 'seed': cfg.seed, 'q0': cfg.q0}
-    if cfg.engine == 'mujoco':
-        from freejoint_core.mujoco_plant import MujocoPlant
-        return MujocoPlant(cfg.arm.description(), cfg.dt_sub, **kwargs)
-    if cfg.arm.urdf_arm is None or cfg.params.n == 3:
-        return Plant(cfg.params, cfg.dt_sub, **kwargs)
-    from freejoint_core.pin_plant import PinPlant
-    return PinPlant(cfg.arm.urdf_arm, cfg.dt_sub, **kwargs)
+    if cfg.engine == 'rk4' and cfg.arm.urdf_arm is None:
+        return Plant(cfg.params, cfg.dt_sub, dist_bound=cfg.dist_bound, seed=cfg.seed,
+                     q0=cfg.q0)
+    return urdf_plant(cfg.arm.description(), cfg.engine, cfg.dt_sub, cfg.dist_bound, cfg.seed,
+                      cfg.q0)

@@ -51,7 +51,8 @@ import time
 from builtin_interfaces.msg import Time
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
 from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
-from freejoint_common.node_tools import request_scheduling, run, scheduling_refusal, Throttle
+from freejoint_common.node_tools import request_scheduling, scheduling_refusal, Throttle
+from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.plant import Plant
 from freejoint_sim.divergence import divergence_reason
@@ -88,7 +89,7 @@ _monotonic = time.monotonic
 _time_ns = time.time_ns
 
 
-class SimNode(Node):
+class SimNode(Node, Lifecycle):
     """The simulated arm behind JointState / effort command topics."""
 
     def __init__(self, **kwargs):
@@ -627,16 +628,20 @@ class SimNode(Node):
                 self._k, self._t_ns * 1e-9, self._timeouts, self._refused,
                 self._divergences, self._brake_engagements)
 
+    @property
+    def executor_kind(self):
+        """The executor of the parameter ``executor`` (the runner spins the node with it)."""
+        return self.config.executor
 
-def _on_stop(node):
-    node.stop_stepping()
-    node.get_logger().info(node.report())
-    node.write_timing()
+    def on_shutdown(self):
+        """Stop the real-time stepping thread; write the timing file if measuring."""
+        self.stop_stepping()
+        self.write_timing()
 
 
 def main(args=None):
-    """Run the node until SIGINT/SIGTERM."""
-    run(SimNode, 'sim_node', args, _on_stop)
+    """Run the node until SIGINT/SIGTERM; exit 2 on a bad start-up parameter."""
+    return run(SimNode, 'sim_node', args)
 
 
 if __name__ == '__main__':

@@ -79,7 +79,7 @@ import sys
 import time
 
 from freejoint_common.clock import own_clock
-from freejoint_common.node_tools import parameter_error
+from freejoint_common.runner import Lifecycle, run
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 import rclpy
@@ -286,7 +286,7 @@ def _is_hidden(name):
     return any(part.startswith('_') for part in name.split('/') if part)
 
 
-class Recorder(Node):
+class Recorder(Node, Lifecycle):
     """Record the run's topics into a rosbag2 (v9, MCAP) bag; see the module notes."""
 
     def __init__(self, **kwargs):
@@ -743,6 +743,14 @@ class Recorder(Node):
         """Return the number of messages received so far."""
         return sum(self.received.values())
 
+    def on_shutdown(self):
+        """Finalise the bag (the runner's shutdown): :meth:`close`."""
+        self.close()
+
+    def failure(self):
+        """Return why not everything received reached the bag (exit 1), or None."""
+        return self.problem
+
     def close(self):
         """
         Finalise the bag and log what was recorded per topic.
@@ -890,16 +898,6 @@ def _remove_old_bag(path):
     shutil.rmtree(path)
 
 
-class _Stop:
-    """SIGINT/SIGTERM set a flag; the main loop then drains the queues and finalises."""
-
-    def __init__(self):
-        self.signum = None
-
-    def __call__(self, signum, frame):
-        self.signum = signum
-
-
 def spin_until_stopped(node, executor, stop, drain_quiet=0.3, drain_max=3.0):
     """
     Take and write every ``batch_period`` until a signal; then take what is left.
@@ -930,18 +928,6 @@ def spin_until_stopped(node, executor, stop, drain_quiet=0.3, drain_max=3.0):
             break
 
 
-def make_executor(kind='events'):
-    """Return rclpy's EventsExecutor (about 4x less CPU per message) or the default one."""
-    if kind == 'events':
-        try:
-            from rclpy.experimental import EventsExecutor
-            return EventsExecutor()
-        except ImportError:  # pragma: no cover - present in rclpy 7.1 (Jazzy)
-            pass
-    from rclpy.executors import SingleThreadedExecutor
-    return SingleThreadedExecutor()
-
-
 def main(args=None):
     """
     Run the recorder until SIGINT/SIGTERM; finalise the bag; exit 0.
@@ -950,37 +936,10 @@ def main(args=None):
     or if not everything received reached it (a write error: the bag is still finalised);
     exit 2 with one fatal line ``bad parameter: <name>: <reason>`` on a bad start-up
     parameter (rclpy's range and type checks, the set-parameters callback), as every node.
+    The signal only sets the runner's flag: the loop then drains the queues.
     """
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    stop = _Stop()
-    signal.signal(signal.SIGINT, stop)
-    signal.signal(signal.SIGTERM, stop)
-    node = None
-    try:
-        node = Recorder()
-    except ParameterException as exc:  # the start-up failure policy of every node
-        rclpy.logging.get_logger('recorder').fatal('bad parameter: %s' % parameter_error(exc))
-        rclpy.try_shutdown()
-        return 2
-    except (BagError, OSError) as exc:
-        print('recorder: error: %s' % exc, file=sys.stderr)
-        rclpy.try_shutdown()
-        return 1
-    executor = make_executor(node.executor_kind)
-    executor.add_node(node)
-    try:
-        spin_until_stopped(node, executor, stop)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.close()
-        executor.remove_node(node)
-        node.destroy_node()
-        rclpy.try_shutdown()
-    if node.problem:
-        print('recorder: error: %s' % node.problem, file=sys.stderr)
-        return 1
-    return 0
+    return run(Recorder, 'recorder', args, errors=(BagError, OSError),
+               loop=lambda nodes, executor, stop: spin_until_stopped(nodes[0], executor, stop))
 
 
 if __name__ == '__main__':

@@ -39,7 +39,8 @@ import sys
 import threading
 import time
 
-from freejoint_common.node_tools import declare, run, Spec
+from freejoint_common.node_tools import declare, Spec
+from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.kinematic_tree import KinematicTree
 from freejoint_core.urdf import shipped_urdf_path
@@ -166,14 +167,10 @@ def from_foxglove(name, value, current):
     return RosParameter(name, value=value)
 
 
-class _Config:
-    executor = 'single'   # guard conditions wake it (rclpy's SingleThreadedExecutor)
-
-
-class Viewer(Node):
+class Viewer(Node, Lifecycle):
     """The graph's topics, transforms, parameters and services over Foxglove's protocol."""
 
-    config = _Config()
+    executor_kind = 'single_threaded'   # guard conditions wake it
 
     def __init__(self, **kwargs):
         super().__init__('viewer', **kwargs)
@@ -538,7 +535,7 @@ class Viewer(Node):
             return serialize_message(response)
         return handler
 
-    def close(self):
+    def on_shutdown(self):
         """Stop the server (clients see the connection close)."""
         self._server.stop()
 
@@ -555,8 +552,7 @@ def main(args=None):
         print('viewer: error: foxglove-sdk is not installed (%s): pip install %s'
               % (exc, FOXGLOVE_SDK), file=sys.stderr)
         return 1
-    run(Viewer, 'viewer', args=args, on_stop=lambda node: node.close())
-    return 0
+    return run(Viewer, 'viewer', args)
 
 
 if __name__ == '__main__':
