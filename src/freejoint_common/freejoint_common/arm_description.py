@@ -199,3 +199,28 @@ def joint_list(name, value, arm, default, names_of_arm):
     if arm.urdf_arm is not None and list(names) == list(default):
         return tuple(names_of_arm)
     return names
+
+
+def arm_joint_names(values, arm):
+    """
+    Return ``(joint_names, joints)`` of a node: the parameters, or the arm's at the defaults.
+
+    Left at their defaults (the paper arm's ``joint1..3`` / ``joint1, joint2``) with a URDF
+    arm, ``joint_names`` are the URDF's revolute joints and ``joints`` its active ones,
+    base to tip; given, they are returned as given (the caller checks them).
+
+    Parameters
+    ----------
+    values : dict
+        ``joint_names`` and ``joints``.
+    arm : NodeArm
+        The arm (:func:`resolve_arm`).
+
+    Returns
+    -------
+    tuple of (tuple of str, tuple of str)
+
+    """
+    return (joint_list('joint_names', values['joint_names'], arm, PAPER_JOINTS,
+                       arm.joint_names),
+            joint_list('joints', values['joints'], arm, PAPER_JOINTS[:2], arm.active_names))

@@ -21,14 +21,11 @@ cannot be read: one line naming the file; 2 on a bad parameter: one fatal line
 import sys
 import time
 
-from freejoint_common.node_tools import parameter_error
+from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
-import rclpy
 from rclpy.duration import Duration
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -49,7 +46,7 @@ def _descriptor(description, ptype, float_range=None, int_range=None):
     return d
 
 
-class Player(Node):
+class Player(Node, Lifecycle):
     """Republish a bag; see the module notes."""
 
     def __init__(self, **kwargs):
@@ -131,7 +128,7 @@ class Player(Node):
         while time.monotonic() < deadline:
             if all(pub.get_subscription_count() >= need for pub in pubs):
                 return True
-            rclpy.spin_once(self, timeout_sec=0.01)  # parameter services answer meanwhile
+            self.executor.spin_once(timeout_sec=0.01)  # parameter services answer meanwhile
         self.get_logger().warning('not every topic has %d subscriber(s) after %.1f s; '
                                   'playing anyway' % (need, self._params['wait_timeout']))
         return False
@@ -172,28 +169,18 @@ class Player(Node):
             ', '.join('%s %d' % kv for kv in sorted(self.played.items()))))
 
 
+def play_once(nodes, executor, stop):
+    """The player's loop: wait (bounded) for subscribers, play the bag once, finish."""
+    node = nodes[0]
+    node.wait_for_subscribers()
+    node.play()
+    node.finish()
+
+
 def main(args=None):
     """Play the bag once and exit (0; 1 if it cannot be read; 2: bad parameter)."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = Player()
-        node.wait_for_subscribers()
-        node.play()
-        node.finish()
-    except (FreejointValueError, ParameterException) as exc:  # as every node
-        rclpy.logging.get_logger('player').fatal('bad parameter: %s' % parameter_error(exc))
-        return 2
-    except BagError as exc:
-        print('player: error: %s' % exc, file=sys.stderr)
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run(Player, 'player', args, loop=play_once, errors=(BagError,),
+               handle_signals=False)
 
 
 if __name__ == '__main__':

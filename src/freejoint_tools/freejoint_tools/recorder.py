@@ -73,7 +73,6 @@ import operator
 import os
 import re
 import shutil
-import signal
 import struct
 import sys
 import time
@@ -85,11 +84,9 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParameters
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.exceptions import InvalidHandle, ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import Trigger
 
 from .bagfile import BagError, BagWriter

@@ -1,0 +1,114 @@
+"""
+The nodes take the arm from robot_description / description_file, and refuse one they cannot.
+
+A URDF the core does not model (a prismatic, non-parallel or floating joint, a link
+without inertial), a passive set leaving fewer than two active joints, or a
+``passive_joints`` name the URDF does not have ends the simulator, the controller and the
+planner at start-up with one line naming the parameter and the problem, exit status 2
+(``freejoint_common.runner``), as any other bad start-up parameter.
+"""
+import os
+import re
+import subprocess
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+INSTALL = os.path.join(ROOT, 'install')
+URDF_DIR = os.path.join(ROOT, 'src', 'freejoint_description', 'urdf')
+FOUR_LINK = os.path.join(URDF_DIR, 'four_link_arm.urdf')
+NODES = {
+    'sim': ('freejoint_sim', 'sim_node'),
+    'controller': ('freejoint_control', 'controller_node'),
+}
+
+
+def _four_link(edit=None):
+    with open(FOUR_LINK) as f:
+        text = f.read()
+    return edit(text) if edit else text
+
+
+def _joint2(attr_old, attr_new):
+    """Edit the joint2 element of the 4-link URDF (its first occurrence of ``attr_old``)."""
+    def edit(text):
+        start = text.index('<joint name="joint2"')
+        end = text.index('</joint>', start)
+        block = text[start:end]
+        assert attr_old in block
+        return text[:start] + block.replace(attr_old, attr_new, 1) + text[end:]
+    return edit
+
+
+def _no_inertial(text):
+    start = text.index('<link name="link2">')
+    i0 = text.index('<inertial>', start)
+    i1 = text.index('</inertial>', i0) + len('</inertial>')
+    return text[:i0] + text[i1:]
+
+
+REFUSALS = [
+    # id, URDF edit, passive_joints, parameter named, what the line says after it
+    ('prismatic', _joint2('type="revolute"', 'type="prismatic"'), '[joint1]',
+     'robot_description', "joint 'joint2': type 'prismatic' is not supported"),
+    ('axis_not_parallel', _joint2('<axis xyz="0 0 1"/>', '<axis xyz="1 0 0"/>'), '[joint1]',
+     'robot_description', "joint 'joint2': axis (1 0 0) is not parallel to z"),
+    ('floating', _joint2('type="revolute"', 'type="floating"'), '[joint1]',
+     'robot_description', "joint 'joint2': type 'floating' is not supported"),
+    ('missing_inertial', _no_inertial, '[joint1]',
+     'robot_description', "link 'link2' has no <inertial>"),
+    ('one_active_left', None, '[joint1, joint2, joint3]',
+     'passive_joints', '3 passive of 4 joints leaves 1 active; the task (x, y) needs at '
+     'least 2'),
+    ('unknown_passive_name', None, '[elbow]',
+     'passive_joints', "'elbow' is not a revolute joint of the URDF"),
+]
+
+
+def _run(pkg, exe, args):
+    done = subprocess.run([os.path.join(INSTALL, pkg, 'lib', pkg, exe), '--ros-args', *args],
+                          capture_output=True, text=True, timeout=120)
+    return done.returncode, done.stdout + done.stderr
+
+
+@pytest.mark.parametrize('node', sorted(NODES))
+@pytest.mark.parametrize('case, edit, passive, param, reason', REFUSALS,
+                         ids=[row[0] for row in REFUSALS])
+def test_an_arm_the_core_cannot_model_ends_the_node_with_one_line_naming_it_and_exit_2(
+        node, case, edit, passive, param, reason, tmp_path):
+    path = tmp_path / ('%s.urdf' % case)
+    path.write_text(_four_link(edit))
+    code, out = _run(*NODES[node], ['-p', 'description_file:=%s' % path,
+                                    '-p', 'passive_joints:=%s' % passive])
+    assert code == 2, 'exit %s, expected 2:\n%s' % (code, out)
+    assert 'Traceback' not in out, out
+    fatal = [line for line in out.splitlines() if 'FATAL' in line]
+    assert len(fatal) == 1, out
+    assert re.search(r'bad parameter: %s: .*%s' % (param, re.escape(reason)), fatal[0]), \
+        fatal[0]
+
+
+def test_a_description_file_that_cannot_be_read_is_named_and_exit_2():
+    code, out = _run('freejoint_sim', 'sim_node',
+                     ['-p', 'description_file:=/nonexistent/arm.urdf'])
+    assert code == 2, out
+    fatal = [line for line in out.splitlines() if 'FATAL' in line]
+    assert len(fatal) == 1 and "bad parameter: description_file: cannot read " \
+        "'/nonexistent/arm.urdf'" in fatal[0], out
+
+
+def test_robot_description_text_from_a_parameter_file_is_taken_as_the_arm(tmp_path):
+    # The way controller_manager / robot_state_publisher get it: the URDF text as a
+    # parameter (here from a parameter file); the controller refuses the default effort
+    # limits (two values) for the arm's three active joints, naming them from the URDF.
+    text = _four_link()
+    params = tmp_path / 'arm.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    passive_joints: [joint1]\n'
+                      '    robot_description: |\n%s\n'
+                      % '\n'.join('      ' + line for line in text.splitlines()))
+    code, out = _run('freejoint_control', 'controller_node', ['--params-file', str(params)])
+    assert code == 2, out
+    assert "bad parameter: effort_limits: expected 3 values in (0, 1e6] N m (one per joint " \
+        "of joints ['joint2', 'joint3', 'joint4'])" in out, out
