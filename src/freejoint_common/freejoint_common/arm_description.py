@@ -21,16 +21,20 @@ model with one line naming the problem. :func:`resolve_arm` is plain Python (no 
 
 from dataclasses import dataclass
 import math
+import os
 
 from freejoint_common.node_tools import Spec
 from freejoint_core.arm import ArmParams, table1
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.urdf import GRAVITY_BY_CASE, load_urdf, parse_urdf, shipped_urdf_path
+from freejoint_core.urdf import GRAVITY_BY_CASE, load_urdf, parse_urdf, SHIPPED
+from freejoint_core.urdf import shipped_urdf_path
 
 PAPER_JOINTS = ('joint1', 'joint2', 'joint3')
 """Joint names of the paper's arm (``paper_arm.urdf``), base to tip."""
 PAPER_PASSIVE = ['joint3']
 """Passive joint of the paper's arm: the default of ``passive_joints``."""
+PACKAGE_SCHEME = 'package://'
+"""Prefix of a path in a ROS package's share directory (``package://<pkg>/<path>``)."""
 NO_GRAVITY = [0.0, 0.0, 0.0]
 """Default of ``gravity``: take the vector of ``case``."""
 
@@ -41,9 +45,10 @@ ARM_SPECS = (
          "end-effector joint (freejoint_core.urdf); '' = description_file, or the paper's "
          'Table I arm if that is empty too', read_only=True),
     Spec('description_file', '',
-         "path of the arm's URDF, read at start-up (when robot_description is empty); the "
-         'shipped ones are share/freejoint_description/urdf/paper_arm.urdf and '
-         'four_link_arm.urdf', read_only=True),
+         "path of the arm's URDF, read at start-up (when robot_description is empty); "
+         'package://<pkg>/<path> is share/<pkg>/<path> (the shipped ones: '
+         'package://freejoint_description/urdf/paper_arm.urdf, four_link_arm.urdf)',
+         read_only=True),
     Spec('passive_joints', list(PAPER_PASSIVE),
          'names of the passive (free, unactuated) joints of the arm; at least two joints '
          "stay active (the task is the end effector's x, y); the paper's arm: joint3",
@@ -154,7 +159,7 @@ def resolve_arm(values):
         arm = parse_urdf(text, passive, gravity)
         source = f'robot_description ({arm.name})'
     elif path:
-        arm = load_urdf(path, passive, gravity)
+        arm = load_urdf(package_path(path), passive, gravity)
         source = f'description_file {path}'
     else:
         arm = parse_urdf(_paper_text(), passive, gravity)
@@ -163,6 +168,36 @@ def resolve_arm(values):
     return NodeArm(params=arm.params, joint_names=arm.joint_names, active_names=active,
                    urdf_arm=arm, source='%s, passive %s, gravity (%s)' % (
                        source, list(arm.passive_joints), ' '.join('%g' % g for g in gravity)))
+
+
+def package_path(path):
+    """
+    Return the file a ``description_file`` names (``package://<pkg>/<path>`` resolved).
+
+    ``package://<pkg>/<path>`` (the ROS URDF convention) is ``share/<pkg>/<path>`` of the
+    first prefix of ``AMENT_PREFIX_PATH`` that has it; the shipped descriptions
+    (``package://freejoint_description/urdf/<name>.urdf``) are also found in the source
+    tree (the PyPI install). Any other path is returned as given.
+
+    Raises
+    ------
+    FreejointValueError
+        ``description_file: ...`` if a ``package://`` path is not found.
+
+    """
+    if not path.startswith(PACKAGE_SCHEME):
+        return path
+    pkg, _, rest = path[len(PACKAGE_SCHEME):].partition('/')
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        candidate = os.path.join(prefix, 'share', pkg, rest)
+        if prefix and os.path.isfile(candidate):
+            return candidate
+    name = os.path.basename(rest)[:-len('.urdf')]
+    if pkg == 'freejoint_description' and rest == 'urdf/%s.urdf' % name and name in SHIPPED:
+        return shipped_urdf_path(name)
+    raise FreejointValueError(
+        f'description_file: {path} not found (share/{pkg}/{rest} of no prefix of '
+        f'AMENT_PREFIX_PATH)')
 
 
 def _paper_text():
