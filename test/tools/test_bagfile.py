@@ -92,10 +92,10 @@ def test_open_bag_reads_topics_messages_and_run_info_in_file_order(tmp_path, mak
     assert bag.custom_data == {'case': 'horizontal', 'variant': 'robust'}
     assert {n: t.count for n, t in bag.topics.items()} == {
         n: len(m) for n, m in written.items()}
-    order = [name for name, _, _, _ in bag.messages]
+    order = [name for name, _, _, _ in bag.messages()]
     assert order[:2] == ['/semi_singular_map', '/planned_path']
     assert order[2:6] == ['/clock', '/joint_states', '/setpoint', '/controller_state']
-    got = [data for name, _, _, data in bag.messages if name == '/setpoint']
+    got = [data for name, _, _, data in bag.messages() if name == '/setpoint']
     assert got == [serialize_message(m) for m in written['/setpoint']]
 
 

@@ -84,7 +84,7 @@ def test_recorder_holds_every_message_of_a_1khz_lockstep_like_run(procs, wait, t
     assert bag.finalised, bag.notes
     for topic, sent in published.items():           # counts and the last message, exactly
         assert bag.topics[topic].count == sent['count'], topic
-        last = [data for name, _, _, data in bag.messages if name == topic][-1]
+        last = [data for name, _, _, data in bag.messages() if name == topic][-1]
         # (the wire form may carry trailing CDR padding the in-process form lacks)
         msg_type = message_class(bag.topics[topic].type)
         assert deserialize_message(last, msg_type) == \
@@ -110,7 +110,7 @@ def test_recorder_holds_every_message_of_a_1khz_lockstep_like_run(procs, wait, t
     assert [list(s.theta_hat) for s in states] == [list(t[2].theta_hat) for t in ticks]
 
     # log times are sim time (use_sim_time): the stamps' time base, not the wall clock
-    log_times = [t for name, t, _, _ in bag.messages if name == '/joint_states']
+    log_times = [t for name, t, _, _ in bag.messages() if name == '/joint_states']
     assert log_times == sorted(log_times)
     assert 1_900_000_000 <= log_times[-1] <= 1_999_000_000
 
@@ -186,7 +186,7 @@ def _tick_sequence(bag):
     from freejoint_tools.typedefs import message_class
     from rclpy.serialization import deserialize_message
     out = []
-    for name, log_time, _, data in bag.messages:
+    for name, log_time, _, data in bag.messages():
         if name == '/clock':
             t_ns = clock_ns(data)
         elif name in TICK_TOPICS:

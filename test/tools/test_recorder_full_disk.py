@@ -70,7 +70,7 @@ def test_writer_on_a_full_disk_counts_what_did_not_reach_the_file_and_finalises(
     listed = {t['topic_metadata']['name']: t['message_count']
               for t in info['topics_with_message_count']}
     for name, channel in topics.items():
-        in_file = [data for topic, _, _, data in bag.messages if topic == name]
+        in_file = [data for topic, _, _, data in bag.messages() if topic == name]
         assert 1000 < len(in_file) < 20000
         assert in_file == sent[name][:len(in_file)]          # what is there, in order
         assert writer.count(channel) == len(in_file) == listed[name]

@@ -77,7 +77,7 @@ def _read_everywhere(path):
         stream.close()
     bag = open_bag(path)
     assert bag.finalised, bag.notes
-    by_own = [(name, t, data) for name, t, _, data in bag.messages]
+    by_own = [(name, t, data) for name, t, _, data in bag.messages()]
     assert by_summary == by_stream == by_own
     assert sorted(by_rosbags, key=lambda m: m[1]) == sorted(by_own, key=lambda m: m[1])
     return by_own
@@ -96,7 +96,7 @@ def test_reindex_of_a_killed_bag_gives_every_flushed_chunk_to_every_reader(
     from freejoint_tools.reindex import reindex
     path = str(tmp_path / 'killed')
     _killed_bag(make_bag, path, ticks=250)     # ticks 200..249 never left the writer
-    before = [(n, t, d) for n, t, _, d in open_bag(path).messages]
+    before = [(n, t, d) for n, t, _, d in open_bag(path).messages()]
     assert not os.path.exists(os.path.join(path, 'metadata.yaml'))
     report = reindex(path)
     assert 'summary rebuilt from 2 complete chunk(s)' in report and 'cut off' not in report
@@ -188,6 +188,6 @@ def test_sigkill_then_reindex_gives_a_bag_rosbags_and_mcap_read(procs, wait, tmp
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith(bag_path + ': %d messages' % before.message_count)
     after = _read_everywhere(bag_path)
-    assert after == [(n, t, d) for n, t, _, d in before.messages]
+    assert after == [(n, t, d) for n, t, _, d in before.messages()]
     assert sum(1 for n, _, _ in after if n == '/joint_states') > 200
     assert not [f for f in os.listdir(bag_path) if f.endswith('.reserve')]

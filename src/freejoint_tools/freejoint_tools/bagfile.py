@@ -37,7 +37,6 @@ and writes the summary of the complete records in place (:func:`finalise_mcap`) 
 """
 
 import errno
-import io
 import os
 import struct
 import zlib
@@ -45,6 +44,7 @@ import zlib
 from mcap.data_stream import ReadDataStream, RecordBuilder
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
+from mcap.reader import make_reader, NonSeekingReader
 from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message,
                           MessageIndex, Metadata, MetadataIndex, Schema, Statistics,
                           SummaryOffset)
@@ -507,7 +507,7 @@ class Topic:
 
 class Bag:
     """
-    A bag read by :func:`open_bag` (all messages in memory, in file order).
+    A bag opened by :func:`open_bag`: its topics and counts; the messages read on demand.
 
     Attributes
     ----------
@@ -525,8 +525,6 @@ class Bag:
         Run information (metadata.yaml ``custom_data``, else the MCAP run record).
     topics : dict of str to Topic
         By topic name.
-    messages : list of tuple
-        ``(topic name, log_time ns, publish_time ns, data bytes)`` in file order.
 
     """
 
@@ -538,16 +536,41 @@ class Bag:
         self.metadata = None
         self.custom_data = {}
         self.topics = {}
-        self.messages = []
+        self._sources = []
 
     @property
     def message_count(self):
         """Return the number of readable messages."""
-        return len(self.messages)
+        return sum(t.count for t in self.topics.values())
 
     def topics_of_type(self, msgtype):
         """Return the names of the topics of type ``msgtype``, sorted."""
         return sorted(n for n, t in self.topics.items() if t.type == msgtype)
+
+    def messages(self, topics=None):
+        """
+        Yield the messages in file order, one chunk in memory at a time.
+
+        Parameters
+        ----------
+        topics : str or iterable of str, optional
+            Only these topics (default: all); chunks without them are not read.
+
+        Yields
+        ------
+        tuple
+            ``(topic name, log_time ns, publish_time ns, data bytes)``.
+
+        Raises
+        ------
+        BagError
+            Naming the file, if a chunk cannot be read (a CRC mismatch, a damaged record).
+
+        """
+        wanted = None if topics is None else (
+            {topics} if isinstance(topics, str) else set(topics))
+        for source in self._sources:
+            yield from source.messages(wanted)
 
     def typestore(self):
         """
@@ -583,110 +606,177 @@ class Bag:
         store = store or self.typestore()
         msgtype = self.topics[topic].type
         out = []
-        for name, log_time, _, data in self.messages:
-            if name == topic:
-                try:
-                    out.append((log_time, store.deserialize_cdr(data, msgtype)))
-                except Exception as exc:  # malformed CDR raises various errors
-                    raise BagError(self.files[0], 'message %d of %s does not decode as %s: %s'
-                                   % (len(out), topic, msgtype, exc))
+        for _, log_time, _, data in self.messages(topic):
+            try:
+                out.append((log_time, store.deserialize_cdr(data, msgtype)))
+            except Exception as exc:  # malformed CDR raises various errors
+                raise BagError(self.files[0], 'message %d of %s does not decode as %s: %s'
+                               % (len(out), topic, msgtype, exc))
         return out
 
 
-_RECORDS = {
-    Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
-    Opcode.METADATA: Metadata, Opcode.DATA_END: DataEnd, Opcode.FOOTER: Footer,
-    Opcode.STATISTICS: Statistics, Opcode.CHUNK: Chunk,
-}
+_READ_ERRORS = (McapError, struct.error, ValueError, UnicodeDecodeError, KeyError, EOFError)
 
 
-class _Scan:
-    """What one pass over an MCAP file found."""
+class _McapFile:
+    """
+    The readable part of one MCAP file: its channels and its complete chunks.
 
-    def __init__(self):
-        self.header = None
-        self.schemas = {}
-        self.channels = {}
-        self.messages = []          # (channel id, log_time, publish_time, data)
-        self.metadata = {}
-        self.statistics = None
-        self.footer = False
-        self.truncated_at = None    # byte offset of the first incomplete record
-        self.size = 0
+    ``chunks`` are ``(chunk start offset, channel ids in it or None: unknown)`` in file
+    order: from the chunk indexes of the summary (finalised file), or from what
+    :func:`scan_mcap` found up to where the file is cut; None: a finalised file without
+    chunks (every message in the data section), read through with mcap's stream reader.
+    """
+
+    def __init__(self, path, topics, chunks):
+        self.path = path
+        self.topics = topics            # channel id -> topic name
+        self.chunks = chunks
+
+    def messages(self, wanted):
+        ids = None if wanted is None else {c for c, t in self.topics.items() if t in wanted}
+        if ids is not None and not ids:
+            return
+        try:
+            with open(self.path, 'rb') as fh:
+                if self.chunks is None:
+                    for _, channel, msg in NonSeekingReader(fh, validate_crcs=True) \
+                            .iter_messages(wanted, log_time_order=False):
+                        yield channel.topic, msg.log_time, msg.publish_time, bytes(msg.data)
+                    return
+                for start, channels in self.chunks:
+                    if ids is not None and channels is not None and ids.isdisjoint(channels):
+                        continue
+                    fh.seek(start + 9)                          # opcode, record length
+                    chunk = Chunk.read(ReadDataStream(fh))
+                    for record in breakup_chunk(chunk, validate_crc=True):
+                        if type(record) is Message and (ids is None or
+                                                        record.channel_id in ids):
+                            yield (self.topics[record.channel_id], record.log_time,
+                                   record.publish_time, bytes(record.data))
+        except OSError as exc:
+            raise BagError(self.path, 'cannot read: %s' % (exc.strerror or exc))
+        except _READ_ERRORS as exc:
+            raise BagError(self.path, 'corrupt MCAP data: %s'
+                           % (str(exc).splitlines()[0] if str(exc) else type(exc).__name__))
 
 
-def _parse(opcode, body):
-    stream = ReadDataStream(io.BytesIO(body))
-    if opcode == Opcode.MESSAGE:
-        return Message.read(stream, len(body))
-    cls = _RECORDS.get(opcode)
-    return cls.read(stream) if cls else None
-
-
-def _take(scan, record):
-    if isinstance(record, Schema):
-        scan.schemas[record.id] = record
-    elif isinstance(record, Channel):
-        scan.channels[record.id] = record
-    elif isinstance(record, Message):
-        scan.messages.append((record.channel_id, record.log_time, record.publish_time,
-                              bytes(record.data)))
-    elif isinstance(record, Metadata):
-        scan.metadata[record.name] = dict(record.metadata)
-    elif isinstance(record, Statistics):
-        scan.statistics = record
-    elif isinstance(record, Header):
-        scan.header = record
-
-
-def _scan_mcap(path):
-    """Read every complete record of an MCAP file in order; note where it is cut short."""
-    scan = _Scan()
+def _check_magic(path):
     try:
-        scan.size = os.path.getsize(path)
-        fh = open(path, 'rb')
+        with open(path, 'rb') as fh:
+            if fh.read(len(MAGIC)) != MAGIC:
+                raise BagError(path, 'not an MCAP file (no MCAP magic at the start)')
     except OSError as exc:
         raise BagError(path, 'cannot read: %s' % exc.strerror)
-    with fh:
-        if fh.read(8) != MAGIC:
-            raise BagError(path, 'not an MCAP file (no MCAP magic at the start)')
-        offset = 8
-        while True:
-            head = fh.read(9)
-            if not head:
-                break                                   # ends on a record boundary
-            if len(head) < 9:
-                scan.truncated_at = offset
-                break
-            opcode, length = struct.unpack('<BQ', head)
-            if length > scan.size - offset - 9:
-                scan.truncated_at = offset
-                break
-            body = fh.read(length)
-            try:
-                record = _parse(opcode, body)
-                if isinstance(record, Chunk):
-                    for inner in breakup_chunk(record, validate_crc=True):
-                        _take(scan, inner)
-                else:
-                    _take(scan, record)
-            except (McapError, struct.error, UnicodeDecodeError, ValueError, KeyError) as exc:
-                raise BagError(path, 'corrupt MCAP record (opcode 0x%02x) at byte %d: %s'
-                               % (opcode, offset, str(exc) or type(exc).__name__))
-            if scan.header is None:
-                raise BagError(path, 'not an MCAP file (first record is not a header)')
-            offset += 9 + length
-            if isinstance(record, Footer):
-                scan.footer = fh.read(8) == MAGIC
-                if not scan.footer:
-                    scan.truncated_at = offset
-                break
-    if scan.header is None:
-        raise BagError(path, 'MCAP file cut short before its header (%d bytes)' % scan.size)
-    if scan.header.profile != 'ros2':
+
+
+def _read_summary(path):
+    """
+    Return ``(header, summary, run record or None)`` of a finalised MCAP file.
+
+    With mcap's indexed reader (``make_reader``: footer, summary, metadata index). Raise
+    BagError naming where the file is cut short if it has no readable summary.
+    """
+    try:
+        with open(path, 'rb') as fh:
+            reader = make_reader(fh, validate_crcs=True)
+            header = reader.get_header()
+            summary = reader.get_summary()
+            if summary is not None:
+                run = [dict(m.metadata) for m in reader.iter_metadata()
+                       if m.name == RUN_RECORD]
+                return header, summary, run[0] if run else None
+    except OSError as exc:
+        raise BagError(path, 'cannot read: %s' % exc.strerror)
+    except _READ_ERRORS:
+        pass
+    contents = scan_mcap(path)
+    raise BagError(path, 'truncated at byte %d of %d (the bag claims to be finalised)'
+                   % (contents.end, contents.size))
+
+
+def _add_topic(bag, topic_name, schema, channel, count):
+    topic = bag.topics.get(topic_name)
+    if topic is None:
+        topic = bag.topics[topic_name] = Topic(
+            topic_name, schema.name if schema else '',
+            schema.data.decode('utf-8', 'replace') if schema else '',
+            channel.metadata.get('topic_type_hash', ''),
+            _qos_list(channel.metadata.get('offered_qos_profiles', '')))
+    topic.count += count
+
+
+def _open_finalised(bag, path):
+    """Add a finalised MCAP file to ``bag``: topics and counts from its summary."""
+    header, summary, run = _read_summary(path)
+    _check_profile(path, header)
+    counts = summary.statistics.channel_message_counts if summary.statistics else None
+    chunks = sorted((c.chunk_start_offset, set(c.message_index_offsets) or None)
+                    for c in summary.chunk_indexes) or None
+    topics = {}
+    for cid, channel in summary.channels.items():
+        schema = summary.schemas.get(channel.schema_id)
+        if channel.schema_id and schema is None:
+            raise BagError(path, 'channel %s has no schema' % channel.topic)
+        topics[cid] = channel.topic
+        _add_topic(bag, channel.topic, schema, channel, 0)
+    source = _McapFile(path, topics, chunks)
+    if counts is None:                       # no statistics: count them
+        for name, _, _, _ in source.messages(None):
+            bag.topics[name].count += 1
+    else:
+        for cid, n in counts.items():
+            if cid not in topics:
+                raise BagError(path, 'statistics count messages on unknown channel %d' % cid)
+            bag.topics[topics[cid]].count += n
+    if run is not None:
+        bag.custom_data.update(run)
+    bag._sources.append(source)
+
+
+def _open_cut(bag, path):
+    """
+    Add an MCAP file without summary to ``bag``: its complete chunks (mcap's StreamReader).
+
+    The last chunk counts too if the file ends in its message indexes (the chunk itself is
+    whole and its CRC checked; reindex cuts it off, the indexed readers need the indexes).
+    """
+    contents = scan_mcap(path)
+    _check_profile(path, contents.header)
+    schemas, channels = dict(contents.schemas), dict(contents.channels)
+    counts = dict(contents.counts)
+    chunks = [(c.chunk_start_offset, set(c.message_index_offsets) or None)
+              for c in contents.chunk_indexes]
+    end = contents.end
+    tail = contents.tail
+    if tail is not None:
+        for record in tail.records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+        chunks.append((tail.index.chunk_start_offset, tail.channels))
+        end = tail.end
+    topics = {}
+    for cid, channel in sorted(channels.items()):
+        topics[cid] = channel.topic
+        _add_topic(bag, channel.topic, schemas.get(channel.schema_id), channel,
+                   counts.get(cid, 0))
+    bag.custom_data.update(contents.run_record())
+    bag._sources.append(_McapFile(path, topics, chunks))
+    if not contents.finalised:
+        bag.finalised = False
+        bag.notes.append('%s: not finalised (recorder stopped without closing the bag?); '
+                         'read %d messages up to byte %d of %d'
+                         % (path, sum(counts.values()), end, contents.size))
+
+
+def _check_profile(path, header):
+    if header.profile != 'ros2':
         raise BagError(path, "MCAP profile is %r, not 'ros2' (not a ROS 2 bag)"
-                       % scan.header.profile)
-    return scan
+                       % header.profile)
 
 
 def _load_metadata(path):
@@ -726,11 +816,14 @@ def _qos_list(text):
 
 def open_bag(path):
     """
-    Read a rosbag2 bag with MCAP storage (a directory, or one of its ``.mcap`` files).
+    Open a rosbag2 bag with MCAP storage (a directory, or one of its ``.mcap`` files).
 
-    A finalised bag (metadata.yaml, MCAP summary) must agree with its metadata. A bag
-    without metadata.yaml (its recorder was killed) is read up to the last complete
-    record of its MCAP file; ``finalised`` is False and ``notes`` says so.
+    Only the summaries are read here; :meth:`Bag.messages` and :meth:`Bag.decode` read
+    the messages chunk by chunk. A finalised bag (metadata.yaml, MCAP summary) is read
+    with mcap's indexed reader and must agree with its metadata. A bag without
+    metadata.yaml (its recorder was killed) is read with mcap's StreamReader up to its last
+    complete chunk (a chunk with all its message indexes, what :func:`scan_mcap` keeps);
+    ``finalised`` is False and ``notes`` says so.
 
     Returns
     -------
@@ -763,40 +856,12 @@ def open_bag(path):
             raise BagError(path, 'not a rosbag2 bag (no metadata.yaml and no .mcap file)')
         bag.finalised = False
     bag.files = files
-    by_channel = {}
     for f in files:
-        scan = _scan_mcap(f)
-        if bag.metadata is not None and (scan.truncated_at is not None or not scan.footer):
-            raise BagError(f, 'truncated at byte %d of %d (the bag claims to be finalised)'
-                           % (scan.truncated_at or scan.size, scan.size))
-        if scan.truncated_at is not None or not scan.footer:
-            bag.finalised = False
-            bag.notes.append('%s: not finalised (recorder stopped without closing the bag?); '
-                             'read %d messages up to byte %d of %d'
-                             % (f, len(scan.messages), scan.truncated_at or scan.size,
-                                scan.size))
-        if RUN_RECORD in scan.metadata:
-            bag.custom_data.update(scan.metadata[RUN_RECORD])
-        for cid, channel in scan.channels.items():
-            schema = scan.schemas.get(channel.schema_id)
-            if channel.schema_id and schema is None:
-                raise BagError(f, 'channel %s has no schema' % channel.topic)
-            if channel.topic not in bag.topics:
-                bag.topics[channel.topic] = Topic(
-                    channel.topic, schema.name if schema else '',
-                    schema.data.decode('utf-8', 'replace') if schema else '',
-                    channel.metadata.get('topic_type_hash', ''),
-                    _qos_list(channel.metadata.get('offered_qos_profiles', '')))
-            by_channel[(f, cid)] = channel.topic
-        for cid, log_time, pub_time, data in scan.messages:
-            topic = by_channel.get((f, cid))
-            if topic is None:
-                raise BagError(f, 'message on unknown channel %d' % cid)
-            bag.topics[topic].count += 1
-            bag.messages.append((topic, log_time, pub_time, data))
-        if scan.statistics is not None and scan.statistics.message_count != len(scan.messages):
-            raise BagError(f, 'holds %d messages, its statistics say %d'
-                           % (len(scan.messages), scan.statistics.message_count))
+        _check_magic(f)
+        if bag.metadata is not None:
+            _open_finalised(bag, f)
+        else:
+            _open_cut(bag, f)
     if bag.metadata is not None:
         bag.custom_data.update(bag.metadata.get('custom_data') or {})
         _check_counts(bag, meta_path)
@@ -843,6 +908,9 @@ class McapContents:
         File size (bytes).
     finalised : bool
         The file has its summary and footer.
+    tail : _PendingChunk or None
+        The last chunk if the file ends in its message indexes (whole, CRC checked, but
+        not counted above: an indexed reader needs its indexes).
 
     """
 
@@ -858,6 +926,7 @@ class McapContents:
         self.end = len(MAGIC)
         self.size = 0
         self.finalised = False
+        self.tail = None
 
     @property
     def message_count(self):
@@ -1002,8 +1071,11 @@ def scan_mcap(path):
             elif isinstance(record, Channel):
                 contents.channels[record.id] = record
                 contents.end = pos
-        if pending is not None and pending.complete():
-            _accept_chunk(contents, pending)
+        if pending is not None:
+            if pending.complete():
+                _accept_chunk(contents, pending)
+            else:
+                contents.tail = pending
     if contents.header is None:
         raise BagError(path, 'MCAP file cut short before its header (%d bytes)' % contents.size)
     return contents

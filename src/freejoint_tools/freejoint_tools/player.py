@@ -137,15 +137,11 @@ class Player(Node, Lifecycle):
         """Publish the bag's messages paced by their log times; return the count."""
         rate = self._params['rate']
         time.sleep(self._params['start_delay'])
-        selected = [m for m in self.bag.messages if m[0] in self._pubs]
-        if not selected:
-            self.get_logger().warning('nothing to play')
-            return 0
-        t0 = selected[0][1]
-        wall0 = time.monotonic()
-        last_clock = None
-        due_ns = 0
-        for name, log_time, _, data in selected:
+        t0 = wall0 = last_clock = None
+        due_ns = played = 0
+        for name, log_time, _, data in self.bag.messages(self._pubs):
+            if t0 is None:
+                t0, wall0 = log_time, time.monotonic()
             due_ns = max(due_ns, log_time - t0)
             wait = wall0 + due_ns * 1e-9 / rate - time.monotonic()
             if wait > 0:
@@ -157,7 +153,10 @@ class Player(Node, Lifecycle):
                 last_clock = log_time
             self._pubs[name].publish(data)
             self.played[name] += 1
-        return len(selected)
+            played += 1
+        if not played:
+            self.get_logger().warning('nothing to play')
+        return played
 
     def finish(self):
         """Wait (bounded) until reliable subscribers acknowledged everything; log counts."""
