@@ -5,9 +5,8 @@ What a component container does for rclcpp nodes, for the graph's rclpy nodes: t
 node classes, names, parameters, topics and services as ``sim_node``, ``controller_node``
 and ``planner_node`` started one by one (docs/GRAPH.md holds for both), but the messages
 between them take Fast DDS's intra-process path in the publishing thread: no
-shared-memory hand-over and no wake-up of another process per message. On the 2-core
-bench machine the lockstep graph with the recorder runs about 1.2-1.5x faster this way
-(docs/performance.md). Nodes of other processes (recorder, RViz, a second controller)
+shared-memory hand-over and no wake-up of another process per message (the figures:
+docs/performance.md). Nodes of other processes (recorder, RViz, a second controller)
 see the same graph.
 
 Usage (``ros2 run freejoint_bringup graph``): ``graph --sim-params config/sim.yaml

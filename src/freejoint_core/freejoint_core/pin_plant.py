@@ -6,8 +6,8 @@ same forcing (torque and one disturbance draw held per control period, the same
 ``numpy.random.default_rng(seed)`` draws), the same classic RK4 at ``dt_sub``, with
 ``qdd = aba(q, qd, tau)`` from :class:`freejoint_core.pin_model.PinArmModel` instead
 of the core's numpy ``ArmModel.forward_dynamics``.  For arms without the scalar
-3-link kernel (n != 3) it is the fast RK4 engine: the general numpy path costs
-milliseconds per period (``bench/core_urdf.py``).
+3-link kernel (n != 3) it is the fast RK4 engine (``bench/core_urdf.py`` prints both
+engines' cost per period).
 """
 
 from freejoint_core.errors import FreejointValueError

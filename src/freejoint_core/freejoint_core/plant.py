@@ -13,13 +13,9 @@ Disturbance: ``rng = numpy.random.default_rng(seed)``; every ``step`` draws
 so ``|d_i| <= dist_bound`` (Section 4: 0.5 N m).  ``dist_bound = 0`` disables
 it and no draw is made.
 
-Step size: ``DEFAULT_DT_SUB`` = 0.5 ms (two RK4 sub-steps per 1 ms period,
-~16-22 us per period for the 3-link arm).  Measured with
-``bench/core_law_plant.py`` against a 10x finer step over 5 s: the robust
-closed loop on the paper's circle (70 % nominal, disturbance, q3(0) = 120 deg)
-changes its tracking error by at most 5e-8 mm (vertical; 5e-11 mm
-horizontal), versus 1e-6 mm at dt_sub = 1 ms; a free swing with disturbance
-(vertical, no torque, chaotic) ends 2e-5 rad apart (3e-4 rad at 1 ms).
+Step size: ``DEFAULT_DT_SUB`` = 0.5 ms, two RK4 sub-steps per 1 ms period
+(``bench/core_law_plant.py`` compares it with a 10x finer step; the figures are in
+docs/performance.md).
 """
 
 import math
@@ -226,7 +222,7 @@ class Plant(PeriodPlant):
         Initial joint angles [rad] and velocities [rad/s]; zeros if None.
     use_fast : bool
         Integrate with the scalar 3-link kernel when n == 3 (default); False
-        forces the general numpy model (reference, ~30x slower).
+        forces the general numpy model (the slower reference).
 
     Attributes
     ----------

@@ -324,7 +324,7 @@ def det_map(nominal_params, resolution_deg=1.0, method='auto'):
         the map has 1440 x 1440 samples.
     method : {'auto', 'closed_form', 'general'}
         'closed_form' (needs ``passive == (2,)``; array passes only),
-        'general' (batched 3 x 3 solves, any passive joint, ~50x slower),
+        'general' (batched 3 x 3 solves, any passive joint, slower),
         'auto' picks the closed form when it applies.
 
     Returns

@@ -467,7 +467,7 @@ class SimNode(Node, Lifecycle):
         absolute grid: no drift), then integrates what is due and publishes. A thread
         instead of an executor timer: the state goes out on time even while the executor
         thread takes a command, parameters or a service call, and each period costs one
-        wake-up (the timer cost two and fired up to 0.8 ms late at p99 under load). The
+        wake-up (a timer costs two and fires late under load: docs/performance.md). The
         thread inherits the process's ``thread_priority``; an unexpected error is logged
         (throttled) and stepping goes on.
         """
