@@ -343,23 +343,6 @@ class ArmModel:
         w2 = self._L * w * w
         return np.array([-(w2 @ np.cos(phi)), -(w2 @ np.sin(phi))])
 
-    def com_jacobians(self, q):
-        """
-        Linear Jacobians of the link centres of mass.
-
-        Parameters
-        ----------
-        q : array_like, (n,)
-            Joint angles [rad].
-
-        Returns
-        -------
-        numpy.ndarray, (n, 2, n)
-            ``Jv[i]`` maps qd to the COM velocity of link i [m/s].
-
-        """
-        return self._com_jacobians(self._phi(self._q(q)))
-
     def _com_jacobians(self, phi):
         n = self.n
         s, c = np.sin(phi), np.cos(phi)
