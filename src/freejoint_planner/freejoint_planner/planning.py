@@ -1,8 +1,10 @@
 """
 The planner's configuration, singularity map and path check (plain Python, no ROS).
 
-The math is ``freejoint_core``'s: ``singularity.det_map`` / ``semi_singular`` /
-``check_path`` (paper, Sec. 3.2) on the nominal arm ``table1(case).scaled(nominal_scale)``
+The math is ``freejoint_core``'s: ``singularity_nlink.arm_region`` (the paper's 3-link map
+``singularity.det_map`` / ``semi_singular`` for the paper's arm, the general batched map for
+any other planar arm) and ``singularity.check_path`` (paper, Sec. 3.2) on the nominal arm
+``table1(case).scaled(nominal_scale)``
 and ``trajectory.CircleQuintic``. This module only validates the node's parameter values,
 bundles the map with what was computed from it, and samples a circle densely enough for
 ``check_path``.
@@ -14,7 +16,8 @@ import time
 
 from freejoint_core.arm import CASES, table1
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.singularity import check_path, det_map, semi_singular
+from freejoint_core.singularity import check_path
+from freejoint_core.singularity_nlink import arm_region
 from freejoint_core.trajectory import circle_peaks, CircleQuintic, plan_transition
 from freejoint_core.trajectory import transition_limits
 import numpy as np
@@ -204,7 +207,7 @@ class SingularityModel:
     nominal : ArmParams
         ``table1(case).scaled(nominal_scale)``.
     region : SemiSingularRegion
-        ``semi_singular(det_map(nominal, resolution_deg), eps_d)``.
+        ``arm_region(nominal, resolution_deg, eps_d)`` (``freejoint_core.singularity_nlink``).
     seconds : float
         Wall time the computation took (s).
 
@@ -258,7 +261,7 @@ def compute_model(case, nominal_scale, resolution_deg, eps_d):
     """
     start = time.perf_counter()
     nominal = table1(case).scaled(nominal_scale)
-    region = semi_singular(det_map(nominal, resolution_deg), eps_d)
+    region = arm_region(nominal, resolution_deg, eps_d)   # any planar arm; paper: closed form
     return SingularityModel(case=case, nominal_scale=float(nominal_scale),
                             resolution_deg=float(resolution_deg), eps_d=float(eps_d),
                             nominal=nominal, region=region,

@@ -5,7 +5,8 @@ from freejoint_core.arm import table1
 from freejoint_core.singularity import det_map, semi_singular
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_planner.planning import circle_bounds, circle_check_points, compute_model
-from freejoint_planner.planning import grid_bound, grid_extent, make_circle, validate
+from freejoint_planner.planning import grid_bound, grid_extent, make_circle, SingularityModel
+from freejoint_planner.planning import validate
 import numpy as np
 import pytest
 
@@ -89,6 +90,20 @@ def test_model_is_the_core_region_of_the_nominal_arm(model):
     assert np.array_equal(model.region.intervals, ref.intervals)
     assert model.region.reach == (0.0, 1.5)
     assert model.seconds > 0.0
+
+
+def test_a_four_link_arm_model_takes_the_general_map_and_checks_circles_by_it():
+    # the planner's check on another arm: SingularityModel over the core's arm_region
+    from freejoint_core.singularity_nlink import arm_region
+    from freejoint_core.urdf import four_link_arm
+    nominal = four_link_arm('horizontal').nominal(0.7)
+    four = SingularityModel(case='horizontal', nominal_scale=0.7, resolution_deg=4.0,
+                            eps_d=1e-7, nominal=nominal, region=arm_region(nominal, 4.0),
+                            seconds=0.0)
+    assert four.region.singular_mask.ndim == 3           # over (q2, q3, q4)
+    assert four.region.reach == pytest.approx((0.0, 1.3))
+    check = four.check(CircleQuintic(centre=(0.0, 0.5), radius=0.02))
+    assert not check.ok and 'semi-singular annulus' in check.reason
 
 
 def test_the_paper_circle_passes_with_the_exact_radial_margin(model):
