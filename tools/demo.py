@@ -88,7 +88,7 @@ def offline_settings(config_dir=CONFIG):
         ``gains``, ``trajectory`` for ``freejoint_core.offline.run_case``.
 
     """
-    from freejoint_core.control import Gains
+    from freejoint_control.params import SCHEMA as CONTROLLER
     from freejoint_core.trajectory import CircleQuintic
     sim = _ros_params(os.path.join(config_dir, 'sim.yaml'))
     ctl = _ros_params(os.path.join(config_dir, 'controller.yaml'))
@@ -106,12 +106,7 @@ def offline_settings(config_dir=CONFIG):
         raise SystemExit('demo: sim.yaml initial_position %s is not the start of the planned '
                          'circle %s, but the offline runner starts there'
                          % (sim['initial_position'], start))
-    tau_limit = tuple(float(v) for v in ctl['effort_limits'])
-    gains = Gains(K=ctl['K'], Lam=ctl['Lambda'], R=ctl['R'], Gamma=ctl['Gamma'],
-                  sigma=ctl['sigma'], eps=ctl['epsilon'], h_form=ctl['h_form'],
-                  theta0=ctl['theta0'], robust=bool(ctl['robust']),
-                  det_threshold=ctl['det_threshold'],
-                  tau_limit=tau_limit)
+    gains = CONTROLLER.from_yaml(os.path.join(config_dir, 'controller.yaml')).gains
     return {'dt': dt, 'dt_sub': float(sim['dt_sub']), 'duration': float(plan['duration']),
             'nominal_scale': float(ctl['nominal_scale']),
             'dist_bound': float(sim['dist_bound']),

@@ -28,15 +28,15 @@ def _random_tick(rng, n):
 
 def test_default_gains_are_the_papers():
     g = Gains()
-    assert g.K == (100.0, 100.0) and g.Lam == (50.0, 50.0) and g.R == (2.0, 2.0)
+    assert g.K == (100.0, 100.0) and g.Lambda == (50.0, 50.0) and g.R == (2.0, 2.0)
     assert g.Gamma == (0.01,) * 5 and g.sigma == (0.1,) * 5 and g.theta0 == (0.0,) * 5
-    assert (g.eps, g.h_form, g.robust, g.det_threshold, g.tau_limit) == (
+    assert (g.epsilon, g.h_form, g.robust, g.det_threshold, g.tau_limit) == (
         0.1, 'sum', True, 1e-7, None)
 
 
 def test_scalar_gains_are_broadcast():
-    g = Gains(K=10, Lam=5.0, R=1.0, Gamma=0.5, sigma=0.2, theta0=1, tau_limit=3)
-    assert (g.K, g.Lam, g.R) == ((10.0, 10.0), (5.0, 5.0), (1.0, 1.0))
+    g = Gains(K=10, Lambda=5.0, R=1.0, Gamma=0.5, sigma=0.2, theta0=1, tau_limit=3)
+    assert (g.K, g.Lambda, g.R) == ((10.0, 10.0), (5.0, 5.0), (1.0, 1.0))
     assert (g.Gamma, g.sigma, g.theta0) == ((0.5,) * 5, (0.2,) * 5, (1.0,) * 5)
     assert g.tau_limit == 3.0
 
@@ -48,12 +48,12 @@ def test_scalar_gains_are_broadcast():
 def test_exact_model_without_robust_term_gives_the_linear_error_dynamics(params, use_fast):
     # nominal == real, no disturbance, robust off: pdd = b + Da tau = v, so
     # edd + (K + Lam) edot + K Lam e = 0 exactly (checked with the continuous dynamics).
-    gains = Gains(K=(80.0, 120.0), Lam=(40.0, 60.0), robust=False)
+    gains = Gains(K=(80.0, 120.0), Lambda=(40.0, 60.0), robust=False)
     ctl = RobustController(params, gains, use_fast=use_fast)
     assert ctl.uses_fast_path == (use_fast and params.n == 3)
     model = ArmModel(params)
     rng = np.random.default_rng(1)
-    k, lam = np.array(gains.K), np.array(gains.Lam)
+    k, lam = np.array(gains.K), np.array(gains.Lambda)
     for _ in range(20):
         q, qd, p_d, pd_d, pdd_d = _random_tick(rng, params.n)
         out = ctl.step(q, qd, p_d, pd_d, pdd_d, DT)
@@ -88,7 +88,7 @@ def test_pseudoinverse_is_a_right_inverse_da_tau_equals_v_plus_dv_minus_b(use_fa
     ctl = RobustController(NOMINAL, gains, use_fast=use_fast)
     model = ArmModel(NOMINAL)
     rng = np.random.default_rng(3)
-    k, lam = np.array(gains.K), np.array(gains.Lam)
+    k, lam = np.array(gains.K), np.array(gains.Lambda)
     for _ in range(20):
         q, qd, p_d, pd_d, pdd_d = _random_tick(rng, 3)
         out = ctl.step(q, qd, p_d, pd_d, pdd_d, DT)
@@ -221,7 +221,7 @@ def test_fallback_is_used_and_bounded_at_a_singular_configuration(use_fast):
     assert out.status & STATUS_NEAR_SINGULAR
     assert np.all(np.isfinite(out.tau))
     _, b = ArmModel(NOMINAL).decoupling([0.3, 0.0, 1.0], [0.5, -0.2, 0.1])
-    k, lam = np.array(ctl.gains.K), np.array(ctl.gains.Lam)
+    k, lam = np.array(ctl.gains.K), np.array(ctl.gains.Lambda)
     w = np.array([0.0, 1.0]) - (k + lam) * out.edot - k * lam * out.e + out.dv - b
     bound = math.sqrt((np.sum(da ** 2) + math.sqrt(thr)) / thr)   # documented bound
     assert np.linalg.norm(out.tau) <= bound * np.linalg.norm(w)
@@ -317,8 +317,8 @@ def test_set_nominal_switches_the_model():
 
 # -- argument validation -----------------------------------------------------------------
 @pytest.mark.parametrize('field, value', [
-    ('K', (0.0, 100.0)), ('K', -1.0), ('K', (100.0, 100.0, 100.0)), ('Lam', (50.0, 0.0)),
-    ('R', (2.0, -2.0)), ('eps', 0.0), ('eps', float('nan')), ('Gamma', (-0.01,) * 5),
+    ('K', (0.0, 100.0)), ('K', -1.0), ('K', (100.0, 100.0, 100.0)), ('Lambda', (50.0, 0.0)),
+    ('R', (2.0, -2.0)), ('epsilon', 0.0), ('epsilon', float('nan')), ('Gamma', (-0.01,) * 5),
     ('Gamma', (0.01,) * 4), ('sigma', (0.1, 0.1, 0.1, 0.1, -0.1)), ('theta0', (-1.0,) * 5),
     ('h_form', 'max'), ('robust', 'yes'), ('det_threshold', 0.0), ('tau_limit', 0.0),
     ('tau_limit', (1.0, -1.0)), ('K', 'abc'),

@@ -156,7 +156,7 @@ def test_a_large_offset_blends_for_longer_within_the_speed_and_acceleration_boun
 
 def test_a_stiffer_step_equals_a_controller_built_with_the_scaled_gains_exactly():
     nominal = table1('vertical').scaled(0.7)
-    scaled = RobustController(nominal, Gains(K=(200.0, 200.0), Lam=(100.0, 100.0)))
+    scaled = RobustController(nominal, Gains(K=(200.0, 200.0), Lambda=(100.0, 100.0)))
     stiff = RobustController(nominal, Gains())
     stiff.set_stiffness(2.0)
     q, qd = (0.3, 1.2, 2.0), (0.1, -0.2, 0.3)
@@ -177,7 +177,7 @@ def test_new_gains_keep_the_stiffness_and_a_bad_scale_is_refused_naming_it():
     ctl.set_stiffness(3.0)
     ctl.set_gains(Gains(K=(40.0, 60.0)))
     ref = RobustController(table1('horizontal').scaled(0.7),
-                           Gains(K=(120.0, 180.0), Lam=(150.0, 150.0)))
+                           Gains(K=(120.0, 180.0), Lambda=(150.0, 150.0)))
     args = ((0.3, 1.2, 2.0), (0.1, -0.2, 0.3), (0.2, 0.0), (0.1, 0.0), (0.0, 0.0), 1e-3)
     assert ctl.step(*args).tau.tolist() == ref.step(*args).tau.tolist()
     for bad in (0.0, -1.0, float('nan'), float('inf')):

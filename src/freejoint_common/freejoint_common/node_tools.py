@@ -1,7 +1,8 @@
 """
 Node plumbing shared by the freejoint nodes.
 
-``Spec`` and :func:`declare` declare each parameter once with its descriptor;
+:class:`NodeParameters` is the generic parameter loader of a node's schema
+(``freejoint_common.schema``): :func:`declare` declares each entry once with its descriptor;
 :func:`unique_names` validates a joint-name list; :class:`Throttle` rate-limits log lines
 per kind of problem; ``SCHEDULING_SPECS`` and :func:`request_scheduling` give a node the
 ``thread_priority`` / ``cpu_affinity`` parameters of ros2_control's controller_manager;
@@ -11,36 +12,22 @@ parameters.
 """
 
 import copy
-from dataclasses import dataclass
 import gc
 import time
 
-from freejoint_common.scheduling import MAX_PRIORITY, process_scheduling
+from freejoint_common.scheduling import process_scheduling
+from freejoint_common.schema import Param, SCHEDULING
 from freejoint_core.errors import FreejointValueError
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
 _monotonic = time.monotonic
 
 
-@dataclass(frozen=True)
-class Spec:
-    """
-    One parameter: default value, description, optional (min, max), read-only.
-
-    An int default with bounds gets an integer range, a float one a floating-point range.
-    A default of None declares an empty integer array (rclpy cannot declare an empty typed
-    array with a default, so :func:`declare` sets it right after declaring it): the node
-    reads None, ``ros2 param get`` / ``dump`` show ``[]``, ``ros2 param set`` takes an
-    integer array.
-    """
-
-    name: str
-    default: object
-    description: str
-    bounds: tuple = None
-    read_only: bool = False
+Spec = Param
+"""One parameter entry (``freejoint_common.schema.Param``; the name nodes used before)."""
 
 
 def unique_names(name, value):
@@ -98,8 +85,9 @@ def declare(node, specs):
             values[spec.name] = plain(param.value) or None    # None: not given
             continue
         if spec.bounds is not None and isinstance(spec.default, int):
+            step = spec.bounds[2] if len(spec.bounds) > 2 else 1
             desc.integer_range = [IntegerRange(
-                from_value=int(spec.bounds[0]), to_value=int(spec.bounds[1]), step=1)]
+                from_value=int(spec.bounds[0]), to_value=int(spec.bounds[1]), step=step)]
         elif spec.bounds is not None:
             desc.floating_point_range = [FloatingPointRange(
                 from_value=float(spec.bounds[0]), to_value=float(spec.bounds[1]), step=0.0)]
@@ -107,17 +95,80 @@ def declare(node, specs):
     return values
 
 
-SCHEDULING_SPECS = (
-    Spec('thread_priority', 0,
-         'SCHED_FIFO priority (1..%d) of every thread of this process (executor and '
-         'middleware threads), as the controller_manager thread_priority of ros2_control; '
-         '0 = the default scheduler. Needs root, CAP_SYS_NICE or an rtprio limit: refused '
-         'with the reason otherwise' % MAX_PRIORITY, (0, MAX_PRIORITY)),
-    Spec('cpu_affinity', None,
-         'CPUs every thread of this process may run on (integer array, e.g. [1]); not set = '
-         'every CPU the process started with'),
-)
-"""Real-time scheduling parameters (``freejoint_common.scheduling``), for sim and controller."""
+class NodeParameters:
+    """
+    The generic loader: declare a node's schema, build its config, keep it current.
+
+    Construction declares every entry of ``schema`` (``freejoint_common.schema.Schema``)
+    with its descriptor and builds ``config`` from the values; a bad start-up value raises
+    (rclpy's ``ParameterException`` for a range or type, ``FreejointValueError`` with the
+    schema's reason), which :func:`run` turns into one line and exit status 2. A schema
+    with the scheduling entries gets its process scheduling requested. :meth:`listen`
+    adds the set-parameters callback: the changed values are validated by the schema
+    (then by the node's ``check``, then the scheduling is applied), refused with the
+    reason, or taken (``values``, ``config``) and handed to the node's ``apply``.
+    """
+
+    def __init__(self, node, schema):
+        self.node = node
+        self.schema = schema
+        self.values = declare(node, schema)
+        self.config = schema.config(self.values)
+        self._scheduling = all(name in schema for name in SCHEDULING_NAMES)
+        self._apply = self._check = None
+        self._watch = ()
+        if self._scheduling:
+            request_scheduling(node, self.values, at_start=True)
+
+    def listen(self, apply=None, check=None, watch=()):
+        """
+        Validate and apply parameter changes from now on.
+
+        Parameters
+        ----------
+        apply : callable, optional
+            ``apply(old_config, new_config, params)`` after a change was taken.
+        check : callable, optional
+            ``check(params, values, config) -> reason or None``: the node's run-time checks
+            of a change (with what it knows only at run time); None accepts.
+        watch : tuple of str
+            Names not in the schema whose changes go to ``check`` / ``apply`` too
+            (``use_sim_time``).
+
+        """
+        self._apply = apply
+        self._check = check
+        self._watch = tuple(watch)
+        self.node.add_on_set_parameters_callback(self._on_set_parameters)
+
+    def _on_set_parameters(self, params):
+        mine = [p for p in params if p.name in self.values]
+        if not mine and not any(p.name in self._watch for p in params):
+            # Not ours (the read-only qos_overrides.* rclpy declares): nothing to check.
+            return SetParametersResult(successful=True)
+        values = dict(self.values)
+        for param in mine:
+            values[param.name] = plain(param.value)
+        try:
+            config = self.schema.config(values)
+            reason = None if self._check is None else self._check(params, values, config)
+            if reason is None and self._scheduling:
+                reason = scheduling_refusal(self.node, params, values)
+        except FreejointValueError as exc:
+            reason = str(exc)
+        if reason:
+            self.node.get_logger().warning('parameter change refused: ' + reason,
+                                           throttle_duration_sec=1.0)
+            return SetParametersResult(successful=False, reason=reason)
+        old = self.config
+        self.values = values
+        self.config = config
+        if self._apply is not None:
+            self._apply(old, config, params)
+        return SetParametersResult(successful=True)
+
+
+SCHEDULING_SPECS = SCHEDULING
 SCHEDULING_NAMES = tuple(spec.name for spec in SCHEDULING_SPECS)
 
 

@@ -21,10 +21,10 @@ import math
 import time
 
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
-from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
-from freejoint_common.node_tools import request_scheduling, scheduling_refusal, Throttle
+from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
+from freejoint_common.node_tools import Throttle
 from freejoint_common.runner import Lifecycle, run
-from freejoint_control.params import build_config, SPECS
+from freejoint_control.params import SCHEMA
 from freejoint_core.control import (ControlOutput, RobustController, STATUS_BAD_INPUT,
                                     STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
@@ -36,7 +36,6 @@ from freejoint_core.reference import (clamp_dt, extrapolate, limit_effort, MODE_
                                       state_refusal)
 from freejoint_msgs.msg import CartesianSetpoint, ControllerState
 import numpy as np
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -78,15 +77,14 @@ class ControllerNode(Node, Lifecycle):
 
     def __init__(self, **kwargs):
         super().__init__('controller_node', **kwargs)
-        self._values = declare(self, SPECS)
-        self.config = build_config(self._values)   # raises: bad start-up parameters
-        request_scheduling(self, self._values, at_start=True)
+        self._params = NodeParameters(self, SCHEMA)   # raises: bad start-up parameters
+        self.config = self._params.config
         cfg = self.config
         self._ctl = RobustController(cfg.nominal, cfg.gains)
         self._shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep)
         self._predictor = None
         self._install(cfg)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._params.listen(self._apply)
 
         self._cmd = Float64MultiArray()
         self._cmd.layout.dim = [MultiArrayDimension(label='stamp_ns=0', size=len(cfg.joints),
@@ -163,7 +161,7 @@ class ControllerNode(Node, Lifecycle):
         self.create_timer(period, self._watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             'controller ready: %s, nominal scale %g, %s, joints %s, dt %g s, robust %s' % (
-                self._values['case'], self._values['nominal_scale'],
+                cfg.case, cfg.nominal_scale,
                 'lockstep' if cfg.lockstep else 'real time', list(cfg.joints), cfg.dt,
                 cfg.gains.robust))
 
@@ -194,22 +192,8 @@ class ControllerNode(Node, Lifecycle):
             self._predictor = None
         self._active_of_cmd = cfg.cmd_index
 
-    def _on_set_parameters(self, params):
-        if not any(param.name in self._values for param in params):
-            # Not ours (the read-only qos_overrides.* rclpy declares): nothing to check.
-            return SetParametersResult(successful=True)
-        values = dict(self._values)
-        for param in params:
-            if param.name in values:
-                values[param.name] = plain(param.value)
-        try:
-            cfg = build_config(values)
-        except FreejointValueError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        reason = scheduling_refusal(self, params, values)
-        if reason is not None:
-            return SetParametersResult(successful=False, reason=reason)
-        old = self.config
+    def _apply(self, old, cfg, params):
+        """Take a validated parameter change (the set-parameters callback's last step)."""
         if cfg.nominal != old.nominal:
             self._ctl.set_nominal(cfg.nominal)
         if cfg.gains != old.gains:
@@ -218,10 +202,8 @@ class ControllerNode(Node, Lifecycle):
                 self._ctl.reset()
             self._good_theta = self._ctl.theta
         self._install(cfg)
-        self._values = values
         changed = ', '.join('%s=%s' % (p.name, plain(p.value)) for p in params)
         self.get_logger().info('parameters set (effective next tick): ' + changed)
-        return SetParametersResult(successful=True)
 
     # -- inputs ----------------------------------------------------------------
     def _joint_map(self, names):
@@ -515,7 +497,7 @@ class ControllerNode(Node, Lifecycle):
         st.position = out.p if pred is None else self._ctl.model.fk(q)
         st.position_desired = (px, py)
         st.status = status
-        st.message = _status_message(status, out.det, self._values, hold_reason,
+        st.message = _status_message(status, out.det, self.config, hold_reason,
                                      shaper) if status else ''
         if sp_ns is None:
             st.setpoint_stamp.sec = 0
@@ -756,7 +738,7 @@ class ControllerNode(Node, Lifecycle):
         return self.config.executor
 
 
-def _status_message(status, det, values, hold_reason, shaper):
+def _status_message(status, det, cfg, hold_reason, shaper):
     parts = []
     if status & STATUS_HOLDING:
         hold = shaper.hold_position
@@ -766,11 +748,11 @@ def _status_message(status, det, values, hold_reason, shaper):
                      % shaper.blend_duration)
     if status & STATUS_NEAR_SINGULAR:
         parts.append('near singular: |det(Da Da^T)| = %.3g < %.3g, damped pseudo-inverse'
-                     % (det, values['det_threshold']))
+                     % (det, cfg.gains.det_threshold))
     if status & STATUS_TORQUE_LIMITED:
-        parts.append('torque limited to %s N m' % list(values['effort_limits']))
+        parts.append('torque limited to %s N m' % list(cfg.effort_limits))
     if status & STATUS_RATE_LIMITED:
-        parts.append('torque change limited to %g N m/s' % values['effort_rate_limit'])
+        parts.append('torque change limited to %g N m/s' % cfg.effort_rate_limit)
     if status & STATUS_LAW_FAULT:
         parts.append('law fault: non-finite or out-of-range output, previous command repeated')
     if status & STATUS_SETPOINT_LATE and not status & STATUS_HOLDING:

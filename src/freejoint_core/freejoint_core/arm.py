@@ -32,6 +32,9 @@ import numpy as np
 
 CASES = ('horizontal', 'vertical')
 
+NOMINAL_SCALE = 0.7
+"""The paper's nominal model: Table I masses, inertias and COM distances times this."""
+
 GRAVITY_VERTICAL = 9.81
 """Gravity [m/s^2] for the paper's vertical case (Table I, Case 2)."""
 

@@ -99,14 +99,14 @@ class Gains:
 
     Attributes
     ----------
-    K, Lam, R : tuple of float, (2,)
+    K, Lambda, R : tuple of float, (2,)
         Diagonals of K, Lambda, R, > 0 (a scalar is broadcast).
     Gamma, sigma : tuple of float, (5,)
         Diagonals of the adaptation gain and sigma-modification, >= 0.
-    eps : float
+    epsilon : float
         Chattering bound epsilon of h_alpha, > 0.
     h_form : {'sum', 'sat'}
-        'sum': ``h = ||a|| + eps`` (paper); 'sat': ``max(||a||, eps)``.
+        'sum': ``h = ||a|| + epsilon`` (paper); 'sat': ``max(||a||, epsilon)``.
     theta0 : tuple of float, (5,)
         Initial estimate, >= 0 (used at construction and by ``reset``).
     robust : bool
@@ -122,11 +122,11 @@ class Gains:
     """
 
     K: tuple = (100.0, 100.0)
-    Lam: tuple = (50.0, 50.0)
+    Lambda: tuple = (50.0, 50.0)
     R: tuple = (2.0, 2.0)
     Gamma: tuple = (0.01,) * 5
     sigma: tuple = (0.1,) * 5
-    eps: float = 0.1
+    epsilon: float = 0.1
     h_form: str = 'sum'
     theta0: tuple = (0.0,) * 5
     robust: bool = True
@@ -136,11 +136,11 @@ class Gains:
 
     def __post_init__(self):
         """Validate and normalise to tuples of floats."""
-        for name, n, lower, strict in (('K', 2, 0.0, True), ('Lam', 2, 0.0, True),
+        for name, n, lower, strict in (('K', 2, 0.0, True), ('Lambda', 2, 0.0, True),
                                        ('R', 2, 0.0, True), ('Gamma', 5, 0.0, False),
                                        ('sigma', 5, 0.0, False), ('theta0', 5, 0.0, False)):
             object.__setattr__(self, name, _vector(getattr(self, name), n, name, lower, strict))
-        for name in ('eps', 'det_threshold'):
+        for name in ('epsilon', 'det_threshold'):
             object.__setattr__(self, name, _vector(getattr(self, name), 1, name, 0.0, True)[0])
         if self.h_form not in H_FORMS:
             raise FreejointValueError(f'h_form: expected one of {H_FORMS}, got {self.h_form!r}')
@@ -324,7 +324,7 @@ class RobustController:
         self._limit = limit
         self._scale_gains()
         self._rr = gains.R
-        self._eps = gains.eps
+        self._eps = gains.epsilon
         self._sum = gains.h_form == 'sum'
         self._robust = gains.robust
         self._thr = gains.det_threshold
@@ -341,12 +341,12 @@ class RobustController:
 
         Holding a point against a constant model error ``eta`` [m/s^2], the law's static
         error is ``eta / (K Lambda)``: ``scale`` 2 quarters it (a stiffer hold).  The step
-        then equals a controller built with ``K * scale`` and ``Lam * scale`` exactly.
+        then equals a controller built with ``K * scale`` and ``Lambda * scale`` exactly.
 
         Parameters
         ----------
         scale : float
-            Factor, finite and > 0; ``scale * (K + Lam)`` should stay well below
+            Factor, finite and > 0; ``scale * (K + Lambda)`` should stay well below
             ``1 / dt`` (the caller's parameters check it).
 
         Raises
@@ -364,7 +364,7 @@ class RobustController:
     def _scale_gains(self):
         """Cache the (scaled) K, Lambda terms of the step."""
         kx, ky = self.gains.K
-        lx, ly = self.gains.Lam
+        lx, ly = self.gains.Lambda
         s = self.stiffness
         if s != 1.0:
             kx, ky, lx, ly = s * kx, s * ky, s * lx, s * ly

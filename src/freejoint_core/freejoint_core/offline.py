@@ -57,17 +57,21 @@ import time
 
 import numpy as np
 
-from .arm import ArmModel, CASES, table1
+from .arm import ArmModel, CASES, NOMINAL_SCALE, table1
 from .control import Gains, RobustController
 from .delay import DEFAULT_BIAS_GAIN, extrapolate_setpoint, StatePredictor
 from .errors import FreejointValueError
 from .metrics import compute_record, format_summary, format_table, write_records
 from .models import make_model
-from .plant import DEFAULT_DT_SUB, Plant
+from .plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
 from .trajectory import CircleQuintic
 
 VARIANTS = ('robust', 'robust_off', 'exact')
 DEFAULT_OUT = 'bags/offline/metrics.json'
+DEFAULT_DT = 1e-3
+"""The paper's control period [s]."""
+DEFAULT_Q3_0_DEG = 120.0
+"""The paper's initial passive joint angle [deg]."""
 # Errors that mean "the numbers blew up" inside the model/controller/plant.
 _BLOWUP = (ArithmeticError, ValueError, np.linalg.LinAlgError)
 
@@ -82,7 +86,7 @@ def _pos_float(name, value):
     return out
 
 
-def initial_state(params, q3_0_deg=120.0, start=(0.2, 0.0)):
+def initial_state(params, q3_0_deg=DEFAULT_Q3_0_DEG, start=(0.2, 0.0)):
     """
     Joint angles (rad) putting the end effector at ``start`` with ``q3 = q3_0_deg``.
 
@@ -114,8 +118,9 @@ def initial_state(params, q3_0_deg=120.0, start=(0.2, 0.0)):
             from None
 
 
-def run_case(case, variant, seed, *, q3_0_deg=120.0, dt=1e-3, dt_sub=DEFAULT_DT_SUB,
-             duration=5.0, nominal_scale=0.7, dist_bound=0.5, gains=None, record_trace=False,
+def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
+             dt_sub=DEFAULT_DT_SUB, duration=5.0, nominal_scale=NOMINAL_SCALE,
+             dist_bound=DEFAULT_DIST_BOUND, gains=None, record_trace=False,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0, delay_ticks=0, predict=False,
              bias_gain=DEFAULT_BIAS_GAIN, predict_ticks=None, echo=False, delay_jitter=0):
     """

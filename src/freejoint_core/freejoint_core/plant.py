@@ -27,6 +27,8 @@ import numpy as np
 
 DEFAULT_DT_SUB = 0.0005
 """Default RK4 sub-step [s]."""
+DEFAULT_DIST_BOUND = 0.5
+"""Bound [N m] of the paper's uniform random joint disturbance."""
 
 
 def _positive(value, name, allow_zero=False):
@@ -231,8 +233,8 @@ class Plant(PeriodPlant):
 
     """
 
-    def __init__(self, params, dt_sub=DEFAULT_DT_SUB, dist_bound=0.5, seed=0, q0=None,
-                 qd0=None, use_fast=True):
+    def __init__(self, params, dt_sub=DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND, seed=0,
+                 q0=None, qd0=None, use_fast=True):
         if not isinstance(params, ArmParams):
             raise FreejointValueError(f'params: expected ArmParams, got {type(params).__name__}')
         model = make_model(params) if use_fast else ArmModel(params)

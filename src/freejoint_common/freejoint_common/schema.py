@@ -1,0 +1,269 @@
+"""
+Declarative parameter schemas of the freejoint nodes (plain Python, no ROS).
+
+As ros2_controllers' generate_parameter_library YAML: one :class:`Param` per parameter
+(name, default, description, bounds, read-only, validator) and one :class:`Schema` per
+node (its params, the cross-parameter checks and the function building the node's
+config object from a complete, valid ``{name: value}`` dict). The node's loader
+(``freejoint_common.node_tools.NodeParameters``) declares every entry with its
+``ParameterDescriptor``, validates at start-up and in the set-parameters callback with the
+reason :meth:`Schema.reason` gives, and hands the node the built config; the demo and the
+tests build the same config from a YAML file (:meth:`Schema.from_yaml`) without ROS.
+
+Validators: a function ``value -> reason or None``; the reason is prefixed with the
+parameter's name. A validator may also raise ``FreejointValueError`` with a message that
+already starts with the name. A schema-level check is a function ``values -> reason or
+None`` whose reason names the parameter to change itself.
+"""
+
+from dataclasses import dataclass
+import math
+
+from freejoint_common.scheduling import MAX_PRIORITY, validate_affinity, validate_priority
+from freejoint_core.arm import CASES, NOMINAL_SCALE as PAPER_NOMINAL_SCALE
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.offline import DEFAULT_DT
+
+
+@dataclass(frozen=True)
+class Param:
+    """
+    One parameter: name, default, description, optional (min, max), read-only, validator.
+
+    The type is the default's (bool, int, float, str or a list of one of them); an int
+    default with bounds gets an integer range, a float one a floating-point range (both
+    inclusive, as ``ParameterDescriptor`` ranges). A default of None declares an empty
+    integer array (rclpy cannot declare an empty typed array with a default): the node
+    reads None, ``ros2 param get`` / ``dump`` show ``[]``.
+    """
+
+    name: str
+    default: object
+    description: str
+    bounds: tuple = None
+    read_only: bool = False
+    validator: object = None
+
+    def reason(self, value):
+        """Return why ``value`` is not valid for this parameter (naming it), or None."""
+        problem = _type_problem(self.default, value)
+        if problem is None and self.validator is not None:
+            try:
+                problem = self.validator(value)
+            except FreejointValueError as exc:
+                return str(exc)
+        if problem is None and self.bounds is not None and not isinstance(value, list):
+            lo, hi = self.bounds
+            if not lo <= value <= hi:
+                problem = f'expected a value in [{lo:.6g}, {hi:.6g}], got {value:g}'
+        return None if problem is None else f'{self.name}: {problem}'
+
+
+def _type_problem(default, value):
+    """Return why ``value`` is not of the type of ``default``, or None."""
+    if default is None:
+        if value is None or (isinstance(value, (list, tuple)) and all(
+                isinstance(v, int) and not isinstance(v, bool) for v in value)):
+            return None
+        return f'expected a list of integers, got {value!r}'
+    if isinstance(default, bool):
+        return None if isinstance(value, bool) else f'expected true or false, got {value!r}'
+    if isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+        return None if ok else f'expected an integer, got {value!r}'
+    if isinstance(default, float):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if ok and not math.isfinite(value):
+            return f'expected a finite number, got {value}'
+        return None if ok else f'expected a number, got {value!r}'
+    if isinstance(default, str):
+        return None if isinstance(value, str) else f'expected a string, got {value!r}'
+    if not isinstance(value, (list, tuple)):
+        return f'expected a list, got {value!r}'
+    return None
+
+
+def above(lower, unit=''):
+    """Return a validator: a number strictly above ``lower``."""
+    def check(value):
+        if not value > lower:
+            return f'must be > {lower:g}{unit}, got {value}'
+        return None
+    return check
+
+
+def one_of(choices):
+    """Return a validator: one of ``choices``."""
+    def check(value):
+        if value not in choices:
+            return f'expected one of {tuple(choices)}, got {value!r}'
+        return None
+    return check
+
+
+def raises(func):
+    """Return a validator of a function raising ``FreejointValueError`` naming the parameter."""
+    def check(value):
+        func(value)
+        return None
+    return check
+
+
+class Schema:
+    """
+    The parameters of one node: entries, cross-parameter checks, config builder.
+
+    Parameters
+    ----------
+    params : iterable of Param or of iterables of Param
+        The entries (groups shared by several nodes are spliced in).
+    checks : sequence of callable, optional
+        ``values -> reason or None``, run once every entry is valid.
+    build : callable, optional
+        ``values -> config`` for valid values (default: the values dict itself). It may
+        still raise ``FreejointValueError`` naming a parameter (a check that needs the
+        built objects, e.g. inverse kinematics of the initial state).
+
+    """
+
+    def __init__(self, params, checks=(), build=None):
+        flat = []
+        for item in params:
+            flat.extend(item if isinstance(item, (tuple, list)) else (item,))
+        self.params = tuple(flat)
+        self.by_name = {p.name: p for p in self.params}
+        if len(self.by_name) != len(self.params):
+            names = [p.name for p in self.params]
+            raise ValueError('parameters declared twice: %s'
+                             % sorted({n for n in names if names.count(n) > 1}))
+        self.checks = tuple(checks)
+        self._build = build
+
+    def __iter__(self):
+        """Iterate over the entries."""
+        return iter(self.params)
+
+    def __contains__(self, name):
+        """Return True if ``name`` is a parameter of the schema."""
+        return name in self.by_name
+
+    def __getitem__(self, name):
+        """Return the entry named ``name``."""
+        return self.by_name[name]
+
+    def defaults(self):
+        """Return ``{name: default}`` (lists copied)."""
+        return {p.name: list(p.default) if isinstance(p.default, (list, tuple)) else p.default
+                for p in self.params}
+
+    def values(self, given=None):
+        """Return the defaults updated with ``given``; an unknown name raises naming it."""
+        values = self.defaults()
+        for name, value in (given or {}).items():
+            if name not in self.by_name:
+                raise FreejointValueError(f'{name}: not a parameter of this node')
+            values[name] = value
+        return values
+
+    def reason(self, values):
+        """
+        Return why ``values`` are not valid (naming the parameter), or None.
+
+        Only the entries present in ``values`` are checked; the cross-parameter checks run
+        when every entry is present.
+        """
+        for name, value in values.items():
+            param = self.by_name.get(name)
+            if param is not None:
+                problem = param.reason(value)
+                if problem is not None:
+                    return problem
+        if len(values) < len(self.params) or any(n not in values for n in self.by_name):
+            return None
+        for check in self.checks:
+            try:
+                problem = check(values)
+            except FreejointValueError as exc:
+                return str(exc)
+            if problem:
+                return problem
+        return None
+
+    def config(self, values):
+        """Validate a complete ``values`` dict and build the config; raise naming the parameter."""
+        missing = [n for n in self.by_name if n not in values]
+        if missing:
+            raise FreejointValueError(f'{missing[0]}: no value given')
+        problem = self.reason(values)
+        if problem:
+            raise FreejointValueError(problem)
+        return dict(values) if self._build is None else self._build(values)
+
+    def from_yaml(self, path, node='/**'):
+        """
+        Return the config of a ``--params-file`` YAML file (defaults for what it omits).
+
+        ``node`` is the file's top-level key (``/**`` matches every node); names the
+        schema does not have (``use_sim_time``, ``qos_overrides``) are ignored.
+        """
+        import yaml
+        with open(path) as fh:
+            doc = yaml.safe_load(fh) or {}
+        given = (doc.get(node) or {}).get('ros__parameters') or {}
+        return self.config(self.values({k: v for k, v in given.items() if k in self}))
+
+
+SCHEDULING = (
+    Param('thread_priority', 0,
+          'SCHED_FIFO priority (1..%d) of every thread of this process (executor and '
+          'middleware threads), as the controller_manager thread_priority of ros2_control; '
+          '0 = the default scheduler. Needs root, CAP_SYS_NICE or an rtprio limit: refused '
+          'with the reason otherwise' % MAX_PRIORITY, (0, MAX_PRIORITY),
+          validator=raises(validate_priority)),
+    Param('cpu_affinity', None,
+          'CPUs every thread of this process may run on (integer array, e.g. [1]); not set = '
+          'every CPU the process started with', validator=raises(validate_affinity)),
+)
+"""Real-time scheduling parameters (``freejoint_common.scheduling``) of a node process."""
+
+EXECUTOR = Param('executor', 'single_threaded',
+                 "rclpy executor: 'single_threaded' or 'events' "
+                 '(rclpy.experimental.EventsExecutor)', read_only=True,
+                 validator=one_of(('single_threaded', 'events')))
+"""The executor the node runs on (sim, controller)."""
+
+
+# -- entries shared by several nodes (one default, one description, one check) ------------
+def _whole_ns(value):
+    if abs(value * 1e9 - round(value * 1e9)) > 1e-3:
+        return f'{value:g} s is not a whole number of nanoseconds'
+    return None
+
+
+def _frame(value):
+    return None if value.strip() else 'expected a frame name, got an empty string'
+
+
+CASE = Param('case', CASES[0],
+             "arm case (Table I): 'horizontal' (no gravity) or 'vertical' (9.81 m/s^2 along "
+             '-y)', validator=one_of(CASES))
+"""The arm's case (sim: the real arm; controller, planner: the nominal model's)."""
+NOMINAL_SCALE = Param('nominal_scale', PAPER_NOMINAL_SCALE,
+                      'nominal model = Table I real parameters with masses, inertias and COM '
+                      'distances times this factor (paper: %g); the controller and the planner '
+                      'must use the same' % PAPER_NOMINAL_SCALE, (0.01, 100.0))
+"""The nominal model of the controller's law and of the planner's singularity map."""
+CONTROL_PERIOD = Param('control_period', DEFAULT_DT,
+                       'control period dt [s]: the lockstep grid t_k = k dt, the step of the '
+                       'simulator, the adaptation update, the setpoint stamps; the same for '
+                       'every node', (1e-5, 1.0), read_only=True, validator=_whole_ns)
+"""The control grid every node of the graph shares."""
+JOINT_NAMES = Param('joint_names', ['joint1', 'joint2', 'joint3'],
+                    'names of all joints in model order (base to tip), passive ones included',
+                    read_only=True)
+JOINTS = Param('joints', ['joint1', 'joint2'],
+               'active joints in the order of the effort command (JointGroupEffortController)',
+               read_only=True)
+FRAME_ID = Param('frame_id', 'base_link',
+                 'frame of the arm base: of ee_position (sim), of the setpoints, map and '
+                 'marker (planner)', validator=_frame)
