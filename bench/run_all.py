@@ -15,8 +15,8 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-MODULES = ['core_law_plant', 'core_delay', 'core_map_offline', 'core_urdf', 'tools_recorder',
-           'graph', 'viewer']
+MODULES = ['core_law_plant', 'core_delay', 'core_map_offline', 'core_singularity_nlink',
+           'core_urdf', 'tools_recorder', 'graph', 'viewer']
 
 
 def meets(value, target):
