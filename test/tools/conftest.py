@@ -30,7 +30,7 @@ class BagMaker:
         self.module = module
 
     def __call__(self, path, ticks, custom_data=None, finalise=True, chunk_size=64 * 1024,
-                 flush_every=0):
+                 flush_every=0, compression='none'):
         """
         Write ``ticks`` ticks (joint_states, setpoint, controller_state, /clock) and the map.
 
@@ -41,7 +41,7 @@ class BagMaker:
         from freejoint_tools.bagfile import BagWriter, default_qos_dict
         from freejoint_tools.typedefs import Definitions
         defs = Definitions()
-        writer = BagWriter(path, custom_data, chunk_size=chunk_size)
+        writer = BagWriter(path, custom_data, chunk_size=chunk_size, compression=compression)
         grid, marker = self.module.latched_messages()
         topics = [('/joint_states', 'sensor_msgs/msg/JointState', 'volatile'),
                   ('/setpoint', 'freejoint_msgs/msg/CartesianSetpoint', 'transient_local'),

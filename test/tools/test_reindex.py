@@ -83,10 +83,11 @@ def _read_everywhere(path):
     return by_own
 
 
-def _killed_bag(make_bag, path, ticks=300, flush_every=100):
+def _killed_bag(make_bag, path, ticks=300, flush_every=100, compression='none'):
     """Write ``ticks`` ticks, a chunk per ``flush_every``, and stop without finalising."""
     make_bag(path, ticks, custom_data={'case': 'vertical', 'seed': '2'},
-             finalise=False, chunk_size=1 << 30, flush_every=flush_every)
+             finalise=False, chunk_size=1 << 30, flush_every=flush_every,
+             compression=compression)
     return _mcap_file(path)
 
 
@@ -108,16 +109,19 @@ def test_reindex_of_a_killed_bag_gives_every_flushed_chunk_to_every_reader(
     assert bag.metadata['custom_data'] == {'case': 'vertical', 'seed': '2'}
 
 
-@pytest.mark.parametrize('cut', [20000, 60, 3], ids=['in_a_chunk', 'in_its_indexes',
-                                                     'in_a_record_header'])
+@pytest.mark.parametrize('compression', ['none', 'zstd'])
+@pytest.mark.parametrize('cut', ['in_a_chunk', 'in_its_indexes', 'in_a_record_header'])
 def test_a_chunk_cut_short_or_without_all_its_indexes_is_left_out_and_cut_off(
-        tmp_path, make_bag, cut):
+        tmp_path, make_bag, cut, compression):
     """Every complete chunk (a chunk with all its message indexes) is kept, nothing else."""
-    from freejoint_tools.bagfile import open_bag
+    from freejoint_tools.bagfile import open_bag, scan_mcap
     from freejoint_tools.reindex import reindex
     path = str(tmp_path / 'cut')
-    mcap = _killed_bag(make_bag, path)         # three chunks of 100 ticks, all flushed
-    os.truncate(mcap, os.path.getsize(mcap) - cut)
+    mcap = _killed_bag(make_bag, path, compression=compression)   # three chunks, flushed
+    last = scan_mcap(mcap).chunk_indexes[-1]
+    size = os.path.getsize(mcap)
+    os.truncate(mcap, {'in_a_chunk': last.chunk_start_offset + last.chunk_length // 2,
+                       'in_its_indexes': size - 60, 'in_a_record_header': size - 3}[cut])
     report = reindex(path)
     assert 'from 2 complete chunk(s), incomplete tail of' in report, report
     after = _read_everywhere(path)
@@ -163,16 +167,21 @@ def test_reindex_command_line_refuses_what_is_not_a_bag_in_one_line(tmp_path):
 
 
 @pytest.mark.ros
-def test_sigkill_then_reindex_gives_a_bag_rosbags_and_mcap_read(procs, wait, tmp_path):
+@pytest.mark.parametrize('compression, grown', [('none', 300_000), ('zstd', 60_000)])
+def test_sigkill_then_reindex_gives_a_bag_rosbags_and_mcap_read(procs, wait, tmp_path,
+                                                                compression, grown):
     """What a user does after kill -9 of the recorder: ``ros2 run freejoint_tools reindex``."""
+    from mcap.reader import make_reader
+
     from freejoint_tools.bagfile import open_bag
     bag_path = str(tmp_path / 'vertical')
     recorder = procs.start_node('freejoint_tools', 'recorder', 'recorder', [
         '--ros-args', '-p', 'output:=%s' % bag_path, '-p', 'topics:=[]',
-        '-p', 'flush_period:=0.2', '-p', 'custom_data:=[case=vertical, seed=2]'])
+        '-p', 'flush_period:=0.2', '-p', 'custom_data:=[case=vertical, seed=2]',
+        '-p', 'compression:=%s' % compression])
     publisher = procs.start_script(PUBLISHER, 'publisher', ['--ticks', '0', '--rate', '1000'])
     mcap = os.path.join(bag_path, 'vertical_0.mcap')
-    wait(lambda: os.path.exists(mcap) and os.path.getsize(mcap) > 300_000, 60.0,
+    wait(lambda: os.path.exists(mcap) and os.path.getsize(mcap) > grown, 60.0,
          'the bag to grow (publisher: %s)' % procs.log(publisher))
     os.killpg(recorder.pid, signal.SIGKILL)
     recorder.wait(10.0)
@@ -191,3 +200,6 @@ def test_sigkill_then_reindex_gives_a_bag_rosbags_and_mcap_read(procs, wait, tmp
     assert after == [(n, t, d) for n, t, _, d in before.messages()]
     assert sum(1 for n, _, _ in after if n == '/joint_states') > 200
     assert not [f for f in os.listdir(bag_path) if f.endswith('.reserve')]
+    with open(mcap, 'rb') as fh:
+        chunks = make_reader(fh).get_summary().chunk_indexes
+    assert {c.compression for c in chunks} == {'' if compression == 'none' else compression}

@@ -12,12 +12,17 @@ Layout (what ``ros2 bag record -s mcap`` of ROS 2 Jazzy writes, rosbag2 version 
                                  (log_time = receive time, publish_time = send time), and on
                                  close a metadata record 'rosbag2' with the serialized bag
                                  information, then the MCAP summary (statistics, indexes).
+                                 Chunks plain or zstd-compressed (BagWriter ``compression``,
+                                 rosbag2's MCAP storage option ``compression: Zstd``).
+
+Reading (:func:`open_bag`) is mcap's: the indexed reader's summary for a finalised file, the
+StreamReader for one cut short; the messages are read chunk by chunk, never the whole bag.
 
 Crash safety: the writer closes the current MCAP chunk and hands the file to the operating
 system on every :meth:`BagWriter.flush` (the recorder calls it periodically), so a process
 killed without warning (SIGKILL) leaves a file that is complete up to its last flushed
 chunk. Such a bag has no ``metadata.yaml`` and no MCAP summary; :func:`open_bag` reads it up
-to the last complete record and reports it as not finalised. A bag that *has* a
+to its last complete chunk and reports it as not finalised. A bag that *has* a
 ``metadata.yaml`` but whose MCAP file is cut short or disagrees with it is corrupt and
 refused.
 
@@ -61,6 +66,8 @@ METADATA_FILE = 'metadata.yaml'
 # rosbag2 writes an infinite duration as this (sec, nsec) pair.
 INFINITE = (9223372036, 854775807)
 RESERVE_SUFFIX = '.reserve'
+# BagWriter's compression values: the MCAP chunk compression each one writes.
+COMPRESSIONS = {'none': CompressionType.NONE, 'zstd': CompressionType.ZSTD}
 # Space kept free for finalising (summary, metadata record, metadata.yaml): this much plus
 # twice the size the chunk indexes have reached.
 RESERVE_BASE = 256 * 1024
@@ -234,9 +241,23 @@ class BagWriter:
     custom_data : dict of str to str, optional
         Run information, stored at once in the MCAP file and on close in metadata.yaml.
     chunk_size : int
-        MCAP chunk size (bytes); a chunk is also closed by every :meth:`flush`.
+        MCAP chunk size (bytes, before compression); a chunk is also closed by every
+        :meth:`flush`.
     ros_distro : str
         Written as ``ros_distro`` in the metadata.
+    compression : {'none', 'zstd'}
+        Chunk compression: what rosbag2's MCAP storage writes with the storage option
+        ``compression: Zstd``. The file stays indexed and every MCAP reader decompresses
+        the chunks itself; metadata.yaml keeps ``compression_format`` and
+        ``compression_mode`` empty as rosbag2 does for it (they describe rosbag2's own
+        file or message compression, which readers undo before the storage).
+
+    Raises
+    ------
+    ValueError
+        If ``compression`` is not one of :data:`COMPRESSIONS`.
+    BagError
+        If the bag directory or file cannot be created.
 
     Notes
     -----
@@ -247,7 +268,11 @@ class BagWriter:
 
     """
 
-    def __init__(self, path, custom_data=None, chunk_size=256 * 1024, ros_distro='jazzy'):
+    def __init__(self, path, custom_data=None, chunk_size=256 * 1024, ros_distro='jazzy',
+                 compression='none'):
+        if compression not in COMPRESSIONS:
+            raise ValueError('compression must be one of %s, got %r'
+                             % (', '.join(COMPRESSIONS), compression))
         self.path = os.fspath(path)
         if os.path.exists(self.path) and not (os.path.isdir(self.path)
                                               and not os.listdir(self.path)):
@@ -270,7 +295,7 @@ class BagWriter:
         self._keep_reserve(RESERVE_BASE)
         self._sink = _Sink(self._fd)
         self._writer = Writer(self._sink, chunk_size=int(chunk_size),
-                              compression=CompressionType.NONE)
+                              compression=COMPRESSIONS[compression])
         self._writer.start(profile='ros2', library=LIBRARY)
         if self.custom_data:
             self._writer.add_metadata(RUN_RECORD, dict(self.custom_data))

@@ -89,7 +89,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
-from .bagfile import BagError, BagWriter
+from .bagfile import BagError, BagWriter, COMPRESSIONS
 from .qos import profile_to_dict, subscription_qos
 from .typedefs import DefinitionError, Definitions, message_class
 
@@ -313,6 +313,10 @@ class Recorder(Node, Lifecycle):
         self.declare_parameter('chunk_size', 1 << 20, _descriptor(
             'MCAP chunk size (bytes); a chunk also closes at every flush',
             ParameterType.PARAMETER_INTEGER, int_range=(4096, 1 << 28)))
+        self.declare_parameter('compression', 'none', _descriptor(
+            "MCAP chunk compression: 'none' or 'zstd' (rosbag2's MCAP storage option "
+            'compression: Zstd; every MCAP reader decompresses the chunks)',
+            ParameterType.PARAMETER_STRING))
         self.declare_parameter('graph_topics', True, _descriptor(
             'Subscribe to the freejoint graph topics (docs/GRAPH.md) at start, with their '
             'contract types and QoS, so a run that starts before discovery loses nothing',
@@ -352,6 +356,7 @@ class Recorder(Node, Lifecycle):
         if p['overwrite']:
             _remove_old_bag(output)
         self.writer = BagWriter(output, p['custom_data'], chunk_size=p['chunk_size'],
+                                compression=p['compression'],
                                 ros_distro=os.environ.get('ROS_DISTRO') or 'jazzy')
         self.output = output
         self._defs = Definitions()
@@ -411,6 +416,10 @@ class Recorder(Node, Lifecycle):
                     value = parse_custom_data(v for v in (value or []) if v)
                 except ValueError as exc:
                     return SetParametersResult(successful=False, reason=str(exc))
+            elif param.name == 'compression' and value not in COMPRESSIONS:
+                return SetParametersResult(
+                    successful=False, reason='compression must be one of %s, got %r'
+                    % (', '.join(COMPRESSIONS), value))
             elif param.name == 'executor' and value not in ('events', 'single_threaded'):
                 return SetParametersResult(
                     successful=False,
