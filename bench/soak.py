@@ -52,6 +52,7 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
+from freejoint_common.contract import to_ns  # noqa: E402, I100
 
 OUT = os.path.join(ROOT, 'bags', 'soak')
 CASES = ('horizontal', 'vertical')
@@ -276,7 +277,7 @@ def stale_periods(timing_path, mono_window):
 
 def stamp_ns(msg):
     """Return a header stamp in ns."""
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+    return to_ns(msg.header.stamp)
 
 
 def controller_ticks(bag_path):

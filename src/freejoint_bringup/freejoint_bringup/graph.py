@@ -7,7 +7,8 @@ and ``planner_node`` started one by one (docs/GRAPH.md holds for both), but the 
 between them take Fast DDS's intra-process path in the publishing thread: no
 shared-memory hand-over and no wake-up of another process per message (the figures:
 docs/performance.md). Nodes of other processes (recorder, RViz, a second controller)
-see the same graph.
+see the same graph. Each node is a ``freejoint_common.runner.Lifecycle``: the runner adds
+them to one EventsExecutor, as ros2/examples' ``composed.py`` does.
 
 Usage (``ros2 run freejoint_bringup graph``): ``graph --sim-params config/sim.yaml
 --controller-params config/controller.yaml --planner-params config/planner.yaml
@@ -22,7 +23,6 @@ between callbacks; each node then logs its end-of-run line as it does alone.
 """
 
 import argparse
-import signal
 import sys
 
 NODES = ('sim', 'controller', 'planner')
@@ -62,70 +62,21 @@ def parse(argv):
     return ap.parse_args(argv)
 
 
-def spin(nodes):
-    """Spin every node with one EventsExecutor until SIGINT/SIGTERM (flag, spin_once)."""
-    import rclpy
-    from freejoint_common.node_tools import spin_until
-    from rclpy.experimental import EventsExecutor
-    stop = []
-
-    def on_signal(signum, frame):
-        stop.append(signum)
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    executor = EventsExecutor()
-    for node in nodes.values():
-        executor.add_node(node)
-    spin_until(executor.spin_once, rclpy.ok, stop)
-
-
-def finish(name, node):
-    """Log the node's end-of-run line (and write the simulator's timing file)."""
-    if hasattr(node, 'stop_stepping'):
-        node.stop_stepping()
-    if hasattr(node, 'report'):
-        node.get_logger().info(node.report())
-    if hasattr(node, 'write_timing'):
-        node.write_timing()
-
-
 def main(args=None):
-    """Run the hosted nodes until SIGINT/SIGTERM."""
-    import rclpy
-    from rclpy.exceptions import ParameterException
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.signals import SignalHandlerOptions
+    """Run the hosted nodes in one executor until SIGINT/SIGTERM (``runner.run``)."""
+    from freejoint_common.runner import run
     from rclpy.utilities import remove_ros_args
-    from freejoint_common.node_tools import parameter_error
-    from freejoint_core.errors import FreejointValueError
     argv = sys.argv if args is None else args
     options = parse(remove_ros_args(argv)[1:])
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    nodes = {}
-    code = 0
-    try:
+
+    def make():     # a generator: the nodes made before a failure are shut down too
         classes = node_classes()
         for name in NODES:
             if name in options.nodes:
-                nodes[name] = classes[name](cli_args=node_args(
+                yield classes[name](cli_args=node_args(
                     getattr(options, '%s_params' % name), getattr(options, name)))
-        spin(nodes)
-    except (FreejointValueError, ParameterException) as exc:  # as every node alone
-        rclpy.logging.get_logger('graph').fatal('bad parameter: %s' % parameter_error(exc))
-        code = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        from freejoint_common.node_tools import GC_PAUSES
-        for name, node in nodes.items():
-            finish(name, node)
-        if nodes:
-            next(iter(nodes.values())).get_logger().info(GC_PAUSES.report())
-        for node in nodes.values():
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+
+    return run(make, 'graph', argv, executor_kind='events')
 
 
 if __name__ == '__main__':

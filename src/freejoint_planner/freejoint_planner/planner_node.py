@@ -48,45 +48,26 @@ import math
 
 from freejoint_common.clock import own_clock, set_ros_time
 from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
+from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, PLAN_CIRCLE, PLANNED_PATH
+from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINT, to_ns
 from freejoint_common.node_tools import request_scheduling
 from freejoint_common.node_tools import scheduling_refusal, SCHEDULING_SPECS
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
 from freejoint_core.trajectory import CircleQuintic
-from freejoint_msgs.msg import CartesianSetpoint
-from freejoint_msgs.srv import PlanCircle
-from nav_msgs.msg import OccupancyGrid
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock as ClockMsg
-from visualization_msgs.msg import Marker
 
-from .conversions import occupancy_grid, path_marker, setpoint_msg, time_ns
+from .conversions import occupancy_grid, path_marker, setpoint_msg
 from .planning import circle_bounds, CIRCLE_KEYS, compute_model, grid_bound, grid_extent
 from .planning import make_circle, MAP_KEYS, prepare_transition, RANGES, validate
 from .stream import Plan, SetpointStream
 
 NODE_NAME = 'freejoint_planner'
-
-# Setpoints: reliable, keep-last 100 (lockstep loses nothing); transient local so that a
-# controller started after the planner still gets the ticks already published ahead.
-QUEUE_DEPTH = 1000
-"""Keep-last depth of the run's streams: 1 s at 1 kHz, so a recorder that stalls
-for less than that loses nothing (docs/GRAPH.md)."""
-SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
-                          reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                         reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-# /clock: best effort accepts any publisher (rclcpp's ClockQoS is best effort).
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
-                       reliability=ReliabilityPolicy.BEST_EFFORT)
 
 MARKER_POINTS = 361
 
@@ -164,11 +145,13 @@ class PlannerNode(Node, Lifecycle):
             f'singularity map computed in {self._model.seconds * 1e3:.0f} ms: '
             f'{self._model.describe()}')
         # QoS overridable (qos_overrides./setpoint.publisher.<history|depth|reliability>).
-        self._setpoint_pub = self.create_publisher(CartesianSetpoint, 'setpoint',
-                                                   overridable(SETPOINT_QOS),
+        self._setpoint_pub = self.create_publisher(SETPOINT.msg_type, SETPOINT.name,
+                                                   overridable(SETPOINT.qos),
                                                    qos_overriding_options=QOS_OVERRIDES)
-        self._map_pub = self.create_publisher(OccupancyGrid, 'semi_singular_map', LATCHED_QOS)
-        self._marker_pub = self.create_publisher(Marker, 'planned_path', LATCHED_QOS)
+        self._map_pub = self.create_publisher(SEMI_SINGULAR_MAP.msg_type, SEMI_SINGULAR_MAP.name,
+                                              SEMI_SINGULAR_MAP.qos)
+        self._marker_pub = self.create_publisher(PLANNED_PATH.msg_type, PLANNED_PATH.name,
+                                                 PLANNED_PATH.qos)
         self._stream = SetpointStream(self._cfg['control_period'], self._cfg['lookahead'],
                                       skip_late=not self._sim)
         self._last_plan_id = 0
@@ -186,10 +169,11 @@ class PlannerNode(Node, Lifecycle):
                 self.get_logger().error(
                     f'configured circle refused, nothing streams: {self._describe(circle)}: '
                     f'{reason}')
-        self.create_subscription(ClockMsg, '/clock', self._on_clock, CLOCK_QOS)
+        self.create_subscription(CLOCK.msg_type, CLOCK.name, self._on_clock,
+                                 CLOCK_SUBSCRIPTION_QOS)
         self._timer = self._make_timer()
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.create_service(PlanCircle, '~/plan_circle', self._on_plan_circle)
+        self.create_service(PLAN_CIRCLE.srv_type, PLAN_CIRCLE.name, self._on_plan_circle)
         self.get_logger().info(
             f"ready: {'sim time (/clock)' if self._sim else 'system time'}, "
             f"dt {self._cfg['control_period']:g} s, lookahead {self._cfg['lookahead']} ticks")
@@ -468,7 +452,7 @@ class PlannerNode(Node, Lifecycle):
 
     def _on_clock(self, msg):
         if self._sim:
-            now_ns = time_ns(msg.clock)
+            now_ns = to_ns(msg.clock)
             set_ros_time(self, now_ns)
             self._advance(now_ns)
             stream = self._stream

@@ -49,6 +49,8 @@ import threading
 import time
 
 from builtin_interfaces.msg import Time
+from freejoint_common.contract import CLOCK, COMMANDS, EE_POSITION, JOINT_STATES, label_stamp
+from freejoint_common.contract import RESET, stamp_from_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
 from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import request_scheduling, scheduling_refusal, Throttle
@@ -58,31 +60,14 @@ from freejoint_core.plant import Plant
 from freejoint_sim.divergence import divergence_reason
 from freejoint_sim.params import build_config, SPECS
 from freejoint_sim.timing import StepTiming, WRITE_DELAY
-from geometry_msgs.msg import PointStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock as ClockMsg
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
-from std_srvs.srv import Trigger
-
-QUEUE_DEPTH = 1000
-"""Keep-last depth of the run's streams: 1 s at 1 kHz, so a recorder that stalls
-for less than that loses nothing (docs/GRAPH.md)."""
-QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
-                 reliability=ReliabilityPolicy.RELIABLE)
-"""QoS of joint_states, ee_position and the commands (docs/GRAPH.md)."""
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
-                       reliability=ReliabilityPolicy.RELIABLE)
-"""QoS of /clock: reliable, as deep as the state (a lagging recorder loses nothing)."""
 
 REPUBLISH_PERIOD = 0.2
 """Lockstep: wall period [s] of republishing step 0 until the first command arrives."""
 MAX_CATCH_UP = 20
 """Real time: steps integrated at most at one wake-up before dropping behind."""
-LABEL_PREFIX = 'stamp_ns='
 
 _isfinite = math.isfinite
 _monotonic = time.monotonic
@@ -139,25 +124,27 @@ class SimNode(Node, Lifecycle):
         self._timing_steps = cfg.timing_steps if cfg.timing_file else 0
         self._timing_write_at = self._timing_steps + WRITE_DELAY if cfg.timing_file else -1
 
-        self._js = JointState()
+        self._js = JOINT_STATES.msg_type()
         self._js.name = list(cfg.joint_names)
         self._js.header.frame_id = ''
-        self._ee = PointStamped()
+        self._ee = EE_POSITION.msg_type()
         self._ee.header.frame_id = cfg.frame_id
-        self._clock_msg = ClockMsg()
+        self._clock_msg = CLOCK.msg_type()
         self._stamp = Time()
 
         # QoS overridable (qos_overrides.<topic>.<publisher|subscription>.<policy>).
-        self._pub_js = self.create_publisher(JointState, 'joint_states', overridable(QOS),
+        self._pub_js = self.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name,
+                                             overridable(JOINT_STATES.qos),
                                              qos_overriding_options=QOS_OVERRIDES)
-        self._pub_ee = self.create_publisher(PointStamped, 'ee_position', overridable(QOS),
+        self._pub_ee = self.create_publisher(EE_POSITION.msg_type, EE_POSITION.name,
+                                             overridable(EE_POSITION.qos),
                                              qos_overriding_options=QOS_OVERRIDES)
-        self._pub_clock = (self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
+        self._pub_clock = (self.create_publisher(CLOCK.msg_type, CLOCK.name, CLOCK.qos)
                            if cfg.lockstep else None)
-        self.create_subscription(Float64MultiArray, 'effort_controller/commands',
-                                 self._on_command, overridable(QOS),
+        self.create_subscription(COMMANDS.msg_type, COMMANDS.name,
+                                 self._on_command, overridable(COMMANDS.qos),
                                  qos_overriding_options=QOS_OVERRIDES)
-        self.create_service(Trigger, '~/reset', self._on_reset)
+        self.create_service(RESET.srv_type, RESET.name, self._on_reset)
         self._diagnostics = Diagnostics(self, 'simulator', 'freejoint_sim',
                                         self._on_diagnostics_timer)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -279,12 +266,9 @@ class SimNode(Node, Lifecycle):
         now = _monotonic()
         if not self._lockstep:
             tau = self._command_effort(msg)
-            dims = msg.layout.dim
-            if dims and dims[0].label.startswith(LABEL_PREFIX):
-                try:   # the age of the state it answers (its grid time) at its receipt
-                    self._note_latency(_time_ns() - int(dims[0].label[len(LABEL_PREFIX):]))
-                except ValueError:
-                    pass
+            ns = label_stamp(msg.layout.dim)
+            if ns is not None:   # the age of the state it answers (its grid time) at receipt
+                self._note_latency(_time_ns() - ns)
             answered = -1
             if self._timing is not None:
                 answered = self._note_realtime_command(msg, now)
@@ -295,18 +279,11 @@ class SimNode(Node, Lifecycle):
             return
         if self._holding():
             return
-        dims = msg.layout.dim
-        if dims:
-            label = dims[0].label
-            if label.startswith(LABEL_PREFIX):
-                try:
-                    ns = int(label[len(LABEL_PREFIX):])
-                except ValueError:
-                    ns = self._t_ns
-                if ns != self._t_ns:
-                    self.get_logger().debug('dropped a command for stamp %d ns at step %d '
-                                            '(t = %d ns)' % (ns, self._k, self._t_ns))
-                    return
+        ns = label_stamp(msg.layout.dim)   # None: no label, the current step's answer
+        if ns is not None and ns != self._t_ns:
+            self.get_logger().debug('dropped a command for stamp %d ns at step %d '
+                                    '(t = %d ns)' % (ns, self._k, self._t_ns))
+            return
         tau = self._command_effort(msg)
         self._note_latency(int((now - self._last_publish) * 1e9))
         k = self._k
@@ -322,12 +299,8 @@ class SimNode(Node, Lifecycle):
 
     def _note_realtime_command(self, msg, now):
         """Note the receipt time of a real-time command; return the step it answers or -1."""
-        dims = msg.layout.dim
-        if not dims or not dims[0].label.startswith(LABEL_PREFIX):
-            return -1
-        try:
-            ns = int(dims[0].label[len(LABEL_PREFIX):])
-        except ValueError:
+        ns = label_stamp(msg.layout.dim)
+        if ns is None:
             return -1
         timing = self._timing
         k = timing.step_of_stamp(ns, self._k)
@@ -412,9 +385,7 @@ class SimNode(Node, Lifecycle):
         t_ns = self._t_ns
         if not self._lockstep:
             t_ns += self._rt_origin_ns   # the step's time on the grid, not the wall clock
-        stamp = self._stamp
-        stamp.sec = t_ns // 1_000_000_000
-        stamp.nanosec = t_ns % 1_000_000_000
+        stamp = stamp_from_ns(t_ns, self._stamp)
         if self._lockstep:
             k = self._k
             if k % self._clock_every == 0 or k == self._max_steps:

@@ -1,0 +1,199 @@
+"""
+The one runner of the freejoint node processes: start-up, spinning, end of run.
+
+Every node process (``sim_node``, ``controller_node``, ``freejoint_planner``, the viewer,
+the recorder, the player) and bringup's one-process composition of sim, controller and
+planner run through :func:`run`. Its lifecycle, for one node or several in one executor
+(as ros2/examples' ``composed.py`` adds nodes to one executor):
+
+1. configure: ``rclpy.init`` (no rclpy signal handlers), then ``make()`` builds the
+   node(s): each declares and validates its parameters in its constructor. A bad
+   start-up parameter (the node's ``FreejointValueError`` or rclpy's range and type
+   checks, ``ParameterException``) is one fatal line ``bad parameter: <name>: <reason>``
+   and exit status 2, no traceback. An exception of ``errors`` (a bag that cannot be
+   created or read) is one line ``<name>: error: <reason>`` on stderr and exit 1.
+2. spin: one executor (the first node's ``executor_kind``: ``'events'`` or
+   ``'single_threaded'``) runs every node until SIGINT/SIGTERM: the signal only sets a
+   flag, so the running callback finishes and the process stops between callbacks
+   (rclpy's own handler invalidates the context under a running callback, whose next
+   publish then fails). The default loop (:func:`spin_until`) freezes what start-up made
+   for the garbage collector, times its pauses, and applies the process scheduling to
+   threads started meanwhile once per :data:`REFRESH_PERIOD`; a node with a loop of its
+   own (the recorder's batched takes, the player's single pass) passes ``loop``.
+3. shut down, for each node in order: :meth:`Lifecycle.on_shutdown` (stop threads,
+   write files, finalise the bag), then its :meth:`Lifecycle.report` line is logged; then
+   the collector's pauses; the nodes are destroyed. A node's :meth:`Lifecycle.failure`
+   (something recorded was lost) is one line ``<name>: error: <reason>`` and exit 1.
+
+``EventsExecutor.spin()`` of the rclpy 7.1.6 wheels never runs a timer and busy-waits,
+so every loop drives the executor by ``spin_once``.
+"""
+
+import gc
+import inspect
+import signal
+import sys
+import time
+
+from freejoint_common.node_tools import GC_PAUSES, parameter_error
+from freejoint_common.scheduling import process_scheduling
+from freejoint_core.errors import FreejointValueError
+
+REFRESH_PERIOD = 1.0
+"""Wall period [s] of applying the process scheduling to threads started meanwhile."""
+
+
+class Lifecycle:
+    """
+    What the runner calls on a node (mixed into every freejoint node class).
+
+    ``configure`` is the node's constructor. The defaults do nothing: a node overrides
+    what it has.
+    """
+
+    executor_kind = 'events'
+    """The executor the runner spins the node with: 'events' or 'single_threaded'."""
+
+    def on_shutdown(self):
+        """Stop what runs besides the executor and write what the run leaves (files)."""
+
+    def report(self):
+        """Return the end-of-run line (logged at shutdown), or None for none."""
+        return None
+
+    def failure(self):
+        """Return why the run failed after all (exit 1), or None."""
+        return None
+
+
+class StopFlag:
+    """SIGINT/SIGTERM handler that notes the signal (:attr:`signum`) and returns."""
+
+    def __init__(self):
+        self.signum = None
+
+    def __call__(self, signum, frame):
+        self.signum = signum
+
+    def __bool__(self):
+        return self.signum is not None
+
+    def install(self):
+        """Handle SIGINT and SIGTERM with this flag."""
+        signal.signal(signal.SIGINT, self)
+        signal.signal(signal.SIGTERM, self)
+        return self
+
+
+def make_executor(kind='events'):
+    """Return rclpy's EventsExecutor (``kind`` 'events') or SingleThreadedExecutor."""
+    if kind == 'events':
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor()
+
+
+def spin_until(spin_once, ok, stop):
+    """Call ``spin_once`` until ``stop`` or not ``ok()``; keep new threads' scheduling."""
+    GC_PAUSES.start()
+    refresh = process_scheduling().refresh
+    monotonic = time.monotonic
+    next_refresh = monotonic() + REFRESH_PERIOD
+    while not stop and ok():
+        spin_once(timeout_sec=0.2)
+        if monotonic() >= next_refresh:
+            next_refresh = monotonic() + REFRESH_PERIOD
+            refresh()
+
+
+def spin_nodes(nodes, executor, stop):
+    """Spin the executor until the stop flag or rclpy's shutdown (the default loop)."""
+    import rclpy
+    spin_until(executor.spin_once, rclpy.ok, stop)
+
+
+def run(make, name, args=None, *, loop=spin_nodes, errors=(), handle_signals=True,
+        executor_kind=None):
+    """
+    Run node(s) through the lifecycle above; return the exit status (0, 1 or 2).
+
+    Parameters
+    ----------
+    make : callable
+        Builds the node, a list of nodes, or a generator of nodes (after ``rclpy.init``;
+        a generator's nodes made before a failure are shut down too); each node is a
+        :class:`Lifecycle`.
+    name : str
+        Name of the process in its start-up and failure lines.
+    args : list of str, optional
+        Command-line arguments for ``rclpy.init`` (None: ``sys.argv``).
+    loop : callable, optional
+        ``loop(nodes, executor, stop)`` runs the process until ``stop`` (default:
+        :func:`spin_nodes`).
+    errors : tuple of exception types, optional
+        Failures of ``make`` or ``loop`` reported as ``<name>: error: <reason>``, exit 1.
+    handle_signals : bool, optional
+        False: rclpy's own signal handlers (SIGINT raises in a loop that blocks outside
+        the executor, as the player's).
+    executor_kind : str, optional
+        'events' or 'single_threaded' (default: the first node's ``executor_kind``).
+
+    """
+    import rclpy
+    from rclpy.exceptions import ParameterException
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
+    rclpy.init(args=args, signal_handler_options=(
+        SignalHandlerOptions.NO if handle_signals else SignalHandlerOptions.ALL))
+    stop = StopFlag()
+    if handle_signals:
+        stop.install()
+    nodes = []
+    code = 0
+    executor = None
+    try:
+        made = make()
+        if inspect.isgenerator(made):
+            for node in made:
+                nodes.append(node)
+        else:
+            nodes = list(made) if isinstance(made, (list, tuple)) else [made]
+        executor = make_executor(executor_kind or nodes[0].executor_kind)
+        for node in nodes:
+            executor.add_node(node)
+        loop(nodes, executor, stop)
+    except (FreejointValueError, ParameterException) as exc:
+        rclpy.logging.get_logger(name).fatal('bad parameter: %s' % parameter_error(exc))
+        code = 2
+    except errors as exc:
+        print('%s: error: %s' % (name, exc), file=sys.stderr)
+        code = 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        failures = shut_down(nodes, executor)
+        rclpy.try_shutdown()
+    for text in failures:
+        print('%s: error: %s' % (name, text), file=sys.stderr)
+    return code or (1 if failures else 0)
+
+
+def shut_down(nodes, executor=None):
+    """Shut ``nodes`` down in order (on_shutdown, report); destroy them; return failures."""
+    failures = []
+    for node in nodes:
+        node.on_shutdown()
+        line = node.report()
+        if line:
+            node.get_logger().info(line)
+        reason = node.failure()
+        if reason:
+            failures.append(reason)
+    if nodes and GC_PAUSES in gc.callbacks:
+        nodes[0].get_logger().info(GC_PAUSES.report())
+    for node in nodes:
+        if executor is not None:
+            executor.remove_node(node)
+        node.destroy_node()
+    return failures
