@@ -47,9 +47,9 @@ against the clock spacing rule at run time.
 import math
 
 from freejoint_common.clock import own_clock, set_ros_time
-from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
 from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, PLAN_CIRCLE, PLANNED_PATH
 from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINT, to_ns
+from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import request_scheduling
 from freejoint_common.node_tools import scheduling_refusal, SCHEDULING_SPECS
 from freejoint_common.runner import Lifecycle, run
