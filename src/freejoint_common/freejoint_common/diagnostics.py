@@ -10,11 +10,11 @@ common rule of the level: ERROR when any error, else WARN when any warning, else
 """
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from freejoint_common.contract import DIAGNOSTICS
 from rclpy.clock import Clock, ClockType
 
 DIAGNOSTICS_PERIOD = 1.0
 """Wall period [s] of the status (ros2_control's diagnostic_updater: 1 Hz)."""
-DIAGNOSTICS_TOPIC = '/diagnostics'
 OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN
 ERROR = DiagnosticStatus.ERROR
@@ -100,7 +100,8 @@ class Diagnostics:
         self.hardware_id = hardware_id
         self.period = period
         self._clock = node.get_clock()
-        self._pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self._pub = node.create_publisher(DIAGNOSTICS.msg_type, DIAGNOSTICS.name,
+                                          DIAGNOSTICS.qos)
         self.timer = node.create_timer(period, on_timer,
                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
 

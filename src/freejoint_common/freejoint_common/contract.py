@@ -1,0 +1,213 @@
+"""
+The freejoint node graph contract (docs/GRAPH.md): the one source of its names and types.
+
+Every node, the recorder, the player, the viewer, the demo, the bench and the tests take
+from here:
+
+* the topics (:class:`Topic`: name, message class, default QoS) and ``GRAPH_TOPICS``, the
+  ones a run's recorder subscribes to from its start;
+* the services (:class:`Service`: name, service class);
+* the QoS profiles, one name per profile (``STREAM_QOS``, ``REALTIME_STATE_QOS``,
+  ``SETPOINT_QOS``, ``LATCHED_QOS``, ``CLOCK_PUBLISHER_QOS``, ``CLOCK_SUBSCRIPTION_QOS``,
+  ``DIAGNOSTICS_QOS``) and :func:`profile` for a profile built from values (the recorder's
+  and player's ``queue_depth``, a discovered publisher's offer);
+* the stamps: :func:`to_ns` and :func:`stamp_from_ns` between ``builtin_interfaces/Time``
+  and integer nanoseconds, :func:`clock_ns` of a serialized ``rosgraph_msgs/Clock``;
+* the lockstep label of a command (``stamp_ns=<t_k>``, lockstep item 2):
+  :func:`stamp_label` and :func:`label_stamp`.
+
+Names are relative (remappable) unless they start with ``/``.  A profile given to a
+publisher or subscription with ``qos_overriding_options`` must be a copy
+(``freejoint_common.node_tools.overridable``): rclpy writes the overrides into it.
+"""
+
+import struct
+from typing import NamedTuple
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
+from freejoint_msgs.msg import CartesianSetpoint, ControllerState
+from freejoint_msgs.srv import PlanCircle
+from geometry_msgs.msg import PointStamped
+from nav_msgs.msg import OccupancyGrid
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker
+
+# -- QoS ------------------------------------------------------------------------------------
+STREAM_DEPTH = 1000
+"""Keep-last depth of the run's streams: 1 s at 1 kHz, so lockstep and a recorder that
+stalls for less than that lose nothing."""
+
+
+def profile(depth, reliable=True, latched=False, **policies):
+    """
+    Return a keep-last QoS profile.
+
+    Parameters
+    ----------
+    depth : int
+        Keep-last depth (>= 1).
+    reliable : bool, optional
+        Reliable, else best effort.
+    latched : bool, optional
+        Transient local, else volatile.
+    **policies
+        Further ``QoSProfile`` keywords (``deadline``, ``lifespan``: a recorded offer).
+
+    """
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+        **policies)
+
+
+def is_latched(qos):
+    """Return whether ``qos`` is transient local (a latched topic)."""
+    return qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+
+
+STREAM_QOS = profile(STREAM_DEPTH)
+"""``joint_states``, ``ee_position``, commands, ``controller_state``: reliable, volatile."""
+REALTIME_STATE_QOS = profile(1)
+"""The controller's ``joint_states`` subscription in real time: the newest state only."""
+SETPOINT_QOS = profile(STREAM_DEPTH, latched=True)
+"""``setpoint``: transient local, so a controller started after the planner still gets the
+ticks streamed ahead while the simulator waited for its first command."""
+LATCHED_QOS = profile(1, latched=True)
+"""The map, the path marker, ``/robot_description``: reliable, transient local, depth 1."""
+CLOCK_PUBLISHER_QOS = profile(STREAM_DEPTH)
+"""The simulator's ``/clock``: reliable, as deep as the state (a lagging recorder loses
+nothing)."""
+CLOCK_SUBSCRIPTION_QOS = profile(STREAM_DEPTH, reliable=False)
+"""A ``/clock`` subscription: best effort accepts any publisher (rclcpp's ClockQoS)."""
+DIAGNOSTICS_QOS = QoSProfile(depth=10)
+"""``/diagnostics`` (rclpy's default profile, depth 10, as diagnostic_updater)."""
+
+
+# -- topics and services --------------------------------------------------------------------
+class Topic(NamedTuple):
+    """A topic of the graph: name, message class and the QoS its publisher offers."""
+
+    name: str
+    msg_type: type
+    qos: QoSProfile
+
+    @property
+    def type_name(self):
+        """The type as ``<package>/msg/<Name>`` (bag metadata, ``ros2 topic``)."""
+        return type_name(self.msg_type)
+
+    @property
+    def latched(self):
+        """Whether the topic is transient local."""
+        return is_latched(self.qos)
+
+
+class Service(NamedTuple):
+    """A service of a node: name (``~/`` = in the node's namespace) and service class."""
+
+    name: str
+    srv_type: type
+
+
+def type_name(cls):
+    """Return ``<package>/msg/<Name>`` (or ``srv``) of a message or service class."""
+    package, kind = cls.__module__.split('.')[:2]
+    return '%s/%s/%s' % (package, kind, cls.__name__)
+
+
+CLOCK = Topic('/clock', Clock, CLOCK_PUBLISHER_QOS)
+JOINT_STATES = Topic('joint_states', JointState, STREAM_QOS)
+EE_POSITION = Topic('ee_position', PointStamped, STREAM_QOS)
+COMMANDS = Topic('effort_controller/commands', Float64MultiArray, STREAM_QOS)
+CONTROLLER_STATE = Topic('controller_state', ControllerState, STREAM_QOS)
+SETPOINT = Topic('setpoint', CartesianSetpoint, SETPOINT_QOS)
+SEMI_SINGULAR_MAP = Topic('semi_singular_map', OccupancyGrid, LATCHED_QOS)
+PLANNED_PATH = Topic('planned_path', Marker, LATCHED_QOS)
+DIAGNOSTICS = Topic('/diagnostics', DiagnosticArray, DIAGNOSTICS_QOS)
+ROBOT_DESCRIPTION = Topic('/robot_description', String, LATCHED_QOS)
+
+GRAPH_TOPICS = (CLOCK, JOINT_STATES, EE_POSITION, COMMANDS, CONTROLLER_STATE, SETPOINT,
+                SEMI_SINGULAR_MAP, PLANNED_PATH)
+"""The run's topics a recorder subscribes to from its start (docs/GRAPH.md, Recording)."""
+
+RESET = Service('~/reset', Trigger)
+"""Simulator and controller: back to the initial state."""
+PLAN_CIRCLE = Service('~/plan_circle', PlanCircle)
+"""Planner: check (and execute) a circle."""
+RECORDER_STATUS = Service('~/status', Trigger)
+"""Recorder: success once every graph topic has a matched publisher."""
+
+# -- stamps ---------------------------------------------------------------------------------
+NS_PER_S = 1_000_000_000
+
+
+def to_ns(stamp):
+    """Return the integer nanoseconds of a ``builtin_interfaces/Time`` (``sec``, ``nanosec``)."""
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def stamp_from_ns(ns, stamp=None):
+    """
+    Return the ``builtin_interfaces/Time`` of a time in integer nanoseconds (>= 0).
+
+    With ``stamp`` (a ``Time`` the caller keeps, e.g. a message's header stamp) its fields
+    are set and it is returned: no new message on a per-tick path.
+    """
+    sec, nanosec = divmod(int(ns), NS_PER_S)
+    if stamp is None:
+        return Time(sec=sec, nanosec=nanosec)
+    stamp.sec = sec
+    stamp.nanosec = nanosec
+    return stamp
+
+
+def seconds_to_ns(seconds):
+    """Return a time or duration [s] in integer nanoseconds, rounded to the nearest."""
+    return int(round(seconds * 1e9))
+
+
+def clock_ns(data):
+    """
+    Return the time [ns] at the start of a serialized message (CDR), None if too short.
+
+    The first field of a ``rosgraph_msgs/Clock`` and the stamp of any message that starts
+    with a ``std_msgs/Header``: read without deserializing (a 1 kHz raw subscription).
+    """
+    if len(data) < 12:
+        return None
+    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
+    return sec * NS_PER_S + nanosec
+
+
+# -- the lockstep label ---------------------------------------------------------------------
+LABEL_PREFIX = 'stamp_ns='
+"""A command's ``layout.dim[0].label`` is ``stamp_ns=<t_k ns>``: the state it answers."""
+
+
+def stamp_label(ns):
+    """Return the label of a command answering the state stamped ``ns``."""
+    return LABEL_PREFIX + '%d' % ns
+
+
+def label_stamp(dims):
+    """
+    Return the stamp [ns] a command's ``layout.dim`` names, or None.
+
+    None without a dimension, without the ``stamp_ns=`` prefix, or with a value that is
+    not an integer: a third-party command (taken as the answer to the current step).
+    """
+    if not dims:
+        return None
+    label = dims[0].label
+    if not label.startswith(LABEL_PREFIX):
+        return None
+    try:
+        return int(label[len(LABEL_PREFIX):])
+    except ValueError:
+        return None
