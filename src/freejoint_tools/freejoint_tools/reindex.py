@@ -4,7 +4,8 @@ reindex: finalise the bag of a recorder that was killed (what ``ros2 bag reindex
 A recorder killed without warning (SIGKILL, power loss) leaves ``<bag>/<bag>_0.mcap``
 without its summary and footer (its last chunk possibly cut short) and no
 ``metadata.yaml``: rosbags and mcap's indexed reader refuse such a file. ``reindex <bag>``
-reads the MCAP file with mcap's StreamReader up to where it is cut, keeps every complete
+reads the MCAP file (plain or zstd chunks) with mcap's StreamReader (:func:`scan_mcap`, the
+pass :func:`open_bag` makes over a cut bag too) up to where it is cut, keeps every complete
 chunk (a chunk with all its message indexes), cuts off the incomplete tail, appends the
 summary (schemas, channels, statistics, chunk and metadata indexes) and footer in place,
 and writes ``metadata.yaml`` from what the file holds; the run information comes from the
