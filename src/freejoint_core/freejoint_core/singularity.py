@@ -457,12 +457,7 @@ class SemiSingularRegion:
         if x1 <= x0 or y1 <= y0:
             raise FreejointValueError(
                 f'extent: need x_min < x_max and y_min < y_max, got {ext.tolist()}')
-        try:
-            cell = float(cell)
-        except (TypeError, ValueError):
-            raise FreejointValueError(f'cell: expected a number, got {cell!r}') from None
-        if not math.isfinite(cell) or cell <= 0.0:
-            raise FreejointValueError(f'cell: expected > 0 m, got {cell}')
+        cell = _positive('cell', cell, '> 0 m')
         nx = int(math.ceil((x1 - x0) / cell - 1e-9))
         ny = int(math.ceil((y1 - y0) / cell - 1e-9))
         xl = x0 + np.arange(nx) * cell
@@ -522,12 +517,7 @@ def semi_singular(det_map, eps_d=EPS_D):
     """
     if not isinstance(det_map, DetMap):
         raise FreejointValueError(f'det_map: expected DetMap, got {type(det_map).__name__}')
-    try:
-        eps = float(eps_d)
-    except (TypeError, ValueError):
-        raise FreejointValueError(f'eps_d: expected a number, got {eps_d!r}') from None
-    if not math.isfinite(eps) or eps <= 0.0:
-        raise FreejointValueError(f'eps_d: expected a finite value > 0, got {eps}')
+    eps = _check_eps(eps_d)
     sgn = np.signbit(det_map.det_da)
     mask = det_map.det <= eps
     for axis in (0, 1):
@@ -539,11 +529,37 @@ def semi_singular(det_map, eps_d=EPS_D):
     _, l2, l3 = det_map.lengths
     dq = math.radians(det_map.resolution_deg)
     widen = (l2 + 2.0 * l3) * dq / 2.0
+    return _region(radii, widen, (l2 + l3) * dq, reach, eps, det_map.resolution_deg, mask)
+
+
+def _positive(name, value, expected):
+    """Return ``value`` as a finite float > 0, or raise naming ``name`` (``expected``)."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise FreejointValueError(f'{name}: expected a number, got {value!r}') from None
+    if not math.isfinite(out) or out <= 0.0:
+        raise FreejointValueError(f'{name}: expected {expected}, got {out}')
+    return out
+
+
+def _check_eps(eps_d):
+    """Return ``eps_d`` as a float, or raise naming it (finite, > 0)."""
+    return _positive('eps_d', eps_d, 'a finite value > 0')
+
+
+def _region(radii, widen, gap_step, reach, eps, resolution_deg, mask):
+    """
+    Return the ``SemiSingularRegion`` of the flagged samples' end-effector radii (m).
+
+    Each radius widened by ``widen`` (m) either way, merged and clipped to ``reach``;
+    the raw radii merged where consecutive ones are closer than ``gap_step`` (m).
+    """
     intervals = _merge(np.clip(radii - widen, *reach), np.clip(radii + widen, *reach))
     # the raw sample radii, merged where consecutive radii are closer than a step
     srt = np.sort(radii)
     if srt.size:
-        gap = np.nonzero(np.diff(srt) > (l2 + l3) * dq)[0]
+        gap = np.nonzero(np.diff(srt) > gap_step)[0]
         starts = np.concatenate(([0], gap + 1))
         ends = np.concatenate((gap, [srt.size - 1]))
         sample_intervals = np.column_stack((srt[starts], srt[ends]))
@@ -551,7 +567,7 @@ def semi_singular(det_map, eps_d=EPS_D):
         sample_intervals = np.zeros((0, 2))
     mask.flags.writeable = False
     return SemiSingularRegion(intervals=intervals, sample_intervals=sample_intervals,
-                              reach=reach, eps_d=eps, resolution_deg=det_map.resolution_deg,
+                              reach=reach, eps_d=eps, resolution_deg=resolution_deg,
                               singular_mask=mask)
 
 

@@ -65,8 +65,7 @@ import math
 import numpy as np
 
 from .errors import FreejointValueError
-from .singularity import (_check_resolution, _merge, det_map, EPS_D, semi_singular,
-                          SemiSingularRegion)
+from .singularity import _check_eps, _check_resolution, _region, det_map, EPS_D, semi_singular
 from .trajectory import workspace_annulus
 
 MAX_SAMPLES = 1 << 23
@@ -282,10 +281,8 @@ class NLinkDetMap:
         ``q_0`` (1 / (kg^4 m^4)).
     minor_negative : numpy.ndarray of bool, shape (r (r - 1) / 2,) + det.shape
         Sign bit of each 2 x 2 minor of ``Da`` (order of :func:`decoupling_minors`).
-    resolution_deg : float
-        Grid step (deg).
-    lengths : tuple of float
-        Link lengths (m), for the Cartesian image.
+    resolution_deg, lengths : float, tuple of float
+        Grid step (deg) and link lengths (m), as in ``singularity.DetMap``.
 
     """
 
@@ -419,12 +416,7 @@ def semi_singular_nlink(det_map, eps_d=EPS_D, cells=True):
     if not isinstance(det_map, NLinkDetMap):
         raise FreejointValueError(
             f'det_map: expected NLinkDetMap, got {type(det_map).__name__}')
-    try:
-        eps = float(eps_d)
-    except (TypeError, ValueError):
-        raise FreejointValueError(f'eps_d: expected a number, got {eps_d!r}') from None
-    if not math.isfinite(eps) or eps <= 0.0:
-        raise FreejointValueError(f'eps_d: expected a finite value > 0, got {eps}')
+    eps = _check_eps(eps_d)
     dims = det_map.det.ndim
     mask = det_map.det <= eps
     if cells:
@@ -440,19 +432,8 @@ def semi_singular_nlink(det_map, eps_d=EPS_D, cells=True):
     levers = np.cumsum(lengths[::-1])[::-1]          # sum_{a >= k} L_a
     dq = math.radians(det_map.resolution_deg)
     widen = float(levers[1:].sum()) * dq / 2.0
-    intervals = _merge(np.clip(radii - widen, *reach), np.clip(radii + widen, *reach))
-    srt = np.sort(radii)
-    if srt.size:
-        gap = np.nonzero(np.diff(srt) > float(levers[1]) * dq)[0]
-        starts = np.concatenate(([0], gap + 1))
-        ends = np.concatenate((gap, [srt.size - 1]))
-        sample_intervals = np.column_stack((srt[starts], srt[ends]))
-    else:
-        sample_intervals = np.zeros((0, 2))
-    mask.flags.writeable = False
-    return SemiSingularRegion(intervals=intervals, sample_intervals=sample_intervals,
-                              reach=reach, eps_d=eps, resolution_deg=det_map.resolution_deg,
-                              singular_mask=mask)
+    return _region(radii, widen, float(levers[1]) * dq, reach, eps, det_map.resolution_deg,
+                   mask)
 
 
 def uses_closed_map(nominal_params):
