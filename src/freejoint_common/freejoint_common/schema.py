@@ -52,6 +52,9 @@ class Param:
                 problem = self.validator(value)
             except FreejointValueError as exc:
                 return str(exc)
+        if (problem is None and isinstance(self.default, float)
+                and not math.isfinite(value)):
+            problem = f'expected a finite number, got {value}'
         if problem is None and self.bounds is not None and not isinstance(value, list):
             lo, hi = self.bounds
             if not lo <= value <= hi:
@@ -73,8 +76,6 @@ def _type_problem(default, value):
         return None if ok else f'expected an integer, got {value!r}'
     if isinstance(default, float):
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if ok and not math.isfinite(value):
-            return f'expected a finite number, got {value}'
         return None if ok else f'expected a number, got {value!r}'
     if isinstance(default, str):
         return None if isinstance(value, str) else f'expected a string, got {value!r}'
@@ -259,10 +260,12 @@ CONTROL_PERIOD = Param('control_period', DEFAULT_DT,
                        'every node', (1e-5, 1.0), read_only=True, validator=_whole_ns)
 """The control grid every node of the graph shares."""
 JOINT_NAMES = Param('joint_names', ['joint1', 'joint2', 'joint3'],
-                    'names of all joints in model order (base to tip), passive ones included',
+                    'names of all joints in model order (base to tip), passive ones included; '
+                    "left at this default with a URDF arm: the URDF's revolute joints",
                     read_only=True)
 JOINTS = Param('joints', ['joint1', 'joint2'],
-               'active joints in the order of the effort command (JointGroupEffortController)',
+               'active joints in the order of the effort command (JointGroupEffortController); '
+               "left at this default with a URDF arm: the arm's active joints, base to tip",
                read_only=True)
 FRAME_ID = Param('frame_id', 'base_link',
                  'frame of the arm base: of ee_position (sim), of the setpoints, map and '

@@ -258,17 +258,19 @@ class ControllerNode(Node, Lifecycle):
             pos = msg.position
             vel = msg.velocity
             try:
-                i0, i1, i2 = idx
-                q = (pos[i0], pos[i1], pos[i2])
-                qd = (vel[i0], vel[i1], vel[i2])
+                if len(idx) == 3:
+                    i0, i1, i2 = idx
+                    q = (pos[i0], pos[i1], pos[i2])
+                    qd = (vel[i0], vel[i1], vel[i2])
+                else:   # an arm of another number of joints (robot_description)
+                    q = tuple([pos[i] for i in idx])
+                    qd = tuple([vel[i] for i in idx])
             except (IndexError, ValueError):
                 q = None
                 kind = 'short'
                 reason = 'JointState has %d names but %d positions and %d velocities' % (
                     len(names), len(pos), len(vel))
-            if q is not None and not (_isfinite(q[0]) and _isfinite(q[1]) and _isfinite(q[2])
-                                      and _isfinite(qd[0]) and _isfinite(qd[1])
-                                      and _isfinite(qd[2])):
+            if q is not None and not all(map(_isfinite, q + qd)):
                 kind = 'nonfinite'
                 reason = 'JointState has a non-finite position or velocity: q=%s qd=%s' % (
                     list(q), list(qd))

@@ -50,17 +50,16 @@ import time
 
 from builtin_interfaces.msg import Time
 from freejoint_common.contract import CLOCK, COMMANDS, EE_POSITION, JOINT_STATES, label_stamp
-from freejoint_common.contract import RESET, stamp_from_ns
+from freejoint_common.contract import RESET, ROBOT_DESCRIPTION, stamp_from_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
-from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
-from freejoint_common.node_tools import request_scheduling, scheduling_refusal, Throttle
+from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
+from freejoint_common.node_tools import Throttle
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
-from freejoint_core.plant import Plant
 from freejoint_sim.divergence import divergence_reason
-from freejoint_sim.params import build_config, SPECS
+from freejoint_sim.engines import make_plant
+from freejoint_sim.params import SCHEMA
 from freejoint_sim.timing import StepTiming, WRITE_DELAY
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
@@ -79,15 +78,12 @@ class SimNode(Node, Lifecycle):
 
     def __init__(self, **kwargs):
         super().__init__('sim_node', **kwargs)
-        self._values = declare(self, SPECS)
-        cfg = build_config(self._values)   # raises: bad start-up parameters
-        request_scheduling(self, self._values, at_start=True)
-        self.config = cfg
-        self._plant = Plant(cfg.params, cfg.dt_sub, dist_bound=cfg.dist_bound, seed=cfg.seed,
-                            q0=cfg.q0)
+        self._params = NodeParameters(self, SCHEMA)   # raises: bad start-up parameters
+        cfg = self.config = self._params.config
+        self._plant = make_plant(cfg)
         self._fk = self._plant.model.fk
         self._install(cfg)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._params.listen(self._apply)
 
         n = cfg.params.n
         r = cfg.params.r
@@ -145,6 +141,7 @@ class SimNode(Node, Lifecycle):
                                  self._on_command, overridable(COMMANDS.qos),
                                  qos_overriding_options=QOS_OVERRIDES)
         self.create_service(RESET.srv_type, RESET.name, self._on_reset)
+        self._publish_description(cfg.arm)
         self._diagnostics = Diagnostics(self, 'simulator', 'freejoint_sim',
                                         self._on_diagnostics_timer)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -157,10 +154,12 @@ class SimNode(Node, Lifecycle):
             self._rt_thread = threading.Thread(target=self._realtime_loop, name='sim_step',
                                                daemon=True)
         self.get_logger().info(
-            'simulator ready: %s arm, %s, dt %g s (RK4 %g s), disturbance %g N m seed %d, '
+            'simulator ready: %s arm, %s, dt %g s (%s %g s), disturbance %g N m seed %d, '
             'q0 = [%s] rad, command timeout %g s' % (
-                self._values['case'], 'lockstep' if cfg.lockstep else 'real time', cfg.dt,
-                cfg.dt_sub, cfg.dist_bound, cfg.seed, ', '.join('%.6f' % v for v in cfg.q0),
+                cfg.arm.source if cfg.arm.urdf_arm else cfg.case,
+                'lockstep' if cfg.lockstep else 'real time', cfg.dt,
+                'MuJoCo RK4' if cfg.engine == 'mujoco' else 'RK4', cfg.dt_sub, cfg.dist_bound,
+                cfg.seed, ', '.join('%.6f' % v for v in cfg.q0),
                 cfg.command_timeout))
         if cfg.lockstep:
             self._publish_state()
@@ -171,6 +170,17 @@ class SimNode(Node, Lifecycle):
                 self.get_logger().info('brakes engaged: the arm is held at q0 until the '
                                        'first command')
             self._rt_thread.start()
+
+    def _publish_description(self, arm):
+        """Publish the arm's URDF on /robot_description (latched, as robot_state_publisher)."""
+        try:
+            text = arm.description().urdf
+        except FreejointValueError as exc:
+            self.get_logger().warn('no %s: %s' % (ROBOT_DESCRIPTION.name, exc))
+            return
+        self._pub_description = self.create_publisher(
+            ROBOT_DESCRIPTION.msg_type, ROBOT_DESCRIPTION.name, ROBOT_DESCRIPTION.qos)
+        self._pub_description.publish(ROBOT_DESCRIPTION.msg_type(data=text))
 
     # -- parameters ------------------------------------------------------------
     def _install(self, cfg):
@@ -187,28 +197,13 @@ class SimNode(Node, Lifecycle):
         self._max_steps = cfg.max_steps
         self._max_speed = cfg.divergence_speed
 
-    def _on_set_parameters(self, params):
-        if not any(param.name in self._values for param in params):
-            # Not ours (the read-only qos_overrides.* rclpy declares): nothing to check.
-            return SetParametersResult(successful=True)
-        values = dict(self._values)
-        for param in params:
-            if param.name in values:
-                values[param.name] = plain(param.value)
-        try:
-            cfg = build_config(values)
-        except FreejointValueError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        reason = scheduling_refusal(self, params, values)
-        if reason is not None:
-            return SetParametersResult(successful=False, reason=reason)
+    def _apply(self, old, cfg, params):
+        """Take a validated parameter change (the set-parameters callback's last step)."""
         self._install(cfg)
         self._ee.header.frame_id = cfg.frame_id
-        self._values = values
         self.get_logger().info('parameters set: %s (arm, disturbance, dt_sub and initial '
                                'state take effect on ~/reset)'
                                % ', '.join('%s=%s' % (p.name, plain(p.value)) for p in params))
-        return SetParametersResult(successful=True)
 
     def _on_reset(self, request, response):
         self._reset_pending = True
@@ -216,7 +211,7 @@ class SimNode(Node, Lifecycle):
         response.success = True
         response.message = ('arm back at q0 = [%s] rad at rest, %s case, seed %d, from step '
                             '%d on%s' % (', '.join('%.6f' % v for v in cfg.q0),
-                                         self._values['case'], cfg.seed, self._k + 1,
+                                         cfg.case, cfg.seed, self._k + 1,
                                          '; divergence cleared' if self._diverged else ''))
         self.get_logger().info('reset requested: ' + response.message)
         return response
@@ -224,8 +219,7 @@ class SimNode(Node, Lifecycle):
     def _do_reset(self):
         cfg = self.config
         self._reset_pending = False
-        self._plant = Plant(cfg.params, cfg.dt_sub, dist_bound=cfg.dist_bound, seed=cfg.seed,
-                            q0=cfg.q0)
+        self._plant = make_plant(cfg)
         self._fk = self._plant.model.fk
         self._applied = [0.0] * cfg.params.n
         self._diverged = None
