@@ -76,6 +76,51 @@ class Arm3Model(ArmModel):
             self._ia = self._ib = None
 
     # -- scalar kernels (hot path) ------------------------------------------
+    def _terms(self, q0, q1, q2, w0, w1, w2):
+        """
+        Return the terms ``qdd`` and ``_task_full`` share, on floats.
+
+        The tuple is ``(c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23, a11, b12,
+        b13, a22, b23, a33, inv)``: ``cos`` / ``sin`` of the absolute angles, the absolute
+        rates ``o2, o3`` (``o1 = w0``) and their squares ``k``, the ``H_ab sin(phi_a -
+        phi_b)`` terms ``a``, the adjugate of ``M_phi`` (``a11 .. a33``, symmetric) and
+        ``1 / det M_phi``.
+        """
+        f2 = q0 + q1
+        f3 = f2 + q2
+        c1 = _cos(q0)
+        s1 = _sin(q0)
+        c2 = _cos(f2)
+        s2 = _sin(f2)
+        c3 = _cos(f3)
+        s3 = _sin(f3)
+        o2 = w0 + w1
+        o3 = o2 + w2
+        k1 = w0 * w0
+        k2 = o2 * o2
+        k3 = o3 * o3
+        h12 = self._h12
+        h13 = self._h13
+        h23 = self._h23
+        x = h12 * (c1 * c2 + s1 * s2)
+        y = h13 * (c1 * c3 + s1 * s3)
+        z = h23 * (c2 * c3 + s2 * s3)
+        a12 = h12 * (s1 * c2 - c1 * s2)
+        a13 = h13 * (s1 * c3 - c1 * s3)
+        a23 = h23 * (s2 * c3 - c2 * s3)
+        d1 = self._d1
+        d2 = self._d2
+        d3 = self._d3
+        a11 = d2 * d3 - z * z
+        b12 = y * z - x * d3
+        b13 = x * z - d2 * y
+        a22 = d1 * d3 - y * y
+        b23 = x * y - d1 * z
+        a33 = d1 * d2 - x * x
+        inv = 1.0 / (d1 * a11 + x * b12 + y * b13)
+        return (c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23,
+                a11, b12, b13, a22, b23, a33, inv)
+
     def qdd(self, q0, q1, q2, w0, w1, w2, t0, t1, t2):
         """
         Forward dynamics on floats.
@@ -95,41 +140,11 @@ class Arm3Model(ArmModel):
             Joint accelerations ``(qdd0, qdd1, qdd2)`` [rad/s^2].
 
         """
-        f2 = q0 + q1
-        f3 = f2 + q2
-        c1 = _cos(q0)
-        s1 = _sin(q0)
-        c2 = _cos(f2)
-        s2 = _sin(f2)
-        c3 = _cos(f3)
-        s3 = _sin(f3)
-        o2 = w0 + w1
-        o3 = o2 + w2
-        k1 = w0 * w0
-        k2 = o2 * o2
-        k3 = o3 * o3
-        h12 = self._h12
-        h13 = self._h13
-        h23 = self._h23
-        x = h12 * (c1 * c2 + s1 * s2)
-        y = h13 * (c1 * c3 + s1 * s3)
-        z = h23 * (c2 * c3 + s2 * s3)
-        a12 = h12 * (s1 * c2 - c1 * s2)
-        a13 = h13 * (s1 * c3 - c1 * s3)
-        a23 = h23 * (s2 * c3 - c2 * s3)
+        (c1, _, c2, _, c3, _, _, _, k1, k2, k3, a12, a13, a23,
+         a11, b12, b13, a22, b23, a33, inv) = self._terms(q0, q1, q2, w0, w1, w2)
         r1 = t0 - t1 - (a12 * k2 + a13 * k3) - self._gh1 * c1
         r2 = t1 - t2 - (a23 * k3 - a12 * k1) - self._gh2 * c2
         r3 = t2 + (a13 * k1 + a23 * k2) - self._gh3 * c3
-        d1 = self._d1
-        d2 = self._d2
-        d3 = self._d3
-        a11 = d2 * d3 - z * z
-        b12 = y * z - x * d3
-        b13 = x * z - d2 * y
-        a22 = d1 * d3 - y * y
-        b23 = x * y - d1 * z
-        a33 = d1 * d2 - x * x
-        inv = 1.0 / (d1 * a11 + x * b12 + y * b13)
         p1 = (a11 * r1 + b12 * r2 + b13 * r3) * inv
         p2 = (b12 * r1 + a22 * r2 + b23 * r3) * inv
         p3 = (b13 * r1 + b23 * r2 + a33 * r3) * inv
@@ -137,42 +152,12 @@ class Arm3Model(ArmModel):
 
     def _task_full(self, q0, q1, q2, w0, w1, w2):
         """Kinematics, ``W = J M^-1`` (2x3, row-major) and ``b`` on floats."""
-        f2 = q0 + q1
-        f3 = f2 + q2
-        c1 = _cos(q0)
-        s1 = _sin(q0)
-        c2 = _cos(f2)
-        s2 = _sin(f2)
-        c3 = _cos(f3)
-        s3 = _sin(f3)
-        o2 = w0 + w1
-        o3 = o2 + w2
-        k1 = w0 * w0
-        k2 = o2 * o2
-        k3 = o3 * o3
-        h12 = self._h12
-        h13 = self._h13
-        h23 = self._h23
-        x = h12 * (c1 * c2 + s1 * s2)
-        y = h13 * (c1 * c3 + s1 * s3)
-        z = h23 * (c2 * c3 + s2 * s3)
-        a12 = h12 * (s1 * c2 - c1 * s2)
-        a13 = h13 * (s1 * c3 - c1 * s3)
-        a23 = h23 * (s2 * c3 - c2 * s3)
+        (c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23,
+         a11, b12, b13, a22, b23, a33, inv) = self._terms(q0, q1, q2, w0, w1, w2)
         # c_phi + G_phi
         f1v = a12 * k2 + a13 * k3 + self._gh1 * c1
         f2v = a23 * k3 - a12 * k1 + self._gh2 * c2
         f3v = -(a13 * k1 + a23 * k2) + self._gh3 * c3
-        d1 = self._d1
-        d2 = self._d2
-        d3 = self._d3
-        a11 = d2 * d3 - z * z
-        b12 = y * z - x * d3
-        b13 = x * z - d2 * y
-        a22 = d1 * d3 - y * y
-        b23 = x * y - d1 * z
-        a33 = d1 * d2 - x * x
-        inv = 1.0 / (d1 * a11 + x * b12 + y * b13)
         l1 = self._l1
         l2 = self._l2
         l3 = self._l3
