@@ -266,6 +266,99 @@ def planner_kill(args, index):
 
 
 # -- (c) controller restart -------------------------------------------------------------
+def log_times(path, text):
+    """Return the system times [s] of a node log's lines containing ``text`` (rcutils stamps)."""
+    times = []
+    try:
+        with open(path, errors='replace') as f:
+            for line in f:
+                if text in line:
+                    head = line.split('] [', 2)
+                    try:
+                        times.append(float(head[1].split(']')[0]))
+                    except (IndexError, ValueError):
+                        pass
+    except OSError:
+        pass
+    return times
+
+
+def restart_timeline(log, released, t_restart, t_end):
+    """
+    Return when a restarted controller got where, in s after its start (``t_restart``).
+
+    ``node_s``: its first log line (the node built, its participant created: process start,
+    interpreter, imports, ``rclpy.init`` and the node's parameters before it); ``ready_s``:
+    'controller ready' (publishers, subscriptions, timers made); ``first_command_s``: the
+    simulator's 'brakes released' (its first command accepted: the participants discovered
+    each other, a state reached the controller and its command the simulator).
+    """
+    def first(times):
+        after = [t - t_restart for t in times if t_restart <= t <= t_end]
+        return min(after) if after else None
+    lines = log_times(log, '[controller_node]')
+    row = {'node_s': first(lines), 'ready_s': first(log_times(log, 'controller ready')),
+           'first_command_s': first(released)}
+    for key, text in (('imports_s', 'imports done'), ('rclpy_init_s', 'rclpy initialised'),
+                      ('matched_joint_states_s', 'matched subscription joint_states'),
+                      ('matched_setpoint_s', 'matched subscription setpoint'),
+                      ('matched_commands_s', 'matched publisher effort_controller/commands'),
+                      ('first_joint_states_s', 'first message on joint_states'),
+                      ('first_setpoint_s', 'first message on setpoint')):
+        value = first(log_times(log, '[PROBE]') and log_times(log, text))
+        if value is not None:
+            row[key] = value
+    return row
+
+
+def blend_of(plant, t_first):
+    """
+    Return the resume blend of a restarted controller: the offset at its first command.
+
+    ``blend_offset_mm``: |end effector - setpoint| at the first command; ``blend_s``: the
+    blend's duration for that offset, ``max(resume_time, 1.875 d / resume_max_velocity,
+    sqrt(5.7735 d / resume_max_acceleration))`` with config/controller.yaml's values (the
+    controller's ReferenceShaper rule).
+    """
+    import math
+    import numpy as np
+    i = int(np.searchsorted(plant['log_ns'], int(t_first * NS)))
+    if i >= len(plant['log_ns']) or not np.isfinite(plant['err_mm'][i]):
+        return {}
+    d = float(plant['err_mm'][i]) / 1000.0
+    ctl = bench_graph.ros_params('controller.yaml')
+    blend = float(ctl.get('resume_time', 0.0))
+    if ctl.get('resume_max_velocity'):
+        blend = max(blend, 1.875 * d / float(ctl['resume_max_velocity']))
+    if ctl.get('resume_max_acceleration'):
+        blend = max(blend, math.sqrt(5.7735 * d / float(ctl['resume_max_acceleration'])))
+    return {'blend_offset_mm': 1000.0 * d, 'blend_s': blend}
+
+
+def restart_command(args):
+    """
+    Return ``(replace, prefix)`` of the restarted controller's command line.
+
+    ``--restart-priority P``: started under ``chrt -f P``: a supervisor can start a real-time
+    process in its scheduling class (systemd's ``CPUSchedulingPolicy=fifo`` /
+    ``CPUSchedulingPriority=``, ``chrt``), so that its start-up (interpreter, imports,
+    participant) is not queued behind best-effort load; the node sets its
+    ``thread_priority`` itself once built either way. ``--probe``: bench/controller_probe.py
+    instead of the executable (the start-up timeline in the node's log).
+    """
+    prefix = ['chrt', '-f', str(args.restart_priority)] if args.restart_priority else []
+    if not args.probe:
+        return None, prefix
+    exe = bench_graph.executable('freejoint_control', 'controller_node')
+    return {exe: os.path.join(HERE, 'controller_probe.py')}, prefix + [sys.executable]
+
+
+def fastdds_profile():
+    """Return the Fast DDS XML profile file the nodes load (None: Fast DDS defaults)."""
+    return (os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE')
+            or os.environ.get('FASTDDS_DEFAULT_PROFILES_FILE') or None)
+
+
 def controller_restart(args, index):
     """Both cases: kill -9 and restart the controller mid-circle, ``--cycles`` times."""
     import numpy as np
@@ -288,16 +381,23 @@ def controller_restart(args, index):
                     s.wait(0.02)
                 t_kill = s.kill('controller_node')
                 s.wait(args.down)
-                t_restart = s.restart('controller_node')
+                load = os.getloadavg()[0]
+                t_restart = s.restart('controller_node', *restart_command(args))
+                log = s.graph.procs['controller_node'].log_path
                 s.wait(args.recover)
-                cycles.append((t_kill, t_restart, time.time()))
+                cycles.append((t_kill, t_restart, time.time(), log, load))
         ticks = soak.controller_ticks(s.bag)
         plant = soak.plant_ticks(s.bag, active_joints())
+        released = log_times(s.graph.procs['sim_node'].log_path, 'brakes released')
+        diverged_at = log_times(s.graph.procs['sim_node'].log_path, 'iverge')
         rows = []
-        for t_kill, t_restart, t_end in cycles:
+        for t_kill, t_restart, t_end, log, load in cycles:
             w = log_window(plant, t_restart, t_end)
             idx = np.nonzero(w)[0]
-            row = {'kill': t_kill, 'restart': t_restart, 'plant_ticks': int(len(idx))}
+            row = {'kill': t_kill, 'restart': t_restart, 'plant_ticks': int(len(idx)),
+                   'load_average_1min': load, 'controller_log': os.path.relpath(log, ROOT)}
+            row.update(restart_timeline(log, released, t_restart, t_end))
+            row['diverged'] = any(t_restart <= t <= t_end for t in diverged_at)
             answers = np.nonzero(log_window(ticks, t_restart, t_end))[0]
             row['first_controller_state_s'] = (float(ticks['log_ns'][answers[0]] * 1e-9
                                                      - t_restart) if len(answers) else None)
@@ -317,6 +417,10 @@ def controller_restart(args, index):
                 row['effort_max'] = [float(v) for v in np.nanmax(np.abs(
                     plant['effort'][idx]), axis=0)]
                 row['max_mm_after'] = float(np.nanmax(err))
+                row.update(blend_of(plant, t_restart + row['first_command_s'])
+                           if row.get('first_command_s') is not None else {})
+            if row.get('back_within_s') is not None and row.get('first_command_s') is not None:
+                row['back_after_first_command_s'] = row['back_within_s'] - row['first_command_s']
             rows.append(row)
         diverged = s.diverged_lines()
         backs = [r.get('back_within_s') for r in rows]
@@ -334,6 +438,25 @@ def controller_restart(args, index):
         res['no_divergence'] = not (diverged or res['diverged_diagnostics'])
         res['back_within_2s'] = (res['worst_back_within_s'] is not None
                                  and res['worst_back_within_s'] <= 2.0)
+        res['fastdds_profile'] = fastdds_profile()
+        say('controller_restart %s: Fast DDS profile %s; per cycle, s after the restart '
+            '(load = 1-min load average at the restart):' % (case, res['fastdds_profile']))
+        say('  cycle  load  node  ready  1st cmd  blend (offset mm)  back  back-1st cmd  '
+            'max |effort| N m  diverged')
+        for k, r in enumerate(rows):
+            say('  %5d %5.2f %5s %6s %8s %6s (%7s) %6s %13s  %16s  %s' % (
+                k + 1, r['load_average_1min'], _f(r.get('node_s')), _f(r.get('ready_s')),
+                _f(r.get('first_command_s')), _f(r.get('blend_s')),
+                _f(r.get('blend_offset_mm')), _f(r.get('back_within_s')),
+                _f(r.get('back_after_first_command_s')), _fl(r.get('effort_max')),
+                r.get('diverged', 'n/a')))
+            if args.probe:
+                say('        probe: imports %s, rclpy.init %s, matched joint_states %s, '
+                    'commands %s, setpoint %s; first joint_states %s, setpoint %s' % tuple(
+                        _f(r.get(k)) for k in (
+                            'imports_s', 'rclpy_init_s', 'matched_joint_states_s',
+                            'matched_commands_s', 'matched_setpoint_s',
+                            'first_joint_states_s', 'first_setpoint_s')))
         say('controller_restart %s: %d kill -9 / restarts (%g s down): first answer after '
             '%s s; end effector back within %.3f mm of the setpoint after %s s (worst; <= 2 s '
             '-> %s); largest |effort| applied after a restart %s vs limits %s -> %s; '
@@ -487,6 +610,12 @@ def parse(argv):
                     help='controller_restart: seconds without a controller (default 1)')
     ap.add_argument('--recover', type=float, default=4.0,
                     help='controller_restart: seconds measured after a restart (default 4)')
+    ap.add_argument('--restart-priority', type=int, default=0,
+                    help='controller_restart: start the restarted controller under chrt -f '
+                    'this priority (0: the default scheduler until the node sets its own)')
+    ap.add_argument('--probe', action='store_true',
+                    help='controller_restart: restart the controller through '
+                    'bench/controller_probe.py (its start-up timeline in its log)')
     ap.add_argument('--control-period', type=float, default=None,
                     help='driver500: the controller control_period (default: configured)')
     ap.add_argument('--gap', type=float, default=1.5, help='start_order: s between nodes')
@@ -507,6 +636,7 @@ def main(argv=None):
     index = 40      # domains apart from a soak started by the same process id
     for name in names:
         cond = soak.conditions(args.priority, 0)
+        cond['fastdds_profile'] = fastdds_profile()
         say('%s: priority %d, %d CPUs, load %.2f' % (name, args.priority, os.cpu_count(),
                                                      os.getloadavg()[0]))
         try:

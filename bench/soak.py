@@ -219,13 +219,15 @@ class Session:
         self.killed.add(name)
         return now
 
-    def restart(self, name, replace=None):
-        """Start ``name`` again with its command line; return the system time (s)."""
+    def restart(self, name, replace=None, prefix=()):
+        """Start ``name`` again with its command line (after ``prefix``); return the time."""
         old = self.graph.procs[name]
-        cmd = [(replace or {}).get(a, a) for a in old.args]
+        cmd = [(replace or {}).get(a, a) for a in getattr(old, 'cmd', old.args)]
         self.restarts[name] = self.restarts.get(name, 0) + 1
         now = time.time()
-        self.graph.start(name, cmd, log_name='%s_%d' % (name, self.restarts[name] + 1))
+        self.graph.start(name, list(prefix) + cmd,
+                         log_name='%s_%d' % (name, self.restarts[name] + 1))
+        self.graph.procs[name].cmd = cmd
         self.killed.discard(name)
         return now
 
