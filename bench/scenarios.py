@@ -44,12 +44,13 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
+from freejoint_common.contract import NS_PER_S  # noqa: E402, I100
 import soak  # noqa: E402 - bench/soak.py, the session and the bag analysis
 
 RESUMING_BIT = 256
 """freejoint_msgs/ControllerState STATUS_RESUMING: the reference blends onto the stream."""
 SCENARIOS = ('replan', 'planner_kill', 'controller_restart', 'driver500', 'start_order')
-NS = 1_000_000_000
+NS = NS_PER_S
 
 
 def say(text):

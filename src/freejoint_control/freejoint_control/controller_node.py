@@ -20,6 +20,9 @@ tick only counters), and the QoS of its topics can be overridden at start-up wit
 import math
 import time
 
+from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, JOINT_STATES
+from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_from_ns
+from freejoint_common.contract import stamp_label, to_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import Throttle
@@ -34,29 +37,11 @@ from freejoint_core.errors import FreejointValueError
 from freejoint_core.reference import (clamp_dt, extrapolate, limit_effort, MODE_HOLD,
                                       MODE_NONE, ReferenceShaper, setpoint_refusal,
                                       state_refusal)
-from freejoint_msgs.msg import CartesianSetpoint, ControllerState
+from freejoint_msgs.msg import ControllerState
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
-from std_srvs.srv import Trigger
-
-QUEUE_DEPTH = 1000
-"""Keep-last depth of the run's streams: 1 s at 1 kHz, so a recorder that stalls
-for less than that loses nothing (docs/GRAPH.md)."""
-QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
-                 reliability=ReliabilityPolicy.RELIABLE)
-"""QoS of joint_states, commands and controller_state (docs/GRAPH.md)."""
-REALTIME_STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                                reliability=ReliabilityPolicy.RELIABLE)
-"""QoS of the controller's joint_states subscription in real time: the newest state only."""
-SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
-                          reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-"""QoS of setpoint: transient local, so a controller started after the planner still gets
-the ticks streamed ahead while the simulator waited for its first command (GRAPH.md)."""
+from std_msgs.msg import MultiArrayDimension
 
 STATUS_HOLDING = ControllerState.STATUS_HOLDING
 STATUS_RATE_LIMITED = ControllerState.STATUS_RATE_LIMITED
@@ -86,8 +71,8 @@ class ControllerNode(Node, Lifecycle):
         self._install(cfg)
         self._params.listen(self._apply)
 
-        self._cmd = Float64MultiArray()
-        self._cmd.layout.dim = [MultiArrayDimension(label='stamp_ns=0', size=len(cfg.joints),
+        self._cmd = COMMANDS.msg_type()
+        self._cmd.layout.dim = [MultiArrayDimension(label=stamp_label(0), size=len(cfg.joints),
                                                     stride=len(cfg.joints))]
         self._dim = self._cmd.layout.dim[0]
         self._state = ControllerState()
@@ -140,20 +125,21 @@ class ControllerNode(Node, Lifecycle):
         # Each QoS overridable (qos_overrides.<topic>.<publisher|subscription>.<policy>,
         # e.g. a best-effort joint_states of a real driver), defaults as in GRAPH.md.
         self._pub_cmd = self.create_publisher(
-            Float64MultiArray, 'effort_controller/commands', overridable(QOS),
+            COMMANDS.msg_type, COMMANDS.name, overridable(COMMANDS.qos),
             qos_overriding_options=QOS_OVERRIDES)
-        self._pub_state = self.create_publisher(ControllerState, 'controller_state',
-                                                overridable(QOS),
+        self._pub_state = self.create_publisher(CONTROLLER_STATE.msg_type, CONTROLLER_STATE.name,
+                                                overridable(CONTROLLER_STATE.qos),
                                                 qos_overriding_options=QOS_OVERRIDES)
         # Real time: only the newest state matters (a queue of old ones would be answered
         # late, a delay the loop cannot take); lockstep: every state, the sim waits.
-        self.create_subscription(JointState, 'joint_states', self._on_joint_state,
-                                 overridable(QOS if cfg.lockstep else REALTIME_STATE_QOS),
+        self.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name, self._on_joint_state,
+                                 overridable(JOINT_STATES.qos if cfg.lockstep
+                                             else REALTIME_STATE_QOS),
                                  qos_overriding_options=QOS_OVERRIDES)
-        self.create_subscription(CartesianSetpoint, 'setpoint', self._on_setpoint,
-                                 overridable(SETPOINT_QOS),
+        self.create_subscription(SETPOINT.msg_type, SETPOINT.name, self._on_setpoint,
+                                 overridable(SETPOINT.qos),
                                  qos_overriding_options=QOS_OVERRIDES)
-        self.create_service(Trigger, '~/reset', self._on_reset)
+        self.create_service(RESET.srv_type, RESET.name, self._on_reset)
         self._diagnostics = Diagnostics(self, 'controller', 'freejoint_control',
                                         self._on_diagnostics_timer)
         self._diag_window = self._window(_monotonic())
@@ -227,7 +213,7 @@ class ControllerNode(Node, Lifecycle):
 
     def _on_joint_state(self, msg):
         stamp = msg.header.stamp
-        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        ns = to_ns(stamp)
         self._last_state_wall = _monotonic()
         self._stale_reported = False
         if self._max_age_ns:
@@ -358,7 +344,7 @@ class ControllerNode(Node, Lifecycle):
 
     def _on_setpoint(self, msg):
         stamp = msg.header.stamp
-        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        ns = to_ns(stamp)
         p = msg.position
         v = msg.velocity
         a = msg.acceleration
@@ -484,7 +470,7 @@ class ControllerNode(Node, Lifecycle):
             self._push(effort)
         cmd = self._cmd
         cmd.data = effort
-        self._dim.label = 'stamp_ns=%d' % ns
+        self._dim.label = stamp_label(ns)
         self._pub_cmd.publish(cmd)
         st = self._state
         st.header.stamp = stamp
@@ -506,8 +492,7 @@ class ControllerNode(Node, Lifecycle):
             st.setpoint_stamp.nanosec = 0
             st.setpoint_age = 0.0
         else:
-            st.setpoint_stamp.sec = sp_ns // 1_000_000_000
-            st.setpoint_stamp.nanosec = sp_ns % 1_000_000_000
+            stamp_from_ns(sp_ns, st.setpoint_stamp)
             st.setpoint_age = (ns - sp_ns) * 1e-9
         st.dt = dt
         if self._lockstep:
@@ -559,7 +544,7 @@ class ControllerNode(Node, Lifecycle):
         """Command zero effort for the state stamped ns; say why in the state message."""
         cmd = self._cmd
         cmd.data = self._zero
-        self._dim.label = 'stamp_ns=%d' % ns
+        self._dim.label = stamp_label(ns)
         self._pub_cmd.publish(cmd)
         st = self._state
         st.header.stamp = stamp

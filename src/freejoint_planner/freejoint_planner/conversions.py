@@ -9,33 +9,16 @@ Message conversions of the planner (ROS message types only, no node, no spinning
 
 import array
 
-from builtin_interfaces.msg import Time
-from freejoint_msgs.msg import CartesianSetpoint
+from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINT, stamp_from_ns
 from geometry_msgs.msg import Point
-from nav_msgs.msg import OccupancyGrid
 import numpy as np
 from visualization_msgs.msg import Marker
-
-from .stream import split_ns
-
-
-def time_msg(t_ns):
-    """Return ``builtin_interfaces/Time`` of a ROS time in integer nanoseconds (>= 0)."""
-    sec, nanosec = split_ns(t_ns)
-    return Time(sec=sec, nanosec=nanosec)
-
-
-def time_ns(msg):
-    """Return the integer nanoseconds of a ``builtin_interfaces/Time``."""
-    return msg.sec * 1_000_000_000 + msg.nanosec
 
 
 def setpoint_msg(sp, frame_id):
     """Return the ``freejoint_msgs/CartesianSetpoint`` of a ``stream.Setpoint``."""
-    msg = CartesianSetpoint()
-    sec, nanosec = split_ns(sp.stamp_ns)
-    msg.header.stamp.sec = sec
-    msg.header.stamp.nanosec = nanosec
+    msg = SETPOINT.msg_type()
+    stamp_from_ns(sp.stamp_ns, msg.header.stamp)
     msg.header.frame_id = frame_id
     msg.position[0] = sp.px
     msg.position[1] = sp.py
@@ -74,10 +57,10 @@ def occupancy_grid(grid, extent, cell, frame_id, stamp_ns):
     grid = np.asarray(grid)
     if grid.ndim != 2 or grid.dtype != np.int8:
         raise ValueError(f'grid: expected a 2-D int8 array, got {grid.dtype} {grid.shape}')
-    msg = OccupancyGrid()
-    msg.header.stamp = time_msg(stamp_ns)
+    msg = SEMI_SINGULAR_MAP.msg_type()
+    msg.header.stamp = stamp_from_ns(stamp_ns)
     msg.header.frame_id = frame_id
-    msg.info.map_load_time = time_msg(stamp_ns)
+    msg.info.map_load_time = stamp_from_ns(stamp_ns)
     msg.info.resolution = float(cell)
     msg.info.height, msg.info.width = (int(n) for n in grid.shape)
     msg.info.origin.position.x = float(extent[0])
@@ -95,7 +78,7 @@ def path_marker(points, frame_id, stamp_ns, plan_id=0, width=0.005):
     line width ``width`` (m), no lifetime (stays until replaced).
     """
     msg = Marker()
-    msg.header.stamp = time_msg(stamp_ns)
+    msg.header.stamp = stamp_from_ns(stamp_ns)
     msg.header.frame_id = frame_id
     msg.ns = 'planned_path'
     msg.id = 0

@@ -83,11 +83,6 @@ def last_tick_due(now_ns, dt_ns, lookahead):
     return (now_ns + lookahead * dt_ns) // dt_ns
 
 
-def split_ns(t_ns):
-    """Return ``(sec, nanosec)`` of a ROS time given in integer nanoseconds (>= 0)."""
-    return divmod(int(t_ns), 1_000_000_000)
-
-
 class Setpoint(NamedTuple):
     """One setpoint of the stream: what a ``CartesianSetpoint`` message carries."""
 

@@ -2,19 +2,12 @@
 from freejoint_core.arm import table1
 from freejoint_core.singularity import det_map, semi_singular
 from freejoint_planner.conversions import occupancy_grid, path_marker, setpoint_msg
-from freejoint_planner.conversions import time_msg, time_ns
 from freejoint_planner.planning import grid_extent
 from freejoint_planner.stream import Setpoint
 import numpy as np
 import pytest
 
 pytestmark = pytest.mark.ros
-
-
-def test_stamps_round_trip_through_builtin_time():
-    msg = time_msg(1_500_000_001)
-    assert (msg.sec, msg.nanosec) == (1, 500_000_001)
-    assert time_ns(msg) == 1_500_000_001
 
 
 def test_setpoint_message_carries_every_field():

@@ -1,7 +1,7 @@
 """The control-grid arithmetic and the setpoint stream, by hand-derived ticks and stamps."""
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_planner.stream import ceil_div, first_tick_at_or_after, last_tick_due
-from freejoint_planner.stream import period_ns, Plan, SetpointStream, split_ns
+from freejoint_planner.stream import period_ns, Plan, SetpointStream
 import pytest
 
 MS = 1_000_000  # ns
@@ -35,11 +35,6 @@ def test_first_tick_at_or_after_and_last_tick_due_on_and_off_the_grid():
     assert last_tick_due(3 * MS, MS, 20) == 23
     assert last_tick_due(2_500_000, MS, 20) == 22
     assert last_tick_due(2_500_000, MS, 0) == 2
-
-
-def test_split_ns_gives_sec_and_nanosec():
-    assert split_ns(1_500_000_001) == (1, 500_000_001)
-    assert split_ns(999_999_999) == (0, 999_999_999)
 
 
 def _ticks(setpoints):

@@ -21,14 +21,13 @@ cannot be read: one line naming the file; 2 on a bad parameter: one fatal line
 import sys
 import time
 
+from freejoint_common.contract import CLOCK, profile, stamp_from_ns
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock
 
 from .bagfile import BagError, open_bag
 from .qos import publisher_qos
@@ -86,7 +85,7 @@ class Player(Node, Lifecycle):
         wanted = {self.resolve_topic_name(t) for t in p['topics']}
         excluded = {self.resolve_topic_name(t) for t in p['exclude']}
         if p['clock']:
-            excluded.add('/clock')
+            excluded.add(CLOCK.name)
         self._pubs = {}
         for name, topic in sorted(self.bag.topics.items()):
             if (wanted and name not in wanted) or name in excluded or not topic.count:
@@ -101,9 +100,8 @@ class Player(Node, Lifecycle):
                 msg_class, name, publisher_qos(topic.qos, p['queue_depth']))
         self._clock_pub = None
         if p['clock']:
-            self._clock_pub = self.create_publisher(
-                Clock, '/clock', QoSProfile(depth=p['queue_depth'],
-                                            reliability=ReliabilityPolicy.RELIABLE))
+            self._clock_pub = self.create_publisher(CLOCK.msg_type, CLOCK.name,
+                                                    profile(p['queue_depth']))
         self.played = dict.fromkeys(self._pubs, 0)
 
     def _on_set_parameters(self, params):
@@ -147,8 +145,7 @@ class Player(Node, Lifecycle):
             if wait > 0:
                 time.sleep(wait)
             if self._clock_pub is not None and (last_clock is None or log_time > last_clock):
-                clock = Clock()
-                clock.clock.sec, clock.clock.nanosec = divmod(log_time, 1_000_000_000)
+                clock = CLOCK.msg_type(clock=stamp_from_ns(log_time))
                 self._clock_pub.publish(clock)
                 last_clock = log_time
             self._pubs[name].publish(data)

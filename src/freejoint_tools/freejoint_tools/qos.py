@@ -1,8 +1,8 @@
 """QoS profiles between rclpy and the rosbag2 version 9 metadata format (plain dicts)."""
 
+from freejoint_common.contract import NS_PER_S, profile
 from rclpy.duration import Duration
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
-                       ReliabilityPolicy)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, ReliabilityPolicy
 
 from .bagfile import INFINITE
 
@@ -13,7 +13,7 @@ def _duration_dict(value):
     ns = value.nanoseconds if hasattr(value, 'nanoseconds') else int(value)
     if ns >= _INF_NS or ns < 0:
         return {'sec': INFINITE[0], 'nsec': INFINITE[1]}
-    return {'sec': ns // 1_000_000_000, 'nsec': ns % 1_000_000_000}
+    return {'sec': ns // NS_PER_S, 'nsec': ns % NS_PER_S}
 
 
 def _duration(value):
@@ -71,10 +71,7 @@ def subscription_qos(offered, depth):
     latched = bool(offered) and all(
         _policy(DurabilityPolicy, q.durability, None) == DurabilityPolicy.TRANSIENT_LOCAL
         for q in offered)
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=max(int(depth), len(offered), 1),
-        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+    return profile(max(int(depth), len(offered), 1), reliable, latched)
 
 
 def publisher_qos(profiles, depth):
@@ -101,5 +98,5 @@ def publisher_qos(profiles, depth):
         value = _duration(first.get(key, {}))
         if value is not None:
             kwargs[key] = value
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(keep, 1),
-                      reliability=reliability, durability=durability, **kwargs)
+    return profile(max(keep, 1), reliability == ReliabilityPolicy.RELIABLE,
+                   durability == DurabilityPolicy.TRANSIENT_LOCAL, **kwargs)

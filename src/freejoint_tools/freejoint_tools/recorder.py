@@ -73,11 +73,12 @@ import operator
 import os
 import re
 import shutil
-import struct
 import sys
 import time
 
+from freejoint_common import contract
 from freejoint_common.clock import own_clock
+from freejoint_common.contract import clock_ns, profile, RECORDER_STATUS
 from freejoint_common.runner import Lifecycle, run
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
@@ -86,8 +87,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from std_srvs.srv import Trigger
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from .bagfile import BagError, BagWriter, COMPRESSIONS
 from .qos import profile_to_dict, subscription_qos
@@ -100,21 +100,12 @@ DEFAULT_DIR = 'bags'
 # same discovery round as the other nodes and misses nothing of a run that starts at once
 # (lockstep starts with the first command). If the publishers offer other QoS or another
 # type the subscription is replaced by one adapted to them. Other topics are discovered.
-GRAPH_TOPICS = (
-    ('/clock', 'rosgraph_msgs/msg/Clock', False),
-    ('joint_states', 'sensor_msgs/msg/JointState', False),
-    ('ee_position', 'geometry_msgs/msg/PointStamped', False),
-    ('effort_controller/commands', 'std_msgs/msg/Float64MultiArray', False),
-    ('controller_state', 'freejoint_msgs/msg/ControllerState', False),
-    ('setpoint', 'freejoint_msgs/msg/CartesianSetpoint', True),
-    ('semi_singular_map', 'nav_msgs/msg/OccupancyGrid', True),
-    ('planned_path', 'visualization_msgs/msg/Marker', True),
-)
+GRAPH_TOPICS = tuple((t.name, t.type_name, t.latched) for t in contract.GRAPH_TOPICS)
 # A batch writes what was received up to this long before the take began; later messages
 # wait for the next batch, when everything received before them has surely been taken too
 # (a message is timestamped on reception a little before it can be taken).
 HOLD_NS = 2_000_000
-CLOCK_TOPIC = '/clock'
+CLOCK_TOPIC = contract.CLOCK.name
 _RECEIVED = operator.itemgetter(0)
 # Files an earlier run of the tools leaves in a bag directory (what overwrite may delete).
 _OWN_FILES = ('metadata.yaml', 'metrics.json')
@@ -390,11 +381,10 @@ class Recorder(Node, Lifecycle):
         if self._sim_time and not self._selected(CLOCK_TOPIC):
             self._clock_only = self._takes_node.create_subscription(
                 message_class('rosgraph_msgs/msg/Clock'), CLOCK_TOPIC, _never_called,
-                QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=p['queue_depth'],
-                           reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
+                profile(p['queue_depth'], reliable=False), raw=True)
             self._update_takers()
         self._ready_topics = [self.resolve_topic_name(t) for t in p['ready_topics']]
-        self.create_service(Trigger, '~/status', self._status)
+        self.create_service(RECORDER_STATUS.srv_type, RECORDER_STATUS.name, self._status)
         self._discover()
 
     # -- parameters -------------------------------------------------------------------
@@ -456,11 +446,7 @@ class Recorder(Node, Lifecycle):
             name = self.resolve_topic_name(rel)
             if not self._selected(name):
                 continue
-            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST,
-                             depth=self._params['queue_depth'],
-                             reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
-                             else DurabilityPolicy.VOLATILE)
+            qos = profile(self._params['queue_depth'], latched=latched)
             if self._subscribe(name, msgtype, qos):
                 self._unconfirmed[name] = (msgtype, qos)
                 try:                   # parse the definitions now, not during the run
@@ -882,14 +868,6 @@ def wait_drained(read_status, quiet, timeout, pause):
             return count, since - start
         pause()
     return last, time.monotonic() - start
-
-
-def clock_ns(data):
-    """Return the time (ns) in a serialized rosgraph_msgs/Clock, None if it is too short."""
-    if len(data) < 12:
-        return None
-    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
-    return sec * 1_000_000_000 + nanosec
 
 
 def _remove_old_bag(path):

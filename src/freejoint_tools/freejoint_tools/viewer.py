@@ -39,6 +39,8 @@ import sys
 import threading
 import time
 
+from freejoint_common.contract import PLANNED_PATH, profile, ROBOT_DESCRIPTION
+from freejoint_common.contract import SEMI_SINGULAR_MAP, stamp_from_ns
 from freejoint_common.node_tools import declare, Spec
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
@@ -50,17 +52,16 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter as RosParameter
 from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 
 from .recorder import _is_hidden, GRAPH_TOPICS
 from .typedefs import DefinitionError, Definitions, message_class
 
 TF_TOPIC = '/tf'
-DESCRIPTION_TOPIC = '/robot_description'
+DESCRIPTION_TOPIC = ROBOT_DESCRIPTION.name
 # Topics low-rate and latched: subscribed reliable, transient local (the last one arrives
 # when a client subscribes); every other one best effort, volatile.
-LATCHED = ('semi_singular_map', 'planned_path')
+LATCHED = (SEMI_SINGULAR_MAP.name, PLANNED_PATH.name)
 
 SPECS = (
     Spec('host', '127.0.0.1', 'address the Foxglove WebSocket server binds to (0.0.0.0: '
@@ -297,7 +298,7 @@ class Viewer(Node, Lifecycle):
     def _advertise_graph(self):
         from foxglove.channels import FrameTransformsChannel
         self._tf = FrameTransformsChannel(TF_TOPIC)
-        self._advertise(DESCRIPTION_TOPIC, 'std_msgs/msg/String')
+        self._advertise(DESCRIPTION_TOPIC, ROBOT_DESCRIPTION.type_name)
         for rel, msgtype, _ in GRAPH_TOPICS:
             self._advertise(self.resolve_topic_name(rel), msgtype)
 
@@ -343,17 +344,12 @@ class Viewer(Node, Lifecycle):
             if msgtype is None:
                 continue
             latched = topic.rsplit('/', 1)[-1] in LATCHED
-            qos = QoSProfile(
-                history=HistoryPolicy.KEEP_LAST, depth=10,
-                reliability=ReliabilityPolicy.RELIABLE if latched
-                else ReliabilityPolicy.BEST_EFFORT,
-                durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
-                else DurabilityPolicy.VOLATILE)
+            qos = profile(10, reliable=latched, latched=latched)
             self._ros_subs[topic] = self.create_subscription(
                 message_class(msgtype), topic, self._forwarder(topic), qos, raw=True)
         if new_topic == DESCRIPTION_TOPIC:
-            from std_msgs.msg import String
-            self._channels[DESCRIPTION_TOPIC][0].log(serialize_message(String(data=self.urdf)),
+            msg = ROBOT_DESCRIPTION.msg_type(data=self.urdf)
+            self._channels[DESCRIPTION_TOPIC][0].log(serialize_message(msg),
                                                      log_time=time.time_ns())
 
     def _forwarder(self, topic):
@@ -375,7 +371,8 @@ class Viewer(Node, Lifecycle):
         from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Vector3
         from foxglove.schemas import Timestamp
         positions = {n: p for n, p in zip(msg.name, msg.position) if math.isfinite(p)}
-        stamp = Timestamp(now // 1_000_000_000, now % 1_000_000_000)
+        stamp = stamp_from_ns(now)
+        stamp = Timestamp(stamp.sec, stamp.nanosec)
         try:
             frames = self.tree.transforms(positions)
         except FreejointValueError:   # non-finite positions were left out above
