@@ -10,6 +10,7 @@ import importlib.util
 import os
 import re
 
+from freejoint_common.contract import clock_ns, JOINT_STATES
 from freejoint_control.records import arrays_from_messages
 from freejoint_core.metrics import compute_record, KEYS
 from freejoint_core.offline import run_case
@@ -85,7 +86,7 @@ class Run:
         raw = self.collector.raw
         if not all(raw.values()):
             return None
-        return max(demo.stamp_ns_of(msgs[0]) for msgs in raw.values()) // DT_NS
+        return max(clock_ns(msgs[0]) for msgs in raw.values()) // DT_NS
 
     def seen_ticks(self, count, within, timeout=60.0):
         """
@@ -235,13 +236,10 @@ def test_joint_states_of_a_driver_in_another_order_drive_the_controller_as_the_s
 
 def test_stopping_the_controller_makes_the_sim_apply_zero_effort_within_its_timeout(
         procs, ros_node, wait):
-    from sensor_msgs.msg import JointState
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
     run = Run(procs, ros_node, wait)
     efforts = []
-    ros_node.create_subscription(JointState, 'joint_states',
-                                 lambda m: efforts.append(list(m.effort)),
-                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    ros_node.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name,
+                                 lambda m: efforts.append(list(m.effort)), JOINT_STATES.qos)
     sim = run.start('sim', 'mode:=realtime', 'command_timeout:=0.3', 'publish_rate:=100.0',
                     'brake_timeout:=0.0')
     controller = run.start('controller', 'lockstep:=false')

@@ -39,10 +39,12 @@ import argparse
 import os
 import sys
 
+from freejoint_common.contract import CONTROLLER_STATE, JOINT_STATES, seconds_to_ns, to_ns
+
 from .bagfile import BagError, open_bag
 
-STATE_TYPE = 'freejoint_msgs/msg/ControllerState'
-JOINT_TYPE = 'sensor_msgs/msg/JointState'
+STATE_TYPE = CONTROLLER_STATE.type_name
+JOINT_TYPE = JOINT_STATES.type_name
 GRID_TYPE = 'nav_msgs/msg/OccupancyGrid'
 MARKER_TYPE = 'visualization_msgs/msg/Marker'
 DEFAULT_PASSIVE = 'joint3'
@@ -140,8 +142,8 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     warnings = list(bag.notes)
     info, more = run_info(bag, overrides)
     warnings += more
-    states_topic = _pick_topic(bag, STATE_TYPE, '/controller_state', state_topic)
-    joints_topic = _pick_topic(bag, JOINT_TYPE, '/joint_states', joint_topic)
+    states_topic = _pick_topic(bag, STATE_TYPE, '/' + CONTROLLER_STATE.name, state_topic)
+    joints_topic = _pick_topic(bag, JOINT_TYPE, '/' + JOINT_STATES.name, joint_topic)
     store = bag.typestore()
     states = [m for _, m in bag.decode(states_topic, store)]
     joints = [m for _, m in bag.decode(joints_topic, store)]
@@ -174,13 +176,13 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
 def _joint_positions(joint_states, t):
     """Return ``{joint name: positions (N,)}`` at the tick times ``t`` (first per stamp)."""
     import numpy as np
-    wanted = {int(round(v * 1e9)) for v in t}
+    wanted = {seconds_to_ns(v) for v in t}
     first = {}
     for msg in joint_states:
-        ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+        ns = to_ns(msg.header.stamp)
         if ns in wanted and ns not in first:
             first[ns] = msg
-    stamps = [int(round(v * 1e9)) for v in t]
+    stamps = [seconds_to_ns(v) for v in t]
     if not stamps or any(ns not in first for ns in stamps):
         return {}
     names = list(first[stamps[0]].name)
