@@ -293,13 +293,6 @@ class NLinkDetMap:
     lengths: tuple
 
 
-def _grid_points(q, idx0, dims):
-    """Return the samples (N, dims) with first index in ``idx0``, others over ``q``."""
-    axes = [q[idx0]] + [q] * (dims - 1)
-    mesh = np.meshgrid(*axes, indexing='ij')
-    return np.stack([m.ravel() for m in mesh], axis=1)
-
-
 def det_map_nlink(nominal_params, resolution_deg=2.0, max_samples=MAX_SAMPLES):
     """
     Step 1, any planar arm: sample ``det(Da Da^T)`` over ``q_1 .. q_{n-1}``.
@@ -345,15 +338,23 @@ def det_map_nlink(nominal_params, resolution_deg=2.0, max_samples=MAX_SAMPLES):
             f'(>= {finest:.3g} deg, 360 / step an even integer)')
     q = np.arange(k) * (2.0 * math.pi / k)
     half = k // 2 + 1
-    pts = _grid_points(q, np.arange(half), dims)
-    minors = decoupling_minors(nominal_params, pts)
-    nminor = minors.shape[1]
+    nminor = len(active) * (len(active) - 1) // 2
     shape = (k,) * dims
     det = np.empty(shape)
     neg = np.empty((nminor,) + shape, dtype=bool)
     top_shape = (half,) + (k,) * (dims - 1)
-    det[:half] = np.einsum('ij,ij->i', minors, minors).reshape(top_shape)
-    neg[:, :half] = np.signbit(minors.T).reshape((nminor,) + top_shape)
+    top_det = det[:half].reshape(-1)                      # views of the computed half
+    top_neg = [neg[m, :half].reshape(-1) for m in range(nminor)]
+    h = _inertia_coefficients(nominal_params)
+    lengths = np.array(nominal_params.lengths, dtype=float)
+    for start in range(0, top_det.size, _CHUNK):
+        sl = slice(start, min(start + _CHUNK, top_det.size))
+        flat = np.arange(sl.start, sl.stop)
+        q_rel = q[np.array(np.unravel_index(flat, top_shape))]          # (dims, N)
+        minors = _minors_chunk(h, lengths, active, q_rel)              # (C, N)
+        top_det[sl] = np.einsum('ij,ij->j', minors, minors)
+        for m in range(nminor):
+            np.signbit(minors[m], out=top_neg[m][sl])
     if half < k:
         # row i (i > k/2) is the mirror of row k - i: every other index j -> (k - j) % k
         rows = k - np.arange(half, k)
