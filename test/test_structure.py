@@ -9,6 +9,7 @@ project's own modules are edges.
 """
 import ast
 import os
+import xml.etree.ElementTree as ET
 
 import pytest
 
@@ -141,6 +142,26 @@ def private_imports_across_packages(modules):
     return found
 
 
+def package_dependencies(modules, src):
+    """
+    Return ``{package: (project packages imported, project packages declared)}``.
+
+    Imported: the packages of the modules its modules import (function-level imports
+    included). Declared: the ``*depend`` entries of its ``package.xml`` naming a Python
+    package of ``src``.
+    """
+    packages = {m.split('.')[0] for m in modules}
+    out = {}
+    for pkg in sorted(packages):
+        imported = set()
+        for module in (m for m in modules if m.split('.')[0] == pkg):
+            imported |= {t.split('.')[0] for t, _, _ in imports(module, modules)}
+        root = ET.parse(os.path.join(src, pkg, 'package.xml')).getroot()
+        declared = {e.text.strip() for e in root if e.tag.endswith('depend') and e.text}
+        out[pkg] = (imported & packages - {pkg}, declared & packages)
+    return out
+
+
 def _write(root, files):
     for rel, text in files.items():
         path = os.path.join(root, rel)
@@ -167,6 +188,16 @@ def test_no_package_module_takes_a_private_name_of_another_package():
     assert not found, 'private names taken across packages:\n' + '\n'.join(found)
 
 
+def test_each_package_declares_exactly_the_project_packages_it_imports():
+    wrong = []
+    for pkg, (imported, declared) in package_dependencies(package_modules(SRC), SRC).items():
+        if imported - declared:
+            wrong.append(f'{pkg} imports {sorted(imported - declared)} without declaring them')
+        if declared - imported:
+            wrong.append(f'{pkg} declares {sorted(declared - imported)} but imports none of it')
+    assert not wrong, 'package.xml out of step with the imports:\n' + '\n'.join(wrong)
+
+
 def test_a_cycle_hidden_in_a_function_level_import_is_found(tmp_path):
     _write(tmp_path, {
         'pa/pa/__init__.py': '',
@@ -190,6 +221,21 @@ def test_a_private_name_taken_across_packages_is_found_but_not_inside_a_package(
     })
     found = private_imports_across_packages(package_modules(str(tmp_path)))
     assert found == ['pb.c:1 takes pa.a._x', 'pb.d:3 takes pa.a._y']
+
+
+def test_an_undeclared_and_an_unused_project_dependency_are_found(tmp_path):
+    manifest = '<package format="3"><name>{0}</name>{1}</package>'
+    _write(tmp_path, {
+        'pa/package.xml': manifest.format('pa', ''),
+        'pa/pa/__init__.py': '',
+        'pb/package.xml': manifest.format('pb', '<exec_depend>pc</exec_depend>'),
+        'pb/pb/__init__.py': '',
+        'pb/pb/b.py': 'def f():\n    import pa\n',
+        'pc/package.xml': manifest.format('pc', ''),
+        'pc/pc/__init__.py': '',
+    })
+    deps = package_dependencies(package_modules(str(tmp_path)), str(tmp_path))
+    assert deps['pb'] == ({'pa'}, {'pc'})
 
 
 @pytest.mark.parametrize('source, level', [('from .errors import E\n', 1),

@@ -6,7 +6,7 @@ disturbance seed 0, this starts the three nodes as separate processes - exactly 
 executables ``ros2 run`` starts (``install/<pkg>/lib/<pkg>/<exe>``) with the parameter files
 of ``config/`` and per-case overrides (``-p case:=vertical``) - and the recorder when it is
 installed, follows the run, stops everything with SIGINT and computes the graph's record from
-the messages the run published (``freejoint_control.records.arrays_from_messages``, then
+the messages the run published (``freejoint_common.records.arrays_from_messages``, then
 ``freejoint_core.metrics.compute_record``).  It prints the offline runner's records of the
 same runs beside the graph's, checks that the end-effector trajectories agree, writes the
 graph's records to ``bags/demo/metrics.json`` and runs ``analyze`` on the bags if installed.
@@ -451,7 +451,7 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
 
 def graph_record(collector, case, seed, n_ticks):
     """Return the graph's record of the collected run (source 'graph') and its arrays."""
-    from freejoint_control.records import arrays_from_messages
+    from freejoint_common.records import arrays_from_messages
     from freejoint_core.metrics import compute_record
     arrays = arrays_from_messages(collector.messages('controller_state'),
                                   collector.messages('joint_states'), PASSIVE_JOINT,

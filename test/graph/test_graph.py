@@ -11,7 +11,7 @@ import os
 import re
 
 from freejoint_common.contract import clock_ns, JOINT_STATES
-from freejoint_control.records import arrays_from_messages
+from freejoint_common.records import arrays_from_messages
 from freejoint_core.metrics import compute_record, KEYS
 from freejoint_core.offline import run_case
 import numpy as np

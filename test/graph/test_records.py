@@ -1,7 +1,7 @@
 """The graph's per-tick arrays from messages (shared by the demo and the bag analysis)."""
 from types import SimpleNamespace as NS
 
-from freejoint_control.records import arrays_from_messages, stamp_ns
+from freejoint_common.records import arrays_from_messages, stamp_ns
 from freejoint_core.metrics import compute_record
 import numpy as np
 import pytest

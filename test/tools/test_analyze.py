@@ -7,7 +7,7 @@ import pytest
 
 def _live_record(written, case, variant, seed, max_ticks=None):
     """Record from the messages themselves, as the demo computes it from live messages."""
-    from freejoint_control.records import arrays_from_messages
+    from freejoint_common.records import arrays_from_messages
     from freejoint_core.metrics import compute_record
     arrays = arrays_from_messages(written['/controller_state'], written['/joint_states'],
                                   'joint3', max_ticks=max_ticks)

@@ -27,7 +27,7 @@ def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, 
     from rclpy.qos import QoSProfile
     from sensor_msgs.msg import JointState
 
-    from freejoint_control.records import arrays_from_messages, stamp_ns
+    from freejoint_common.records import arrays_from_messages, stamp_ns
     from freejoint_core.metrics import compute_record
     from freejoint_tools.analyze import analyse_bag
     from freejoint_tools.bagfile import open_bag

@@ -28,7 +28,7 @@ def test_readme_order_recorder_first_records_the_run_from_tick_0(
     from freejoint_msgs.srv import PlanCircle
     from std_srvs.srv import Trigger
 
-    from freejoint_control.records import stamp_ns
+    from freejoint_common.records import stamp_ns
     from freejoint_tools.bagfile import open_bag
     from freejoint_tools.recorder import received_count, wait_drained
     bag_path = str(tmp_path / 'my_run')

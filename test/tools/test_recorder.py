@@ -47,7 +47,7 @@ def _assert_every_gap_reported(stamps, log, topic):
 
 
 def _stamps_ns(bag, topic):
-    from freejoint_control.records import stamp_ns
+    from freejoint_common.records import stamp_ns
     return [stamp_ns(m) for _, m in bag.decode(topic)]
 
 
@@ -58,7 +58,7 @@ def test_recorder_holds_every_message_of_a_1khz_lockstep_like_run(procs, wait, t
     from rosbags.rosbag2 import Reader
     from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
-    from freejoint_control.records import arrays_from_messages
+    from freejoint_common.records import arrays_from_messages
     from freejoint_core.metrics import compute_record
     from freejoint_tools.analyze import analyse_bag
     from freejoint_tools.bagfile import open_bag
@@ -181,7 +181,7 @@ def test_sigkill_leaves_a_bag_the_analysis_reads_up_to_the_last_chunk(procs, wai
 
 def _tick_sequence(bag):
     """Return ``[(topic, k, log time)]`` of the bag's /clock and tick messages, in bag order."""
-    from freejoint_control.records import stamp_ns
+    from freejoint_common.records import stamp_ns
     from freejoint_tools.recorder import clock_ns
     from freejoint_tools.typedefs import message_class
     from rclpy.serialization import deserialize_message

@@ -133,7 +133,7 @@ def test_recorder_on_a_full_disk_reports_the_loss_finalises_and_exits_with_one_l
         assert written == bag.topics[topic].count > 100, topic
         assert lost > 0 and received == written + lost, (topic, line.group(0))
         assert int(noted[topic]) == lost
-    from freejoint_control.records import stamp_ns
+    from freejoint_common.records import stamp_ns
     stamps = [stamp_ns(m) for _, m in bag.decode('/joint_states')]
     assert stamps == sorted(set(stamps))
     holes = (stamps[-1] - stamps[0]) // 1_000_000 + 1 - len(stamps)

@@ -69,7 +69,7 @@ def test_a_recorder_started_after_the_run_names_the_first_tick_and_the_ticks_it_
     import rclpy
     from std_srvs.srv import Trigger
 
-    from freejoint_control.records import stamp_ns
+    from freejoint_common.records import stamp_ns
     from freejoint_tools.bagfile import open_bag
     from freejoint_tools.recorder import received_count
     publisher = procs.start_script(PUBLISHER, 'publisher', [

@@ -9,7 +9,7 @@ Usage::
 
 For each bag the per-tick arrays are computed from the recorded ``ControllerState`` and
 ``JointState`` messages only - decoded with the message definitions stored in the bag -
-by ``freejoint_control.records.arrays_from_messages``, the same conversion the demo applies
+by ``freejoint_common.records.arrays_from_messages``, the same conversion the demo applies
 to the messages it receives live, and turned into a record by
 ``freejoint_core.metrics.compute_record`` with ``source: 'bag'``. The record is written
 beside the bag's files as ``<bag>/metrics.json`` and all records are printed as the
@@ -135,7 +135,7 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
         With a one-line message naming the file.
 
     """
-    from freejoint_control.records import arrays_from_messages
+    from freejoint_common.records import arrays_from_messages
     from freejoint_core.errors import FreejointValueError
     from freejoint_core.metrics import compute_record
     bag = open_bag(path)

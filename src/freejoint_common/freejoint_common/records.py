@@ -10,10 +10,8 @@ by ``rosbags`` both work.
 
 """
 
+from freejoint_common.contract import to_ns
 import numpy as np
-
-ARRAY_KEYS = ('t', 'p', 'p_d', 'tau', 'theta', 'q_passive', 'det')
-"""Keys of the dict :func:`arrays_from_messages` returns (``compute_record`` arguments)."""
 
 
 def stamp_ns(msg):
@@ -30,8 +28,7 @@ def stamp_ns(msg):
     int
 
     """
-    stamp = msg.header.stamp
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+    return to_ns(msg.header.stamp)
 
 
 def arrays_from_messages(states, joint_states, passive_joint, max_ticks=None):
