@@ -216,3 +216,30 @@ def test_bad_arguments_are_refused_naming_them():
         sn.semi_singular_nlink(sing.det_map(PAPER, 10.0))
     with pytest.raises(FreejointValueError, match='eps_d'):
         sn.semi_singular_nlink(sn.det_map_nlink(FOUR, 30.0), eps_d=0.0)
+
+
+def test_no_singular_configuration_found_by_newton_lies_in_a_free_annulus_of_the_map():
+    # a 4-link arm, last joint passive, whose conservative map leaves a nonsingular annulus
+    params = ArmParams(lengths=(0.357, 0.397, 0.471, 0.224), masses=(1.245, 0.761, 1.795, 0.409),
+                       inertias=(0.069, 0.087, 0.024, 0.09), com=(0.289, 0.085, 0.327, 0.045),
+                       passive=(3,))
+    free = sn.arm_region(params, 4.0).nonsingular_intervals
+    assert free.shape == (1, 2) and free[0, 1] - free[0, 0] > 0.1      # about [0.81, 0.93] m
+    # Levenberg-Marquardt on the three minors from random starts: points of the singular set
+    rng = np.random.default_rng(25)
+    x = rng.uniform(-math.pi, math.pi, (600, 3))
+    for _ in range(50):
+        f = sn.decoupling_minors(params, x)
+        jac = np.stack([(sn.decoupling_minors(params, x + 1e-7 * e) - f) / 1e-7
+                        for e in np.eye(3)], axis=2)
+        jtj = jac.transpose(0, 2, 1) @ jac
+        jtj += 1e-9 * np.trace(jtj, axis1=1, axis2=2)[:, None, None] * np.eye(3)
+        step = np.linalg.solve(jtj, jac.transpose(0, 2, 1) @ f[:, :, None])[:, :, 0]
+        x -= np.clip(step, -0.3, 0.3)
+    found = x[sn.decoupling_det(params, x) < 1e-12]
+    assert len(found) > 100
+    for q in found[:5]:                                   # singular by the reference model too
+        sv = np.linalg.svd(_brute(params, np.r_[0.0, q]), compute_uv=False)
+        assert sv[1] < 1e-6 * sv[0]
+    radii = sn.ee_radius_nlink(params.lengths, found)
+    assert not np.any((radii >= free[0, 0]) & (radii <= free[0, 1]))
