@@ -46,7 +46,10 @@ Cauchy-Binet: ``det(Da Da^T) = sum_{k<l} D_kl^2`` over the 2 x 2 minors ``D_kl``
 ``det(Da Da^T) <= eps_d`` (the paper's criterion) or if it is a corner of a grid cell
 in which every minor takes both signs (a common zero may lie in the cell), and the
 radius of each flagged sample is widened by a bound on the radius' change over half a
-cell, as the 3-link map does.  The paper's sampled criterion alone (``cells=False``:
+cell, as the 3-link map does.  Conservative as far as each minor's zero surface is flat
+on the scale of a cell (a plane through a cell separates its corners), like the 3-link
+map's sign-change test; ``test/core/test_singularity_nlink.py`` checks it against a
+Newton search of the singular set.  The paper's sampled criterion alone (``cells=False``:
 only samples with ``det(Da Da^T) <= eps_d``) misses such curves between samples and is
 then no guarantee.
 
