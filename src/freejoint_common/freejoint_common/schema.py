@@ -32,7 +32,8 @@ class Param:
 
     The type is the default's (bool, int, float, str or a list of one of them); an int
     default with bounds gets an integer range, a float one a floating-point range (both
-    inclusive, as ``ParameterDescriptor`` ranges). A default of None declares an empty
+    inclusive, as ``ParameterDescriptor`` ranges; ``exclusive_min`` refuses the lower bound
+    itself, with the reason). A default of None declares an empty
     integer array (rclpy cannot declare an empty typed array with a default): the node
     reads None, ``ros2 param get`` / ``dump`` show ``[]``.
     """
@@ -43,6 +44,7 @@ class Param:
     bounds: tuple = None
     read_only: bool = False
     validator: object = None
+    exclusive_min: bool = False
 
     def reason(self, value):
         """Return why ``value`` is not valid for this parameter (naming it), or None."""
@@ -56,9 +58,10 @@ class Param:
                 and not math.isfinite(value)):
             problem = f'expected a finite number, got {value}'
         if problem is None and self.bounds is not None and not isinstance(value, list):
-            lo, hi = self.bounds
-            if not lo <= value <= hi:
-                problem = f'expected a value in [{lo:.6g}, {hi:.6g}], got {value:g}'
+            lo, hi = self.bounds[:2]
+            if value < lo or (self.exclusive_min and value <= lo) or value > hi:
+                low = '(' if self.exclusive_min else '['
+                problem = f'expected a value in {low}{lo:.6g}, {hi:.6g}], got {value:g}'
         return None if problem is None else f'{self.name}: {problem}'
 
 

@@ -46,25 +46,23 @@ against the clock spacing rule at run time.
 
 import math
 
+from freejoint_common.arm_description import resolve_arm
 from freejoint_common.clock import own_clock, set_ros_time
 from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, PLAN_CIRCLE, PLANNED_PATH
 from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINT, to_ns
-from freejoint_common.node_tools import declare, overridable, plain, QOS_OVERRIDES
-from freejoint_common.node_tools import request_scheduling
-from freejoint_common.node_tools import scheduling_refusal, SCHEDULING_SPECS
+from freejoint_common.node_tools import NodeParameters, overridable, QOS_OVERRIDES
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
 from freejoint_core.trajectory import CircleQuintic
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .conversions import occupancy_grid, path_marker, setpoint_msg
-from .planning import circle_bounds, CIRCLE_KEYS, compute_model, grid_bound, grid_extent
-from .planning import make_circle, MAP_KEYS, prepare_transition, RANGES, validate
+from .params import CIRCLE_KEYS, LOOKAHEAD_MAX, MAP_KEYS, SCHEMA, validate
+from .planning import circle_bounds, compute_model, grid_bound, grid_extent
+from .planning import make_circle, prepare_transition
 from .stream import Plan, SetpointStream
 
 NODE_NAME = 'freejoint_planner'
@@ -72,70 +70,24 @@ NODE_NAME = 'freejoint_planner'
 MARKER_POINTS = 361
 
 
-def _range(name):
-    lo, hi = RANGES[name]
-    if isinstance(lo, int) and isinstance(hi, int):
-        return {'integer_range': [IntegerRange(from_value=lo, to_value=hi, step=1)]}
-    return {'floating_point_range': [FloatingPointRange(from_value=float(lo),
-                                                        to_value=float(hi))]}
-
-
-# name -> (default, description, extra descriptor fields)
-PARAMETERS = {
-    'case': ('horizontal', "Arm of Table I: 'horizontal' or 'vertical' (the singularity map "
-             'is the same for both: Da holds no gravity term).', {}),
-    'nominal_scale': (0.7, 'Nominal model = Table I masses, inertias and COMs times this '
-                      '(paper: 0.7). Changing it recomputes the map.', _range('nominal_scale')),
-    'resolution_deg': (0.25, 'Joint-space step of the singularity map (deg); 360 / value an '
-                       'even integer. 0.25 costs about 0.1 s. Changing it recomputes the map.',
-                       _range('resolution_deg')),
-    'eps_d': (1e-7, 'Semi-singular criterion on |det(Da Da^T)| (paper: 1e-7), > 0. Changing '
-              'it recomputes the map.', _range('eps_d')),
-    'grid_resolution': (0.01, 'Cell size of the semi_singular_map OccupancyGrid (m).',
-                        _range('grid_resolution')),
-    'frame_id': ('base_link', 'Frame of the setpoints, map and marker (the arm base).', {}),
-    'control_period': (0.001, 'Control period dt (s); setpoint k is stamped k * dt. Must '
-                       'match the simulator and controller.',
-                       dict(_range('control_period'), read_only=True)),
-    'lookahead': (20, 'Setpoints published ahead of ROS time (ticks), >= 1. Sim time: with '
-                  '/clock every N ticks, >= N - 1 (a smaller value is refused once N is '
-                  'known; found too small when N is learnt, it is raised to 2 N - 1).',
-                  _range('lookahead')),
-    'centre': ([0.0, 0.0], 'Circle centre (x, y) in m, base frame.', {}),
-    'radius': (0.2, 'Circle radius (m), > 0.', _range('radius')),
-    'duration': (5.0, 'Time of the revolution (s), > 0.', _range('duration')),
-    'start_angle': (0.0, 'Angle of the start point about the centre (rad), from +x, '
-                    'within one revolution either way.', _range('start_angle')),
-    'direction': (1, '+1 counter-clockwise, -1 clockwise.',
-                  {'integer_range': [IntegerRange(from_value=-1, to_value=1, step=2)]}),
-    'start_delay': (0.0, 'Delay from the start of a plan to its motion (s); the start point '
-                    'is held meanwhile.', _range('start_delay')),
-    'max_speed': (1.0, 'Largest end-effector speed of a plan (m/s): a circle peaking above '
-                  'it is refused (paper circle: 0.471).', _range('max_speed')),
-    'max_acceleration': (5.0, 'Largest end-effector acceleration of a plan (m/s^2): a circle '
-                         'peaking above it is refused (paper circle: 1.11).',
-                         _range('max_acceleration')),
-    'transition_max_duration': (60.0, 'Longest transition (s) from the current setpoint into '
-                                "a new plan's start; none shorter within the bounds: the "
-                                'plan is refused.', _range('transition_max_duration')),
-    'autostart': (True, 'Start the configured circle at activation and after every accepted '
-                  'change of its parameters.', {}),
-}
-
-
 class PlannerNode(Node, Lifecycle):
     """Thin ROS wrapper around freejoint_core's singularity analysis and CircleQuintic."""
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        self._cfg = self._declare_parameters()
+        # Every parameter of params.SCHEMA, validated (a bad one raises: exit 2); with
         # thread_priority / cpu_affinity (ros2_control's names), as the sim and controller:
-        # in real time the stream must not be starved by SCHED_FIFO neighbours
-        self._sched = declare(self, SCHEDULING_SPECS)
-        request_scheduling(self, self._sched, at_start=True)
+        # in real time the stream must not be starved by SCHED_FIFO neighbours.
+        self._params = NodeParameters(self, SCHEMA)
+        self._cfg = self._params.config
+        self._pending = None
+        # The arm (robot_description / description_file, passive_joints, gravity): its
+        # nominal model is the map's; read-only but gravity, which the map does not hold.
+        arm = resolve_arm(self._cfg)
+        self._arm = None if arm.urdf_arm is None else arm.params
         self._sim = self.get_parameter('use_sim_time').value
         own_clock(self)     # one /clock delivery: _on_clock sets the ROS clock
-        self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS))
+        self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS), arm=self._arm)
         reason = (grid_bound(self._model.region.reach, self._cfg['grid_resolution'])
                   or circle_bounds(make_circle(self._cfg), self._model,
                                    self._cfg['max_speed'], self._cfg['max_acceleration']))
@@ -172,57 +124,30 @@ class PlannerNode(Node, Lifecycle):
         self.create_subscription(CLOCK.msg_type, CLOCK.name, self._on_clock,
                                  CLOCK_SUBSCRIPTION_QOS)
         self._timer = self._make_timer()
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._params.listen(self._apply, self._check, watch=('use_sim_time',))
         self.create_service(PLAN_CIRCLE.srv_type, PLAN_CIRCLE.name, self._on_plan_circle)
         self.get_logger().info(
             f"ready: {'sim time (/clock)' if self._sim else 'system time'}, "
             f"dt {self._cfg['control_period']:g} s, lookahead {self._cfg['lookahead']} ticks")
 
     # ---- parameters -------------------------------------------------------------------
-    def _declare_parameters(self):
-        """
-        Declare every parameter once; a bad value raises, naming it.
-
-        rclpy's range and type checks raise ``ParameterException``, ``validate``'s reason
-        a ``FreejointValueError``: ``runner.run`` turns either into one fatal line
-        'bad parameter: <name>: <reason>' and exit status 2 (as every freejoint node).
-        """
-        cfg = {}
-        for name, (default, description, extra) in PARAMETERS.items():
-            descriptor = ParameterDescriptor(description=description, **extra)
-            value = self.declare_parameter(name, default, descriptor).value
-            cfg[name] = list(value) if name == 'centre' else value
-        reason = validate(cfg)
-        if reason:
-            raise FreejointValueError(reason)
-        return cfg
-
-    def _on_set_parameters(self, params):
-        """Validate a parameter change; re-check the circle; apply or refuse with a reason."""
-        new = dict(self._cfg)
+    def _check(self, params, new, _config):
+        """Check a valid parameter change against the stream, the map and the plans."""
         sim = self._sim
         for p in params:
             if p.name == 'use_sim_time':
                 sim = bool(p.value)
-            elif p.name in new:
-                new[p.name] = list(p.value) if p.name == 'centre' else p.value
-        reason = validate(new)
-        if reason:
-            return self._refuse(reason)
         n = self._stream.spacing
         if (sim and n > 1 and new['lookahead'] != self._cfg['lookahead']
                 and int(new['lookahead']) < n - 1):
-            return self._refuse(
-                f"lookahead: {new['lookahead']} ticks is below N - 1 = {n - 1} for /clock "
-                f'every N = {n} ticks (the clock spacing rule: the ticks between two /clock '
-                f'must be out when the first arrives); >= {2 * n - 1} rides out a lost /clock')
+            return (f"lookahead: {new['lookahead']} ticks is below N - 1 = {n - 1} for /clock "
+                    f'every N = {n} ticks (the clock spacing rule: the ticks between two '
+                    f'/clock must be out when the first arrives); >= {2 * n - 1} rides out a '
+                    'lost /clock')
         changed = {k for k in new if new[k] != self._cfg[k]}
         model = self._model
         if changed & set(MAP_KEYS):
-            try:
-                model = compute_model(*(new[k] for k in MAP_KEYS))
-            except FreejointValueError as exc:
-                return self._refuse(str(exc))
+            model = compute_model(*(new[k] for k in MAP_KEYS), arm=self._arm)
             self.get_logger().info(f'singularity map recomputed in {model.seconds * 1e3:.0f} '
                                    f'ms: {model.describe()}')
             plan = self._stream.plan
@@ -232,39 +157,33 @@ class PlannerNode(Node, Lifecycle):
                     check = check_path(model.region, plan.transition.sample_ticks(
                         self._stream.dt, plan.transition_ticks + 1)[:, :2])
                 if not check.ok:
-                    return self._refuse(f'the running plan {plan.plan_id} would enter the '
-                                        f'semi-singular region of the new map: {check.reason}')
+                    return (f'the running plan {plan.plan_id} would enter the '
+                            f'semi-singular region of the new map: {check.reason}')
         reason = grid_bound(model.region.reach, new['grid_resolution'])
         if reason:
-            return self._refuse(reason)
+            return reason
         if changed and not changed & set(CIRCLE_KEYS):
             # the bounds or the map changed: the configured circle must still be valid (a
             # restart with these values would end at start-up otherwise)
             reason = circle_bounds(make_circle(new), model, new['max_speed'],
                                    new['max_acceleration'])
             if reason:
-                return self._refuse(f"{', '.join(sorted(changed))}: the configured circle "
-                                    f'would exceed the bounds: {reason}')
-        circle = None
+                return (f"{', '.join(sorted(changed))}: the configured circle would exceed "
+                        f'the bounds: {reason}')
+        circle = admitted = None
         if changed & set(CIRCLE_KEYS):
             circle = make_circle(new)
-            reason, margin, choice, tick = self._admit(circle, model, new,
-                                                       transition=new['autostart'])
+            reason, *admitted = self._admit(circle, model, new, transition=new['autostart'])
             if reason:
-                return self._refuse(f'circle refused, the running plan goes on: '
-                                    f'{self._describe(circle)}: {reason}')
-        sched = dict(self._sched)
-        for p in params:
-            if p.name in sched:
-                sched[p.name] = plain(p.value)
-        try:
-            reason = scheduling_refusal(self, params, sched)
-        except FreejointValueError as exc:     # a CPU the process may not use, ...
-            reason = str(exc)
-        if reason is not None:
-            return self._refuse(reason)
-        self._sched = sched
-        # accepted: apply
+                return (f'circle refused, the running plan goes on: '
+                        f'{self._describe(circle)}: {reason}')
+        self._pending = (sim, changed, model, circle, admitted)
+        return None
+
+    def _apply(self, _old, new, _params):
+        """Take an accepted parameter change: stream, timer, map, configured circle."""
+        sim, changed, model, circle, admitted = self._pending
+        self._pending = None
         self._cfg = new
         self._stream.lookahead = int(new['lookahead'])
         if 'lookahead' in changed:
@@ -274,17 +193,12 @@ class PlannerNode(Node, Lifecycle):
             self._model = model
             self._publish_map()
         if circle is not None and new['autostart']:
+            margin, choice, tick = admitted
             self._execute(circle, new['start_delay'], margin, 'configured', choice, tick)
         elif 'frame_id' in changed and self._stream.plan is not None:
             self._publish_marker(self._stream.plan)
         if sim != self._sim:
             self._switch_time_source(sim)
-        return SetParametersResult(successful=True)
-
-    def _refuse(self, reason):
-        self.get_logger().warning(f'parameter change refused: {reason}',
-                                  throttle_duration_sec=1.0)
-        return SetParametersResult(successful=False, reason=reason)
 
     def _make_timer(self):
         """
@@ -471,7 +385,7 @@ class PlannerNode(Node, Lifecycle):
         """
         n = self._stream.spacing
         old = self._stream.lookahead
-        value = min(2 * n - 1, RANGES['lookahead'][1])
+        value = min(2 * n - 1, LOOKAHEAD_MAX)
         self.get_logger().error(
             f'/clock every N = {n} ticks but lookahead is {old} < N - 1 = {n - 1} (clock '
             f'spacing rule: in lockstep the controller waits for ticks only the next /clock '

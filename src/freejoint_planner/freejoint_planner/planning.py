@@ -4,124 +4,24 @@ The planner's configuration, singularity map and path check (plain Python, no RO
 The math is ``freejoint_core``'s: ``singularity_nlink.arm_region`` (the paper's 3-link map
 ``singularity.det_map`` / ``semi_singular`` for the paper's arm, the general batched map for
 any other planar arm) and ``singularity.check_path`` (paper, Sec. 3.2) on the nominal arm
-``table1(case).scaled(nominal_scale)``
-and ``trajectory.CircleQuintic``. This module only validates the node's parameter values,
+``table1(case).scaled(nominal_scale)`` and ``trajectory.CircleQuintic``. This module
 bundles the map with what was computed from it, and samples a circle densely enough for
-``check_path``.
+``check_path``; the node's parameters are its schema, ``freejoint_planner.params``.
 """
 
 from dataclasses import dataclass
 import math
 import time
 
-from freejoint_core.arm import CASES, table1
-from freejoint_core.errors import FreejointValueError
+from freejoint_core.arm import table1
 from freejoint_core.singularity import check_path
 from freejoint_core.singularity_nlink import arm_region
 from freejoint_core.trajectory import circle_peaks, CircleQuintic, plan_transition
 from freejoint_core.trajectory import transition_limits
 import numpy as np
 
-# Parameters of the configured circle; an accepted change of any of them re-checks it.
-CIRCLE_KEYS = ('centre', 'radius', 'duration', 'start_angle', 'direction', 'start_delay')
-# Parameters of the singularity map; an accepted change of any of them recomputes it.
-MAP_KEYS = ('case', 'nominal_scale', 'resolution_deg', 'eps_d')
-
-# Accepted ranges (also the ParameterDescriptor ranges of the node).
-RANGES = {
-    'nominal_scale': (0.01, 100.0),
-    'resolution_deg': (0.1, 10.0),
-    'eps_d': (0.0, 1.0),            # exclusive lower bound
-    'grid_resolution': (0.001, 0.5),
-    'radius': (0.0, 10.0),          # exclusive lower bound
-    'duration': (0.0, 3600.0),      # exclusive lower bound
-    'start_delay': (0.0, 3600.0),
-    'control_period': (1e-5, 1.0),
-    # >= 1: a setpoint must be out before its tick's state (0 races it); <= the keep-last
-    # depth of `setpoint` (1000): more at once could overrun a late reader's history.
-    'lookahead': (1, 1000),
-    # end-effector bounds of every plan (circle and transition); the paper's circle peaks
-    # at 0.471 m/s and 1.11 m/s^2
-    'max_speed': (0.0, 10.0),             # exclusive lower bound
-    'max_acceleration': (0.0, 100.0),     # exclusive lower bound
-    'transition_max_duration': (0.0, 600.0),   # exclusive lower bound
-    # one revolution either way: a huge angle would lose the quintic's increments to
-    # rounding (at 1e17 rad the ulp is 16 rad: the point would jump, not move)
-    'start_angle': (-2.0 * math.pi, 2.0 * math.pi),
-}
-OPEN_LOW = ('eps_d', 'radius', 'duration', 'max_speed', 'max_acceleration',
-            'transition_max_duration')
-
 # Largest arc length (m) between the points of a circle handed to check_path.
 CHECK_STEP = 5e-4
-
-
-def validate(cfg):
-    """
-    Return why a planner configuration is invalid, or '' if it is valid.
-
-    Parameters
-    ----------
-    cfg : dict
-        Parameter name -> value, as the node holds them (only the keys present are
-        checked; ``centre`` a sequence, ``direction`` an int, ...).
-
-    Returns
-    -------
-    str
-        The first problem found, naming the parameter, or ''.
-
-    """
-    def number(name):
-        value = cfg[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise FreejointValueError(f'{name}: expected a number, got {value!r}')
-        value = float(value)
-        if not math.isfinite(value):
-            raise FreejointValueError(f'{name}: expected a finite number, got {value}')
-        return value
-
-    try:
-        for name, (lo, hi) in RANGES.items():
-            if name not in cfg:
-                continue
-            value = number(name)
-            open_lo = name in OPEN_LOW
-            if value < lo or (open_lo and value <= lo) or value > hi:
-                bound = f'({lo:.6g}' if open_lo else f'[{lo:.6g}'
-                raise FreejointValueError(f'{name}: expected a value in {bound}, {hi:.6g}], '
-                                          f'got {value:g}')
-        if 'lookahead' in cfg and cfg['lookahead'] != int(cfg['lookahead']):
-            raise FreejointValueError(f"lookahead: expected an integer, got {cfg['lookahead']}")
-        if 'resolution_deg' in cfg:
-            steps = 360.0 / float(cfg['resolution_deg'])
-            if abs(steps - round(steps)) > 1e-9 * steps or round(steps) % 2:
-                raise FreejointValueError(
-                    f"resolution_deg: 360 / {cfg['resolution_deg']:g} must be an even integer "
-                    '(e.g. 0.25, 0.5, 1.0)')
-        if 'control_period' in cfg:
-            dt = float(cfg['control_period'])
-            if abs(dt * 1e9 - round(dt * 1e9)) > 1e-3:
-                raise FreejointValueError(
-                    f'control_period: {dt:g} s is not a whole number of nanoseconds')
-        if 'case' in cfg and cfg['case'] not in CASES:
-            raise FreejointValueError(f"case: expected one of {CASES}, got {cfg['case']!r}")
-        if 'direction' in cfg and (isinstance(cfg['direction'], bool)
-                                   or cfg['direction'] not in (1, -1)):
-            raise FreejointValueError(f"direction: expected +1 or -1, got {cfg['direction']!r}")
-        if 'centre' in cfg:
-            centre = list(cfg['centre'])
-            if len(centre) != 2:
-                raise FreejointValueError(
-                    f'centre: expected 2 values (x, y) in m, got {len(centre)}: {centre}')
-            if not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                       and math.isfinite(v) for v in centre):
-                raise FreejointValueError(f'centre: expected finite numbers, got {centre}')
-        if 'frame_id' in cfg and not str(cfg['frame_id']).strip():
-            raise FreejointValueError('frame_id: expected a frame name, got an empty string')
-    except FreejointValueError as exc:
-        return str(exc)
-    return ''
 
 
 def circle_bounds(circle, model, max_speed, max_acceleration):
@@ -239,7 +139,7 @@ class SingularityModel:
                 f'resolution {self.resolution_deg:g} deg, eps_d {self.eps_d:g})')
 
 
-def compute_model(case, nominal_scale, resolution_deg, eps_d):
+def compute_model(case, nominal_scale, resolution_deg, eps_d, cells=True, arm=None):
     """
     Compute the singularity map and semi-singular region of the nominal arm.
 
@@ -253,6 +153,12 @@ def compute_model(case, nominal_scale, resolution_deg, eps_d):
         Joint-space grid step (deg); 0.25 takes about 0.1 s.
     eps_d : float
         Criterion on ``|det(Da Da^T)|`` (paper: 1e-7).
+    cells : bool
+        ``arm_region``'s conservative cell test (arms other than the paper's 3-link one;
+        False: the paper's sampled criterion alone).
+    arm : ArmParams, optional
+        The real arm (e.g. of a URDF, ``freejoint_common.arm_description``); default
+        ``table1(case)``.
 
     Returns
     -------
@@ -260,8 +166,9 @@ def compute_model(case, nominal_scale, resolution_deg, eps_d):
 
     """
     start = time.perf_counter()
-    nominal = table1(case).scaled(nominal_scale)
-    region = arm_region(nominal, resolution_deg, eps_d)   # any planar arm; paper: closed form
+    nominal = (table1(case) if arm is None else arm).scaled(nominal_scale)
+    # any planar arm; the paper's: closed form
+    region = arm_region(nominal, resolution_deg, eps_d, cells=bool(cells))
     return SingularityModel(case=case, nominal_scale=float(nominal_scale),
                             resolution_deg=float(resolution_deg), eps_d=float(eps_d),
                             nominal=nominal, region=region,

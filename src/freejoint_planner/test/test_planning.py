@@ -4,9 +4,9 @@ import re
 from freejoint_core.arm import table1
 from freejoint_core.singularity import det_map, semi_singular
 from freejoint_core.trajectory import CircleQuintic
+from freejoint_planner.params import validate
 from freejoint_planner.planning import circle_bounds, circle_check_points, compute_model
 from freejoint_planner.planning import grid_bound, grid_extent, make_circle, SingularityModel
-from freejoint_planner.planning import validate
 import numpy as np
 import pytest
 

@@ -1,0 +1,130 @@
+"""
+Parameters of the planner node: its schema (no ROS types).
+
+``SCHEMA`` lists every parameter once (name, default, description, range, read-only,
+validator); ``freejoint_common.node_tools.NodeParameters`` declares it on the node and
+validates every change with it; the node's config is the validated ``{name: value}``
+dict. ``case``, ``nominal_scale`` and ``control_period`` are the entries the controller
+(and the simulator) share (``freejoint_common.schema``), the arm the entries of
+``freejoint_common.arm_description``; the configured circle's defaults are the core's
+``CircleQuintic`` (the paper's circle). :func:`validate` checks some values alone (a
+``~/plan_circle`` request).
+"""
+
+import inspect
+import math
+
+from freejoint_common.arm_description import ARM_SPECS
+from freejoint_common.schema import CASE, CONTROL_PERIOD, FRAME_ID, NOMINAL_SCALE, Param
+from freejoint_common.schema import SCHEDULING, Schema
+from freejoint_core.trajectory import CircleQuintic
+
+_CIRCLE = {name: p.default for name, p in
+           inspect.signature(CircleQuintic.__init__).parameters.items()
+           if p.default is not inspect.Parameter.empty}
+"""The paper's circle: the defaults of ``CircleQuintic``."""
+
+# Parameters of the configured circle; an accepted change of any of them re-checks it.
+CIRCLE_KEYS = ('centre', 'radius', 'duration', 'start_angle', 'direction', 'start_delay')
+# Parameters of the singularity map; an accepted change of any of them recomputes it.
+MAP_KEYS = ('case', 'nominal_scale', 'resolution_deg', 'eps_d')
+
+
+def _even_steps(value):
+    steps = 360.0 / float(value)
+    if abs(steps - round(steps)) > 1e-9 * steps or round(steps) % 2:
+        return f'360 / {value:g} must be an even integer (e.g. 0.25, 0.5, 1.0)'
+    return None
+
+
+def _direction(value):
+    return None if value in (1, -1) else f'expected +1 or -1, got {value!r}'
+
+
+def _centre(value):
+    centre = list(value)
+    if len(centre) != 2:
+        return f'expected 2 values (x, y) in m, got {len(centre)}: {centre}'
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+               for v in centre):
+        return f'expected finite numbers, got {centre}'
+    return None
+
+
+PARAMS = (
+    CASE, NOMINAL_SCALE,
+    Param('resolution_deg', 0.25,
+          'Joint-space step of the singularity map (deg); 360 / value an even integer. 0.25 '
+          'costs about 0.1 s. Changing it recomputes the map.', (0.1, 10.0),
+          validator=_even_steps),
+    Param('eps_d', 1e-7,
+          'Semi-singular criterion on |det(Da Da^T)| (paper: 1e-7), > 0. Changing it '
+          'recomputes the map.', (0.0, 1.0), exclusive_min=True),
+    Param('grid_resolution', 0.01, 'Cell size of the semi_singular_map OccupancyGrid (m).',
+          (0.001, 0.5)),
+    FRAME_ID,
+    CONTROL_PERIOD,
+    # >= 1: a setpoint must be out before its tick's state (0 races it); <= the keep-last
+    # depth of `setpoint` (1000): more at once could overrun a late reader's history.
+    Param('lookahead', 20,
+          'Setpoints published ahead of ROS time (ticks), >= 1. Sim time: with /clock every '
+          'N ticks, >= N - 1 (a smaller value is refused once N is known; found too small '
+          'when N is learnt, it is raised to 2 N - 1).', (1, 1000)),
+    Param('centre', list(_CIRCLE['centre']), 'Circle centre (x, y) in m, base frame.',
+          validator=_centre),
+    Param('radius', _CIRCLE['radius'], 'Circle radius (m), > 0.', (0.0, 10.0),
+          exclusive_min=True),
+    Param('duration', _CIRCLE['duration'], 'Time of the revolution (s), > 0.', (0.0, 3600.0),
+          exclusive_min=True),
+    # one revolution either way: a huge angle would lose the quintic's increments to
+    # rounding (at 1e17 rad the ulp is 16 rad: the point would jump, not move)
+    Param('start_angle', _CIRCLE['start_angle'],
+          'Angle of the start point about the centre (rad), from +x, within one revolution '
+          'either way.', (-2.0 * math.pi, 2.0 * math.pi)),
+    Param('direction', _CIRCLE['direction'], '+1 counter-clockwise, -1 clockwise.',
+          (-1, 1, 2), validator=_direction),
+    Param('start_delay', 0.0,
+          'Delay from the start of a plan to its motion (s); the start point is held '
+          'meanwhile.', (0.0, 3600.0)),
+    # end-effector bounds of every plan (circle and transition); the paper's circle peaks
+    # at 0.471 m/s and 1.11 m/s^2
+    Param('max_speed', 1.0,
+          'Largest end-effector speed of a plan (m/s): a circle peaking above it is refused '
+          '(paper circle: 0.471).', (0.0, 10.0), exclusive_min=True),
+    Param('max_acceleration', 5.0,
+          'Largest end-effector acceleration of a plan (m/s^2): a circle peaking above it is '
+          'refused (paper circle: 1.11).', (0.0, 100.0), exclusive_min=True),
+    Param('transition_max_duration', 60.0,
+          "Longest transition (s) from the current setpoint into a new plan's start; none "
+          'shorter within the bounds: the plan is refused.', (0.0, 600.0), exclusive_min=True),
+    Param('autostart', True,
+          'Start the configured circle at activation and after every accepted change of its '
+          'parameters.'),
+    ARM_SPECS,
+    SCHEDULING,
+)
+
+SCHEMA = Schema(PARAMS)
+SPECS = SCHEMA.params
+DEFAULTS = SCHEMA.defaults()
+LOOKAHEAD_MAX = SCHEMA['lookahead'].bounds[1]
+"""Largest ``lookahead`` (ticks): the keep-last depth of ``setpoint``."""
+
+
+def validate(cfg):
+    """
+    Return why some planner parameter values are invalid, or '' if they are valid.
+
+    Parameters
+    ----------
+    cfg : dict
+        Parameter name -> value (only the names present are checked; ``centre`` a
+        sequence, ``direction`` an int, ...).
+
+    Returns
+    -------
+    str
+        The first problem found, naming the parameter, or ''.
+
+    """
+    return SCHEMA.reason(cfg) or ''
