@@ -36,9 +36,10 @@ Usage: ``. tools/env.sh && python bench/graph.py [--lockstep-only | --realtime-o
 import os
 import shutil
 import signal
-import subprocess
 import sys
 import time
+
+from freejoint_tools.harness import Processes, ServiceCalls
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 INSTALL = os.path.join(ROOT, 'install')
@@ -115,37 +116,12 @@ def proc_vmhwm_mib(pid):
     return None
 
 
-class Graph:
-    """Node processes of one run: start with a log each, measure, stop cleanly."""
+class Graph(Processes):
+    """Node processes of one run (``freejoint_tools.harness``): measure, stop cleanly."""
 
     def __init__(self, log_dir, tag, env):
-        self.log_dir = log_dir
-        self.tag = tag
-        self.env = env
-        self.procs = {}
+        super().__init__(log_dir, tag, env, cwd=ROOT)
         self._cpu = {}
-
-    def start(self, name, cmd, log_name=None):
-        """
-        Start ``cmd`` (its output to <log_dir>/<tag>_<log_name or name>.log); return it.
-
-        A name already running is replaced in ``procs`` (a restart: stop or kill the old
-        process first); ``log_name`` keeps the old one's log.
-        """
-        os.makedirs(self.log_dir, exist_ok=True)
-        path = os.path.join(self.log_dir, '%s_%s.log' % (self.tag, log_name or name))
-        log = open(path, 'w')
-        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self.env,
-                                start_new_session=True, cwd=ROOT)
-        proc.log_path = path
-        proc.logs = [path] + list(getattr(self.procs.get(name), 'logs', []))
-        proc.log_file = log
-        self.procs[name] = proc
-        return proc
-
-    def exited(self):
-        """Return the names of the processes that exited."""
-        return [n for n, p in self.procs.items() if p.poll() is not None]
 
     def cpu(self):
         """Return {name: CPU seconds so far} (a process that exited: its last reading)."""
@@ -157,20 +133,6 @@ class Graph:
     def vmhwm(self):
         """Return {name: VmHWM MiB}."""
         return {n: proc_vmhwm_mib(p.pid) for n, p in self.procs.items()}
-
-    def stop(self, name, timeout=20.0):
-        """SIGINT one process, wait, SIGKILL its group after ``timeout`` s; return its code."""
-        proc = self.procs[name]
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait(5.0)
-        if not proc.log_file.closed:
-            proc.log_file.close()
-        return proc.returncode
 
     def stop_all(self, order=STOP_ORDER):
         """
@@ -204,10 +166,6 @@ class Graph:
                              and ('[ERROR]' in line or '[WARN]' in line))
         return count
 
-    def tail(self, name, lines=5):
-        """Return the last lines of a process log."""
-        with open(self.procs[name].log_path) as f:
-            return ''.join(f.readlines()[-lines:])
 
 
 def node_cmd(pkg, exe, config, overrides):
@@ -278,7 +236,7 @@ def start_graph(graph, layout, bag, sim_overrides, ctl_overrides, planner_overri
 
 
 # -- this process's ROS node (services only: nothing on the hot path) --------------------
-class Client:
+class Client(ServiceCalls):
     """An rclpy node of the bench: recorder status, plan requests; spun only while used."""
 
     def __init__(self):
@@ -286,49 +244,16 @@ class Client:
         from rclpy.executors import SingleThreadedExecutor
         rclpy.init()
         self.rclpy = rclpy
-        self.node = rclpy.create_node('freejoint_bench')
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(self.node)
+        node = rclpy.create_node('freejoint_bench')
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        super().__init__(node, executor)
 
     def close(self):
         """Destroy the node and shut rclpy down."""
         self.executor.shutdown()
         self.node.destroy_node()
         self.rclpy.try_shutdown()
-
-    def spin_until(self, predicate, timeout, step=0.05):
-        """Spin until ``predicate()`` or ``timeout`` s; return whether it held."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            self.executor.spin_once(timeout_sec=step)
-        return predicate()
-
-    def call(self, srv_type, name, request, timeout):
-        """Call service ``name`` (waiting for it up to ``timeout`` s); answer or None."""
-        client = self.node.create_client(srv_type, name)
-        try:
-            if not self.spin_until(client.service_is_ready, timeout):
-                return None
-            future = client.call_async(request)
-            self.spin_until(future.done, timeout, step=0.01)
-            return future.result() if future.done() else None
-        finally:
-            self.node.destroy_client(client)
-
-    def recorder_ready(self, timeout):
-        """Wait until the recorder's ``~/status`` says every graph topic is matched."""
-        from std_srvs.srv import Trigger
-        deadline = time.monotonic() + timeout
-        answer = None
-        while time.monotonic() < deadline:
-            answer = self.call(Trigger, '/recorder/status', Trigger.Request(),
-                               max(0.1, deadline - time.monotonic()))
-            if answer is not None and answer.success:
-                return True, answer.message
-            time.sleep(0.2)
-        return False, answer.message if answer is not None else 'no answer'
 
     def controller_answers(self, timeout, count=20):
         """Wait until ``count`` controller_state messages arrived (briefly subscribed)."""
@@ -341,31 +266,6 @@ class Client:
         finally:
             self.node.destroy_subscription(sub)
 
-    def recorder_status(self, timeout=5.0):
-        """Return the message of the recorder's ``~/status`` ('' if no answer)."""
-        from std_srvs.srv import Trigger
-        answer = self.call(Trigger, '/recorder/status', Trigger.Request(), timeout)
-        return answer.message if answer is not None else ''
-
-    def recorder_drained(self, quiet=1.0, timeout=120.0):
-        """
-        Wait until the recorder's received count is unchanged for ``quiet`` s.
-
-        Called once the simulator holds at ``max_steps`` (the graph is silent): a steady
-        count means the recorder has taken everything. Return (count or None, wall s).
-        """
-        from freejoint_tools.recorder import wait_drained
-        return wait_drained(self.recorder_status, quiet, timeout,
-                            lambda: self.spin_until(lambda: False, 0.1))
-
-    def plan_circle(self, plan, timeout=20.0):
-        """Ask the planner for the configured circle, executed at once; return the answer."""
-        from freejoint_msgs.srv import PlanCircle
-        request = PlanCircle.Request(
-            centre=[float(v) for v in plan['centre']], radius=float(plan['radius']),
-            duration=float(plan['duration']), start_angle=float(plan['start_angle']),
-            direction=int(plan['direction']), execute=True)
-        return self.call(PlanCircle, '/freejoint_planner/plan_circle', request, timeout)
 
 
 def ros_params(name):
@@ -535,12 +435,11 @@ def offline_bound(case=CASE):
 def tracking_error(bag, window_ns):
     """Return (max, rms) mm of |p - p_d| of the controller_state ticks stamped in window."""
     import numpy as np
-    from freejoint_common.contract import to_ns
     from freejoint_tools.bagfile import open_bag
     lo, hi = window_ns
     err = []
     for _, msg in open_bag(bag).decode('/controller_state'):
-        ns = to_ns(msg.header.stamp)
+        ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         if lo <= ns <= hi:
             err.append(np.hypot(msg.position[0] - msg.position_desired[0],
                                 msg.position[1] - msg.position_desired[1]))

@@ -6,7 +6,7 @@ disturbance seed 0, this starts the three nodes as separate processes - exactly 
 executables ``ros2 run`` starts (``install/<pkg>/lib/<pkg>/<exe>``) with the parameter files
 of ``config/`` and per-case overrides (``-p case:=vertical``) - and the recorder when it is
 installed, follows the run, stops everything with SIGINT and computes the graph's record from
-the messages the run published (``freejoint_common.records.arrays_from_messages``, then
+the messages the run published (``freejoint_control.records.arrays_from_messages``, then
 ``freejoint_core.metrics.compute_record``).  It prints the offline runner's records of the
 same runs beside the graph's, checks that the end-effector trajectories agree, writes the
 graph's records to ``bags/demo/metrics.json`` and runs ``analyze`` on the bags if installed.
@@ -18,7 +18,7 @@ unless ``ROS_AUTOMATIC_DISCOVERY_RANGE`` says otherwise.
 """
 import argparse
 import os
-import signal
+import struct
 import subprocess
 import sys
 import time
@@ -52,6 +52,12 @@ def shown(path):
     """Return ``path`` relative to the repository if it lies inside it, else absolute."""
     path = os.path.abspath(path)
     return os.path.relpath(path, ROOT) if path.startswith(ROOT + os.sep) else path
+
+
+def stamp_ns_of(raw):
+    """Return the header stamp (ns) of a serialized message that starts with a Header."""
+    sec, nanosec = struct.unpack_from('<iI', raw, 4)
+    return sec * 1_000_000_000 + nanosec
 
 
 # -- settings -------------------------------------------------------------------------
@@ -117,31 +123,33 @@ class Collector:
     run.  Deep reader queues keep every message while this process catches up.
     """
 
+    TOPICS = (('controller_state', 'freejoint_msgs.msg', 'ControllerState'),
+              ('joint_states', 'sensor_msgs.msg', 'JointState'),
+              ('ee_position', 'geometry_msgs.msg', 'PointStamped'))
+
     def __init__(self, node, depth=20000):
-        from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION, JOINT_STATES
-        from freejoint_common.contract import profile
-        qos = profile(depth)
+        import importlib
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
         self.node = node
         self.types = {}
         self.raw = {}
         self.last = {}
         self.subs = {}
-        for topic, msg_type in ((t.name, t.msg_type)
-                                for t in (CONTROLLER_STATE, JOINT_STATES, EE_POSITION)):
-            self.types[topic] = msg_type
+        for topic, module, name in self.TOPICS:
+            self.types[topic] = getattr(importlib.import_module(module), name)
             self.raw[topic] = []
             self.last[topic] = -1
             self.subs[topic] = node.create_subscription(
                 self.types[topic], topic, self._callback(topic), qos, raw=True)
 
     def _callback(self, topic):
-        from freejoint_common.contract import clock_ns   # the Header's stamp, as /clock's
         store = self.raw[topic].append
         last = self.last
 
         def take(raw):
             store(raw)
-            ns = clock_ns(raw)
+            ns = stamp_ns_of(raw)
             if ns > last[topic]:
                 last[topic] = ns
         return take
@@ -190,11 +198,10 @@ def ee_trajectory(points, dt_ns, n_ticks):
         Naming the first tick without a message.
 
     """
-    from freejoint_common.contract import to_ns
     import numpy as np
     first = {}
     for msg in points:
-        first.setdefault(to_ns(msg.header.stamp), msg)
+        first.setdefault(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec, msg)
     out = np.empty((n_ticks, 2))
     for k in range(n_ticks):
         msg = first.get(k * dt_ns)
@@ -203,142 +210,6 @@ def ee_trajectory(points, dt_ns, n_ticks):
                              % (k, k * dt_ns * 1e-9))
         out[k] = msg.point.x, msg.point.y
     return out
-
-
-# -- processes --------------------------------------------------------------------------
-class Graph:
-    """The node processes of one run, their logs, and a clean stop."""
-
-    def __init__(self, log_dir, tag):
-        self.log_dir = log_dir
-        self.tag = tag
-        self.procs = []
-
-    def start(self, name, cmd):
-        """Start ``cmd`` with its output in <log_dir>/<tag>_<name>.log; return the Popen."""
-        os.makedirs(self.log_dir, exist_ok=True)
-        path = os.path.join(self.log_dir, '%s_%s.log' % (self.tag, name))
-        log = open(path, 'w')
-        env = dict(os.environ, PYTHONUNBUFFERED='1')
-        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env,
-                                start_new_session=True, cwd=ROOT)
-        proc.name = name
-        proc.log_path = path
-        proc.log_file = log
-        self.procs.append(proc)
-        return proc
-
-    def alive(self):
-        """Return the names of the processes that exited (empty if all run)."""
-        return [p.name for p in self.procs if p.poll() is not None]
-
-    def stop(self, proc, timeout=20.0):
-        """SIGINT the process, wait, SIGKILL after ``timeout`` s; return its exit code."""
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait(5.0)
-        proc.log_file.close()
-        return proc.returncode
-
-    def stop_all(self):
-        """Stop every process still running, last started first; return {name: code}."""
-        codes = {}
-        for proc in reversed(self.procs):
-            if not proc.log_file.closed:
-                codes[proc.name] = self.stop(proc)
-        return codes
-
-    @staticmethod
-    def tail(proc, lines=8):
-        """Return the last lines of a process log."""
-        with open(proc.log_path) as f:
-            return ''.join(f.readlines()[-lines:])
-
-
-def node_cmd(pkg, exe, params_file, overrides=()):
-    """Return the command line of a node, as ``ros2 run`` with a params file."""
-    cmd = [executable(pkg, exe), '--ros-args', '--params-file', params_file]
-    for item in overrides:
-        cmd += ['-p', item]
-    return cmd
-
-
-def spin_until(executor, predicate, timeout, step=0.1):
-    """Spin until ``predicate()`` or ``timeout`` wall s; return whether it held."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        executor.spin_once(timeout_sec=step)
-    return predicate()
-
-
-def call(executor, client, request, timeout):
-    """Call a service (waiting for it up to ``timeout`` s); return the answer or None."""
-    if not spin_until(executor, client.service_is_ready, timeout):
-        return None
-    future = client.call_async(request)
-    spin_until(executor, future.done, timeout, step=0.05)
-    return future.result() if future.done() else None
-
-
-def start_plan(executor, node, plan, timeout=30.0):
-    """Ask the planner for the configured circle (``~/plan_circle``, execute); return it."""
-    from freejoint_msgs.srv import PlanCircle
-    client = node.create_client(PlanCircle, '/freejoint_planner/plan_circle')
-    try:
-        request = PlanCircle.Request(
-            centre=[float(v) for v in plan['centre']], radius=float(plan['radius']),
-            duration=float(plan['duration']), start_angle=float(plan['start_angle']),
-            direction=int(plan['direction']), execute=True)
-        return call(executor, client, request, timeout)
-    finally:
-        node.destroy_client(client)
-
-
-def recorder_ready(executor, node, timeout):
-    """Wait until the recorder's ``~/status`` says every graph topic is matched."""
-    from std_srvs.srv import Trigger
-    client = node.create_client(Trigger, '/recorder/status')
-    deadline = time.monotonic() + timeout
-    answer = None
-    try:
-        while time.monotonic() < deadline:
-            answer = call(executor, client, Trigger.Request(), deadline - time.monotonic())
-            if answer is not None and answer.success:
-                return True, answer.message
-            spin_until(executor, lambda: False, 0.2)
-        return False, answer.message if answer is not None else 'no answer'
-    finally:
-        node.destroy_client(client)
-
-
-def recorder_drained(executor, node, quiet, timeout):
-    """
-    Wait until the recorder's received count (``~/status``) is unchanged for ``quiet`` s.
-
-    Called once the simulator holds (``max_steps``): the graph is silent, so a steady count
-    means the recorder has taken everything published. Return the count (None: no answer).
-    """
-    from freejoint_tools.recorder import wait_drained
-    from std_srvs.srv import Trigger
-    client = node.create_client(Trigger, '/recorder/status')
-    deadline = time.monotonic() + timeout
-
-    def read_status():
-        answer = call(executor, client, Trigger.Request(), deadline - time.monotonic())
-        return answer.message if answer is not None else None
-
-    try:
-        count, _settled = wait_drained(read_status, quiet, timeout,
-                                       lambda: spin_until(executor, lambda: False, 0.1))
-        return count
-    finally:
-        node.destroy_client(client)
 
 
 def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
@@ -363,10 +234,11 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
         logs).
 
     """
-    graph = Graph(log_dir, case)
+    from freejoint_tools.harness import node_cmd, Processes, ServiceCalls
+    graph = Processes(log_dir, case, cwd=ROOT)
+    calls = ServiceCalls(collector.node, executor)
     rec_exe = executable('freejoint_tools', 'recorder')
     bag = None
-    node = collector.node
     try:
         if record and os.path.exists(rec_exe):
             bag = os.path.join(out_dir, case)
@@ -386,20 +258,20 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
         graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node',
                                              os.path.join(CONFIG, 'planner.yaml'),
                                              ['case:=' + case, 'autostart:=false']))
-        if not spin_until(executor, lambda: collector.publishers_ready() or graph.alive(),
-                          60.0) or graph.alive():
+        if not calls.spin_until(lambda: collector.publishers_ready() or graph.exited(),
+                                60.0) or graph.exited():
             raise RuntimeError('the nodes did not come up within 60 s%s (logs in %s)' % (
-                '' if not graph.alive() else ': %s exited' % graph.alive(), log_dir))
+                '' if not graph.exited() else ': %s exited' % graph.exited(), log_dir))
         if bag is not None:
-            ok, status = recorder_ready(executor, node, 60.0)
+            ok, status = calls.recorder_ready(60.0)
             if not ok:
                 raise RuntimeError('the recorder is not ready after 60 s: %s (logs in %s)'
                                    % (status, log_dir))
             # The readers have matched every publisher; the writers' side of the match
             # (what makes a volatile writer send to the recorder) can lag by tens of ms.
-            spin_until(executor, lambda: False, SETTLE)
+            calls.spin_until(lambda: False, SETTLE)
         plan = _ros_params(os.path.join(CONFIG, 'planner.yaml'))
-        answer = start_plan(executor, node, plan)
+        answer = calls.plan_circle(plan, 30.0)
         if answer is None or not answer.accepted:
             raise RuntimeError('the planner did not start the circle: %s (logs in %s)' % (
                 'no answer from ~/plan_circle' if answer is None else answer.reason, log_dir))
@@ -424,9 +296,9 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
                 rtf = ns * 1e-9 / max(now - first_wall, 1e-9)
                 progress('  %-10s t = %.3f of %.3f s sim   (%.2fx real time)'
                          % (case, ns * 1e-9, last_ns * 1e-9, rtf))
-            if graph.alive():
+            if graph.exited():
                 raise RuntimeError('%s exited during the run (logs in %s)'
-                                   % (graph.alive(), log_dir))
+                                   % (graph.exited(), log_dir))
             if now - last_change > STALL_TIMEOUT:
                 raise RuntimeError('no new tick for %g s at t = %.3f s (logs in %s)'
                                    % (STALL_TIMEOUT, max(ns, 0) * 1e-9, log_dir))
@@ -434,24 +306,21 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
         # The simulator now holds (max_steps): take what is still in flight, and let the
         # recorder take everything before any publisher exits (a sample not yet taken from
         # shared memory dies with its publisher).
-        spin_until(executor, lambda: False, 0.2, step=0.05)
+        calls.spin_until(lambda: False, 0.2)
         if bag is not None:
-            recorder_drained(executor, node, DRAIN_QUIET, 30.0)
+            calls.recorder_drained(DRAIN_QUIET, 30.0)
     finally:
         # The recorder last, so that it finalises the bag after every publisher is gone.
-        codes = {}
-        for name in ('controller_node', 'planner_node', 'sim_node', 'recorder'):
-            for proc in graph.procs:
-                if proc.name == name and not proc.log_file.closed:
-                    codes[name] = graph.stop(proc, 60.0 if name == 'recorder' else 20.0)
+        codes = graph.stop_all(order=('controller_node', 'planner_node', 'sim_node',
+                                      'recorder'), timeouts={'recorder': 60.0})
     return {'wall_s': wall, 'sim_s': last_ns * 1e-9, 'codes': codes,
-            'logs': [p.log_path for p in graph.procs], 'bag': bag,
-            'sim_log': next(p.log_path for p in graph.procs if p.name == 'sim_node')}
+            'logs': [p.log_path for p in graph.started], 'bag': bag,
+            'sim_log': graph.procs['sim_node'].log_path}
 
 
 def graph_record(collector, case, seed, n_ticks):
     """Return the graph's record of the collected run (source 'graph') and its arrays."""
-    from freejoint_common.records import arrays_from_messages
+    from freejoint_control.records import arrays_from_messages
     from freejoint_core.metrics import compute_record
     arrays = arrays_from_messages(collector.messages('controller_state'),
                                   collector.messages('joint_states'), PASSIVE_JOINT,
@@ -497,6 +366,7 @@ def main(argv=None):
     from freejoint_core.offline import run_case
     import numpy as np
     import rclpy
+    from freejoint_tools.harness import Processes
     from rclpy.experimental import EventsExecutor
 
     settings = offline_settings()
@@ -521,7 +391,7 @@ def main(argv=None):
     executor.add_node(node)
     graph_records, offline_records, runs = [], [], []
     failed = False
-    view = Graph(log_dir, 'view')
+    view = Processes(log_dir, 'view', cwd=ROOT)
     try:
         if args.view:
             proc = view.start('viewer', [executable('freejoint_tools', 'viewer')])

@@ -19,7 +19,7 @@ import shutil
 import subprocess
 import sys
 
-from freejoint_common.records import arrays_from_messages, stamp_ns
+from freejoint_control.records import arrays_from_messages, stamp_ns
 from freejoint_core.offline import run_case
 import numpy as np
 import pytest
@@ -97,7 +97,7 @@ class Hosts:
         self.made = []
 
     def start(self, side, cmd, name):
-        proc = self.procs.start(['ip', 'netns', 'exec', self.names[side], *cmd], name,
+        proc = self.procs.start(name, ['ip', 'netns', 'exec', self.names[side], *cmd],
                                 env=self.env)
         return proc
 

@@ -80,8 +80,8 @@ def test_every_thread_gets_the_priority_and_cpus_and_set_parameters_changes_them
     # checked here; the refusal itself is the next test's.
     prio = 10 if _fifo_permitted() else 0
     policy = os.SCHED_FIFO if prio else os.SCHED_OTHER
-    proc = procs.start(_node_cmd(pkg, exe, config, '-p', 'thread_priority:=%d' % prio,
-                                 '-p', 'cpu_affinity:=[%d]' % LAST), name)
+    proc = procs.start(name, _node_cmd(pkg, exe, config, '-p', 'thread_priority:=%d' % prio,
+                                       '-p', 'cpu_affinity:=[%d]' % LAST))
     text = 'SCHED_FIFO 10' if prio else 'default scheduler'
     wait(lambda: 'process scheduling: %s on CPUs [%d]' % (text, LAST) in procs.log(proc),
          30.0, 'the node to report its scheduling')
@@ -105,9 +105,9 @@ def test_every_thread_gets_the_priority_and_cpus_and_set_parameters_changes_them
 
 def test_without_the_privilege_the_node_says_why_and_runs_on(procs, ros_node, wait):
     from rclpy.parameter import Parameter
-    proc = procs.start(WITHOUT_SYS_NICE + _node_cmd(
+    proc = procs.start('controller_node', WITHOUT_SYS_NICE + _node_cmd(
         'freejoint_control', 'controller_node', 'controller.yaml',
-        '-p', 'thread_priority:=10'), 'controller_node')
+        '-p', 'thread_priority:=10'))
     wait(lambda: 'controller ready' in procs.log(proc), 30.0, 'the controller to start')
     log = procs.log(proc)
     assert ('thread_priority 10 not applied: SCHED_FIFO priority 10 not permitted for this '

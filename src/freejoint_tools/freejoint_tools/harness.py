@@ -1,0 +1,231 @@
+"""
+The process harness of the demo, the bench and the multi-process tests.
+
+``make demo`` (tools/demo.py), the bench (bench/graph.py) and the tests (test/conftest.py's
+``procs`` fixture) run their node processes and call their services with this module.
+:class:`Processes` starts node processes (``ros2 run`` paths, each with its log file and
+environment: the run's ``ROS_DOMAIN_ID``), tells which exited, stops them (SIGINT, bounded
+wait, SIGKILL of the process group) and collects their exit codes and output.
+:class:`ServiceCalls` holds the one copy of the service helpers of a harness node: spin
+until a condition (bounded), call a service (waiting for it, bounded), the recorder's
+``~/status`` (ready, drained) and the planner's ``~/plan_circle``.
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+
+def executable(pkg, exe):
+    """Return what ``ros2 run <pkg> <exe>`` starts: <prefix of pkg>/lib/<pkg>/<exe>."""
+    from ament_index_python.packages import get_package_prefix
+    return os.path.join(get_package_prefix(pkg), 'lib', pkg, exe)
+
+
+def node_cmd(pkg, exe, params_file=None, overrides=()):
+    """Return a node's command line, as ``ros2 run`` with a params file and ``-p`` items."""
+    cmd = [executable(pkg, exe), '--ros-args']
+    if params_file:
+        cmd += ['--params-file', params_file]
+    for item in overrides:
+        cmd += ['-p', item]
+    return cmd
+
+
+class Processes:
+    """
+    The node processes of one run: start each with a log and an environment, stop them.
+
+    Parameters
+    ----------
+    log_dir : str
+        Directory of the logs, ``<log_dir>/<tag>_<name>.log`` (``<name>.log`` without tag).
+    tag : str, optional
+        Prefix of the log names.
+    env : dict, optional
+        Environment of every process (default: this process's), ``PYTHONUNBUFFERED=1``.
+    cwd : str, optional
+        Working directory of the processes.
+    stop_timeout : float, optional
+        Default wait [s] of :meth:`stop` after SIGINT before SIGKILL.
+
+    Attributes
+    ----------
+    procs : dict
+        {name: the latest process started under that name} (``subprocess.Popen`` with
+        ``name``, ``log_path``, ``log_file`` and ``logs``: its and its predecessors' logs).
+
+    """
+
+    def __init__(self, log_dir, tag=None, env=None, cwd=None, stop_timeout=20.0):
+        self.log_dir = log_dir
+        self.stop_timeout = stop_timeout
+        self.tag = tag
+        self.env = dict(os.environ if env is None else env, PYTHONUNBUFFERED='1')
+        self.cwd = cwd
+        self.procs = {}
+        self.started = []       # every process, in start order
+
+    def start(self, name, cmd, env=None, log_name=None):
+        """
+        Start ``cmd`` (list) with its output in its log; return the process.
+
+        ``env`` adds to the harness environment. A name already used is replaced in
+        ``procs`` (a restart: stop or kill the old process first); ``log_name`` keeps the
+        old one's log (a log per name otherwise).
+        """
+        os.makedirs(self.log_dir, exist_ok=True)
+        base = log_name or name
+        path = os.path.join(self.log_dir, '%s_%s.log' % (self.tag, base) if self.tag
+                            else base + '.log')
+        log = open(path, 'w')
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
+                                env=dict(self.env, **(env or {})), cwd=self.cwd,
+                                start_new_session=True)
+        proc.name = name
+        proc.log_path = path
+        proc.log_file = log
+        old = self.procs.get(name)
+        proc.logs = [path] + [p for p in getattr(old, 'logs', []) if p != path]
+        self.procs[name] = proc
+        self.started.append(proc)
+        return proc
+
+    def start_node(self, pkg, exe, name, args=()):
+        """Start an installed node exactly as ``ros2 run pkg exe args...`` would."""
+        return self.start(name, [executable(pkg, exe), *args])
+
+    def start_script(self, path, name, args=()):
+        """Start a Python script with this interpreter."""
+        return self.start(name, [sys.executable, path, *args])
+
+    def _proc(self, which):
+        return self.procs[which] if isinstance(which, str) else which
+
+    def exited(self):
+        """Return the names of the processes that have exited; empty while all run."""
+        return [n for n, p in self.procs.items() if p.poll() is not None]
+
+    def log(self, which):
+        """Return what a process (or name) printed so far."""
+        proc = self._proc(which)
+        if not proc.log_file.closed:
+            proc.log_file.flush()
+        with open(proc.log_path) as f:
+            return f.read()
+
+    def tail(self, which, lines=8):
+        """Return the last ``lines`` lines of a process's (or name's) log."""
+        return ''.join(self.log(which).splitlines(True)[-lines:])
+
+    def stop(self, which, timeout=None):
+        """SIGINT a process (or name), wait ``timeout`` s, then SIGKILL; return its code."""
+        proc = self._proc(which)
+        timeout = self.stop_timeout if timeout is None else timeout
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(5.0)
+        if not proc.log_file.closed:
+            proc.log_file.close()
+        return proc.returncode
+
+    def stop_all(self, order=(), timeouts=None):
+        """
+        Stop every process not stopped yet; return {name: exit code}.
+
+        The names of ``order`` first, in that order, then the others, last started first;
+        ``timeouts`` maps a name to its SIGINT wait (``stop_timeout`` otherwise).
+        """
+        rest = [p for p in reversed(self.started) if p.name not in order]
+        named = [p for n in order for p in self.started if p.name == n]
+        codes = {}
+        for proc in named + rest:
+            if not proc.log_file.closed:
+                codes[proc.name] = self.stop(proc, (timeouts or {}).get(proc.name))
+        return codes
+
+
+class ServiceCalls:
+    """
+    Service calls of a harness node spun by ``executor`` (every wait bounded).
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The harness's node (clients are created on it per call).
+    executor : rclpy executor
+        The executor that spins ``node``.
+
+    """
+
+    def __init__(self, node, executor):
+        self.node = node
+        self.executor = executor
+
+    def spin_until(self, predicate, timeout, step=0.05):
+        """Spin until ``predicate()`` or ``timeout`` wall s; return whether it held."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            self.executor.spin_once(timeout_sec=step)
+        return predicate()
+
+    def call(self, srv_type, name, request, timeout):
+        """Call service ``name`` (waiting for it up to ``timeout`` s); answer or None."""
+        client = self.node.create_client(srv_type, name)
+        try:
+            if not self.spin_until(client.service_is_ready, timeout):
+                return None
+            future = client.call_async(request)
+            self.spin_until(future.done, timeout, step=0.01)
+            return future.result() if future.done() else None
+        finally:
+            self.node.destroy_client(client)
+
+    def recorder_status(self, timeout=5.0):
+        """Return the answer message of the recorder's ``~/status`` ('': no answer)."""
+        from std_srvs.srv import Trigger
+        answer = self.call(Trigger, '/recorder/status', Trigger.Request(), timeout)
+        return answer.message if answer is not None else ''
+
+    def recorder_ready(self, timeout):
+        """Wait until the recorder's ``~/status`` says every graph topic is matched."""
+        from std_srvs.srv import Trigger
+        deadline = time.monotonic() + timeout
+        answer = None
+        while time.monotonic() < deadline:
+            answer = self.call(Trigger, '/recorder/status', Trigger.Request(),
+                               max(0.1, deadline - time.monotonic()))
+            if answer is not None and answer.success:
+                return True, answer.message
+            self.spin_until(lambda: False, 0.2)
+        return False, answer.message if answer is not None else 'no answer'
+
+    def recorder_drained(self, quiet=1.0, timeout=120.0):
+        """
+        Wait until the recorder's received count is unchanged for ``quiet`` s.
+
+        Called once the simulator holds at ``max_steps`` (the graph is silent): a steady
+        count means the recorder has taken everything. Return (count or None, wall s).
+        """
+        from freejoint_tools.recorder import wait_drained
+        deadline = time.monotonic() + timeout
+        return wait_drained(
+            lambda: self.recorder_status(max(0.1, deadline - time.monotonic())),
+            quiet, timeout, lambda: self.spin_until(lambda: False, 0.1))
+
+    def plan_circle(self, plan, timeout=20.0):
+        """Ask the planner for the circle of ``plan`` (its parameters), executed at once."""
+        from freejoint_msgs.srv import PlanCircle
+        request = PlanCircle.Request(
+            centre=[float(v) for v in plan['centre']], radius=float(plan['radius']),
+            duration=float(plan['duration']), start_angle=float(plan['start_angle']),
+            direction=int(plan['direction']), execute=True)
+        return self.call(PlanCircle, '/freejoint_planner/plan_circle', request, timeout)

@@ -1,0 +1,60 @@
+"""freejoint_tools.harness.Processes: the process harness of the demo, the bench and the tests."""
+import sys
+
+from freejoint_tools.harness import node_cmd, Processes
+
+SLEEPER = ('import signal, sys, time\n'
+           'signal.signal(signal.SIGINT, lambda *a: sys.exit(7))\n'
+           'print("up", flush=True)\n'
+           'time.sleep(60)\n')
+STUBBORN = ('import signal, time\n'
+            'signal.signal(signal.SIGINT, signal.SIG_IGN)\n'
+            'print("up", flush=True)\n'
+            'time.sleep(60)\n')
+
+
+def test_exited_names_only_the_processes_that_have_exited(tmp_path, wait):
+    procs = Processes(str(tmp_path), tag='run')
+    try:
+        quick = procs.start('quick', [sys.executable, '-c', 'print("bye"); raise SystemExit(3)'])
+        procs.start('sleeper', [sys.executable, '-c', SLEEPER])
+        wait(lambda: quick.poll() is not None, 30.0, 'the quick process to exit')
+        wait(lambda: 'up' in procs.log('sleeper'), 30.0, 'the sleeper to start')
+        assert procs.exited() == ['quick']
+        assert procs.log(quick) == 'bye\n'
+        assert quick.log_path == str(tmp_path / 'run_quick.log')
+    finally:
+        codes = procs.stop_all()
+    assert codes == {'sleeper': 7, 'quick': 3}
+
+
+def test_stop_all_goes_in_the_given_order_and_kills_what_ignores_sigint(tmp_path, wait):
+    procs = Processes(str(tmp_path), stop_timeout=0.5)
+    stubborn = procs.start('stubborn', [sys.executable, '-c', STUBBORN])
+    procs.start('sleeper', [sys.executable, '-c', SLEEPER])
+    wait(lambda: 'up' in procs.log('stubborn') and 'up' in procs.log('sleeper'), 30.0,
+         'both to start')
+    codes = procs.stop_all(order=('stubborn',))
+    assert list(codes) == ['stubborn', 'sleeper']
+    assert codes['stubborn'] == -9 and stubborn.log_file.closed
+    assert codes['sleeper'] == 7
+    assert procs.stop_all() == {}     # nothing left to stop
+
+
+def test_the_environment_reaches_the_process_and_a_restart_keeps_both_logs(tmp_path, wait):
+    procs = Processes(str(tmp_path), env={'FREEJOINT_X': 'base', 'PATH': '/usr/bin:/bin'})
+    show = [sys.executable, '-c', 'import os; print(os.environ["FREEJOINT_X"], '
+            'os.environ["ROS_DOMAIN_ID"], os.environ["PYTHONUNBUFFERED"])']
+    first = procs.start('node', show, env={'ROS_DOMAIN_ID': '42'})
+    wait(lambda: first.poll() is not None, 30.0, 'the first run to exit')
+    second = procs.start('node', show, env={'ROS_DOMAIN_ID': '43'}, log_name='node_2')
+    wait(lambda: second.poll() is not None, 30.0, 'the second run to exit')
+    procs.stop_all()
+    assert procs.log(first) == 'base 42 1\n' and procs.log(second) == 'base 43 1\n'
+    assert procs.procs['node'] is second and second.logs == [second.log_path, first.log_path]
+
+
+def test_node_cmd_is_the_ros2_run_command_line_with_params_file_and_overrides():
+    cmd = node_cmd('freejoint_sim', 'sim_node', 'config/sim.yaml', ['case:=vertical'])
+    assert cmd[0].endswith('/freejoint_sim/lib/freejoint_sim/sim_node')
+    assert cmd[1:] == ['--ros-args', '--params-file', 'config/sim.yaml', '-p', 'case:=vertical']
