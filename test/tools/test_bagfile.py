@@ -265,3 +265,21 @@ def test_writer_refuses_an_unknown_compression_naming_it(tmp_path):
     with pytest.raises(ValueError, match="compression must be one of none, zstd, got 'lz4'"):
         BagWriter(str(tmp_path / 'run'), compression='lz4')
     assert not os.path.exists(str(tmp_path / 'run'))
+
+
+def test_decode_topics_reads_several_topics_in_one_pass_as_decode_does_each(tmp_path,
+                                                                            make_bag):
+    from freejoint_tools.bagfile import BagError, open_bag
+    path = str(tmp_path / 'run')
+    written = make_bag(path, 30, flush_every=10)
+    bag = open_bag(path)
+    both = bag.decode_topics(['/joint_states', '/semi_singular_map'])
+    assert set(both) == {'/joint_states', '/semi_singular_map'}
+    for topic, got in both.items():
+        alone = bag.decode(topic)
+        assert [t for t, _ in got] == [t for t, _ in alone]
+        assert len(got) == len(written[topic])
+    assert [m.header.stamp.nanosec for _, m in both['/joint_states']] == \
+        [m.header.stamp.nanosec for m in written['/joint_states']]
+    with pytest.raises(BagError, match='no topic /nothing in the bag'):
+        bag.decode_topics(['/joint_states', '/nothing'])

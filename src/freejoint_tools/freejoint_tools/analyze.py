@@ -145,8 +145,9 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     states_topic = _pick_topic(bag, STATE_TYPE, '/' + CONTROLLER_STATE.name, state_topic)
     joints_topic = _pick_topic(bag, JOINT_TYPE, '/' + JOINT_STATES.name, joint_topic)
     store = bag.typestore()
-    states = [m for _, m in bag.decode(states_topic, store)]
-    joints = [m for _, m in bag.decode(joints_topic, store)]
+    decoded = bag.decode_topics([states_topic, joints_topic], store)
+    states = [m for _, m in decoded[states_topic]]
+    joints = [m for _, m in decoded[joints_topic]]
     try:
         arrays = arrays_from_messages(states, joints, info['passive_joint'],
                                       max_ticks=info['max_ticks'])

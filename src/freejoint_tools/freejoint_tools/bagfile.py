@@ -626,17 +626,26 @@ class Bag:
 
         The messages are rosbags dataclasses with the field names of the ROS message.
         """
-        if topic not in self.topics:
-            raise BagError(self.path, 'no topic %s in the bag' % topic)
+        return self.decode_topics([topic], store)[topic]
+
+    def decode_topics(self, topics, store=None):
+        """
+        Return ``{topic: [(log_time ns, message), ...]}`` of ``topics``, in one pass.
+
+        As :meth:`decode` for each topic, reading the bag once for all of them.
+        """
+        for topic in topics:
+            if topic not in self.topics:
+                raise BagError(self.path, 'no topic %s in the bag' % topic)
         store = store or self.typestore()
-        msgtype = self.topics[topic].type
-        out = []
-        for _, log_time, _, data in self.messages(topic):
+        types = {topic: self.topics[topic].type for topic in topics}
+        out = {topic: [] for topic in topics}
+        for topic, log_time, _, data in self.messages(topics):
             try:
-                out.append((log_time, store.deserialize_cdr(data, msgtype)))
+                out[topic].append((log_time, store.deserialize_cdr(data, types[topic])))
             except Exception as exc:  # malformed CDR raises various errors
                 raise BagError(self.files[0], 'message %d of %s does not decode as %s: %s'
-                               % (len(out), topic, msgtype, exc))
+                               % (len(out[topic]), topic, types[topic], exc))
         return out
 
 
