@@ -283,3 +283,26 @@ def test_decode_topics_reads_several_topics_in_one_pass_as_decode_does_each(tmp_
         [m.header.stamp.nanosec for m in written['/joint_states']]
     with pytest.raises(BagError, match='no topic /nothing in the bag'):
         bag.decode_topics(['/joint_states', '/nothing'])
+
+
+def test_a_damaged_chunk_of_a_finalised_bag_fails_the_read_naming_the_file(tmp_path,
+                                                                           make_bag):
+    """Open reads the summary only; the chunk's CRC fails when its messages are read."""
+    from mcap.reader import make_reader
+
+    from freejoint_tools.bagfile import BagError, open_bag
+    path = str(tmp_path / 'run')
+    make_bag(path, 30, flush_every=10)
+    mcap = os.path.join(path, 'run_0.mcap')
+    with open(mcap, 'rb') as fh:
+        second = make_reader(fh).get_summary().chunk_indexes[1]
+    with open(mcap, 'r+b') as fh:                  # a byte of its records, past the header
+        fh.seek(second.chunk_start_offset + second.chunk_length - 50)
+        byte = fh.read(1)
+        fh.seek(-1, os.SEEK_CUR)
+        fh.write(bytes([byte[0] ^ 0xff]))
+    bag = open_bag(path)
+    assert len(bag.decode('/semi_singular_map')) == 1     # only in the first chunk
+    with pytest.raises(BagError, match='corrupt MCAP data') as info:
+        bag.decode('/joint_states')
+    assert str(info.value).startswith(mcap + ': ') and '\n' not in str(info.value)
