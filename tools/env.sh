@@ -25,7 +25,7 @@ if ! grep -qs system "$_fj_root/.stamps/venv"; then
   done
   unset _fj_lib
 fi
-# The project's Fast DDS profile (config/fastdds.xml: a restarted node discovered at once
+# The project's Fast DDS profile (config/fastdds.xml: a restarted node discovered sooner
 # with localhost discovery, a killed one forgotten after 5 s instead of 20 s), unless one
 # is chosen already. FASTRTPS_*: Fast DDS 2.x (Jazzy); FASTDDS_*: Fast DDS 3.x.
 if [ -z "${FASTRTPS_DEFAULT_PROFILES_FILE:-}${FASTDDS_DEFAULT_PROFILES_FILE:-}" ]; then
