@@ -54,9 +54,10 @@ only samples with ``det(Da Da^T) <= eps_d``) misses such curves between samples 
 then no guarantee.
 
 Consequence for redundant arms (``r > 2``): a singular curve in joint space maps to a
-whole interval of radii, and for the shipped 4-link example (any single passive joint)
-the curves reach every radius of the arm's reach, so the conservative region is the
-whole reach annulus and no Cartesian path is certified: the paper's region criterion
+whole interval of radii, and for the shipped 4-link example (joint 1 passive) the
+curves reach every radius of the arm's reach, so the conservative region is the whole
+reach annulus (as for every other choice of one or two passive joints of that arm, 4 deg
+map) and no Cartesian path is certified: the paper's region criterion
 cannot guarantee a nonsingular path for such an arm, whose configuration at a point is
 left to the dynamics (``test/core/test_singularity_nlink.py`` finds a singular
 configuration of the nominal 4-link arm at a radius inside its example circle's band).
