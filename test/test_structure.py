@@ -188,6 +188,17 @@ def test_no_package_module_takes_a_private_name_of_another_package():
     assert not found, 'private names taken across packages:\n' + '\n'.join(found)
 
 
+def test_the_demo_and_bench_scripts_take_no_private_name_of_a_package():
+    modules = package_modules(SRC)
+    for folder in ('tools', 'bench'):
+        for name in sorted(os.listdir(os.path.join(ROOT, folder))):
+            if name.endswith('.py'):
+                modules[f'{folder}.{name[:-3]}'] = os.path.join(ROOT, folder, name)
+    found = [f for f in private_imports_across_packages(modules)
+             if f.startswith(('tools.', 'bench.'))]
+    assert not found, 'private names of packages taken by scripts:\n' + '\n'.join(found)
+
+
 def test_each_package_declares_exactly_the_project_packages_it_imports():
     wrong = []
     for pkg, (imported, declared) in package_dependencies(package_modules(SRC), SRC).items():
