@@ -721,7 +721,7 @@ class ControllerNode(Node, Lifecycle):
 
     @property
     def executor_kind(self):
-        """The executor of the parameter ``executor`` (the runner spins the node with it)."""
+        """Return the parameter ``executor`` (the runner spins the node with it)."""
         return self.config.executor
 
 

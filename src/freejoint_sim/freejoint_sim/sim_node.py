@@ -59,7 +59,7 @@ from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_sim.divergence import divergence_reason
 from freejoint_sim.engines import make_plant
 from freejoint_sim.params import SCHEMA
-from freejoint_sim.timing import StepTiming, WRITE_DELAY
+from freejoint_sim.timing import StepTiming
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
@@ -115,10 +115,10 @@ class SimNode(Node, Lifecycle):
         self._final_status_sent = False
         self._latency = LatencyWindow()   # state-to-command latencies of the status window
         self._note_latency = self._latency.note
-        self._timing = (StepTiming(cfg.timing_file, cfg.timing_steps) if cfg.timing_file
-                        else None)
-        self._timing_steps = cfg.timing_steps if cfg.timing_file else 0
-        self._timing_write_at = self._timing_steps + WRITE_DELAY if cfg.timing_file else -1
+        # measurement: an optional observer of the step events (timing_file), None if off
+        self._observer = (StepTiming(cfg.timing_file, cfg.timing_steps,
+                                     'lockstep' if self._lockstep else 'realtime', self._dt,
+                                     self.get_logger().info) if cfg.timing_file else None)
 
         self._js = JOINT_STATES.msg_type()
         self._js.name = list(cfg.joint_names)
@@ -264,8 +264,8 @@ class SimNode(Node, Lifecycle):
             if ns is not None:   # the age of the state it answers (its grid time) at receipt
                 self._note_latency(_time_ns() - ns)
             answered = -1
-            if self._timing is not None:
-                answered = self._note_realtime_command(msg, now)
+            if self._observer is not None:
+                answered = self._observer.command_received(ns, self._k, now)
             self._latest = (self._zero if tau is None else tau, now, answered, tau is not None)
             if self._cmd_timed_out:
                 self._cmd_timed_out = False
@@ -280,37 +280,12 @@ class SimNode(Node, Lifecycle):
             return
         tau = self._command_effort(msg)
         self._note_latency(int((now - self._last_publish) * 1e9))
-        k = self._k
-        if k < self._timing_steps:
-            timing = self._timing
-            if timing.received[k] != timing.received[k]:   # NaN: the first answer
-                timing.received[k] = now
-                timing.applied[k] = k
+        if self._observer is not None:
+            self._observer.command_answered(self._k, now)
         if not self._got_first:
             self._got_first = True
             self.get_logger().info('first command: running')
         self._advance(self._zero if tau is None else tau)
-
-    def _note_realtime_command(self, msg, now):
-        """Note the receipt time of a real-time command; return the step it answers or -1."""
-        ns = label_stamp(msg.layout.dim)
-        if ns is None:
-            return -1
-        timing = self._timing
-        k = timing.step_of_stamp(ns, self._k)
-        if k >= 0 and timing.received[k] != timing.received[k]:
-            timing.received[k] = now
-        return k
-
-    def write_timing(self):
-        """Write the timing file if measuring and not yet written; return its path."""
-        timing = self._timing
-        if timing is None or timing.written:
-            return None
-        path = timing.write('lockstep' if self._lockstep else 'realtime', self._dt)
-        self.get_logger().info('timing of steps 0..%d written to %s'
-                               % (timing.steps - 1, path))
-        return path
 
     # -- stepping --------------------------------------------------------------
     def _holding(self):
@@ -344,12 +319,14 @@ class SimNode(Node, Lifecycle):
         self._t_ns = self._k * self._dt_ns
         if self._lockstep or self._k % self._every == 0:
             self._publish_state()
-        if self._k == self._timing_write_at:
-            self.write_timing()
+        observer = self._observer
+        if observer is not None:
+            observer.step_done(self._k)
         if self._lockstep and self._k == self._max_steps:
             self.get_logger().info('reached max_steps = %d (t = %.3f s): holding'
                                    % (self._k, self._t_ns * 1e-9))
-            self.write_timing()     # no later command can be received: the run is over
+            if observer is not None:
+                observer.run_over()   # no later command can be received
 
     def _take_state(self):
         """Take the plant's state for publication if sane; else diverge, return False."""
@@ -391,11 +368,8 @@ class SimNode(Node, Lifecycle):
         js.position = self._q_list
         js.velocity = self._qd_list
         js.effort = self._applied
-        k = self._k
-        if k < self._timing_steps:
-            timing = self._timing
-            timing.published[k] = _monotonic()
-            timing.stamp_ns[k] = t_ns
+        if self._observer is not None:
+            self._observer.state_published(self._k, t_ns)
         self._pub_js.publish(js)
         px, py = self._fk(q).tolist()
         ee = self._ee
@@ -471,8 +445,8 @@ class SimNode(Node, Lifecycle):
             self._rt_start += (due - 1) * self._dt
             self._rt_origin_ns += (due - 1) * self._dt_ns
             self._dropped += due - 1
-            if self._timing is not None:
-                self._timing.dropped += due - 1
+            if self._observer is not None:
+                self._observer.steps_dropped(due - 1)
             due = 1
         latest = self._latest
         if self._braked:
@@ -498,8 +472,8 @@ class SimNode(Node, Lifecycle):
                         % (self._cmd_topic(), self._timeout))
             else:
                 tau = latest[0]
-                if self._k < self._timing_steps:
-                    self._timing.applied[self._k] = latest[2]
+                if self._observer is not None:
+                    self._observer.command_applied(self._k, latest[2])
             self._advance(tau)
 
     def _engage_brakes(self, now):
@@ -595,13 +569,14 @@ class SimNode(Node, Lifecycle):
 
     @property
     def executor_kind(self):
-        """The executor of the parameter ``executor`` (the runner spins the node with it)."""
+        """Return the parameter ``executor`` (the runner spins the node with it)."""
         return self.config.executor
 
     def on_shutdown(self):
-        """Stop the real-time stepping thread; write the timing file if measuring."""
+        """Stop the real-time stepping thread; tell the step observer the run is over."""
         self.stop_stepping()
-        self.write_timing()
+        if self._observer is not None:
+            self._observer.run_over()
 
 
 def main(args=None):

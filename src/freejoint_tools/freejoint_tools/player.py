@@ -166,7 +166,7 @@ class Player(Node, Lifecycle):
 
 
 def play_once(nodes, executor, stop):
-    """The player's loop: wait (bounded) for subscribers, play the bag once, finish."""
+    """Wait (bounded) for subscribers, play the bag once, finish (the player's loop)."""
     node = nodes[0]
     node.wait_for_subscribers()
     node.play()
