@@ -71,6 +71,7 @@ class StopFlag:
 
     def __init__(self):
         self.signum = None
+        self._previous = {}
 
     def __call__(self, signum, frame):
         self.signum = signum
@@ -80,9 +81,15 @@ class StopFlag:
 
     def install(self):
         """Handle SIGINT and SIGTERM with this flag."""
-        signal.signal(signal.SIGINT, self)
-        signal.signal(signal.SIGTERM, self)
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            self._previous[signum] = signal.signal(signum, self)
         return self
+
+    def restore(self):
+        """Give SIGINT and SIGTERM back to the handlers they had before :meth:`install`."""
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+        self._previous = {}
 
 
 def make_executor(kind='events'):
@@ -174,6 +181,7 @@ def run(make, name, args=None, *, loop=spin_nodes, errors=(), handle_signals=Tru
     finally:
         failures = shut_down(nodes, executor)
         rclpy.try_shutdown()
+        stop.restore()
     for text in failures:
         print('%s: error: %s' % (name, text), file=sys.stderr)
     return code or (1 if failures else 0)
