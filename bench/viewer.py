@@ -12,10 +12,10 @@ Usage: ``. tools/env.sh && python bench/viewer.py``. Logs stay in ``bags/bench/v
 
 import os
 import statistics
-import subprocess
 import sys
 import time
 
+from freejoint_tools.harness import Processes
 import graph
 
 RUNS = int(os.environ.get('FREEJOINT_BENCH_VIEWER_RUNS', '3'))
@@ -24,30 +24,18 @@ RTF = 'lockstep 1 kHz + recorder: real-time factor'
 
 
 def _start_viewer(env, index):
-    os.makedirs(OUT, exist_ok=True)
-    log = open(os.path.join(OUT, 'viewer_%d.log' % index), 'w')
-    proc = subprocess.Popen([graph.executable('freejoint_tools', 'viewer'), '--ros-args',
-                             '-p', 'port:=0'], stdout=log, stderr=subprocess.STDOUT,
-                            env=env, start_new_session=True, cwd=graph.ROOT)
+    """Start the viewer (its log viewer_<index>.log); return its harness once it is ready."""
+    viewer = Processes(OUT, env=env, cwd=graph.ROOT)
+    proc = viewer.start('viewer', [graph.executable('freejoint_tools', 'viewer'),
+                                   '--ros-args', '-p', 'port:=0'],
+                        log_name='viewer_%d' % index)
     deadline = time.monotonic() + 60.0
     while time.monotonic() < deadline and proc.poll() is None:
-        with open(log.name) as f:
-            if 'viewer ready' in f.read():
-                return proc, log
+        if 'viewer ready' in viewer.log(proc):
+            return viewer
         time.sleep(0.1)
-    proc.kill()
-    raise RuntimeError('the viewer did not start (log %s)' % log.name)
-
-
-def _stop(proc, log):
-    proc.send_signal(2)
-    try:
-        proc.wait(20.0)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(5.0)
-    log.close()
-    return proc.returncode
+    viewer.stop_all()
+    raise RuntimeError('the viewer did not start (log %s)' % proc.log_path)
 
 
 def run():
@@ -64,13 +52,13 @@ def run():
         try:
             if with_viewer:
                 viewer = _start_viewer(env, i)
-                cpu0 = graph.proc_cpu_seconds(viewer[0].pid)
+                cpu0 = graph.proc_cpu_seconds(viewer.procs['viewer'].pid)
             rows = graph.lockstep(client, env, 'separate')
             if with_viewer:
-                viewer_cpu.append(graph.proc_cpu_seconds(viewer[0].pid) - cpu0)
+                viewer_cpu.append(graph.proc_cpu_seconds(viewer.procs['viewer'].pid) - cpu0)
         finally:
             if viewer is not None:
-                _stop(*viewer)
+                viewer.stop_all()
             client.close()
         factor = next(r['value'] for r in rows if r['name'] == RTF)
         factors[with_viewer].append(factor)
