@@ -8,10 +8,10 @@ lists get ``--spin-time 4``: what they print is checked here, not how fast disco
 the load of a shared test machine (a node can show up seconds after the others).
 """
 import os
-import signal
 import subprocess
 import time
 
+from freejoint_tools.harness import Processes
 import pytest
 
 pytestmark = pytest.mark.ros
@@ -30,15 +30,10 @@ def fj(*args, timeout=120):
 def graph(tmp_path_factory):
     """Start the controller, the planner (system time) and the recorder for the module."""
     logs = tmp_path_factory.mktemp('fj_nodes')
-    started = []
+    procs = Processes(str(logs), stop_timeout=10.0)
 
     def start(pkg, exe, *args):
-        log = open(os.path.join(logs, exe + '.log'), 'w')
-        proc = subprocess.Popen([os.path.join(ROOT, 'install', pkg, 'lib', pkg, exe),
-                                 '--ros-args', *args], stdout=log, stderr=subprocess.STDOUT,
-                                start_new_session=True)
-        proc.log = log
-        started.append(proc)
+        procs.start_node(pkg, exe, exe, ['--ros-args', *args])
 
     start('freejoint_control', 'controller_node', '--params-file',
           os.path.join(CONFIG, 'controller.yaml'))
@@ -51,14 +46,7 @@ def graph(tmp_path_factory):
         up = fj('param', 'list', name, '--timeout', '60')
         assert up.returncode == 0, 'node %s not up: %s' % (name, up.stderr)
     yield logs
-    for proc in reversed(started):
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(10.0)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(5.0)
-        proc.log.close()
+    procs.stop_all()
 
 
 def test_fj_node_list_shows_the_running_nodes_but_not_itself(graph):
