@@ -167,7 +167,6 @@ class Graph(Processes):
         return count
 
 
-
 def node_cmd(pkg, exe, config, overrides):
     """Return a node's command line, as ``ros2 run`` with a params file and overrides."""
     cmd = [executable(pkg, exe), '--ros-args', '--params-file', os.path.join(CONFIG, config)]
@@ -265,7 +264,6 @@ class Client(ServiceCalls):
             return self.spin_until(lambda: len(got) >= count, timeout, step=0.01)
         finally:
             self.node.destroy_subscription(sub)
-
 
 
 def ros_params(name):
