@@ -22,6 +22,7 @@ FOUR_LINK = os.path.join(URDF_DIR, 'four_link_arm.urdf')
 NODES = {
     'sim': ('freejoint_sim', 'sim_node'),
     'controller': ('freejoint_control', 'controller_node'),
+    'planner': ('freejoint_planner', 'planner_node'),
 }
 
 
@@ -112,3 +113,60 @@ def test_robot_description_text_from_a_parameter_file_is_taken_as_the_arm(tmp_pa
     assert code == 2, out
     assert "bad parameter: effort_limits: expected 3 values in (0, 1e6] N m (one per joint " \
         "of joints ['joint2', 'joint3', 'joint4'])" in out, out
+
+
+CONFIG = os.path.join(ROOT, 'config')
+FOUR_LINK_Q0 = [0.0, 1.0052314594852472, 1.3891119364177558, 2.2480117465074176]
+
+
+def _sim_args(*files, overrides=()):
+    args = ['--ros-args', '--params-file', os.path.join(CONFIG, 'sim.yaml')]
+    for name in files:
+        args += ['--params-file', os.path.join(CONFIG, name)]
+    for item in overrides:
+        args += ['-p', item]
+    return args
+
+
+def _spin(node):
+    import rclpy
+    return lambda: rclpy.spin_once(node, timeout_sec=0.05)
+
+
+@pytest.mark.parametrize('engine', ['rk4', 'mujoco'])
+def test_sim_takes_the_four_link_urdf_and_publishes_it_on_robot_description_latched(
+        engine, procs, ros_node, wait):
+    from freejoint_common.contract import JOINT_STATES, ROBOT_DESCRIPTION
+    sim = procs.start_node('freejoint_sim', 'sim_node', 'sim', _sim_args(
+        'four_link/sim.yaml', overrides=['engine:=%s' % engine]))
+    wait(lambda: 'simulator ready' in procs.log(sim) or sim.poll() is not None, 30.0,
+         'the simulator')
+    assert sim.poll() is None, procs.log(sim)
+    assert "four_link_arm.urdf, passive ['joint1'], gravity (0 0 -9.81)" in procs.log(sim)
+    # Subscribed after the simulator published it: a transient-local subscription (as
+    # RViz's and robot_state_publisher's) still gets it.
+    texts, states = [], []
+    ros_node.create_subscription(ROBOT_DESCRIPTION.msg_type, ROBOT_DESCRIPTION.name,
+                                 lambda m: texts.append(m.data), ROBOT_DESCRIPTION.qos)
+    ros_node.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name, states.append,
+                                 JOINT_STATES.qos)
+    wait(lambda: texts and states, 30.0, '/robot_description and joint_states',
+         spin=_spin(ros_node))
+    assert texts[0] == _four_link()
+    assert list(states[0].name) == ['joint1', 'joint2', 'joint3', 'joint4']
+    assert list(states[0].position) == FOUR_LINK_Q0
+    assert procs.stop(sim) == 0
+
+
+def test_sim_of_the_paper_arm_publishes_the_shipped_paper_urdf(procs, ros_node, wait):
+    from freejoint_common.contract import ROBOT_DESCRIPTION
+    sim = procs.start_node('freejoint_sim', 'sim_node', 'sim', _sim_args())
+    wait(lambda: 'simulator ready: horizontal arm' in procs.log(sim) or sim.poll() is not None,
+         30.0, 'the simulator')
+    texts = []
+    ros_node.create_subscription(ROBOT_DESCRIPTION.msg_type, ROBOT_DESCRIPTION.name,
+                                 lambda m: texts.append(m.data), ROBOT_DESCRIPTION.qos)
+    wait(lambda: texts, 30.0, '/robot_description', spin=_spin(ros_node))
+    with open(os.path.join(URDF_DIR, 'paper_arm.urdf')) as f:
+        assert texts[0] == f.read()
+    assert procs.stop(sim) == 0

@@ -27,7 +27,7 @@ _CIRCLE = {name: p.default for name, p in
 # Parameters of the configured circle; an accepted change of any of them re-checks it.
 CIRCLE_KEYS = ('centre', 'radius', 'duration', 'start_angle', 'direction', 'start_delay')
 # Parameters of the singularity map; an accepted change of any of them recomputes it.
-MAP_KEYS = ('case', 'nominal_scale', 'resolution_deg', 'eps_d')
+MAP_KEYS = ('case', 'nominal_scale', 'resolution_deg', 'eps_d', 'singular_cells')
 
 
 def _even_steps(value):
@@ -60,6 +60,12 @@ PARAMS = (
     Param('eps_d', 1e-7,
           'Semi-singular criterion on |det(Da Da^T)| (paper: 1e-7), > 0. Changing it '
           'recomputes the map.', (0.0, 1.0), exclusive_min=True),
+    Param('singular_cells', True,
+          'Map of an arm other than the paper 3-link one (freejoint_core.singularity_nlink): '
+          'also flag every grid cell in which each 2 x 2 minor of Da changes sign '
+          '(conservative; with more than 2 active joints the singular curves can reach every '
+          'radius, and then every circle is refused); false = the paper sampled criterion '
+          'alone. Changing it recomputes the map.'),
     Param('grid_resolution', 0.01, 'Cell size of the semi_singular_map OccupancyGrid (m).',
           (0.001, 0.5)),
     FRAME_ID,
