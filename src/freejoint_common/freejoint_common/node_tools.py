@@ -292,4 +292,3 @@ def parameter_error(exc):
         return text
     reason, sep, names = text.rpartition(': ')
     return '%s: %s' % (names, reason) if sep else text
-
