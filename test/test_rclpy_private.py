@@ -7,7 +7,8 @@ rclpy's private names are read from the installed rclpy itself: every ``_name`` 
 access an attribute of such a name unless the project defines that name itself (an
 attribute it assigns or a method it defines: ``self._clock`` of its own class); and a
 class deriving from rclpy's ``Node`` may not assign a private attribute of rclpy's Node
-(that would overwrite rclpy's own: ``self._clock = ...`` in a node replaces its clock).
+(that would overwrite rclpy's own: ``self._clock = ...`` in a node replaces its clock); nor
+import rclpy's private modules (``rclpy._rclpy_pybind11``, ``rclpy.impl``).
 """
 
 import ast
@@ -118,6 +119,15 @@ def violations(trees, rclpy_names, node_attrs):
                     and isinstance(n.args[1], ast.Constant) and n.args[1].value in forbidden):
                 found.append('%s:%d: %s(..., %r) (rclpy private)'
                              % (path, n.lineno, n.func.id, n.args[1].value))
+            if isinstance(n, (ast.Import, ast.ImportFrom)):
+                modules = ([a.name for a in n.names] if isinstance(n, ast.Import)
+                           else [n.module or ''])
+                for module in modules:
+                    parts = module.split('.')
+                    if parts[0] == 'rclpy' and any(private(x) or x == 'impl'
+                                                   for x in parts[1:]):
+                        found.append('%s:%d: import of %s (rclpy private module)'
+                                     % (path, n.lineno, module))
         for cls in node_subclasses(tree):
             for name, line in assigned_self_attrs(cls):
                 if name in node_attrs:
@@ -142,7 +152,7 @@ def test_no_rclpy_private_member_is_used_in_src_tools_or_bench(rclpy_names):
     assert not found, 'rclpy private members used:\n' + '\n'.join(found)
 
 
-def test_the_rule_catches_a_private_access_a_getattr_and_a_clobbered_node_attribute(
+def test_the_rule_catches_private_access_getattr_clobbered_node_attribute_private_module(
         rclpy_names):
     source = (
         'from rclpy.node import Node\n'
@@ -152,10 +162,12 @@ def test_the_rule_catches_a_private_access_a_getattr_and_a_clobbered_node_attrib
         '        self._own = 1\n'
         '        self._time_source.detach_node()\n'
         '        getattr(self, "_set_ros_time_is_active")\n'
-        '        self._own += 1\n')
+        '        self._own += 1\n'
+        'from rclpy.impl.implementation_singleton import rclpy_implementation\n')
     found = violations({'example.py': ast.parse(source)}, *rclpy_names)
     assert found == [
         'example.py:4: Planner assigns self._clock, a private attribute of rclpy Node',
         'example.py:6: ._time_source (rclpy private)',
         "example.py:7: getattr(..., '_set_ros_time_is_active') (rclpy private)",
+        'example.py:9: import of rclpy.impl.implementation_singleton (rclpy private module)',
     ]
