@@ -120,7 +120,7 @@ BAD_START = [
     ('recorder', 'chunk_size', '1', 'range'),
     ('recorder', 'discovery_period', 'abc', 'type'),
     ('recorder', 'executor', 'bogus', 'executor'),
-    ('recorder', 'compression', 'lz4', 'compression must be one of none, zstd'),
+    ('recorder', 'compression', 'lz4', 'must be one of none, zstd'),
     ('player', 'rate', '0.0', 'range'),
     ('player', 'rate', 'abc', 'type'),
     ('player', 'bag', "''", 'no bag given'),

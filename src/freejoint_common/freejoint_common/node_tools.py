@@ -91,8 +91,17 @@ def declare(node, specs):
         elif spec.bounds is not None:
             desc.floating_point_range = [FloatingPointRange(
                 from_value=float(spec.bounds[0]), to_value=float(spec.bounds[1]), step=0.0)]
-        values[spec.name] = plain(node.declare_parameter(spec.name, spec.default, desc).value)
+        values[spec.name] = _typed(spec, node.declare_parameter(spec.name, spec.default,
+                                                                desc).value)
     return values
+
+
+def _typed(spec, value):
+    """Return a parameter value as plain Python; an array given empty ([]: None) as []."""
+    value = plain(value)
+    if value is None and isinstance(spec.default, list):
+        return []
+    return value
 
 
 class NodeParameters:
@@ -148,7 +157,7 @@ class NodeParameters:
             return SetParametersResult(successful=True)
         values = dict(self.values)
         for param in mine:
-            values[param.name] = plain(param.value)
+            values[param.name] = _typed(self.schema[param.name], param.value)
         try:
             config = self.schema.config(values)
             reason = None if self._check is None else self._check(params, values, config)

@@ -22,27 +22,15 @@ import sys
 import time
 
 from freejoint_common.contract import CLOCK, profile, stamp_from_ns
+from freejoint_common.node_tools import NodeParameters
 from freejoint_common.runner import Lifecycle, run
-from freejoint_core.errors import FreejointValueError
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
 
 from .bagfile import BagError, open_bag
+from .params import PLAYER
 from .qos import publisher_qos
 from .typedefs import message_class
-
-
-def _descriptor(description, ptype, float_range=None, int_range=None):
-    d = ParameterDescriptor(description=description, type=ptype, read_only=True)
-    if float_range:
-        d.floating_point_range = [FloatingPointRange(
-            from_value=float_range[0], to_value=float_range[1], step=0.0)]
-    if int_range:
-        d.integer_range = [IntegerRange(from_value=int_range[0], to_value=int_range[1],
-                                        step=1)]
-    return d
 
 
 class Player(Node, Lifecycle):
@@ -50,35 +38,9 @@ class Player(Node, Lifecycle):
 
     def __init__(self, **kwargs):
         super().__init__('player', **kwargs)
-        self._params = {}
-        self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.declare_parameter('bag', '', _descriptor('Bag directory to play',
-                                                      ParameterType.PARAMETER_STRING))
-        self.declare_parameter('rate', 1.0, _descriptor(
-            'Playback speed factor (2.0 = twice as fast)', ParameterType.PARAMETER_DOUBLE,
-            float_range=(0.001, 1000.0)))
-        self.declare_parameter('clock', True, _descriptor(
-            'Publish /clock from the log times (the recorded /clock is not republished)',
-            ParameterType.PARAMETER_BOOL))
-        self.declare_parameter('topics', [''], _descriptor(
-            'Topics to play; empty list = all', ParameterType.PARAMETER_STRING_ARRAY))
-        self.declare_parameter('exclude', [''], _descriptor(
-            'Topics not to play', ParameterType.PARAMETER_STRING_ARRAY))
-        self.declare_parameter('start_delay', 0.0, _descriptor(
-            'Wall time to wait before the first message (s)', ParameterType.PARAMETER_DOUBLE,
-            float_range=(0.0, 3600.0)))
-        self.declare_parameter('wait_for_subscribers', 0, _descriptor(
-            'Wait until every publisher has this many matched subscriptions',
-            ParameterType.PARAMETER_INTEGER, int_range=(0, 1000)))
-        self.declare_parameter('wait_timeout', 10.0, _descriptor(
-            'Longest wait for subscribers, and for acknowledgements at the end (s)',
-            ParameterType.PARAMETER_DOUBLE, float_range=(0.0, 3600.0)))
-        self.declare_parameter('queue_depth', 1000, _descriptor(
-            'Publisher depth where the recording does not know it',
-            ParameterType.PARAMETER_INTEGER, int_range=(1, 1000000)))
+        # Every parameter of params.PLAYER, read-only; a bad one raises (exit 2).
+        self._params = NodeParameters(self, PLAYER).config
         p = self._params
-        if not p['bag']:
-            raise FreejointValueError('bag: no bag given (-p bag:=<directory>)')
         self.bag = open_bag(p['bag'])
         for note in self.bag.notes:
             self.get_logger().warning(note)
@@ -103,18 +65,6 @@ class Player(Node, Lifecycle):
             self._clock_pub = self.create_publisher(CLOCK.msg_type, CLOCK.name,
                                                     profile(p['queue_depth']))
         self.played = dict.fromkeys(self._pubs, 0)
-
-    def _on_set_parameters(self, params):
-        values = dict(self._params)
-        for param in params:
-            value = param.value
-            if param.name in ('topics', 'exclude'):
-                value = [v for v in (value or []) if v]
-            elif param.name == 'rate' and not (value or 0.0) > 0.0:
-                return SetParametersResult(successful=False, reason='rate must be > 0')
-            values[param.name] = value
-        self._params = values
-        return SetParametersResult(successful=True)
 
     def wait_for_subscribers(self):
         """Wait (bounded) until each publisher (/clock too) has the wanted subscribers; spin."""

@@ -79,9 +79,8 @@ import time
 from freejoint_common import contract
 from freejoint_common.clock import own_clock
 from freejoint_common.contract import clock_ns, profile, RECORDER_STATUS
+from freejoint_common.node_tools import NodeParameters
 from freejoint_common.runner import Lifecycle, run
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -89,7 +88,8 @@ from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
-from .bagfile import BagError, BagWriter, COMPRESSIONS
+from .bagfile import BagError, BagWriter
+from .params import RECORDER
 from .qos import profile_to_dict, subscription_qos
 from .typedefs import DefinitionError, Definitions, message_class
 
@@ -117,33 +117,12 @@ GRID_MIN_STEP_NS = 1000
 _GAPS_KEPT = 1000
 
 
-def _descriptor(description, ptype, read_only=True, float_range=None, int_range=None):
-    d = ParameterDescriptor(description=description, type=ptype, read_only=read_only)
-    if float_range:
-        d.floating_point_range = [FloatingPointRange(
-            from_value=float_range[0], to_value=float_range[1], step=0.0)]
-    if int_range:
-        d.integer_range = [IntegerRange(from_value=int_range[0], to_value=int_range[1],
-                                        step=1)]
-    return d
-
-
-def parse_custom_data(items):
-    """
-    Parse ``['key=value', ...]`` into a dict; raise ValueError naming a bad item.
-
-    Keys are non-empty and unique; values may be empty.
-    """
-    out = {}
-    for item in items or []:
-        key, sep, value = str(item).partition('=')
-        key = key.strip()
-        if not sep or not key:
-            raise ValueError('custom_data item %r is not key=value' % item)
-        if key in out:
-            raise ValueError('custom_data key %r given twice' % key)
-        out[key] = value.strip()
-    return out
+def _refuse_sim_time_change(params, _values, _config):
+    """Refuse a change of ``use_sim_time``: read once at start (the recorder takes /clock)."""
+    if any(p.name == 'use_sim_time' for p in params):
+        return ('use_sim_time is read once at start (the recorder takes /clock itself); '
+                'restart the recorder to change it')
+    return None
 
 
 class StampGrid:
@@ -279,53 +258,10 @@ class Recorder(Node, Lifecycle):
 
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.declare_parameter('output', '', _descriptor(
-            'Bag directory to create (default bags/rosbag2_<date-time>); must not exist '
-            'unless overwrite is true', ParameterType.PARAMETER_STRING))
-        self.declare_parameter('topics', [''], _descriptor(
-            'Topics to record; empty list = every topic with a publisher',
-            ParameterType.PARAMETER_STRING_ARRAY))
-        self.declare_parameter('exclude', [''], _descriptor(
-            'Topics not to record', ParameterType.PARAMETER_STRING_ARRAY))
-        self.declare_parameter('custom_data', [''], _descriptor(
-            'Run information as key=value items (e.g. case=horizontal, variant=robust, '
-            'seed=0), stored in metadata.yaml custom_data and at once in the MCAP file',
-            ParameterType.PARAMETER_STRING_ARRAY))
-        self.declare_parameter('overwrite', False, _descriptor(
-            'Replace an existing bag directory at output (only one holding bag files)',
-            ParameterType.PARAMETER_BOOL))
-        self.declare_parameter('discovery_period', 0.05, _descriptor(
-            'Wall period of topic discovery (s)', ParameterType.PARAMETER_DOUBLE,
-            float_range=(0.01, 10.0)))
-        self.declare_parameter('flush_period', 0.25, _descriptor(
-            'Wall period of closing the MCAP chunk and flushing the file (s): the most '
-            'a SIGKILL can lose', ParameterType.PARAMETER_DOUBLE, float_range=(0.01, 60.0)))
-        self.declare_parameter('chunk_size', 1 << 20, _descriptor(
-            'MCAP chunk size (bytes); a chunk also closes at every flush',
-            ParameterType.PARAMETER_INTEGER, int_range=(4096, 1 << 28)))
-        self.declare_parameter('compression', 'none', _descriptor(
-            "MCAP chunk compression: 'none' or 'zstd' (rosbag2's MCAP storage option "
-            'compression: Zstd; every MCAP reader decompresses the chunks)',
-            ParameterType.PARAMETER_STRING))
-        self.declare_parameter('graph_topics', True, _descriptor(
-            'Subscribe to the freejoint graph topics (docs/GRAPH.md) at start, with their '
-            'contract types and QoS, so a run that starts before discovery loses nothing',
-            ParameterType.PARAMETER_BOOL))
-        self.declare_parameter('ready_topics', [t for t, _, _ in GRAPH_TOPICS], _descriptor(
-            '~/status answers success once each of these topics has a matched publisher',
-            ParameterType.PARAMETER_STRING_ARRAY))
-        self.declare_parameter('executor', 'events', _descriptor(
-            "rclpy executor: 'events' (rclpy.experimental.EventsExecutor) or "
-            "'single_threaded'", ParameterType.PARAMETER_STRING))
-        self.declare_parameter('batch_period', 0.01, _descriptor(
-            'Wall period (s) of taking what arrived on every recorded topic (the '
-            'subscriptions are not dispatched by the executor): one wake-up per period '
-            'instead of one per message', ParameterType.PARAMETER_DOUBLE,
-            float_range=(0.001, 0.1)))
-        self.declare_parameter('queue_depth', 5000, _descriptor(
-            'Subscription queue depth (messages) per topic', ParameterType.PARAMETER_INTEGER,
-            int_range=(1, 1000000)))
+        # Every parameter of params.RECORDER, read-only; a bad one raises (exit 2).
+        self._param_loader = NodeParameters(self, RECORDER)
+        self._param_loader.listen(check=_refuse_sim_time_change, watch=('use_sim_time',))
+        self._params = self._param_loader.config
         p = self._params
         self.executor_kind = p['executor']
         self.batch_period = p['batch_period']
@@ -386,45 +322,6 @@ class Recorder(Node, Lifecycle):
         self._ready_topics = [self.resolve_topic_name(t) for t in p['ready_topics']]
         self.create_service(RECORDER_STATUS.srv_type, RECORDER_STATUS.name, self._status)
         self._discover()
-
-    # -- parameters -------------------------------------------------------------------
-    _params = {}
-
-    def _on_set_parameters(self, params):
-        values = dict(self._params)
-        for param in params:
-            value = param.value
-            if param.name in ('topics', 'exclude', 'ready_topics'):
-                value = [v for v in (value or []) if v]
-                bad = [v for v in value if not isinstance(v, str) or ' ' in v]
-                if bad:
-                    return SetParametersResult(successful=False,
-                                               reason='%s: bad topic name %r'
-                                               % (param.name, bad[0]))
-            elif param.name == 'custom_data':
-                try:
-                    value = parse_custom_data(v for v in (value or []) if v)
-                except ValueError as exc:
-                    return SetParametersResult(successful=False, reason=str(exc))
-            elif param.name == 'compression' and value not in COMPRESSIONS:
-                return SetParametersResult(
-                    successful=False, reason='compression must be one of %s, got %r'
-                    % (', '.join(COMPRESSIONS), value))
-            elif param.name == 'executor' and value not in ('events', 'single_threaded'):
-                return SetParametersResult(
-                    successful=False,
-                    reason="executor must be 'events' or 'single_threaded', got %r" % value)
-            elif param.name == 'use_sim_time':
-                return SetParametersResult(
-                    successful=False, reason='use_sim_time is read once at start (the '
-                    'recorder takes /clock itself); restart the recorder to change it')
-            elif param.name in ('discovery_period', 'flush_period'):
-                if value is None or not value > 0.0:
-                    return SetParametersResult(successful=False,
-                                               reason='%s must be > 0 s' % param.name)
-            values[param.name] = value
-        self._params = values
-        return SetParametersResult(successful=True)
 
     # -- subscriptions ----------------------------------------------------------------
     def _warn_once(self, key, text):
