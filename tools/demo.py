@@ -88,28 +88,28 @@ def offline_settings(config_dir=CONFIG):
 
     """
     from freejoint_control.params import SCHEMA as CONTROLLER
-    from freejoint_core.trajectory import CircleQuintic
-    sim = _ros_params(os.path.join(config_dir, 'sim.yaml'))
-    ctl = _ros_params(os.path.join(config_dir, 'controller.yaml'))
-    plan = _ros_params(os.path.join(config_dir, 'planner.yaml'))
-    dt = float(sim['control_period'])
-    for name, other in (('controller', ctl), ('planner', plan)):
-        if float(other['control_period']) != dt:
+    from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_planner.planning import make_circle
+    from freejoint_sim.params import SCHEMA as SIM
+    sim = SIM.from_yaml(os.path.join(config_dir, 'sim.yaml'))
+    ctl = CONTROLLER.from_yaml(os.path.join(config_dir, 'controller.yaml'))
+    plan = PLANNER.from_yaml(os.path.join(config_dir, 'planner.yaml'))
+    for name, other in (('controller', ctl.dt), ('planner', plan['control_period'])):
+        if other != sim.dt:
             raise SystemExit('demo: control_period differs between sim.yaml (%g) and %s.yaml '
-                             '(%g)' % (dt, name, float(other['control_period'])))
-    trajectory = CircleQuintic(centre=plan['centre'], radius=plan['radius'],
-                               duration=plan['duration'], start_angle=plan['start_angle'],
-                               direction=plan['direction'])
+                             '(%g)' % (sim.dt, name, other))
+    if plan['nominal_scale'] != ctl.nominal_scale:
+        raise SystemExit('demo: nominal_scale differs between controller.yaml (%g) and '
+                         'planner.yaml (%g)' % (ctl.nominal_scale, plan['nominal_scale']))
+    trajectory = make_circle(plan)
     start = trajectory.sample(0.0)[0].tolist()
-    if max(abs(a - float(b)) for a, b in zip(start, sim['initial_position'])) > 1e-12:
+    if max(abs(a - b) for a, b in zip(start, sim.initial_position)) > 1e-12:
         raise SystemExit('demo: sim.yaml initial_position %s is not the start of the planned '
                          'circle %s, but the offline runner starts there'
-                         % (sim['initial_position'], start))
-    gains = CONTROLLER.from_yaml(os.path.join(config_dir, 'controller.yaml')).gains
-    return {'dt': dt, 'dt_sub': float(sim['dt_sub']), 'duration': float(plan['duration']),
-            'nominal_scale': float(ctl['nominal_scale']),
-            'dist_bound': float(sim['dist_bound']),
-            'q3_0_deg': float(sim['initial_passive_deg']), 'gains': gains,
+                         % (list(sim.initial_position), start))
+    return {'dt': sim.dt, 'dt_sub': sim.dt_sub, 'duration': float(plan['duration']),
+            'nominal_scale': ctl.nominal_scale, 'dist_bound': sim.dist_bound,
+            'q3_0_deg': sim.initial_passive_deg, 'gains': ctl.gains,
             'trajectory': trajectory}
 
 

@@ -270,6 +270,7 @@ class Config:
     divergence_speed: float = 1000.0
     brake_timeout: float = 0.05
     initial_passive_deg: float = DEFAULT_Q3_0_DEG
+    initial_position: tuple = (0.2, 0.0)
 
 
 def build(values):
@@ -314,7 +315,8 @@ def build(values):
                   start_braked=values['start_braked'],
                   divergence_speed=float(values['divergence_speed']),
                   brake_timeout=float(values['brake_timeout']),
-                  initial_passive_deg=passive)
+                  initial_passive_deg=passive,
+                  initial_position=tuple(values['initial_position']))
 
 
 SCHEMA = Schema(PARAMS, CHECKS, build)
