@@ -8,6 +8,7 @@ ENV := . tools/env.sh &&
 
 help:
 	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
+	@echo '              ARM=four_link: the shipped 4-link example instead (config/four_link)'
 	@echo 'make test     run every test (core math, nodes, interfaces, linters)'
 	@echo 'make setup    only set up: .venv with ROS 2 Jazzy wheels, colcon build'
 	@echo 'make offline  offline closed-loop runner (reference table, bags/offline/metrics.json)'
@@ -20,7 +21,7 @@ setup:
 	@bash tools/setup.sh
 
 demo: setup
-	@$(ENV) python tools/demo.py $(if $(VIEW),--view)
+	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM))
 
 test: setup
 	@$(ENV) python -m pytest -c pytest.ini
