@@ -11,6 +11,8 @@ setup(
         ('share/' + package_name, ['package.xml']),
     ],
     install_requires=['setuptools', 'numpy'],
+    # URDF arms: Pinocchio (pin) for their dynamics, MuJoCo for the mujoco engine.
+    extras_require={'urdf': ['pin', 'mujoco']},
     zip_safe=True,
     maintainer='freejoint developers',
     maintainer_email='dev@freejoint.invalid',
