@@ -155,3 +155,46 @@ def test_a_bad_start_up_parameter_ends_the_node_with_one_line_naming_it_and_exit
     assert 'bad parameter: %s: ' % param in line, line
     reasons = {'range': 'out of range', 'type': 'of type'}
     assert reasons.get(reason, reason) in line, line
+
+
+def _schema(kind):
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_sim.params import SCHEMA as SIM
+    from freejoint_tools.params import PLAYER, RECORDER
+    return {'sim_node': SIM, 'controller_node': CONTROLLER, 'planner_node': PLANNER,
+            'recorder': RECORDER, 'player': PLAYER}[kind]
+
+
+@pytest.mark.parametrize('kind', NODES)
+def test_every_schema_entry_is_declared_on_the_running_node_with_its_descriptor(
+        kind, procs, ros_node, tmp_path, make_bag):
+    from rclpy.parameter_client import AsyncParameterClient
+    schema = _schema(kind)
+    pkg, exe, name, args = _node(kind, tmp_path, make_bag)
+    node = procs.start_node(pkg, exe, exe, ['--ros-args', *args])
+    client = AsyncParameterClient(ros_node, name)
+    assert client.wait_for_services(timeout_sec=30.0), 'no parameter services of ' + name
+    names = [p.name for p in schema]
+    listed = set(_call(ros_node, client.list_parameters(), name + '/list_parameters')
+                 .result.names)
+    assert set(names) <= listed, sorted(set(names) - listed)
+    extra = sorted(n for n in listed - set(names)
+                   if n not in ('use_sim_time', 'start_type_description_service')
+                   and not n.startswith('qos_overrides.'))
+    assert extra == [], 'declared outside the schema: %s' % extra
+    descriptors = _call(ros_node, client.describe_parameters(names),
+                        name + '/describe_parameters').descriptors
+    assert [d.name for d in descriptors] == names
+    for entry, desc in zip(schema, descriptors):
+        assert desc.description == entry.description, entry.name
+        assert desc.read_only == entry.read_only, entry.name
+        ranges = [(r.from_value, r.to_value, r.step)
+                  for r in list(desc.floating_point_range) + list(desc.integer_range)]
+        if entry.bounds is None:
+            assert ranges == [], entry.name
+        else:
+            step = entry.bounds[2] if len(entry.bounds) > 2 else (
+                1 if isinstance(entry.default, int) else 0.0)
+            assert ranges == [(entry.bounds[0], entry.bounds[1], step)], entry.name
+    assert node.poll() is None, procs.log(node)

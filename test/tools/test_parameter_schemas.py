@@ -1,0 +1,130 @@
+"""
+The parameter schemas (freejoint_common.schema) are the one place of each parameter.
+
+- A parameter shared by nodes is one entry (the same object) in each schema, and a
+  default the core also uses is the core's constant (the same object), not a copy.
+- The node modules declare nothing themselves (no declare_parameter, descriptor or
+  set-parameters callback of their own) and never pair a parameter name with a value.
+- Every name in config/*.yaml is an entry of its node's schema, and the files build.
+
+Adding a parameter is then: its entry in the node's params.py, and the code that uses it
+(config field and the node's use of it); the loader declares, validates and applies it.
+"""
+import ast
+import os
+
+from freejoint_common import schema
+from freejoint_control.params import gains, GAIN_NAMES, SCHEMA as CONTROLLER
+from freejoint_core import arm, offline, plant
+from freejoint_core.control import Gains
+from freejoint_planner.params import SCHEMA as PLANNER
+from freejoint_sim.params import SCHEMA as SIM
+from freejoint_tools.params import PLAYER, RECORDER
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SRC = os.path.join(ROOT, 'src')
+NODE_MODULES = {
+    'freejoint_sim/freejoint_sim/sim_node.py': SIM,
+    'freejoint_control/freejoint_control/controller_node.py': CONTROLLER,
+    'freejoint_planner/freejoint_planner/planner_node.py': PLANNER,
+    'freejoint_tools/freejoint_tools/recorder.py': RECORDER,
+    'freejoint_tools/freejoint_tools/player.py': PLAYER,
+}
+CONFIGS = {'sim.yaml': SIM, 'controller.yaml': CONTROLLER, 'planner.yaml': PLANNER}
+# What only the generic loader (node_tools.NodeParameters) may call.
+LOADER_ONLY = ('declare_parameter', 'declare_parameters', 'add_on_set_parameters_callback',
+               'ParameterDescriptor', 'FloatingPointRange', 'IntegerRange')
+
+
+def test_a_parameter_shared_by_nodes_is_one_entry_in_each_schema():
+    for name in ('case', 'nominal_scale', 'control_period'):
+        assert CONTROLLER[name] is PLANNER[name], name
+    for name in ('control_period', 'joint_names', 'joints', 'frame_id'):
+        assert SIM[name] is getattr(schema, name.upper()), name
+    for name in ('robot_description', 'description_file', 'passive_joints', 'gravity'):
+        assert SIM[name] is CONTROLLER[name] is PLANNER[name], name
+    for name in ('thread_priority', 'cpu_affinity'):
+        assert SIM[name] is CONTROLLER[name] is PLANNER[name], name
+
+
+def test_a_default_the_core_uses_too_is_the_cores_constant():
+    assert CONTROLLER['nominal_scale'].default is arm.NOMINAL_SCALE
+    assert SIM['control_period'].default is offline.DEFAULT_DT
+    assert SIM['dt_sub'].default is plant.DEFAULT_DT_SUB
+    assert SIM['dist_bound'].default is plant.DEFAULT_DIST_BOUND
+    assert SIM['initial_passive_deg'].default is offline.DEFAULT_Q3_0_DEG
+    core = Gains()
+    for name in GAIN_NAMES:     # the core's field names are the parameter names
+        default = CONTROLLER[name].default
+        assert (tuple(default) if isinstance(default, list) else default) == getattr(
+            core, name), name
+    assert gains(CONTROLLER.defaults()) == core
+
+
+def _loader_calls(tree):
+    """Return the names of loader-only functions a module calls or names."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and node.attr in LOADER_ONLY:
+            found.append(node.attr)
+        elif isinstance(node, ast.Name) and node.id in LOADER_ONLY:
+            found.append(node.id)
+    return found
+
+
+def _paired_values(tree, names):
+    """Return (line, name) where a parameter name sits next to a literal value."""
+    def literal(node):
+        return isinstance(node, (ast.Constant, ast.List, ast.Tuple)) and not (
+            isinstance(node, ast.Constant) and isinstance(node.value, str))
+
+    def is_name(node):
+        return isinstance(node, ast.Constant) and node.value in names
+
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            found += [(node.lineno, k.value) for k, v in zip(node.keys, node.values)
+                      if k is not None and is_name(k) and (literal(v) or isinstance(
+                          v, ast.Tuple))]
+        elif isinstance(node, (ast.Tuple, ast.List, ast.Call)):
+            items = node.args if isinstance(node, ast.Call) else node.elts
+            found += [(node.lineno, a.value) for a, b in zip(items, items[1:])
+                      if is_name(a) and literal(b)]
+    return found
+
+
+@pytest.mark.parametrize('path', sorted(NODE_MODULES))
+def test_a_node_module_declares_no_parameter_and_repeats_no_default(path):
+    names = {p.name for p in NODE_MODULES[path]}
+    with open(os.path.join(SRC, path)) as fh:
+        tree = ast.parse(fh.read())
+    assert _loader_calls(tree) == [], path
+    assert _paired_values(tree, names) == [], path
+
+
+def test_the_node_module_checks_find_a_declaration_and_a_copied_default():
+    # the planner's table before its schema, and a hand-declared parameter
+    planner_table = ("PARAMETERS = {'nominal_scale': (0.7, 'Nominal model', {}),\n"
+                     "              'radius': (0.2, 'Circle radius', {})}\n")
+    declared = "node.declare_parameter('nominal_scale', 0.7, ParameterDescriptor())\n"
+    getter = "scale = values.get('nominal_scale', 0.7)\n"
+    names = {'nominal_scale', 'radius'}
+    assert _paired_values(ast.parse(planner_table), names) == [(1, 'nominal_scale'),
+                                                               (1, 'radius')]
+    assert _paired_values(ast.parse(declared), names) == [(1, 'nominal_scale')]
+    assert _loader_calls(ast.parse(declared)) == ['declare_parameter', 'ParameterDescriptor']
+    assert _paired_values(ast.parse(getter), names) == [(1, 'nominal_scale')]
+
+
+@pytest.mark.parametrize('name', sorted(CONFIGS))
+def test_every_name_of_a_params_file_is_a_schema_entry_and_the_file_builds(name):
+    import yaml
+    for folder in ('', 'four_link'):
+        path = os.path.join(ROOT, 'config', folder, name)
+        with open(path) as fh:
+            given = yaml.safe_load(fh)['/**']['ros__parameters']
+        unknown = sorted(set(given) - {p.name for p in CONFIGS[name]} - {'use_sim_time'})
+        assert unknown == [], (path, unknown)
+    CONFIGS[name].from_yaml(os.path.join(ROOT, 'config', name))
