@@ -19,6 +19,7 @@ tick whose output is not finite or whose tracking error exceeds ``diverge_m``.
 
 import math
 
+from freejoint_core.arm import NOMINAL_SCALE
 from freejoint_core.control import Gains, RobustController
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.metrics import compute_record
@@ -63,7 +64,7 @@ def make_plant(arm, engine='rk4', dt_sub=DEFAULT_DT_SUB, dist_bound=0.5, seed=0,
     return PinPlant(arm, dt_sub, **kwargs)
 
 
-def run_arm(arm, trajectory, q0, *, label='urdf', seed=0, nominal_scale=0.7,
+def run_arm(arm, trajectory, q0, *, label='urdf', seed=0, nominal_scale=NOMINAL_SCALE,
             dist_bound=0.5, dt=1e-3, dt_sub=DEFAULT_DT_SUB, n_ticks=None, engine='rk4',
             gains=None, diverge_m=0.5):
     """

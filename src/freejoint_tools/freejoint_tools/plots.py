@@ -100,11 +100,11 @@ def figure_run(trace, path):
 
 def figure2(trace, path, resolution_deg=1.0):
     """Write Fig. 2 (singular regions; see the module notes) to ``path``."""
-    from freejoint_core.arm import table1
+    from freejoint_core.arm import NOMINAL_SCALE, table1
     from freejoint_core.singularity import det_map, EPS_D, semi_singular
     info = trace['info']
     case = info['case'] if info['case'] in FIG_NUMBER else 'horizontal'
-    scale = info.get('nominal_scale') or 0.7
+    scale = info.get('nominal_scale') or NOMINAL_SCALE
     nominal = table1(case).scaled(scale)
     dmap = det_map(nominal, resolution_deg)
     region = semi_singular(dmap, EPS_D)
