@@ -14,7 +14,7 @@ import ast
 import os
 
 from freejoint_common import schema
-from freejoint_control.params import gains, GAIN_NAMES, SCHEMA as CONTROLLER
+from freejoint_control.params import GAIN_NAMES, gains, SCHEMA as CONTROLLER
 from freejoint_core import arm, offline, plant
 from freejoint_core.control import Gains
 from freejoint_planner.params import SCHEMA as PLANNER
