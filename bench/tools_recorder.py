@@ -4,7 +4,8 @@ Benchmark: the recorder node's throughput without loss, and the bag tools' speed
 Figures (printed; nothing is asserted):
 
 * for increasing rates, a publisher process (test/nodes/tools_publisher.py, 4 messages per
-  tick: /clock, joint_states, setpoint, controller_state, reliable depth 100 as the graph)
+  tick: /clock, joint_states, setpoint, controller_state, reliable depth 100; the graph's
+  is 1000)
   runs 2 s of ticks while a recorder process records all topics; the messages the bag
   holds are counted against those published: the highest rate with no loss (msg/s; target
   >= 4000, the 1 kHz lockstep graph's four topics), the loss at each rate, and the

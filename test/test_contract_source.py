@@ -3,8 +3,9 @@ The graph contract has one source: ``freejoint_common/contract.py``.
 
 Read from the source text (no ROS needed): no QoS profile is constructed, no stamp is
 split or joined by hand and no lockstep label is spelt outside the contract module, in the
-packages, ``tools/`` and ``bench/``; every topic and service the contract names is in
-docs/GRAPH.md's tables, which name the contract module as their source.
+packages, ``tools/`` and ``bench/``; nor in the tests (``test/``, ``src/<pkg>/test/``),
+where a literal second of nanoseconds as data is fine; every topic and service the contract
+names is in docs/GRAPH.md's tables, which name the contract module as their source.
 """
 import ast
 import os
@@ -14,17 +15,24 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONTRACT = os.path.join(ROOT, 'src', 'freejoint_common', 'freejoint_common', 'contract.py')
+CONTRACT_TEST = os.path.join(ROOT, 'src', 'freejoint_common', 'test', 'test_contract.py')
 GRAPH_MD = os.path.join(ROOT, 'docs', 'GRAPH.md')
 SCANNED = ('src', 'tools', 'bench')
 SKIPPED_DIRS = {'test', 'build', 'install', 'log', '__pycache__', '.venv'}
 
+QOS = ('a QoS profile constructed (use freejoint_common.contract)', re.compile(r'\bQoSProfile\('))
+JOINED = ('a stamp joined by hand (use contract.to_ns)', re.compile(r'\.sec\s*\*'))
+LABEL = ('the lockstep label spelt out (use contract.stamp_label / label_stamp)',
+         re.compile(r"""['"]stamp_ns="""))
 FORBIDDEN = (
-    ('a QoS profile constructed (use freejoint_common.contract)', re.compile(r'\bQoSProfile\(')),
+    QOS, JOINED, LABEL,
     ('nanoseconds per second spelt out (use contract.to_ns / stamp_from_ns / NS_PER_S)',
      re.compile(r'\b1_?000_?000_?000\b|\b10\s*\*\*\s*9\b')),
-    ('a stamp joined by hand (use contract.to_ns)', re.compile(r'\.sec\s*\*')),
-    ('the lockstep label spelt out (use contract.stamp_label / label_stamp)',
-     re.compile(r"""['"]stamp_ns=""")),
+)
+FORBIDDEN_IN_TESTS = (
+    QOS, JOINED, LABEL,
+    ('a stamp split by hand (use contract.stamp_from_ns)',
+     re.compile(r'(//|%|divmod\(.*,)\s*(1_?000_?000_?000|10\s*\*\*\s*9)\b')),
 )
 
 
@@ -56,14 +64,19 @@ def code_lines(path):
         yield number, line
 
 
-def violations(paths, contract=CONTRACT):
-    """Return ``'<path>:<line>: <what>'`` for each forbidden construct outside ``contract``."""
+def violations(paths, contract=CONTRACT, forbidden=FORBIDDEN):
+    """
+    Return ``'<path>:<line>: <what>'`` for each forbidden construct in ``paths``.
+
+    The contract, its own test (which spells the label it checks) and this file are not read.
+    """
     found = []
+    own = {os.path.abspath(p) for p in (contract, CONTRACT_TEST, __file__)}
     for path in paths:
-        if os.path.abspath(path) == os.path.abspath(contract):
+        if os.path.abspath(path) in own:
             continue
         for number, line in code_lines(path):
-            for what, pattern in FORBIDDEN:
+            for what, pattern in forbidden:
                 if pattern.search(line):
                     found.append('%s:%d: %s' % (os.path.relpath(path, ROOT), number, what))
     return found
@@ -73,6 +86,26 @@ def test_no_qos_profile_stamp_arithmetic_or_label_outside_the_contract():
     paths = list(sources(ROOT))
     assert CONTRACT in paths and len(paths) > 30
     assert violations(paths) == []
+
+
+def test_the_tests_take_the_contract_too():
+    paths = list(sources(ROOT, ('test',)))
+    src = os.path.join(ROOT, 'src')
+    for pkg in sorted(os.listdir(src)):
+        folder = os.path.join(src, pkg, 'test')
+        if os.path.isdir(folder):
+            paths += [os.path.join(folder, n) for n in sorted(os.listdir(folder))
+                      if n.endswith('.py')]
+    assert len(paths) > 30
+    assert violations(paths, forbidden=FORBIDDEN_IN_TESTS) == []
+
+
+def test_a_stamp_split_in_a_test_is_found_and_a_second_as_data_is_not(tmp_path):
+    (tmp_path / 'test').mkdir()
+    (tmp_path / 'test' / 'test_x.py').write_text(
+        'T0 = 1_000_000_000 + 5\nsec, nsec = divmod(T0, 1_000_000_000)\n')
+    found = violations(sources(str(tmp_path), ('test',)), forbidden=FORBIDDEN_IN_TESTS)
+    assert len(found) == 1 and 'test_x.py:2: a stamp split' in found[0], found
 
 
 @pytest.mark.parametrize('line, what', [

@@ -13,11 +13,10 @@ import time
 
 
 def main(planner_yaml, ticks):
-    import rclpy
+    from freejoint_common.contract import JOINT_STATES, to_ns
     from freejoint_msgs.srv import PlanCircle
     from freejoint_tools.recorder import wait_drained
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import JointState
+    import rclpy
     from std_srvs.srv import Trigger
     import yaml
 
@@ -37,10 +36,10 @@ def main(planner_yaml, ticks):
     last = [0]
 
     def on_state(msg):
-        last[0] = max(last[0], msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+        last[0] = max(last[0], to_ns(msg.header.stamp))
 
-    node.create_subscription(JointState, '/joint_states', on_state,
-                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    node.create_subscription(JOINT_STATES.msg_type, '/' + JOINT_STATES.name, on_state,
+                             JOINT_STATES.qos)
     status = node.create_client(Trigger, '/recorder/status')
     deadline = time.monotonic() + 120.0
     answer = None

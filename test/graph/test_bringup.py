@@ -25,9 +25,8 @@ def _offline_settings():
 def test_one_process_graph_reproduces_the_offline_run_and_stops_cleanly(
         procs, ros_node, wait):
     from freejoint_msgs.srv import PlanCircle
-    from geometry_msgs.msg import PointStamped
+    from freejoint_common.contract import EE_POSITION, profile, to_ns
     from rclpy.experimental import EventsExecutor
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
     graph = procs.start_node('freejoint_bringup', 'graph', 'graph', [
         '--sim-params', os.path.join(CONFIG, 'sim.yaml'),
         '--controller-params', os.path.join(CONFIG, 'controller.yaml'),
@@ -42,12 +41,10 @@ def test_one_process_graph_reproduces_the_offline_run_and_stops_cleanly(
     points = {}
 
     def on_point(msg):
-        points.setdefault(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
-                          (msg.point.x, msg.point.y))
+        points.setdefault(to_ns(msg.header.stamp), (msg.point.x, msg.point.y))
 
-    sub = ros_node.create_subscription(PointStamped, 'ee_position', on_point,
-                                       QoSProfile(depth=5000,
-                                                  reliability=ReliabilityPolicy.RELIABLE))
+    sub = ros_node.create_subscription(EE_POSITION.msg_type, EE_POSITION.name, on_point,
+                                       profile(5000))
     wait(lambda: sub.get_publisher_count() > 0 or graph.poll() is not None, 60.0,
          'the graph process to publish ee_position', spin=spin)
     assert graph.poll() is None, procs.log(graph)

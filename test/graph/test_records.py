@@ -1,6 +1,7 @@
 """The graph's per-tick arrays from messages (shared by the demo and the bag analysis)."""
 from types import SimpleNamespace as NS
 
+from freejoint_common.contract import stamp_from_ns
 from freejoint_common.records import arrays_from_messages, stamp_ns
 from freejoint_core.metrics import compute_record
 import numpy as np
@@ -10,8 +11,7 @@ DT_NS = 1_000_000
 
 
 def _header(k):
-    ns = k * DT_NS
-    return NS(stamp=NS(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000))
+    return NS(stamp=stamp_from_ns(k * DT_NS))
 
 
 def _state(k, effort=None):

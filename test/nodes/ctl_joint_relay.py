@@ -5,12 +5,12 @@ Republishes every ``joint_states`` message on ``driver/joint_states`` with the j
 another order and two extra joints (a gripper and a wrist that the arm model does not
 have), as a real robot's driver may publish them.
 """
+from freejoint_common.contract import JOINT_STATES, profile
 import rclpy
 from rclpy.executors import ExternalShutdownException
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+QOS = profile(100)
 ORDER = ('gripper', 'joint3', 'joint1', 'wrist', 'joint2')
 
 
@@ -30,7 +30,7 @@ def main():
                                  for n in ORDER])
         pub.publish(out)
 
-    node.create_subscription(JointState, 'joint_states', relay, QOS)
+    node.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name, relay, QOS)
     node.get_logger().info('relay ready')
     try:
         rclpy.spin(node)

@@ -8,16 +8,13 @@ the system clock, the same lookahead.  ``--count N`` stops publishing after N ti
 """
 import argparse
 
+from freejoint_common.contract import CLOCK, profile, seconds_to_ns, SETPOINT, stamp_from_ns
+from freejoint_common.contract import to_ns
 from freejoint_core.trajectory import CircleQuintic
-from freejoint_msgs.msg import CartesianSetpoint
 import rclpy
 from rclpy.executors import ExternalShutdownException
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock
 
-QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                 reliability=ReliabilityPolicy.RELIABLE,
-                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+QOS = profile(100, latched=True)
 
 
 def main():
@@ -29,11 +26,11 @@ def main():
     args, rest = ap.parse_known_args()
     rclpy.init(args=rest)
     node = rclpy.create_node('ctl_setpoints')
-    pub = node.create_publisher(CartesianSetpoint, 'setpoint', QOS)
+    pub = node.create_publisher(SETPOINT.msg_type, SETPOINT.name, QOS)
     traj = CircleQuintic()
-    dt_ns = round(args.dt * 1e9)
+    dt_ns = seconds_to_ns(args.dt)
     state = {'next': 0, 'start': None}
-    msg = CartesianSetpoint()
+    msg = SETPOINT.msg_type()
     msg.plan_id = 1
 
     def publish_up_to(now_ns, offset_ns=0):
@@ -43,8 +40,7 @@ def main():
                 return
             px, py, vx, vy, ax, ay = traj.sample_tuple(k * args.dt)
             stamp_ns = offset_ns + k * dt_ns
-            msg.header.stamp.sec = stamp_ns // 1_000_000_000
-            msg.header.stamp.nanosec = stamp_ns % 1_000_000_000
+            stamp_from_ns(stamp_ns, msg.header.stamp)
             msg.position = [px, py]
             msg.velocity = [vx, vy]
             msg.acceleration = [ax, ay]
@@ -61,10 +57,9 @@ def main():
             publish_up_to(now - state['start'], state['start'])
         node.create_timer(args.dt, tick)
     else:
-        node.create_subscription(
-            Clock, '/clock',
-            lambda m: publish_up_to(m.clock.sec * 1_000_000_000 + m.clock.nanosec),
-            QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        node.create_subscription(CLOCK.msg_type, CLOCK.name,
+                                 lambda m: publish_up_to(to_ns(m.clock)),
+                                 profile(10, reliable=False))
     node.get_logger().info('streaming setpoints')
     try:
         rclpy.spin(node)

@@ -25,13 +25,11 @@ import subprocess
 import sys
 import time
 
+from freejoint_common.contract import CLOCK, profile, SETPOINT, stamp_from_ns, to_ns
 from freejoint_core.trajectory import CircleQuintic
-from freejoint_msgs.msg import CartesianSetpoint
 from freejoint_msgs.srv import PlanCircle
 import rclpy
 from rclpy.experimental import EventsExecutor
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 EXE = os.path.join(ROOT, 'install', 'freejoint_planner', 'lib', 'freejoint_planner',
@@ -41,7 +39,7 @@ LOOKAHEAD = 20
 
 
 def _stamp(msg):
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+    return to_ns(msg.header.stamp)
 
 
 def _cpu_s(pid):
@@ -80,9 +78,8 @@ def main():
         state['last'] = stamp
         state['count'] += 1
 
-    node.create_subscription(CartesianSetpoint, 'setpoint', on_setpoint,
-                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
-    pub = node.create_publisher(Clock, '/clock', 1000)
+    node.create_subscription(SETPOINT.msg_type, SETPOINT.name, on_setpoint, profile(1000))
+    pub = node.create_publisher(CLOCK.msg_type, CLOCK.name, CLOCK.qos)
     summary = {}
     try:
         deadline = time.monotonic() + 30.0
@@ -91,8 +88,7 @@ def main():
             spin_once(timeout_sec=0.05)
 
         def publish(now_ns):
-            msg = Clock()
-            msg.clock.sec, msg.clock.nanosec = divmod(now_ns, 1_000_000_000)
+            msg = CLOCK.msg_type(clock=stamp_from_ns(now_ns))
             pub.publish(msg)
 
         while state['last'] < LOOKAHEAD * MS and time.monotonic() < deadline:

@@ -9,6 +9,8 @@ import math
 import os
 import re
 
+from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, DIAGNOSTICS, JOINT_STATES
+from freejoint_common.contract import profile, SETPOINT, stamp_from_ns, stamp_label, to_ns
 from freejoint_core.arm import table1
 from freejoint_core.control import (Gains, RobustController, STATUS_BAD_INPUT,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE)
@@ -31,10 +33,7 @@ QD0 = (0.05, -0.1, 0.3)
 
 
 def _qos(transient=False):
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    return QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=(DurabilityPolicy.TRANSIENT_LOCAL if transient
-                                  else DurabilityPolicy.VOLATILE))
+    return profile(100, latched=transient)
 
 
 class Driver:
@@ -42,24 +41,21 @@ class Driver:
 
     def __init__(self, node, wait):
         import rclpy
-        from freejoint_msgs.msg import CartesianSetpoint, ControllerState
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import Float64MultiArray
         self.rclpy = rclpy
         self.node = node
         self.wait = wait
         self.states = {}
         self.commands = {}
-        self.pub_js = node.create_publisher(JointState, 'joint_states', _qos())
-        self.pub_sp = node.create_publisher(CartesianSetpoint, 'setpoint', _qos(True))
-        node.create_subscription(ControllerState, 'controller_state', self._on_state, _qos())
-        node.create_subscription(Float64MultiArray, 'effort_controller/commands',
-                                 self._on_command, _qos())
-        self.JointState = JointState
-        self.CartesianSetpoint = CartesianSetpoint
+        self.pub_js = node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, _qos())
+        self.pub_sp = node.create_publisher(SETPOINT.msg_type, SETPOINT.name, _qos(True))
+        node.create_subscription(CONTROLLER_STATE.msg_type, CONTROLLER_STATE.name,
+                                 self._on_state, _qos())
+        node.create_subscription(COMMANDS.msg_type, COMMANDS.name, self._on_command, _qos())
+        self.JointState = JOINT_STATES.msg_type
+        self.CartesianSetpoint = SETPOINT.msg_type
 
     def _on_state(self, msg):
-        ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        ns = to_ns(msg.header.stamp)
         self.states.setdefault(ns, []).append(msg)
 
     def _on_command(self, msg):
@@ -76,9 +72,7 @@ class Driver:
         return k * DT_NS + self.offset_ns
 
     def stamp(self, msg, k):
-        ns = self.ns(k)
-        msg.header.stamp.sec = ns // 1_000_000_000
-        msg.header.stamp.nanosec = ns % 1_000_000_000
+        stamp_from_ns(self.ns(k), msg.header.stamp)
 
     def setpoint(self, k, values):
         msg = self.CartesianSetpoint()
@@ -124,9 +118,9 @@ class Driver:
     def answer(self, k, what='the answer', timeout=15.0):
         """Wait for the ControllerState of tick k; return it and the command."""
         ns = self.ns(k)
-        self.wait(lambda: ns in self.states and 'stamp_ns=%d' % ns in self.commands,
+        self.wait(lambda: ns in self.states and stamp_label(ns) in self.commands,
                   timeout, '%s to tick %d' % (what, k), spin=self.spin)
-        return self.states[ns][0], self.commands['stamp_ns=%d' % ns][0]
+        return self.states[ns][0], self.commands[stamp_label(ns)][0]
 
     def connect(self, proc, procs):
         self.wait(lambda: (self.pub_js.get_subscription_count() > 0
@@ -327,7 +321,7 @@ def test_with_on_stale_zero_stale_setpoint_and_stale_state_command_zero_effort_a
     # No more states: zero effort and STALE_STATE.
     wait(lambda: any(m.status == STATUS_STALE_STATE for m in drv.states[DT_NS]), 15.0,
          'the stale-state message', spin=drv.spin)
-    assert drv.commands['stamp_ns=%d' % DT_NS][-1] == [0.0, 0.0]
+    assert drv.commands[stamp_label(DT_NS)][-1] == [0.0, 0.0]
     assert 'no joint_states for 0.3 s: zero effort' in procs.log(proc)
     assert procs.stop(proc) == 0
 
@@ -473,8 +467,7 @@ def test_real_time_controller_holds_against_gravity_before_the_first_setpoint_an
             assert st.setpoint_stamp.sec == 0 and st.setpoint_stamp.nanosec == 0
         elif k < 60 or 120 <= k < 170:
             assert st.status & STATUS_RESUMING and not holding, (k, st.message)
-            assert (st.setpoint_stamp.sec * 1_000_000_000 + st.setpoint_stamp.nanosec
-                    == drv.ns(k))
+            assert to_ns(st.setpoint_stamp) == drv.ns(k)
         elif 100 <= k < 120:
             # Stale: held at fk(q) of the first stale tick, not zero effort.
             assert holding and st.status & STATUS_STALE_SETPOINT, (k, st.message)
@@ -486,7 +479,7 @@ def test_real_time_controller_holds_against_gravity_before_the_first_setpoint_an
             assert st.setpoint_age == pytest.approx((k - 79) * DT, abs=1e-12)
         assert st.state_age > 0.0
     # Gravity is held: the hold efforts are the vertical arm's, far from zero.
-    assert max(abs(x) for x in drv.commands['stamp_ns=%d' % (9 * DT_NS)][0]) > 5.0
+    assert max(abs(x) for x in drv.commands[stamp_label(9 * DT_NS)][0]) > 5.0
     # The reference has no step: per 1 ms tick at most what the 50 ms quintic blend of the
     # 3.6 cm offset and the 0.1 m/s stream give ((1.875 x 0.036 / 0.05 + 0.1) m/s x 1 ms =
     # 1.45 mm, a little more with the velocity offset); a step would be the 36 mm offset.
@@ -941,7 +934,7 @@ def test_real_time_skips_a_state_older_than_max_state_age_without_a_command(
     st, cmd = drv.answer(k_now)
     assert st.status & STATUS_HOLDING and _finite_within(cmd)
     assert 0.0 <= st.state_age < 2.0
-    assert 'stamp_ns=%d' % drv.ns(k_old) not in drv.commands
+    assert stamp_label(drv.ns(k_old)) not in drv.commands
     assert procs.stop(proc) == 0
     assert '1 states skipped as too old' in procs.log(proc)
 
@@ -1019,9 +1012,9 @@ class Diagnostics:
     NAME = 'controller_node: controller'
 
     def __init__(self, node):
-        from diagnostic_msgs.msg import DiagnosticArray
         self.statuses = []
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_array, 10)
+        node.create_subscription(DIAGNOSTICS.msg_type, DIAGNOSTICS.name, self._on_array,
+                                 DIAGNOSTICS.qos)
 
     def _on_array(self, msg):
         for status in msg.status:

@@ -71,24 +71,26 @@ def _get(ros_node, client, names):
     return {n: parameter_value_to_python(v) for n, v in zip(names, future.result().values)}
 
 
+def _stamps(messages):
+    """Return the header stamps [ns] of ``messages``."""
+    from freejoint_common.contract import to_ns
+    return [to_ns(m.header.stamp) for m in messages]
+
+
 class ClockDriver:
     """Publish `/clock` like the lockstep sim and collect the planner's setpoints."""
 
     def __init__(self, ros_node, lookahead=LOOKAHEAD):
-        from freejoint_msgs.msg import CartesianSetpoint
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-        from rosgraph_msgs.msg import Clock
+        from freejoint_common.contract import CLOCK, profile, SETPOINT
         self.node = ros_node
         self.lookahead = lookahead
         self.got = []
-        self.clock_pub = ros_node.create_publisher(Clock, '/clock', 10)
+        self.clock_pub = ros_node.create_publisher(CLOCK.msg_type, CLOCK.name, profile(10))
         # GRAPH.md: reliable, keep-last 1000, transient local (what the controller uses: a
         # match completed on the planner's side only after its first ticks loses nothing)
-        self.sub = ros_node.create_subscription(
-            CartesianSetpoint, 'setpoint', self.got.append,
-            QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self._clock = Clock
+        self.sub = ros_node.create_subscription(SETPOINT.msg_type, SETPOINT.name,
+                                                self.got.append, SETPOINT.qos)
+        self._clock = CLOCK.msg_type
 
     def matched(self):
         _spin(self.node)
@@ -96,15 +98,14 @@ class ClockDriver:
                 and self.clock_pub.get_subscription_count() >= 1)
 
     def publish(self, now_ns):
-        msg = self._clock()
-        msg.clock.sec, msg.clock.nanosec = divmod(now_ns, 1_000_000_000)
-        self.clock_pub.publish(msg)
+        from freejoint_common.contract import stamp_from_ns
+        self.clock_pub.publish(self._clock(clock=stamp_from_ns(now_ns)))
 
     def last_stamp(self):
         if not self.got:
             return None
-        s = self.got[-1].header.stamp
-        return s.sec * 1_000_000_000 + s.nanosec
+        from freejoint_common.contract import to_ns
+        return to_ns(self.got[-1].header.stamp)
 
     def step(self, now_ns, wait, what=''):
         """Publish /clock = now and wait for the setpoints due (up to now + lookahead)."""
@@ -130,8 +131,8 @@ def test_planner_yaml_loads_and_a_late_subscriber_gets_the_map_and_the_path(
     import numpy as np
     from freejoint_core.arm import table1
     from freejoint_core.singularity import det_map, semi_singular
+    from freejoint_common.contract import LATCHED_QOS
     from nav_msgs.msg import OccupancyGrid
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from visualization_msgs.msg import Marker
     import yaml
     with open(YAML) as f:
@@ -139,8 +140,7 @@ def test_planner_yaml_loads_and_a_late_subscriber_gets_the_map_and_the_path(
     proc = _start_planner(procs, ('--params-file', YAML))
     _wait_ready(ros_node, procs, proc, wait)
     # late: subscribed only now, after the planner published both at start
-    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    latched = LATCHED_QOS
     grids, markers = [], []
     ros_node.create_subscription(OccupancyGrid, 'semi_singular_map', grids.append, latched)
     ros_node.create_subscription(Marker, 'planned_path', markers.append, latched)
@@ -194,7 +194,7 @@ def test_setpoints_in_sim_time_are_the_circle_on_the_grid_each_stamp_once_in_ord
     for now in times:
         clock.step(now, wait, '(log: %s)' % procs.log(proc))
     last = (5_100 + 100)
-    stamps = [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in clock.got]
+    stamps = _stamps(clock.got)
     assert stamps == [k * MS for k in range(last + 1)]       # each once, in order, on the grid
     circle = CircleQuintic()                                  # the paper's, the default
     for k, m in enumerate(clock.got):
@@ -207,8 +207,8 @@ def test_setpoints_in_sim_time_are_the_circle_on_the_grid_each_stamp_once_in_ord
 
 def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_order_and_a_too_small_lookahead_is_refused_or_raised(  # noqa: E501
         procs, ros_node, wait):
+    from freejoint_common.contract import LATCHED_QOS
     from freejoint_msgs.srv import PlanCircle
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from visualization_msgs.msg import Marker
     proc = _start_planner(procs)
     client = _wait_ready(ros_node, procs, proc, wait)
@@ -222,7 +222,7 @@ def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_
     assert clock.clock_pub.get_subscription_count() == 1
     for now in range(0, 201 * MS, 10 * MS):  # /clock every 10th tick, as clock_rate 100 Hz
         clock.step(now, wait, '(log: %s)' % procs.log(proc))
-    stamps = [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in clock.got]
+    stamps = _stamps(clock.got)
     assert stamps == [k * MS for k in range(201 + LOOKAHEAD)]
     assert '/clock every 10 ticks (or more): lookahead 20 covers it and one lost /clock' in \
         procs.log(proc)
@@ -230,9 +230,7 @@ def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_
     # the node's ROS clock follows its own /clock subscription: the marker of a plan
     # accepted now is stamped with the last /clock
     markers = []
-    ros_node.create_subscription(Marker, 'planned_path', markers.append,
-                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    ros_node.create_subscription(Marker, 'planned_path', markers.append, LATCHED_QOS)
     wait(lambda: markers, 15.0, 'the latched marker', spin=lambda: _spin(ros_node, 0.1))
     request = PlanCircle.Request(centre=[0.0, 0.0], radius=0.1, duration=5.0,
                                  start_angle=0.0, direction=1, execute=True)
@@ -319,8 +317,8 @@ def test_a_circle_change_starts_at_the_next_tick_by_a_transition_and_a_map_chang
     from freejoint_core.arm import table1
     from freejoint_core.singularity import det_map, semi_singular
     from freejoint_core.trajectory import CircleQuintic
+    from freejoint_common.contract import LATCHED_QOS
     from nav_msgs.msg import OccupancyGrid
-    from rclpy.qos import DurabilityPolicy, QoSProfile
     proc = _start_planner(procs)
     _wait_ready(ros_node, procs, proc, wait)
     params = _param_client(ros_node, wait)
@@ -344,8 +342,7 @@ def test_a_circle_change_starts_at_the_next_tick_by_a_transition_and_a_map_chang
     assert 'transition of' in procs.log(proc)
 
     grids = []
-    ros_node.create_subscription(OccupancyGrid, 'semi_singular_map', grids.append,
-                                 QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    ros_node.create_subscription(OccupancyGrid, 'semi_singular_map', grids.append, LATCHED_QOS)
     wait(lambda: grids, 15.0, 'the latched map', spin=lambda: _spin(ros_node, 0.1))
     result = _set(ros_node, params, 'eps_d', 0.1)             # wider band, plan 2 still clear
     assert result.successful, result.reason
@@ -435,7 +432,7 @@ def test_plan_circle_every_1_3_s_while_circles_run_never_steps_the_setpoint_and_
                 assert answer.reason.startswith(
                     'circle centre') and ('the transition into plan' in answer.reason
                                           or 'no safe transition' in answer.reason), answer
-    stamps = [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in clock.got]
+    stamps = _stamps(clock.got)
     assert stamps == [k * MS for k in range(len(stamps))]      # each tick once, in order
     p = np.array([tuple(m.position) for m in clock.got])
     steps = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))

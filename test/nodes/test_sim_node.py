@@ -26,8 +26,8 @@ ERROR = 2
 
 
 def _qos():
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    return QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    from freejoint_common.contract import profile
+    return profile(100)
 
 
 class Controller:
@@ -35,11 +35,8 @@ class Controller:
 
     def __init__(self, node, wait):
         import rclpy
-        from geometry_msgs.msg import PointStamped
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
-        from rosgraph_msgs.msg import Clock
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+        from freejoint_common import contract
+        from std_msgs.msg import MultiArrayDimension
         self.rclpy = rclpy
         self.node = node
         self.wait = wait
@@ -48,22 +45,24 @@ class Controller:
         self.clock = []
         self.diagnostics = []      # (level int, message, {key: value}) of the sim's status
         self.arrivals = []         # every joint_states message, in order of arrival
-        self.pub = node.create_publisher(Float64MultiArray, 'effort_controller/commands',
-                                         _qos())
-        node.create_subscription(JointState, 'joint_states', self._on_state, _qos())
-        node.create_subscription(PointStamped, 'ee_position', self._on_ee, _qos())
-        from diagnostic_msgs.msg import DiagnosticArray
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+        self.contract = contract
+        commands, states, ee = contract.COMMANDS, contract.JOINT_STATES, contract.EE_POSITION
+        self.pub = node.create_publisher(commands.msg_type, commands.name, _qos())
+        node.create_subscription(states.msg_type, states.name, self._on_state, _qos())
+        node.create_subscription(ee.msg_type, ee.name, self._on_ee, _qos())
+        diagnostics, clock = contract.DIAGNOSTICS, contract.CLOCK
+        node.create_subscription(diagnostics.msg_type, diagnostics.name, self._on_diagnostics,
+                                 diagnostics.qos)
         node.create_subscription(
-            Clock, '/clock',
-            lambda m: self.clock.append(m.clock.sec * 1_000_000_000 + m.clock.nanosec),
-            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))   # none lost
-        self.Float64MultiArray = Float64MultiArray
+            clock.msg_type, clock.name,
+            lambda m: self.clock.append(contract.to_ns(m.clock)), _qos())   # none lost
+        self.Float64MultiArray = commands.msg_type
         self.MultiArrayDimension = MultiArrayDimension
 
     @staticmethod
     def _ns(msg):
-        return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        from freejoint_common.contract import to_ns
+        return to_ns(msg.header.stamp)
 
     def _on_state(self, msg):
         self.states.setdefault(self._ns(msg), msg)
@@ -87,7 +86,7 @@ class Controller:
         if k is not None:
             stamp_ns = k * DT_NS
         if stamp_ns is not None:
-            msg.layout.dim = [self.MultiArrayDimension(label='stamp_ns=%d' % stamp_ns,
+            msg.layout.dim = [self.MultiArrayDimension(label=self.contract.stamp_label(stamp_ns),
                                                        size=len(data), stride=len(data))]
         msg.data = [float(v) for v in data]
         self.pub.publish(msg)

@@ -4,7 +4,8 @@ A lockstep-like run without the real nodes: publishes what the graph publishes p
 Per control tick k (stamp t_k = k * dt): ``/clock`` (if --clock), ``joint_states``
 (sensor_msgs/JointState, joints joint1..3), ``setpoint`` (freejoint_msgs/CartesianSetpoint,
 transient local) and ``controller_state`` (freejoint_msgs/ControllerState), each reliable
-keep-last 100 as in docs/GRAPH.md; before the ticks, once, the latched ``semi_singular_map``
+keep-last 100 (the graph's is 1000, ``freejoint_common.contract.STREAM_DEPTH``: a shallower
+history shows an overrun sooner); before the ticks, once, the latched ``semi_singular_map``
 (nav_msgs/OccupancyGrid) and ``planned_path`` (visualization_msgs/Marker), transient local
 depth 1. Message contents are a pure function of k (:func:`tick_messages`).
 
@@ -27,10 +28,10 @@ import signal
 import sys
 import time
 
+from freejoint_common.contract import LATCHED_QOS, profile, stamp_from_ns
 from freejoint_msgs.msg import CartesianSetpoint, ControllerState
 from nav_msgs.msg import OccupancyGrid
 import rclpy
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
@@ -45,9 +46,8 @@ TICK_TOPICS = ('/joint_states', '/setpoint', '/controller_state')
 def tick_messages(k):
     """Return ``(JointState, CartesianSetpoint, ControllerState)`` of tick k."""
     t_ns = k * DT_NS
-    sec, nsec = divmod(t_ns, 1_000_000_000)
     js = JointState()
-    js.header.stamp.sec, js.header.stamp.nanosec = sec, nsec
+    stamp_from_ns(t_ns, js.header.stamp)
     js.name = ['joint1', 'joint2', 'joint3']
     js.position = [0.1 * math.sin(k / 100.0), 1.0 + 0.2 * math.cos(k / 100.0),
                    0.5 * math.sin(k / 50.0)]
@@ -132,13 +132,12 @@ def main():
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('tools_publisher')
-    tick_qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-    # as the planner offers it (docs/GRAPH.md): transient local, depth 100
-    setpoint_qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                              durability=DurabilityPolicy.VOLATILE if opts.setpoint_volatile
-                              else DurabilityPolicy.TRANSIENT_LOCAL)
-    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    # Depth 100, not the graph's 1000: an overloaded machine overflows this history, which
+    # the recorder must then report (test_recorder). setpoint transient local as the
+    # planner offers it (docs/GRAPH.md) unless --setpoint-volatile.
+    tick_qos = profile(100)
+    setpoint_qos = profile(100, latched=not opts.setpoint_volatile)
+    latched = LATCHED_QOS
     pubs = {
         '/joint_states': node.create_publisher(JointState, '/joint_states', tick_qos),
         '/setpoint': node.create_publisher(CartesianSetpoint, '/setpoint', setpoint_qos),

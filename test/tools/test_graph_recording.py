@@ -21,21 +21,20 @@ SETTLE = 1.0
 def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, tmp_path,
                                                          same_record, call_service):
     import rclpy
-    from freejoint_msgs.msg import ControllerState
     from freejoint_msgs.srv import PlanCircle
     from std_srvs.srv import Trigger
-    from rclpy.qos import QoSProfile
-    from sensor_msgs.msg import JointState
+
+    from freejoint_common.contract import CONTROLLER_STATE, JOINT_STATES, profile
 
     from freejoint_common.records import arrays_from_messages, stamp_ns
     from freejoint_core.metrics import compute_record
     from freejoint_tools.analyze import analyse_bag
     from freejoint_tools.bagfile import open_bag
     live = {'states': [], 'joints': []}
-    ros_node.create_subscription(ControllerState, '/controller_state', live['states'].append,
-                                 QoSProfile(depth=10000))
-    ros_node.create_subscription(JointState, '/joint_states', live['joints'].append,
-                                 QoSProfile(depth=10000))
+    ros_node.create_subscription(CONTROLLER_STATE.msg_type, '/' + CONTROLLER_STATE.name,
+                                 live['states'].append, profile(10000))
+    ros_node.create_subscription(JOINT_STATES.msg_type, '/' + JOINT_STATES.name,
+                                 live['joints'].append, profile(10000))
     bag_path = str(tmp_path / 'horizontal')
     recorder = procs.start_node('freejoint_tools', 'recorder', 'recorder', [
         '--ros-args', '-p', 'output:=%s' % bag_path, '-p', 'topics:=[]',

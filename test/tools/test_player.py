@@ -10,10 +10,9 @@ TOPICS = ('/joint_states', '/setpoint', '/controller_state', '/semi_singular_map
 def test_player_republishes_a_bag_in_order_with_its_clock(procs, ros_node, wait, tmp_path,
                                                           make_bag):
     import rclpy
-    from rclpy.qos import DurabilityPolicy, QoSProfile
     from rclpy.serialization import deserialize_message, serialize_message
-    from rosgraph_msgs.msg import Clock
 
+    from freejoint_common.contract import CLOCK, profile, to_ns
     from freejoint_tools.bagfile import open_bag
     from freejoint_tools.typedefs import message_class
     path = str(tmp_path / 'run')
@@ -22,12 +21,11 @@ def test_player_republishes_a_bag_in_order_with_its_clock(procs, ros_node, wait,
     got = {t: [] for t in TOPICS}
     for topic in TOPICS:
         latched = bag.topics[topic].qos[0]['durability'] == 'transient_local'
-        qos = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
-                         else DurabilityPolicy.VOLATILE)
+        qos = profile(1000, latched=latched)
         ros_node.create_subscription(message_class(bag.topics[topic].type), topic,
                                      got[topic].append, qos, raw=True)
     clocks = []
-    ros_node.create_subscription(Clock, '/clock', clocks.append, 1000)
+    ros_node.create_subscription(CLOCK.msg_type, CLOCK.name, clocks.append, CLOCK.qos)
     player = procs.start_node('freejoint_tools', 'player', 'player', [
         '--ros-args', '-p', 'bag:=%s' % path, '-p', 'rate:=20.0',
         '-p', 'wait_for_subscribers:=1'])
@@ -42,7 +40,7 @@ def test_player_republishes_a_bag_in_order_with_its_clock(procs, ros_node, wait,
         sent = [deserialize_message(serialize_message(m), cls) for m in written[topic]]
         assert [deserialize_message(d, cls) for d in got[topic]] == sent, topic
     # /clock carries the bag's log times (sim time here), each distinct time once, in order
-    assert [c.clock.sec * 10**9 + c.clock.nanosec for c in clocks] == \
+    assert [to_ns(c.clock) for c in clocks] == \
         [k * 1_000_000 for k in range(300)]
     assert 'played %d messages' % sum(len(written[t]) for t in TOPICS) in procs.log(player)
 

@@ -99,12 +99,12 @@ class Topic(NamedTuple):
 
     @property
     def type_name(self):
-        """The type as ``<package>/msg/<Name>`` (bag metadata, ``ros2 topic``)."""
+        """Return the type as ``<package>/msg/<Name>`` (bag metadata, ``ros2 topic``)."""
         return type_name(self.msg_type)
 
     @property
     def latched(self):
-        """Whether the topic is transient local."""
+        """Return whether the topic is transient local."""
         return is_latched(self.qos)
 
 

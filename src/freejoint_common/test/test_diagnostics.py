@@ -1,8 +1,9 @@
 """The shared parts of the nodes' /diagnostics and QoS overrides (no node needed)."""
 
+from freejoint_common.contract import profile
 from freejoint_common.diagnostics import ERROR, LatencyWindow, level_and_message, OK, WARN
 from freejoint_common.node_tools import overridable, QOS_OVERRIDES
-from rclpy.qos import QoSPolicyKind, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSPolicyKind, ReliabilityPolicy
 
 
 def test_latency_window_gives_mean_and_max_in_ms_and_restarts_only_when_asked():
@@ -22,7 +23,7 @@ def test_level_is_error_before_warn_before_ok_with_the_reasons_joined():
 
 
 def test_overridable_profiles_are_copies_and_the_options_are_rclpys_defaults():
-    shared = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    shared = profile(1000)
     own = overridable(shared)
     own.reliability = ReliabilityPolicy.BEST_EFFORT   # what an override writes
     assert shared.reliability == ReliabilityPolicy.RELIABLE and own.depth == 1000
