@@ -409,7 +409,11 @@ def controller_restart(args, index):
                 err = plant['err_mm'][idx]
                 t = plant['log_ns'][idx] * 1e-9
                 out = np.nonzero(~(err <= bound))[0]
-                if not len(out):
+                if row.get('first_command_s') is None:
+                    # Never commanded in the window: a braked arm the stream passes near
+                    # is not 'back'.
+                    row['back_within_s'] = None
+                elif not len(out):
                     row['back_within_s'] = 0.0
                 elif out[-1] + 1 < len(t):
                     row['back_within_s'] = float(t[out[-1] + 1] - t_restart)
