@@ -15,7 +15,7 @@ Timings: ``core_timing.per_call_us``.  Usage:
 """
 
 from core_timing import per_call_us, print_rows
-from freejoint_core.arm import table1
+from freejoint_core.arm import NOMINAL_SCALE, table1
 from freejoint_core.delay import StatePredictor
 import numpy as np
 
@@ -24,7 +24,7 @@ DT = 1e-3
 
 def _tick_us(ticks, calls, repeats=5, **kwargs):
     """Median over ``repeats`` of the mean time of one predict + push [us]."""
-    pred = StatePredictor(table1('vertical').scaled(0.7), DT, max_ticks=max(ticks, 1),
+    pred = StatePredictor(table1('vertical').scaled(NOMINAL_SCALE), DT, max_ticks=max(ticks, 1),
                           **kwargs)
     q = np.array([0.3, 1.2, 2.0])
     qd = np.array([0.4, -0.3, 0.8])

@@ -19,7 +19,7 @@ Timings: ``core_timing.per_call_us``.  Usage:
 import math
 
 from core_timing import per_call_us, print_rows
-from freejoint_core.arm import table1
+from freejoint_core.arm import NOMINAL_SCALE, table1
 from freejoint_core.control import Gains, RobustController
 from freejoint_core.models import make_model
 from freejoint_core.plant import DEFAULT_DT_SUB, Plant
@@ -31,7 +31,7 @@ Q3_0 = math.radians(120.0)
 
 
 def _tick_timing(use_fast, calls):
-    ctl = RobustController(table1('vertical').scaled(0.7), Gains(), use_fast=use_fast)
+    ctl = RobustController(table1('vertical').scaled(NOMINAL_SCALE), Gains(), use_fast=use_fast)
     q = np.array([0.3, 1.2, 2.0])
     qd = np.array([0.4, -0.3, 0.8])
     p_d, pd_d, pdd_d = np.array([0.2, 0.05]), np.array([0.1, 0.2]), np.array([0.5, -0.4])
@@ -58,7 +58,7 @@ def _closed_loop(case, dt_sub, seconds=5.0, seed=0):
     traj = CircleQuintic()
     q0 = make_model(real).ik(traj.sample(0.0)[0], [Q3_0], 1)
     plant = Plant(real, dt_sub, dist_bound=0.5, seed=seed, q0=q0)
-    ctl = RobustController(real.scaled(0.7), Gains())
+    ctl = RobustController(real.scaled(NOMINAL_SCALE), Gains())
     errors = []
     for k in range(round(seconds / DT)):
         p, pd, pdd = traj.sample(k * DT)

@@ -23,7 +23,7 @@ except ImportError:  # run from a source checkout without the workspace installe
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(
         os.path.abspath(__file__))), 'src', 'freejoint_core'))
 
-from freejoint_core.arm import table1  # noqa: E402
+from freejoint_core.arm import NOMINAL_SCALE, table1  # noqa: E402
 from freejoint_core.offline import run_case  # noqa: E402
 from freejoint_core.singularity import det_map, semi_singular  # noqa: E402
 
@@ -39,7 +39,7 @@ def _median_time(fun, repeats):
 
 def run():
     """Return the benchmark rows: list of dict(name, value, unit, target)."""
-    nominal = table1('horizontal').scaled(0.7)
+    nominal = table1('horizontal').scaled(NOMINAL_SCALE)
     det_map(nominal, 1.0)  # warm-up (imports, caches)
     rows = [
         {'name': 'singularity det_map 1 deg (360x360), closed form',

@@ -14,13 +14,14 @@ Usage: ``PYTHONPATH=src/freejoint_core python bench/core_singularity_nlink.py``.
 import sys
 
 from core_timing import per_call_us, print_rows
+from freejoint_core.arm import NOMINAL_SCALE
 from freejoint_core.singularity_nlink import det_map_nlink, semi_singular_nlink
 from freejoint_core.urdf import four_link_arm
 
 
 def run():
     """Return the benchmark rows: list of dict(name, value, unit, target)."""
-    nominal = four_link_arm('horizontal').nominal(0.7)
+    nominal = four_link_arm('horizontal').nominal(NOMINAL_SCALE)
     det_map_nlink(nominal, 10.0)  # warm-up (imports, caches)
     coarse = per_call_us(lambda: det_map_nlink(nominal, 3.0), 1, repeats=3) * 1e-6
     fine = per_call_us(lambda: det_map_nlink(nominal, 2.0), 1, repeats=3) * 1e-6

@@ -20,7 +20,7 @@ Usage: ``python bench/core_urdf.py`` in the workspace (``. tools/env.sh``).
 
 from core_timing import per_call_us, print_rows
 from freejoint_core import offline
-from freejoint_core.arm import ArmModel, table1
+from freejoint_core.arm import ArmModel, NOMINAL_SCALE, table1
 from freejoint_core.models import make_model
 from freejoint_core.mujoco_plant import MujocoPlant
 from freejoint_core.pin_model import PinArmModel
@@ -38,8 +38,8 @@ def _state(n):
 
 
 def _model_timings(arm, label, calls):
-    pin_model = PinArmModel(arm, scale=0.7)
-    ref = make_model(arm.nominal(0.7))
+    pin_model = PinArmModel(arm, scale=NOMINAL_SCALE)
+    ref = make_model(arm.nominal(NOMINAL_SCALE))
     q, qd = _state(arm.params.n)
     kind = 'scalar kernel' if arm.params.n == 3 else 'general numpy'
     return [
