@@ -96,8 +96,8 @@ def test_a_description_file_that_cannot_be_read_is_named_and_exit_2():
                      ['-p', 'description_file:=/nonexistent/arm.urdf'])
     assert code == 2, out
     fatal = [line for line in out.splitlines() if 'FATAL' in line]
-    assert len(fatal) == 1 and "bad parameter: description_file: cannot read " \
-        "'/nonexistent/arm.urdf'" in fatal[0], out
+    assert len(fatal) == 1 and ('bad parameter: description_file: cannot read '
+                                "'/nonexistent/arm.urdf'") in fatal[0], out
 
 
 def test_robot_description_text_from_a_parameter_file_is_taken_as_the_arm(tmp_path):
@@ -111,8 +111,8 @@ def test_robot_description_text_from_a_parameter_file_is_taken_as_the_arm(tmp_pa
                       % '\n'.join('      ' + line for line in text.splitlines()))
     code, out = _run('freejoint_control', 'controller_node', ['--params-file', str(params)])
     assert code == 2, out
-    assert "bad parameter: effort_limits: expected 3 values in (0, 1e6] N m (one per joint " \
-        "of joints ['joint2', 'joint3', 'joint4'])" in out, out
+    assert ('bad parameter: effort_limits: expected 3 values in (0, 1e6] N m (one per joint '
+            "of joints ['joint2', 'joint3', 'joint4'])") in out, out
 
 
 CONFIG = os.path.join(ROOT, 'config')

@@ -15,7 +15,7 @@ validated build (``FreejointValueError`` naming the parameter).
 from dataclasses import dataclass
 import math
 
-from freejoint_common.arm_description import ARM_SPECS, arm_joint_names, resolve_arm
+from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve_arm
 from freejoint_common.node_tools import unique_names
 from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR, JOINT_NAMES
 from freejoint_common.schema import JOINTS, NOMINAL_SCALE, one_of, Param, SCHEDULING, Schema
