@@ -44,7 +44,7 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
-from freejoint_common.contract import NS_PER_S  # noqa: E402, I100
+from freejoint_common.contract import EE_POSITION, NS_PER_S, SETPOINT  # noqa: E402, I100
 import soak  # noqa: E402 - bench/soak.py, the session and the bag analysis
 
 RESUMING_BIT = 256
@@ -87,7 +87,7 @@ def setpoint_steps_mm(bag_path, lo_ns, hi_ns, dt_ns):
     import numpy as np
     from freejoint_tools.bagfile import open_bag
     by_stamp = {}
-    for log_ns, msg in open_bag(bag_path).decode('/setpoint'):
+    for log_ns, msg in open_bag(bag_path).decode(SETPOINT.absolute):
         if lo_ns <= log_ns <= hi_ns:
             by_stamp[soak.stamp_ns(msg)] = (msg.position[0], msg.position[1])
     stamps = np.array(sorted(by_stamp), dtype=np.int64)
@@ -553,7 +553,7 @@ def start_order(args, index):
             s.wait(float(loop.plan['duration']) + 0.5)
             t_end = time.time()
         bag = open_bag(s.bag)
-        ee = [(lt, m.point.x, m.point.y) for lt, m in bag.decode('/ee_position')
+        ee = [(lt, m.point.x, m.point.y) for lt, m in bag.decode(EE_POSITION.absolute)
               if lt <= int(t_plan * NS)]
         row = {'case': case, 'order': list(order), 'gap_s': args.gap,
                'ee_samples_before_plan': len(ee), 'exit_codes': s.codes,

@@ -52,7 +52,8 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
-from freejoint_common.contract import to_ns  # noqa: E402, I100
+from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION  # noqa: E402, I100
+from freejoint_common.contract import JOINT_STATES, SETPOINT, to_ns  # noqa: E402
 
 OUT = os.path.join(ROOT, 'bags', 'soak')
 CASES = ('horizontal', 'vertical')
@@ -296,7 +297,7 @@ def controller_ticks(bag_path):
     """
     import numpy as np
     from freejoint_tools.bagfile import open_bag
-    msgs = open_bag(bag_path).decode('/controller_state')
+    msgs = open_bag(bag_path).decode(CONTROLLER_STATE.absolute)
     if not msgs:
         raise RuntimeError('no controller_state in %s' % bag_path)
     fields = [f for f in getattr(msgs[0][1], '__dataclass_fields__', {}) if 'age' in f]
@@ -339,15 +340,15 @@ def plant_ticks(bag_path, joints=('joint1', 'joint2')):
     import numpy as np
     from freejoint_tools.bagfile import open_bag
     bag = open_bag(bag_path)
-    ee = bag.decode('/ee_position')
+    ee = bag.decode(EE_POSITION.absolute)
     if not ee:
         raise RuntimeError('no ee_position in %s' % bag_path)
     log_ns = np.array([lt for lt, _ in ee], dtype=np.int64)
     stamps = np.array([stamp_ns(m) for _, m in ee], dtype=np.int64)
     p = np.array([(m.point.x, m.point.y) for _, m in ee])
     by_stamp = {}
-    if '/setpoint' in bag.topics:
-        for _, msg in bag.decode('/setpoint'):
+    if SETPOINT.absolute in bag.topics:
+        for _, msg in bag.decode(SETPOINT.absolute):
             by_stamp[stamp_ns(msg)] = (msg.position[0], msg.position[1])
     pd = np.full_like(p, np.nan)
     if by_stamp:
@@ -359,7 +360,7 @@ def plant_ticks(bag_path, joints=('joint1', 'joint2')):
         pd[ok] = sp[i[ok]]
     effort = np.full((len(ee), len(joints)), np.nan)
     index = {k: j for j, k in enumerate(stamps.tolist())}
-    for _, msg in bag.decode('/joint_states'):
+    for _, msg in bag.decode(JOINT_STATES.absolute):
         j = index.get(stamp_ns(msg))
         if j is not None and msg.effort is not None and len(msg.effort):
             names = list(msg.name)

@@ -103,6 +103,11 @@ class Topic(NamedTuple):
         return type_name(self.msg_type)
 
     @property
+    def absolute(self):
+        """Return the name in the root namespace, unremapped (how a graph's bag names it)."""
+        return self.name if self.name.startswith('/') else '/' + self.name
+
+    @property
     def latched(self):
         """Return whether the topic is transient local."""
         return is_latched(self.qos)

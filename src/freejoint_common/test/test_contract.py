@@ -70,3 +70,5 @@ def test_graph_topics_are_the_recorded_names_types_and_durabilities():
         ('planned_path', 'visualization_msgs/msg/Marker', True),
     ]
     assert contract.type_name(contract.PLAN_CIRCLE.srv_type) == 'freejoint_msgs/srv/PlanCircle'
+    assert (contract.JOINT_STATES.absolute, contract.CLOCK.absolute) == \
+        ('/joint_states', '/clock')

@@ -142,8 +142,8 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     warnings = list(bag.notes)
     info, more = run_info(bag, overrides)
     warnings += more
-    states_topic = _pick_topic(bag, STATE_TYPE, '/' + CONTROLLER_STATE.name, state_topic)
-    joints_topic = _pick_topic(bag, JOINT_TYPE, '/' + JOINT_STATES.name, joint_topic)
+    states_topic = _pick_topic(bag, STATE_TYPE, CONTROLLER_STATE.absolute, state_topic)
+    joints_topic = _pick_topic(bag, JOINT_TYPE, JOINT_STATES.absolute, joint_topic)
     store = bag.typestore()
     decoded = bag.decode_topics([states_topic, joints_topic], store)
     states = [m for _, m in decoded[states_topic]]
