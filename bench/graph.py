@@ -433,11 +433,12 @@ def offline_bound(case=CASE):
 def tracking_error(bag, window_ns):
     """Return (max, rms) mm of |p - p_d| of the controller_state ticks stamped in window."""
     import numpy as np
+    from freejoint_common.contract import to_ns
     from freejoint_tools.bagfile import open_bag
     lo, hi = window_ns
     err = []
     for _, msg in open_bag(bag).decode('/controller_state'):
-        ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        ns = to_ns(msg.header.stamp)
         if lo <= ns <= hi:
             err.append(np.hypot(msg.position[0] - msg.position_desired[0],
                                 msg.position[1] - msg.position_desired[1]))

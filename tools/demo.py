@@ -23,7 +23,6 @@ unless ``ROS_AUTOMATIC_DISCOVERY_RANGE`` says otherwise.
 """
 import argparse
 import os
-import struct
 import subprocess
 import sys
 import time
@@ -60,12 +59,6 @@ def shown(path):
     """Return ``path`` relative to the repository if it lies inside it, else absolute."""
     path = os.path.abspath(path)
     return os.path.relpath(path, ROOT) if path.startswith(ROOT + os.sep) else path
-
-
-def stamp_ns_of(raw):
-    """Return the header stamp (ns) of a serialized message that starts with a Header."""
-    sec, nanosec = struct.unpack_from('<iI', raw, 4)
-    return sec * 1_000_000_000 + nanosec
 
 
 # -- settings -------------------------------------------------------------------------
@@ -131,33 +124,31 @@ class Collector:
     run.  Deep reader queues keep every message while this process catches up.
     """
 
-    TOPICS = (('controller_state', 'freejoint_msgs.msg', 'ControllerState'),
-              ('joint_states', 'sensor_msgs.msg', 'JointState'),
-              ('ee_position', 'geometry_msgs.msg', 'PointStamped'))
-
     def __init__(self, node, depth=20000):
-        import importlib
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
-        qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+        from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION, JOINT_STATES
+        from freejoint_common.contract import profile
+        qos = profile(depth)
         self.node = node
         self.types = {}
         self.raw = {}
         self.last = {}
         self.subs = {}
-        for topic, module, name in self.TOPICS:
-            self.types[topic] = getattr(importlib.import_module(module), name)
+        for topic, msg_type in ((t.name, t.msg_type)
+                                for t in (CONTROLLER_STATE, JOINT_STATES, EE_POSITION)):
+            self.types[topic] = msg_type
             self.raw[topic] = []
             self.last[topic] = -1
             self.subs[topic] = node.create_subscription(
                 self.types[topic], topic, self._callback(topic), qos, raw=True)
 
     def _callback(self, topic):
+        from freejoint_common.contract import clock_ns   # the Header's stamp, as /clock's
         store = self.raw[topic].append
         last = self.last
 
         def take(raw):
             store(raw)
-            ns = stamp_ns_of(raw)
+            ns = clock_ns(raw)
             if ns > last[topic]:
                 last[topic] = ns
         return take
@@ -206,10 +197,11 @@ def ee_trajectory(points, dt_ns, n_ticks):
         Naming the first tick without a message.
 
     """
+    from freejoint_common.contract import to_ns
     import numpy as np
     first = {}
     for msg in points:
-        first.setdefault(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec, msg)
+        first.setdefault(to_ns(msg.header.stamp), msg)
     out = np.empty((n_ticks, 2))
     for k in range(n_ticks):
         msg = first.get(k * dt_ns)
@@ -340,7 +332,7 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
 
 def graph_record(collector, case, seed, n_ticks, passive_joint=PASSIVE_JOINT):
     """Return the graph's record of the collected run (source 'graph') and its arrays."""
-    from freejoint_control.records import arrays_from_messages
+    from freejoint_common.records import arrays_from_messages
     from freejoint_core.metrics import compute_record
     arrays = arrays_from_messages(collector.messages('controller_state'),
                                   collector.messages('joint_states'), passive_joint,
