@@ -119,6 +119,11 @@ class Service(NamedTuple):
     name: str
     srv_type: type
 
+    def of(self, node):
+        """Return the service's full name on the node named ``node`` (root namespace)."""
+        return '/%s/%s' % (node.strip('/'), self.name[2:] if self.name.startswith('~/')
+                           else self.name.lstrip('/'))
+
 
 def type_name(cls):
     """Return ``<package>/msg/<Name>`` (or ``srv``) of a message or service class."""

@@ -72,3 +72,5 @@ def test_graph_topics_are_the_recorded_names_types_and_durabilities():
     assert contract.type_name(contract.PLAN_CIRCLE.srv_type) == 'freejoint_msgs/srv/PlanCircle'
     assert (contract.JOINT_STATES.absolute, contract.CLOCK.absolute) == \
         ('/joint_states', '/clock')
+    assert contract.PLAN_CIRCLE.of('freejoint_planner') == '/freejoint_planner/plan_circle'
+    assert contract.RECORDER_STATUS.of('/recorder') == '/recorder/status'

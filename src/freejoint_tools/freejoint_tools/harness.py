@@ -191,17 +191,19 @@ class ServiceCalls:
 
     def recorder_status(self, timeout=5.0):
         """Return the answer message of the recorder's ``~/status`` ('': no answer)."""
-        from std_srvs.srv import Trigger
-        answer = self.call(Trigger, '/recorder/status', Trigger.Request(), timeout)
+        from freejoint_common.contract import RECORDER_STATUS
+        trigger = RECORDER_STATUS.srv_type
+        answer = self.call(trigger, RECORDER_STATUS.of('recorder'), trigger.Request(), timeout)
         return answer.message if answer is not None else ''
 
     def recorder_ready(self, timeout):
         """Wait until the recorder's ``~/status`` says every graph topic is matched."""
-        from std_srvs.srv import Trigger
+        from freejoint_common.contract import RECORDER_STATUS
+        trigger = RECORDER_STATUS.srv_type
         deadline = time.monotonic() + timeout
         answer = None
         while time.monotonic() < deadline:
-            answer = self.call(Trigger, '/recorder/status', Trigger.Request(),
+            answer = self.call(trigger, RECORDER_STATUS.of('recorder'), trigger.Request(),
                                max(0.1, deadline - time.monotonic()))
             if answer is not None and answer.success:
                 return True, answer.message
@@ -223,9 +225,10 @@ class ServiceCalls:
 
     def plan_circle(self, plan, timeout=20.0):
         """Ask the planner for the circle of ``plan`` (its parameters), executed at once."""
-        from freejoint_msgs.srv import PlanCircle
-        request = PlanCircle.Request(
+        from freejoint_common.contract import PLAN_CIRCLE
+        request = PLAN_CIRCLE.srv_type.Request(
             centre=[float(v) for v in plan['centre']], radius=float(plan['radius']),
             duration=float(plan['duration']), start_angle=float(plan['start_angle']),
             direction=int(plan['direction']), execute=True)
-        return self.call(PlanCircle, '/freejoint_planner/plan_circle', request, timeout)
+        return self.call(PLAN_CIRCLE.srv_type, PLAN_CIRCLE.of('freejoint_planner'), request,
+                         timeout)
