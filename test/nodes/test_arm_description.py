@@ -170,3 +170,17 @@ def test_sim_of_the_paper_arm_publishes_the_shipped_paper_urdf(procs, ros_node, 
     with open(os.path.join(URDF_DIR, 'paper_arm.urdf')) as f:
         assert texts[0] == f.read()
     assert procs.stop(sim) == 0
+
+
+def test_viewer_takes_the_arm_from_the_simulators_robot_description(procs, wait):
+    # One source of the arm: the viewer without description_file follows the graph's
+    # latched /robot_description (its /tf and URDF channel), here the 4-link arm.
+    sim = procs.start_node('freejoint_sim', 'sim_node', 'sim', _sim_args('four_link/sim.yaml'))
+    viewer = procs.start_node('freejoint_tools', 'viewer', 'viewer',
+                              ['--ros-args', '-p', 'port:=0'])
+    line = 'URDF from /robot_description (%d characters)' % len(_four_link())
+    wait(lambda: line in procs.log(viewer) or viewer.poll() is not None
+         or sim.poll() is not None, 60.0, 'the viewer to take the URDF')
+    assert line in procs.log(viewer), procs.log(viewer) + procs.log(sim)
+    assert procs.stop(viewer) == 0
+    assert procs.stop(sim) == 0

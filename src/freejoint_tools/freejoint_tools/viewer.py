@@ -13,7 +13,9 @@ What a Foxglove client (the app, or any client of Foxglove's WebSocket protocol)
   clock of Foxglove's live view, as the other messages' log times: a lockstep run's sim
   time starts at 0 again with the next run, and older frames would stay ahead of it);
 * ``/robot_description``: the URDF text (``std_msgs/msg/String``), for the 3D panel's URDF
-  layer;
+  layer: the graph's own ``/robot_description`` (the simulator's, transient local) once it
+  arrives, so that the graph has one source of the arm; ``description_file`` instead if
+  given; the shipped ``paper_arm.urdf`` until then;
 * the parameters of every node of the graph, as ``<node>.<parameter>``
   (``/controller_node.K``), read and set through rclpy's ``AsyncParameterClient``; a
   refused set is answered with the unchanged value and a warning status naming the
@@ -69,7 +71,8 @@ SPECS = (
     Spec('port', 8765, 'TCP port of the Foxglove WebSocket server (0: any free port, '
          'logged)', (0, 65535), read_only=True),
     Spec('description_file', '', 'URDF of the arm for /tf and /robot_description; empty = '
-         'the shipped paper_arm.urdf (freejoint_description)', read_only=True),
+         "the graph's /robot_description (the simulator's), the shipped paper_arm.urdf "
+         '(freejoint_description) until it arrives', read_only=True),
     Spec('joint_states_topic', 'joint_states', 'JointState topic the transforms are '
          'computed from', read_only=True),
     Spec('tf_rate', 50.0, 'most /tf updates per second sent to clients (joint_states '
@@ -200,9 +203,32 @@ class Viewer(Node, Lifecycle):
         self._server = self._start_server()
         self._advertise_graph()
         self.create_timer(self.values['discovery_period'], self._discover)
+        if not self.values['description_file']:
+            # One source of the arm: the graph's latched /robot_description replaces the
+            # shipped URDF when it arrives (a URDF arm of the simulator's).
+            self.create_subscription(ROBOT_DESCRIPTION.msg_type, ROBOT_DESCRIPTION.name,
+                                     self._on_description, ROBOT_DESCRIPTION.qos)
         self.get_logger().info(
             'viewer ready: ws://%s:%d (Foxglove: open connection, Foxglove WebSocket); URDF %s'
             % (self.values['host'], self._server.port, path))
+
+    def _on_description(self, msg):
+        """Take the graph's /robot_description as the arm of /tf and of the URDF channel."""
+        if msg.data == self.urdf:
+            return
+        try:
+            tree = KinematicTree(msg.data)
+        except FreejointValueError as exc:
+            self.get_logger().warn('%s not taken: %s' % (ROBOT_DESCRIPTION.name, exc))
+            return
+        self.urdf, self.tree = msg.data, tree
+        self.get_logger().info('URDF from %s (%d characters)'
+                               % (ROBOT_DESCRIPTION.name, len(msg.data)))
+        with self._lock:
+            watched = DESCRIPTION_TOPIC in self._subscribed
+        if watched:
+            self._channels[DESCRIPTION_TOPIC][0].log(serialize_message(msg),
+                                                     log_time=time.time_ns())
 
     # -- parameters of the viewer itself ------------------------------------------------
     def _on_set_parameters(self, params):
