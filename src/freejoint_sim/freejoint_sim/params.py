@@ -17,7 +17,7 @@ naming the parameter).
 from dataclasses import dataclass, replace
 import math
 
-from freejoint_common.arm_description import ARM_SPECS, joint_list, PAPER_JOINTS, resolve_arm
+from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve_arm
 from freejoint_common.node_tools import unique_names
 from freejoint_common.schema import CASE, CONTROL_PERIOD, EXECUTOR, FRAME_ID, JOINT_NAMES
 from freejoint_common.schema import JOINTS, one_of, Param, SCHEDULING, Schema
@@ -203,13 +203,12 @@ def _initial_joints(text, params):
 def _joints(values, arm):
     """Return ``(joint_names, joints)`` of the arm, or raise naming the parameter."""
     params = arm.params
-    joint_names = unique_names('joint_names', joint_list(
-        'joint_names', values['joint_names'], arm, PAPER_JOINTS, arm.joint_names))
+    joint_names, joints = arm_joint_names(values, arm)
+    joint_names = unique_names('joint_names', joint_names)
     if len(joint_names) != params.n:
         raise FreejointValueError(
             f'joint_names: the arm has {params.n} joints, got {len(joint_names)} names')
-    joints = unique_names('joints', joint_list('joints', values['joints'], arm,
-                                               ('joint1', 'joint2'), arm.active_names))
+    joints = unique_names('joints', joints)
     active_names = [joint_names[i] for i in params.active]
     if sorted(joints) != sorted(active_names):
         raise FreejointValueError(
