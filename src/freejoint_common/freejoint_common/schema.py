@@ -113,6 +113,24 @@ def raises(func):
     return check
 
 
+class ParameterValues:
+    """
+    A node's config: what ``build`` derived (its fields), and every parameter by name.
+
+    Mixed into a config dataclass that has a ``values`` field (the validated
+    ``{name: value}`` dict): ``config.<name>`` is the field of that name if the config
+    has one, else the parameter's value, as generate_parameter_library's ``params.<name>``.
+    A parameter the node reads as it is needs no field: its schema entry and its use.
+    """
+
+    def __getattr__(self, name):
+        """Return the value of the parameter ``name`` (no field of that name)."""
+        values = self.__dict__.get('values')
+        if values is not None and name in values:
+            return values[name]
+        raise AttributeError(f'{type(self).__name__} has no field or parameter {name!r}')
+
+
 class Schema:
     """
     The parameters of one node: entries, cross-parameter checks, config builder.

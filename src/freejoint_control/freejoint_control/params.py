@@ -12,13 +12,14 @@ validated build (``FreejointValueError`` naming the parameter).
 
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 
 from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve_arm
 from freejoint_common.node_tools import unique_names
 from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR, JOINT_NAMES
-from freejoint_common.schema import JOINTS, NOMINAL_SCALE, one_of, Param, SCHEDULING, Schema
+from freejoint_common.schema import JOINTS, NOMINAL_SCALE, one_of, Param, ParameterValues
+from freejoint_common.schema import SCHEDULING, Schema
 from freejoint_core.arm import ArmParams
 from freejoint_core.control import Gains, H_FORMS
 from freejoint_core.errors import FreejointValueError
@@ -246,11 +247,14 @@ CHECKS = (_check_joints, _check_loop_rate, _check_theta0, _check_effort_limits,
 
 
 @dataclass(frozen=True)
-class Config:
-    """Validated controller configuration."""
+class Config(ParameterValues):
+    """
+    Validated controller configuration: what is derived from several parameters.
 
-    case: str
-    nominal_scale: float
+    Every other parameter is ``config.<name>`` as validated (``ParameterValues``).
+    """
+
+    values: dict = field(repr=False, hash=False)
     nominal: ArmParams
     gains: Gains
     joint_names: tuple
@@ -259,26 +263,11 @@ class Config:
     dt: float
     dt_ns: int
     lockstep: bool
-    stale_timeout: float
-    executor: str
     effort_limits: tuple
-    effort_rate_limit: float
-    on_stale_setpoint: str
-    resume_time: float
-    hold_stiffness: float
-    resume_max_velocity: float
-    resume_max_acceleration: float
-    carry_forward_time: float
-    max_state_age: float
     position_lower: tuple
     position_upper: tuple
     velocity_limit: tuple
     reach: float
-    setpoint_max_velocity: float
-    setpoint_max_acceleration: float
-    delay_compensation: str
-    thread_priority: int
-    cpu_affinity: object
 
 
 GAIN_NAMES = ('K', 'Lambda', 'R', 'Gamma', 'sigma', 'epsilon', 'h_form', 'theta0', 'robust',
@@ -301,29 +290,16 @@ def build(values):
     limits = _floats('effort_limits', values['effort_limits'])
     dt = float(values['control_period'])
     return Config(
-        case=values['case'], nominal_scale=float(values['nominal_scale']), nominal=nominal,
+        values=dict(values), nominal=nominal,
         gains=gains(values, tuple(limits[joints.index(name)] for name in active_names),
                     _floats('theta_max', values['theta_max'])),
         joint_names=joint_names, joints=joints,
         cmd_index=tuple(active_names.index(name) for name in joints), dt=dt,
-        dt_ns=round(dt * 1e9), lockstep=bool(values['lockstep']),
-        stale_timeout=float(values['stale_timeout']), executor=values['executor'],
-        effort_limits=limits, effort_rate_limit=float(values['effort_rate_limit']),
-        on_stale_setpoint=values['on_stale_setpoint'],
-        resume_time=float(values['resume_time']),
-        hold_stiffness=float(values['hold_stiffness']),
-        resume_max_velocity=float(values['resume_max_velocity']),
-        resume_max_acceleration=float(values['resume_max_acceleration']),
-        carry_forward_time=float(values['carry_forward_time']),
-        max_state_age=float(values['max_state_age']),
+        dt_ns=round(dt * 1e9), lockstep=bool(values['lockstep']), effort_limits=limits,
         position_lower=_floats('joint_position_lower', values['joint_position_lower']),
         position_upper=_floats('joint_position_upper', values['joint_position_upper']),
         velocity_limit=_floats('joint_velocity_limit', values['joint_velocity_limit']),
-        reach=float(sum(nominal.lengths)),
-        setpoint_max_velocity=float(values['setpoint_max_velocity']),
-        setpoint_max_acceleration=float(values['setpoint_max_acceleration']),
-        delay_compensation=values['delay_compensation'],
-        thread_priority=values['thread_priority'], cpu_affinity=values['cpu_affinity'])
+        reach=float(sum(nominal.lengths)))
 
 
 SCHEMA = Schema(PARAMS, CHECKS, build)

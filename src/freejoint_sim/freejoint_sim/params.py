@@ -14,13 +14,13 @@ naming the parameter).
 
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 import math
 
 from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve_arm
 from freejoint_common.node_tools import unique_names
 from freejoint_common.schema import CASE, CONTROL_PERIOD, EXECUTOR, FRAME_ID, JOINT_NAMES
-from freejoint_common.schema import JOINTS, one_of, Param, SCHEDULING, Schema
+from freejoint_common.schema import JOINTS, one_of, Param, ParameterValues, SCHEDULING, Schema
 from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.offline import DEFAULT_Q3_0_DEG
@@ -240,13 +240,16 @@ CHECKS = (_check_joints, _check_steps, _check_timing)
 
 
 @dataclass(frozen=True)
-class Config:
-    """Validated simulator configuration."""
+class Config(ParameterValues):
+    """
+    Validated simulator configuration: what is derived from the parameters.
 
-    case: str
+    Every other parameter is ``config.<name>`` as validated (``ParameterValues``).
+    """
+
+    values: dict = field(repr=False, hash=False)
     params: ArmParams
     arm: object
-    engine: str
     q0: tuple
     joint_names: tuple
     joints: tuple
@@ -254,22 +257,8 @@ class Config:
     lockstep: bool
     dt: float
     dt_ns: int
-    dt_sub: float
     publish_every: int
-    dist_bound: float
-    seed: int
-    command_timeout: float
-    frame_id: str
-    executor: str
-    timing_file: str = ''
-    timing_steps: int = 0
-    max_steps: int = 0
-    clock_every: int = 1
-    start_braked: bool = True
-    divergence_speed: float = 1000.0
-    brake_timeout: float = 0.05
-    initial_passive_deg: float = DEFAULT_Q3_0_DEG
-    initial_position: tuple = (0.2, 0.0)
+    clock_every: int
 
 
 def build(values):
@@ -298,24 +287,12 @@ def build(values):
             raise FreejointValueError(
                 f'initial_position: unreachable with initial_passive_deg = '
                 f'{values["initial_passive_deg"]}: {exc}') from None
-    return Config(case=values['case'], params=params, arm=arm, engine=values['engine'],
-                  q0=tuple(float(v) for v in q0), joint_names=joint_names,
-                  joints=joints,
+    return Config(values=dict(values), params=params, arm=arm,
+                  q0=tuple(float(v) for v in q0), joint_names=joint_names, joints=joints,
                   cmd_to_active=tuple(active_names.index(name) for name in joints),
                   lockstep=values['mode'] == 'lockstep', dt=dt, dt_ns=round(dt * 1e9),
-                  dt_sub=float(values['dt_sub']),
                   publish_every=_publish_every(values['publish_rate'], dt),
-                  dist_bound=float(values['dist_bound']), seed=values['seed'],
-                  command_timeout=float(values['command_timeout']),
-                  frame_id=str(values['frame_id']), executor=values['executor'],
-                  timing_file=str(values['timing_file']),
-                  timing_steps=values['timing_steps'], max_steps=values['max_steps'],
-                  clock_every=_clock_every(values['clock_rate'], dt),
-                  start_braked=values['start_braked'],
-                  divergence_speed=float(values['divergence_speed']),
-                  brake_timeout=float(values['brake_timeout']),
-                  initial_passive_deg=passive,
-                  initial_position=tuple(values['initial_position']))
+                  clock_every=_clock_every(values['clock_rate'], dt))
 
 
 SCHEMA = Schema(PARAMS, CHECKS, build)
