@@ -49,8 +49,6 @@ STATUS_LAW_FAULT = ControllerState.STATUS_LAW_FAULT
 STATUS_RESUMING = ControllerState.STATUS_RESUMING
 STATUS_DT_CLAMPED = ControllerState.STATUS_DT_CLAMPED
 STATUS_SETPOINT_LATE = ControllerState.STATUS_SETPOINT_LATE
-LATE_PERIODS = 10
-"""Real time: a setpoint older than this many control periods is late (carried forward)."""
 
 _isfinite = math.isfinite
 _monotonic = time.monotonic
@@ -157,7 +155,7 @@ class ControllerNode(Node, Lifecycle):
         self.config = cfg
         self._dt = cfg.dt
         self._half_ns = cfg.dt_ns // 2
-        self._late_ns = LATE_PERIODS * cfg.dt_ns
+        self._late_ns = cfg.late_periods * cfg.dt_ns
         self._carry_ns = round(cfg.carry_forward_time * 1e9)
         self._max_age_ns = 0 if cfg.lockstep else round(cfg.max_state_age * 1e9)
         self._stale = cfg.stale_timeout
@@ -744,7 +742,7 @@ def _status_message(status, det, cfg, hold_reason, shaper):
         parts.append('law fault: non-finite or out-of-range output, previous command repeated')
     if status & STATUS_SETPOINT_LATE and not status & STATUS_HOLDING:
         parts.append('setpoint late: the newest is older than %d control periods, carried '
-                     'forward along its velocity and acceleration' % LATE_PERIODS)
+                     'forward along its velocity and acceleration' % cfg.late_periods)
     if status & STATUS_DT_CLAMPED:
         parts.append('state stamps outside [0.25, 4] x control_period: dt clamped')
     return '; '.join(parts)

@@ -134,6 +134,9 @@ PARAMS = (
     Param('resume_max_acceleration', 5.0,
           'bound [m/s^2] on the peak acceleration of the blend: a larger offset blends for '
           'longer than resume_time (sqrt(5.77 offset / resume_max_acceleration))', (1e-3, 1e4)),
+    Param('late_periods', 10,
+          'real time: a setpoint older than this many control periods is late '
+          '(STATUS_SETPOINT_LATE, carried forward for at most carry_forward_time)', (1, 10000)),
     Param('max_state_age', 0.1,
           'real time: a state older than this [s] when it is taken (a backlog after a stall '
           'or at start-up) is skipped without a command (0 = never skip)', (0.0, 3600.0)),
