@@ -336,6 +336,30 @@ def blend_of(plant, t_first):
     return {'blend_offset_mm': 1000.0 * d, 'blend_s': blend}
 
 
+def first_after(times, t0, t_end):
+    """Return the first of ``times`` in [t0, t_end], in s after t0 (None: none)."""
+    after = [t - t0 for t in times if t0 <= t <= t_end]
+    return min(after) if after else None
+
+
+def start_standby(s, key, node_cmd, args):
+    """
+    Start a warm standby controller as process ``key`` (node name ``key``).
+
+    bench/controller_standby.py with the controller's own arguments (``node_cmd``): built
+    and discovered, idle, taking over when the active one's commands stop (``--standby``
+    of controller_restart; a measurement prototype, not safe as it is: see
+    docs/performance.md).
+    """
+    cmd = [sys.executable, os.path.join(HERE, 'controller_standby.py')] + node_cmd[1:] + [
+        '-r', '__node:=' + key]
+    prefix = ['chrt', '-f', str(args.restart_priority)] if args.restart_priority else []
+    s.restarts[key] = s.restarts.get(key, 0) + 1
+    s.graph.start(key, prefix + cmd, log_name='%s_standby_%d' % (key, s.restarts[key]))
+    s.graph.procs[key].cmd = cmd
+    s.killed.discard(key)
+
+
 def restart_command(args):
     """
     Return ``(replace, prefix)`` of the restarted controller's command line.
@@ -372,6 +396,11 @@ def controller_restart(args, index):
         with soak.Session('controller_restart_' + case, index, case, seconds) as s:
             index += 1
             s.up()
+            keys = ['controller_node', 'controller_standby']
+            node_cmd = list(s.graph.procs['controller_node'].args)
+            if args.standby:
+                start_standby(s, keys[1], node_cmd, args)
+                s.wait(3.0)
             loop = bench_graph.CircleLoop(s.client, before=lambda: soak.rest_at_q0(s.client))
             for _ in range(args.cycles):
                 # A circle from rest at q(0) each cycle (no new circle meanwhile), killed
@@ -380,6 +409,18 @@ def controller_restart(args, index):
                 loop.poll()
                 while time.monotonic() < loop.accepted[-1] + args.mid:
                     s.wait(0.02)
+                if args.standby:
+                    # The standby takes over by itself; the supervisor (this loop) then
+                    # starts the next standby in the killed one's place.
+                    load = os.getloadavg()[0]
+                    t_kill = s.kill(keys[0])
+                    log = s.graph.procs[keys[1]].log_path
+                    s.wait(args.recover)
+                    cycles.append((t_kill, t_kill, time.time(), log, load))
+                    start_standby(s, keys[0], node_cmd, args)
+                    keys.reverse()
+                    s.wait(3.0)
+                    continue
                 t_kill = s.kill('controller_node')
                 s.wait(args.down)
                 load = os.getloadavg()[0]
@@ -398,6 +439,12 @@ def controller_restart(args, index):
             row = {'kill': t_kill, 'restart': t_restart, 'plant_ticks': int(len(idx)),
                    'load_average_1min': load, 'controller_log': os.path.relpath(log, ROOT)}
             row.update(restart_timeline(log, released, t_restart, t_end))
+            if args.standby:
+                row['node_s'] = None    # built long before the kill
+                row['takeover_s'] = first_after(log_times(log, 'taking over'), t_restart, t_end)
+                if row['takeover_s'] is not None:
+                    # Its first command (usually before the brakes engage: no release).
+                    row['first_command_s'] = row['takeover_s']
             row['diverged'] = any(t_restart <= t <= t_end for t in diverged_at)
             answers = np.nonzero(log_window(ticks, t_restart, t_end))[0]
             row['first_controller_state_s'] = (float(ticks['log_ns'][answers[0]] * 1e-9
@@ -455,6 +502,9 @@ def controller_restart(args, index):
                 _f(r.get('blend_offset_mm')), _f(r.get('back_within_s')),
                 _f(r.get('back_after_first_command_s')), _fl(r.get('effort_max')),
                 r.get('diverged', 'n/a')))
+            if args.standby:
+                say('        standby: took over %s s after the kill (times above from the '
+                    'kill)' % _f(r.get('takeover_s')))
             if args.probe:
                 say('        probe: imports %s, rclpy.init %s, matched joint_states %s, '
                     'commands %s, setpoint %s; first joint_states %s, setpoint %s' % tuple(
@@ -618,6 +668,10 @@ def parse(argv):
     ap.add_argument('--restart-priority', type=int, default=0,
                     help='controller_restart: start the restarted controller under chrt -f '
                     'this priority (0: the default scheduler until the node sets its own)')
+    ap.add_argument('--standby', action='store_true',
+                    help='controller_restart: a warm standby controller '
+                    '(bench/controller_standby.py) takes over from the killed one; a new '
+                    'standby is started after each takeover')
     ap.add_argument('--probe', action='store_true',
                     help='controller_restart: restart the controller through '
                     'bench/controller_probe.py (its start-up timeline in its log)')
