@@ -119,15 +119,28 @@ def same_record():
 
 
 @pytest.fixture
-def call_service(ros_node, wait):
-    """Give the test ``call(client, request, what)``: wait for the service, call it, answer."""
-    import rclpy
+def start_circle(ros_node):
+    """
+    Give the test a function of ``pause`` that starts a run the README's manual way.
 
-    def call(client, request, what):
-        wait(client.service_is_ready, 30.0, what,
-             spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.05))
-        future = client.call_async(request)
-        rclpy.spin_until_future_complete(ros_node, future, timeout_sec=10.0)
-        assert future.done(), 'no answer from %s' % what
-        return future.result()
-    return call
+    It calls ``/recorder/status`` until it says every graph topic is matched (60 s), ``pause`` wall
+    seconds (the publishers' side of the match can lag the recorder's), then the paper's
+    horizontal circle through ``/freejoint_planner/plan_circle``, which must be accepted.
+    """
+    import rclpy
+    from freejoint_tools.harness import ServiceCalls
+
+    class Spin:
+        def spin_once(self, timeout_sec):
+            rclpy.spin_once(ros_node, timeout_sec=timeout_sec)
+
+    def start(pause):
+        calls = ServiceCalls(ros_node, Spin())
+        ready, message = calls.recorder_ready(60.0)
+        assert ready, 'the recorder did not match every graph topic: %s' % message
+        calls.spin_until(lambda: False, pause)
+        answer = calls.plan_circle({'centre': [0.0, 0.0], 'radius': 0.2, 'duration': 5.0,
+                                    'start_angle': 0.0, 'direction': 1})
+        assert answer is not None, 'no answer from plan_circle'
+        assert answer.accepted, answer.reason
+    return start

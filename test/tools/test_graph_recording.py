@@ -5,7 +5,6 @@ The run is started (planner ``~/plan_circle``) only once the recorder's ``~/stat
 every graph topic has a matched publisher, as a launcher that must lose nothing does.
 """
 import os
-import time
 
 import pytest
 
@@ -19,11 +18,8 @@ SETTLE = 1.0
 
 
 def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, tmp_path,
-                                                         same_record, call_service):
+                                                         same_record, start_circle):
     import rclpy
-    from freejoint_msgs.srv import PlanCircle
-    from std_srvs.srv import Trigger
-
     from freejoint_common.contract import CONTROLLER_STATE, JOINT_STATES, profile
 
     from freejoint_common.records import arrays_from_messages, stamp_ns
@@ -50,23 +46,9 @@ def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, 
             '-p', 'autostart:=false'] if exe == 'planner_node' else [
             '--ros-args', '--params-file', os.path.join(CONFIG, conf)]))
 
-    call = call_service
-
-    status = ros_node.create_client(Trigger, '/recorder/status')
-    answers = []
-    wait(lambda: answers and answers[-1].success, 60.0,
-         'the recorder to match every graph topic (%s)' % (answers[-1:] or ''),
-         spin=lambda: answers.append(call(status, Trigger.Request(), 'recorder status')))
     # The recorder's readers have matched every publisher; the publishers' side of the match
     # (what makes a volatile writer send to it) can lag by tens of ms: let it settle.
-    settle = time.monotonic() + SETTLE
-    while time.monotonic() < settle:
-        rclpy.spin_once(ros_node, timeout_sec=0.05)
-    plan = ros_node.create_client(PlanCircle, '/freejoint_planner/plan_circle')
-    answer = call(plan, PlanCircle.Request(centre=[0.0, 0.0], radius=0.2, duration=5.0,
-                                           start_angle=0.0, direction=1, execute=True),
-                  'plan_circle')
-    assert answer.accepted, answer.reason
+    start_circle(SETTLE)
     wait(lambda: len(live['states']) > TICKS + 50, 120.0,
          'the graph to run %d ticks (sim: %s)' % (TICKS, procs.log(nodes[1])[-500:]),
          spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.01))

@@ -11,7 +11,6 @@ started together can take seconds).
 
 import os
 import re
-import time
 
 import pytest
 
@@ -23,9 +22,8 @@ TICKS = 1500
 
 
 def test_readme_order_recorder_first_records_the_run_from_tick_0(
-        procs, ros_node, wait, tmp_path, call_service):
+        procs, ros_node, wait, tmp_path, start_circle):
     import rclpy
-    from freejoint_msgs.srv import PlanCircle
     from std_srvs.srv import Trigger
 
     from freejoint_common.records import stamp_ns
@@ -45,8 +43,6 @@ def test_readme_order_recorder_first_records_the_run_from_tick_0(
         return procs.start_node(pkg, exe, exe, ['--ros-args', '--params-file',
                                                 os.path.join(CONFIG, conf), *extra])
 
-    call = call_service
-
     # the README's lines, in its order; the simulator holds after TICKS ticks (ends quiet)
     recorder = procs.start_node('freejoint_tools', 'recorder', 'recorder', [
         '--ros-args', '-p', 'output:=%s' % bag_path, '-p', 'use_sim_time:=true'])
@@ -57,18 +53,7 @@ def test_readme_order_recorder_first_records_the_run_from_tick_0(
              start('freejoint_control', 'controller_node', 'controller.yaml')]
     # `ros2 service call /recorder/status std_srvs/srv/Trigger` until success: true, then
     # the circle (what a user typing the next line gives the middleware: a second or more)
-    answers = []
-    wait(lambda: answers and answers[-1].success, 60.0,
-         'the recorder to match every graph topic (%s)' % answers[-1:],
-         spin=lambda: answers.append(call(client, Trigger.Request(), 'recorder status')))
-    pause = time.monotonic() + 1.0
-    while time.monotonic() < pause:
-        rclpy.spin_once(ros_node, timeout_sec=0.05)
-    plan = ros_node.create_client(PlanCircle, '/freejoint_planner/plan_circle')
-    answer = call(plan, PlanCircle.Request(centre=[0.0, 0.0], radius=0.2, duration=5.0,
-                                           start_angle=0.0, direction=1, execute=True),
-                  'plan_circle')
-    assert answer.accepted, answer.reason
+    start_circle(1.0)
     wait(lambda: (received_count(read_status()) or 0) > 4 * TICKS, 120.0,
          'the run (sim: %s)' % procs.log(nodes[0])[-800:],
          spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.1))
