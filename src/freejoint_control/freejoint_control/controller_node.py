@@ -63,7 +63,7 @@ class ControllerNode(Node, Lifecycle):
         self._params = NodeParameters(self, SCHEMA)   # raises: bad start-up parameters
         self.config = self._params.config
         cfg = self.config
-        self._ctl = RobustController(cfg.nominal, cfg.gains)
+        self._ctl = RobustController(cfg.nominal, cfg.gains, model=cfg.nominal_model)
         self._shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep)
         self._predictor = None
         self._install(cfg)
@@ -179,7 +179,7 @@ class ControllerNode(Node, Lifecycle):
     def _apply(self, old, cfg, params):
         """Take a validated parameter change (the set-parameters callback's last step)."""
         if cfg.nominal != old.nominal:
-            self._ctl.set_nominal(cfg.nominal)
+            self._ctl.set_nominal(cfg.nominal, cfg.nominal_model)
         if cfg.gains != old.gains:
             self._ctl.set_gains(cfg.gains)
             if cfg.gains.theta0 != old.gains.theta0:

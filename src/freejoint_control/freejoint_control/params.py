@@ -23,6 +23,7 @@ from freejoint_common.schema import SCHEDULING, Schema
 from freejoint_core.arm import ArmParams
 from freejoint_core.control import Gains, H_FORMS
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.urdf_offline import nominal_model
 
 ON_STALE = ('hold', 'zero')
 DELAY_COMPENSATION = ('off', 'predict')
@@ -271,6 +272,7 @@ class Config(ParameterValues):
     position_upper: tuple
     velocity_limit: tuple
     reach: float
+    nominal_model: object = field(default=None, compare=False)
 
 
 GAIN_NAMES = ('K', 'Lambda', 'R', 'Gamma', 'sigma', 'epsilon', 'h_form', 'theta0', 'robust',
@@ -283,6 +285,12 @@ def gains(values, tau_limit=None, theta_max=None):
     return Gains(**{name: (tuple(values[name]) if isinstance(values[name], list)
                            else values[name]) for name in GAIN_NAMES},
                  tau_limit=tau_limit, theta_max=theta_max)
+
+
+def _nominal_model(values):
+    """Pinocchio's nominal model of a URDF arm of other than 3 links, else None."""
+    arm = resolve_arm(values).urdf_arm
+    return None if arm is None else nominal_model(arm, values['nominal_scale'])
 
 
 def build(values):
@@ -302,7 +310,7 @@ def build(values):
         position_lower=_floats('joint_position_lower', values['joint_position_lower']),
         position_upper=_floats('joint_position_upper', values['joint_position_upper']),
         velocity_limit=_floats('joint_velocity_limit', values['joint_velocity_limit']),
-        reach=float(sum(nominal.lengths)))
+        reach=float(sum(nominal.lengths)), nominal_model=_nominal_model(values))
 
 
 SCHEMA = Schema(PARAMS, CHECKS, build)

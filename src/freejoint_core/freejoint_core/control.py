@@ -255,6 +255,10 @@ class RobustController:
     use_fast : bool
         Use the scalar 3-link kernel when possible (n == 3, r == 2); False
         forces the general numpy path (for checks).
+    model : ArmModel, optional
+        The nominal model's implementation, of ``nominal_params`` (e.g.
+        ``freejoint_core.pin_model.PinArmModel`` of a URDF arm: Pinocchio instead of
+        the general numpy path); default ``make_model(nominal_params)``.
 
     Attributes
     ----------
@@ -263,16 +267,16 @@ class RobustController:
 
     """
 
-    def __init__(self, nominal_params, gains=None, use_fast=True):
+    def __init__(self, nominal_params, gains=None, use_fast=True, model=None):
         self._use_fast = bool(use_fast)
-        self.set_nominal(nominal_params)
+        self.set_nominal(nominal_params, model)
         self._theta = None
         self.stiffness = 1.0
         self.set_gains(Gains() if gains is None else gains)
         self.reset()
 
     # -- configuration ----------------------------------------------------
-    def set_nominal(self, params):
+    def set_nominal(self, params, model=None):
         """
         Replace the nominal model (next step); keeps theta.
 
@@ -280,6 +284,9 @@ class RobustController:
         ----------
         params : ArmParams
             New nominal parameters.
+        model : ArmModel, optional
+            Its implementation (``params`` equal to ``params``); default
+            ``make_model(params)``.
 
         """
         if not isinstance(params, ArmParams):
@@ -290,7 +297,13 @@ class RobustController:
         self.nominal = params
         self.n = params.n
         self.r = params.r
-        self.model = make_model(params) if self._use_fast else ArmModel(params)
+        if model is not None and (not isinstance(model, ArmModel) or model.params != params):
+            raise FreejointValueError(
+                'model: expected an ArmModel of the nominal parameters, got '
+                f'{type(model).__name__}')
+        if model is None:
+            model = make_model(params) if self._use_fast else ArmModel(params)
+        self.model = model
         self._fast = self._use_fast and self.n == 3 and self.r == 2 and hasattr(
             self.model, 'task')
         self._task = self.model.task if self._fast else None

@@ -8,12 +8,14 @@ The loop of ``freejoint_core.offline`` for any arm ``freejoint_core.urdf`` accep
     out = RobustController(arm.nominal(nominal_scale)).step(q, qd, p_d(t_k), ..., dt)
     plant.step(out.tau, dt)
 
-with the plant of :func:`make_plant` (the simulator node's ``engine``): ``rk4`` is
+with the nominal model from Pinocchio for n != 3 (:func:`nominal_model`, as the
+controller node's) and the plant of :func:`make_plant` (the simulator node's
+``engine``): ``rk4`` is
 ``freejoint_core.plant.Plant`` (closed-form kernel) for 3-link arms and
 ``freejoint_core.pin_plant.PinPlant`` (Pinocchio's ABA) otherwise, ``mujoco``
 ``freejoint_core.mujoco_plant.MujocoPlant``.  The simulator, controller and planner
 nodes run the same loop on a URDF arm, so in lockstep the graph's records equal these
-(``test/graph/test_four_link_graph.py``).  The run stops (without raising) at the first
+(``test/graph/test_arm_graph.py``).  The run stops (without raising) at the first
 tick whose output is not finite or whose tracking error exceeds ``diverge_m``.
 """
 
@@ -64,6 +66,31 @@ def make_plant(arm, engine='rk4', dt_sub=DEFAULT_DT_SUB, dist_bound=0.5, seed=0,
     return PinPlant(arm, dt_sub, **kwargs)
 
 
+def nominal_model(arm, scale):
+    """
+    Return the implementation of a URDF arm's nominal model for the controller.
+
+    Parameters
+    ----------
+    arm : UrdfArm
+        The real arm.
+    scale : float
+        ``nominal_scale``.
+
+    Returns
+    -------
+    PinArmModel or None
+        Pinocchio's model of ``arm.nominal(scale)`` for n != 3 (several times faster
+        than the general numpy path, ``bench/core_urdf.py``); None for 3 links (the
+        controller's closed-form kernel).
+
+    """
+    if arm.params.n == 3:
+        return None
+    from freejoint_core.pin_model import PinArmModel
+    return PinArmModel(arm, scale)
+
+
 def run_arm(arm, trajectory, q0, *, label='urdf', seed=0, nominal_scale=NOMINAL_SCALE,
             dist_bound=0.5, dt=1e-3, dt_sub=DEFAULT_DT_SUB, n_ticks=None, engine='rk4',
             gains=None, diverge_m=0.5):
@@ -111,7 +138,8 @@ def run_arm(arm, trajectory, q0, *, label='urdf', seed=0, nominal_scale=NOMINAL_
     if n_ticks is None:
         n_ticks = int(round(trajectory.duration / dt))
     plant = make_plant(arm, engine, dt_sub, dist_bound, seed, q0)
-    ctrl = RobustController(arm.nominal(nominal_scale), Gains() if gains is None else gains)
+    ctrl = RobustController(arm.nominal(nominal_scale), Gains() if gains is None else gains,
+                            model=nominal_model(arm, nominal_scale))
     n, r = arm.params.n, arm.params.r
     passive = arm.params.passive[0] if arm.params.passive else 0
     t = np.arange(n_ticks) * dt
