@@ -7,8 +7,8 @@ have), as a real robot's driver may publish them.
 """
 from freejoint_common.contract import JOINT_STATES, profile
 import rclpy
-from rclpy.executors import ExternalShutdownException
 from sensor_msgs.msg import JointState
+from standin import spin
 
 QOS = profile(100)
 ORDER = ('gripper', 'joint3', 'joint1', 'wrist', 'joint2')
@@ -32,16 +32,7 @@ def main():
 
     node.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name, relay, QOS)
     node.get_logger().info('relay ready')
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if rclpy.ok():
-            raise
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin(node)
 
 
 if __name__ == '__main__':

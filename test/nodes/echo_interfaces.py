@@ -7,7 +7,7 @@ the `/probe/plan_circle` service answers PlanCircle requests (accepts radius < 1
 from freejoint_msgs.msg import CartesianSetpoint, ControllerState
 from freejoint_msgs.srv import PlanCircle
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from standin import spin
 
 TYPES = (CartesianSetpoint, ControllerState)
 
@@ -29,13 +29,7 @@ def main():
 
     node.create_service(PlanCircle, '/probe/plan_circle', plan)
     node.get_logger().info('echo ready')
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin(node)
 
 
 if __name__ == '__main__':
