@@ -267,14 +267,16 @@ class Client(ServiceCalls):
 
 
 def ros_params(name):
-    """Return the ros__parameters of config/<name>."""
-    import yaml
-    with open(os.path.join(CONFIG, name)) as f:
-        data = yaml.safe_load(f)
-    for section in data.values():
-        if isinstance(section, dict) and 'ros__parameters' in section:
-            return section['ros__parameters']
-    raise RuntimeError('%s has no ros__parameters' % name)
+    """
+    Return the parameter values of the node of config/<name>.
+
+    Its schema's defaults overlaid with the file (which sets only what differs from them).
+    """
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_sim.params import SCHEMA as SIM
+    schema = {'sim.yaml': SIM, 'controller.yaml': CONTROLLER, 'planner.yaml': PLANNER}[name]
+    return schema.yaml_values(os.path.join(CONFIG, name))
 
 
 def wait_for_file(path, graph, timeout, what):

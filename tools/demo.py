@@ -62,16 +62,6 @@ def shown(path):
 
 
 # -- settings -------------------------------------------------------------------------
-def _ros_params(path):
-    import yaml
-    with open(path) as f:
-        data = yaml.safe_load(f)
-    for section in data.values():
-        if isinstance(section, dict) and 'ros__parameters' in section:
-            return section['ros__parameters']
-    raise SystemExit('demo: %s has no ros__parameters section' % path)
-
-
 def offline_settings(config_dir=CONFIG):
     """
     Return the ``run_case`` keyword arguments matching the parameter files of the graph.
@@ -280,9 +270,9 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
             # The readers have matched every publisher; the writers' side of the match
             # (what makes a volatile writer send to the recorder) can lag by tens of ms.
             calls.spin_until(lambda: False, SETTLE)
-        plan = _ros_params(os.path.join(CONFIG, 'planner.yaml'))
-        if arm is not None:
-            plan.update(_ros_params(os.path.join(CONFIG, arm, 'planner.yaml')))
+        from freejoint_planner.params import SCHEMA as PLANNER
+        plan = PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'), *(
+            [] if arm is None else [os.path.join(CONFIG, arm, 'planner.yaml')]))
         answer = calls.plan_circle(plan, 30.0)
         if answer is None or not answer.accepted:
             raise RuntimeError('the planner did not start the circle: %s (logs in %s)' % (

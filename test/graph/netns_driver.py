@@ -15,10 +15,10 @@ import time
 def main(planner_yaml, ticks):
     from freejoint_common.contract import JOINT_STATES, to_ns
     from freejoint_msgs.srv import PlanCircle
+    from freejoint_planner.params import SCHEMA
     from freejoint_tools.recorder import wait_drained
     import rclpy
     from std_srvs.srv import Trigger
-    import yaml
 
     rclpy.init()
     node = rclpy.create_node('netns_driver')
@@ -53,8 +53,7 @@ def main(planner_yaml, ticks):
     settle = time.monotonic() + 1.0   # the writers' side of the match can lag a little
     while time.monotonic() < settle:
         spin()
-    with open(planner_yaml) as f:
-        circle = yaml.safe_load(f)['/**']['ros__parameters']
+    circle = SCHEMA.yaml_values(planner_yaml)     # the file over the schema's defaults
     plan = node.create_client(PlanCircle, '/freejoint_planner/plan_circle')
     answer = call(plan, PlanCircle.Request(
         centre=[float(v) for v in circle['centre']], radius=float(circle['radius']),

@@ -11,6 +11,7 @@ import re
 
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, DIAGNOSTICS, JOINT_STATES
 from freejoint_common.contract import profile, SETPOINT, stamp_from_ns, stamp_label, to_ns
+from freejoint_control.params import SCHEMA
 from freejoint_core.arm import table1
 from freejoint_core.control import (Gains, RobustController, STATUS_BAD_INPUT,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE)
@@ -327,12 +328,13 @@ def test_with_on_stale_zero_stale_setpoint_and_stale_state_command_zero_effort_a
 
 
 # -- hold, resume, limits, dt from stamps, reset, faults (issues 10 and 11) ------------------
-LIMITS = (300.0, 200.0)     # effort_limits of config/controller.yaml
+FILE = SCHEMA.yaml_values(PARAMS)  # what the node takes from config/controller.yaml
+LIMITS = tuple(FILE['effort_limits'])
 STALE_JUMP_NS = 2_100_000_000   # a jump of the stamps beyond the tests' stale_timeout 2 s
 OLD_STAMPS = ('-p', 'max_state_age:=0.0')
 """Real time with the tests' stamps (from 0, i.e. 1970): no state is skipped as too old."""
-RATE = 20000.0              # effort_rate_limit of config/controller.yaml [N m/s]
-STIFFNESS = 2.0             # hold_stiffness of config/controller.yaml
+RATE = FILE['effort_rate_limit']        # [N m/s]
+STIFFNESS = FILE['hold_stiffness']
 
 
 class Replica:

@@ -134,9 +134,10 @@ def test_planner_yaml_loads_and_a_late_subscriber_gets_the_map_and_the_path(
     from freejoint_common.contract import LATCHED_QOS
     from nav_msgs.msg import OccupancyGrid
     from visualization_msgs.msg import Marker
-    import yaml
-    with open(YAML) as f:
-        expected = yaml.safe_load(f)['/**']['ros__parameters']
+    from freejoint_planner.params import SCHEMA
+    # the file over the schema's defaults (cpu_affinity: not set), and its use_sim_time
+    expected = {k: v for k, v in SCHEMA.yaml_values(YAML).items() if v is not None}
+    expected['use_sim_time'] = True
     proc = _start_planner(procs, ('--params-file', YAML))
     _wait_ready(ros_node, procs, proc, wait)
     # late: subscribed only now, after the planner published both at start

@@ -6,6 +6,9 @@ The parameter schemas (freejoint_common.schema) are the one place of each parame
 - The node modules declare nothing themselves (no declare_parameter, descriptor or
   set-parameters callback of their own) and never pair a parameter name with a value.
 - Every name in config/*.yaml is an entry of its node's schema, and the files build.
+- A params file sets only what differs from the schema's default (config/four_link/*.yaml:
+  from config/*.yaml's value under it): a default lives in one place.
+- docs/parameters.md is what tools/gen_parameters.py generates from the schemas.
 
 Adding a parameter is then: its entry in the node's params.py, and the code that uses it
 (config field and the node's use of it); the loader declares, validates and applies it.
@@ -116,6 +119,50 @@ def test_the_node_module_checks_find_a_declaration_and_a_copied_default():
     assert _paired_values(ast.parse(declared), names) == [(1, 'nominal_scale')]
     assert _loader_calls(ast.parse(declared)) == ['declare_parameter', 'ParameterDescriptor']
     assert _paired_values(ast.parse(getter), names) == [(1, 'nominal_scale')]
+
+
+def _repeated_values(schema, path, under=()):
+    """Return the names ``path`` sets to the value they have without it (``under`` files)."""
+    import yaml
+    with open(path) as fh:
+        given = yaml.safe_load(fh)['/**']['ros__parameters']
+    before = schema.yaml_values(*under)
+    return sorted(n for n, v in given.items() if n in schema and v == before[n])
+
+
+@pytest.mark.parametrize('name', sorted(CONFIGS))
+def test_a_params_file_sets_no_parameter_to_the_value_it_has_anyway(name):
+    base = os.path.join(ROOT, 'config', name)
+    assert _repeated_values(CONFIGS[name], base) == [], (
+        '%s repeats schema defaults: remove them (the default lives in the schema)' % base)
+    overlay = os.path.join(ROOT, 'config', 'four_link', name)
+    assert _repeated_values(CONFIGS[name], overlay, [base]) == [], (
+        '%s repeats values it has from %s or the schema: remove them' % (overlay, base))
+
+
+def test_the_repeated_value_check_finds_a_default_and_an_overlay_repeat(tmp_path):
+    base = tmp_path / 'controller.yaml'
+    base.write_text('/**:\n  ros__parameters:\n    executor: events\n    K: [100.0, 100.0]\n'
+                    '    hold_stiffness: 3.0\n')
+    overlay = tmp_path / 'overlay.yaml'
+    overlay.write_text('/**:\n  ros__parameters:\n    hold_stiffness: 3.0\n    robust: false\n')
+    assert _repeated_values(CONTROLLER, str(base)) == ['K']
+    assert _repeated_values(CONTROLLER, str(overlay), [str(base)]) == ['hold_stiffness']
+
+
+def test_the_parameter_reference_is_generated_from_the_schemas():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        'gen_parameters', os.path.join(ROOT, 'tools', 'gen_parameters.py'))
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    with open(gen.OUTPUT) as fh:
+        committed = fh.read()
+    assert committed == gen.render(), (
+        'docs/parameters.md is stale (a schema changed): run `%s`' % gen.COMMAND)
+    for _, _, _, _, node_schema in gen.nodes():
+        for p in node_schema:
+            assert '| `%s` |' % p.name in committed, p.name
 
 
 @pytest.mark.parametrize('name', sorted(CONFIGS))

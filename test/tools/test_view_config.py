@@ -104,9 +104,9 @@ def test_urdf_joint_names_are_the_nodes_joint_names_defaults():
     moving = list(KinematicTree(_urdf()).moving)
     for specs in (SIM_SPECS, CONTROL_SPECS):
         assert next(s.default for s in specs if s.name == 'joint_names') == moving
-    with open(os.path.join(ROOT, 'config', 'sim.yaml')) as f:
-        sim = yaml.safe_load(f)['/**']['ros__parameters']
-    assert sim.get('joint_names', moving) == moving
+    from freejoint_sim.params import SCHEMA
+    sim = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'sim.yaml'))
+    assert sim['joint_names'] == moving
 
 
 def test_rviz_config_shows_robot_model_tf_and_the_graphs_markers():

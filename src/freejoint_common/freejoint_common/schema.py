@@ -221,18 +221,27 @@ class Schema:
             raise FreejointValueError(problem)
         return dict(values) if self._build is None else self._build(values)
 
-    def from_yaml(self, path, node='/**'):
+    def yaml_values(self, *paths, node='/**'):
         """
-        Return the config of a ``--params-file`` YAML file (defaults for what it omits).
+        Return the values a node started with ``--params-file`` ``paths`` takes.
 
-        ``node`` is the file's top-level key (``/**`` matches every node); names the
-        schema does not have (``use_sim_time``, ``qos_overrides``) are ignored.
+        The defaults overlaid with the ``ros__parameters`` of each file in turn (a later file
+        overrides an earlier one, as repeated ``--params-file`` arguments do). ``node`` is the
+        files' top-level key (``/**`` matches every node); names the schema does not have
+        (``use_sim_time``, ``qos_overrides``) are ignored. Not validated (see :meth:`config`).
         """
         import yaml
-        with open(path) as fh:
-            doc = yaml.safe_load(fh) or {}
-        given = (doc.get(node) or {}).get('ros__parameters') or {}
-        return self.config(self.values({k: v for k, v in given.items() if k in self}))
+        values = self.defaults()
+        for path in paths:
+            with open(path) as fh:
+                doc = yaml.safe_load(fh) or {}
+            given = (doc.get(node) or {}).get('ros__parameters') or {}
+            values.update({k: v for k, v in given.items() if k in self})
+        return values
+
+    def from_yaml(self, *paths, node='/**'):
+        """Return the config of ``--params-file`` YAML files (defaults for what they omit)."""
+        return self.config(self.yaml_values(*paths, node=node))
 
 
 SCHEDULING = (

@@ -110,7 +110,8 @@ PARAMS = (
           'the paper runs peak at 13 / 11 (horizontal) and 133 / 74 (vertical)'),
     Param('effort_rate_limit', 20000.0,
           'largest torque change [N m/s] per joint after a (re)start, a hold, a reset or a '
-          'zero-effort answer, until the command has caught up with the law', (1.0, 1e9),
+          'zero-effort answer, until the command has caught up with the law (then off: the '
+          "paper's vertical runs change torque at up to 1.1e5 N m/s while tracking)", (1.0, 1e9),
           validator=above(0.0)),
     Param('stale_timeout', 0.5,
           'wall time [s] (lockstep) or state-stamp time (real time) without a fresh setpoint '
@@ -118,8 +119,10 @@ PARAMS = (
           'time without a state after which zero effort is commanded', (1e-3, 3600.0),
           validator=above(0.0)),
     Param('on_stale_setpoint', 'hold',
-          "no fresh setpoint: 'hold' the end effector where it is (full law, gravity "
-          "included) or command 'zero' effort", validator=one_of(ON_STALE)),
+          "no fresh setpoint (and before the first one in real time): 'hold' the end "
+          'effector where it is (reference fk(q) frozen at the onset, full law with gravity, '
+          "STATUS_HOLDING) or command 'zero' effort (the arm goes limp); lockstep waits for "
+          'the first setpoint', validator=one_of(ON_STALE)),
     Param('resume_time', 0.5,
           'time [s of state stamps] of the quintic blend from the hold to the streamed '
           'setpoint (0: switch at once)', (0.0, 60.0)),
@@ -140,23 +143,30 @@ PARAMS = (
           '(STATUS_SETPOINT_LATE, carried forward for at most carry_forward_time)', (1, 10000)),
     Param('max_state_age', 0.1,
           'real time: a state older than this [s] when it is taken (a backlog after a stall '
-          'or at start-up) is skipped without a command (0 = never skip)', (0.0, 3600.0)),
+          'or at start-up) is skipped without a command (0 = never skip); normal ages are '
+          '0.5-18 ms', (0.0, 3600.0)),
     Param('carry_forward_time', 0.02,
           'real time: a late setpoint (older than the state) is carried forward along its '
           'velocity and acceleration for at most this long [s]; older, the controller holds '
-          '(with on_stale_setpoint: hold)', (0.0, 3600.0)),
+          "(with on_stale_setpoint: hold). Short: it bridges a planner's jitter, a dead "
+          'planner must not drag the arm along', (0.0, 3600.0)),
     Param('theta_max', [100.0] * 5,
-          'element-wise bound of theta_hat (5 values > 0, <= 1e6), clamped inside the update',
+          'element-wise bound of theta_hat (5 values > 0, <= 1e6), clamped inside the update; '
+          "the paper's runs reach at most 0.0039, 0.30, 0.0019, 8.0e-5, 6.7e-6",
           validator=_theta_max),
     Param('joint_position_lower', [-1000.0, -1000.0, -1000.0],
-          'plausible joint positions [rad], lower bound per joint of joint_names'),
+          'plausible joint positions [rad], lower bound per joint of joint_names; a state '
+          'outside is refused like NaN (zero effort, STATUS_BAD_INPUT). Wide by default (joint1 '
+          "turns continuously in the paper's runs, up to 32 rad): set the arm's URDF limits"),
     Param('joint_position_upper', [1000.0, 1000.0, 1000.0],
           'plausible joint positions [rad], upper bound per joint of joint_names'),
     Param('joint_velocity_limit', [100.0, 100.0, 100.0],
           'plausible joint speed [rad/s] per joint of joint_names (> 0)',
           validator=_positive_floats('joint_velocity_limit')),
-    Param('setpoint_max_velocity', 5.0, 'largest plausible setpoint speed [m/s]',
-          (1e-6, 1e3)),
+    Param('setpoint_max_velocity', 5.0,
+          'largest plausible setpoint speed [m/s]; a setpoint beyond it, its acceleration '
+          "bound or the arm's reach is refused with the reason and dropped (none fresh left: "
+          "hold); the paper's circle peaks at 0.47 m/s", (1e-6, 1e3)),
     Param('setpoint_max_acceleration', 50.0,
           'largest plausible setpoint acceleration [m/s^2]', (1e-6, 1e5)),
     Param('delay_compensation', 'off',
