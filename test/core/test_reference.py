@@ -201,3 +201,46 @@ def test_the_hold_is_stiffer_and_the_blend_hands_back_smoothly_to_the_law_gains(
     assert max(abs(a - b) for a, b in zip(seen, seen[1:])) < 2 * 1.875 / 500
     # at the middle of the blend the smoothstep is exactly 1/2
     assert seen[250] == pytest.approx(1.5, abs=1e-12)
+
+
+def test_start_from_the_measured_motion_keeps_position_and_velocity_continuous():
+    # A standby activated while the arm moves at (0.3, -0.1) m/s, 2 cm from the stream.
+    sp = (0.50, 0.20, 0.40, 0.10, 1.0, -2.0)
+    sh = ReferenceShaper(1.0, max_velocity=1.0, max_acceleration=5.0)
+    sh.hold((0.0, 0.0))
+    sh.start_from((0.52, 0.21), (0.30, -0.10))
+    ref, blending = sh.track(10.0, sp, None)
+    # At activation the reference is the measured motion, acceleration 0.
+    assert blending and sh.mode == MODE_BLEND
+    assert ref == pytest.approx((0.52, 0.21, 0.30, -0.10, 0.0, 0.0), abs=1e-15)
+    # Offset (0.02, 0.01) m, (-0.1, -0.2) m/s, (-1, 2) m/s^2 decaying over T = 1 s (the
+    # 2.2 cm offset is within the bounds): half-way, by hand, d(t) = d0 + v0 t + a0 t^2 / 2
+    # + c3 t^3 + c4 t^4 + c5 t^5 with c3 = -(20 d0 + 12 v0 + 3 a0) / 2,
+    # c4 = (30 d0 + 16 v0 + 3 a0) / 2, c5 = -(12 d0 + 6 v0 + a0) / 2 (T = 1).
+    def by_hand(d0, v0, a0, t):
+        c3 = -(20 * d0 + 12 * v0 + 3 * a0) / 2
+        c4 = (30 * d0 + 16 * v0 + 3 * a0) / 2
+        c5 = -(12 * d0 + 6 * v0 + a0) / 2
+        return d0 + v0 * t + a0 * t * t / 2 + c3 * t ** 3 + c4 * t ** 4 + c5 * t ** 5
+    # x: d0 = 0.02, v0 = -0.1, a0 = -1 -> c3 = 1.9, c4 = -2.0, c5 = 0.68:
+    # 0.02 - 0.05 - 0.125 + 0.2375 - 0.125 + 0.02125 = -0.02125
+    assert by_hand(0.02, -0.1, -1.0, 0.5) == pytest.approx(-0.02125, abs=1e-15)
+    ref, blending = sh.track(10.5, sp, None)
+    assert blending
+    assert ref[0] == pytest.approx(0.50 - 0.02125, abs=1e-12)
+    assert ref[1] == pytest.approx(0.20 + by_hand(0.01, -0.2, 2.0, 0.5), abs=1e-12)
+    # Then the stream itself.
+    assert sh.track(11.0, sp, None) == (sp, False)
+
+
+def test_start_from_is_refused_for_non_finite_motion_and_a_hold_forgets_it():
+    sh = ReferenceShaper(0.5)
+    with pytest.raises(FreejointValueError, match='p, v'):
+        sh.start_from((0.1, math.nan), (0.0, 0.0))
+    with pytest.raises(FreejointValueError, match='p, v'):
+        sh.start_from((0.1, 0.2), (0.0,))
+    sh.start_from((0.1, 0.2), (1.0, 0.0))
+    # No setpoint at activation: a hold at zero velocity where the arm is now.
+    assert sh.hold((0.3, 0.4)) == (0.3, 0.4, 0.0, 0.0, 0.0, 0.0)
+    ref, _ = sh.track(0.0, (0.5, 0.5, 0.0, 0.0, 0.0, 0.0), None)
+    assert ref[:4] == pytest.approx((0.3, 0.4, 0.0, 0.0))

@@ -12,7 +12,9 @@ A real arm must not go limp when its setpoints stop, nor jump when they come bac
   offset that starts at (last reference - setpoint) in position, velocity and
   acceleration and decays to zero over ``resume_time`` along a quintic (C2): the
   reference's position, velocity and acceleration stay continuous (:func:`quintic_offset`);
-- **stream**: the setpoint itself.
+- **stream**: the setpoint itself;
+- **start from the measured motion** (:meth:`ReferenceShaper.start_from`): a controller
+  taking over a moving arm blends from the end effector's measured position and velocity.
 
 Besides, :func:`clamp_dt`, :func:`limit_effort`, :func:`state_refusal` and
 :func:`setpoint_refusal` are the controller's input and output guards (plausibility of a
@@ -147,6 +149,34 @@ class ReferenceShaper:
         self._last = None        # (px, py, vx, vy, ax, ay) of the last reference
         self._t0 = 0.0
         self._off0 = None
+        self._start = None       # (px, py, vx, vy, 0, 0) given by start_from
+
+    def start_from(self, p, v):
+        """
+        Start (again) from the arm's measured motion: the next ``track`` blends from it.
+
+        A controller that takes over an arm in motion (a standby activated after the
+        active controller died) starts its reference where the end effector is and as it
+        moves, ``(p, v, 0)``, instead of a hold at zero velocity: the first ``track``
+        starts a blend whose offset is ``(p - sp, v - v_sp, -a_sp)`` (position and velocity
+        of the reference continuous with the measured motion; the blend's duration by the
+        usual rules of its position offset). Forgets any hold or blend; a ``hold`` before
+        the next ``track`` holds (zero velocity) and forgets this start.
+
+        Parameters
+        ----------
+        p : sequence of float, (2,)
+            Measured end-effector position ``fk(q)`` [m].
+        v : sequence of float, (2,)
+            Measured end-effector velocity ``J(q) qd`` [m/s].
+
+        """
+        vals = [float(x) for x in p] + [float(x) for x in v]
+        if len(vals) != 4 or not all(map(_isfinite, vals)):
+            raise FreejointValueError(
+                f'p, v: expected 2 finite values each, got {list(p)!r}, {list(v)!r}')
+        self.reset()
+        self._start = (vals[0], vals[1], vals[2], vals[3], 0.0, 0.0)
 
     @property
     def hold_position(self):
@@ -201,6 +231,7 @@ class ReferenceShaper:
         """
         if self.mode != MODE_HOLD:
             self.mode = MODE_HOLD
+            self._start = None
             self._hold = (float(p_now[0]), float(p_now[1]))
         ref = (self._hold[0], self._hold[1], 0.0, 0.0, 0.0, 0.0)
         self._last = ref
@@ -218,7 +249,8 @@ class ReferenceShaper:
             Setpoint ``(px, py, vx, vy, ax, ay)`` [m, m/s, m/s^2].
         p_now : tuple of float, (2,)
             Measured end-effector position [m]: the start of the blend when the
-            controller starts (``blend_on_start``) with no reference yet.
+            controller starts (``blend_on_start``) with no reference yet (unused after
+            :meth:`start_from`).
 
         Returns
         -------
@@ -233,11 +265,15 @@ class ReferenceShaper:
             self._last = sp
             return sp, False
         if mode == MODE_NONE:
-            if not self.blend_on_start:
+            start, self._start = self._start, None
+            if start is not None:
+                self._last = start
+            elif not self.blend_on_start:
                 self.mode = MODE_STREAM
                 self._last = sp
                 return sp, False
-            self._last = (float(p_now[0]), float(p_now[1]), 0.0, 0.0, 0.0, 0.0)
+            else:
+                self._last = (float(p_now[0]), float(p_now[1]), 0.0, 0.0, 0.0, 0.0)
             mode = MODE_HOLD
         if mode == MODE_HOLD:
             if self.resume_time <= 0.0:
