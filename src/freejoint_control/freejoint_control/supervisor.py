@@ -1,0 +1,354 @@
+"""
+controller_supervisor: the controller under a supervisor with respawn, plus a hot spare.
+
+``controller_supervisor [--name N] [--pid-file F] [--stop-timeout S] [--] <arguments of
+controller_node>`` starts two ``controller_node`` processes with the same arguments: the
+active one, node name ``N`` (default ``controller_node``), and a hot spare with ``-p
+standby:=true``, node name ``N_spare`` (the names alternate: a spare started after a
+takeover gets the name that is free, so the graph always has ``/N`` and ``/N_spare``; the
+active one is whichever the log line and the pid file name). A spare is built, its
+subscriptions and publishers discovered, and idle (docs/GRAPH.md, parameter ``standby``).
+
+When a child dies, its death is seen at once (a pidfd per child, no polling, no command
+silence): if it was the active one the spare is activated with SIGUSR1 (no DDS involved)
+and ``controller <pid> died (signal 9): standby <pid> active (/<name>)`` is logged; then a
+new spare is started. A stopped or stalled controller is not dead: it stays active (two
+controllers never command at once through the supervisor). A spare not ready yet
+(``notify_ready`` not received: its SIGUSR1 handler is not installed) is activated as soon
+as it is. A child exiting with status 2 (a bad parameter) stops everything with status 2:
+respawning cannot fix a configuration. SIGINT / SIGTERM are forwarded to the children;
+the supervisor exits when they have exited (SIGKILL after ``--stop-timeout``, default
+5 s) with the active child's status.
+
+The pid file (``--pid-file``), rewritten atomically at every change, is JSON:
+``{"supervisor": pid, "active": {"pid", "name"}, "standby": {"pid", "name", "ready"}}``.
+Plain Python (no rclpy: the supervisor is not a ROS participant).
+"""
+
+import argparse
+import json
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+
+READY_FD_ENV = 'FREEJOINT_READY_FD'
+"""Environment variable naming the file descriptor a child writes ``ready`` to."""
+EXIT_BAD_PARAMETER = 2
+MAX_SPAWNS = 10
+"""At most this many child starts within :data:`SPAWN_WINDOW` s (a crash loop stops)."""
+SPAWN_WINDOW = 10.0
+
+
+def notify_ready():
+    """
+    Tell a supervisor the node is ready (its signal handler installed), once.
+
+    Writes ``ready`` to the descriptor named by ``FREEJOINT_READY_FD`` and closes it (as
+    systemd's ``sd_notify(READY=1)``); nothing without a supervisor.
+    """
+    fd = os.environ.pop(READY_FD_ENV, None)
+    if fd is None:
+        return
+    try:
+        os.write(int(fd), b'ready\n')
+        os.close(int(fd))
+    except (OSError, ValueError):
+        pass
+
+
+def log(level, text):
+    """One line on stderr in the format of rcutils' console output."""
+    print('[%s] [%.9f] [controller_supervisor]: %s' % (level, time.time(), text),
+          file=sys.stderr, flush=True)
+
+
+def describe(status):
+    """Return 'signal 9' / 'exit 0' of a waitpid status."""
+    if os.WIFSIGNALED(status):
+        return 'signal %d' % os.WTERMSIG(status)
+    return 'exit %d' % os.waitstatus_to_exitcode(status)
+
+
+def controller_command():
+    """Return the command starting ``controller_node`` (the sibling console script)."""
+    here = os.path.dirname(os.path.abspath(sys.argv[0]))
+    exe = os.path.join(here, 'controller_node')
+    if os.path.isfile(exe) and os.access(exe, os.X_OK):
+        return [exe]
+    return [sys.executable, '-c',
+            'import sys; from freejoint_control.controller_node import main; sys.exit(main())']
+
+
+class Child:
+    """One controller process: its pid, pidfd, node name, role and readiness pipe."""
+
+    def __init__(self, cmd, name, standby):
+        self.name = name
+        self.standby = standby
+        read, write = os.pipe()
+        env = dict(os.environ)
+        env[READY_FD_ENV] = str(write)
+        extra = ['--ros-args', '-r', '__node:=' + name]
+        if standby:
+            extra += ['-p', 'standby:=true']
+        self.proc = subprocess.Popen(cmd + extra, env=env, pass_fds=(write,),
+                                     preexec_fn=_ignore_usr1)
+        os.close(write)
+        self.pid = self.proc.pid
+        self.ready_fd = read
+        self.ready = False
+        self.pidfd = os.pidfd_open(self.pid)
+        self.started = time.monotonic()
+        self.status = None
+
+    def reap(self):
+        """Collect the exit status (the pidfd said it exited); close the descriptors."""
+        _, self.status = os.waitpid(self.pid, 0)
+        self.proc.returncode = os.waitstatus_to_exitcode(self.status)
+        self.close()
+        return self.status
+
+    def close(self):
+        for fd in (self.pidfd, self.ready_fd):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self.pidfd = self.ready_fd = None
+
+    def signal(self, signum):
+        """Send ``signum`` unless the child was reaped."""
+        if self.status is None:
+            try:
+                os.kill(self.pid, signum)
+            except ProcessLookupError:
+                pass
+
+
+def _ignore_usr1():
+    # Until the spare's node installs its handler, SIGUSR1 must not kill it (default
+    # action): ignored, inherited across exec; the supervisor waits for 'ready'.
+    signal.signal(signal.SIGUSR1, signal.SIG_IGN)
+
+
+class Supervisor:
+    """The active controller, its spare, the respawn and the takeover (module notes)."""
+
+    def __init__(self, node_args, name='controller_node', pid_file=None, stop_timeout=5.0):
+        self.cmd = controller_command() + list(node_args)
+        self.names = (name, name + '_spare')
+        self.pid_file = pid_file
+        self.stop_timeout = stop_timeout
+        self.active = None
+        self.spare = None
+        self.pending_activation = False
+        self.stop_signal = None
+        self.spawns = []
+        self.code = 0
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_w, False)
+        os.set_blocking(self._wake_r, False)
+
+    # -- children ---------------------------------------------------------------
+    def _spawn(self, standby):
+        now = time.monotonic()
+        self.spawns = [t for t in self.spawns if now - t < SPAWN_WINDOW] + [now]
+        if len(self.spawns) > MAX_SPAWNS:
+            log('ERROR', '%d controller starts within %g s: crash loop, stopping'
+                % (len(self.spawns), SPAWN_WINDOW))
+            self.code = 1
+            self._stop(signal.SIGTERM)
+            return None
+        used = {c.name for c in (self.active, self.spare) if c is not None}
+        name = next(n for n in self.names if n not in used)
+        child = Child(self.cmd, name, standby)
+        log('INFO', 'started %s controller %d (/%s)' % ('standby' if standby else 'active',
+                                                        child.pid, name))
+        return child
+
+    def _write_pid_file(self):
+        if not self.pid_file:
+            return
+        doc = {'supervisor': os.getpid(),
+               'active': None if self.active is None else {
+                   'pid': self.active.pid, 'name': self.active.name},
+               'standby': None if self.spare is None else {
+                   'pid': self.spare.pid, 'name': self.spare.name, 'ready': self.spare.ready}}
+        tmp = self.pid_file + '.tmp'
+        with open(tmp, 'w') as f:
+            json.dump(doc, f)
+        os.replace(tmp, self.pid_file)
+
+    def _activate_spare(self, dead_pid, how):
+        spare = self.spare
+        self.spare = None
+        self.active = spare
+        if spare.ready:
+            spare.signal(signal.SIGUSR1)
+            log('WARN', 'controller %d died (%s): standby %d active (/%s)'
+                % (dead_pid, how, spare.pid, spare.name))
+        else:
+            self.pending_activation = True
+            log('WARN', 'controller %d died (%s): standby %d (/%s) not ready yet: activated '
+                'when it is' % (dead_pid, how, spare.pid, spare.name))
+
+    def _on_exit(self, child):
+        status = child.reap()
+        how = describe(status)
+        if self.stop_signal is not None:
+            log('INFO', 'controller %d (/%s) exited (%s)' % (child.pid, child.name, how))
+            if child is self.active:
+                self.code = self.code or max(0, os.waitstatus_to_exitcode(status))
+            return
+        if os.WIFEXITED(status) and os.WEXITSTATUS(status) == EXIT_BAD_PARAMETER:
+            log('ERROR', 'controller %d (/%s) refused its parameters (exit 2): stopping'
+                % (child.pid, child.name))
+            self.code = EXIT_BAD_PARAMETER
+            if child is self.active:
+                self.active = None
+            else:
+                self.spare = None
+            self._stop(signal.SIGTERM)
+            return
+        if child is self.active:
+            self.active = None
+            self.pending_activation = False
+            if self.spare is not None:
+                self._activate_spare(child.pid, how)
+            else:
+                log('ERROR', 'controller %d died (%s) with no standby: starting one'
+                    % (child.pid, how))
+                self.active = self._spawn(False)
+        else:
+            self.spare = None
+            log('WARN', 'standby controller %d (/%s) died (%s): starting another'
+                % (child.pid, child.name, how))
+        if self.stop_signal is None and self.spare is None:
+            self.spare = self._spawn(True)
+        self._write_pid_file()
+
+    def _on_ready(self, child):
+        try:
+            data = os.read(child.ready_fd, 64)
+        except OSError:
+            data = b''
+        os.close(child.ready_fd)
+        child.ready_fd = None
+        if not data:
+            return      # closed without 'ready' (it died first): its pidfd says so
+        child.ready = True
+        if child is self.active and self.pending_activation:
+            self.pending_activation = False
+            child.signal(signal.SIGUSR1)
+            log('WARN', 'standby %d ready: active (/%s)' % (child.pid, child.name))
+        elif child is self.spare:
+            log('INFO', 'standby %d ready (/%s)' % (child.pid, child.name))
+        self._write_pid_file()
+
+    # -- stop -------------------------------------------------------------------
+    def _on_signal(self, signum, frame):
+        if self.stop_signal is None:
+            self.stop_signal = signum
+        try:
+            os.write(self._wake_w, b'.')
+        except OSError:
+            pass
+
+    def _stop(self, signum):
+        if self.stop_signal is None:
+            self.stop_signal = signum
+        for child in (self.active, self.spare):
+            if child is not None:
+                child.signal(signum)
+
+    def _children(self):
+        return [c for c in (self.active, self.spare) if c is not None and c.status is None]
+
+    # -- loop -------------------------------------------------------------------
+    def run(self):
+        """Supervise until SIGINT / SIGTERM (or a fatal child exit); return the status."""
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, self._on_signal)
+        self.active = self._spawn(False)
+        self.spare = self._spawn(True)
+        self._write_pid_file()
+        forwarded = False
+        deadline = None
+        while True:
+            if self.stop_signal is not None and not forwarded:
+                forwarded = True
+                log('INFO', 'stopping: signal %d forwarded to the controllers'
+                    % self.stop_signal)
+                self._stop(self.stop_signal)
+                deadline = time.monotonic() + self.stop_timeout
+            children = self._children()
+            if forwarded and not children:
+                break
+            timeout = 1.0
+            if deadline is not None:
+                timeout = max(0.0, min(timeout, deadline - time.monotonic()))
+                if timeout == 0.0:
+                    for child in children:
+                        log('ERROR', 'controller %d did not stop within %g s: SIGKILL'
+                            % (child.pid, self.stop_timeout))
+                        child.signal(signal.SIGKILL)
+                    deadline = None
+                    timeout = 1.0
+            fds = {self._wake_r: None}
+            for child in children:
+                fds[child.pidfd] = ('exit', child)
+                if child.ready_fd is not None:
+                    fds[child.ready_fd] = ('ready', child)
+            readable, _, _ = select.select(list(fds), [], [], timeout)
+            # Deaths first: a takeover must not wait behind a readiness note.
+            events = sorted((fds[fd] for fd in readable if fds[fd] is not None),
+                            key=lambda e: e[0] != 'exit')
+            if self._wake_r in readable:
+                try:
+                    os.read(self._wake_r, 64)
+                except BlockingIOError:
+                    pass
+            for kind, child in events:
+                if child.status is not None:
+                    continue
+                if kind == 'exit':
+                    self._on_exit(child)
+                elif child.ready_fd is not None:
+                    self._on_ready(child)
+        if self.pid_file:
+            try:
+                os.unlink(self.pid_file)
+            except OSError:
+                pass
+        return self.code
+
+
+def parse(argv):
+    """Return the supervisor's options and the controller's arguments."""
+    ap = argparse.ArgumentParser(
+        prog='controller_supervisor', allow_abbrev=False,
+        description='Run controller_node with a hot spare that takes over when it dies.')
+    ap.add_argument('--name', default='controller_node',
+                    help='node name of the first active controller (the spare: NAME_spare)')
+    ap.add_argument('--pid-file', default=None, help='JSON file: active and standby pids')
+    ap.add_argument('--stop-timeout', type=float, default=5.0,
+                    help='s to wait for the children after SIGINT / SIGTERM (then SIGKILL)')
+    opts, rest = ap.parse_known_args(argv)
+    if rest and rest[0] == '--':
+        rest = rest[1:]
+    return opts, rest
+
+
+def main(args=None):
+    """Run the supervisor; exit with the active controller's status (2: bad parameter)."""
+    opts, node_args = parse(sys.argv[1:] if args is None else args)
+    sup = Supervisor(node_args, opts.name, opts.pid_file, opts.stop_timeout)
+    return sup.run()
+
+
+if __name__ == '__main__':
+    sys.exit(main())
