@@ -50,8 +50,6 @@ def type_name(default):
 
 def shown(value):
     """Return a value as a ``--params-file`` YAML writes it."""
-    if value is None:
-        return 'not set'
     if isinstance(value, bool):
         return 'true' if value else 'false'
     if isinstance(value, str):
@@ -98,8 +96,9 @@ def render():
                   '| name | type | default | range | read-only | description |',
                   '|---|---|---|---|---|---|']
         for p in schema:
-            lines.append('| `%s` | %s | `%s` | %s | %s | %s |' % (
-                p.name, type_name(p.default), cell(shown(p.default)), bounds(p),
+            default = 'not set' if p.default is None else '`%s`' % cell(shown(p.default))
+            lines.append('| `%s` | %s | %s | %s | %s | %s |' % (
+                p.name, type_name(p.default), default, bounds(p),
                 'yes' if p.read_only else '', cell(p.description)))
     return '\n'.join(lines) + '\n'
 
