@@ -1,9 +1,10 @@
 """
 Every command line of the README's two install sections, run as the user types it.
 
-The sections "On a full ROS 2 Jazzy install" and "Without ROS installed (ROS 2 from PyPI)"
-are read from README.md, their ```bash blocks split into commands, and each is run in
-order in a scratch directory (``config/`` linked in), under ``. tools/env.sh``:
+The sections "On a full ROS 2 Jazzy install", "Without ROS installed (ROS 2 from PyPI)" and
+"Bring your own arm" (its ``my_arm.urdf``: a copy of the shipped paper arm's URDF) are read
+from README.md, their ```bash blocks split into commands, and each is run in order in a
+scratch directory (``config/`` linked in), under ``. tools/env.sh``:
 
 - a node's start (``ros2 run <pkg> <exe> ...``, ``fj run ...`` or the bare executable) is
   started in the background and must come up (its parameter services answer); a block
@@ -20,6 +21,7 @@ order in a scratch directory (``config/`` linked in), under ``. tools/env.sh``:
 import os
 import re
 import shlex
+import shutil
 import signal
 import subprocess
 import time
@@ -46,6 +48,9 @@ COVERED = {
 """Line prefix -> the test of what it needs (a rosdep key, the install layout, the bag)."""
 JAZZY = '## On a full ROS 2 Jazzy install'
 PYPI = '## Without ROS installed (ROS 2 from PyPI)'
+OWN_ARM = '## Bring your own arm'
+MY_ARM = os.path.join(ROOT, 'src', 'freejoint_description', 'urdf', 'paper_arm.urdf')
+"""The URDF the test gives the README's ``my_arm.urdf``."""
 
 
 def readme_blocks(title):
@@ -191,3 +196,18 @@ def test_every_line_of_the_pypi_section_works_as_typed_after_env_sh(runner):
     assert kinds.count('started') == 4 and kinds.count('ran') >= 10, runner.ran
     with open(os.path.join(runner.cwd, 'my_controller.yaml')) as f:
         assert f.read().startswith('/controller_node:\n  ros__parameters:\n')
+
+
+def test_every_line_of_the_own_arm_section_brings_up_the_nodes_on_the_urdf_it_names(runner):
+    shutil.copy(MY_ARM, os.path.join(runner.cwd, 'my_arm.urdf'))
+    blocks = readme_blocks(OWN_ARM)
+    own = [lines for lines in blocks if any('my_arm.urdf' in line for line in lines)]
+    assert own, 'no block of %r starts a node on my_arm.urdf' % OWN_ARM
+    for lines in blocks:
+        runner.run_block(lines)
+        if lines is own[0]:
+            passive = runner.shell('fj param get /sim_node passive_joints')
+            assert passive.returncode == 0 and "['joint2']" in passive.stdout, passive
+    kinds = [kind for kind, _ in runner.ran]
+    assert len(runner.ran) == sum(len(b) for b in blocks)
+    assert kinds.count('started') >= 7, runner.ran
