@@ -6,7 +6,7 @@ disturbance seed 0, this starts the three nodes as separate processes - exactly 
 executables ``ros2 run`` starts (``install/<pkg>/lib/<pkg>/<exe>``) with the parameter files
 of ``config/`` and per-case overrides (``-p case:=vertical``) - and the recorder when it is
 installed, follows the run, stops everything with SIGINT and computes the graph's record from
-the messages the run published (``freejoint_control.records.arrays_from_messages``, then
+the messages the run published (``freejoint_common.records.arrays_from_messages``, then
 ``freejoint_core.metrics.compute_record``).  It prints the offline runner's records of the
 same runs beside the graph's, checks that the end-effector trajectories agree, writes the
 graph's records to ``bags/demo/metrics.json`` and runs ``analyze`` on the bags if installed.
