@@ -19,7 +19,7 @@ import shutil
 import subprocess
 import sys
 
-from freejoint_control.records import arrays_from_messages, stamp_ns
+from freejoint_common.records import arrays_from_messages, stamp_ns
 from freejoint_core.offline import run_case
 import numpy as np
 import pytest
