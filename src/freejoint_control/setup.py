@@ -20,6 +20,7 @@ setup(
     entry_points={
         'console_scripts': [
             'controller_node = freejoint_control.controller_node:main',
+            'controller_supervisor = freejoint_control.supervisor:main',
         ],
     },
 )

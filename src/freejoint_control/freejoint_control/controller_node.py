@@ -14,20 +14,27 @@ converts messages, pairs states with setpoints, guards its inputs and outputs an
 to ``/diagnostics`` once a second (answer rate, latency, holds, refusals, law faults; per
 tick only counters), and the QoS of its topics can be overridden at start-up with ros2's
 ``qos_overrides.<topic>.<publisher|subscription>.<history|depth|reliability>`` parameters.
+With ``standby: true`` (real time) it is a hot spare (``controller_supervisor``): built and
+discovered, setpoints taken, joint_states dropped unread, nothing published (``/diagnostics``
+says STANDBY) until SIGUSR1; the next state then activates it, its reference starting from
+the arm's measured motion (``ReferenceShaper.start_from``), the torque ramped from zero.
 
 """
 
 import math
+import signal
 import time
 
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, JOINT_STATES
 from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_from_ns
 from freejoint_common.contract import stamp_label, to_ns
-from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
+from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import Throttle
 from freejoint_common.runner import Lifecycle, run
+from freejoint_common.scheduling import process_scheduling
 from freejoint_control.params import SCHEMA
+from freejoint_control.supervisor import notify_ready
 from freejoint_core.control import (ControlOutput, RobustController, STATUS_BAD_INPUT,
                                     STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
@@ -119,6 +126,19 @@ class ControllerNode(Node, Lifecycle):
         else:
             self._now_ns = time.time_ns
         self._throttle = Throttle(1.0)
+        # Hot spare: idle until SIGUSR1, whose handler only sets a flag; the next
+        # joint_states callback activates (the runner's between-callbacks rule).
+        self._standby = cfg.standby
+        self._activation_requested = False
+        self._start_from_motion = False
+        self._activated_wall = None
+        if cfg.standby:
+            signal.signal(signal.SIGUSR1, self._on_activate_signal)
+            # Idle at the default scheduler: dropping 1 kHz of states costs ~20 % of a
+            # CPU, which must not come out of the real-time budget of the active loop and
+            # the simulator; thread_priority applies from the activation on.
+            process_scheduling().request(self.get_fully_qualified_name(), 0,
+                                         cfg.cpu_affinity)
 
         # Each QoS overridable (qos_overrides.<topic>.<publisher|subscription>.<policy>,
         # e.g. a best-effort joint_states of a real driver), defaults as in GRAPH.md.
@@ -147,7 +167,42 @@ class ControllerNode(Node, Lifecycle):
             'controller ready: %s, nominal scale %g, %s, joints %s, dt %g s, robust %s' % (
                 cfg.case, cfg.nominal_scale,
                 'lockstep' if cfg.lockstep else 'real time', list(cfg.joints), cfg.dt,
-                cfg.gains.robust))
+                cfg.gains.robust) + (
+                ' (standby: idle at the default scheduler until SIGUSR1)' if cfg.standby
+                else ''))
+        notify_ready()
+
+    # -- standby ---------------------------------------------------------------
+    def _on_activate_signal(self, signum, frame):
+        """SIGUSR1: activate at the next joint_states (only a flag here)."""
+        self._activation_requested = True
+
+    def _activate(self):
+        """Leave standby: this state and the next are answered; start from the motion."""
+        self._standby = False
+        self._start_from_motion = True
+        self._activated_wall = time.time()
+        cfg = self.config
+        refused = process_scheduling().request(self.get_fully_qualified_name(),
+                                               cfg.thread_priority, cfg.cpu_affinity)
+        if refused is not None:
+            self.get_logger().error('thread_priority %d not applied at the activation: %s'
+                                    % (cfg.thread_priority, refused))
+        self.get_logger().warn("activated (standby): the reference starts from the arm's "
+                               'measured motion, theta_hat from theta0, torque ramped from '
+                               'zero')
+
+    def _start_from(self, q, qd):
+        """Start the reference from the measured end-effector motion (fk, J qd)."""
+        model = self._ctl.model
+        try:
+            p = model.fk(q)
+            v = model.jacobian(q) @ np.asarray(qd, dtype=float)
+            self._shaper.start_from(p.tolist(), v.tolist())
+        except (FreejointValueError, ArithmeticError) as exc:
+            self._shaper.reset()
+            self.get_logger().error('cannot start from the measured motion (%s): blending '
+                                    'from the position at rest' % exc)
 
     # -- parameters ------------------------------------------------------------
     def _install(self, cfg):
@@ -210,6 +265,10 @@ class ControllerNode(Node, Lifecycle):
         return found
 
     def _on_joint_state(self, msg):
+        if self._standby:
+            if not self._activation_requested:
+                return      # a hot spare: dropped unread
+            self._activate()
         stamp = msg.header.stamp
         ns = to_ns(stamp)
         self._last_state_wall = _monotonic()
@@ -275,6 +334,9 @@ class ControllerNode(Node, Lifecycle):
             self._answer_zero(ns, stamp, STATUS_BAD_INPUT, 'bad input: ' + reason)
             return
         self._last_q = q
+        if self._start_from_motion:
+            self._start_from_motion = False
+            self._start_from(q, qd)
         if self._lockstep:
             sp = self._setpoints.pop(ns, None)
             if sp is None:
@@ -624,6 +686,11 @@ class ControllerNode(Node, Lifecycle):
 
     def _on_diagnostics_timer(self):
         """Every second: the status on /diagnostics (lockstep: once while no state comes)."""
+        if self._standby:
+            self._diag_window = self._window(_monotonic())
+            self._diagnostics.publish(OK, 'STANDBY: hot spare, joint_states dropped unread '
+                                      'until SIGUSR1', (('mode', 'standby'),))
+            return
         last = self._last_state_wall
         silent = last is None or last < self._diag_window[0]
         if self._lockstep and silent:
@@ -695,6 +762,8 @@ class ControllerNode(Node, Lifecycle):
         level, message = level_and_message(errors, warnings, ok)
         self._diagnostics.publish(level, message, (
             ('mode', 'lockstep' if self._lockstep else 'realtime'),
+            ('activated from standby', 'no' if self._activated_wall is None
+             else 'at %.3f (system time)' % self._activated_wall),
             ('answer rate [Hz]', '%.1f' % (answers / elapsed if elapsed > 0.0 else 0.0)),
             ('latency mean [ms]', latency[0]),
             ('latency max [ms]', latency[1]),

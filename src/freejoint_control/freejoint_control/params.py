@@ -84,6 +84,11 @@ PARAMS = (
           'true: answer the state stamped t_k only with the setpoint stamped t_k; '
           'false (real time): with the newest setpoint stamped <= t_k + dt/2',
           read_only=True),
+    Param('standby', False,
+          'real time: start as a hot spare (controller_supervisor): subscriptions and '
+          'publishers made, setpoints taken, joint_states dropped unread, nothing published '
+          'until SIGUSR1 activates it; then it starts from the measured motion',
+          read_only=True),
     Param('K', list(_DEFAULT.K), 'diagonal of K (2 values > 0) [1/s]',
           validator=_gain('K')),
     Param('Lambda', list(_DEFAULT.Lambda), 'diagonal of Lambda (2 values > 0) [1/s]',
@@ -256,8 +261,15 @@ def _check_state_bounds(values):
     return None
 
 
+def _check_standby(values):
+    if values['standby'] and values['lockstep']:
+        return ('standby: a hot spare is for real time (lockstep: false); in lockstep the '
+                'simulator waits for one controller, there is nothing to take over')
+    return None
+
+
 CHECKS = (_check_joints, _check_loop_rate, _check_theta0, _check_effort_limits,
-          _check_delay_compensation, _check_state_bounds)
+          _check_delay_compensation, _check_state_bounds, _check_standby)
 
 
 @dataclass(frozen=True)

@@ -95,7 +95,7 @@ class Child:
         if standby:
             extra += ['-p', 'standby:=true']
         self.proc = subprocess.Popen(cmd + extra, env=env, pass_fds=(write,),
-                                     preexec_fn=_ignore_usr1)
+                                     preexec_fn=_child_setup)
         os.close(write)
         self.pid = self.proc.pid
         self.ready_fd = read
@@ -129,10 +129,14 @@ class Child:
                 pass
 
 
-def _ignore_usr1():
+def _child_setup():
     # Until the spare's node installs its handler, SIGUSR1 must not kill it (default
-    # action): ignored, inherited across exec; the supervisor waits for 'ready'.
+    # action): ignored, inherited across exec; the supervisor waits for 'ready'. A child
+    # starts at the default scheduler even under a real-time supervisor (its start-up must
+    # not preempt the active loop); the node sets its thread_priority itself.
     signal.signal(signal.SIGUSR1, signal.SIG_IGN)
+    if os.sched_getscheduler(0) != os.SCHED_OTHER:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
 class Supervisor:
