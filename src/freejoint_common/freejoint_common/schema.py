@@ -16,7 +16,7 @@ already starts with the name. A schema-level check is a function ``values -> rea
 None`` whose reason names the parameter to change itself.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 
 from freejoint_common.scheduling import MAX_PRIORITY, validate_affinity, validate_priority
@@ -129,6 +129,36 @@ class ParameterValues:
         if values is not None and name in values:
             return values[name]
         raise AttributeError(f'{type(self).__name__} has no field or parameter {name!r}')
+
+
+@dataclass(frozen=True)
+class LoopConfig(ParameterValues):
+    """
+    What the configs of the control loop's nodes (simulator, controller) both derive.
+
+    Attributes
+    ----------
+    values : dict
+        The validated ``{name: value}`` dict (``config.<name>`` of any parameter).
+    joint_names : tuple of str
+        All joints of the arm in model order (base to tip), passive ones included.
+    joints : tuple of str
+        The commanded (active) joints in the order of the effort command.
+    lockstep : bool
+        True: the deterministic lockstep loop; False: real time.
+    dt : float
+        Control period [s].
+    dt_ns : int
+        Control period [ns].
+
+    """
+
+    values: dict = field(repr=False, hash=False)
+    joint_names: tuple
+    joints: tuple
+    lockstep: bool
+    dt: float
+    dt_ns: int
 
 
 class Schema:

@@ -18,7 +18,7 @@ import math
 from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve_arm
 from freejoint_common.node_tools import unique_names
 from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR, JOINT_NAMES
-from freejoint_common.schema import JOINTS, NOMINAL_SCALE, one_of, Param, ParameterValues
+from freejoint_common.schema import JOINTS, LoopConfig, NOMINAL_SCALE, one_of, Param
 from freejoint_common.schema import SCHEDULING, Schema
 from freejoint_core.arm import ArmParams
 from freejoint_core.control import Gains, H_FORMS
@@ -273,22 +273,17 @@ CHECKS = (_check_joints, _check_loop_rate, _check_theta0, _check_effort_limits,
 
 
 @dataclass(frozen=True)
-class Config(ParameterValues):
+class Config(LoopConfig):
     """
     Validated controller configuration: what is derived from several parameters.
 
-    Every other parameter is ``config.<name>`` as validated (``ParameterValues``).
+    Besides the loop's fields (:class:`LoopConfig`): the nominal model, the gains, the
+    command order and the limits. Every other parameter is ``config.<name>`` as validated.
     """
 
-    values: dict = field(repr=False, hash=False)
     nominal: ArmParams
     gains: Gains
-    joint_names: tuple
-    joints: tuple
     cmd_index: tuple
-    dt: float
-    dt_ns: int
-    lockstep: bool
     effort_limits: tuple
     position_lower: tuple
     position_upper: tuple

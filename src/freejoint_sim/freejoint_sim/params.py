@@ -14,13 +14,13 @@ naming the parameter).
 
 """
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 import math
 
 from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve_arm
 from freejoint_common.node_tools import unique_names
 from freejoint_common.schema import CASE, CONTROL_PERIOD, EXECUTOR, FRAME_ID, JOINT_NAMES
-from freejoint_common.schema import JOINTS, one_of, Param, ParameterValues, SCHEDULING, Schema
+from freejoint_common.schema import JOINTS, LoopConfig, one_of, Param, SCHEDULING, Schema
 from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.offline import DEFAULT_Q3_0_DEG
@@ -240,23 +240,19 @@ CHECKS = (_check_joints, _check_steps, _check_timing)
 
 
 @dataclass(frozen=True)
-class Config(ParameterValues):
+class Config(LoopConfig):
     """
     Validated simulator configuration: what is derived from the parameters.
 
-    Every other parameter is ``config.<name>`` as validated (``ParameterValues``).
+    Besides the loop's fields (:class:`LoopConfig`): the arm (``params``, ``arm``), its
+    initial joint angles ``q0``, the command-to-active-joint map and the publication
+    steps. Every other parameter is ``config.<name>`` as validated.
     """
 
-    values: dict = field(repr=False, hash=False)
     params: ArmParams
     arm: object
     q0: tuple
-    joint_names: tuple
-    joints: tuple
     cmd_to_active: tuple
-    lockstep: bool
-    dt: float
-    dt_ns: int
     publish_every: int
     clock_every: int
 
