@@ -18,7 +18,8 @@ The tracking bound is 1.5 x the offline runner's worst max error of seeds 0-9 of
 ``controller_restart``  (c) both cases, ``--cycles`` (5) times: kill -9 the controller
     mid-circle, restart it ``--down`` (1.0) s later: the largest |effort| after the restart
     vs the limit, divergence, time from the restart until the tracking error stays within
-    the bound (<= 2 s).
+    the bound (<= 2 s). ``--supervised``: under ``controller_supervisor``, the active child
+    killed and its hot spare taking over (times from the kill).
 ``driver500``  (d) both cases: the simulator publishing joint_states at 500 Hz
     (``publish_rate: 500``; ``--control-period`` for the controller, default: as
     configured), circles for ``--seconds``: tracking vs the bound, stale periods.
@@ -35,6 +36,7 @@ import argparse
 import itertools
 import json
 import os
+import signal
 import sys
 import time
 
@@ -342,22 +344,43 @@ def first_after(times, t0, t_end):
     return min(after) if after else None
 
 
-def start_standby(s, key, node_cmd, args):
+def supervise(s, pid_file, args):
     """
-    Start a warm standby controller as process ``key`` (node name ``key``).
+    Run the session's controller under ``controller_supervisor`` (``--supervised``).
 
-    bench/controller_standby.py with the controller's own arguments (``node_cmd``): built
-    and discovered, idle, taking over when the active one's commands stop (``--standby``
-    of controller_restart; a measurement prototype, not safe as it is: see
-    docs/performance.md).
+    The graph's ``controller_node`` process becomes the supervisor with the controller's
+    own arguments: an active controller and a hot spare (parameter ``standby``), the spare
+    activated by the supervisor when the active one dies. The supervisor runs under ``chrt
+    -f`` (``--restart-priority``, else ``--priority``) so that it reacts at once; its
+    children start at the default scheduler and take their ``thread_priority`` themselves.
     """
-    cmd = [sys.executable, os.path.join(HERE, 'controller_standby.py')] + node_cmd[1:] + [
-        '-r', '__node:=' + key]
-    prefix = ['chrt', '-f', str(args.restart_priority)] if args.restart_priority else []
-    s.restarts[key] = s.restarts.get(key, 0) + 1
-    s.graph.start(key, prefix + cmd, log_name='%s_standby_%d' % (key, s.restarts[key]))
-    s.graph.procs[key].cmd = cmd
-    s.killed.discard(key)
+    start = s.graph.start
+    node = bench_graph.executable('freejoint_control', 'controller_node')
+    sup = bench_graph.executable('freejoint_control', 'controller_supervisor')
+    priority = args.restart_priority or args.priority
+
+    def start_supervised(name, cmd, *rest, **kwargs):
+        if name == 'controller_node' and cmd and cmd[0] == node:
+            cmd = (['chrt', '-f', str(priority)] if priority else []) + [
+                sup, '--pid-file', pid_file, '--'] + list(cmd[1:])
+        return start(name, cmd, *rest, **kwargs)
+    s.graph.start = start_supervised
+
+
+def supervised_pids(s, pid_file, timeout=60.0):
+    """Wait until the supervisor's spare is ready; return (active pid, spare pid)."""
+    end = time.monotonic() + timeout
+    while True:
+        try:
+            with open(pid_file) as f:
+                doc = json.load(f)
+            if doc.get('active') and doc.get('standby') and doc['standby']['ready']:
+                return doc['active']['pid'], doc['standby']['pid']
+        except (OSError, ValueError):
+            pass
+        if time.monotonic() > end:
+            raise RuntimeError('no ready spare within %g s (%s)' % (timeout, pid_file))
+        s.wait(0.05)
 
 
 def restart_command(args):
@@ -395,12 +418,10 @@ def controller_restart(args, index):
         seconds = args.cycles * (args.down + args.recover + 6.0) + 10.0
         with soak.Session('controller_restart_' + case, index, case, seconds) as s:
             index += 1
+            if args.supervised:
+                supervise(s, os.path.join(s.dir, 'supervisor.json'), args)
             s.up()
-            keys = ['controller_node', 'controller_standby']
-            node_cmd = list(s.graph.procs['controller_node'].args)
-            if args.standby:
-                start_standby(s, keys[1], node_cmd, args)
-                s.wait(3.0)
+            pid_file = os.path.join(s.dir, 'supervisor.json')
             loop = bench_graph.CircleLoop(s.client, before=lambda: soak.rest_at_q0(s.client))
             for _ in range(args.cycles):
                 # A circle from rest at q(0) each cycle (no new circle meanwhile), killed
@@ -409,17 +430,16 @@ def controller_restart(args, index):
                 loop.poll()
                 while time.monotonic() < loop.accepted[-1] + args.mid:
                     s.wait(0.02)
-                if args.standby:
-                    # The standby takes over by itself; the supervisor (this loop) then
-                    # starts the next standby in the killed one's place.
+                if args.supervised:
+                    # kill -9 of the active child; the supervisor activates the spare and
+                    # starts the next one (ready before the next cycle's kill).
+                    active, _spare = supervised_pids(s, pid_file)
                     load = os.getloadavg()[0]
-                    t_kill = s.kill(keys[0])
-                    log = s.graph.procs[keys[1]].log_path
+                    t_kill = time.time()
+                    os.kill(active, signal.SIGKILL)
+                    log = s.graph.procs['controller_node'].log_path
                     s.wait(args.recover)
                     cycles.append((t_kill, t_kill, time.time(), log, load))
-                    start_standby(s, keys[0], node_cmd, args)
-                    keys.reverse()
-                    s.wait(3.0)
                     continue
                 t_kill = s.kill('controller_node')
                 s.wait(args.down)
@@ -439,16 +459,19 @@ def controller_restart(args, index):
             row = {'kill': t_kill, 'restart': t_restart, 'plant_ticks': int(len(idx)),
                    'load_average_1min': load, 'controller_log': os.path.relpath(log, ROOT)}
             row.update(restart_timeline(log, released, t_restart, t_end))
-            if args.standby:
-                row['node_s'] = None    # built long before the kill
-                row['takeover_s'] = first_after(log_times(log, 'taking over'), t_restart, t_end)
-                if row['takeover_s'] is not None:
-                    # Its first command (usually before the brakes engage: no release).
-                    row['first_command_s'] = row['takeover_s']
             row['diverged'] = any(t_restart <= t <= t_end for t in diverged_at)
             answers = np.nonzero(log_window(ticks, t_restart, t_end))[0]
             row['first_controller_state_s'] = (float(ticks['log_ns'][answers[0]] * 1e-9
                                                      - t_restart) if len(answers) else None)
+            if args.supervised:
+                # Times from the kill: the supervisor saw the death, the spare activated;
+                # its first command is its first controller_state in the bag (a takeover
+                # within the simulator's 0.05-s brake watchdog has no 'brakes released').
+                row['node_s'] = row['ready_s'] = None   # built long before the kill
+                row['detected_s'] = first_after(log_times(log, 'died (signal'), t_kill, t_end)
+                row['takeover_s'] = first_after(log_times(log, 'activated (standby)'),
+                                                t_kill, t_end)
+                row['first_command_s'] = row['first_controller_state_s']
             down = log_window(plant, t_kill, t_restart)
             row['max_mm_while_down'] = (float(np.nanmax(plant['err_mm'][down]))
                                         if down.any() else None)
@@ -502,9 +525,10 @@ def controller_restart(args, index):
                 _f(r.get('blend_offset_mm')), _f(r.get('back_within_s')),
                 _f(r.get('back_after_first_command_s')), _fl(r.get('effort_max')),
                 r.get('diverged', 'n/a')))
-            if args.standby:
-                say('        standby: took over %s s after the kill (times above from the '
-                    'kill)' % _f(r.get('takeover_s')))
+            if args.supervised:
+                say('        supervised: death seen %s s, spare activated %s s after the kill '
+                    '(times above from the kill)' % (_f(r.get('detected_s')),
+                                                     _f(r.get('takeover_s'))))
             if args.probe:
                 say('        probe: imports %s, rclpy.init %s, matched joint_states %s, '
                     'commands %s, setpoint %s; first joint_states %s, setpoint %s' % tuple(
@@ -668,10 +692,10 @@ def parse(argv):
     ap.add_argument('--restart-priority', type=int, default=0,
                     help='controller_restart: start the restarted controller under chrt -f '
                     'this priority (0: the default scheduler until the node sets its own)')
-    ap.add_argument('--standby', action='store_true',
-                    help='controller_restart: a warm standby controller '
-                    '(bench/controller_standby.py) takes over from the killed one; a new '
-                    'standby is started after each takeover')
+    ap.add_argument('--supervised', action='store_true',
+                    help='controller_restart: the controller runs under controller_supervisor '
+                    '(an active controller and a hot spare); the active child is killed, the '
+                    'spare takes over, the supervisor starts the next spare')
     ap.add_argument('--probe', action='store_true',
                     help='controller_restart: restart the controller through '
                     'bench/controller_probe.py (its start-up timeline in its log)')

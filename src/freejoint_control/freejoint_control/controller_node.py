@@ -134,10 +134,13 @@ class ControllerNode(Node, Lifecycle):
         self._activated_wall = None
         if cfg.standby:
             signal.signal(signal.SIGUSR1, self._on_activate_signal)
-            # Idle at the default scheduler: dropping 1 kHz of states costs ~20 % of a
-            # CPU, which must not come out of the real-time budget of the active loop and
-            # the simulator; thread_priority applies from the activation on.
-            process_scheduling().request(self.get_fully_qualified_name(), 0,
+            # Idle at SCHED_FIFO 1 (with a thread_priority above 1): below every real-time
+            # thread of the graph (dropping 1 kHz of states costs ~20 % of a CPU), above
+            # best-effort load, which must not starve it: its middleware threads answer
+            # the publishers' shared-memory port health checks, and its activation must
+            # not wait for a CPU. thread_priority applies from the activation on.
+            process_scheduling().request(self.get_fully_qualified_name(),
+                                         1 if cfg.thread_priority > 1 else 0,
                                          cfg.cpu_affinity)
 
         # Each QoS overridable (qos_overrides.<topic>.<publisher|subscription>.<policy>,
@@ -168,7 +171,7 @@ class ControllerNode(Node, Lifecycle):
                 cfg.case, cfg.nominal_scale,
                 'lockstep' if cfg.lockstep else 'real time', list(cfg.joints), cfg.dt,
                 cfg.gains.robust) + (
-                ' (standby: idle at the default scheduler until SIGUSR1)' if cfg.standby
+                ' (standby: idle until SIGUSR1)' if cfg.standby
                 else ''))
         notify_ready()
 

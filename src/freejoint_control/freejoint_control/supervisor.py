@@ -1,28 +1,31 @@
 """
 controller_supervisor: the controller under a supervisor with respawn, plus a hot spare.
 
-``controller_supervisor [--name N] [--pid-file F] [--stop-timeout S] [--] <arguments of
-controller_node>`` starts two ``controller_node`` processes with the same arguments: the
-active one, node name ``N`` (default ``controller_node``), and a hot spare with ``-p
-standby:=true``, node name ``N_spare`` (the names alternate: a spare started after a
-takeover gets the name that is free, so the graph always has ``/N`` and ``/N_spare``; the
-active one is whichever the log line and the pid file name). A spare is built, its
-subscriptions and publishers discovered, and idle (docs/GRAPH.md, parameter ``standby``).
+``controller_supervisor [--name N] [--pid-file F] [--stop-timeout S]
+[--respawn-delay D] [--] <arguments of controller_node>`` starts two ``controller_node``
+processes with the same arguments: the active one, node name ``N`` (default
+``controller_node``), and a hot spare with ``-p standby:=true``, node name ``N_spare``.
+The names alternate: a spare started after a takeover gets the name that is free, so the
+graph always has ``/N`` and ``/N_spare``, and the active one is whichever the last
+takeover line and the pid file name. A spare is built, its subscriptions and publishers
+discovered, and idle (docs/GRAPH.md, parameter ``standby``).
 
 When a child dies, its death is seen at once (a pidfd per child, no polling, no command
 silence): if it was the active one the spare is activated with SIGUSR1 (no DDS involved)
-and ``controller <pid> died (signal 9): standby <pid> active (/<name>)`` is logged; then a
-new spare is started. A stopped or stalled controller is not dead: it stays active (two
-controllers never command at once through the supervisor). A spare not ready yet
-(``notify_ready`` not received: its SIGUSR1 handler is not installed) is activated as soon
-as it is. A child exiting with status 2 (a bad parameter) stops everything with status 2:
-respawning cannot fix a configuration. SIGINT / SIGTERM are forwarded to the children;
-the supervisor exits when they have exited (SIGKILL after ``--stop-timeout``, default
-5 s) with the active child's status.
+and ``controller <pid> died (signal 9): standby <pid> active (/<name>)`` is logged; a new
+spare is started ``--respawn-delay`` (2) s later (the new active controller's recovery
+first). A stopped or stalled controller is not dead: it stays active (two controllers
+never command at once through the supervisor). A spare not ready yet (``notify_ready``
+not received: its SIGUSR1 handler not installed) is activated as soon as it is. A child
+exiting with status 2 (a bad parameter) stops everything with status 2: respawning
+cannot fix a configuration; more than 10 starts within 10 s stop it with status 1.
+SIGINT / SIGTERM are forwarded to the children; the supervisor exits when they have
+exited (SIGKILL after ``--stop-timeout``, default 5 s) with the active child's status.
 
 The pid file (``--pid-file``), rewritten atomically at every change, is JSON:
 ``{"supervisor": pid, "active": {"pid", "name"}, "standby": {"pid", "name", "ready"}}``.
-Plain Python (no rclpy: the supervisor is not a ROS participant).
+Plain Python (no rclpy: the supervisor is not a ROS participant). Run it at the
+controller's SCHED_FIFO priority (``chrt -f 50``) so that it reacts at once.
 """
 
 import argparse
@@ -131,22 +134,29 @@ class Child:
 
 def _child_setup():
     # Until the spare's node installs its handler, SIGUSR1 must not kill it (default
-    # action): ignored, inherited across exec; the supervisor waits for 'ready'. A child
-    # starts at the default scheduler even under a real-time supervisor (its start-up must
-    # not preempt the active loop); the node sets its thread_priority itself.
+    # action): ignored, inherited across exec; the supervisor waits for 'ready'. Under a
+    # real-time supervisor a child starts at SCHED_FIFO 1: below every real-time thread of
+    # the graph (its start-up must not preempt the active loop), above best-effort load: a
+    # participant starved at start-up does not answer the shared-memory port health check
+    # of a real-time publisher, which then blocks (the simulator stalled 2 s with spares
+    # started at the default scheduler, also at nice -20). The node sets its
+    # thread_priority itself (a spare at its activation).
     signal.signal(signal.SIGUSR1, signal.SIG_IGN)
     if os.sched_getscheduler(0) != os.SCHED_OTHER:
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
 
 
 class Supervisor:
     """The active controller, its spare, the respawn and the takeover (module notes)."""
 
-    def __init__(self, node_args, name='controller_node', pid_file=None, stop_timeout=5.0):
+    def __init__(self, node_args, name='controller_node', pid_file=None, stop_timeout=5.0,
+                 respawn_delay=2.0):
         self.cmd = controller_command() + list(node_args)
         self.names = (name, name + '_spare')
         self.pid_file = pid_file
         self.stop_timeout = stop_timeout
+        self.respawn_delay = respawn_delay
+        self.spawn_at = None        # monotonic time of the next spare's start
         self.active = None
         self.spare = None
         self.pending_activation = False
@@ -231,8 +241,9 @@ class Supervisor:
             self.spare = None
             log('WARN', 'standby controller %d (/%s) died (%s): starting another'
                 % (child.pid, child.name, how))
-        if self.stop_signal is None and self.spare is None:
-            self.spare = self._spawn(True)
+        if self.stop_signal is None and self.spare is None and self.spawn_at is None:
+            # Not at once: the new active controller's recovery comes first.
+            self.spawn_at = time.monotonic() + self.respawn_delay
         self._write_pid_file()
 
     def _on_ready(self, child):
@@ -293,6 +304,15 @@ class Supervisor:
             if forwarded and not children:
                 break
             timeout = 1.0
+            if self.spawn_at is not None and self.stop_signal is None:
+                wait = self.spawn_at - time.monotonic()
+                if wait <= 0.0:
+                    self.spawn_at = None
+                    if self.spare is None:
+                        self.spare = self._spawn(True)
+                        self._write_pid_file()
+                    continue
+                timeout = min(timeout, wait)
             if deadline is not None:
                 timeout = max(0.0, min(timeout, deadline - time.monotonic()))
                 if timeout == 0.0:
@@ -341,6 +361,9 @@ def parse(argv):
     ap.add_argument('--pid-file', default=None, help='JSON file: active and standby pids')
     ap.add_argument('--stop-timeout', type=float, default=5.0,
                     help='s to wait for the children after SIGINT / SIGTERM (then SIGKILL)')
+    ap.add_argument('--respawn-delay', type=float, default=2.0,
+                    help='s after a death before the next spare is started (default 2: the '
+                    "new active controller's recovery first)")
     opts, rest = ap.parse_known_args(argv)
     if rest and rest[0] == '--':
         rest = rest[1:]
@@ -350,7 +373,8 @@ def parse(argv):
 def main(args=None):
     """Run the supervisor; exit with the active controller's status (2: bad parameter)."""
     opts, node_args = parse(sys.argv[1:] if args is None else args)
-    sup = Supervisor(node_args, opts.name, opts.pid_file, opts.stop_timeout)
+    sup = Supervisor(node_args, opts.name, opts.pid_file, opts.stop_timeout,
+                     opts.respawn_delay)
     return sup.run()
 
 
