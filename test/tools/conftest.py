@@ -34,7 +34,9 @@ class BagMaker:
         """
         Write ``ticks`` ticks (joint_states, setpoint, controller_state, /clock) and the map.
 
-        Returns the dict topic -> list of the rclpy messages written, in order.
+        Returns the dict topic -> list of the rclpy messages written, in order; the bytes
+        written (their serialization: CDR padding bytes are not reproducible from one
+        serialization to the next) are left in ``self.data``, topic -> list of bytes.
         """
         from rclpy.serialization import serialize_message
 
@@ -55,10 +57,13 @@ class BagMaker:
             channels[name] = writer.add_topic(name, msgtype, text, digest,
                                               [default_qos_dict(durability=durability)])
         written = {name: [] for name, _, _ in topics}
+        self.data = {name: [] for name, _, _ in topics}
 
         def put(name, t_ns, msg):
-            writer.write(channels[name], t_ns, serialize_message(msg))
+            data = serialize_message(msg)
+            writer.write(channels[name], t_ns, data)
             written[name].append(msg)
+            self.data[name].append(data)
 
         put('/semi_singular_map', 0, grid)
         put('/planned_path', 0, marker)
