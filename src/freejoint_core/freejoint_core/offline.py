@@ -60,7 +60,7 @@ import numpy as np
 from .arm import ArmModel, CASES, NOMINAL_SCALE, table1
 from .control import Gains, RobustController
 from .delay import DEFAULT_BIAS_GAIN, extrapolate_setpoint, StatePredictor
-from .errors import FreejointValueError
+from .errors import FreejointValueError, positive
 from .metrics import compute_record, format_summary, format_table, write_records
 from .models import make_model
 from .plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
@@ -74,16 +74,6 @@ DEFAULT_Q3_0_DEG = 120.0
 """The paper's initial passive joint angle [deg]."""
 # Errors that mean "the numbers blew up" inside the model/controller/plant.
 _BLOWUP = (ArithmeticError, ValueError, np.linalg.LinAlgError)
-
-
-def _pos_float(name, value):
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise FreejointValueError(f'{name}: expected a number, got {value!r}') from None
-    if not math.isfinite(out) or out <= 0.0:
-        raise FreejointValueError(f'{name}: must be finite and > 0, got {out}')
-    return out
 
 
 def initial_state(params, q3_0_deg=DEFAULT_Q3_0_DEG, start=(0.2, 0.0)):
@@ -193,10 +183,10 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
         raise FreejointValueError(f'case: expected one of {CASES}, got {case!r}')
     if variant not in VARIANTS:
         raise FreejointValueError(f'variant: expected one of {VARIANTS}, got {variant!r}')
-    dt = _pos_float('dt', dt)
-    duration = _pos_float('duration', duration)
-    diverge_m = _pos_float('diverge_m', diverge_m)
-    diverge_qd = _pos_float('diverge_qd', diverge_qd)
+    dt = positive('dt', dt)
+    duration = positive('duration', duration)
+    diverge_m = positive('diverge_m', diverge_m)
+    diverge_qd = positive('diverge_qd', diverge_qd)
     n_ticks = int(round(duration / dt))
     if n_ticks < 1 or abs(n_ticks * dt - duration) > 1e-9 * duration:
         raise FreejointValueError(
@@ -230,7 +220,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
         raise FreejointValueError(
             f'trajectory: expected CircleQuintic, got {type(trajectory).__name__}')
 
-    dt_sub = _pos_float('dt_sub', dt_sub)
+    dt_sub = positive('dt_sub', dt_sub)
     n_sub = round(dt / dt_sub)
     if n_sub < 1 or abs(n_sub * dt_sub - dt) > 1e-9 * dt:
         raise FreejointValueError(
@@ -239,7 +229,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     if variant == 'exact':
         nominal, dist = real, 0.0
     else:
-        nominal = real.scaled(_pos_float('nominal_scale', nominal_scale))
+        nominal = real.scaled(positive('nominal_scale', nominal_scale))
         dist = dist_bound
     if variant == 'robust_off':
         gains = dataclasses.replace(gains, robust=False)

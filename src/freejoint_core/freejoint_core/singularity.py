@@ -54,7 +54,7 @@ import math
 
 import numpy as np
 
-from .errors import FreejointValueError
+from .errors import FreejointValueError, positive
 from .trajectory import workspace_annulus
 
 # Paper's criterion eps_d for |det(Da Da^T)| (Sec. 4).
@@ -457,7 +457,7 @@ class SemiSingularRegion:
         if x1 <= x0 or y1 <= y0:
             raise FreejointValueError(
                 f'extent: need x_min < x_max and y_min < y_max, got {ext.tolist()}')
-        cell = _positive('cell', cell, '> 0 m')
+        cell = positive('cell', cell, '> 0 m')
         nx = int(math.ceil((x1 - x0) / cell - 1e-9))
         ny = int(math.ceil((y1 - y0) / cell - 1e-9))
         xl = x0 + np.arange(nx) * cell
@@ -532,20 +532,9 @@ def semi_singular(det_map, eps_d=EPS_D):
     return _region(radii, widen, (l2 + l3) * dq, reach, eps, det_map.resolution_deg, mask)
 
 
-def _positive(name, value, expected):
-    """Return ``value`` as a finite float > 0, or raise naming ``name`` (``expected``)."""
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise FreejointValueError(f'{name}: expected a number, got {value!r}') from None
-    if not math.isfinite(out) or out <= 0.0:
-        raise FreejointValueError(f'{name}: expected {expected}, got {out}')
-    return out
-
-
 def _check_eps(eps_d):
     """Return ``eps_d`` as a float, or raise naming it (finite, > 0)."""
-    return _positive('eps_d', eps_d, 'a finite value > 0')
+    return positive('eps_d', eps_d, 'a finite value > 0')
 
 
 def _region(radii, widen, gap_step, reach, eps, resolution_deg, mask):
