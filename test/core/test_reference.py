@@ -217,6 +217,7 @@ def test_start_from_the_measured_motion_keeps_position_and_velocity_continuous()
     # 2.2 cm offset is within the bounds): half-way, by hand, d(t) = d0 + v0 t + a0 t^2 / 2
     # + c3 t^3 + c4 t^4 + c5 t^5 with c3 = -(20 d0 + 12 v0 + 3 a0) / 2,
     # c4 = (30 d0 + 16 v0 + 3 a0) / 2, c5 = -(12 d0 + 6 v0 + a0) / 2 (T = 1).
+
     def by_hand(d0, v0, a0, t):
         c3 = -(20 * d0 + 12 * v0 + 3 * a0) / 2
         c4 = (30 * d0 + 16 * v0 + 3 * a0) / 2

@@ -48,8 +48,9 @@ class Graph:
         self.pid_file = str(tmp_path / 'supervisor.json')
         self.commands = []      # (monotonic time, efforts)
         self.ctl_states = []    # (monotonic time, position, position_desired)
-        ros_node.create_subscription(COMMANDS.msg_type, COMMANDS.name, lambda m: self.commands.append(
-            (time.monotonic(), list(m.data))), COMMANDS.qos)
+        ros_node.create_subscription(
+            COMMANDS.msg_type, COMMANDS.name,
+            lambda m: self.commands.append((time.monotonic(), list(m.data))), COMMANDS.qos)
         ros_node.create_subscription(
             CONTROLLER_STATE.msg_type, CONTROLLER_STATE.name, lambda m: self.ctl_states.append(
                 (time.monotonic(), tuple(m.position), tuple(m.position_desired))),
@@ -68,8 +69,8 @@ class Graph:
             'sim.yaml', 'mode:=realtime', PRIORITY))
         sup = self.procs.start_node(
             'freejoint_control', 'controller_supervisor', 'supervisor',
-            ['--pid-file', self.pid_file, '--'] + _args('controller.yaml', 'lockstep:=false',
-                                                              PRIORITY))
+            ['--pid-file', self.pid_file, '--']
+            + _args('controller.yaml', 'lockstep:=false', PRIORITY))
         self.wait(lambda: 'simulator ready' in self.procs.log(sim) or sim.poll() is not None,
                   30.0, 'the simulator', spin=self.spin)
         self.wait(lambda: self.pids().get('ready') or sup.poll() is not None, 60.0,
