@@ -11,9 +11,9 @@ class PlantDivergedError(FreejointValueError):
     """The integration produced a non-finite state; the plant kept its last finite one."""
 
 
-def positive(name, value, expected='a finite number > 0'):
+def positive(name, value, allow_zero=False):
     """
-    Return ``value`` as a finite float > 0, or raise naming the argument.
+    Return ``value`` as a finite float > 0 (>= 0 with ``allow_zero``), or raise naming it.
 
     Parameters
     ----------
@@ -21,8 +21,8 @@ def positive(name, value, expected='a finite number > 0'):
         The argument's name (the message starts with it).
     value : object
         What was given.
-    expected : str, optional
-        What the message says was expected.
+    allow_zero : bool, optional
+        Accept 0.
 
     Returns
     -------
@@ -31,13 +31,14 @@ def positive(name, value, expected='a finite number > 0'):
     Raises
     ------
     FreejointValueError
-        ``value`` is not a number, not finite or not > 0.
+        ``value`` is not a number, not finite, negative, or 0 without ``allow_zero``.
 
     """
     try:
         out = float(value)
     except (TypeError, ValueError):
         raise FreejointValueError(f'{name}: expected a number, got {value!r}') from None
-    if not math.isfinite(out) or out <= 0.0:
-        raise FreejointValueError(f'{name}: expected {expected}, got {out}')
+    if not math.isfinite(out) or out < 0.0 or (out == 0.0 and not allow_zero):
+        bound = '>= 0' if allow_zero else '> 0'
+        raise FreejointValueError(f'{name}: must be finite and {bound}, got {out}')
     return out

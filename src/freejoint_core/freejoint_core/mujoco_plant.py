@@ -23,9 +23,9 @@ the plant keeps its last finite state, as ``Plant`` does.  MuJoCo's warnings are
 taken by a handler during the step (not printed, no ``MUJOCO_LOG.TXT``).
 """
 
-from freejoint_core.errors import FreejointValueError
+from freejoint_core.errors import FreejointValueError, positive
 from freejoint_core.models import make_model
-from freejoint_core.plant import _positive, DEFAULT_DT_SUB, PeriodPlant
+from freejoint_core.plant import DEFAULT_DT_SUB, PeriodPlant
 from freejoint_core.urdf import UrdfArm
 import mujoco
 import numpy as np
@@ -53,7 +53,7 @@ def build_mj_model(arm, dt_sub=DEFAULT_DT_SUB):
     """
     if not isinstance(arm, UrdfArm):
         raise FreejointValueError(f'arm: expected UrdfArm, got {type(arm).__name__}')
-    dt_sub = _positive(dt_sub, 'dt_sub')
+    dt_sub = positive('dt_sub', dt_sub)
     try:
         model = mujoco.MjModel.from_xml_string(arm.urdf)
     except ValueError as exc:

@@ -21,7 +21,7 @@ docs/performance.md).
 import math
 
 from freejoint_core.arm import ArmModel, ArmParams, check_vector
-from freejoint_core.errors import FreejointValueError, PlantDivergedError
+from freejoint_core.errors import FreejointValueError, PlantDivergedError, positive
 from freejoint_core.models import make_model
 import numpy as np
 
@@ -29,17 +29,6 @@ DEFAULT_DT_SUB = 0.0005
 """Default RK4 sub-step [s]."""
 DEFAULT_DIST_BOUND = 0.5
 """Bound [N m] of the paper's uniform random joint disturbance."""
-
-
-def _positive(value, name, allow_zero=False):
-    try:
-        value = float(value)
-    except (TypeError, ValueError) as exc:
-        raise FreejointValueError(f'{name}: expected a number, got {value!r}') from exc
-    if not math.isfinite(value) or value < 0.0 or (value == 0.0 and not allow_zero):
-        bound = '>= 0' if allow_zero else '> 0'
-        raise FreejointValueError(f'{name}: must be finite and {bound}, got {value}')
-    return value
 
 
 def check_torques(tau_active, r, name='tau_active'):
@@ -110,8 +99,8 @@ class PeriodPlant:
         self.model = model
         self.n = params.n
         self.r = params.r
-        self.dt_sub = _positive(dt_sub, 'dt_sub')
-        self.dist_bound = _positive(dist_bound, 'dist_bound', allow_zero=True)
+        self.dt_sub = positive('dt_sub', dt_sub)
+        self.dist_bound = positive('dist_bound', dist_bound, allow_zero=True)
         self._check_seed(seed)
         self._seed0 = seed
         self._q0 = self._state(q0, 'q0')
@@ -159,7 +148,7 @@ class PeriodPlant:
     def _substeps(self, dt):
         if dt == self._dt_cache[0]:
             return self._dt_cache[1]
-        dt_f = _positive(dt, 'dt')
+        dt_f = positive('dt', dt)
         n_sub = round(dt_f / self.dt_sub)
         if n_sub < 1 or abs(n_sub * self.dt_sub - dt_f) > 1e-9 * dt_f:
             raise FreejointValueError(

@@ -457,7 +457,7 @@ class SemiSingularRegion:
         if x1 <= x0 or y1 <= y0:
             raise FreejointValueError(
                 f'extent: need x_min < x_max and y_min < y_max, got {ext.tolist()}')
-        cell = positive('cell', cell, '> 0 m')
+        cell = positive('cell', cell)
         nx = int(math.ceil((x1 - x0) / cell - 1e-9))
         ny = int(math.ceil((y1 - y0) / cell - 1e-9))
         xl = x0 + np.arange(nx) * cell
@@ -534,7 +534,7 @@ def semi_singular(det_map, eps_d=EPS_D):
 
 def _check_eps(eps_d):
     """Return ``eps_d`` as a float, or raise naming it (finite, > 0)."""
-    return positive('eps_d', eps_d, 'a finite value > 0')
+    return positive('eps_d', eps_d)
 
 
 def _region(radii, widen, gap_step, reach, eps, resolution_deg, mask):
