@@ -132,6 +132,9 @@ def test_params_file_loads_and_lockstep_steps_are_the_plant(procs, ros_node, wai
     model = make_model(table1('horizontal'))
     msg = ctl.state(0)
     _same(msg, plant, (0.0, 0.0))
+    # Step 0 (state and /clock) goes out again every republish period until the first
+    # command: wait for its /clock too, or a late-matched /clock subscription misses it.
+    wait(lambda: 0 in ctl.clock, 10.0, '/clock at step 0', spin=ctl.spin)
     for k in range(30):
         tau = (3.0 * math.sin(0.3 * k), -2.0 * math.cos(0.2 * k))
         ctl.command(tau, k)
