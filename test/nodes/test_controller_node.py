@@ -208,21 +208,12 @@ def test_joint_state_in_another_order_with_extra_joints_drives_it_the_same(
 
 def test_set_parameters_changes_the_next_tick_and_a_bad_value_is_refused(
         procs, ros_node, wait):
+    from freejoint_tools.harness import ParameterCalls
     from rclpy.parameter import Parameter
-    from rclpy.parameter_client import AsyncParameterClient
-    import rclpy
     proc = _start(procs)
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
-    client = AsyncParameterClient(ros_node, 'controller_node')
-    assert client.wait_for_services(timeout_sec=15.0), 'no parameter services'
-
-    def set_params(*params):
-        future = client.set_parameters(list(params))
-        rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
-        assert future.done(), 'no answer from set_parameters within 15 s'
-        return future.result().results
-
+    params = ParameterCalls(ros_node, 'controller_node')
     ctl = RobustController(table1('horizontal').scaled(0.7), Gains())
     q, qd = _state_q(0)
     drv.setpoint(0, _setpoint(0))
@@ -230,7 +221,7 @@ def test_set_parameters_changes_the_next_tick_and_a_bad_value_is_refused(
     drv.answer(0)
     _expect(ctl, q, qd, _setpoint(0))
 
-    (res,) = set_params(Parameter('K', value=[40.0, 60.0]))
+    (res,) = params.set_parameters([Parameter('K', value=[40.0, 60.0])])
     assert res.successful, res.reason
     ctl.set_gains(Gains(K=(40.0, 60.0)))
     q, qd = _state_q(1)
@@ -244,11 +235,11 @@ def test_set_parameters_changes_the_next_tick_and_a_bad_value_is_refused(
            (Parameter('h_form', value='max'), r"^h_form: expected 'sum' or 'sat'"),
            (Parameter('Lambda', value=[0.0, 1.0]), r'^Lambda: values must be finite and > 0')]
     for param, reason in bad:
-        (res,) = set_params(param)
+        (res,) = params.set_parameters([param])
         assert not res.successful
         assert re.match(reason, res.reason), res.reason
     # Out of its descriptor's range: refused by rclpy with the range in the reason.
-    (res,) = set_params(Parameter('epsilon', value=-0.5))
+    (res,) = params.set_parameters([Parameter('epsilon', value=-0.5)])
     assert not res.successful and 'epsilon' in res.reason
 
     # Still running, on the last good values (K = 40, 60).
@@ -259,7 +250,7 @@ def test_set_parameters_changes_the_next_tick_and_a_bad_value_is_refused(
     assert cmd == _expect(ctl, q, qd, _setpoint(2)).tau.tolist()
 
     # The robust switch and theta0 (which restarts theta_hat) also act on the next tick.
-    (res,) = set_params(Parameter('robust', value=False))
+    (res,) = params.set_parameters([Parameter('robust', value=False)])
     assert res.successful, res.reason
     ctl.set_gains(Gains(K=(40.0, 60.0), robust=False))
     q, qd = _state_q(3)
@@ -558,9 +549,8 @@ def test_real_time_dt_comes_from_the_state_stamps_bounded_to_four_periods(
 
 def test_per_joint_effort_limits_clip_each_joint_and_bad_limits_or_gains_are_refused(
         procs, ros_node, wait):
+    from freejoint_tools.harness import ParameterCalls
     from rclpy.parameter import Parameter
-    from rclpy.parameter_client import AsyncParameterClient
-    import rclpy
     proc = _start(procs, '-p', 'effort_limits:=[5.0, 3.0]')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
@@ -574,8 +564,7 @@ def test_per_joint_effort_limits_clip_each_joint_and_bad_limits_or_gains_are_ref
         assert cmd == [max(-5.0, min(5.0, tau[0])), max(-3.0, min(3.0, tau[1]))]
         assert abs(tau[0]) > 5.0 and st.status & ControllerState.STATUS_TORQUE_LIMITED
         assert 'torque limited to [5.0, 3.0] N m' in st.message
-    client = AsyncParameterClient(ros_node, 'controller_node')
-    assert client.wait_for_services(timeout_sec=15.0), 'no parameter services'
+    params = ParameterCalls(ros_node, 'controller_node')
     bad = [(Parameter('effort_limits', value=[1.0]), r'^effort_limits: expected 2 values'),
            (Parameter('effort_limits', value=[-1.0, 2.0]), r'^effort_limits: expected 2'),
            (Parameter('K', value=[1e300, 100.0]), r'^K: values must be <= 10000'),
@@ -589,11 +578,9 @@ def test_per_joint_effort_limits_clip_each_joint_and_bad_limits_or_gains_are_ref
            (Parameter('joint_velocity_limit', value=[1.0]), r'^joint_velocity_limit: exp'),
            (Parameter('on_stale_setpoint', value='drop'), r'^on_stale_setpoint: expected')]
     for param, reason in bad:
-        future = client.set_parameters([param])
-        rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
-        (res,) = future.result().results
+        (res,) = params.set_parameters([param])
         assert not res.successful and re.match(reason, res.reason), (param.name, res.reason)
-    (res,) = _set(ros_node, client, Parameter('effort_limits', value=[2.0, 300.0]))
+    (res,) = params.set_parameters([Parameter('effort_limits', value=[2.0, 300.0])])
     assert res.successful, res.reason
     q, qd = _state_q(3)
     drv.setpoint(3, _setpoint(3))
@@ -602,14 +589,6 @@ def test_per_joint_effort_limits_clip_each_joint_and_bad_limits_or_gains_are_ref
     tau = _expect(ctl, q, qd, _setpoint(3)).tau.tolist()
     assert cmd == [max(-2.0, min(2.0, tau[0])), tau[1]]
     assert procs.stop(proc) == 0
-
-
-def _set(node, client, *params):
-    import rclpy
-    future = client.set_parameters(list(params))
-    rclpy.spin_until_future_complete(node, future, timeout_sec=15.0)
-    assert future.done(), 'no answer from set_parameters within 15 s'
-    return future.result().results
 
 
 def test_restarted_real_time_controller_ramps_its_torque_from_zero_without_a_spike(
@@ -687,8 +666,8 @@ FAULTS = {
 @pytest.mark.parametrize('fault', sorted(FAULTS))
 def test_absurd_input_is_refused_with_a_reason_and_tracking_resumes_within_half_a_second(
         procs, ros_node, wait, fault):
+    from freejoint_tools.harness import ParameterCalls
     from rclpy.parameter import Parameter
-    from rclpy.parameter_client import AsyncParameterClient
     kind, corrupt, reason = FAULTS[fault]
     proc = _start(procs, '-p', 'case:=vertical', '-p', 'lockstep:=false', *OLD_STAMPS,
                   '-p', 'resume_time:=0.01', '-p', 'stale_timeout:=2.0')
@@ -730,9 +709,8 @@ def test_absurd_input_is_refused_with_a_reason_and_tracking_resumes_within_half_
         wait(lambda: reason in procs.log(proc), 10.0, 'the setpoint refusal in the log')
         assert 'setpoint stamped %d ns refused' % (k * DT_NS) in procs.log(proc)
     else:
-        client = AsyncParameterClient(ros_node, 'controller_node')
-        assert client.wait_for_services(timeout_sec=15.0), 'no parameter services'
-        (res,) = _set(ros_node, client, Parameter('K', value=[1e300, 1e300]))
+        (res,) = ParameterCalls(ros_node, 'controller_node').set_parameters(
+            [Parameter('K', value=[1e300, 1e300])])
         assert not res.successful and res.reason.startswith(reason), res.reason
         drv.joint_state(k, q, qd)
         st, cmd = drv.answer(k)
@@ -944,30 +922,18 @@ def test_real_time_skips_a_state_older_than_max_state_age_without_a_command(
 JS_RELIABILITY = 'qos_overrides./joint_states.subscription.reliability'
 
 
-def _parameters(node, names):
-    """Return {name: value} of the controller's parameters ``names`` (one get call)."""
-    import rclpy
-    from rclpy.parameter import parameter_value_to_python
-    from rclpy.parameter_client import AsyncParameterClient
-    client = AsyncParameterClient(node, 'controller_node')
-    assert client.wait_for_services(timeout_sec=30.0), 'no parameter services'
-    future = client.get_parameters(list(names))
-    rclpy.spin_until_future_complete(node, future, timeout_sec=15.0)
-    assert future.done(), 'no answer from get_parameters within 15 s'
-    return {n: parameter_value_to_python(v) for n, v in zip(names, future.result().values)}
-
-
 @pytest.mark.parametrize('override', [True, False], ids=['override', 'no_override'])
 def test_a_best_effort_joint_states_driver_drives_the_controller_only_with_the_qos_override(
         override, procs, ros_node, wait):
     """A sensor-data (best-effort) joint_states, as many real drivers publish it."""
+    from freejoint_tools.harness import ParameterCalls
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import JointState
     extra = ('-p', JS_RELIABILITY + ':=best_effort') if override else ()
     proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS, *extra)
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)      # the controller is up: its reliable joint_states matched
-    params = _parameters(ros_node, [
+    params = ParameterCalls(ros_node, 'controller_node', timeout=30.0).get_values([
         JS_RELIABILITY, 'qos_overrides./joint_states.subscription.depth',
         'qos_overrides./joint_states.subscription.history',
         'qos_overrides./setpoint.subscription.reliability',

@@ -44,31 +44,15 @@ def _call(ros_node, client, request, what, timeout=10.0):
     return future.result()
 
 
-def _param_client(ros_node, wait):
-    from rclpy.parameter_client import AsyncParameterClient
-    client = AsyncParameterClient(ros_node, NODE)
-    wait(lambda: client.services_are_ready(), 30.0, 'the planner parameter services',
-         spin=lambda: _spin(ros_node, 0.1))
-    return client
+def _param_client(ros_node):
+    from freejoint_tools.harness import ParameterCalls
+    return ParameterCalls(ros_node, NODE, timeout=30.0)
 
 
-def _set(ros_node, client, name, value):
+def _set(params, name, value):
     """Set one parameter as `ros2 param set` does; return its SetParametersResult."""
-    import rclpy
     from rclpy.parameter import Parameter
-    future = client.set_parameters([Parameter(name, value=value)])
-    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=10.0)
-    assert future.done(), 'no answer to setting %s within 10 s' % name
-    return future.result().results[0]
-
-
-def _get(ros_node, client, names):
-    import rclpy
-    from rclpy.parameter import parameter_value_to_python
-    future = client.get_parameters(names)
-    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=10.0)
-    assert future.done(), 'no answer to get_parameters within 10 s'
-    return {n: parameter_value_to_python(v) for n, v in zip(names, future.result().values)}
+    return params.set_parameters([Parameter(name, value=value)])[0]
 
 
 def _stamps(messages):
@@ -148,7 +132,7 @@ def test_planner_yaml_loads_and_a_late_subscriber_gets_the_map_and_the_path(
     wait(lambda: grids and markers, 15.0, 'the latched map and marker',
          spin=lambda: _spin(ros_node, 0.1))
 
-    params = _get(ros_node, _param_client(ros_node, wait), sorted(expected))
+    params = _param_client(ros_node).get_values(sorted(expected))
     assert params == expected
     assert params['use_sim_time'] is True          # not the default: the file was applied
 
@@ -213,7 +197,7 @@ def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_
     from visualization_msgs.msg import Marker
     proc = _start_planner(procs)
     client = _wait_ready(ros_node, procs, proc, wait)
-    params = _param_client(ros_node, wait)
+    params = _param_client(ros_node)
     clock = ClockDriver(ros_node)
     wait(clock.matched, 30.0, 'the planner matching /clock and setpoint',
          spin=lambda: _spin(ros_node, 0.05))
@@ -240,14 +224,14 @@ def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_
     stamp = markers[1].header.stamp
     assert (stamp.sec, stamp.nanosec) == (0, 200 * MS)
     # the spacing N = 10 is known: a lookahead below N - 1 = 9 is refused, 0 always
-    result = _set(ros_node, params, 'lookahead', 5)
+    result = _set(params, 'lookahead', 5)
     assert not result.successful
     assert result.reason.startswith('lookahead: 5 ticks is below N - 1 = 9 for /clock every '
                                     'N = 10 ticks'), result.reason
-    result = _set(ros_node, params, 'lookahead', 0)
+    result = _set(params, 'lookahead', 0)
     assert not result.successful and 'lookahead' in result.reason and 'Min: 1' in \
         result.reason, result.reason
-    assert _set(ros_node, params, 'lookahead', 9).successful
+    assert _set(params, 'lookahead', 9).successful
     # /clock then jumps 30 ticks: 221 .. 239 due, 221 .. 229 late; N = 30 > lookahead + 1:
     # a loud error and lookahead raised to 2 N - 1 = 59, the ticks up to 289 out at once
     clock.got.clear()
@@ -264,7 +248,7 @@ def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_
         '= 59 to ride out a lost /clock; lookahead is 9' in log
     assert '[ERROR]' in log and '/clock every N = 30 ticks but lookahead is 9 < N - 1 = 29' \
         in log and 'lookahead raised to 59' in log
-    assert _get(ros_node, params, ['lookahead']) == {'lookahead': 59}
+    assert params.get_values(['lookahead']) == {'lookahead': 59}
 
 
 def test_a_path_into_the_semi_singular_region_is_refused_and_the_good_plan_keeps_streaming(
@@ -273,7 +257,7 @@ def test_a_path_into_the_semi_singular_region_is_refused_and_the_good_plan_keeps
     from freejoint_msgs.srv import PlanCircle
     proc = _start_planner(procs, ('-p', 'use_sim_time:=true', '-p', 'lookahead:=100'))
     client = _wait_ready(ros_node, procs, proc, wait)
-    params = _param_client(ros_node, wait)
+    params = _param_client(ros_node)
     clock = ClockDriver(ros_node, lookahead=100)
     wait(clock.matched, 30.0, 'the planner matching /clock and setpoint',
          spin=lambda: _spin(ros_node, 0.05))
@@ -292,14 +276,14 @@ def test_a_path_into_the_semi_singular_region_is_refused_and_the_good_plan_keeps
     assert answer.accepted and answer.reason == ''
     assert answer.margin > 0.2 and answer.plan_id == 0        # about 0.29 m; not executed
 
-    result = _set(ros_node, params, 'centre', [0.5, 0.0])
+    result = _set(params, 'centre', [0.5, 0.0])
     assert not result.successful
     assert 'circle refused' in result.reason and 'semi-singular annulus' in result.reason
     for name, value in [('radius', -0.1), ('eps_d', 0.0), ('resolution_deg', 0.05),
                         ('centre', [0.1])]:
-        result = _set(ros_node, params, name, value)
+        result = _set(params, name, value)
         assert not result.successful and name in result.reason, (name, result.reason)
-    assert _get(ros_node, params, ['centre', 'radius', 'eps_d', 'resolution_deg']) == {
+    assert params.get_values(['centre', 'radius', 'eps_d', 'resolution_deg']) == {
         'centre': [0.0, 0.0], 'radius': 0.2, 'eps_d': 1e-7, 'resolution_deg': 0.25}
 
     for now in (1 * MS, 30 * MS, 100 * MS):
@@ -322,13 +306,13 @@ def test_a_circle_change_starts_at_the_next_tick_by_a_transition_and_a_map_chang
     from nav_msgs.msg import OccupancyGrid
     proc = _start_planner(procs)
     _wait_ready(ros_node, procs, proc, wait)
-    params = _param_client(ros_node, wait)
+    params = _param_client(ros_node)
     clock = ClockDriver(ros_node)
     wait(clock.matched, 30.0, 'the planner matching /clock and setpoint',
          spin=lambda: _spin(ros_node, 0.05))
     clock.step(0, wait)
     clock.step(10 * MS, wait)                                 # ticks 0 .. 30 of plan 1
-    result = _set(ros_node, params, 'radius', 0.3)
+    result = _set(params, 'radius', 0.3)
     assert result.successful, result.reason
     clock.step(12 * MS, wait)                                 # ticks 31, 32 of plan 2
     assert [m.plan_id for m in clock.got] == [1] * 31 + [2, 2]
@@ -345,17 +329,17 @@ def test_a_circle_change_starts_at_the_next_tick_by_a_transition_and_a_map_chang
     grids = []
     ros_node.create_subscription(OccupancyGrid, 'semi_singular_map', grids.append, LATCHED_QOS)
     wait(lambda: grids, 15.0, 'the latched map', spin=lambda: _spin(ros_node, 0.1))
-    result = _set(ros_node, params, 'eps_d', 0.1)             # wider band, plan 2 still clear
+    result = _set(params, 'eps_d', 0.1)             # wider band, plan 2 still clear
     assert result.successful, result.reason
     wait(lambda: len(grids) == 2, 15.0, 'the recomputed map', spin=lambda: _spin(ros_node, 0.1))
     region = semi_singular(det_map(table1('horizontal').scaled(0.7), 0.25), 0.1)
     ref = region.to_grid((-1.5, 1.5, -1.5, 1.5), 0.01)
     assert np.array_equal(np.array(grids[1].data, dtype=np.int8).reshape(300, 300), ref)
     assert not np.array_equal(grids[0].data, grids[1].data)
-    result = _set(ros_node, params, 'eps_d', 1.0)             # everything semi-singular
+    result = _set(params, 'eps_d', 1.0)             # everything semi-singular
     assert not result.successful
     assert 'running plan 2 would enter the semi-singular region' in result.reason
-    assert _get(ros_node, params, ['eps_d']) == {'eps_d': 0.1}
+    assert params.get_values(['eps_d']) == {'eps_d': 0.1}
 
 
 BAD_START = [
@@ -471,7 +455,7 @@ def test_circles_beyond_the_reach_or_the_bounds_are_refused_at_run_time_naming_t
     from freejoint_msgs.srv import PlanCircle
     proc = _start_planner(procs)
     client = _wait_ready(ros_node, procs, proc, wait)
-    params = _param_client(ros_node, wait)
+    params = _param_client(ros_node)
     for name, value, words in [
             ('radius', 0.8, 'radius: 0.8 m exceeds the largest circle the reach annulus'),
             ('centre', [1.6, 0.0], 'centre: (1.6, 0) m is 1.6 m from the base, beyond the '
@@ -482,15 +466,15 @@ def test_circles_beyond_the_reach_or_the_bounds_are_refused_at_run_time_naming_t
                                        'of 3000 x 3000 cells'),
             ('start_angle', 7.0, 'start_angle'),
             ('max_speed', 0.0, 'max_speed')]:
-        result = _set(ros_node, params, name, value)
+        result = _set(params, name, value)
         assert not result.successful and words in result.reason, (name, result.reason)
     # the configured circle (the paper's, 0.471 m/s) must stay within the bounds
-    result = _set(ros_node, params, 'max_speed', 0.3)
+    result = _set(params, 'max_speed', 0.3)
     assert not result.successful and result.reason.startswith(
         'max_speed: the configured circle would exceed the bounds: duration: 5 s for radius '
         '0.2 m peaks at 0.471239 m/s, above max_speed 0.3 m/s'), result.reason
-    assert _set(ros_node, params, 'duration', 8.0).successful      # 0.295 m/s
-    assert _set(ros_node, params, 'max_speed', 0.3).successful
+    assert _set(params, 'duration', 8.0).successful      # 0.295 m/s
+    assert _set(params, 'max_speed', 0.3).successful
     for request, words in [
             ({'radius': 0.2, 'duration': 5.0, 'start_angle': 0.0},
              'above max_speed 0.3 m/s (duration >= 7.85398 s)'),
@@ -519,7 +503,7 @@ def test_the_planner_takes_thread_priority_and_cpu_affinity_for_every_thread_lik
     proc = _start_planner(procs, ('-p', 'use_sim_time:=false', '-p', 'thread_priority:=10',
                                   '-p', 'cpu_affinity:=[%d]' % cpu))
     _wait_ready(ros_node, procs, proc, wait)
-    params = _param_client(ros_node, wait)
+    params = _param_client(ros_node)
 
     def threads():
         out = set()
@@ -532,12 +516,12 @@ def test_the_planner_takes_thread_priority_and_cpu_affinity_for_every_thread_lik
         return out
     if permitted:
         assert threads() == {(os.SCHED_FIFO, 10, (cpu,))}, procs.log(proc)
-        assert _get(ros_node, params, ['thread_priority']) == {'thread_priority': 10}
+        assert params.get_values(['thread_priority']) == {'thread_priority': 10}
     else:
         assert 'thread_priority 10 not applied' in procs.log(proc)
-        assert _get(ros_node, params, ['thread_priority']) == {'thread_priority': 0}
-    result = _set(ros_node, params, 'cpu_affinity', [4096])
+        assert params.get_values(['thread_priority']) == {'thread_priority': 0}
+    result = _set(params, 'cpu_affinity', [4096])
     assert not result.successful and 'cpu_affinity: CPU 4096' in result.reason, result.reason
-    assert _set(ros_node, params, 'thread_priority', 0).successful
+    assert _set(params, 'thread_priority', 0).successful
     wait(lambda: {t[:2] for t in threads()} == {(os.SCHED_OTHER, 0)}, 10.0,
          'every thread back on the default scheduler', spin=lambda: _spin(ros_node, 0.1))

@@ -43,28 +43,6 @@ def _threads(pid):
     return out
 
 
-def _set(node, name, params):
-    import rclpy
-    from rclpy.parameter_client import AsyncParameterClient
-    client = AsyncParameterClient(node, name)
-    assert client.wait_for_services(timeout_sec=15.0), 'no parameter services of ' + name
-    future = client.set_parameters(params)
-    rclpy.spin_until_future_complete(node, future, timeout_sec=15.0)
-    assert future.done(), 'no answer from set_parameters within 15 s'
-    return future.result().results
-
-
-def _get(node, name, names):
-    import rclpy
-    from rclpy.parameter_client import AsyncParameterClient
-    client = AsyncParameterClient(node, name)
-    assert client.wait_for_services(timeout_sec=15.0), 'no parameter services of ' + name
-    future = client.get_parameters(names)
-    rclpy.spin_until_future_complete(node, future, timeout_sec=15.0)
-    assert future.done(), 'no answer from get_parameters within 15 s'
-    return future.result().values
-
-
 def _node_cmd(pkg, exe, config, *extra):
     return [os.path.join(ROOT, 'install', pkg, 'lib', pkg, exe), '--ros-args',
             '--params-file', os.path.join(CONFIG, config), *extra]
@@ -75,6 +53,7 @@ def _node_cmd(pkg, exe, config, *extra):
     ('freejoint_sim', 'sim_node', 'sim.yaml', 'sim_node')])
 def test_every_thread_gets_the_priority_and_cpus_and_set_parameters_changes_them(
         procs, ros_node, wait, pkg, exe, config, name):
+    from freejoint_tools.harness import ParameterCalls
     from rclpy.parameter import Parameter
     # Without the privilege (not root, no CAP_SYS_NICE / rtprio) only the affinity part is
     # checked here; the refusal itself is the next test's.
@@ -88,15 +67,16 @@ def test_every_thread_gets_the_priority_and_cpus_and_set_parameters_changes_them
     wait(lambda: len(_threads(proc.pid)) >= 3
          and all(t == (policy, prio, [LAST]) for t in _threads(proc.pid)), 10.0,
          'every thread at %s on CPU %d: %s' % (text, LAST, _threads(proc.pid)))
-    res = _set(ros_node, name, [Parameter('thread_priority', value=99),
-                                Parameter('cpu_affinity', value=[LAST + 64])])
+    params = ParameterCalls(ros_node, name)
+    res = params.set_parameters([Parameter('thread_priority', value=99),
+                                 Parameter('cpu_affinity', value=[LAST + 64])])
     assert [r.successful for r in res] == [False, False]
     # The descriptor's integer range refuses it before the node's own check.
     assert 'thread_priority' in res[0].reason and '98' in res[0].reason, res[0].reason
     assert res[1].reason.startswith('cpu_affinity: CPU %d is not available' % (LAST + 64))
     assert all(t == (policy, prio, [LAST]) for t in _threads(proc.pid))
-    res = _set(ros_node, name, [Parameter('thread_priority', value=0),
-                                Parameter('cpu_affinity', value=CPUS)])
+    res = params.set_parameters([Parameter('thread_priority', value=0),
+                                 Parameter('cpu_affinity', value=CPUS)])
     assert [r.successful for r in res] == [True, True], [r.reason for r in res]
     assert all(t == (os.SCHED_OTHER, 0, CPUS) for t in _threads(proc.pid)), _threads(proc.pid)
     assert proc.poll() is None
@@ -104,6 +84,7 @@ def test_every_thread_gets_the_priority_and_cpus_and_set_parameters_changes_them
 
 
 def test_without_the_privilege_the_node_says_why_and_runs_on(procs, ros_node, wait):
+    from freejoint_tools.harness import ParameterCalls
     from rclpy.parameter import Parameter
     proc = procs.start('controller_node', WITHOUT_SYS_NICE + _node_cmd(
         'freejoint_control', 'controller_node', 'controller.yaml',
@@ -114,14 +95,15 @@ def test_without_the_privilege_the_node_says_why_and_runs_on(procs, ros_node, wa
             'process (needs root, CAP_SYS_NICE or an rtprio limit >= 10: ulimit -r is ') in log
     assert 'running with thread_priority 0 (default scheduler on CPUs %s)' % CPUS in log
     assert all(t[:2] == (os.SCHED_OTHER, 0) for t in _threads(proc.pid))
-    got = _get(ros_node, 'controller_node', ['thread_priority'])
+    params = ParameterCalls(ros_node, 'controller_node')
+    got = params.get_parameters(['thread_priority'])
     assert got[0].integer_value == 0
-    res = _set(ros_node, 'controller_node', [Parameter('thread_priority', value=20)])
+    res = params.set_parameters([Parameter('thread_priority', value=20)])
     assert not res[0].successful
     assert res[0].reason.startswith('SCHED_FIFO priority 20 not permitted')
     # Parameters that need no privilege still go through, and the node answers.
-    res = _set(ros_node, 'controller_node', [Parameter('cpu_affinity', value=[LAST]),
-                                             Parameter('epsilon', value=0.2)])
+    res = params.set_parameters([Parameter('cpu_affinity', value=[LAST]),
+                                 Parameter('epsilon', value=0.2)])
     assert [r.successful for r in res] == [True, True], [r.reason for r in res]
     assert all(t == (os.SCHED_OTHER, 0, [LAST]) for t in _threads(proc.pid))
     assert procs.stop(proc) == 0

@@ -355,23 +355,15 @@ def test_reset_service_puts_the_arm_back_at_rest_and_time_runs_on(procs, ros_nod
 
 def test_bad_parameter_values_are_refused_with_a_reason_and_it_keeps_running(
         procs, ros_node, wait):
-    import rclpy
+    from freejoint_tools.harness import ParameterCalls
     from rclpy.parameter import Parameter
-    from rclpy.parameter_client import AsyncParameterClient
     proc = _start(procs)
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
-    client = AsyncParameterClient(ros_node, 'sim_node')
-    assert client.wait_for_services(timeout_sec=15.0), 'no parameter services'
-    future = client.set_parameters([Parameter('dt_sub', value=0.0003),
-                                    Parameter('seed', value=-2),
-                                    Parameter('initial_position', value=[2.0, 0.0]),
-                                    Parameter('case', value='sideways'),
-                                    Parameter('clock_rate', value=300.0),
-                                    Parameter('command_timeout', value=1.0)])
-    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
-    assert future.done(), 'no answer from set_parameters within 15 s'
-    res = future.result().results
+    res = ParameterCalls(ros_node, 'sim_node').set_parameters([
+        Parameter('dt_sub', value=0.0003), Parameter('seed', value=-2),
+        Parameter('initial_position', value=[2.0, 0.0]), Parameter('case', value='sideways'),
+        Parameter('clock_rate', value=300.0), Parameter('command_timeout', value=1.0)])
     assert res[0].reason == ('dt_sub: control_period 0.001 s is not an integer multiple of '
                              'dt_sub 0.0003 s')
     assert res[1].reason == 'seed: expected an integer >= 0, got -2'

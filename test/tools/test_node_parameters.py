@@ -55,21 +55,12 @@ def _node(kind, tmp_path, make_bag, config=True):
              '-p', 'wait_timeout:=120.0'])
 
 
-def _call(node, future, what, timeout=20.0):
-    import rclpy
-    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
-    assert future.done(), 'no answer from %s within %g s' % (what, timeout)
-    return future.result()
-
-
 def _all_parameters(node, name):
     """Return {name: ParameterValue} from one list_parameters and one get_parameters call."""
-    from rclpy.parameter_client import AsyncParameterClient
-    client = AsyncParameterClient(node, name)
-    assert client.wait_for_services(timeout_sec=30.0), 'no parameter services of ' + name
-    names = sorted(_call(node, client.list_parameters(), name + '/list_parameters')
-                   .result.names)
-    values = _call(node, client.get_parameters(names), name + '/get_parameters').values
+    from freejoint_tools.harness import ParameterCalls
+    client = ParameterCalls(node, name, timeout=30.0)
+    names = sorted(client.list_parameters())
+    values = client.get_parameters(names)
     assert len(values) == len(names), (
         '%s/get_parameters answered %d values for the %d names of list_parameters (a '
         'parameter without a value?)' % (name, len(values), len(names)))
@@ -169,22 +160,19 @@ def _schema(kind):
 @pytest.mark.parametrize('kind', NODES)
 def test_every_schema_entry_is_declared_on_the_running_node_with_its_descriptor(
         kind, procs, ros_node, tmp_path, make_bag):
-    from rclpy.parameter_client import AsyncParameterClient
+    from freejoint_tools.harness import ParameterCalls
     schema = _schema(kind)
     pkg, exe, name, args = _node(kind, tmp_path, make_bag)
     node = procs.start_node(pkg, exe, exe, ['--ros-args', *args])
-    client = AsyncParameterClient(ros_node, name)
-    assert client.wait_for_services(timeout_sec=30.0), 'no parameter services of ' + name
+    client = ParameterCalls(ros_node, name, timeout=30.0)
     names = [p.name for p in schema]
-    listed = set(_call(ros_node, client.list_parameters(), name + '/list_parameters')
-                 .result.names)
+    listed = set(client.list_parameters())
     assert set(names) <= listed, sorted(set(names) - listed)
     extra = sorted(n for n in listed - set(names)
                    if n not in ('use_sim_time', 'start_type_description_service')
                    and not n.startswith('qos_overrides.'))
     assert extra == [], 'declared outside the schema: %s' % extra
-    descriptors = _call(ros_node, client.describe_parameters(names),
-                        name + '/describe_parameters').descriptors
+    descriptors = client.describe_parameters(names)
     assert [d.name for d in descriptors] == names
     for entry, desc in zip(schema, descriptors):
         assert desc.description == entry.description, entry.name

@@ -18,7 +18,6 @@ import threading
 import time
 
 import pytest
-import rclpy
 
 pytestmark = pytest.mark.ros
 
@@ -237,16 +236,12 @@ def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_cl
         assert 'K' in status['message'].split('refused:', 1)[1], status['message']
 
         # A change made elsewhere (as ros2 param set) reaches a client that subscribed.
+        from freejoint_tools.harness import ParameterCalls
         from rclpy.parameter import Parameter
-        from rclpy.parameter_client import AsyncParameterClient
         client.send(op='subscribeParameterUpdates', names=['/controller_node.K'])
         time.sleep(0.5)   # the subscription request reaches the viewer first
-        params = AsyncParameterClient(ros_node, '/controller_node')
-        wait(lambda: params.services_are_ready(), 30.0, 'controller parameter services')
-        future = params.set_parameters([Parameter('K', value=[110.0, 100.0])])
-        wait(future.done, 30.0, 'set K from ROS', spin=lambda: rclpy.spin_once(
-            ros_node, timeout_sec=0.05))
-        assert future.result().results[0].successful
+        params = ParameterCalls(ros_node, '/controller_node', timeout=30.0)
+        assert params.set_parameters([Parameter('K', value=[110.0, 100.0])])[0].successful
         update = client.wait(lambda e: e['event'] == 'parameterValues' and not e.get('id')
                              and e['parameters'][0]['value'] == [110.0, 100.0], 30.0,
                              'the K update')

@@ -8,7 +8,9 @@ environment: the run's ``ROS_DOMAIN_ID``), tells which exited, stops them (SIGIN
 wait, SIGKILL of the process group) and collects their exit codes and output.
 :class:`ServiceCalls` holds the one copy of the service helpers of a harness node: spin
 until a condition (bounded), call a service (waiting for it, bounded), the recorder's
-``~/status`` (ready, drained) and the planner's ``~/plan_circle``.
+``~/status`` (ready, drained) and the planner's ``~/plan_circle``. :class:`ParameterCalls`
+calls one node's parameter services (set, get, list, describe), sending a request again
+when its answer is lost.
 """
 
 import os
@@ -159,22 +161,27 @@ class ServiceCalls:
     ----------
     node : rclpy.node.Node
         The harness's node (clients are created on it per call).
-    executor : rclpy executor
-        The executor that spins ``node``.
+    executor : rclpy executor, optional
+        The executor that spins ``node``; None: ``rclpy.spin_once(node)`` (the global
+        executor, as a test's ``ros_node`` is spun).
 
     """
 
-    def __init__(self, node, executor):
+    def __init__(self, node, executor=None):
         self.node = node
         self.executor = executor
 
     def spin_until(self, predicate, timeout, step=0.05):
         """Spin until ``predicate()`` or ``timeout`` wall s; return whether it held."""
+        import rclpy
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if predicate():
                 return True
-            self.executor.spin_once(timeout_sec=step)
+            if self.executor is None:
+                rclpy.spin_once(self.node, timeout_sec=step)
+            else:
+                self.executor.spin_once(timeout_sec=step)
         return predicate()
 
     def call(self, srv_type, name, request, timeout):
@@ -232,3 +239,118 @@ class ServiceCalls:
             direction=int(plan['direction']), execute=True)
         return self.call(PLAN_CIRCLE.srv_type, PLAN_CIRCLE.of('freejoint_planner'), request,
                          timeout)
+
+
+class ParameterCalls:
+    """
+    Call the parameter services of the node ``target``, sending a lost request again.
+
+    A request left unanswered for ``resend`` s is sent again, and again, until one is
+    answered or ``timeout`` s have passed; the first answer is returned. rmw_fastrtps
+    drops a service response when the server has not matched the client's response reader
+    yet ("failed to send response ... client will not receive response",
+    ros2/rmw_fastrtps#390, #467): waiting longer never brings that answer, a new request
+    does. Only idempotent requests are made, so that a request taken twice leaves the node
+    as once: set parameters to values (the nodes' set callbacks act on the values, not on
+    the number of requests; a refused value is refused again), get, list, describe. The
+    requests go through one rclpy ``AsyncParameterClient``, so they arrive in order: a
+    resent set is taken before the next call's request. Every wait is bounded.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The calling node (the harness's or the test's).
+    target : str
+        The node whose services are called, as ``ros2 param`` names it
+        (``/controller_node``, or relative to ``node``'s namespace).
+    executor : rclpy executor, optional
+        The executor that spins ``node``; None: ``rclpy.spin_once(node)``.
+    timeout : float, optional
+        Wall s to wait for the services (once per instance), then for each call's answer.
+    resend : float, optional
+        Wall s without an answer after which the request is sent again.
+
+    Attributes
+    ----------
+    sent : int
+        The number of requests the latest call sent (1 when its first was answered).
+
+    Raises
+    ------
+    TimeoutError
+        From any call: no parameter services of ``target`` within ``timeout`` s, or no
+        answer within ``timeout`` s; the message names the target and the service.
+
+    """
+
+    def __init__(self, node, target, executor=None, timeout=15.0, resend=3.0):
+        from rclpy.parameter_client import AsyncParameterClient
+        self.target = target
+        self.timeout = timeout
+        self.resend = resend
+        self.calls = ServiceCalls(node, executor)
+        self.client = AsyncParameterClient(node, target)
+        self.sent = 0           # requests sent by the latest call
+        self._ready = False
+
+    def _call(self, service, send):
+        """Send ``send()`` until answered (every ``resend`` s, ``timeout`` s); the answer."""
+        if not self._ready:
+            self._ready = self.calls.spin_until(self.client.services_are_ready, self.timeout)
+            if not self._ready:
+                raise TimeoutError('no parameter services of %s within %g s'
+                                   % (self.target, self.timeout))
+        deadline = time.monotonic() + self.timeout
+        futures = []
+
+        def answered():
+            return [f for f in futures if f.done() and not f.cancelled()]
+        try:
+            while not answered() and time.monotonic() < deadline:
+                futures.append(send())
+                patience = min(self.resend, deadline - time.monotonic())
+                self.calls.spin_until(lambda: bool(answered()), patience, step=0.01)
+        finally:
+            self.sent = len(futures)
+            for future in futures:
+                future.cancel()     # a late answer to a resent request goes nowhere
+        if not answered():
+            raise TimeoutError('no answer from %s/%s within %g s (requests sent: %d, one '
+                               'every %g s)' % (self.target, service, self.timeout,
+                                                len(futures), self.resend))
+        return answered()[0].result()
+
+    def set_parameters(self, params):
+        """
+        Set ``params`` (``rclpy.parameter.Parameter`` list) as ``ros2 param set`` does.
+
+        Returns the node's ``SetParametersResult`` of each, in order (``successful``,
+        ``reason``).
+        """
+        params = list(params)
+        return list(self._call('set_parameters',
+                               lambda: self.client.set_parameters(params)).results)
+
+    def get_parameters(self, names):
+        """Return the ``ParameterValue`` messages of ``names``, in order."""
+        names = list(names)
+        return list(self._call('get_parameters',
+                               lambda: self.client.get_parameters(names)).values)
+
+    def get_values(self, names):
+        """Return {name: value as plain Python} of ``names`` (one get_parameters call)."""
+        from rclpy.parameter import parameter_value_to_python
+        names = list(names)
+        return {n: parameter_value_to_python(v)
+                for n, v in zip(names, self.get_parameters(names))}
+
+    def list_parameters(self):
+        """Return the names of every parameter of the node (``ros2 param list``)."""
+        return list(self._call('list_parameters',
+                               lambda: self.client.list_parameters()).result.names)
+
+    def describe_parameters(self, names):
+        """Return the ``ParameterDescriptor`` messages of ``names``, in order."""
+        names = list(names)
+        return list(self._call('describe_parameters',
+                               lambda: self.client.describe_parameters(names)).descriptors)
