@@ -362,7 +362,8 @@ def supervise(s, pid_file, args):
     def start_supervised(name, cmd, *rest, **kwargs):
         if name == 'controller_node' and cmd and cmd[0] == node:
             cmd = (['chrt', '-f', str(priority)] if priority else []) + [
-                sup, '--pid-file', pid_file, '--'] + list(cmd[1:])
+                sup, '--pid-file', pid_file, '--transport', args.children_transport,
+                '--'] + list(cmd[1:])
         return start(name, cmd, *rest, **kwargs)
     s.graph.start = start_supervised
 
@@ -514,8 +515,12 @@ def controller_restart(args, index):
         res['back_within_2s'] = (res['worst_back_within_s'] is not None
                                  and res['worst_back_within_s'] <= 2.0)
         res['fastdds_profile'] = fastdds_profile()
-        say('controller_restart %s: Fast DDS profile %s; per cycle, s after the restart '
-            '(load = 1-min load average at the restart):' % (case, res['fastdds_profile']))
+        if args.supervised:
+            res['children_transport'] = args.children_transport
+        say('controller_restart %s: Fast DDS profile %s%s; per cycle, s after the restart '
+            '(load = 1-min load average at the restart):' % (
+                case, res['fastdds_profile'], ', supervised, children transport %s'
+                % args.children_transport if args.supervised else ''))
         say('  cycle  load  node  ready  1st cmd  blend (offset mm)  back  back-1st cmd  '
             'max |effort| N m  diverged')
         for k, r in enumerate(rows):
@@ -696,6 +701,10 @@ def parse(argv):
                     help='controller_restart: the controller runs under controller_supervisor '
                     '(an active controller and a hot spare); the active child is killed, the '
                     'spare takes over, the supervisor starts the next spare')
+    ap.add_argument('--children-transport', choices=('udp', 'inherit'), default='udp',
+                    help="controller_restart --supervised: the supervisor's --transport (udp: "
+                    'its children without shared memory, the default; inherit: as the '
+                    'environment, for comparison)')
     ap.add_argument('--probe', action='store_true',
                     help='controller_restart: restart the controller through '
                     'bench/controller_probe.py (its start-up timeline in its log)')

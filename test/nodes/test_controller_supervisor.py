@@ -5,6 +5,7 @@ Multi-process: the real-time simulator, the planner and ``controller_supervisor`
 ``controller_node`` processes) as ``ros2 run`` starts them with the files of ``config/``.
 A kill -9 of the active controller mid-circle is taken over by the spare (SIGUSR1 from the
 supervisor, which saw the death); a stopped (stalled) controller is not dead: no takeover.
+The children use no Fast DDS shared memory (the supervisor's UDPv4 profile).
 """
 import json
 import math
@@ -117,6 +118,11 @@ def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_b
     g = Graph(procs, ros_node, wait, tmp_path)
     sim, sup = g.start()
     first = g.pids()
+    # The children talk UDPv4 only: no Fast DDS shared memory a kill -9 could leave locked.
+    assert 'children on UDPv4 only (no shared memory)' in procs.log(sup)
+    for pid in (first['active'], first['spare']):
+        with open('/proc/%d/maps' % pid) as f:
+            assert '/dev/shm/fastrtps' not in f.read(), 'child %d maps Fast DDS SHM' % pid
     g.pause(2.0)        # 1 s into the circle
     t_kill = time.monotonic()
     os.kill(first['active'], signal.SIGKILL)

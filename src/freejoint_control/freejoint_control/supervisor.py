@@ -26,6 +26,18 @@ The pid file (``--pid-file``), rewritten atomically at every change, is JSON:
 ``{"supervisor": pid, "active": {"pid", "name"}, "standby": {"pid", "name", "ready"}}``.
 Plain Python (no rclpy: the supervisor is not a ROS participant). Run it at the
 controller's SCHED_FIFO priority (``chrt -f 50``) so that it reacts at once.
+
+The children talk UDPv4 only (``--transport udp``, the default): a process killed while it
+holds Fast DDS shared-memory ports leaves them locked, and a publisher that pushes to them
+waits on the dead process's mutex (the real-time simulator stalled 2 s after each kill -9
+of a shared-memory controller; none without it: docs/performance.md). The supervisor
+writes the children's Fast DDS profile at start-up: the environment's profile
+(``FASTRTPS_DEFAULT_PROFILES_FILE`` / ``FASTDDS_DEFAULT_PROFILES_FILE``, e.g.
+config/fastdds.xml) with its SHM transports removed, or a UDPv4 profile if there is none.
+rmw_fastrtps adds a shared-memory transport of its own under
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, so there the children get ``SUBNET`` with the
+static peer 127.0.0.1 and their UDPv4 transport bound to 127.0.0.1: the same reach as
+LOCALHOST. ``--transport inherit`` leaves the environment as it is.
 """
 
 import argparse
@@ -35,7 +47,9 @@ import select
 import signal
 import subprocess
 import sys
+import tempfile
 import time
+from xml.etree import ElementTree
 
 READY_FD_ENV = 'FREEJOINT_READY_FD'
 """Environment variable naming the file descriptor a child writes ``ready`` to."""
@@ -60,6 +74,144 @@ def notify_ready():
         os.close(int(fd))
     except (OSError, ValueError):
         pass
+
+
+PROFILE_ENV = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
+"""Where Fast DDS 2.x (Jazzy) and 3.x read their XML profiles file from."""
+PROFILES_NS = 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'
+UDP_ONLY = """<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="%s">
+  <participant profile_name="freejoint_udp" is_default_profile="true">
+    <rtps/>
+  </participant>
+</profiles>
+""" % PROFILES_NS
+
+
+def _local(tag):
+    return tag.rsplit('}', 1)[-1]
+
+
+def _children(elem, name):
+    return [c for c in elem if _local(c.tag) == name]
+
+
+def _text(elem, name):
+    found = _children(elem, name)
+    return (found[0].text or '').strip() if found else ''
+
+
+def _child(elem, name, index=None):
+    """Return ``elem``'s first child ``name``, created (at ``index``) if it has none."""
+    found = _children(elem, name)
+    if found:
+        return found[0]
+    ns = elem.tag[:elem.tag.index('}') + 1] if elem.tag.startswith('{') else ''
+    new = ElementTree.Element(ns + name)
+    elem.insert(len(elem) if index is None else index, new)
+    return new
+
+
+def udp_profile(text, loopback):
+    """
+    Return a Fast DDS profiles XML text: ``text``'s with its transports UDPv4 only.
+
+    Parameters
+    ----------
+    text : str or None
+        The XML of a Fast DDS profiles file (None: a profile of its own).
+    loopback : bool
+        Bind the UDPv4 transports to 127.0.0.1 (``interfaceWhiteList``).
+
+    Returns
+    -------
+    str
+        The XML: SHM transport descriptors and their ``userTransports`` entries removed;
+        every participant profile with ``useBuiltinTransports`` false and at least one
+        UDPv4 transport of the file (one named ``freejoint_supervised_udp`` added if it
+        had none); everything else (discovery, QoS) as in ``text``.
+
+    Raises
+    ------
+    ValueError
+        ``text`` is not XML or has no ``profiles`` element.
+
+    """
+    try:
+        root = ElementTree.fromstring(text if text is not None else UDP_ONLY)
+    except ElementTree.ParseError as exc:
+        raise ValueError('not a Fast DDS profiles file: %s' % exc) from None
+    profiles = root if _local(root.tag) == 'profiles' else next(
+        (e for e in root.iter() if _local(e.tag) == 'profiles'), None)
+    if profiles is None:
+        raise ValueError('not a Fast DDS profiles file: no <profiles> element')
+    ns = profiles.tag[:profiles.tag.index('}') + 1] if profiles.tag.startswith('{') else ''
+    # Before the participants: Fast DDS resolves their transport ids as it parses them.
+    descriptors = _child(profiles, 'transport_descriptors', 0)
+    shm, udp = set(), []
+    for desc in list(_children(descriptors, 'transport_descriptor')):
+        kind, ident = _text(desc, 'type'), _text(desc, 'transport_id')
+        if kind == 'SHM':
+            shm.add(ident)
+            descriptors.remove(desc)
+        elif kind == 'UDPv4':
+            udp.append((ident, desc))
+    if not udp:
+        desc = ElementTree.SubElement(descriptors, ns + 'transport_descriptor')
+        ElementTree.SubElement(desc, ns + 'transport_id').text = 'freejoint_supervised_udp'
+        ElementTree.SubElement(desc, ns + 'type').text = 'UDPv4'
+        udp.append(('freejoint_supervised_udp', desc))
+    if loopback:
+        for _ident, desc in udp:
+            for old in _children(desc, 'interfaceWhiteList'):
+                desc.remove(old)
+            allowed = ElementTree.SubElement(desc, ns + 'interfaceWhiteList')
+            ElementTree.SubElement(allowed, ns + 'address').text = '127.0.0.1'
+    for participant in _children(profiles, 'participant'):
+        rtps = _child(participant, 'rtps')
+        _child(rtps, 'useBuiltinTransports').text = 'false'
+        users = _child(rtps, 'userTransports')
+        for ref in list(_children(users, 'transport_id')):
+            if (ref.text or '').strip() in shm:
+                users.remove(ref)
+        if not any((r.text or '').strip() in {i for i, _ in udp}
+                   for r in _children(users, 'transport_id')):
+            ElementTree.SubElement(users, ns + 'transport_id').text = udp[0][0]
+    if ns:
+        ElementTree.register_namespace('', ns[1:-1])    # Fast DDS reads unprefixed tags
+    return ElementTree.tostring(root, encoding='unicode')
+
+
+def udp_environment(environ, directory):
+    """
+    Return the environment updates that give a child process UDPv4 transports only.
+
+    Writes the children's profile (:func:`udp_profile` of the environment's profiles
+    file) to ``directory``/fastdds_children.xml. Under
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (where rmw_fastrtps adds a shared-memory
+    transport itself) the range becomes ``SUBNET`` with the static peer 127.0.0.1 and the
+    transports are bound to 127.0.0.1. Raises OSError / ValueError naming the file.
+    """
+    source = next((environ[k] for k in PROFILE_ENV if environ.get(k)), None)
+    text = None
+    if source is not None:
+        try:
+            with open(source) as f:
+                text = f.read()
+        except OSError as exc:
+            raise OSError('Fast DDS profile %s: %s' % (source, exc.strerror)) from None
+    loopback = environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE') == 'LOCALHOST'
+    try:
+        xml = udp_profile(text, loopback)
+    except ValueError as exc:
+        raise ValueError('Fast DDS profile %s: %s' % (source, exc)) from None
+    path = os.path.join(directory, 'fastdds_children.xml')
+    with open(path, 'w') as f:
+        f.write('<?xml version="1.0" encoding="UTF-8" ?>\n' + xml + '\n')
+    updates = {k: path for k in PROFILE_ENV}
+    if loopback:
+        updates.update(ROS_AUTOMATIC_DISCOVERY_RANGE='SUBNET', ROS_STATIC_PEERS='127.0.0.1')
+    return updates
 
 
 def log(level, text):
@@ -88,11 +240,12 @@ def controller_command():
 class Child:
     """One controller process: its pid, pidfd, node name, role and readiness pipe."""
 
-    def __init__(self, cmd, name, standby):
+    def __init__(self, cmd, name, standby, env_updates=None):
         self.name = name
         self.standby = standby
         read, write = os.pipe()
         env = dict(os.environ)
+        env.update(env_updates or {})
         env[READY_FD_ENV] = str(write)
         extra = ['--ros-args', '-r', '__node:=' + name]
         if standby:
@@ -150,8 +303,9 @@ class Supervisor:
     """The active controller, its spare, the respawn and the takeover (module notes)."""
 
     def __init__(self, node_args, name='controller_node', pid_file=None, stop_timeout=5.0,
-                 respawn_delay=2.0):
+                 respawn_delay=2.0, env_updates=None):
         self.cmd = controller_command() + list(node_args)
+        self.env_updates = dict(env_updates or {})
         self.names = (name, name + '_spare')
         self.pid_file = pid_file
         self.stop_timeout = stop_timeout
@@ -179,7 +333,7 @@ class Supervisor:
             return None
         used = {c.name for c in (self.active, self.spare) if c is not None}
         name = next(n for n in self.names if n not in used)
-        child = Child(self.cmd, name, standby)
+        child = Child(self.cmd, name, standby, self.env_updates)
         log('INFO', 'started %s controller %d (/%s)' % ('standby' if standby else 'active',
                                                         child.pid, name))
         return child
@@ -364,6 +518,10 @@ def parse(argv):
     ap.add_argument('--respawn-delay', type=float, default=2.0,
                     help='s after a death before the next spare is started (default 2: the '
                     "new active controller's recovery first)")
+    ap.add_argument('--transport', choices=('udp', 'inherit'), default='udp',
+                    help="the children's Fast DDS transports: udp (default: UDPv4 only, a "
+                    'killed child leaves no shared-memory port locked) or inherit (as the '
+                    'environment)')
     opts, rest = ap.parse_known_args(argv)
     if rest and rest[0] == '--':
         rest = rest[1:]
@@ -373,9 +531,20 @@ def parse(argv):
 def main(args=None):
     """Run the supervisor; exit with the active controller's status (2: bad parameter)."""
     opts, node_args = parse(sys.argv[1:] if args is None else args)
-    sup = Supervisor(node_args, opts.name, opts.pid_file, opts.stop_timeout,
-                     opts.respawn_delay)
-    return sup.run()
+    with tempfile.TemporaryDirectory(prefix='controller_supervisor_') as directory:
+        updates = {}
+        if opts.transport == 'udp':
+            try:
+                updates = udp_environment(os.environ, directory)
+            except (OSError, ValueError) as exc:
+                log('FATAL', "the children's Fast DDS profile: %s" % exc)
+                return EXIT_BAD_PARAMETER
+            log('INFO', 'children on UDPv4 only (no shared memory): %s%s' % (
+                updates[PROFILE_ENV[0]], ', discovery SUBNET with the static peer 127.0.0.1 '
+                '(LOCALHOST reach)' if 'ROS_STATIC_PEERS' in updates else ''))
+        sup = Supervisor(node_args, opts.name, opts.pid_file, opts.stop_timeout,
+                         opts.respawn_delay, updates)
+        return sup.run()
 
 
 if __name__ == '__main__':
