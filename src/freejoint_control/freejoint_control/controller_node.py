@@ -136,9 +136,8 @@ class ControllerNode(Node, Lifecycle):
             signal.signal(signal.SIGUSR1, self._on_activate_signal)
             # Idle at SCHED_FIFO 1 (with a thread_priority above 1): below every real-time
             # thread of the graph (dropping 1 kHz of states costs ~20 % of a CPU), above
-            # best-effort load, which must not starve it: its middleware threads answer
-            # the publishers' shared-memory port health checks, and its activation must
-            # not wait for a CPU. thread_priority applies from the activation on.
+            # best-effort load, which must not starve it: its activation must not wait for
+            # a CPU. thread_priority applies from the activation on.
             process_scheduling().request(self.get_fully_qualified_name(),
                                          1 if cfg.thread_priority > 1 else 0,
                                          cfg.cpu_affinity)

@@ -287,16 +287,17 @@ class Child:
 
 def _child_setup():
     # Until the spare's node installs its handler, SIGUSR1 must not kill it (default
-    # action): ignored, inherited across exec; the supervisor waits for 'ready'. Under a
-    # real-time supervisor a child starts at SCHED_FIFO 1: below every real-time thread of
-    # the graph (its start-up must not preempt the active loop), above best-effort load: a
-    # participant starved at start-up does not answer the shared-memory port health check
-    # of a real-time publisher, which then blocks (the simulator stalled 2 s with spares
-    # started at the default scheduler, also at nice -20). The node sets its
-    # thread_priority itself (a spare at its activation).
+    # action): ignored, inherited across exec; the supervisor waits for 'ready'. A child
+    # starts at the default scheduler whatever the supervisor's: its start-up (about 1 CPU-s
+    # of imports and discovery) at SCHED_FIFO would eat the real-time budget of the graph
+    # (kernel.sched_rt_runtime_us: 95 % of each second) and the kernel would throttle every
+    # real-time thread, the simulator's and the active controller's too, for the rest of
+    # the period (commands 50 ms late). The node sets its scheduling itself once its
+    # modules are loaded (a spare: SCHED_FIFO 1 while idle, thread_priority from its
+    # activation on).
     signal.signal(signal.SIGUSR1, signal.SIG_IGN)
     if os.sched_getscheduler(0) != os.SCHED_OTHER:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
 class Supervisor:
