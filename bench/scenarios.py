@@ -368,6 +368,23 @@ def supervise(s, pid_file, args):
     s.graph.start = start_supervised
 
 
+def recorder_at(s, priority):
+    """
+    Start the session's recorder under ``chrt -f priority`` (``--recorder-priority``).
+
+    The recorder is the measuring instrument: at the default scheduler on 2 CPUs whose
+    real-time threads are not throttled it falls behind and loses the tail of the bag
+    (cycles without plant figures). Below the planner (``--priority`` - 10).
+    """
+    start = s.graph.start
+
+    def start_recorder(name, cmd, *rest, **kwargs):
+        if name == 'recorder':
+            cmd = ['chrt', '-f', str(priority)] + list(cmd)
+        return start(name, cmd, *rest, **kwargs)
+    s.graph.start = start_recorder
+
+
 def supervised_pids(s, pid_file, timeout=60.0):
     """Wait until the supervisor's spare is ready; return (active pid, spare pid)."""
     end = time.monotonic() + timeout
@@ -421,6 +438,8 @@ def controller_restart(args, index):
             index += 1
             if args.supervised:
                 supervise(s, os.path.join(s.dir, 'supervisor.json'), args)
+            if args.recorder_priority:
+                recorder_at(s, args.recorder_priority)
             s.up()
             pid_file = os.path.join(s.dir, 'supervisor.json')
             loop = bench_graph.CircleLoop(s.client, before=lambda: soak.rest_at_q0(s.client))
@@ -705,6 +724,9 @@ def parse(argv):
                     help="controller_restart --supervised: the supervisor's --transport (udp: "
                     'its children without shared memory, the default; inherit: as the '
                     'environment, for comparison)')
+    ap.add_argument('--recorder-priority', type=int, default=0,
+                    help='controller_restart: the recorder under chrt -f this priority '
+                    '(0: the default scheduler)')
     ap.add_argument('--probe', action='store_true',
                     help='controller_restart: restart the controller through '
                     'bench/controller_probe.py (its start-up timeline in its log)')
@@ -729,8 +751,8 @@ def main(argv=None):
     for name in names:
         cond = soak.conditions(args.priority, 0)
         cond['fastdds_profile'] = fastdds_profile()
-        say('%s: priority %d, %d CPUs, load %.2f' % (name, args.priority, os.cpu_count(),
-                                                     os.getloadavg()[0]))
+        say('%s: priority %d, %d CPUs, load %.2f, sched_rt_runtime_us %s' % (
+            name, args.priority, os.cpu_count(), os.getloadavg()[0], cond['sched_rt_runtime_us']))
         try:
             rows, index = RUNNERS[name](args, index)
             error = None

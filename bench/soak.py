@@ -54,6 +54,7 @@ if HERE not in sys.path:
 import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
 from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION  # noqa: E402, I100
 from freejoint_common.contract import JOINT_STATES, SETPOINT, to_ns  # noqa: E402
+from freejoint_common.scheduling import rt_budget  # noqa: E402
 
 OUT = os.path.join(ROOT, 'bags', 'soak')
 CASES = ('horizontal', 'vertical')
@@ -91,6 +92,7 @@ def conditions(priority, hogs):
             'thread_priority': priority, 'scheduling': 'SCHED_FIFO' if priority else 'OTHER',
             'planner_thread_priority': priority - 10 if priority > 10 else 0,
             'layout': 'a process per node (make demo)', 'hogs': hogs,
+            'sched_rt_runtime_us': (rt_budget() or (None,))[0],
             'time_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}
 
 

@@ -15,7 +15,7 @@ import copy
 import gc
 import time
 
-from freejoint_common.scheduling import process_scheduling
+from freejoint_common.scheduling import process_scheduling, rt_budget, rt_budget_note
 from freejoint_common.schema import Param, SCHEDULING
 from freejoint_core.errors import FreejointValueError
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -204,6 +204,9 @@ def request_scheduling(node, values, at_start=False):
             % (asked, reason, sched.describe() if again is None else again))
     elif reason is None and sched.requests and (sched.priority or sched.affinity):
         node.get_logger().info('process scheduling: ' + sched.describe())
+        note = rt_budget_note(rt_budget()) if sched.priority else None
+        if note is not None:
+            node.get_logger().info(note, once=True)
     return reason
 
 

@@ -25,6 +25,41 @@ MAX_PRIORITY = 98
 """Highest priority accepted: 99 stays with the kernel's own watchdog threads."""
 
 
+RT_RUNTIME_FILE = '/proc/sys/kernel/sched_rt_runtime_us'
+RT_PERIOD_FILE = '/proc/sys/kernel/sched_rt_period_us'
+
+
+def rt_budget():
+    """
+    Return the kernel's real-time budget ``(runtime_us, period_us)``; None if unreadable.
+
+    The kernel lets SCHED_FIFO threads use a CPU for ``runtime_us`` of every
+    ``period_us`` (950000 of 1000000 by default) and throttles all of them on a CPU that
+    used it up, for the rest of the period: a real-time loop that needs more stalls for up
+    to ``period_us - runtime_us``. ``runtime_us`` -1: no budget (no throttling).
+    """
+    try:
+        with open(RT_RUNTIME_FILE) as f:
+            runtime = int(f.read())
+        with open(RT_PERIOD_FILE) as f:
+            period = int(f.read())
+    except (OSError, ValueError):
+        return None
+    return runtime, period
+
+
+def rt_budget_note(budget):
+    """Return the one-line note on a limited real-time ``budget`` (None: unlimited)."""
+    if budget is None or budget[0] < 0 or budget[0] >= budget[1]:
+        return None
+    runtime, period = budget
+    return ('the kernel throttles SCHED_FIFO threads after %d of every %d us on a CPU '
+            '(kernel.sched_rt_runtime_us): a graph whose real-time threads need more stalls '
+            'up to %.0f ms; a real-time machine runs with kernel.sched_rt_runtime_us=-1 or '
+            'cores to spare (docs/GRAPH.md, real-time scheduling)'
+            % (runtime, period, (period - runtime) * 1e-3))
+
+
 def available_cpus():
     """Return the sorted CPUs this process may use at all (its start-up affinity)."""
     return sorted(os.sched_getaffinity(0))

@@ -131,3 +131,26 @@ def test_without_the_privilege_fifo_is_refused_with_the_reason_and_nothing_chang
     reason, threads, text = steps['b']
     assert reason is None and text == 'default scheduler on CPUs [%d]' % CPUS[-1]
     assert all(t == [os.SCHED_OTHER, 0, [CPUS[-1]]] for t in threads), threads
+
+
+def test_a_limited_real_time_budget_gets_a_note_with_the_longest_stall():
+    from freejoint_common.scheduling import rt_budget_note
+    # The kernel's default: 950000 of every 1000000 us -> a stall of up to 50 ms.
+    note = rt_budget_note((950000, 1000000))
+    assert note.startswith('the kernel throttles SCHED_FIFO threads after 950000 of every '
+                           '1000000 us on a CPU (kernel.sched_rt_runtime_us)')
+    assert 'stalls up to 50 ms' in note and 'kernel.sched_rt_runtime_us=-1' in note
+    assert 'stalls up to 200 ms' in rt_budget_note((800000, 1000000))
+    # No budget (-1), a budget of the whole period, or nothing readable: no note.
+    assert rt_budget_note((-1, 1000000)) is None
+    assert rt_budget_note((1000000, 1000000)) is None
+    assert rt_budget_note(None) is None
+
+
+def test_the_real_time_budget_is_read_from_the_kernel():
+    from freejoint_common.scheduling import rt_budget
+    with open('/proc/sys/kernel/sched_rt_runtime_us') as f:
+        runtime = int(f.read())
+    with open('/proc/sys/kernel/sched_rt_period_us') as f:
+        period = int(f.read())
+    assert rt_budget() == (runtime, period)
