@@ -64,6 +64,14 @@ def test_every_thread_gets_the_priority_and_cpus_and_set_parameters_changes_them
     text = 'SCHED_FIFO 10' if prio else 'default scheduler'
     wait(lambda: 'process scheduling: %s on CPUs [%d]' % (text, LAST) in procs.log(proc),
          30.0, 'the node to report its scheduling')
+    if prio:
+        # At SCHED_FIFO the node says whether the kernel's real-time budget can throttle it.
+        from freejoint_common.scheduling import rt_budget, rt_budget_note
+        note = rt_budget_note(rt_budget())
+        if note is not None:
+            assert note in procs.log(proc)
+        else:
+            assert 'the kernel throttles SCHED_FIFO threads' not in procs.log(proc)
     wait(lambda: len(_threads(proc.pid)) >= 3
          and all(t == (policy, prio, [LAST]) for t in _threads(proc.pid)), 10.0,
          'every thread at %s on CPU %d: %s' % (text, LAST, _threads(proc.pid)))
