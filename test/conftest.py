@@ -2,7 +2,7 @@
 import os
 import time
 
-from freejoint_tools.harness import Processes
+from freejoint_tools.harness import clean_stale_fast_dds_shm, Processes
 import pytest
 
 # Every run gets its own domain and sees only this machine, so runs (and CI) never mix.
@@ -13,12 +13,48 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
 
 
+def pytest_sessionstart(session):
+    """Start from a /dev/shm without Fast DDS files of dead processes."""
+    clean_stale_fast_dds_shm()
+
+
+def _live_participants():
+    """Return how many Fast DDS participants this process has (one 'dds.ev' thread each)."""
+    count = 0
+    for tid in os.listdir('/proc/self/task'):
+        try:
+            with open('/proc/self/task/%s/comm' % tid) as f:
+                count += f.read().startswith('dds.ev')
+        except OSError:
+            pass
+    return count
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """
+    Say so when participants outlive the tests (an executor or context left running).
+
+    Fast DDS destroys them in its exit handlers and can deadlock there: the run would hang
+    after its summary instead of exiting.
+    """
+    import gc
+    gc.collect()
+    left = _live_participants()
+    if left:
+        reporter = session.config.pluginmanager.get_plugin('terminalreporter')
+        if reporter is not None:
+            reporter.write_line('%d Fast DDS participant(s) of this process still alive at '
+                                'the end: a test left an executor or an rclpy context '
+                                'running' % left, red=True)
+
+
 @pytest.fixture
 def procs(tmp_path):
     """Give the test the process harness; stop what still runs at its end (logs in tmp_path)."""
     p = Processes(str(tmp_path), stop_timeout=10.0)
     yield p
     p.stop_all()
+    clean_stale_fast_dds_shm()      # what a killed node left must not break the next test
 
 
 def wait_for(predicate, timeout, what, spin=None, step=0.01):

@@ -2,13 +2,15 @@
 The project's Fast DDS profile (config/fastdds.xml): accepted by Fast DDS, used by the shell.
 
 Fast DDS reports a bad XML profile only in its log output (``XMLPARSER Error``, on stdout
-with these wheels) and then runs on its defaults, so a typo in the file would silently undo
-it: the first test loads the shipped file in a node process and fails on any XML error; the
-second shows that the check sees one. What the profile buys (a restarted controller's
-first command, a killed node forgotten) is measured by ``bench/scenarios.py
-controller_restart`` (docs/performance.md). The profile ``controller_supervisor`` derives
-for its children (UDPv4 only: a killed child leaves no shared-memory port locked) is
-checked the same way, and that its process maps no Fast DDS shared memory.
+with these wheels; other errors there, e.g. a stale shared-memory port a killed process
+left in /dev/shm, are not the profile's) and then runs on its defaults, so a typo in the
+file would silently undo it: the first test loads the shipped file in a node process and
+fails on any XML error; the second shows that the check sees one. What the profile buys
+(a restarted controller's first command, a killed node forgotten) is measured by
+``bench/scenarios.py controller_restart`` (docs/performance.md). The profile
+``controller_supervisor`` derives for its children (UDPv4 only: a killed child leaves no
+shared-memory port locked) is checked the same way, and that its process maps no Fast DDS
+shared memory.
 """
 
 import os
@@ -44,7 +46,7 @@ def test_the_shipped_fastdds_profile_is_accepted_without_an_xml_error():
     code, output = run_node(PROFILE)
     assert code == 0, output
     assert 'profile_probe' in output
-    assert 'XMLPARSER' not in output and 'Error' not in output, output
+    assert 'XMLPARSER' not in output, output
 
 
 def test_a_profile_with_an_unknown_element_is_reported_in_the_log(tmp_path):
@@ -90,7 +92,7 @@ def test_the_supervisors_children_profile_is_accepted_and_maps_no_shared_memory(
     child = updates.pop('FASTRTPS_DEFAULT_PROFILES_FILE')
     code, output = run_node(child, **updates)
     assert code == 0, output
-    assert 'XMLPARSER' not in output and 'Error' not in output, output
+    assert 'XMLPARSER' not in output, output
     assert not _shm_mapped(output), output
     # The control: the shipped profile under LOCALHOST maps Fast DDS shared memory.
     code, output = run_node(PROFILE, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')

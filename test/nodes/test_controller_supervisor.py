@@ -60,6 +60,10 @@ class Graph:
     def spin(self):
         self.executor.spin_once(timeout_sec=0.02)
 
+    def close(self):
+        """Shut the executor down: left running it keeps the test's participant alive."""
+        self.executor.shutdown(timeout_sec=5.0)
+
     def pause(self, seconds):
         end = time.monotonic() + seconds
         while time.monotonic() < end:
@@ -103,6 +107,14 @@ class Graph:
                 'ready': doc['standby']['ready']}
 
 
+@pytest.fixture
+def graph(procs, ros_node, wait, tmp_path):
+    """Give the test a Graph; its executor shut down at the end, whatever happened."""
+    g = Graph(procs, ros_node, wait, tmp_path)
+    yield g
+    g.close()
+
+
 def test_standby_with_lockstep_exits_2_with_one_line(procs, wait):
     proc = procs.start_node('freejoint_control', 'controller_node', 'controller', _args(
         'controller.yaml', 'lockstep:=true', 'standby:=true'))
@@ -114,8 +126,8 @@ def test_standby_with_lockstep_exits_2_with_one_line(procs, wait):
 
 
 def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_bounds(
-        procs, ros_node, wait, tmp_path):
-    g = Graph(procs, ros_node, wait, tmp_path)
+        procs, wait, graph):
+    g = graph
     sim, sup = g.start()
     first = g.pids()
     # The children talk UDPv4 only: no Fast DDS shared memory a kill -9 could leave locked.
@@ -154,8 +166,8 @@ def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_b
     assert 'exited' in procs.log(sup)
 
 
-def test_a_stopped_active_controller_is_not_taken_over(procs, ros_node, wait, tmp_path):
-    g = Graph(procs, ros_node, wait, tmp_path)
+def test_a_stopped_active_controller_is_not_taken_over(procs, wait, graph):
+    g = graph
     sim, sup = g.start(planner=False)
     first = g.pids()
     os.kill(first['active'], signal.SIGSTOP)

@@ -8,6 +8,7 @@ lists get ``--spin-time 4``: what they print is checked here, not how fast disco
 the load of a shared test machine (a node can show up seconds after the others).
 """
 import os
+import re
 import subprocess
 import time
 
@@ -21,9 +22,26 @@ CONFIG = os.path.join(ROOT, 'config')
 FJ = os.path.join(ROOT, 'install', 'freejoint_tools', 'lib', 'freejoint_tools', 'fj')
 
 
+ANSI = re.compile(r'\x1b\[[0-9;]*m')
+FAST_DDS_LOG = re.compile(r'^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d+ \[\w+ (Error|Warning|Info)\] ')
+"""A line of Fast DDS's own log (colours removed), e.g. ``... [RTPS_TRANSPORT_SHM Error] Failed
+init_port fastrtps_port7000: open_and_lock_file failed``: the shared-memory state a killed
+process left in /dev/shm, whatever fj does."""
+
+
 def fj(*args, timeout=120):
-    """Run ``fj args...``; return the CompletedProcess (text)."""
-    return subprocess.run([FJ, *args], capture_output=True, text=True, timeout=timeout)
+    """
+    Run ``fj args...``; return the CompletedProcess (text).
+
+    ``stderr`` is fj's own: Fast DDS's log lines are the middleware's (fj routes them to
+    stderr, test_fj_output_stays_clean_of_what_libraries_write_to_stdout) and are dropped
+    before the checks; ``middleware`` keeps them.
+    """
+    done = subprocess.run([FJ, *args], capture_output=True, text=True, timeout=timeout)
+    lines = done.stderr.splitlines(keepends=True)
+    done.middleware = ''.join(ln for ln in lines if FAST_DDS_LOG.match(ANSI.sub('', ln)))
+    done.stderr = ''.join(ln for ln in lines if not FAST_DDS_LOG.match(ANSI.sub('', ln)))
+    return done
 
 
 @pytest.fixture(scope='module')

@@ -13,6 +13,7 @@ calls one node's parameter services (set, get, list, describe), sending a reques
 when its answer is lost.
 """
 
+import fcntl
 import os
 import signal
 import subprocess
@@ -354,3 +355,47 @@ class ParameterCalls:
         names = list(names)
         return list(self._call('describe_parameters',
                                lambda: self.client.describe_parameters(names)).descriptors)
+
+
+SHM_DIR = '/dev/shm'
+SHM_PREFIX = 'fastrtps_'
+
+
+def clean_stale_fast_dds_shm(shm_dir=SHM_DIR):
+    """
+    Remove the Fast DDS shared-memory files whose owner is dead; return their names.
+
+    What ``fastdds shm clean`` does: a participant holds an exclusive ``flock`` on the
+    ``<name>_el`` file of its segment and of each port it listens on for its whole life; a
+    process killed with SIGKILL leaves them behind (sometimes the ``_el`` file without its
+    port), and a later participant given the same port number fails
+    ``open_and_lock_file`` and loses messages (the tests kill nodes on purpose). An
+    ``_el`` file nobody holds is removed with its ``<name>`` file.
+    """
+    try:
+        names = [n for n in os.listdir(shm_dir)
+                 if n.startswith(SHM_PREFIX) and n.endswith('_el')]
+    except OSError:
+        return []
+    removed = []
+    for name in names:
+        path = os.path.join(shm_dir, name)
+        try:
+            fd = os.open(path, os.O_RDWR)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue            # held: its owner lives
+        try:
+            for stale in (path[:-3], path):
+                try:
+                    os.unlink(stale)
+                    removed.append(os.path.basename(stale))
+                except FileNotFoundError:
+                    pass
+        finally:
+            os.close(fd)
+    return removed
