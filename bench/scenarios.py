@@ -19,7 +19,9 @@ The tracking bound is 1.5 x the offline runner's worst max error of seeds 0-9 of
     mid-circle, restart it ``--down`` (1.0) s later: the largest |effort| after the restart
     vs the limit, divergence, time from the restart until the tracking error stays within
     the bound (<= 2 s). ``--supervised``: under ``controller_supervisor``, the active child
-    killed and its hot spare taking over (times from the kill).
+    killed and its hot spare taking over (times from the kill); ``--children-transport
+    inherit`` for the supervisor's children on the environment's transports (shared
+    memory), ``--recorder-priority P`` for the recorder under ``chrt -f P``.
 ``driver500``  (d) both cases: the simulator publishing joint_states at 500 Hz
     (``publish_rate: 500``; ``--control-period`` for the controller, default: as
     configured), circles for ``--seconds``: tracking vs the bound, stale periods.

@@ -10,7 +10,8 @@ wait, SIGKILL of the process group) and collects their exit codes and output.
 until a condition (bounded), call a service (waiting for it, bounded), the recorder's
 ``~/status`` (ready, drained) and the planner's ``~/plan_circle``. :class:`ParameterCalls`
 calls one node's parameter services (set, get, list, describe), sending a request again
-when its answer is lost.
+when its answer is lost. :func:`clean_stale_fast_dds_shm` removes the shared-memory files a
+killed node left (the test session calls it).
 """
 
 import fcntl
