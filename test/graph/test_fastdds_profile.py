@@ -135,3 +135,16 @@ def test_a_broken_profile_stops_the_supervisor_with_its_name(tmp_path):
     with pytest.raises(OSError, match='Fast DDS profile /nonexistent.xml: No such file'):
         udp_environment({'FASTDDS_DEFAULT_PROFILES_FILE': '/nonexistent.xml'},
                         str(tmp_path))
+
+
+def test_under_another_rmw_the_children_keep_their_environment(tmp_path):
+    from freejoint_control.supervisor import udp_environment
+    environ = {'FASTRTPS_DEFAULT_PROFILES_FILE': PROFILE,
+               'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+    assert udp_environment(dict(environ, RMW_IMPLEMENTATION='rmw_cyclonedds_cpp'),
+                           str(tmp_path)) == {}
+    assert os.listdir(tmp_path) == []
+    # Fast DDS named or by default (Jazzy's): the children's profile.
+    for rmw in ('rmw_fastrtps_cpp', ''):
+        assert udp_environment(dict(environ, RMW_IMPLEMENTATION=rmw), str(tmp_path))[
+            'ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'SUBNET'

@@ -78,6 +78,8 @@ def notify_ready():
 
 PROFILE_ENV = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
 """Where Fast DDS 2.x (Jazzy) and 3.x read their XML profiles file from."""
+FAST_DDS_RMWS = ('', 'rmw_fastrtps_cpp', 'rmw_fastrtps_dynamic_cpp')
+"""``RMW_IMPLEMENTATION`` values that mean Fast DDS ('' = Jazzy's default)."""
 PROFILES_NS = 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'
 UDP_ONLY = """<?xml version="1.0" encoding="UTF-8" ?>
 <profiles xmlns="%s">
@@ -190,8 +192,12 @@ def udp_environment(environ, directory):
     file) to ``directory``/fastdds_children.xml. Under
     ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (where rmw_fastrtps adds a shared-memory
     transport itself) the range becomes ``SUBNET`` with the static peer 127.0.0.1 and the
-    transports are bound to 127.0.0.1. Raises OSError / ValueError naming the file.
+    transports are bound to 127.0.0.1. Nothing ({}) under another RMW than Fast DDS's
+    (``RMW_IMPLEMENTATION``): the profile is Fast DDS's, and SUBNET would widen another
+    middleware's reach. Raises OSError / ValueError naming the file.
     """
+    if environ.get('RMW_IMPLEMENTATION', '') not in FAST_DDS_RMWS:
+        return {}
     source = next((environ[k] for k in PROFILE_ENV if environ.get(k)), None)
     text = None
     if source is not None:
@@ -540,9 +546,13 @@ def main(args=None):
             except (OSError, ValueError) as exc:
                 log('FATAL', "the children's Fast DDS profile: %s" % exc)
                 return EXIT_BAD_PARAMETER
-            log('INFO', 'children on UDPv4 only (no shared memory): %s%s' % (
-                updates[PROFILE_ENV[0]], ', discovery SUBNET with the static peer 127.0.0.1 '
-                '(LOCALHOST reach)' if 'ROS_STATIC_PEERS' in updates else ''))
+            if updates:
+                log('INFO', 'children on UDPv4 only (no shared memory): %s%s' % (
+                    updates[PROFILE_ENV[0]], ', discovery SUBNET with the static peer '
+                    '127.0.0.1 (LOCALHOST reach)' if 'ROS_STATIC_PEERS' in updates else ''))
+            else:
+                log('INFO', 'children on the transports of the environment: RMW_IMPLEMENTATION '
+                    '%s is not Fast DDS' % os.environ.get('RMW_IMPLEMENTATION'))
         sup = Supervisor(node_args, opts.name, opts.pid_file, opts.stop_timeout,
                          opts.respawn_delay, updates)
         return sup.run()
