@@ -487,7 +487,7 @@ def bring_up_realtime(client, graph, layout, bag, case, sim, ctl=(), planner=(),
         raise RuntimeError('the controller does not answer the simulator after 60 s')
     if reset:
         from std_srvs.srv import Trigger
-        if client.call(Trigger, '/sim_node/reset', Trigger.Request(), 20.0) is None:
+        if client.call(Trigger, '/sim_node/reset', Trigger.Request(), 20.0, resend=2.0) is None:
             raise RuntimeError('the simulator did not answer ~/reset')
     client.spin_until(lambda: False, 1.0)   # the controller holds the start point
 

@@ -432,7 +432,7 @@ def rest_at_q0(client):
     all, the paper's law loses the vertical arm on the 4th back-to-back circle (seed 0).
     """
     from std_srvs.srv import Trigger
-    if client.call(Trigger, '/sim_node/reset', Trigger.Request(), 10.0) is None:
+    if client.call(Trigger, '/sim_node/reset', Trigger.Request(), 10.0, resend=2.0) is None:
         raise RuntimeError('no answer from /sim_node/reset')
     # A controller that is down (a restart scenario) starts from theta0 anyway.
     client.call(Trigger, '/controller_node/reset', Trigger.Request(), 2.0)

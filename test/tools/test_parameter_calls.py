@@ -139,3 +139,64 @@ def test_no_such_node_fails_within_the_timeout_naming_it(ros_node):
                                            '1 s$'):
         calls.set_parameters([])
     assert time.monotonic() - start < 3.0
+
+
+class TriggerStandIn:
+    """A ``/standin/reset`` (std_srvs/Trigger) that withholds the answers asked for."""
+
+    def __init__(self, withhold):
+        import rclpy
+        from rclpy.callback_groups import ReentrantCallbackGroup
+        from rclpy.executors import MultiThreadedExecutor
+        from std_srvs.srv import Trigger
+        self.withhold, self.requests = withhold, 0
+        self.release, self.lock = threading.Event(), threading.Lock()
+        self.node = rclpy.create_node('standin_trigger')
+        self.node.create_service(Trigger, TARGET + '/reset', self._answer,
+                                 callback_group=ReentrantCallbackGroup())
+        self.executor = MultiThreadedExecutor(num_threads=6)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def _answer(self, request, response):
+        with self.lock:
+            self.requests += 1
+            number = self.requests
+        if number in self.withhold:
+            self.release.wait(30.0)
+            return response
+        response.success, response.message = True, 'answered request %d' % number
+        return response
+
+    def close(self):
+        self.release.set()
+        self.executor.shutdown(timeout_sec=10.0)
+        self.thread.join(10.0)
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def trigger_standin(ros_node):
+    made = []
+
+    def make(withhold):
+        made.append(TriggerStandIn(withhold))
+        return made[-1]
+    yield make
+    for standin in made:
+        standin.close()
+
+
+def test_an_idempotent_service_call_is_sent_again_when_its_answer_is_lost(
+        ros_node, trigger_standin):
+    from freejoint_tools.harness import ServiceCalls
+    from std_srvs.srv import Trigger
+    standin = trigger_standin({1, 3})
+    calls = ServiceCalls(ros_node)
+    answer = calls.call(Trigger, TARGET + '/reset', Trigger.Request(), 10.0, resend=0.5)
+    assert answer is not None and answer.message == 'answered request 2'
+    # Without resend the withheld request is all there is: no answer within the timeout.
+    start = time.monotonic()
+    assert calls.call(Trigger, TARGET + '/reset', Trigger.Request(), 1.5) is None
+    assert 1.5 <= time.monotonic() - start < 4.0 and standin.requests == 3

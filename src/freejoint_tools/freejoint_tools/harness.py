@@ -186,23 +186,41 @@ class ServiceCalls:
                 self.executor.spin_once(timeout_sec=step)
         return predicate()
 
-    def call(self, srv_type, name, request, timeout):
-        """Call service ``name`` (waiting for it up to ``timeout`` s); answer or None."""
+    def call(self, srv_type, name, request, timeout, resend=None):
+        """
+        Call service ``name`` (waiting for it up to ``timeout`` s); answer or None.
+
+        ``resend`` (s, idempotent services only, e.g. a ``~/reset``): the request is sent
+        again when unanswered that long, until ``timeout`` - rmw_fastrtps drops a response
+        sent before the server matched the client (:class:`ParameterCalls`).
+        """
         client = self.node.create_client(srv_type, name)
+        futures = []
         try:
             if not self.spin_until(client.service_is_ready, timeout):
                 return None
-            future = client.call_async(request)
-            self.spin_until(future.done, timeout, step=0.01)
-            return future.result() if future.done() else None
+            deadline = time.monotonic() + timeout
+            while True:
+                futures.append(client.call_async(request))
+                left = deadline - time.monotonic()
+                wait = left if resend is None else min(resend, left)
+                done = self.spin_until(lambda: any(f.done() for f in futures), max(0.0, wait),
+                                       step=0.01)
+                if done or time.monotonic() >= deadline:
+                    break
+            answered = [f for f in futures if f.done() and not f.cancelled()]
+            return answered[0].result() if answered else None
         finally:
+            for future in futures:
+                future.cancel()
             self.node.destroy_client(client)
 
     def recorder_status(self, timeout=5.0):
         """Return the answer message of the recorder's ``~/status`` ('': no answer)."""
         from freejoint_common.contract import RECORDER_STATUS
         trigger = RECORDER_STATUS.srv_type
-        answer = self.call(trigger, RECORDER_STATUS.of('recorder'), trigger.Request(), timeout)
+        answer = self.call(trigger, RECORDER_STATUS.of('recorder'), trigger.Request(), timeout,
+                           resend=2.0)
         return answer.message if answer is not None else ''
 
     def recorder_ready(self, timeout):
@@ -213,7 +231,7 @@ class ServiceCalls:
         answer = None
         while time.monotonic() < deadline:
             answer = self.call(trigger, RECORDER_STATUS.of('recorder'), trigger.Request(),
-                               max(0.1, deadline - time.monotonic()))
+                               max(0.1, deadline - time.monotonic()), resend=2.0)
             if answer is not None and answer.success:
                 return True, answer.message
             self.spin_until(lambda: False, 0.2)
