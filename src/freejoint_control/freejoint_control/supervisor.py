@@ -30,7 +30,7 @@ controller's SCHED_FIFO priority (``chrt -f 50``) so that it reacts at once.
 The children talk UDPv4 only (``--transport udp``, the default): a process killed while it
 holds Fast DDS shared-memory ports leaves them locked, and a publisher that pushes to them
 waits on the dead process's mutex (the real-time simulator stalled 2-6 s after a kill -9
-of a shared-memory controller, at most 57 ms without: docs/performance.md). The supervisor
+of a shared-memory controller, 57 ms at most without, 335 ms once: performance.md). The supervisor
 writes the children's Fast DDS profile at start-up: the environment's profile
 (``FASTRTPS_DEFAULT_PROFILES_FILE`` / ``FASTDDS_DEFAULT_PROFILES_FILE``, e.g.
 config/fastdds.xml) with its SHM transports removed, or a UDPv4 profile if there is none.
