@@ -76,8 +76,8 @@ class StandIn:
 def standin_of(ros_node):
     made = []
 
-    def make(withhold):
-        made.append(StandIn(withhold))
+    def make(withhold, kind=None):
+        made.append((kind or StandIn)(withhold))
         return made[-1]
     yield make
     for standin in made:
@@ -141,7 +141,7 @@ def test_no_such_node_fails_within_the_timeout_naming_it(ros_node):
     assert time.monotonic() - start < 3.0
 
 
-class TriggerStandIn:
+class TriggerStandIn(StandIn):
     """A ``/standin/reset`` (std_srvs/Trigger) that withholds the answers asked for."""
 
     def __init__(self, withhold):
@@ -169,30 +169,12 @@ class TriggerStandIn:
         response.success, response.message = True, 'answered request %d' % number
         return response
 
-    def close(self):
-        self.release.set()
-        self.executor.shutdown(timeout_sec=10.0)
-        self.thread.join(10.0)
-        self.node.destroy_node()
-
-
-@pytest.fixture
-def trigger_standin(ros_node):
-    made = []
-
-    def make(withhold):
-        made.append(TriggerStandIn(withhold))
-        return made[-1]
-    yield make
-    for standin in made:
-        standin.close()
-
 
 def test_an_idempotent_service_call_is_sent_again_when_its_answer_is_lost(
-        ros_node, trigger_standin):
+        ros_node, standin_of):
     from freejoint_tools.harness import ServiceCalls
     from std_srvs.srv import Trigger
-    standin = trigger_standin({1, 3})
+    standin = standin_of({1, 3}, TriggerStandIn)
     calls = ServiceCalls(ros_node)
     answer = calls.call(Trigger, TARGET + '/reset', Trigger.Request(), 10.0, resend=0.5)
     assert answer is not None and answer.message == 'answered request 2'
