@@ -186,33 +186,48 @@ class ServiceCalls:
                 self.executor.spin_once(timeout_sec=step)
         return predicate()
 
+    def first_answer(self, send, timeout, resend=None):
+        """
+        Send a request and spin until it is answered; return ``(result or None, sent)``.
+
+        ``send()`` sends one request and returns its future. With ``resend`` (s; for
+        idempotent requests only) a request unanswered that long is sent again, until one
+        is answered or ``timeout`` s have passed: rmw_fastrtps drops a response sent before
+        the server matched the client's response reader (ros2/rmw_fastrtps#390, #467), and
+        waiting longer never brings it. ``sent`` is the number of requests sent; the
+        others' futures are cancelled (a late answer goes nowhere).
+        """
+        deadline = time.monotonic() + timeout
+        futures = []
+
+        def answered():
+            return [f for f in futures if f.done() and not f.cancelled()]
+        try:
+            while True:
+                futures.append(send())
+                left = deadline - time.monotonic()
+                wait = left if resend is None else min(resend, left)
+                if (self.spin_until(lambda: bool(answered()), max(0.0, wait), step=0.01)
+                        or time.monotonic() >= deadline):
+                    break
+        finally:
+            for future in futures:
+                future.cancel()
+        done = answered()
+        return (done[0].result() if done else None), len(futures)
+
     def call(self, srv_type, name, request, timeout, resend=None):
         """
         Call service ``name`` (waiting for it up to ``timeout`` s); answer or None.
 
-        ``resend`` (s, idempotent services only, e.g. a ``~/reset``): the request is sent
-        again when unanswered that long, until ``timeout`` - rmw_fastrtps drops a response
-        sent before the server matched the client (:class:`ParameterCalls`).
+        ``resend``: see :meth:`first_answer` (idempotent services only, e.g. a ``~/reset``).
         """
         client = self.node.create_client(srv_type, name)
-        futures = []
         try:
             if not self.spin_until(client.service_is_ready, timeout):
                 return None
-            deadline = time.monotonic() + timeout
-            while True:
-                futures.append(client.call_async(request))
-                left = deadline - time.monotonic()
-                wait = left if resend is None else min(resend, left)
-                done = self.spin_until(lambda: any(f.done() for f in futures), max(0.0, wait),
-                                       step=0.01)
-                if done or time.monotonic() >= deadline:
-                    break
-            answered = [f for f in futures if f.done() and not f.cancelled()]
-            return answered[0].result() if answered else None
+            return self.first_answer(lambda: client.call_async(request), timeout, resend)[0]
         finally:
-            for future in futures:
-                future.cancel()
             self.node.destroy_client(client)
 
     def recorder_status(self, timeout=5.0):
@@ -320,25 +335,12 @@ class ParameterCalls:
             if not self._ready:
                 raise TimeoutError('no parameter services of %s within %g s'
                                    % (self.target, self.timeout))
-        deadline = time.monotonic() + self.timeout
-        futures = []
-
-        def answered():
-            return [f for f in futures if f.done() and not f.cancelled()]
-        try:
-            while not answered() and time.monotonic() < deadline:
-                futures.append(send())
-                patience = min(self.resend, deadline - time.monotonic())
-                self.calls.spin_until(lambda: bool(answered()), patience, step=0.01)
-        finally:
-            self.sent = len(futures)
-            for future in futures:
-                future.cancel()     # a late answer to a resent request goes nowhere
-        if not answered():
+        result, self.sent = self.calls.first_answer(send, self.timeout, self.resend)
+        if result is None:
             raise TimeoutError('no answer from %s/%s within %g s (requests sent: %d, one '
                                'every %g s)' % (self.target, service, self.timeout,
-                                                len(futures), self.resend))
-        return answered()[0].result()
+                                                self.sent, self.resend))
+        return result
 
     def set_parameters(self, params):
         """
