@@ -346,6 +346,15 @@ def first_after(times, t0, t_end):
     return min(after) if after else None
 
 
+def rewrite_start(s, rewrite):
+    """Start the session's processes with ``rewrite(name, cmd)`` as their command line."""
+    start = s.graph.start
+
+    def start_rewritten(name, cmd, *rest, **kwargs):
+        return start(name, rewrite(name, list(cmd)), *rest, **kwargs)
+    s.graph.start = start_rewritten
+
+
 def supervise(s, pid_file, args):
     """
     Run the session's controller under ``controller_supervisor`` (``--supervised``).
@@ -356,18 +365,17 @@ def supervise(s, pid_file, args):
     -f`` (``--restart-priority``, else ``--priority``) so that it reacts at once; its
     children start at the default scheduler and take their ``thread_priority`` themselves.
     """
-    start = s.graph.start
     node = bench_graph.executable('freejoint_control', 'controller_node')
     sup = bench_graph.executable('freejoint_control', 'controller_supervisor')
     priority = args.restart_priority or args.priority
 
-    def start_supervised(name, cmd, *rest, **kwargs):
-        if name == 'controller_node' and cmd and cmd[0] == node:
-            cmd = (['chrt', '-f', str(priority)] if priority else []) + [
-                sup, '--pid-file', pid_file, '--transport', args.children_transport,
-                '--'] + list(cmd[1:])
-        return start(name, cmd, *rest, **kwargs)
-    s.graph.start = start_supervised
+    def supervised(name, cmd):
+        if name != 'controller_node' or not cmd or cmd[0] != node:
+            return cmd
+        return (['chrt', '-f', str(priority)] if priority else []) + [
+            sup, '--pid-file', pid_file, '--transport', args.children_transport,
+            '--'] + cmd[1:]
+    rewrite_start(s, supervised)
 
 
 def recorder_at(s, priority):
@@ -378,13 +386,8 @@ def recorder_at(s, priority):
     real-time threads are not throttled it falls behind and loses the tail of the bag
     (cycles without plant figures). Below the planner (``--priority`` - 10).
     """
-    start = s.graph.start
-
-    def start_recorder(name, cmd, *rest, **kwargs):
-        if name == 'recorder':
-            cmd = ['chrt', '-f', str(priority)] + list(cmd)
-        return start(name, cmd, *rest, **kwargs)
-    s.graph.start = start_recorder
+    rewrite_start(s, lambda name, cmd: ['chrt', '-f', str(priority)] + cmd
+                  if name == 'recorder' else cmd)
 
 
 def supervised_pids(s, pid_file, timeout=60.0):
@@ -438,12 +441,12 @@ def controller_restart(args, index):
         seconds = args.cycles * (args.down + args.recover + 6.0) + 10.0
         with soak.Session('controller_restart_' + case, index, case, seconds) as s:
             index += 1
+            pid_file = os.path.join(s.dir, 'supervisor.json')
             if args.supervised:
-                supervise(s, os.path.join(s.dir, 'supervisor.json'), args)
+                supervise(s, pid_file, args)
             if args.recorder_priority:
                 recorder_at(s, args.recorder_priority)
             s.up()
-            pid_file = os.path.join(s.dir, 'supervisor.json')
             loop = bench_graph.CircleLoop(s.client, before=lambda: soak.rest_at_q0(s.client))
             for _ in range(args.cycles):
                 # A circle from rest at q(0) each cycle (no new circle meanwhile), killed
