@@ -426,8 +426,8 @@ def restart_command(args):
 
 def fastdds_profile():
     """Return the Fast DDS XML profile file the nodes load (None: Fast DDS defaults)."""
-    return (os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE')
-            or os.environ.get('FASTDDS_DEFAULT_PROFILES_FILE') or None)
+    from freejoint_control.supervisor import profiles_file
+    return profiles_file(os.environ)
 
 
 def controller_restart(args, index):

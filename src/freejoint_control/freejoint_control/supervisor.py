@@ -184,6 +184,11 @@ def udp_profile(text, loopback):
     return ElementTree.tostring(root, encoding='unicode')
 
 
+def profiles_file(environ):
+    """Return the Fast DDS XML profiles file ``environ`` names (None: Fast DDS defaults)."""
+    return next((environ[k] for k in PROFILE_ENV if environ.get(k)), None)
+
+
 def udp_environment(environ, directory):
     """
     Return the environment updates that give a child process UDPv4 transports only.
@@ -198,7 +203,7 @@ def udp_environment(environ, directory):
     """
     if environ.get('RMW_IMPLEMENTATION', '') not in FAST_DDS_RMWS:
         return {}
-    source = next((environ[k] for k in PROFILE_ENV if environ.get(k)), None)
+    source = profiles_file(environ)
     text = None
     if source is not None:
         try:
