@@ -49,9 +49,11 @@ class Driver:
         self.commands = {}
         self.pub_js = node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, _qos())
         self.pub_sp = node.create_publisher(SETPOINT.msg_type, SETPOINT.name, _qos(True))
-        node.create_subscription(CONTROLLER_STATE.msg_type, CONTROLLER_STATE.name,
-                                 self._on_state, _qos())
-        node.create_subscription(COMMANDS.msg_type, COMMANDS.name, self._on_command, _qos())
+        self.subs = (
+            node.create_subscription(CONTROLLER_STATE.msg_type, CONTROLLER_STATE.name,
+                                     self._on_state, _qos()),
+            node.create_subscription(COMMANDS.msg_type, COMMANDS.name, self._on_command,
+                                     _qos()))
         self.JointState = JOINT_STATES.msg_type
         self.CartesianSetpoint = SETPOINT.msg_type
 
@@ -124,10 +126,13 @@ class Driver:
         return self.states[ns][0], self.commands[stamp_label(ns)][0]
 
     def connect(self, proc, procs):
+        # Matched both ways, not only seen in the graph: the graph (ros_discovery_info) can
+        # list the controller's publishers before this test's readers have matched them, and
+        # an answer published then is lost (the watchdog's stale answer 2 s later was the one
+        # received).
         self.wait(lambda: (self.pub_js.get_subscription_count() > 0
                            and self.pub_sp.get_subscription_count() > 0
-                           and len(self.node.get_publishers_info_by_topic(
-                               '/controller_state')) > 0),
+                           and all(sub.get_publisher_count() > 0 for sub in self.subs)),
                   30.0, 'the controller to connect (log: %s)' % procs.log(proc),
                   spin=self.spin)
 
