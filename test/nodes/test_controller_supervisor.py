@@ -26,6 +26,8 @@ LIMITS = SCHEMA.from_yaml(os.path.join(CONFIG, 'controller.yaml')).effort_limits
 PRIORITY = 'thread_priority:=50'
 """Sim and controllers at SCHED_FIFO 50, the planner at 40, as the soak runs them: a
 vertical arm at the default scheduler on a loaded machine is not a real-time loop."""
+CHILDREN = {'controller_node', 'controller_node_spare'}
+"""The supervisor's two node names (a new spare takes the one that is free)."""
 TAKEOVER_WALL_S = 1.0
 """Bound on the wall time from the kill to the next command at the simulator's topic
 (measured 0.03 s when the spare is ready; generous for a loaded test machine)."""
@@ -43,7 +45,7 @@ class Graph:
 
     def __init__(self, procs, ros_node, wait, tmp_path):
         from rclpy.experimental import EventsExecutor
-        self.procs, self.wait = procs, wait
+        self.procs, self.wait, self.node = procs, wait, ros_node
         self.executor = EventsExecutor()
         self.executor.add_node(ros_node)
         self.pid_file = str(tmp_path / 'supervisor.json')
@@ -94,6 +96,10 @@ class Graph:
             assert planner.poll() is None, self.procs.tail(planner, 10)
         return sim, sup
 
+    def subscribers(self, topic):
+        """Return the names of the nodes the graph lists as subscribed to ``topic``."""
+        return {info.node_name for info in self.node.get_subscriptions_info_by_topic(topic)}
+
     def pids(self):
         """Return {'active': pid, 'spare': pid, 'ready': bool} of the pid file ({}: none)."""
         try:
@@ -135,6 +141,10 @@ def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_b
     for pid in (first['active'], first['spare']):
         with open('/proc/%d/maps' % pid) as f:
             assert '/dev/shm/fastrtps' not in f.read(), 'child %d maps Fast DDS SHM' % pid
+    # Both children take the setpoints; only the active one is subscribed to joint_states.
+    g.wait(lambda: g.subscribers('/setpoint') >= {'controller_node', 'controller_node_spare'},
+           30.0, 'both controllers on /setpoint in the graph', spin=g.spin)
+    assert g.subscribers('/joint_states') & CHILDREN == {'controller_node'}
     g.pause(2.0)        # 1 s into the circle
     t_kill = time.monotonic()
     os.kill(first['active'], signal.SIGKILL)
@@ -150,6 +160,10 @@ def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_b
     wait(lambda: g.pids().get('ready') and g.pids()['spare'] not in (
         first['active'], first['spare']), 60.0, 'a new spare', spin=g.spin)
     assert g.pids()['active'] == first['spare']
+    # The activated spare subscribed (the killed one's entry may linger in the graph until
+    # its lease ends, and the new spare takes its name: not asserted on).
+    g.wait(lambda: 'controller_node_spare' in g.subscribers('/joint_states'), 10.0,
+           'the activated spare on /joint_states in the graph', spin=g.spin)
     # Commands came back within a bounded wall time, every effort finite within the limits.
     assert resumed - t_kill <= TAKEOVER_WALL_S, 'commands again %.3f s after the kill' % (
         resumed - t_kill)

@@ -15,9 +15,10 @@ to ``/diagnostics`` once a second (answer rate, latency, holds, refusals, law fa
 tick only counters), and the QoS of its topics can be overridden at start-up with ros2's
 ``qos_overrides.<topic>.<publisher|subscription>.<history|depth|reliability>`` parameters.
 With ``standby: true`` (real time) it is a hot spare (``controller_supervisor``): built and
-discovered, setpoints taken, joint_states dropped unread, nothing published (``/diagnostics``
-says STANDBY) until SIGUSR1; the next state then activates it, its reference starting from
-the arm's measured motion (``ReferenceShaper.start_from``), the torque ramped from zero.
+discovered, setpoints taken, not subscribed to joint_states, nothing published
+(``/diagnostics`` says STANDBY) until SIGUSR1; the signal subscribes it and the first state
+activates it, its reference starting from the arm's measured motion
+(``ReferenceShaper.start_from``), the torque ramped from zero.
 
 """
 
@@ -126,18 +127,21 @@ class ControllerNode(Node, Lifecycle):
         else:
             self._now_ns = time.time_ns
         self._throttle = Throttle(1.0)
-        # Hot spare: idle until SIGUSR1, whose handler only sets a flag; the next
-        # joint_states callback activates (the runner's between-callbacks rule).
+        # Hot spare: idle until SIGUSR1, not subscribed to joint_states (a 1-kHz stream
+        # it would only drop). The signal's handler only sets a flag (the EventsExecutor
+        # has no guard conditions); the next setpoint or watchdog callback subscribes
+        # (the runner's between-callbacks rule) and the first state activates.
         self._standby = cfg.standby
         self._activation_requested = False
         self._start_from_motion = False
         self._activated_wall = None
+        self._states_sub = None
         if cfg.standby:
             signal.signal(signal.SIGUSR1, self._on_activate_signal)
             # Idle at SCHED_FIFO 1 (with a thread_priority above 1): below every real-time
-            # thread of the graph (dropping 1 kHz of states costs ~20 % of a CPU), above
-            # best-effort load, which must not starve it: its activation must not wait for
-            # a CPU. thread_priority applies from the activation on.
+            # thread of the graph (idle, it takes only the setpoints), above best-effort
+            # load, which must not starve it: its activation must not wait for a CPU.
+            # thread_priority applies from the activation on.
             process_scheduling().request(self.get_fully_qualified_name(),
                                          1 if cfg.thread_priority > 1 else 0,
                                          cfg.cpu_affinity)
@@ -152,10 +156,8 @@ class ControllerNode(Node, Lifecycle):
                                                 qos_overriding_options=QOS_OVERRIDES)
         # Real time: only the newest state matters (a queue of old ones would be answered
         # late, a delay the loop cannot take); lockstep: every state, the sim waits.
-        self.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name, self._on_joint_state,
-                                 overridable(JOINT_STATES.qos if cfg.lockstep
-                                             else REALTIME_STATE_QOS),
-                                 qos_overriding_options=QOS_OVERRIDES)
+        if not cfg.standby:
+            self._subscribe_states()
         self.create_subscription(SETPOINT.msg_type, SETPOINT.name, self._on_setpoint,
                                  overridable(SETPOINT.qos),
                                  qos_overriding_options=QOS_OVERRIDES)
@@ -175,9 +177,23 @@ class ControllerNode(Node, Lifecycle):
         notify_ready()
 
     # -- standby ---------------------------------------------------------------
+    def _subscribe_states(self):
+        """Subscribe ``joint_states`` (real time: the newest state; lockstep: every one)."""
+        self._states_sub = self.create_subscription(
+            JOINT_STATES.msg_type, JOINT_STATES.name, self._on_joint_state,
+            overridable(JOINT_STATES.qos if self.config.lockstep else REALTIME_STATE_QOS),
+            qos_overriding_options=QOS_OVERRIDES)
+
     def _on_activate_signal(self, signum, frame):
-        """SIGUSR1: activate at the next joint_states (only a flag here)."""
+        """SIGUSR1: activation requested (only a flag here)."""
         self._activation_requested = True
+
+    def _on_activation_requested(self):
+        """Subscribe joint_states (once); the first state activates (:meth:`_activate`)."""
+        if self._states_sub is None:
+            self._subscribe_states()
+            self.get_logger().info('activation requested (SIGUSR1): joint_states subscribed, '
+                                   'active from the first state')
 
     def _activate(self):
         """Leave standby: this state and the next are answered; start from the motion."""
@@ -268,9 +284,7 @@ class ControllerNode(Node, Lifecycle):
 
     def _on_joint_state(self, msg):
         if self._standby:
-            if not self._activation_requested:
-                return      # a hot spare: dropped unread
-            self._activate()
+            self._activate()    # the first state after SIGUSR1 (subscribed at the signal)
         stamp = msg.header.stamp
         ns = to_ns(stamp)
         self._last_state_wall = _monotonic()
@@ -405,6 +419,8 @@ class ControllerNode(Node, Lifecycle):
         return found
 
     def _on_setpoint(self, msg):
+        if self._activation_requested and self._standby:
+            self._on_activation_requested()
         stamp = msg.header.stamp
         ns = to_ns(stamp)
         p = msg.position
@@ -662,6 +678,8 @@ class ControllerNode(Node, Lifecycle):
 
     def _watchdog(self):
         """Wall-clock staleness: a held lockstep state without setpoint, or no state."""
+        if self._activation_requested and self._standby:
+            self._on_activation_requested()     # no setpoint stream: at the latest here
         now = _monotonic()
         pending = self._pending
         if pending is not None:
@@ -690,7 +708,7 @@ class ControllerNode(Node, Lifecycle):
         """Every second: the status on /diagnostics (lockstep: once while no state comes)."""
         if self._standby:
             self._diag_window = self._window(_monotonic())
-            self._diagnostics.publish(OK, 'STANDBY: hot spare, joint_states dropped unread '
+            self._diagnostics.publish(OK, 'STANDBY: hot spare, not subscribed to joint_states '
                                       'until SIGUSR1', (('mode', 'standby'),))
             return
         last = self._last_state_wall

@@ -85,9 +85,10 @@ PARAMS = (
           'false (real time): with the newest setpoint stamped <= t_k + dt/2',
           read_only=True),
     Param('standby', False,
-          'real time: start as a hot spare (controller_supervisor): subscriptions and '
-          'publishers made, setpoints taken, joint_states dropped unread, nothing published '
-          'until SIGUSR1 activates it; then it starts from the measured motion',
+          'real time: start as a hot spare (controller_supervisor): publishers made, '
+          'setpoints taken, not subscribed to joint_states, nothing published until SIGUSR1 '
+          '(subscribes; the first state activates it); then it starts from the measured '
+          'motion',
           read_only=True),
     Param('K', list(_DEFAULT.K), 'diagonal of K (2 values > 0) [1/s]',
           validator=_gain('K')),
