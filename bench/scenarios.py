@@ -450,7 +450,10 @@ def controller_restart(args, index):
             loop = bench_graph.CircleLoop(s.client, before=lambda: soak.rest_at_q0(s.client))
             for _ in range(args.cycles):
                 # A circle from rest at q(0) each cycle (no new circle meanwhile), killed
-                # args.mid s after it was accepted.
+                # args.mid s after it was accepted; supervised, a circle starts once the
+                # spare is ready (the kill is then mid-circle, not after the circle).
+                if args.supervised:
+                    supervised_pids(s, pid_file)
                 loop.next = 0.0
                 loop.poll()
                 while time.monotonic() < loop.accepted[-1] + args.mid:

@@ -102,15 +102,20 @@ class Graph:
 
     def pids(self):
         """Return {'active': pid, 'spare': pid, 'ready': bool} of the pid file ({}: none)."""
-        try:
-            with open(self.pid_file) as f:
-                doc = json.load(f)
-        except (OSError, ValueError):
-            return {}
-        if not doc.get('active') or not doc.get('standby'):
-            return {}
-        return {'active': doc['active']['pid'], 'spare': doc['standby']['pid'],
-                'ready': doc['standby']['ready']}
+        return _pids(self.pid_file)
+
+
+def _pids(pid_file):
+    """Return {'active': pid, 'spare': pid, 'ready': bool} of ``pid_file`` ({}: none)."""
+    try:
+        with open(pid_file) as f:
+            doc = json.load(f)
+    except (OSError, ValueError):
+        return {}
+    if not doc.get('active') or not doc.get('standby'):
+        return {}
+    return {'active': doc['active']['pid'], 'spare': doc['standby']['pid'],
+            'ready': doc['standby']['ready']}
 
 
 @pytest.fixture
@@ -178,6 +183,30 @@ def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_b
         'the kill' % max(late)
     assert procs.stop(sup) == 0, procs.tail(sup, 20)
     assert 'exited' in procs.log(sup)
+
+
+def test_the_spare_is_ready_only_once_a_simulator_subscribes_to_its_commands(
+        procs, wait, tmp_path):
+    # No graph fixture: its subscription to the commands would be a subscriber.
+    pid_file = str(tmp_path / 'supervisor.json')
+    sup = procs.start_node(
+        'freejoint_control', 'controller_supervisor', 'supervisor',
+        ['--pid-file', pid_file, '--'] + _args('controller.yaml', 'lockstep:=false'))
+    # Both children built (their nodes logged 'controller ready'), no simulator: the spare
+    # could not command anything, so it has not told the supervisor it is ready.
+    wait(lambda: procs.log(sup).count('controller ready') >= 2 or sup.poll() is not None,
+         60.0, 'both controllers built')
+    time.sleep(1.0)
+    assert sup.poll() is None, procs.tail(sup, 20)
+    assert _pids(pid_file) and not _pids(pid_file)['ready'], _pids(pid_file)
+    assert 'standby ready' not in procs.log(sup)
+    sim = procs.start_node('freejoint_sim', 'sim_node', 'sim', _args('sim.yaml',
+                                                                    'mode:=realtime'))
+    wait(lambda: _pids(pid_file).get('ready') or sup.poll() is not None
+         or sim.poll() is not None, 60.0, 'the spare ready once the simulator is there')
+    assert _pids(pid_file)['ready'], procs.tail(sup, 20)
+    assert 'standby ready: commands matched, setpoint stream not matched (no planner)' in \
+        procs.log(sup)
 
 
 def test_a_stopped_active_controller_is_not_taken_over(procs, wait, graph):

@@ -16,8 +16,9 @@ tick only counters), and the QoS of its topics can be overridden at start-up wit
 ``qos_overrides.<topic>.<publisher|subscription>.<history|depth|reliability>`` parameters.
 With ``standby: true`` (real time) it is a hot spare (``controller_supervisor``): built and
 discovered, setpoints taken, not subscribed to joint_states, nothing published
-(``/diagnostics`` says STANDBY) until SIGUSR1; the signal subscribes it and the first state
-activates it, its reference starting from the arm's measured motion
+(``/diagnostics`` says STANDBY) until SIGUSR1; it tells the supervisor it is ready once its
+commands are matched and the setpoint stream has caught up; the signal subscribes it and
+the first state activates it, its reference starting from the arm's measured motion
 (``ReferenceShaper.start_from``), the torque ramped from zero.
 
 """
@@ -61,6 +62,9 @@ STATUS_SETPOINT_LATE = ControllerState.STATUS_SETPOINT_LATE
 _isfinite = math.isfinite
 _monotonic = time.monotonic
 _NAME_MAP_CACHE = 16
+STANDBY_IDLE_STREAM = 0.25
+"""[s] A matched setpoint publisher silent this long is not streaming: a spare does not
+wait for it to catch up before it tells the supervisor it is ready."""
 
 
 class ControllerNode(Node, Lifecycle):
@@ -158,9 +162,12 @@ class ControllerNode(Node, Lifecycle):
         # late, a delay the loop cannot take); lockstep: every state, the sim waits.
         if not cfg.standby:
             self._subscribe_states()
-        self.create_subscription(SETPOINT.msg_type, SETPOINT.name, self._on_setpoint,
-                                 overridable(SETPOINT.qos),
-                                 qos_overriding_options=QOS_OVERRIDES)
+        self._sp_sub = self.create_subscription(SETPOINT.msg_type, SETPOINT.name,
+                                                self._on_setpoint, overridable(SETPOINT.qos),
+                                                qos_overriding_options=QOS_OVERRIDES)
+        self._sp_wall = None            # monotonic time of the newest setpoint received
+        self._sp_matched_wall = None    # standby: when a setpoint publisher was first matched
+        self._waiting_for = 'start-up'  # standby: what it waits for before it is ready
         self.create_service(RESET.srv_type, RESET.name, self._on_reset)
         self._diagnostics = Diagnostics(self, 'controller', 'freejoint_control',
                                         self._on_diagnostics_timer)
@@ -174,7 +181,10 @@ class ControllerNode(Node, Lifecycle):
                 cfg.gains.robust) + (
                 ' (standby: idle until SIGUSR1)' if cfg.standby
                 else ''))
-        notify_ready()
+        if not cfg.standby:
+            notify_ready()
+        # A spare tells the supervisor it is ready once it could take over at once: see
+        # _check_standby_ready (its watchdog).
 
     # -- standby ---------------------------------------------------------------
     def _subscribe_states(self):
@@ -183,6 +193,44 @@ class ControllerNode(Node, Lifecycle):
             JOINT_STATES.msg_type, JOINT_STATES.name, self._on_joint_state,
             overridable(JOINT_STATES.qos if self.config.lockstep else REALTIME_STATE_QOS),
             qos_overriding_options=QOS_OVERRIDES)
+
+    def _standby_waits_for(self):
+        """
+        Return what a spare still lacks to take over at once ('' : nothing).
+
+        Its commands matched by a subscriber (the simulator or driver), and the setpoint
+        stream, if a planner is matched, caught up: the newest setpoint received within the
+        carry-forward time of now, or none for 0.25 s (a planner not streaming). A spare
+        activated before (its transient-local history still arriving, the newest setpoint
+        0.2 s old) holds until the stream catches up.
+        """
+        if self._pub_cmd.get_subscription_count() == 0:
+            return 'no subscriber of %s yet' % self.resolve_topic_name(COMMANDS.name)
+        if self._sp_sub.get_publisher_count() == 0:
+            return ''
+        now = _monotonic()
+        if self._sp_matched_wall is None:
+            self._sp_matched_wall = now
+        last = self._sp_wall if self._sp_wall is not None else self._sp_matched_wall
+        if now - last > STANDBY_IDLE_STREAM:
+            return ''
+        if not self._recent:
+            return 'the setpoint stream matched, no setpoint received yet'
+        behind = (self._now_ns() - self._recent[-1][0]) * 1e-9
+        if behind * 1e9 > self._carry_ns:
+            return 'the setpoint stream catching up (newest %.3f s old)' % behind
+        return ''
+
+    def _check_standby_ready(self):
+        """Standby: once nothing is lacking, tell the supervisor (once)."""
+        waits_for = self._standby_waits_for()
+        if waits_for:
+            self._waiting_for = waits_for
+            return
+        self._waiting_for = ''
+        notify_ready()
+        self.get_logger().info('standby ready: commands matched, setpoint stream %s' % (
+            'caught up' if self._sp_sub.get_publisher_count() else 'not matched (no planner)'))
 
     def _on_activate_signal(self, signum, frame):
         """SIGUSR1: activation requested (only a flag here)."""
@@ -437,6 +485,7 @@ class ControllerNode(Node, Lifecycle):
             return
         self._last_sp_refusal = ''
         self._setpoint_seen = True
+        self._sp_wall = _monotonic()
         if not self._lockstep:
             recent = self._recent
             recent.append((ns, values))
@@ -678,8 +727,11 @@ class ControllerNode(Node, Lifecycle):
 
     def _watchdog(self):
         """Wall-clock staleness: a held lockstep state without setpoint, or no state."""
-        if self._activation_requested and self._standby:
-            self._on_activation_requested()     # no setpoint stream: at the latest here
+        if self._standby:
+            if self._activation_requested:
+                self._on_activation_requested()     # no setpoint stream: at the latest here
+            elif self._waiting_for:
+                self._check_standby_ready()
         now = _monotonic()
         pending = self._pending
         if pending is not None:
@@ -708,8 +760,10 @@ class ControllerNode(Node, Lifecycle):
         """Every second: the status on /diagnostics (lockstep: once while no state comes)."""
         if self._standby:
             self._diag_window = self._window(_monotonic())
-            self._diagnostics.publish(OK, 'STANDBY: hot spare, not subscribed to joint_states '
-                                      'until SIGUSR1', (('mode', 'standby'),))
+            self._diagnostics.publish(
+                OK, 'STANDBY: hot spare, not subscribed to joint_states until SIGUSR1' + (
+                    '; not ready: %s' % self._waiting_for if self._waiting_for else ''),
+                (('mode', 'standby'), ('ready', 'no' if self._waiting_for else 'yes')))
             return
         last = self._last_state_wall
         silent = last is None or last < self._diag_window[0]
