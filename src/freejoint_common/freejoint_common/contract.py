@@ -8,9 +8,9 @@ from here:
   ones a run's recorder subscribes to from its start;
 * the services (:class:`Service`: name, service class);
 * the QoS profiles, one name per profile (``STREAM_QOS``, ``REALTIME_STATE_QOS``,
-  ``SETPOINT_QOS``, ``LATCHED_QOS``, ``CLOCK_PUBLISHER_QOS``, ``CLOCK_SUBSCRIPTION_QOS``,
-  ``DIAGNOSTICS_QOS``) and :func:`profile` for a profile built from values (the recorder's
-  and player's ``queue_depth``, a discovered publisher's offer);
+  ``SETPOINT_QOS``, ``STANDBY_SETPOINT_QOS``, ``LATCHED_QOS``, ``CLOCK_PUBLISHER_QOS``,
+  ``CLOCK_SUBSCRIPTION_QOS``, ``DIAGNOSTICS_QOS``) and :func:`profile` for a profile built
+  from values (the recorder's and player's ``queue_depth``, a discovered publisher's offer);
 * the stamps: :func:`to_ns` and :func:`stamp_from_ns` between ``builtin_interfaces/Time``
   and integer nanoseconds, :func:`clock_ns` of a serialized ``rosgraph_msgs/Clock``;
 * the lockstep label of a command (``stamp_ns=<t_k>``, lockstep item 2):
@@ -78,6 +78,10 @@ REALTIME_STATE_QOS = profile(1)
 SETPOINT_QOS = profile(STREAM_DEPTH, latched=True)
 """``setpoint``: transient local, so a controller started after the planner still gets the
 ticks streamed ahead while the simulator waited for its first command."""
+STANDBY_SETPOINT_QOS = profile(STREAM_DEPTH)
+"""A hot spare's ``setpoint`` subscription: volatile (matches the transient-local
+publisher), so a new spare is not sent the planner's history of old ticks (real time takes
+the newest; the planner streams ahead)."""
 LATCHED_QOS = profile(1, latched=True)
 """The map, the path marker, ``/robot_description``: reliable, transient local, depth 1."""
 CLOCK_PUBLISHER_QOS = profile(STREAM_DEPTH)

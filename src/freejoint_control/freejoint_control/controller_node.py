@@ -17,7 +17,9 @@ tick only counters), and the QoS of its topics can be overridden at start-up wit
 With ``standby: true`` (real time) it is a hot spare (``controller_supervisor``): built and
 discovered, setpoints taken, not subscribed to joint_states, nothing published
 (``/diagnostics`` says STANDBY) until SIGUSR1; it tells the supervisor it is ready once its
-commands are matched and the setpoint stream has caught up; the signal subscribes it and
+commands and setpoints are matched as the graph lists them and the setpoint stream has
+caught up (then it idles at SCHED_FIFO 1, before at the default scheduler); the signal
+subscribes it and
 the first state activates it, its reference starting from the arm's measured motion
 (``ReferenceShaper.start_from``), the torque ramped from zero.
 
@@ -29,6 +31,7 @@ import time
 
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, JOINT_STATES
 from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_from_ns
+from freejoint_common.contract import STANDBY_SETPOINT_QOS
 from freejoint_common.contract import stamp_label, to_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
@@ -62,6 +65,9 @@ STATUS_SETPOINT_LATE = ControllerState.STATUS_SETPOINT_LATE
 _isfinite = math.isfinite
 _monotonic = time.monotonic
 _NAME_MAP_CACHE = 16
+STANDBY_SETTLE = 0.5
+"""[s] A spare is ready once nothing was lacking for this long (its discovery of the graph,
+which can list the simulator before the planner, settled)."""
 STANDBY_IDLE_STREAM = 0.25
 """[s] A matched setpoint publisher silent this long is not streaming: a spare does not
 wait for it to catch up before it tells the supervisor it is ready."""
@@ -142,12 +148,12 @@ class ControllerNode(Node, Lifecycle):
         self._states_sub = None
         if cfg.standby:
             signal.signal(signal.SIGUSR1, self._on_activate_signal)
-            # Idle at SCHED_FIFO 1 (with a thread_priority above 1): below every real-time
-            # thread of the graph (idle, it takes only the setpoints), above best-effort
-            # load, which must not starve it: its activation must not wait for a CPU.
-            # thread_priority applies from the activation on.
-            process_scheduling().request(self.get_fully_qualified_name(),
-                                         1 if cfg.thread_priority > 1 else 0,
+            # At the default scheduler until ready (_check_standby_ready): its discovery
+            # and the setpoint history it is sent then would spend the kernel's real-time
+            # budget of the CPU, which stalls every SCHED_FIFO thread of the graph to the
+            # end of the second (measured: 43-49-ms gaps of the simulator as a spare got
+            # ready at SCHED_FIFO 1). thread_priority applies from the activation on.
+            process_scheduling().request(self.get_fully_qualified_name(), 0,
                                          cfg.cpu_affinity)
 
         # Each QoS overridable (qos_overrides.<topic>.<publisher|subscription>.<policy>,
@@ -162,12 +168,14 @@ class ControllerNode(Node, Lifecycle):
         # late, a delay the loop cannot take); lockstep: every state, the sim waits.
         if not cfg.standby:
             self._subscribe_states()
-        self._sp_sub = self.create_subscription(SETPOINT.msg_type, SETPOINT.name,
-                                                self._on_setpoint, overridable(SETPOINT.qos),
-                                                qos_overriding_options=QOS_OVERRIDES)
+        self._sp_sub = self.create_subscription(
+            SETPOINT.msg_type, SETPOINT.name, self._on_setpoint,
+            overridable(STANDBY_SETPOINT_QOS if cfg.standby else SETPOINT.qos),
+            qos_overriding_options=QOS_OVERRIDES)
         self._sp_wall = None            # monotonic time of the newest setpoint received
         self._sp_matched_wall = None    # standby: when a setpoint publisher was first matched
         self._waiting_for = 'start-up'  # standby: what it waits for before it is ready
+        self._settled_since = None      # standby: since when nothing was lacking
         self.create_service(RESET.srv_type, RESET.name, self._on_reset)
         self._diagnostics = Diagnostics(self, 'controller', 'freejoint_control',
                                         self._on_diagnostics_timer)
@@ -204,9 +212,19 @@ class ControllerNode(Node, Lifecycle):
         activated before (its transient-local history still arriving, the newest setpoint
         0.2 s old) holds until the stream catches up.
         """
-        if self._pub_cmd.get_subscription_count() == 0:
-            return 'no subscriber of %s yet' % self.resolve_topic_name(COMMANDS.name)
-        if self._sp_sub.get_publisher_count() == 0:
+        # Matched: what this node's endpoints matched; listed: what the graph lists (its
+        # discovery can be ahead of the matching).
+        matched = self._pub_cmd.get_subscription_count()
+        listed = self.count_subscribers(COMMANDS.name)
+        if matched == 0 or matched < listed:
+            return '%s matched by %d of its %d subscribers' % (
+                self.resolve_topic_name(COMMANDS.name), matched, listed)
+        matched = self._sp_sub.get_publisher_count()
+        listed = self.count_publishers(SETPOINT.name)
+        if matched < listed:
+            return '%s: %d of its %d publishers matched' % (
+                self.resolve_topic_name(SETPOINT.name), matched, listed)
+        if matched == 0:
             return ''
         now = _monotonic()
         if self._sp_matched_wall is None:
@@ -222,12 +240,25 @@ class ControllerNode(Node, Lifecycle):
         return ''
 
     def _check_standby_ready(self):
-        """Standby: once nothing is lacking, tell the supervisor (once)."""
+        """Standby: once nothing was lacking for STANDBY_SETTLE s, tell the supervisor."""
         waits_for = self._standby_waits_for()
+        now = _monotonic()
         if waits_for:
             self._waiting_for = waits_for
+            self._settled_since = None
+            return
+        if self._settled_since is None:
+            self._settled_since = now
+        if now - self._settled_since < STANDBY_SETTLE:
+            self._waiting_for = 'the graph settling'
             return
         self._waiting_for = ''
+        # Idle at SCHED_FIFO 1 (with a thread_priority above 1): below every real-time
+        # thread of the graph (idle, it takes only the setpoints), above best-effort load,
+        # which must not starve it: its activation must not wait for a CPU.
+        cfg = self.config
+        process_scheduling().request(self.get_fully_qualified_name(),
+                                     1 if cfg.thread_priority > 1 else 0, cfg.cpu_affinity)
         notify_ready()
         self.get_logger().info('standby ready: commands matched, setpoint stream %s' % (
             'caught up' if self._sp_sub.get_publisher_count() else 'not matched (no planner)'))
