@@ -147,7 +147,7 @@ def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_b
         with open('/proc/%d/maps' % pid) as f:
             assert '/dev/shm/fastrtps' not in f.read(), 'child %d maps Fast DDS SHM' % pid
     # Both children take the setpoints; only the active one is subscribed to joint_states.
-    g.wait(lambda: g.subscribers('/setpoint') >= {'controller_node', 'controller_node_spare'},
+    g.wait(lambda: g.subscribers('/setpoint') >= CHILDREN,
            30.0, 'both controllers on /setpoint in the graph', spin=g.spin)
     assert g.subscribers('/joint_states') & CHILDREN == {'controller_node'}
     g.pause(2.0)        # 1 s into the circle
@@ -200,8 +200,8 @@ def test_the_spare_is_ready_only_once_a_simulator_subscribes_to_its_commands(
     assert sup.poll() is None, procs.tail(sup, 20)
     assert _pids(pid_file) and not _pids(pid_file)['ready'], _pids(pid_file)
     assert 'standby ready' not in procs.log(sup)
-    sim = procs.start_node('freejoint_sim', 'sim_node', 'sim', _args('sim.yaml',
-                                                                    'mode:=realtime'))
+    sim = procs.start_node('freejoint_sim', 'sim_node', 'sim',
+                           _args('sim.yaml', 'mode:=realtime'))
     wait(lambda: _pids(pid_file).get('ready') or sup.poll() is not None
          or sim.poll() is not None, 60.0, 'the spare ready once the simulator is there')
     assert _pids(pid_file)['ready'], procs.tail(sup, 20)

@@ -19,9 +19,8 @@ discovered, setpoints taken, not subscribed to joint_states, nothing published
 (``/diagnostics`` says STANDBY) until SIGUSR1; it tells the supervisor it is ready once its
 commands and setpoints are matched as the graph lists them and the setpoint stream has
 caught up (then it idles at SCHED_FIFO 1, before at the default scheduler); the signal
-subscribes it and
-the first state activates it, its reference starting from the arm's measured motion
-(``ReferenceShaper.start_from``), the torque ramped from zero.
+subscribes it and the first state activates it, its reference starting from the arm's
+measured motion (``ReferenceShaper.start_from``), the torque ramped from zero.
 
 """
 
@@ -31,8 +30,7 @@ import time
 
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, JOINT_STATES
 from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_from_ns
-from freejoint_common.contract import STANDBY_SETPOINT_QOS
-from freejoint_common.contract import stamp_label, to_ns
+from freejoint_common.contract import stamp_label, STANDBY_SETPOINT_QOS, to_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import Throttle
@@ -206,11 +204,12 @@ class ControllerNode(Node, Lifecycle):
         """
         Return what a spare still lacks to take over at once ('' : nothing).
 
-        Its commands matched by a subscriber (the simulator or driver), and the setpoint
-        stream, if a planner is matched, caught up: the newest setpoint received within the
-        carry-forward time of now, or none for 0.25 s (a planner not streaming). A spare
-        activated before (its transient-local history still arriving, the newest setpoint
-        0.2 s old) holds until the stream catches up.
+        Its commands matched by every subscriber the graph lists (at least one: the
+        simulator or driver); every setpoint publisher the graph lists matched and, with
+        one, the stream caught up: the newest setpoint received within the carry-forward
+        time of now, or none for STANDBY_IDLE_STREAM s (a planner not streaming). A spare
+        activated before (measured: its newest setpoint 0.2 s old) holds until the stream
+        catches up.
         """
         # Matched: what this node's endpoints matched; listed: what the graph lists (its
         # discovery can be ahead of the matching).

@@ -16,11 +16,11 @@ and ``controller <pid> died (signal 9): standby <pid> active (/<name>)`` is logg
 spare is started ``--respawn-delay`` (2) s later (the new active controller's recovery
 first). A stopped or stalled controller is not dead: it stays active (two controllers
 never command at once through the supervisor). A spare not ready yet (``notify_ready``
-not received: a ``controller_node`` sends it once its commands are matched by a subscriber
-and the setpoint stream has caught up, its SIGUSR1 handler installed) is activated as soon
-as it is. A child
-exiting with status 2 (a bad parameter) stops everything with status 2: respawning
-cannot fix a configuration; more than 10 starts within 10 s stop it with status 1.
+not received: a ``controller_node`` sends it once its commands and setpoints are matched as
+the graph lists them and the setpoint stream has caught up, its SIGUSR1 handler installed)
+is activated as soon as it is. A child exiting with status 2 (a bad parameter) stops
+everything with status 2: respawning cannot fix a configuration; more than 10 starts within
+10 s stop it with status 1.
 SIGINT / SIGTERM are forwarded to the children; the supervisor exits when they have
 exited (SIGKILL after ``--stop-timeout``, default 5 s) with the active child's status.
 
