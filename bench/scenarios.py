@@ -392,15 +392,12 @@ def recorder_at(s, priority):
 
 def supervised_pids(s, pid_file, timeout=60.0):
     """Wait until the supervisor's spare is ready; return (active pid, spare pid)."""
+    from freejoint_control.supervisor import read_pid_file
     end = time.monotonic() + timeout
     while True:
-        try:
-            with open(pid_file) as f:
-                doc = json.load(f)
-            if doc.get('active') and doc.get('standby') and doc['standby']['ready']:
-                return doc['active']['pid'], doc['standby']['pid']
-        except (OSError, ValueError):
-            pass
+        pids = read_pid_file(pid_file)
+        if pids.get('ready'):
+            return pids['active'], pids['spare']
         if time.monotonic() > end:
             raise RuntimeError('no ready spare within %g s (%s)' % (timeout, pid_file))
         s.wait(0.05)

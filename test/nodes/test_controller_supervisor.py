@@ -7,7 +7,6 @@ A kill -9 of the active controller mid-circle is taken over by the spare (SIGUSR
 supervisor, which saw the death); a stopped (stalled) controller is not dead: no takeover.
 The children use no Fast DDS shared memory (the supervisor's UDPv4 profile).
 """
-import json
 import math
 import os
 import signal
@@ -15,6 +14,7 @@ import time
 
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE
 from freejoint_control.params import SCHEMA
+from freejoint_control.supervisor import read_pid_file
 import pytest
 
 pytestmark = pytest.mark.ros
@@ -102,20 +102,7 @@ class Graph:
 
     def pids(self):
         """Return {'active': pid, 'spare': pid, 'ready': bool} of the pid file ({}: none)."""
-        return _pids(self.pid_file)
-
-
-def _pids(pid_file):
-    """Return {'active': pid, 'spare': pid, 'ready': bool} of ``pid_file`` ({}: none)."""
-    try:
-        with open(pid_file) as f:
-            doc = json.load(f)
-    except (OSError, ValueError):
-        return {}
-    if not doc.get('active') or not doc.get('standby'):
-        return {}
-    return {'active': doc['active']['pid'], 'spare': doc['standby']['pid'],
-            'ready': doc['standby']['ready']}
+        return read_pid_file(self.pid_file)
 
 
 @pytest.fixture
@@ -198,13 +185,14 @@ def test_the_spare_is_ready_only_once_a_simulator_subscribes_to_its_commands(
          60.0, 'both controllers built')
     time.sleep(1.0)
     assert sup.poll() is None, procs.tail(sup, 20)
-    assert _pids(pid_file) and not _pids(pid_file)['ready'], _pids(pid_file)
+    pids = read_pid_file(pid_file)
+    assert pids and not pids['ready'], pids
     assert 'standby ready' not in procs.log(sup)
     sim = procs.start_node('freejoint_sim', 'sim_node', 'sim',
                            _args('sim.yaml', 'mode:=realtime'))
-    wait(lambda: _pids(pid_file).get('ready') or sup.poll() is not None
+    wait(lambda: read_pid_file(pid_file).get('ready') or sup.poll() is not None
          or sim.poll() is not None, 60.0, 'the spare ready once the simulator is there')
-    assert _pids(pid_file)['ready'], procs.tail(sup, 20)
+    assert read_pid_file(pid_file)['ready'], procs.tail(sup, 20)
     assert 'standby ready: commands matched, setpoint stream not matched (no planner)' in \
         procs.log(sup)
 

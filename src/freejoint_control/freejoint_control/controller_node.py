@@ -170,7 +170,7 @@ class ControllerNode(Node, Lifecycle):
             SETPOINT.msg_type, SETPOINT.name, self._on_setpoint,
             overridable(STANDBY_SETPOINT_QOS if cfg.standby else SETPOINT.qos),
             qos_overriding_options=QOS_OVERRIDES)
-        self._sp_wall = None            # monotonic time of the newest setpoint received
+        self._sp_wall = None            # standby: monotonic time of the newest setpoint
         self._sp_matched_wall = None    # standby: when a setpoint publisher was first matched
         self._waiting_for = 'start-up'  # standby: what it waits for before it is ready
         self._settled_since = None      # standby: since when nothing was lacking
@@ -258,9 +258,10 @@ class ControllerNode(Node, Lifecycle):
         cfg = self.config
         process_scheduling().request(self.get_fully_qualified_name(),
                                      1 if cfg.thread_priority > 1 else 0, cfg.cpu_affinity)
-        notify_ready()
+        # Logged before the supervisor hears of it: its 'standby ready' line comes after.
         self.get_logger().info('standby ready: commands matched, setpoint stream %s' % (
             'caught up' if self._sp_sub.get_publisher_count() else 'not matched (no planner)'))
+        notify_ready()
 
     def _on_activate_signal(self, signum, frame):
         """SIGUSR1: activation requested (only a flag here)."""
@@ -515,7 +516,8 @@ class ControllerNode(Node, Lifecycle):
             return
         self._last_sp_refusal = ''
         self._setpoint_seen = True
-        self._sp_wall = _monotonic()
+        if self._standby:
+            self._sp_wall = _monotonic()    # only a spare's readiness reads it
         if not self._lockstep:
             recent = self._recent
             recent.append((ns, values))

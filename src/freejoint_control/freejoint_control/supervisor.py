@@ -186,6 +186,23 @@ def udp_profile(text, loopback):
     return ElementTree.tostring(root, encoding='unicode')
 
 
+def read_pid_file(path):
+    """
+    Return ``{'active': pid, 'spare': pid, 'ready': bool}`` of a supervisor's pid file.
+
+    ``{}`` while there is no file (or an unreadable one) or either child is missing.
+    """
+    try:
+        with open(path) as f:
+            doc = json.load(f)
+    except (OSError, ValueError):
+        return {}
+    if not doc.get('active') or not doc.get('standby'):
+        return {}
+    return {'active': doc['active']['pid'], 'spare': doc['standby']['pid'],
+            'ready': doc['standby']['ready']}
+
+
 def profiles_file(environ):
     """Return the Fast DDS XML profiles file ``environ`` names (None: Fast DDS defaults)."""
     return next((environ[k] for k in PROFILE_ENV if environ.get(k)), None)
