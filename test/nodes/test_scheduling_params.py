@@ -69,7 +69,8 @@ def test_every_thread_gets_the_priority_and_cpus_and_set_parameters_changes_them
         from freejoint_common.scheduling import rt_budget, rt_budget_note
         note = rt_budget_note(rt_budget())
         if note is not None:
-            assert note in procs.log(proc)
+            # Logged just after the scheduling line: waited for (bounded), not read at once.
+            wait(lambda: note in procs.log(proc), 10.0, 'the real-time budget note')
         else:
             assert 'the kernel throttles SCHED_FIFO threads' not in procs.log(proc)
     wait(lambda: len(_threads(proc.pid)) >= 3
