@@ -16,7 +16,7 @@ What ``ros2 bag record -s mcap`` does, for this workspace where rosbag2 is not i
   (``take_message``) and merges the takes of all topics by their receive time (the
   middleware's timestamp on reception), so the bag keeps the order of arrival. One wake-up
   per batch instead of one per message; the recorder's own node keeps ``~/status``, the
-  timers, the parameters and the message-lost events in its executor;
+  timers and the parameters in its executor;
 * log time = the receive time: in system time the middleware's reception timestamp, in sim
   time (``use_sim_time:=true``) the latest recorded ``/clock`` received before the message
   (see below). A message received less than 2 ms before a take began waits for the next
@@ -50,7 +50,14 @@ exits. The recorder runs some ten ticks behind a loaded lockstep graph, so a lau
 the recorder's publishers only once it had time to catch up (e.g. stop the controller
 first - the lockstep pauses - wait half a second, then the rest, the recorder last).
 Messages the middleware does report lost (a publisher's depth-1000 history overrun while
-the recorder was starved of CPU) are logged at once and counted in the summary.
+the recorder was starved of CPU) are logged within a tenth of a second and counted in the
+summary. Those message-lost events are read through a wait set of their own (a
+SingleThreadedExecutor over a third node, ``<name>_events``, spun for a moment every 0.1 s
+and at close), never through the EventsExecutor: handed to it, rmw_fastrtps 8.4.3 (the
+Jazzy wheels) enables its sample-lost listener, whose lock order is the reverse of
+``rcl_take_event``'s, and a burst of losses then deadlocks the recorder (its executor and the
+middleware's receive thread wait for each other; ros2/rmw_fastrtps#890). Without the
+listener the middleware never takes the event's lock, and reading the event is safe.
 
 Timestamps: with ``use_sim_time:=true`` the log times are sim time (the lockstep ``/clock``,
 ``t_k = k dt``), the same time base as the header stamps: a message's log time is the
@@ -85,6 +92,7 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidHandle
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
@@ -94,6 +102,8 @@ from .qos import profile_to_dict, subscription_qos
 from .typedefs import DefinitionError, Definitions, message_class
 
 DEFAULT_DIR = 'bags'
+LOST_PERIOD = 0.1
+"""Wall period (s) of reading the middleware's message-lost events (module docstring)."""
 # The freejoint graph's topics (docs/GRAPH.md): name (relative = in the recorder's
 # namespace), type, transient local. With graph_topics (default) the recorder subscribes to
 # them at start - reliable, deep queue - so that it is matched with their publishers in the
@@ -271,11 +281,17 @@ class Recorder(Node, Lifecycle):
         if self._sim_time:
             own_clock(self)
         # The recorded topics' subscriptions live on a node no executor spins: nothing
-        # dispatches them; take() takes what they hold every batch_period. Services, timers,
-        # parameters and the message-lost events stay on this node, in the executor.
-        self._takes_node = Node(self.get_name() + '_takes', namespace=self.get_namespace(),
-                                context=self.context, use_global_arguments=False,
-                                enable_rosout=False, start_parameter_services=False)
+        # dispatches them; take() takes what they hold every batch_period. Services, timers
+        # and parameters stay on this node, in the executor. Their message-lost events go to
+        # a third node, read by a wait-set executor of its own (never the EventsExecutor:
+        # module docstring).
+        self._takes_node, self._events_node = (
+            Node(self.get_name() + suffix, namespace=self.get_namespace(),
+                 context=self.context, use_global_arguments=False, enable_rosout=False,
+                 start_parameter_services=False) for suffix in ('_takes', '_events'))
+        self._lost_events = SingleThreadedExecutor(context=self.context)
+        self._lost_events.add_node(self._events_node)
+        self._lost_read = False  # a message-lost event was dispatched (by _read_lost)
         self._wanted = {self.resolve_topic_name(t) for t in p['topics']}
         self._excluded = {self.resolve_topic_name(t) for t in p['exclude']}
         output = p['output'] or os.path.join(
@@ -309,6 +325,7 @@ class Recorder(Node, Lifecycle):
         wall = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(p['discovery_period'], self._discover, clock=wall)
         self.create_timer(p['flush_period'], self._flush, clock=wall)
+        self.create_timer(LOST_PERIOD, self._read_lost, clock=wall)
         self.get_logger().info('recording into %s (%s)' % (
             output, 'topics: ' + ', '.join(sorted(self._wanted)) if self._wanted
             else 'all topics'))
@@ -412,8 +429,8 @@ class Recorder(Node, Lifecycle):
         sub = self._takes_node.create_subscription(
             msg_class, name, _never_called, qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(message_lost=self._lost_callback(name)))
-        for handler in sub.event_handlers:    # the events are dispatched with this node's
-            self.add_waitable(handler)
+        for handler in sub.event_handlers:    # read by _read_lost's wait set
+            self._events_node.add_waitable(handler)
         self._subs[name] = sub
         self._types[name] = msgtype
         self._update_takers()
@@ -424,10 +441,11 @@ class Recorder(Node, Lifecycle):
     def _unsubscribe(self, name):
         """Destroy a topic's subscription, after taking what it still holds."""
         self.take()
+        self._read_lost()
         sub = self._subs.pop(name)
         self._update_takers()
         for handler in sub.event_handlers:
-            self.remove_waitable(handler)
+            self._events_node.remove_waitable(handler)
         self._takes_node.destroy_subscription(sub)
 
     def _update_takers(self):
@@ -611,8 +629,17 @@ class Recorder(Node, Lifecycle):
             ', '.join('%s %d' % kv for kv in sorted(matched.items())))
         return response
 
+    def _read_lost(self):
+        """Dispatch the pending message-lost events (a zero-timeout wait each, bounded)."""
+        for _ in range(len(self._subs) + 1):
+            self._lost_read = False
+            self._lost_events.spin_once(timeout_sec=0.0)
+            if not self._lost_read:
+                return
+
     def _lost_callback(self, name):
         def on_lost(info):
+            self._lost_read = True
             if info.total_count_change <= 0:
                 return
             self.lost[name] += int(info.total_count_change)
@@ -656,10 +683,14 @@ class Recorder(Node, Lifecycle):
             self.get_logger().error('cannot take the last messages: %s' % exc)
         finally:
             self._closed = True
+            try:
+                self._read_lost()
+            except Exception as exc:  # noqa: B902 - finalise the bag whatever the read said
+                self.get_logger().error('cannot read the message-lost events: %s' % exc)
             for name in list(self._subs):
                 sub = self._subs.pop(name)
                 for handler in sub.event_handlers:
-                    self.remove_waitable(handler)
+                    self._events_node.remove_waitable(handler)
                 self._takes_node.destroy_subscription(sub)
             self._takers = []
             self.writer.flush()                # the last chunk: its messages written or lost
@@ -717,7 +748,9 @@ class Recorder(Node, Lifecycle):
         return notes
 
     def destroy_node(self):
-        """Destroy the node and the one that holds the recording subscriptions."""
+        """Destroy the node and the ones that hold the recording subscriptions and events."""
+        self._lost_events.shutdown()
+        self._events_node.destroy_node()
         self._takes_node.destroy_node()
         super().destroy_node()
 

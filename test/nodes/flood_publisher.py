@@ -1,0 +1,57 @@
+"""
+Publish std_msgs/String on one topic as fast as possible, best effort, keep-last 1.
+
+What makes a reader lose messages for real (a best-effort reader that is not taken fast
+enough sees gaps in the writer's sequence numbers, which the middleware reports lost).
+
+Usage: flood_publisher.py --topic NAME --seconds S --summary FILE
+
+It waits (up to 30 s) for a matched subscription, publishes for S seconds, writes
+``{"published": N}`` to FILE and exits 0 (1 if nothing matched).
+"""
+
+import argparse
+import json
+import sys
+import time
+
+import rclpy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+
+FLOOD_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                       reliability=ReliabilityPolicy.BEST_EFFORT)
+
+
+def main():
+    """Flood ``--topic`` for ``--seconds``; write the count published."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--topic', required=True)
+    parser.add_argument('--seconds', type=float, required=True)
+    parser.add_argument('--summary', required=True)
+    args = parser.parse_args()
+    rclpy.init()
+    node = rclpy.create_node('flood_publisher')
+    pub = node.create_publisher(String, args.topic, FLOOD_QOS)
+    deadline = time.monotonic() + 30.0
+    while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if pub.get_subscription_count() == 0:
+        print('flood_publisher: no subscription on %s within 30 s' % args.topic,
+              file=sys.stderr)
+        return 1
+    msg = String(data='x' * 64)
+    count = 0
+    end = time.monotonic() + args.seconds
+    while time.monotonic() < end:
+        pub.publish(msg)
+        count += 1
+    with open(args.summary, 'w') as fh:
+        json.dump({'published': count}, fh)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
