@@ -48,11 +48,12 @@ def _node_cmd(pkg, exe, config, *extra):
             '--params-file', os.path.join(CONFIG, config), *extra]
 
 
-@pytest.mark.parametrize('pkg, exe, config, name', [
-    ('freejoint_control', 'controller_node', 'controller.yaml', 'controller_node'),
-    ('freejoint_sim', 'sim_node', 'sim.yaml', 'sim_node')])
+@pytest.mark.parametrize('pkg, exe, config, name, ready', [
+    ('freejoint_control', 'controller_node', 'controller.yaml', 'controller_node',
+     'controller ready'),
+    ('freejoint_sim', 'sim_node', 'sim.yaml', 'sim_node', 'simulator ready')])
 def test_every_thread_gets_the_priority_and_cpus_and_set_parameters_changes_them(
-        procs, ros_node, wait, pkg, exe, config, name):
+        procs, ros_node, wait, pkg, exe, config, name, ready):
     from freejoint_tools.harness import ParameterCalls
     from rclpy.parameter import Parameter
     # Without the privilege (not root, no CAP_SYS_NICE / rtprio) only the affinity part is
@@ -76,9 +77,14 @@ def test_every_thread_gets_the_priority_and_cpus_and_set_parameters_changes_them
     wait(lambda: len(_threads(proc.pid)) >= 3
          and all(t == (policy, prio, [LAST]) for t in _threads(proc.pid)), 10.0,
          'every thread at %s on CPU %d: %s' % (text, LAST, _threads(proc.pid)))
+    wait(lambda: ready in procs.log(proc), 30.0, 'the node to be ready')
     params = ParameterCalls(ros_node, name)
-    res = params.set_parameters([Parameter('thread_priority', value=99),
-                                 Parameter('cpu_affinity', value=[LAST + 64])])
+    try:
+        res = params.set_parameters([Parameter('thread_priority', value=99),
+                                     Parameter('cpu_affinity', value=[LAST + 64])])
+    except TimeoutError as exc:     # say what the node did meanwhile
+        raise AssertionError('%s; its threads %s; its log:\n%s'
+                             % (exc, _threads(proc.pid), procs.log(proc))) from exc
     assert [r.successful for r in res] == [False, False]
     # The descriptor's integer range refuses it before the node's own check.
     assert 'thread_priority' in res[0].reason and '98' in res[0].reason, res[0].reason

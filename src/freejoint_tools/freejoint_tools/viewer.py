@@ -60,6 +60,8 @@ from .recorder import _is_hidden, GRAPH_TOPICS
 from .typedefs import DefinitionError, Definitions, message_class
 
 TF_TOPIC = '/tf'
+RESEND = 0.5
+"""Seconds before a parameter request still unanswered is sent again (see ``_await``)."""
 DESCRIPTION_TOPIC = ROBOT_DESCRIPTION.name
 # Topics low-rate and latched: subscribed reliable, transient local (the last one arrives
 # when a client subscribes); every other one best effort, volatile.
@@ -259,22 +261,37 @@ class Viewer(Node, Lifecycle):
             except Exception as exc:  # handed to the waiting server thread
                 fut.set_exception(exc)
 
-    def _await(self, make_future):
-        """From a server thread: start an rclpy request on the executor thread, wait for it."""
+    def _await(self, make_future, resend=RESEND):
+        """
+        From a server thread: start an rclpy request on the executor thread, wait for it.
+
+        With ``resend`` (s) the request is sent again while unanswered, the first answer
+        returned (``call_timeout`` s in all): rmw_fastrtps drops a response sent before the
+        server has matched this client's reader, which a request to a node discovered a
+        moment ago can meet. ``resend=None`` for a request that must not run twice.
+        """
         timeout = self.values['call_timeout']
+        deadline = time.monotonic() + timeout
         done = concurrent.futures.Future()
 
-        def start():
-            ros_future = make_future()
+        def finished(f):          # on the executor thread, as every start()
+            if done.done():
+                return
+            if f.exception() is not None:
+                done.set_exception(f.exception())
+            else:
+                done.set_result(f.result())
 
-            def finished(f):
-                if f.exception() is not None:
-                    done.set_exception(f.exception())
-                else:
-                    done.set_result(f.result())
-            ros_future.add_done_callback(finished)
-        self._submit(start).result(timeout)
-        return done.result(timeout)
+        def start():
+            make_future().add_done_callback(finished)
+        while True:
+            self._submit(start).result(timeout)
+            left = deadline - time.monotonic()
+            try:
+                return done.result(max(0.0, left if resend is None else min(resend, left)))
+            except concurrent.futures.TimeoutError:
+                if time.monotonic() >= deadline:
+                    raise
 
     # -- the server ----------------------------------------------------------------------
     def _start_server(self):
@@ -438,7 +455,8 @@ class Viewer(Node, Lifecycle):
         """Return ``{name: ParameterValue}`` of ``node`` (every parameter if ``names`` None)."""
         client = self._ready(node)
         if client is None:
-            return {}
+            raise TimeoutError('no parameter services within %g s'
+                               % self.values['call_timeout'])
         if names is None:
             names = list(self._await(lambda: client.list_parameters()).result.names)
         if not names:
@@ -551,7 +569,7 @@ class Viewer(Node, Lifecycle):
                     raise RuntimeError('%s: service not available' % name)
                 time.sleep(0.02)
             try:
-                response = self._await(lambda: cli.call_async(ros_request))
+                response = self._await(lambda: cli.call_async(ros_request), resend=None)
             except concurrent.futures.TimeoutError:
                 raise RuntimeError('%s: no answer within %.1f s'
                                    % (name, self.values['call_timeout']))
