@@ -15,12 +15,11 @@ import json
 import sys
 import time
 
+from freejoint_common.contract import profile
 import rclpy
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-FLOOD_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
-                       reliability=ReliabilityPolicy.BEST_EFFORT)
+FLOOD_QOS = profile(1, reliable=False)
 
 
 def main():
