@@ -146,6 +146,7 @@ def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_b
     wait(lambda: g.commands[-1][0] > t_kill + 0.01, 10.0, 'commands again', spin=g.spin)
     resumed = min(t for t, _ in g.commands if t > t_kill + 0.005)
     g.pause(2.5)
+    t_end = time.monotonic()     # the tracking window: 2 s after the kill to here
     log = procs.log(sup)
     # The spare logged its activation; the supervisor started a new spare that got ready.
     assert 'activated (standby)' in log, log[-3000:]
@@ -162,10 +163,12 @@ def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_b
     for _, effort in g.commands:
         assert all(math.isfinite(e) and abs(e) <= lim for e, lim in zip(effort, LIMITS)), \
             effort
-    # No divergence (the simulator's log says none), tracking again.
+    # No divergence (the simulator's log says none), tracking again from 2 s after the kill
+    # (the acceptance's window; later, while a new spare starts on a machine that may be
+    # overloaded, the circle is over and the arm is held - docs/performance.md).
     assert not [ln for ln in procs.log(sim).splitlines() if 'diverg' in ln.lower()]
     late = [math.hypot(p[0] - d[0], p[1] - d[1]) for t, p, d in g.ctl_states
-            if t > t_kill + 2.0]
+            if t_kill + 2.0 < t <= t_end]
     assert late and max(late) < 0.05, 'end effector %.3f m from the setpoint 2 s after ' \
         'the kill' % max(late)
     assert procs.stop(sup) == 0, procs.tail(sup, 20)

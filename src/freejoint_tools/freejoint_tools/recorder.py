@@ -11,8 +11,8 @@ What ``ros2 bag record -s mcap`` does, for this workspace where rosbag2 is not i
   queue (``queue_depth``) so nothing is dropped while the recorder catches up;
 * messages are taken serialized (``raw=True``: the CDR bytes, no decode and re-encode) by
   the recorder itself, not dispatched by an executor one by one: the recording
-  subscriptions live on a second node (``<name>_takes``) that no executor spins, and every
-  ``batch_period`` (10 ms, wall) the recorder takes everything each of them holds
+  subscriptions live on a second node (``_<name>_takes``, hidden) that no executor spins,
+  and every ``batch_period`` (10 ms, wall) the recorder takes everything each of them holds
   (``take_message``) and merges the takes of all topics by their receive time (the
   middleware's timestamp on reception), so the bag keeps the order of arrival. One wake-up
   per batch instead of one per message; the recorder's own node keeps ``~/status``, the
@@ -52,7 +52,7 @@ first - the lockstep pauses - wait half a second, then the rest, the recorder la
 Messages the middleware does report lost (a publisher's depth-1000 history overrun while
 the recorder was starved of CPU) are logged within a tenth of a second and counted in the
 summary. Those message-lost events are read through a wait set of their own (a
-SingleThreadedExecutor over a third node, ``<name>_events``, spun for a moment every 0.1 s
+SingleThreadedExecutor over a third node, ``_<name>_events``, spun for a moment every 0.1 s
 and at close), never through the EventsExecutor: handed to it, rmw_fastrtps 8.4.3 (the
 Jazzy wheels) enables its sample-lost listener, whose lock order is the reverse of
 ``rcl_take_event``'s, and a burst of losses then deadlocks the recorder (its executor and the
@@ -285,10 +285,12 @@ class Recorder(Node, Lifecycle):
         # and parameters stay on this node, in the executor. Their message-lost events go to
         # a third node, read by a wait-set executor of its own (never the EventsExecutor:
         # module docstring).
+        # Both hidden (a leading underscore, as ros2 node list hides): helpers without
+        # parameters, which a tool listing the graph's nodes (the viewer) passes over.
         self._takes_node, self._events_node = (
-            Node(self.get_name() + suffix, namespace=self.get_namespace(),
+            Node('_%s_%s' % (self.get_name(), suffix), namespace=self.get_namespace(),
                  context=self.context, use_global_arguments=False, enable_rosout=False,
-                 start_parameter_services=False) for suffix in ('_takes', '_events'))
+                 start_parameter_services=False) for suffix in ('takes', 'events'))
         self._lost_events = SingleThreadedExecutor(context=self.context)
         self._lost_events.add_node(self._events_node)
         self._lost_read = False  # a message-lost event was dispatched (by _read_lost)
