@@ -844,6 +844,52 @@ def test_a_non_finite_law_result_is_never_published_and_theta_hat_is_restored(
         node.destroy_node()
 
 
+def test_a_setpoint_delivered_before_a_state_is_applied_before_the_state_is_answered(
+        ros_node, wait, monkeypatch):
+    """
+    In-process: both already in the node's readers when its executor wakes (a busy start).
+
+    Setpoint 0 and state 0 are acknowledged by the node's readers before its executor runs
+    at all, so one wait finds both ready; the state must be answered with setpoint 0, not
+    held as "no setpoint yet" (the single-threaded executor takes them in the order the
+    subscriptions were made).
+    """
+    from rclpy.duration import Duration
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from freejoint_control.controller_node import ControllerNode
+    node = ControllerNode(parameter_overrides=[
+        Parameter('case', value='vertical'), Parameter('lockstep', value=False),
+        Parameter('stale_timeout', value=2.0), Parameter('max_state_age', value=0.0)])
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        states = []
+        monkeypatch.setattr(node._pub_cmd, 'publish', lambda msg: None)
+        monkeypatch.setattr(node._pub_state, 'publish', lambda msg: states.append(
+            (msg.status, msg.message, list(msg.effort), to_ns(msg.setpoint_stamp))))
+        drv = Driver(ros_node, wait)
+        wait(lambda: (drv.pub_js.get_subscription_count() > 0
+                      and drv.pub_sp.get_subscription_count() > 0), 30.0,
+             'the in-process controller to match', spin=drv.spin)
+        q, qd = Q0, QD0
+        drv.setpoint(0, _setpoint(0))
+        assert drv.pub_sp.wait_for_all_acked(Duration(seconds=15.0)), 'setpoint not acked'
+        drv.joint_state(0, q, qd)
+        assert drv.pub_js.wait_for_all_acked(Duration(seconds=15.0)), 'state not acked'
+        wait(lambda: states, 15.0, 'the answer to state 0',
+             spin=lambda: executor.spin_once(timeout_sec=0.05))
+        status, message, effort, sp_ns = states[0]
+        assert not status & STATUS_HOLDING and 'no setpoint yet' not in message, message
+        assert sp_ns == 0
+        rep = Replica('vertical', lockstep=False)
+        assert effort == rep.tick(0, q, qd, _setpoint(0))[0]
+    finally:
+        executor.remove_node(node)
+        executor.shutdown()
+        node.destroy_node()
+
+
 def test_a_late_setpoint_stream_is_carried_forward_then_held_and_rejoined_without_a_step(
         procs, ros_node, wait):
     """A starved planner (gaps of 0.3 s seen): no frozen reference, no step when it returns."""

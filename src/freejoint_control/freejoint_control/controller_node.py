@@ -162,14 +162,17 @@ class ControllerNode(Node, Lifecycle):
         self._pub_state = self.create_publisher(CONTROLLER_STATE.msg_type, CONTROLLER_STATE.name,
                                                 overridable(CONTROLLER_STATE.qos),
                                                 qos_overriding_options=QOS_OVERRIDES)
-        # Real time: only the newest state matters (a queue of old ones would be answered
-        # late, a delay the loop cannot take); lockstep: every state, the sim waits.
-        if not cfg.standby:
-            self._subscribe_states()
         self._sp_sub = self.create_subscription(
             SETPOINT.msg_type, SETPOINT.name, self._on_setpoint,
             overridable(STANDBY_SETPOINT_QOS if cfg.standby else SETPOINT.qos),
             qos_overriding_options=QOS_OVERRIDES)
+        # After the setpoints (a spare subscribes later too): the single-threaded executor
+        # takes what one wait found ready in the order the subscriptions were made, so a
+        # setpoint that came in before a state is applied before the state is answered.
+        # Real time: only the newest state matters (a queue of old ones would be answered
+        # late, a delay the loop cannot take); lockstep: every state, the sim waits.
+        if not cfg.standby:
+            self._subscribe_states()
         self._sp_wall = None            # standby: monotonic time of the newest setpoint
         self._sp_matched_wall = None    # standby: when a setpoint publisher was first matched
         self._waiting_for = 'start-up'  # standby: what it waits for before it is ready
