@@ -125,15 +125,18 @@ class Driver:
                   timeout, '%s to tick %d' % (what, k), spin=self.spin)
         return self.states[ns][0], self.commands[stamp_label(ns)][0]
 
+    def matched(self):
+        """Return whether this test's endpoints and the controller's match both ways."""
+        return (self.pub_js.get_subscription_count() > 0
+                and self.pub_sp.get_subscription_count() > 0
+                and all(sub.get_publisher_count() > 0 for sub in self.subs))
+
     def connect(self, proc, procs):
         # Matched both ways, not only seen in the graph: the graph (ros_discovery_info) can
         # list the controller's publishers before this test's readers have matched them, and
         # an answer published then is lost (the watchdog's stale answer 2 s later was the one
         # received).
-        self.wait(lambda: (self.pub_js.get_subscription_count() > 0
-                           and self.pub_sp.get_subscription_count() > 0
-                           and all(sub.get_publisher_count() > 0 for sub in self.subs)),
-                  30.0, 'the controller to connect (log: %s)' % procs.log(proc),
+        self.wait(self.matched, 30.0, 'the controller to connect (log: %s)' % procs.log(proc),
                   spin=self.spin)
 
 
@@ -869,9 +872,7 @@ def test_a_setpoint_delivered_before_a_state_is_applied_before_the_state_is_answ
         monkeypatch.setattr(node._pub_state, 'publish', lambda msg: states.append(
             (msg.status, msg.message, list(msg.effort), to_ns(msg.setpoint_stamp))))
         drv = Driver(ros_node, wait)
-        wait(lambda: (drv.pub_js.get_subscription_count() > 0
-                      and drv.pub_sp.get_subscription_count() > 0), 30.0,
-             'the in-process controller to match', spin=drv.spin)
+        wait(drv.matched, 30.0, 'the in-process controller to match', spin=drv.spin)
         q, qd = Q0, QD0
         drv.setpoint(0, _setpoint(0))
         assert drv.pub_sp.wait_for_all_acked(Duration(seconds=15.0)), 'setpoint not acked'
