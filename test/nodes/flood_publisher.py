@@ -1,13 +1,16 @@
 """
 Publish std_msgs/String on one topic as fast as possible, best effort, keep-last 1.
 
-What makes a reader lose messages for real (a best-effort reader that is not taken fast
-enough sees gaps in the writer's sequence numbers, which the middleware reports lost).
+What makes a reader lose messages for real once it is starved of CPU (the transport's
+queue to it overflows, and the samples it then receives skip sequence numbers, which the
+middleware reports lost). Flooding alone does not do it on a fast machine: the reader's
+receive thread can keep up.
 
 Usage: flood_publisher.py --topic NAME --seconds S --summary FILE
 
-It waits (up to 30 s) for a matched subscription, publishes for S seconds, writes
-``{"published": N}`` to FILE and exits 0 (1 if nothing matched).
+It waits (up to 30 s) for a matched subscription, prints ``flooding NAME`` when it starts
+publishing, publishes for S seconds, writes ``{"published": N}`` to FILE and exits 0 (1 if
+nothing matched).
 """
 
 import argparse
@@ -40,6 +43,7 @@ def main():
               file=sys.stderr)
         return 1
     msg = String(data='x' * 64)
+    print('flooding %s' % args.topic, flush=True)
     count = 0
     end = time.monotonic() + args.seconds
     while time.monotonic() < end:

@@ -3,6 +3,7 @@ import json
 import os
 import re
 import signal
+import time
 
 import pytest
 import yaml
@@ -157,12 +158,14 @@ def test_signal_mid_run_gives_a_finalised_bag_without_gaps(procs, wait, tmp_path
 def test_messages_the_middleware_loses_are_counted_and_the_recorder_still_stops_cleanly(
         procs, wait, tmp_path):
     """
-    A best-effort topic flooded faster than the recorder takes it: real losses.
+    A best-effort topic flooded while the recorder is starved of CPU: real losses.
 
-    The middleware reports them (message-lost events); the recorder logs and counts each
-    report, keeps recording, and on SIGINT finalises the bag and exits 0. Through the
-    EventsExecutor those events deadlocked rmw_fastrtps 8.4.3 within seconds of such a
-    flood (the recorder then never answered the signal: the module docstring).
+    The recorder is stopped (SIGSTOP) for 1 s of a 6 s flood, so the transport's queue to
+    it overflows whatever the machine's speed (a flood alone let a fast reader keep up and
+    lose nothing). The middleware reports the losses (message-lost events); the recorder
+    logs and counts each report, keeps recording, and on SIGINT finalises the bag and exits
+    0. Through the EventsExecutor those events deadlocked rmw_fastrtps 8.4.3 within seconds
+    of such a flood (the recorder then never answered the signal: the module docstring).
     """
     from freejoint_tools.bagfile import open_bag
     bag_path = str(tmp_path / 'flood')
@@ -172,6 +175,11 @@ def test_messages_the_middleware_loses_are_counted_and_the_recorder_still_stops_
                                'batch_period:=0.1')
     flood = procs.start_script(FLOOD, 'flood', ['--topic', '/flood', '--seconds', '6',
                                                 '--summary', summary_path])
+    wait(lambda: 'flooding' in procs.log(flood) or flood.poll() is not None, 60.0,
+         'the flood to start (%s)' % procs.log(flood))
+    os.killpg(recorder.pid, signal.SIGSTOP)
+    time.sleep(1.0)
+    os.killpg(recorder.pid, signal.SIGCONT)
     wait(lambda: flood.poll() is not None, 60.0, 'the flood to end (%s)' % procs.log(flood))
     assert flood.returncode == 0, procs.log(flood)
     wait(lambda: 'the middleware reports' in procs.log(recorder), 10.0,
