@@ -178,8 +178,10 @@ def test_messages_the_middleware_loses_are_counted_and_the_recorder_still_stops_
     wait(lambda: 'flooding' in procs.log(flood) or flood.poll() is not None, 60.0,
          'the flood to start (%s)' % procs.log(flood))
     os.killpg(recorder.pid, signal.SIGSTOP)
-    time.sleep(1.0)
-    os.killpg(recorder.pid, signal.SIGCONT)
+    try:
+        time.sleep(1.0)
+    finally:
+        os.killpg(recorder.pid, signal.SIGCONT)
     wait(lambda: flood.poll() is not None, 60.0, 'the flood to end (%s)' % procs.log(flood))
     assert flood.returncode == 0, procs.log(flood)
     wait(lambda: 'the middleware reports' in procs.log(recorder), 10.0,
