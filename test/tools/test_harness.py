@@ -58,3 +58,30 @@ def test_node_cmd_is_the_ros2_run_command_line_with_params_file_and_overrides():
     cmd = node_cmd('freejoint_sim', 'sim_node', 'config/sim.yaml', ['case:=vertical'])
     assert cmd[0].endswith('/freejoint_sim/lib/freejoint_sim/sim_node')
     assert cmd[1:] == ['--ros-args', '--params-file', 'config/sim.yaml', '-p', 'case:=vertical']
+
+
+def test_thread_report_names_the_busy_and_the_sleeping_thread_of_a_process(tmp_path, wait):
+    from freejoint_tools.harness import thread_report
+    procs = Processes(str(tmp_path))
+    busy = ('import threading, time\n'
+            'def spin():\n'
+            '    while True:\n'
+            '        pass\n'
+            'threading.Thread(target=spin, name="spinner", daemon=True).start()\n'
+            'print("up", flush=True)\n'
+            'time.sleep(60)\n')
+    try:
+        proc = procs.start('busy', [sys.executable, '-c', busy])
+        wait(lambda: 'up' in procs.log('busy'), 30.0, 'the process to start')
+        report = thread_report(proc.pid, 0.5)
+    finally:
+        procs.stop_all()
+    lines = report.splitlines()
+    assert lines[0].startswith('threads of %d over 0.5 s' % proc.pid)
+    rows = {int(line.split()[0]): line.split() for line in lines[1:3]}
+    # Python names the thread 'spinner' in its own name only: the kernel's is the
+    # process's. The main thread sleeps (S, no CPU); the other spins (R, about 0.5 s).
+    main, other = rows[proc.pid], next(r for t, r in rows.items() if t != proc.pid)
+    assert main[2] == 'S' and float(main[5]) < 0.1, report
+    assert other[2] == 'R' and float(other[5]) > 0.2, report
+    assert main[3] == other[3] == 'OTHER/0'

@@ -378,6 +378,78 @@ class ParameterCalls:
                                lambda: self.client.describe_parameters(names)).descriptors)
 
 
+_POLICIES = {0: 'OTHER', 1: 'FIFO', 2: 'RR', 3: 'BATCH', 5: 'IDLE', 6: 'DEADLINE'}
+
+
+def _thread_stats(task_dir):
+    """Return {tid: (name, state, cpu ticks, policy, rt priority, last CPU)} of a task dir."""
+    out = {}
+    try:
+        tids = os.listdir(task_dir)
+    except OSError:
+        return out
+    for tid in tids:
+        try:
+            with open(os.path.join(task_dir, tid, 'stat')) as fh:
+                stat = fh.read()
+        except OSError:
+            continue            # ended meanwhile
+        name = stat[stat.index('(') + 1:stat.rindex(')')]
+        rest = stat[stat.rindex(')') + 2:].split()
+        # fields 3 (state), 14 + 15 (utime, stime), 39 (processor), 40, 41 (rt prio, policy)
+        out[int(tid)] = (name, rest[0], int(rest[11]) + int(rest[12]), int(rest[38]),
+                         int(rest[37]), int(rest[36]))
+    return out
+
+
+def _wchan(pid, tid):
+    try:
+        with open('/proc/%d/task/%d/wchan' % (pid, tid)) as fh:
+            return fh.read().strip() or '-'
+    except OSError:
+        return '?'
+
+
+def thread_report(pid, interval=1.0):
+    """
+    Describe what the threads of process ``pid`` do, for a process that stopped progressing.
+
+    Samples ``/proc`` twice, ``interval`` s apart: per thread of ``pid`` its name, state,
+    scheduling, last CPU, CPU time used in the interval and kernel wait channel; then every
+    SCHED_FIFO / SCHED_RR thread of the machine (other processes) that used CPU in the
+    interval - a busy real-time thread starves lower priorities on its CPUs. Returns the
+    text (no exception: what cannot be read is left out).
+    """
+    tick = os.sysconf('SC_CLK_TCK')
+    before = _thread_stats('/proc/%d/task' % pid)
+    others = {}
+    for proc in os.listdir('/proc'):
+        if proc.isdigit() and int(proc) != pid:
+            for tid, st in _thread_stats('/proc/%s/task' % proc).items():
+                if st[3] in (1, 2):
+                    others[(int(proc), tid)] = st
+    time.sleep(interval)
+    after = _thread_stats('/proc/%d/task' % pid)
+    lines = ['threads of %d over %g s (name state policy/prio cpu used[s] wchan):'
+             % (pid, interval)]
+    for tid in sorted(after):
+        name, state, ticks, policy, prio, cpu = after[tid]
+        used = (ticks - before.get(tid, after[tid])[2]) / tick
+        lines.append('  %d %s %s %s/%d cpu%d %.2f %s' % (
+            tid, name, state, _POLICIES.get(policy, policy), prio, cpu, used,
+            _wchan(pid, tid)))
+    busy = []
+    for (proc, tid), st in sorted(others.items()):
+        now = _thread_stats('/proc/%d/task' % proc).get(tid)
+        if now is not None and now[2] > st[2]:
+            busy.append('  %d/%d %s %s/%d cpu%d %.2f' % (
+                proc, tid, now[0], _POLICIES.get(now[3], now[3]), now[4], now[5],
+                (now[2] - st[2]) / tick))
+    lines.append('real-time threads of other processes busy meanwhile: %s'
+                 % ('\n' + '\n'.join(busy) if busy else 'none'))
+    return '\n'.join(lines)
+
+
 SHM_DIR = '/dev/shm'
 SHM_PREFIX = 'fastrtps_'
 
