@@ -637,14 +637,12 @@ def test_restarted_real_time_controller_ramps_its_torque_from_zero_without_a_spi
 
 def test_reset_service_restarts_theta_hat_and_the_hold(procs, ros_node, wait):
     from std_srvs.srv import Trigger
-    import rclpy
+    from freejoint_tools.harness import ServiceCalls
     proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS, '-p', 'resume_time:=0.01',
                   '-p', 'stale_timeout:=2.0')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
     rep = Replica('horizontal', lockstep=False, resume=0.01)
-    client = ros_node.create_client(Trigger, '/controller_node/reset')
-    assert client.wait_for_service(timeout_sec=15.0), 'no ~/reset service'
     q, qd = Q0, (1.0, -2.0, 3.0)          # fast: theta_hat grows
     for k in range(25):
         drv.setpoints_ahead(k, _setpoint)
@@ -653,10 +651,13 @@ def test_reset_service_restarts_theta_hat_and_the_hold(procs, ros_node, wait):
         effort, _, _, out = rep.tick(k * DT_NS, q, qd, _setpoint(k))
         assert cmd == effort, (k, st.status, st.dt, st.setpoint_stamp.nanosec, st.message)
     assert max(st.theta_hat) > 0.0 and not st.status & STATUS_RESUMING
-    future = client.call_async(Trigger.Request())
-    rclpy.spin_until_future_complete(ros_node, future, timeout_sec=15.0)
-    assert future.done() and future.result().success, 'no answer from ~/reset'
-    assert 'theta_hat reset to theta0' in future.result().message
+    # Sent again after 3 s unanswered (rmw_fastrtps#390: a response sent before the server
+    # matched the client's response reader is dropped); a second reset with no state in
+    # between leaves the controller as one does.
+    answer = ServiceCalls(ros_node).call(Trigger, '/controller_node/reset', Trigger.Request(),
+                                         15.0, resend=3.0)
+    assert answer is not None and answer.success, 'no answer from ~/reset'
+    assert 'theta_hat reset to theta0' in answer.message
     rep.reset()
     k = 25
     drv.setpoints_ahead(k, _setpoint)
