@@ -868,8 +868,8 @@ def test_a_setpoint_delivered_before_a_state_is_applied_before_the_state_is_answ
     not held as "no setpoint yet" (the executor takes them in the order the subscriptions
     were made). Events executor (the config's): with the node spinning first - before, it
     registers the subscriptions from an unordered set, and a state and a setpoint both
-    waiting then may be answered state first (a one-tick hold at start-up; measured 3 of 8
-    runs) - the messages are taken in the order they arrived.
+    waiting then may be answered state first (a one-tick hold at start-up) - the messages
+    are taken in the order they arrived.
     """
     from rclpy.duration import Duration
     from rclpy.parameter import Parameter

@@ -48,10 +48,10 @@ def _explain_stall(exc, proc, procs):
     """
     Raise ``exc`` again with what the stalled node did: its threads, then its Python stacks.
 
-    A node pinned to one CPU at SCHED_FIFO stalled now and then in CI (start-up not
-    finished, or its parameter services unanswered); not reproduced alone. The report says
-    which thread held the CPU (and any other real-time thread busy meanwhile), and SIGABRT
-    makes the node's faulthandler (PYTHONFAULTHANDLER) print where its Python threads were.
+    For a node pinned to one CPU at SCHED_FIFO that does not finish its start-up or answer
+    its parameter services: the report says which thread held the CPU (and any other
+    real-time thread busy meanwhile), and SIGABRT makes the node's faulthandler
+    (PYTHONFAULTHANDLER) print where its Python threads were.
     """
     from freejoint_tools.harness import thread_report
     report = thread_report(proc.pid)
