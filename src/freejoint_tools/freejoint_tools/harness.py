@@ -11,7 +11,8 @@ until a condition (bounded), call a service (waiting for it, bounded), the recor
 ``~/status`` (ready, drained) and the planner's ``~/plan_circle``. :class:`ParameterCalls`
 calls one node's parameter services (set, get, list, describe), sending a request again
 when its answer is lost. :func:`clean_stale_fast_dds_shm` removes the shared-memory files a
-killed node left (the test session calls it).
+killed node left (the test session calls it). :func:`thread_report` says what the threads
+of a process that stopped progressing do.
 """
 
 import fcntl
