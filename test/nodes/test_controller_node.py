@@ -636,7 +636,7 @@ def test_restarted_real_time_controller_ramps_its_torque_from_zero_without_a_spi
 
 
 def test_reset_service_restarts_theta_hat_and_the_hold(procs, ros_node, wait):
-    from std_srvs.srv import Trigger
+    from freejoint_common.contract import RESET
     from freejoint_tools.harness import ServiceCalls
     proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS, '-p', 'resume_time:=0.01',
                   '-p', 'stale_timeout:=2.0')
@@ -654,8 +654,8 @@ def test_reset_service_restarts_theta_hat_and_the_hold(procs, ros_node, wait):
     # Sent again after 3 s unanswered (rmw_fastrtps#390: a response sent before the server
     # matched the client's response reader is dropped); a second reset with no state in
     # between leaves the controller as one does.
-    answer = ServiceCalls(ros_node).call(Trigger, '/controller_node/reset', Trigger.Request(),
-                                         15.0, resend=3.0)
+    answer = ServiceCalls(ros_node).call(RESET.srv_type, RESET.of('controller_node'),
+                                         RESET.srv_type.Request(), 15.0, resend=3.0)
     assert answer is not None and answer.success, 'no answer from ~/reset'
     assert 'theta_hat reset to theta0' in answer.message
     rep.reset()

@@ -81,22 +81,12 @@ def test_writer_on_a_full_disk_counts_what_did_not_reach_the_file_and_finalises(
     assert sorted(os.listdir(path)) == ['full_0.mcap', 'metadata.yaml']   # reserve freed
 
 
-def _status(ros_node):
-    from std_srvs.srv import Trigger
-    from freejoint_tools.harness import ServiceCalls
-    # A query: sent again after 3 s unanswered (rmw_fastrtps drops a response sent before
-    # the server matched the client's response reader, ros2/rmw_fastrtps#390).
-    answer = ServiceCalls(ros_node).call(Trigger, '/recorder/status', Trigger.Request(), 30.0,
-                                         resend=3.0)
-    assert answer is not None, 'no answer from the recorder status within 30 s'
-    return answer
-
-
 @pytest.mark.ros
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_recorder_on_a_full_disk_reports_the_loss_finalises_and_exits_with_one_line(
         procs, wait, ros_node, tmp_path, small_disk, signum):
     from freejoint_tools.bagfile import open_bag
+    from freejoint_tools.harness import ServiceCalls
     bag_path = os.path.join(small_disk(3 << 20), 'run')
     recorder = procs.start_node('freejoint_tools', 'recorder', 'recorder', [
         '--ros-args', '-p', 'output:=%s' % bag_path, '-p', 'topics:=[%s]' % ', '.join(
@@ -106,7 +96,10 @@ def test_recorder_on_a_full_disk_reports_the_loss_finalises_and_exits_with_one_l
         '--ticks', '0', '--rate', '1000', '--clock', '--recorder', '/recorder'])
     wait(lambda: 'cannot write the bag' in procs.log(recorder), 90.0,
          'the disk to fill (recorder: %s)' % procs.log(recorder)[-2000:])
-    answer = _status(ros_node)
+    # The harness's query sends again when unanswered (a response can be lost:
+    # ros2/rmw_fastrtps#390).
+    answer = ServiceCalls(ros_node).recorder_answer(30.0)
+    assert answer is not None, 'no answer from the recorder status within 30 s'
     assert not answer.success and 'disk full' in answer.message, answer.message
     assert int(re.search(r'; not written (\d+);', answer.message).group(1)) > 0
     time.sleep(0.5)                            # messages keep coming: counted lost

@@ -231,12 +231,16 @@ class ServiceCalls:
         finally:
             self.node.destroy_client(client)
 
-    def recorder_status(self, timeout=5.0):
-        """Return the answer message of the recorder's ``~/status`` ('': no answer)."""
+    def recorder_answer(self, timeout=5.0):
+        """Return the recorder's ``~/status`` answer (``std_srvs/Trigger``), None if none."""
         from freejoint_common.contract import RECORDER_STATUS
         trigger = RECORDER_STATUS.srv_type
-        answer = self.call(trigger, RECORDER_STATUS.of('recorder'), trigger.Request(), timeout,
-                           resend=2.0)
+        return self.call(trigger, RECORDER_STATUS.of('recorder'), trigger.Request(), timeout,
+                         resend=2.0)
+
+    def recorder_status(self, timeout=5.0):
+        """Return the answer message of the recorder's ``~/status`` ('': no answer)."""
+        answer = self.recorder_answer(timeout)
         return answer.message if answer is not None else ''
 
     def recorder_ready(self, timeout):
