@@ -38,15 +38,15 @@ from freejoint_common.runner import Lifecycle, run
 from freejoint_common.scheduling import process_scheduling
 from freejoint_control.params import SCHEMA
 from freejoint_control.supervisor import notify_ready
-from freejoint_core.control import (ControlOutput, RobustController, STATUS_BAD_INPUT,
+from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT,
                                     STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
                                     STATUS_TORQUE_LIMITED)
 from freejoint_core.delay import extrapolate_setpoint, StatePredictor
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.reference import (clamp_dt, extrapolate, limit_effort, MODE_HOLD,
-                                      MODE_NONE, ReferenceShaper, setpoint_refusal,
-                                      state_refusal)
+from freejoint_core.guards import clamp_dt, limit_effort, setpoint_refusal, state_refusal
+from freejoint_core.laws import make_law
+from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
 from freejoint_msgs.msg import ControllerState
 import numpy as np
 from rclpy.clock import Clock, ClockType
@@ -79,7 +79,7 @@ class ControllerNode(Node, Lifecycle):
         self._params = NodeParameters(self, SCHEMA)   # raises: bad start-up parameters
         self.config = self._params.config
         cfg = self.config
-        self._ctl = RobustController(cfg.nominal, cfg.gains, model=cfg.nominal_model)
+        self._ctl = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
         self._shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep)
         self._predictor = None
         self._install(cfg)
