@@ -188,6 +188,10 @@ PARAMS = (
           'with adaptation; another law is one module registering itself '
           '(freejoint_core.laws.register_law) and this value; takes effect at start-up',
           read_only=True, validator=one_of(LAWS)),
+    Param('state_publish_rate', 0.0,
+          'rate [Hz of state stamps] of controller_state (as ros2_control state publishers '
+          'thin theirs): 0 = one per answered state; else at most one per 1/rate s, and '
+          'every answer whose status differs from the last published one', (0.0, 1e6)),
 )
 
 

@@ -137,19 +137,20 @@ class RobustLaw(RobustController, ControlLaw):
         self._last = None
 
     def state_values(self):
-        """Return theta_hat (5), rho_hat, delta_v (2) of the last step."""
+        """Return theta_hat (5, now), rho_hat and delta_v (2) of the last step (or 0)."""
         out = self._last
         if out is None:
             return list(self._theta) + [0.0, 0.0, 0.0]
-        return out.theta.tolist() + [out.rho] + out.dv.tolist()
+        return list(self._theta) + [out.rho] + out.dv.tolist()
 
     def save_state(self):
         """Return theta_hat (a tuple)."""
         return tuple(self._theta)
 
     def restore_state(self, saved):
-        """Put theta_hat back (``set_theta``)."""
+        """Put theta_hat back (``set_theta``); rho_hat and delta_v read 0 until a step."""
         self.set_theta(saved)
+        self._last = None
 
 
 LAWS = {}
