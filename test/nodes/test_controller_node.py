@@ -232,7 +232,8 @@ def test_set_parameters_changes_the_next_tick_and_a_bad_value_is_refused(
            (Parameter('K', value=[1e300, 1e300]), r'^K: values must be <= 10000'),
            (Parameter('effort_limits', value=[1.0]), r'^effort_limits: expected 2 values'),
            (Parameter('on_stale_setpoint', value='drop'), r'^on_stale_setpoint: expected'),
-           (Parameter('state_publish_rate', value=-1.0), r'state_publish_rate')]
+           (Parameter('state_publish_rate', value=-1.0),
+            r'^Parameter state_publish_rate out of range')]
     for param, reason in bad:
         (res,) = params.set_parameters([param])
         assert not res.successful
@@ -272,7 +273,7 @@ def _finite_within(cmd, limits=LIMITS):
 
 
 def _loop(**given):
-    """The ROS-free loop of the node's configuration (config/controller.yaml + given)."""
+    """Return the ROS-free loop of the node's configuration (config/controller.yaml + given)."""
     from freejoint_control.loop import ControlLoop
     return ControlLoop(SCHEMA.config(dict(FILE, **given)))
 
@@ -290,7 +291,8 @@ def test_reset_service_restarts_theta_hat(procs, ros_node, wait):
     proc = _start(procs)
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
-    ctl = RobustController(table1('horizontal').scaled(0.7), Gains())
+    ctl = RobustController(table1('horizontal').scaled(0.7),
+                           Gains(tau_limit=LIMITS, theta_max=(100.0,) * 5))
     qd = (1.0, -2.0, 3.0)          # fast: theta_hat grows
     for k in range(5):
         drv.setpoint(k, _setpoint(k))
@@ -322,7 +324,7 @@ def test_state_publish_rate_thins_controller_state_but_not_the_commands(procs, r
     drv.connect(proc, procs)
     for k in range(12):
         drv.setpoint(k, _setpoint(k))
-        drv.joint_state(k, *_state_q(k))
+        drv.joint_state(k, Q0, QD0)       # the same status throughout
         ns = drv.ns(k)
         wait(lambda: stamp_label(ns) in drv.commands, 15.0, 'the command of tick %d' % k,
              spin=drv.spin)

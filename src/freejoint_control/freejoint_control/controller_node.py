@@ -35,7 +35,7 @@ from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_
 from freejoint_common.node_tools import Throttle
 from freejoint_common.runner import Lifecycle, run
 from freejoint_common.scheduling import process_scheduling
-from freejoint_control.loop import ControlLoop, ERROR, WARN
+from freejoint_control.loop import ControlLoop, ERROR, RECEIPT, WARN
 from freejoint_control.params import SCHEMA
 from freejoint_control.supervisor import notify_ready
 from freejoint_msgs.msg import ControllerState
@@ -128,11 +128,15 @@ class ControllerNode(Node, Lifecycle):
     def _log(self, level, kind, text):
         """Log a line of the loop (``kind``: throttled per kind; None: always)."""
         logger = self.get_logger()
-        log = logger.error if level == ERROR else logger.warn if level == WARN else logger.info
-        if kind is None:
-            log(text)
+        # rclpy ties one severity to each logging call site: a call line per severity.
+        if kind is not None:
+            self._throttle(logger.error if level == ERROR else logger.warn, kind, text)
+        elif level == ERROR:
+            logger.error(text)
+        elif level == WARN:
+            logger.warn(text)
         else:
-            self._throttle(log, kind, text)
+            logger.info(text)
 
     # -- standby ---------------------------------------------------------------
     def _subscribe_states(self):
@@ -237,8 +241,12 @@ class ControllerNode(Node, Lifecycle):
         cmd.data = res.effort
         self._dim.label = stamp_label(ns)
         self._pub_cmd.publish(cmd)
-        if res.latency_ns is not None:
-            self._latency.note(res.latency_ns)
+        latency = res.latency_ns
+        if latency is RECEIPT:
+            # Lockstep: the wall time from the state's receipt to its command.
+            self._latency.note(int((_monotonic() - self._loop.last_state_wall) * 1e9))
+        elif latency is not None:
+            self._latency.note(latency)
         st = self._state
         period = self._state_period_ns
         if period and self._state_pub_ns is not None and res.status == st.status and (

@@ -55,6 +55,9 @@ STANDBY_IDLE_STREAM = 0.25
 wait for it to catch up before it tells the supervisor it is ready."""
 DEBUG, INFO, WARN, ERROR = 'debug', 'info', 'warn', 'error'
 """Levels of the ``log`` callable."""
+RECEIPT = 'receipt'
+"""``Result.latency_ns`` of a lockstep answer: the node measures it from the state's receipt
+(``ControlLoop.last_state_wall``) to the command, on its own clock."""
 
 _isfinite = math.isfinite
 _NAME_MAP_CACHE = 16
@@ -91,9 +94,10 @@ class Result:
         Its values after this answer.
     repeated : bool
         The state's stamp was answered before: the same answer again.
-    latency_ns : int
-        The latency of the answer [ns] for the diagnostics (lockstep: from the state's
-        receipt, real time: from its stamp).
+    latency_ns : int, RECEIPT or None
+        The latency of the answer [ns] for the diagnostics: real time from the state's
+        stamp; lockstep :data:`RECEIPT` (from its receipt, measured by the node); None for
+        a zero-effort answer (not counted).
 
     """
 
@@ -399,17 +403,17 @@ class ControlLoop:
                 if self.shaper.mode == MODE_HOLD and self._setpoint_seen:
                     # Already holding on a stale stream: answer at once, not a timeout per tick.
                     self.pending = None
-                    return self._no_setpoint(ns, q, qd, now_ns, mono)
+                    return self._no_setpoint(ns, q, qd, now_ns)
                 self.pending = (ns, q, qd, mono)
                 return None
             self.pending = None
-            return self._tick(ns, q, qd, ns, sp, now_ns, mono)
+            return self._tick(ns, q, qd, ns, sp, now_ns)
         found = self._realtime_setpoint(ns)
         if found is None:
-            return self._no_setpoint(ns, q, qd, now_ns, mono)
+            return self._no_setpoint(ns, q, qd, now_ns)
         if ns - found[0] > self._carry_ns and self.hold_on_stale:
-            return self._no_setpoint(ns, q, qd, now_ns, mono, (ns - found[0]) * 1e-9)
-        return self._tick(ns, q, qd, found[0], found[1], now_ns, mono)
+            return self._no_setpoint(ns, q, qd, now_ns, (ns - found[0]) * 1e-9)
+        return self._tick(ns, q, qd, found[0], found[1], now_ns)
 
     def _start_from(self, q, qd):
         """Start the reference from the measured end-effector motion (fk, J qd)."""
@@ -423,7 +427,7 @@ class ControlLoop:
             self.log(ERROR, None, 'cannot start from the measured motion (%s): blending '
                      'from the position at rest' % exc)
 
-    def _no_setpoint(self, ns, q, qd, now_ns, mono, late=None):
+    def _no_setpoint(self, ns, q, qd, now_ns, late=None):
         """Answer a state without a fresh (or timely) setpoint: hold or zero effort."""
         if late is not None:
             why = ('setpoint stream late: the newest is %.3g s old, carried forward %g s at '
@@ -442,7 +446,7 @@ class ControlLoop:
         if self.shaper.mode != MODE_HOLD:
             self.holds += 1
             self.log(WARN, 'hold', why + ': holding position')
-        return self._tick(ns, q, qd, None, None, now_ns, mono, why, late is not None)
+        return self._tick(ns, q, qd, None, None, now_ns, why, late is not None)
 
     def _sp_refusal_note(self):
         text = self._last_sp_refusal
@@ -493,7 +497,7 @@ class ControlLoop:
         pending = self.pending
         if pending is not None and pending[0] == ns:
             self.pending = None
-            return self._tick(ns, pending[1], pending[2], ns, values, now_ns, mono)
+            return self._tick(ns, pending[1], pending[2], ns, values, now_ns)
         if ns > self.last_ns:
             setpoints = self._setpoints
             setpoints[ns] = values
@@ -514,7 +518,7 @@ class ControlLoop:
         if pending is not None:
             if self._setpoint_seen and mono - pending[3] > self.stale_timeout:
                 self.pending = None
-                return self._no_setpoint(pending[0], pending[1], pending[2], now_ns, mono)
+                return self._no_setpoint(pending[0], pending[1], pending[2], now_ns)
             return None
         last = self.last_state_wall
         if last is not None and not self.stale_reported and mono - last > self.stale_timeout:
@@ -530,7 +534,7 @@ class ControlLoop:
         return None
 
     # -- outputs -----------------------------------------------------------------------
-    def _tick(self, ns, q, qd, sp_ns, sp, now_ns, mono, hold_reason='', late=False):
+    def _tick(self, ns, q, qd, sp_ns, sp, now_ns, hold_reason='', late=False):
         """Compute the answer to the state stamped ns (sp None: hold)."""
         status = 0
         shaper = self.shaper
@@ -641,9 +645,9 @@ class ControlLoop:
         res.dt = dt
         if self.lockstep:
             # Sim time stands still until the command; the latency is the wall time from
-            # the state's receipt to its command.
+            # the state's receipt to its command (the node's to measure).
             res.state_age = 0.0
-            res.latency_ns = int((mono - self.last_state_wall) * 1e9)
+            res.latency_ns = RECEIPT
         else:
             age_ns = now_ns - ns
             res.state_age = age_ns * 1e-9
