@@ -1,4 +1,4 @@
-"""Hold / resume reference and the controller's guards (freejoint_core.reference)."""
+"""Hold / resume reference (freejoint_core.reference) and the input guards (guards)."""
 import math
 
 from freejoint_core.arm import table1
