@@ -62,6 +62,7 @@ RECEIPT = 'receipt'
 _isfinite = math.isfinite
 _NAME_MAP_CACHE = 16
 _ZERO2 = (0.0, 0.0)
+_THETA_NAMES = tuple('theta_hat[%d]' % i for i in range(5))
 
 
 def _no_log(level, kind, text):
@@ -662,10 +663,9 @@ class ControlLoop:
     def _fault_output(self, q):
         """Return the published terms of a tick whose law result was refused."""
         zero2 = np.zeros(2)
-        theta = np.array(self.law.state_values()[:5]) if self.law.state_names[:1] == (
-            'theta_hat[0]',) else np.zeros(5)
-        return ControlOutput(np.zeros(len(self._zero)), zero2, zero2, zero2, theta, 0.0,
-                             zero2, self._last_det, self.law.model.fk(q), 0)
+        return ControlOutput(np.zeros(len(self._zero)), zero2, zero2, zero2,
+                             np.array(_theta_hat(self.law)), 0.0, zero2, self._last_det,
+                             self.law.model.fk(q), 0)
 
     def _predicted_step(self, pred, ns, q, qd, ref, dt, now_ns):
         """Run the law on the state predicted to when the command takes effect."""
@@ -696,10 +696,9 @@ class ControlLoop:
         res.stamp_ns = ns
         res.effort = self._zero
         res.error = res.error_rate = res.sliding = res.delta_v = _ZERO2
-        values = law.state_values()
-        res.theta_hat = values[:5] if law.state_names[:1] == ('theta_hat[0]',) else [0.0] * 5
+        res.theta_hat = _theta_hat(law)
         res.rho_hat = 0.0
-        res.law_state_values = values
+        res.law_state_values = law.state_values()
         res.det_dd = self._last_det
         q = self._last_q
         res.position = law.model.fk(q) if q is not None else self._last_sp
@@ -823,6 +822,13 @@ class ControlLoop:
                 'states skipped as too old'
                 % (self.ticks, self.zero_answers, self.holds, self.refused_states,
                    self.refused_setpoints, self.faults, self.old_states))
+
+
+def _theta_hat(law):
+    """Return ControllerState's theta_hat (5) of a law: its first 5 values, or zeros."""
+    if law.state_names[:5] == _THETA_NAMES:
+        return law.state_values()[:5]
+    return [0.0] * 5
 
 
 def _status_message(status, det, cfg, hold_reason, shaper):
