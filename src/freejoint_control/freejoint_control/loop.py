@@ -81,8 +81,9 @@ class Result:
         The command [N m] in the order of parameter ``joints``.
     error, error_rate, sliding, delta_v, position, position_desired : sequence, (2,)
         ControllerState's task-space terms [m, m/s, m/s^2].
-    theta_hat : list of float, (5,)
-        The paper's law's estimate (ControllerState's field of that law).
+    theta_hat : sequence of float, (5,)
+        The paper's law's estimate (ControllerState's field of that law; the law's
+        ``numpy.ndarray`` after a step, given to the message as it is).
     rho_hat, det_dd, state_age, setpoint_age, dt : float
         As ControllerState's fields.
     status : int
@@ -627,7 +628,7 @@ class ControlLoop:
         res.error = out.e
         res.error_rate = out.edot
         res.sliding = out.s
-        res.theta_hat = out.theta.tolist()
+        res.theta_hat = out.theta
         res.rho_hat = out.rho
         res.delta_v = out.dv
         res.law_state_values = values

@@ -189,11 +189,12 @@ def law_output_fault(effort, limits, values, bounds):
         ``'torque [...]'`` or ``'<law state> [...]'``: a non-finite or out-of-range value.
 
     """
-    for i, x in enumerate(effort):
-        if not -limits[i] <= x <= limits[i]:
+    for x, lim in zip(effort, limits):
+        if not -lim <= x <= lim:
             return 'torque %r' % (list(effort),)
-    for (lo, hi), x in zip(bounds, values):
-        if not (_isfinite(x) and lo <= x <= hi):
+    isfinite = _isfinite
+    for x, (lo, hi) in zip(values, bounds):
+        if not (lo <= x <= hi and isfinite(x)):
             return 'law state %r' % (list(values),)
     return None
 
