@@ -1,12 +1,12 @@
-"""Hold / resume reference and the controller's guards (freejoint_core.reference)."""
+"""Hold / resume reference (freejoint_core.reference) and the input guards (guards)."""
 import math
 
 from freejoint_core.arm import table1
 from freejoint_core.control import Gains, RobustController
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.reference import (clamp_dt, limit_effort, MODE_BLEND, MODE_HOLD,
-                                      MODE_STREAM, quintic_offset, ReferenceShaper,
-                                      setpoint_refusal, state_refusal)
+from freejoint_core.guards import clamp_dt, limit_effort, setpoint_refusal, state_refusal
+from freejoint_core.reference import (MODE_BLEND, MODE_HOLD, MODE_STREAM, quintic_offset,
+                                      ReferenceShaper)
 from freejoint_core.trajectory import CircleQuintic
 import numpy as np
 import pytest

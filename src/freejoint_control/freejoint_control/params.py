@@ -23,6 +23,7 @@ from freejoint_common.schema import SCHEDULING, Schema
 from freejoint_core.arm import ArmParams
 from freejoint_core.control import Gains, H_FORMS
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.laws import LAWS
 from freejoint_core.urdf_offline import nominal_model
 
 ON_STALE = ('hold', 'zero')
@@ -182,6 +183,15 @@ PARAMS = (
           validator=one_of(DELAY_COMPENSATION)),
     EXECUTOR,
     SCHEDULING,
+    Param('law', 'robust',
+          "the control law (freejoint_core.laws registry): 'robust' = the paper's robust law "
+          'with adaptation; another law is one module registering itself '
+          '(freejoint_core.laws.register_law) and this value; takes effect at start-up',
+          read_only=True, validator=one_of(LAWS)),
+    Param('state_publish_rate', 0.0,
+          'rate [Hz of state stamps] of controller_state (as ros2_control state publishers '
+          'thin theirs): 0 = one per answered state; else at most one per 1/rate s, and '
+          'every answer whose status differs from the last published one', (0.0, 1e6)),
 )
 
 

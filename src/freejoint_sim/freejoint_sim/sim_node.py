@@ -33,7 +33,7 @@ Modes (docs/GRAPH.md):
   brakes where the arm is (a drive watchdog) until the next accepted command.
 
 A diverged plant (non-finite, or a joint faster than ``divergence_speed``, or an angle
-beyond ``freejoint_sim.divergence.MAX_ANGLE``) is not integrated further: the simulator
+beyond ``freejoint_core.guards.MAX_ANGLE``) is not integrated further: the simulator
 publishes its last sane state, reports ERROR on ``/diagnostics`` and counts the divergence
 in its end-of-run line until ``~/reset``.
 
@@ -56,7 +56,7 @@ from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_
 from freejoint_common.node_tools import Throttle
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
-from freejoint_sim.divergence import divergence_reason
+from freejoint_core.guards import divergence_reason
 from freejoint_sim.engines import make_plant
 from freejoint_sim.params import SCHEMA
 from freejoint_sim.timing import StepTiming

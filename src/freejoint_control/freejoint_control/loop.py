@@ -1,0 +1,858 @@
+"""
+The controller's loop without ROS: what the controller node decides, as plain Python.
+
+:class:`ControlLoop` takes the samples the node converts from its messages - a joint state
+(stamp [ns], names, positions, velocities), a setpoint (stamp [ns], six values) - and the
+clock values the node reads (system time ``now_ns`` [ns], monotonic time ``mono`` [s]);
+it reads no clock itself, so a test drives it deterministically.  Per input it returns
+the :class:`Result` to publish (the command and the ControllerState's fields as plain
+values) or None when nothing is to be published yet.  It owns:
+
+- the joint-name mapping (any order, extra joints ignored) and the state guards (missing
+  joint, short arrays, non-finite or implausible values: zero effort, STATUS_BAD_INPUT);
+- the pairing of states with setpoints: lockstep by equal stamps (a state waits for its
+  setpoint; :meth:`ControlLoop.watchdog` holds it after ``stale_timeout``), real time the
+  newest fresh setpoint, carried forward along its velocity and acceleration while late;
+- hold / resume (``ReferenceShaper``), the law (``freejoint_core.laws``, parameter ``law``)
+  and its faults (law state restored, previous command repeated), the torque and rate
+  limits, dt from the stamps, old states skipped, repeated stamps answered alike, time
+  going back, ``delay_compensation: predict``, :meth:`ControlLoop.reset`;
+- the hot spare's readiness (:meth:`ControlLoop.standby_waits_for`, from the numbers of
+  matched and listed endpoints the node passes in), the status message, the counters and
+  the content of the ``/diagnostics`` status (:meth:`ControlLoop.diagnostics`).
+
+Logging goes through the ``log(level, kind, text)`` callable given (``kind`` names a
+throttled kind of line, None: always); status bits are ControllerState's.
+
+"""
+
+import math
+
+from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
+                                    STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
+                                    STATUS_TORQUE_LIMITED)
+from freejoint_core.delay import extrapolate_setpoint, StatePredictor
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.guards import (clamp_dt, law_output_fault, limit_effort,
+                                   setpoint_refusal, state_refusal)
+from freejoint_core.laws import make_law
+from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
+import numpy as np
+
+# ControllerState's status bits beyond the core's (test_loop checks them against the message).
+STATUS_HOLDING = 32
+STATUS_RATE_LIMITED = 64
+STATUS_LAW_FAULT = 128
+STATUS_RESUMING = 256
+STATUS_DT_CLAMPED = 512
+STATUS_SETPOINT_LATE = 1024
+
+STANDBY_SETTLE = 0.5
+"""[s] A spare is ready once nothing was lacking for this long (its discovery of the graph,
+which can list the simulator before the planner, settled)."""
+STANDBY_IDLE_STREAM = 0.25
+"""[s] A matched setpoint publisher silent this long is not streaming: a spare does not
+wait for it to catch up before it tells the supervisor it is ready."""
+DEBUG, INFO, WARN, ERROR = 'debug', 'info', 'warn', 'error'
+"""Levels of the ``log`` callable."""
+RECEIPT = 'receipt'
+"""``Result.latency_ns`` of a lockstep answer: the node measures it from the state's receipt
+(``ControlLoop.last_state_wall``) to the command, on its own clock."""
+
+_isfinite = math.isfinite
+_NAME_MAP_CACHE = 16
+_ZERO2 = (0.0, 0.0)
+_THETA_NAMES = tuple('theta_hat[%d]' % i for i in range(5))
+
+
+def _no_log(level, kind, text):
+    """Drop a log line (the default of ``log``)."""
+
+
+class Result:
+    """
+    What to publish for one answered state (one object per loop, refilled per answer).
+
+    Attributes
+    ----------
+    stamp_ns : int
+        Stamp [ns] of the state answered (-1: none answered yet).
+    effort : list of float, (r,)
+        The command [N m] in the order of parameter ``joints``.
+    error, error_rate, sliding, delta_v, position, position_desired : sequence, (2,)
+        ControllerState's task-space terms [m, m/s, m/s^2].
+    theta_hat : sequence of float, (5,)
+        The paper's law's estimate (ControllerState's field of that law; the law's
+        ``numpy.ndarray`` after a step, given to the message as it is).
+    rho_hat, det_dd, state_age, setpoint_age, dt : float
+        As ControllerState's fields.
+    status : int
+        Status bits; ``message`` says why when not 0.
+    setpoint_ns : int or None
+        Stamp of the setpoint used (None: none).
+    law_state_names : tuple of str
+        Names of the law's internal state (``ControlLaw.state_names``).
+    law_state_values : list of float
+        Its values after this answer.
+    repeated : bool
+        The state's stamp was answered before: the same answer again.
+    latency_ns : int, RECEIPT or None
+        The latency of the answer [ns] for the diagnostics: real time from the state's
+        stamp; lockstep :data:`RECEIPT` (from its receipt, measured by the node); None for
+        a zero-effort answer (not counted).
+
+    """
+
+    __slots__ = ('stamp_ns', 'effort', 'error', 'error_rate', 'sliding', 'theta_hat',
+                 'rho_hat', 'delta_v', 'det_dd', 'position', 'position_desired', 'status',
+                 'message', 'setpoint_ns', 'setpoint_age', 'dt', 'state_age',
+                 'law_state_names', 'law_state_values', 'repeated', 'latency_ns')
+
+    def __init__(self):
+        self.stamp_ns = -1
+        self.effort = []
+        self.error = self.error_rate = self.sliding = self.delta_v = _ZERO2
+        self.position = self.position_desired = _ZERO2
+        self.theta_hat = [0.0] * 5
+        self.rho_hat = self.det_dd = self.state_age = self.setpoint_age = self.dt = 0.0
+        self.status = 0
+        self.message = ''
+        self.setpoint_ns = None
+        self.law_state_names = ()
+        self.law_state_values = []
+        self.repeated = False
+        self.latency_ns = 0
+
+
+class ControlLoop:
+    """
+    The controller's decisions between samples and commands (module docstring).
+
+    Parameters
+    ----------
+    config : freejoint_control.params.Config
+        The validated configuration (its fields and ``config.<parameter>``).
+    log : callable, optional
+        ``log(level, kind, text)``; default: drop.
+
+    """
+
+    def __init__(self, config, log=None):
+        cfg = config
+        self.log = log or _no_log
+        self.law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
+        self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep)
+        self._predictor = None
+        self._install(cfg)
+        self.result = Result()
+        self.result.law_state_names = tuple(self.law.state_names)
+        self._zero = [0.0] * len(cfg.joints)
+        self.last_ns = -1               # stamp of the last answered state
+        self.pending = None             # lockstep: (ns, q, qd, since) waiting for a setpoint
+        self._setpoints = {}            # lockstep: stamp_ns -> (px, py, vx, vy, ax, ay)
+        self._recent = []               # real time: [(stamp_ns, values)], in arrival order
+        self._setpoint_seen = False     # a setpoint was received (lockstep: stale timeout on)
+        self._setpoint_used = False     # a setpoint was tracked (else: 'no setpoint yet')
+        self._late = False              # real time: the last setpoint used was late
+        self._last_sp = _ZERO2
+        self.last_state_wall = None     # monotonic time of the last state received
+        self.stale_reported = False
+        self._last_q = None
+        self._last_det = 0.0
+        self._name_maps = {}
+        self._map_names = None
+        self._map = None
+        self.ticks = 0
+        self.zero_answers = 0
+        self.holds = 0
+        self.faults = 0
+        self.refused_setpoints = 0
+        self.refused_states = 0
+        self.old_states = 0
+        self.stale_periods = 0          # onsets of a stale (or late) setpoint stream
+        self._stale_now = False
+        self.period_bits = 0            # status bits of the answers of the status period
+        self._last_sp_refusal = ''
+        self._good_state = self.law.save_state()
+        # Last command sent, in command order (None: none yet in lockstep, whose start is
+        # the paper's; real time starts from the zero effort the arm had).
+        self._prev_cmd = None if cfg.lockstep else list(self._zero)
+        self._rate_armed = not cfg.lockstep
+        # Hot spare (real time): not answering until activate().
+        self.standby = cfg.standby
+        self._start_from_motion = False
+        self._sp_wall = None            # standby: monotonic time of the newest setpoint
+        self._sp_matched_wall = None    # standby: when a setpoint publisher was first matched
+        self.waiting_for = 'start-up'   # standby: what it waits for before it is ready
+        self._settled_since = None      # standby: since when nothing was lacking
+
+    # -- configuration -----------------------------------------------------------------
+    def _install(self, cfg):
+        """Cache what the tick needs from a validated configuration."""
+        self.config = cfg
+        self._dt = cfg.dt
+        self._half_ns = cfg.dt_ns // 2
+        self._late_ns = cfg.late_periods * cfg.dt_ns
+        self._carry_ns = round(cfg.carry_forward_time * 1e9)
+        self._max_age_ns = 0 if cfg.lockstep else round(cfg.max_state_age * 1e9)
+        self.stale_timeout = cfg.stale_timeout
+        self.lockstep = cfg.lockstep
+        self._cmd_index = cfg.cmd_index
+        self._identity = cfg.cmd_index == tuple(range(len(cfg.cmd_index)))
+        self._limits = cfg.effort_limits
+        self._rate = cfg.effort_rate_limit
+        self.hold_on_stale = cfg.on_stale_setpoint == 'hold'
+        self.shaper.set_resume_time(cfg.resume_time)
+        self._hold_stiffness = cfg.hold_stiffness
+        self.shaper.set_bounds(cfg.resume_max_velocity, cfg.resume_max_acceleration)
+        self._sp_bounds = (cfg.reach, cfg.setpoint_max_velocity, cfg.setpoint_max_acceleration)
+        self._state_bounds = (cfg.position_lower, cfg.position_upper, cfg.velocity_limit)
+        if cfg.delay_compensation == 'predict':
+            if self._predictor is None or self._predictor.params != cfg.nominal:
+                self._predictor = StatePredictor(cfg.nominal, cfg.dt)
+        else:
+            self._predictor = None
+
+    def apply(self, old, cfg):
+        """Take a validated parameter change (effective on the next state)."""
+        law = self.law
+        if cfg.nominal != old.nominal:
+            law.set_nominal(cfg.nominal, cfg.nominal_model)
+        if cfg.gains != old.gains:
+            law.set_gains(cfg.gains)
+            if cfg.gains.theta0 != old.gains.theta0:
+                law.reset()
+            self._good_state = law.save_state()
+        self._install(cfg)
+
+    def reset(self):
+        """Restart the law's state (theta_hat = theta0) and forget the hold / blend."""
+        self.law.reset()
+        self._good_state = self.law.save_state()
+        self.shaper.reset()
+        self._rate_armed = self._prev_cmd is not None
+        if self._predictor is not None:
+            self._predictor.reset()
+
+    # -- standby -----------------------------------------------------------------------
+    def activate(self):
+        """Leave standby: answer from now on, the reference starting from the motion."""
+        self.standby = False
+        self._start_from_motion = True
+
+    def standby_waits_for(self, cmd_matched, cmd_listed, sp_matched, sp_listed, mono, now_ns,
+                          names=('commands', 'setpoint')):
+        """
+        Return what a spare still lacks to take over at once ('' : nothing).
+
+        Its commands matched by every subscriber the graph lists (at least one: the
+        simulator or driver); every setpoint publisher the graph lists matched and, with
+        one, the stream caught up: the newest setpoint received within the carry-forward
+        time of now, or none for STANDBY_IDLE_STREAM s (a planner not streaming).
+
+        Parameters
+        ----------
+        cmd_matched, cmd_listed : int
+            Subscribers of the commands matched by its publisher / listed by the graph.
+        sp_matched, sp_listed : int
+            Setpoint publishers matched by its subscription / listed by the graph.
+        mono : float
+            Monotonic time [s].
+        now_ns : int
+            System time [ns].
+        names : (str, str)
+            The topics' names for the text.
+
+        """
+        if cmd_matched == 0 or cmd_matched < cmd_listed:
+            return '%s matched by %d of its %d subscribers' % (
+                names[0], cmd_matched, cmd_listed)
+        if sp_matched < sp_listed:
+            return '%s: %d of its %d publishers matched' % (names[1], sp_matched, sp_listed)
+        if sp_matched == 0:
+            return ''
+        if self._sp_matched_wall is None:
+            self._sp_matched_wall = mono
+        last = self._sp_wall if self._sp_wall is not None else self._sp_matched_wall
+        if mono - last > STANDBY_IDLE_STREAM:
+            return ''
+        if not self._recent:
+            return 'the setpoint stream matched, no setpoint received yet'
+        behind = (now_ns - self._recent[-1][0]) * 1e-9
+        if behind * 1e9 > self._carry_ns:
+            return 'the setpoint stream catching up (newest %.3f s old)' % behind
+        return ''
+
+    def standby_settled(self, waits_for, mono):
+        """
+        Note what a spare lacks now; return True once nothing was lacking STANDBY_SETTLE s.
+
+        ``waiting_for`` then is '' (the node tells the supervisor it is ready, once).
+        """
+        if waits_for:
+            self.waiting_for = waits_for
+            self._settled_since = None
+            return False
+        if self._settled_since is None:
+            self._settled_since = mono
+        if mono - self._settled_since < STANDBY_SETTLE:
+            self.waiting_for = 'the graph settling'
+            return False
+        self.waiting_for = ''
+        return True
+
+    # -- inputs ------------------------------------------------------------------------
+    def _joint_map(self, names):
+        """Map a JointState name list to the model joints' indices (cached per list)."""
+        key = tuple(names)
+        found = self._name_maps.get(key)
+        if found is None:
+            want = self.config.joint_names
+            missing = [n for n in want if n not in key]
+            if missing:
+                found = (None, 'JointState lacks joint(s) %s (has %s)' % (missing, list(key)),
+                         'missing')
+            else:
+                found = (tuple(key.index(n) for n in want), '', '')
+            if len(self._name_maps) >= _NAME_MAP_CACHE:
+                self._name_maps.clear()
+            self._name_maps[key] = found
+        self._map_names = names
+        self._map = found
+        return found
+
+    def on_state(self, ns, names, pos, vel, now_ns, mono):
+        """
+        Take a joint state; return the Result to publish, or None (none yet).
+
+        Parameters
+        ----------
+        ns : int
+            Its stamp [ns].
+        names : sequence of str
+            Joint names (any order, extra joints ignored).
+        pos, vel : sequence of float
+            Positions [rad] and velocities [rad/s] in the order of ``names``.
+        now_ns : int
+            System time [ns] (only read in real time: state ages).
+        mono : float
+            Monotonic time [s] (its receipt).
+
+        """
+        self.last_state_wall = mono
+        self.stale_reported = False
+        if self._max_age_ns:
+            age_ns = now_ns - ns
+            if age_ns > self._max_age_ns:
+                self.old_states += 1
+                self.log(WARN, 'old_state',
+                         'state stamped %d ns is %.3f s old (> max_state_age %g s): '
+                         'skipped, no command from it' % (
+                             ns, age_ns * 1e-9, self.config.max_state_age))
+                return None
+        if ns == self.last_ns:
+            # A repeated state (the sim's start-up republication): same answer, no new update.
+            res = self.result
+            res.repeated = True
+            return res
+        if ns < self.last_ns:
+            self.log(WARN, None,
+                     'state time went back from %d to %d ns (simulator restarted?): theta_hat '
+                     'reset to theta0' % (self.last_ns, ns))
+            self.reset()
+            self._setpoints.clear()
+            self._recent.clear()
+        found = self._map if names == self._map_names else self._joint_map(names)
+        idx, reason, kind = found
+        q = None
+        if idx is not None:
+            try:
+                if len(idx) == 3:
+                    i0, i1, i2 = idx
+                    q = (pos[i0], pos[i1], pos[i2])
+                    qd = (vel[i0], vel[i1], vel[i2])
+                else:   # an arm of another number of joints (robot_description)
+                    q = tuple([pos[i] for i in idx])
+                    qd = tuple([vel[i] for i in idx])
+            except (IndexError, ValueError):
+                q = None
+                kind = 'short'
+                reason = 'JointState has %d names but %d positions and %d velocities' % (
+                    len(names), len(pos), len(vel))
+            if q is not None and not all(map(_isfinite, q + qd)):
+                kind = 'nonfinite'
+                reason = 'JointState has a non-finite position or velocity: q=%s qd=%s' % (
+                    list(q), list(qd))
+                q = None
+            if q is not None:
+                lower, upper, vlim = self._state_bounds
+                implausible = state_refusal(q, qd, lower, upper, vlim)
+                if implausible is not None:
+                    kind = 'implausible'
+                    reason = 'implausible state: ' + implausible
+                    q = None
+        if q is None:
+            self.refused_states += 1
+            self.log(ERROR, kind, 'state refused: %s; zero effort, theta_hat kept' % reason)
+            return self._answer_zero(ns, STATUS_BAD_INPUT, 'bad input: ' + reason, now_ns)
+        self._last_q = q
+        if self._start_from_motion:
+            self._start_from_motion = False
+            self._start_from(q, qd)
+        if self.lockstep:
+            sp = self._setpoints.pop(ns, None)
+            if sp is None:
+                if self.shaper.mode == MODE_HOLD and self._setpoint_seen:
+                    # Already holding on a stale stream: answer at once, not a timeout per tick.
+                    self.pending = None
+                    return self._no_setpoint(ns, q, qd, now_ns)
+                self.pending = (ns, q, qd, mono)
+                return None
+            self.pending = None
+            return self._tick(ns, q, qd, ns, sp, now_ns)
+        found = self._realtime_setpoint(ns)
+        if found is None:
+            return self._no_setpoint(ns, q, qd, now_ns)
+        if ns - found[0] > self._carry_ns and self.hold_on_stale:
+            return self._no_setpoint(ns, q, qd, now_ns, (ns - found[0]) * 1e-9)
+        return self._tick(ns, q, qd, found[0], found[1], now_ns)
+
+    def _start_from(self, q, qd):
+        """Start the reference from the measured end-effector motion (fk, J qd)."""
+        model = self.law.model
+        try:
+            p = model.fk(q)
+            v = model.jacobian(q) @ np.asarray(qd, dtype=float)
+            self.shaper.start_from(p.tolist(), v.tolist())
+        except (FreejointValueError, ArithmeticError) as exc:
+            self.shaper.reset()
+            self.log(ERROR, None, 'cannot start from the measured motion (%s): blending '
+                     'from the position at rest' % exc)
+
+    def _no_setpoint(self, ns, q, qd, now_ns, late=None):
+        """Answer a state without a fresh (or timely) setpoint: hold or zero effort."""
+        if late is not None:
+            why = ('setpoint stream late: the newest is %.3g s old, carried forward %g s at '
+                   'most' % (late, self.config.carry_forward_time))
+        elif self._setpoint_used:
+            why = ('stale setpoint: none stamped within %g s before the state%s'
+                   % (self.stale_timeout, self._sp_refusal_note()))
+        else:
+            why = 'no setpoint yet' + self._sp_refusal_note()
+        if not self._stale_now and (late is not None or self._setpoint_used):
+            self._stale_now = True
+            self.stale_periods += 1
+        if not self.hold_on_stale:
+            self.log(WARN, 'stale_setpoint', why + ': zero effort')
+            return self._answer_zero(ns, STATUS_STALE_SETPOINT, why + ': zero effort', now_ns)
+        if self.shaper.mode != MODE_HOLD:
+            self.holds += 1
+            self.log(WARN, 'hold', why + ': holding position')
+        return self._tick(ns, q, qd, None, None, now_ns, why, late is not None)
+
+    def _sp_refusal_note(self):
+        text = self._last_sp_refusal
+        return ' (last setpoint refused: %s)' % text if text else ''
+
+    def _realtime_setpoint(self, ns):
+        """
+        Return (stamp_ns, values) of the newest fresh setpoint for ns, or None.
+
+        Fresh: stamped <= ns + dt/2 and not older than stale_timeout.
+        """
+        recent = self._recent
+        limit = ns + self._half_ns
+        while len(recent) > 1 and recent[1][0] <= limit:
+            del recent[0]
+        if not recent or recent[0][0] > limit:
+            return None
+        found = recent[0]
+        if (ns - found[0]) * 1e-9 > self.stale_timeout:
+            return None
+        return found
+
+    def on_setpoint(self, ns, values, now_ns, mono):
+        """
+        Take a setpoint ``(px, py, vx, vy, ax, ay)`` stamped ``ns``; return a Result or None.
+
+        Lockstep: the state waiting for it is answered now. A setpoint the guards refuse is
+        dropped (counted, the reason logged and noted for the next hold's message).
+        """
+        reach, vmax, amax = self._sp_bounds
+        reason = setpoint_refusal(values, reach, vmax, amax)
+        if reason is not None:
+            self.refused_setpoints += 1
+            self._last_sp_refusal = reason
+            self.log(ERROR, 'setpoint',
+                     'setpoint stamped %d ns refused: %s; dropped' % (ns, reason))
+            return None
+        self._last_sp_refusal = ''
+        self._setpoint_seen = True
+        if self.standby:
+            self._sp_wall = mono    # only a spare's readiness reads it
+        if not self.lockstep:
+            recent = self._recent
+            recent.append((ns, values))
+            if len(recent) > 1000:
+                del recent[:500]
+            return None
+        pending = self.pending
+        if pending is not None and pending[0] == ns:
+            self.pending = None
+            return self._tick(ns, pending[1], pending[2], ns, values, now_ns)
+        if ns > self.last_ns:
+            setpoints = self._setpoints
+            setpoints[ns] = values
+            if len(setpoints) > 10000:
+                for key in sorted(setpoints)[:5000]:
+                    del setpoints[key]
+        return None
+
+    def watchdog(self, now_ns, mono):
+        """
+        Wall-clock staleness (the node calls it a few times per stale_timeout).
+
+        A lockstep state waiting longer than stale_timeout for its setpoint is answered
+        (hold, or zero effort); no state for stale_timeout: zero effort, once. Returns the
+        Result to publish or None.
+        """
+        pending = self.pending
+        if pending is not None:
+            if self._setpoint_seen and mono - pending[3] > self.stale_timeout:
+                self.pending = None
+                return self._no_setpoint(pending[0], pending[1], pending[2], now_ns)
+            return None
+        last = self.last_state_wall
+        if last is not None and not self.stale_reported and mono - last > self.stale_timeout:
+            self.stale_reported = True
+            self.log(WARN, None, 'no joint_states for %g s: zero effort' % self.stale_timeout)
+            res = self._answer_zero(self.last_ns, STATUS_STALE_STATE,
+                                    'stale state: no joint_states within %g s'
+                                    % self.stale_timeout, now_ns)
+            if not self.lockstep:
+                # The arm moved under zero effort: the next state starts a hold / blend.
+                self.shaper.reset()
+            return res
+        return None
+
+    # -- outputs -----------------------------------------------------------------------
+    def _tick(self, ns, q, qd, sp_ns, sp, now_ns, hold_reason='', late=False):
+        """Compute the answer to the state stamped ns (sp None: hold)."""
+        status = 0
+        shaper = self.shaper
+        law = self.law
+        if self.lockstep or self.last_ns < 0:
+            dt = self._dt
+        else:
+            dt, clamped = clamp_dt((ns - self.last_ns) * 1e-9, self._dt)
+            if clamped:
+                status |= STATUS_DT_CLAMPED
+                self.log(WARN, 'dt', 'state stamps %g s apart, outside [0.25, 4] x '
+                         'control_period: the law uses dt = %g s'
+                         % ((ns - self.last_ns) * 1e-9, dt))
+        if sp is None:
+            self._late = False
+            if shaper.mode != MODE_HOLD:
+                ref = shaper.hold(law.model.fk(q).tolist())
+                self._rate_armed = self._prev_cmd is not None
+            else:
+                ref = shaper.hold(None)
+            status |= STATUS_HOLDING
+            if late:
+                status |= STATUS_SETPOINT_LATE
+            elif self._setpoint_used:
+                status |= STATUS_STALE_SETPOINT
+        else:
+            if not self.lockstep:
+                age_ns = ns - sp_ns
+                if age_ns > 0:
+                    sp = extrapolate(sp, age_ns * 1e-9)
+                late = age_ns > self._late_ns
+                if late:
+                    status |= STATUS_SETPOINT_LATE
+                elif self._late:
+                    shaper.restart_blend()       # the stream is back: no step to it
+                self._late = late
+            p_now = law.model.fk(q).tolist() if shaper.mode == MODE_NONE else None
+            ref, blending = shaper.track(ns * 1e-9, sp, p_now)
+            self._setpoint_used = True
+            self._stale_now = False
+            if blending:
+                status |= STATUS_RESUMING
+        stiffness = shaper.stiffness(self._hold_stiffness)
+        if stiffness != law.stiffness:
+            law.set_stiffness(stiffness)
+        px, py, vx, vy, ax, ay = ref
+        pred = self._predictor
+        limits = self._limits
+        fault = None
+        try:
+            if pred is None:
+                out = law.step(q, qd, (px, py), (vx, vy), (ax, ay), dt)
+            else:
+                out = self._predicted_step(pred, ns, q, qd, ref, dt, now_ns)
+        except (FreejointValueError, ArithmeticError) as exc:
+            out = None
+            fault = 'result (%s: %s)' % (type(exc).__name__, exc)
+        if out is not None:
+            tau = out.tau.tolist()
+            effort = tau if self._identity else [tau[i] for i in self._cmd_index]
+            values = law.state_values()
+            fault = law_output_fault(effort, limits, values, law.state_bounds)
+        if fault is not None:
+            self.faults += 1
+            law.restore_state(self._good_state)
+            effort = list(self._prev_cmd) if self._prev_cmd is not None else list(self._zero)
+            status |= STATUS_LAW_FAULT
+            self.log(ERROR, 'fault', 'the law gave a non-finite or out-of-range %s: not '
+                     'published, law state restored, previous command repeated' % fault)
+            out = self._fault_output(q)
+            values = law.state_values()
+        else:
+            self._good_state = law.save_state()
+        status |= out.status
+        if self._rate_armed:
+            effort, clipped, rated = limit_effort(effort, limits, self._prev_cmd,
+                                                  self._rate * dt)
+            if rated:
+                status |= STATUS_RATE_LIMITED
+            else:
+                self._rate_armed = False
+        self._prev_cmd = effort
+        if pred is not None:
+            self._push(effort)
+        res = self.result
+        res.repeated = False
+        res.stamp_ns = ns
+        res.effort = effort
+        res.error = out.e
+        res.error_rate = out.edot
+        res.sliding = out.s
+        res.theta_hat = out.theta
+        res.rho_hat = out.rho
+        res.delta_v = out.dv
+        res.law_state_values = values
+        res.det_dd = out.det
+        res.position = out.p if pred is None else law.model.fk(q)
+        res.position_desired = (px, py)
+        res.status = status
+        res.message = _status_message(status, out.det, self.config, hold_reason,
+                                      shaper) if status else ''
+        if sp_ns is None:
+            res.setpoint_ns = None
+            res.setpoint_age = 0.0
+        else:
+            res.setpoint_ns = sp_ns
+            res.setpoint_age = (ns - sp_ns) * 1e-9
+        res.dt = dt
+        if self.lockstep:
+            # Sim time stands still until the command; the latency is the wall time from
+            # the state's receipt to its command (the node's to measure).
+            res.state_age = 0.0
+            res.latency_ns = RECEIPT
+        else:
+            age_ns = now_ns - ns
+            res.state_age = age_ns * 1e-9
+            res.latency_ns = age_ns
+        self.period_bits |= status
+        self.last_ns = ns
+        self._last_sp = (px, py)
+        self._last_det = out.det
+        self.ticks += 1
+        return res
+
+    def _fault_output(self, q):
+        """Return the published terms of a tick whose law result was refused."""
+        zero2 = np.zeros(2)
+        return ControlOutput(np.zeros(len(self._zero)), zero2, zero2, zero2,
+                             np.array(_theta_hat(self.law)), 0.0, zero2, self._last_det,
+                             self.law.model.fk(q), 0)
+
+    def _predicted_step(self, pred, ns, q, qd, ref, dt, now_ns):
+        """Run the law on the state predicted to when the command takes effect."""
+        age = (now_ns - ns) * 1e-9
+        ticks = min(pred.max_ticks, max(1, math.ceil(age / self._dt - 1e-9)))
+        try:
+            q_pred, qd_pred = pred.predict(q, qd, ticks)
+            h = ticks * self._dt
+            p, v, a = extrapolate_setpoint(ref[0:2], ref[2:4], ref[4:6], h)
+        except FreejointValueError as exc:
+            self.log(ERROR, 'predict', 'state prediction failed (%s): the law uses the '
+                     'measured state' % exc)
+            return self.law.step(q, qd, ref[0:2], ref[2:4], ref[4:6], dt)
+        return self.law.step(q_pred, qd_pred, p, v, a, dt)
+
+    def _push(self, effort):
+        """Record the command sent (command order) in the predictor (model order)."""
+        tau = [0.0] * len(effort)
+        for j, i in enumerate(self._cmd_index):
+            tau[i] = effort[j]
+        self._predictor.push(tau)
+
+    def _answer_zero(self, ns, status, message, now_ns):
+        """Return the zero-effort answer to the state stamped ns, saying why."""
+        law = self.law
+        res = self.result
+        res.repeated = False
+        res.stamp_ns = ns
+        res.effort = self._zero
+        res.error = res.error_rate = res.sliding = res.delta_v = _ZERO2
+        res.theta_hat = _theta_hat(law)
+        res.rho_hat = 0.0
+        res.law_state_values = law.state_values()
+        res.det_dd = self._last_det
+        q = self._last_q
+        res.position = law.model.fk(q) if q is not None else self._last_sp
+        res.position_desired = self._last_sp
+        res.status = status
+        res.message = message
+        res.setpoint_ns = None
+        res.setpoint_age = 0.0
+        res.dt = 0.0
+        res.state_age = 0.0 if self.lockstep or ns < 0 else (now_ns - ns) * 1e-9
+        res.latency_ns = None
+        self.period_bits |= status
+        if ns >= 0:
+            self.last_ns = ns
+        self.zero_answers += 1
+        # The arm got zero: the next computed command ramps up from it.
+        self._prev_cmd = list(self._zero)
+        self._rate_armed = True
+        if self._predictor is not None:
+            self._push(self._zero)
+        return res
+
+    # -- status ------------------------------------------------------------------------
+    def counters(self):
+        """Return the counters a status period starts from (answers, faults, refusals)."""
+        return (self.ticks + self.zero_answers, self.faults, self.refused_states,
+                self.refused_setpoints, self.old_states)
+
+    def diagnostics(self, elapsed, start, silent, latency, states_topic, activated_at):
+        """
+        Return (errors, warnings, ok message, key/values) of the status period now ending.
+
+        Parameters
+        ----------
+        elapsed : float
+            Length of the period [s].
+        start : tuple
+            :meth:`counters` at its start.
+        silent : bool
+            No state came in the period.
+        latency : (str, str)
+            Mean and maximum latency [ms] of the period, as text.
+        states_topic : str
+            The joint-states topic's resolved name (for the text).
+        activated_at : float or None
+            System time [s] of the activation from standby.
+
+        """
+        answers0, faults0, refused_states0, refused_sp0, old0 = start
+        answers = self.ticks + self.zero_answers - answers0
+        faults = self.faults - faults0
+        refused_states = self.refused_states - refused_states0
+        refused_sp = self.refused_setpoints - refused_sp0
+        old = self.old_states - old0
+        bits = self.period_bits
+        self.period_bits = 0
+        res = self.result
+        current = res.status
+        period = 'in the last %.1f s' % elapsed
+        errors = []
+        warnings = []
+        no_state = None
+        if self.last_state_wall is None:
+            no_state = 'no joint_states yet on %s' % states_topic
+        elif self.stale_reported:
+            no_state = 'no joint_states for %g s: zero effort commanded' % self.stale_timeout
+        elif silent:
+            no_state = 'no joint_states %s' % period
+        if no_state is not None:
+            if self.lockstep:
+                warnings.append(no_state + ' (lockstep: simulation time stands still)')
+            else:
+                errors.append(no_state)
+        if faults:
+            errors.append('%d law faults %s: the previous command repeated, theta_hat '
+                          'restored' % (faults, period))
+        if current & STATUS_HOLDING or (current & STATUS_STALE_SETPOINT
+                                        and not self.hold_on_stale):
+            warnings.append(res.message)
+        elif bits & STATUS_HOLDING:
+            warnings.append('held %s' % period)
+        for bit, text in ((STATUS_RATE_LIMITED, 'torque change rate limited'),
+                          (STATUS_TORQUE_LIMITED, 'torque limited'),
+                          (STATUS_SETPOINT_LATE, 'setpoint stream late (carried forward)'),
+                          (STATUS_DT_CLAMPED, 'state stamps irregular: dt clamped')):
+            if bits & bit:
+                warnings.append('%s %s' % (text, period))
+        for count, what in ((refused_states, 'states refused'),
+                            (refused_sp, 'setpoints refused'),
+                            (old, 'states skipped as too old')):
+            if count:
+                warnings.append('%d %s %s' % (count, what, period))
+        if self.pending is not None:
+            ok = ('waiting for the setpoint of the state stamped %d ns (lockstep)'
+                  % self.pending[0])
+        else:
+            ok = res.message or 'tracking'
+        values = (
+            ('mode', 'lockstep' if self.lockstep else 'realtime'),
+            ('activated from standby', 'no' if activated_at is None
+             else 'at %.3f (system time)' % activated_at),
+            ('answer rate [Hz]', '%.1f' % (answers / elapsed if elapsed > 0.0 else 0.0)),
+            ('latency mean [ms]', latency[0]),
+            ('latency max [ms]', latency[1]),
+            ('status', current),
+            ('status message', res.message),
+            ('ticks', self.ticks),
+            ('zero-effort answers', self.zero_answers),
+            ('holds', self.holds),
+            ('stale setpoint periods', self.stale_periods),
+            ('refused states', self.refused_states),
+            ('refused setpoints', self.refused_setpoints),
+            ('law faults', self.faults),
+            ('old states skipped', self.old_states))
+        return errors, warnings, ok, values
+
+    def report(self):
+        """One line for the end of the run: ticks, zero-effort answers, holds, refusals."""
+        return ('controller stopped: %d ticks computed, %d zero-effort answers (stale or bad '
+                'input), %d holds, %d states and %d setpoints refused, %d law faults, %d '
+                'states skipped as too old'
+                % (self.ticks, self.zero_answers, self.holds, self.refused_states,
+                   self.refused_setpoints, self.faults, self.old_states))
+
+
+def _theta_hat(law):
+    """Return ControllerState's theta_hat (5) of a law: its first 5 values, or zeros."""
+    if law.state_names[:5] == _THETA_NAMES:
+        return law.state_values()[:5]
+    return [0.0] * 5
+
+
+def _status_message(status, det, cfg, hold_reason, shaper):
+    """Return the ControllerState message of a computed answer's status bits."""
+    parts = []
+    if status & STATUS_HOLDING:
+        hold = shaper.hold_position
+        parts.append('holding at (%.4f, %.4f) m: %s' % (hold[0], hold[1], hold_reason))
+    if status & STATUS_RESUMING:
+        parts.append('resuming: blending from the hold to the setpoint over %.3g s'
+                     % shaper.blend_duration)
+    if status & STATUS_NEAR_SINGULAR:
+        parts.append('near singular: |det(Da Da^T)| = %.3g < %.3g, damped pseudo-inverse'
+                     % (det, cfg.gains.det_threshold))
+    if status & STATUS_TORQUE_LIMITED:
+        parts.append('torque limited to %s N m' % list(cfg.effort_limits))
+    if status & STATUS_RATE_LIMITED:
+        parts.append('torque change limited to %g N m/s' % cfg.effort_rate_limit)
+    if status & STATUS_LAW_FAULT:
+        parts.append('law fault: non-finite or out-of-range output, previous command repeated')
+    if status & STATUS_SETPOINT_LATE and not status & STATUS_HOLDING:
+        parts.append('setpoint late: the newest is older than %d control periods, carried '
+                     'forward along its velocity and acceleration' % cfg.late_periods)
+    if status & STATUS_DT_CLAMPED:
+        parts.append('state stamps outside [0.25, 4] x control_period: dt clamped')
+    return '; '.join(parts)

@@ -1,0 +1,229 @@
+"""
+The controller's and the simulator's guards: plausibility checks and limits, in one place.
+
+- :func:`state_refusal`: a measured joint state outside the plausible positions and speeds;
+- :func:`setpoint_refusal`: a task-space setpoint beyond the reach, speed or acceleration;
+- :func:`law_output_fault`: a law result that must not be commanded (a non-finite or
+  out-of-range torque, a law state outside its bounds);
+- :func:`limit_effort`: the torque limit and the rate limit of the command;
+- :func:`clamp_dt`: the law's time step measured from state stamps, bounded;
+- :func:`divergence_reason`: a simulated plant whose state is not a physical one any more
+  (``freejoint_core.plant.Plant.step`` raises ``PlantDivergedError`` on a non-finite state;
+  the simulator also stops at a joint faster than its ``divergence_speed`` or an angle
+  beyond :data:`MAX_ANGLE`, where the integration no longer resolves the motion and the
+  numbers only grow: a lost arm ran at over 1000 rad/s before it overflowed).
+
+Each returns the reason (a string naming the value) or None, or the limited values; plain
+floats and sequences, no ROS types.
+
+"""
+
+import math
+
+MAX_ANGLE = 1e6
+"""Largest plausible joint angle [rad]: some 160000 turns of a free joint."""
+
+_isfinite = math.isfinite
+
+
+def clamp_dt(dt, nominal, low=0.25, high=4.0):
+    """
+    Bound a time step measured from stamps to ``[low, high] * nominal``.
+
+    Parameters
+    ----------
+    dt : float
+        Measured step [s] (difference of consecutive state stamps).
+    nominal : float
+        Nominal control period [s], > 0.
+    low, high : float
+        Bounds as multiples of ``nominal``.
+
+    Returns
+    -------
+    dt : float
+        The bounded step [s] (``nominal`` when ``dt`` is not finite).
+    clamped : bool
+        True when ``dt`` was outside the range.
+
+    """
+    lo = low * nominal
+    hi = high * nominal
+    if not _isfinite(dt):
+        return nominal, True
+    if dt < lo:
+        return lo, True
+    if dt > hi:
+        return hi, True
+    return dt, False
+
+
+def limit_effort(tau, limits, prev=None, max_step=None):
+    """
+    Clip torques to per-joint limits and, optionally, to a step from the previous command.
+
+    Parameters
+    ----------
+    tau : sequence of float, (r,)
+        Torques [N m] (finite).
+    limits : sequence of float, (r,)
+        Per-joint limits [N m], > 0: ``|tau_i| <= limits_i``.
+    prev : sequence of float, (r,), optional
+        Previous command [N m]; with ``max_step``, ``|tau_i - prev_i| <= max_step``.
+    max_step : float, optional
+        Largest change per tick [N m] (rate limit times dt).
+
+    Returns
+    -------
+    tau : list of float, (r,)
+        The limited torques.
+    clipped : bool
+        A torque limit bound.
+    rate_limited : bool
+        The step limit bound.
+
+    """
+    out = []
+    clipped = False
+    rated = False
+    for i, x in enumerate(tau):
+        lim = limits[i]
+        if x > lim:
+            x = lim
+            clipped = True
+        elif x < -lim:
+            x = -lim
+            clipped = True
+        if max_step is not None and prev is not None:
+            lo = prev[i] - max_step
+            hi = prev[i] + max_step
+            if x > hi:
+                x = hi
+                rated = True
+            elif x < lo:
+                x = lo
+                rated = True
+        out.append(x)
+    return out, clipped, rated
+
+
+def state_refusal(q, qd, lower, upper, vmax):
+    """
+    Return why a measured state is implausible, or None when it is within the limits.
+
+    Parameters
+    ----------
+    q, qd : sequence of float, (n,)
+        Joint positions [rad] and velocities [rad/s].
+    lower, upper : sequence of float, (n,)
+        Position limits [rad].
+    vmax : sequence of float, (n,)
+        Velocity limits [rad/s]: ``|qd_i| <= vmax_i``.
+
+    Returns
+    -------
+    str or None
+
+    """
+    for i, x in enumerate(q):
+        if not (_isfinite(x) and lower[i] <= x <= upper[i]):
+            return 'joint %d position %r outside [%g, %g] rad' % (i, x, lower[i], upper[i])
+    for i, x in enumerate(qd):
+        if not (_isfinite(x) and -vmax[i] <= x <= vmax[i]):
+            return 'joint %d velocity %r beyond %g rad/s' % (i, x, vmax[i])
+    return None
+
+
+def setpoint_refusal(sp, reach, vmax, amax):
+    """
+    Return why a setpoint is implausible, or None when it is within the bounds.
+
+    Parameters
+    ----------
+    sp : sequence of float, (6,)
+        ``(px, py, vx, vy, ax, ay)`` [m, m/s, m/s^2].
+    reach : float
+        Largest distance of a reachable point from the base [m].
+    vmax, amax : float
+        Bounds on the setpoint's speed [m/s] and acceleration magnitude [m/s^2].
+
+    Returns
+    -------
+    str or None
+
+    """
+    for x in sp:
+        if not _isfinite(x):
+            return 'non-finite value in %s' % (list(sp),)
+    r = math.hypot(sp[0], sp[1])
+    if not r <= reach:
+        return 'position (%g, %g) is %g m from the base, beyond the reach %g m' % (
+            sp[0], sp[1], r, reach)
+    v = math.hypot(sp[2], sp[3])
+    if not v <= vmax:
+        return 'velocity %g m/s beyond %g m/s' % (v, vmax)
+    a = math.hypot(sp[4], sp[5])
+    if not a <= amax:
+        return 'acceleration %g m/s^2 beyond %g m/s^2' % (a, amax)
+    return None
+
+
+def law_output_fault(effort, limits, values, bounds):
+    """
+    Return why a law's result must not be commanded, or None when it may.
+
+    Parameters
+    ----------
+    effort : sequence of float, (r,)
+        The torques [N m] the law gave (command order).
+    limits : sequence of float, (r,)
+        Per-joint torque limits [N m]: ``|effort_i| <= limits_i`` (a law clips to them).
+    values : sequence of float, (k,)
+        The law's internal state after the step (``ControlLaw.state_values``).
+    bounds : sequence of (float, float), (k,)
+        Plausible range of each state value (``ControlLaw.state_bounds``).
+
+    Returns
+    -------
+    str or None
+        ``'torque [...]'`` or ``'<law state> [...]'``: a non-finite or out-of-range value.
+
+    """
+    for x, lim in zip(effort, limits):
+        if not -lim <= x <= lim:
+            return 'torque %r' % (list(effort),)
+    isfinite = _isfinite
+    for x, (lo, hi) in zip(values, bounds):
+        if not (lo <= x <= hi and isfinite(x)):
+            return 'law state %r' % (list(values),)
+    return None
+
+
+def divergence_reason(q, qd, max_speed, max_angle=MAX_ANGLE):
+    """
+    Return why the state (q, qd) is not a physical one, or None if it is.
+
+    Parameters
+    ----------
+    q, qd : sequence of float, (n,)
+        Joint angles [rad] and velocities [rad/s].
+    max_speed : float
+        Largest plausible joint speed [rad/s].
+    max_angle : float
+        Largest plausible absolute joint angle [rad].
+
+    Returns
+    -------
+    str or None
+        The first problem found, naming the joint (index from 0) and the value.
+
+    """
+    for i, (a, v) in enumerate(zip(q, qd)):
+        if not (_isfinite(a) and _isfinite(v)):
+            return 'joint %d: non-finite state (q = %r rad, qd = %r rad/s)' % (i, a, v)
+        if abs(v) > max_speed:
+            return 'joint %d: speed %.6g rad/s beyond divergence_speed %g rad/s' % (
+                i, v, max_speed)
+        if abs(a) > max_angle:
+            return 'joint %d: angle %.6g rad beyond %g rad' % (i, a, max_angle)
+    return None

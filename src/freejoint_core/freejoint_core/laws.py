@@ -1,0 +1,210 @@
+"""
+The control-law seam: one small interface every control law implements, and its registry.
+
+A law maps one measured state and one task-space setpoint to the active joint torques and
+advances its own internal state over ``dt``::
+
+    out = law.step(q, qd, p_d, pd_d, pdd_d, dt)        # ControlOutput
+
+Its internal state is explicit: ``law.state_names`` name the values ``law.state_values()``
+returns (reported generically, so that a second law needs no message change), and
+``law.save_state()`` / ``law.restore_state(saved)`` take and put back a snapshot (the
+control loop restores the last good one after a law fault). ``law.reset()`` starts the
+state afresh; ``law.model`` is the nominal model the law uses (forward kinematics of the
+measured state), ``law.stiffness`` the hold stiffness scale it runs at
+(``law.set_stiffness``); ``set_nominal`` / ``set_gains`` take a new nominal model or new
+gains (effective on the next step). ``law.state_bounds`` gives each state value's
+plausible range ``(lower, upper)``: a value outside it (or non-finite) is a law fault.
+
+The paper's law (:class:`RobustLaw`, ``RobustController`` of ``freejoint_core.control``,
+same numbers) is registered as ``'robust'``; :func:`register_law` adds another law (one
+module defining it and calling ``register_law``), :func:`make_law` builds the one a
+controller's parameter ``law`` names.
+
+"""
+
+import math
+
+from freejoint_core.control import RobustController
+from freejoint_core.errors import FreejointValueError
+
+INF = math.inf
+
+
+class ControlLaw:
+    """
+    The interface of a control law (a base class; a law overrides what it has).
+
+    Attributes
+    ----------
+    name : str
+        The name the law is registered under (parameter ``law``).
+    state_names : tuple of str
+        Names of the values of :meth:`state_values`, in order.
+    state_bounds : tuple of (float, float)
+        Plausible range of each state value; outside it (or non-finite): a law fault.
+    model : ArmModel
+        The nominal model of the law (``fk``, ``jacobian``).
+    stiffness : float
+        The factor of the gains while holding (1: the gains as given).
+
+    """
+
+    name = ''
+    state_names = ()
+    state_bounds = ()
+
+    def step(self, q, qd, p_d, pd_d, pdd_d, dt):
+        """
+        Return the torques of one tick and advance the law's state by ``dt``.
+
+        Parameters
+        ----------
+        q, qd : sequence of float, (n,)
+            Measured joint angles [rad] and velocities [rad/s] (model order).
+        p_d, pd_d, pdd_d : sequence of float, (2,)
+            Setpoint position [m], velocity [m/s], acceleration [m/s^2].
+        dt : float
+            Time step [s], > 0.
+
+        Returns
+        -------
+        ControlOutput
+            ``tau`` (r,) [N m] and the law's instrumentation.
+
+        """
+        raise NotImplementedError
+
+    def reset(self):
+        """Start the law's internal state afresh."""
+
+    def state_values(self):
+        """Return the law's internal state after the last step, list of float."""
+        return []
+
+    def save_state(self):
+        """Return a snapshot of the internal state for :meth:`restore_state`."""
+        return None
+
+    def restore_state(self, saved):
+        """Put back a snapshot of :meth:`save_state`."""
+
+    def set_stiffness(self, scale):
+        """Scale the law's gains for a hold (1: as given)."""
+        self.stiffness = float(scale)
+
+    def set_nominal(self, params, model=None):
+        """Take a new nominal model (next step)."""
+        raise NotImplementedError
+
+    def set_gains(self, gains):
+        """Take new gains (next step); the state is kept."""
+        raise NotImplementedError
+
+
+class RobustLaw(RobustController, ControlLaw):
+    """
+    The paper's robust law with sigma-modified adaptation (``RobustController``).
+
+    State: ``theta_hat[0..4]`` (after the tick's update), ``rho_hat`` (used in the tick)
+    and ``delta_v[0..1]`` (the robust term [m/s^2]); ``theta_hat`` within
+    ``[0, gains.theta_max]``.
+    """
+
+    name = 'robust'
+    state_names = ('theta_hat[0]', 'theta_hat[1]', 'theta_hat[2]', 'theta_hat[3]',
+                   'theta_hat[4]', 'rho_hat', 'delta_v[0]', 'delta_v[1]')
+
+    def __init__(self, nominal_params, gains=None, model=None):
+        self._last = None
+        super().__init__(nominal_params, gains, model=model)
+
+    def set_gains(self, gains):
+        """Install new gains (``RobustController.set_gains``) and the state's bounds."""
+        super().set_gains(gains)
+        tmax = gains.theta_max if gains.theta_max is not None else (INF,) * 5
+        self.state_bounds = tuple((0.0, t) for t in tmax) + ((-INF, INF),) * 3
+
+    def step(self, q, qd, p_d, pd_d, pdd_d, dt):
+        """Return ``RobustController.step`` (the paper's law) and keep it for the state."""
+        out = RobustController.step(self, q, qd, p_d, pd_d, pdd_d, dt)
+        self._last = out
+        return out
+
+    def reset(self):
+        """Set theta_hat back to ``gains.theta0``."""
+        RobustController.reset(self)
+        self._last = None
+
+    def state_values(self):
+        """Return theta_hat (5, now), rho_hat and delta_v (2) of the last step (or 0)."""
+        out = self._last
+        if out is None:
+            return list(self._theta) + [0.0, 0.0, 0.0]
+        return list(self._theta) + [out.rho] + out.dv.tolist()
+
+    def save_state(self):
+        """Return theta_hat (a tuple)."""
+        return tuple(self._theta)
+
+    def restore_state(self, saved):
+        """Put theta_hat back (``set_theta``); rho_hat and delta_v read 0 until a step."""
+        self.set_theta(saved)
+        self._last = None
+
+
+LAWS = {}
+"""The registry: law name -> factory ``(nominal, gains, model) -> ControlLaw``."""
+
+
+def register_law(name, factory):
+    """
+    Register a control law under ``name`` (the value of the controller's parameter ``law``).
+
+    Parameters
+    ----------
+    name : str
+        Its name, non-empty.
+    factory : callable
+        ``factory(nominal, gains, model=None)`` returning a :class:`ControlLaw`.
+
+    """
+    if not isinstance(name, str) or not name:
+        raise FreejointValueError(f'name: expected a non-empty string, got {name!r}')
+    if not callable(factory):
+        raise FreejointValueError(f'factory: expected a callable, got {factory!r}')
+    LAWS[name] = factory
+
+
+def make_law(name, nominal, gains, model=None):
+    """
+    Build the control law registered as ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A registered law (:data:`LAWS`).
+    nominal : ArmParams
+        Nominal parameters of the arm.
+    gains : Gains
+        The gains.
+    model : ArmModel, optional
+        The nominal model's implementation (default: the law's choice).
+
+    Returns
+    -------
+    ControlLaw
+
+    Raises
+    ------
+    FreejointValueError
+        If no law is registered as ``name``.
+
+    """
+    factory = LAWS.get(name)
+    if factory is None:
+        raise FreejointValueError(f'law: expected one of {tuple(LAWS)}, got {name!r}')
+    return factory(nominal, gains, model=model)
+
+
+register_law(RobustLaw.name, RobustLaw)
