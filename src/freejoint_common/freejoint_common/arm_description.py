@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import math
 import os
 
-from freejoint_common.node_tools import Spec
+from freejoint_common.schema import Spec
 from freejoint_core.arm import ArmParams, table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.urdf import GRAVITY_BY_CASE, load_urdf, parse_urdf, SHIPPED
