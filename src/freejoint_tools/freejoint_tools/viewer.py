@@ -43,8 +43,9 @@ import time
 
 from freejoint_common.contract import PLANNED_PATH, profile, ROBOT_DESCRIPTION
 from freejoint_common.contract import SEMI_SINGULAR_MAP, stamp_from_ns
-from freejoint_common.node_tools import declare, Spec
+from freejoint_common.node_tools import declare
 from freejoint_common.runner import Lifecycle, run
+from freejoint_common.schema import Spec
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.kinematic_tree import KinematicTree
 from freejoint_core.urdf import shipped_urdf_path
@@ -57,6 +58,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.serialization import deserialize_message, serialize_message
 
 from .recorder import _is_hidden, GRAPH_TOPICS
+from .resend import first_answer, Wakeup
 from .typedefs import DefinitionError, Definitions, message_class
 
 TF_TOPIC = '/tf'
@@ -271,27 +273,14 @@ class Viewer(Node, Lifecycle):
         moment ago can meet. ``resend=None`` for a request that must not run twice.
         """
         timeout = self.values['call_timeout']
-        deadline = time.monotonic() + timeout
-        done = concurrent.futures.Future()
+        wakeup = Wakeup()
 
-        def finished(f):          # on the executor thread, as every start()
-            if done.done():
-                return
-            if f.exception() is not None:
-                done.set_exception(f.exception())
-            else:
-                done.set_result(f.result())
-
-        def start():
-            make_future().add_done_callback(finished)
-        while True:
-            self._submit(start).result(timeout)
-            left = deadline - time.monotonic()
-            try:
-                return done.result(max(0.0, left if resend is None else min(resend, left)))
-            except concurrent.futures.TimeoutError:
-                if time.monotonic() >= deadline:
-                    raise
+        def send():             # the request is made on the executor thread
+            return self._submit(lambda: wakeup.watch(make_future())).result(timeout)
+        answer, _ = first_answer(send, wakeup, timeout, resend)
+        if answer is None:
+            raise TimeoutError('no answer within %g s' % timeout)
+        return answer.result()
 
     # -- the server ----------------------------------------------------------------------
     def _start_server(self):
@@ -570,7 +559,7 @@ class Viewer(Node, Lifecycle):
                 time.sleep(0.02)
             try:
                 response = self._await(lambda: cli.call_async(ros_request), resend=None)
-            except concurrent.futures.TimeoutError:
+            except (TimeoutError, concurrent.futures.TimeoutError):
                 raise RuntimeError('%s: no answer within %.1f s'
                                    % (name, self.values['call_timeout']))
             return serialize_message(response)
