@@ -30,7 +30,7 @@ test: setup
 	@$(ENV) python -m pytest -c pytest.ini
 
 test-fast: setup
-	@$(ENV) python -m pytest -c pytest.ini -q -m 'not dds' $(FAST_TESTS)
+	@$(ENV) bash tools/test_fast.sh
 
 offline: setup
 	@$(ENV) python -m freejoint_core.offline

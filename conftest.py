@@ -1,15 +1,18 @@
 """
-The ``dds`` marker, set on every test that needs DDS (``make test-fast`` runs the others).
+The ``dds`` and ``slow`` markers (``make test-fast`` runs the tests that have neither).
 
 A test is marked ``dds`` when it uses the ``procs`` or ``ros_node`` fixture (directly or
 through another fixture), when it is marked ``ros`` (it needs the built workspace: it starts
 node executables, ``fj`` or the README's commands), when its module starts an rclpy context
 or node in the test process (``rclpy.init``, ``create_node``, ``Context()``), or when it
 lives under a folder of multi-process tests (``test/graph``, ``test/nodes``,
-``test/interfaces``). Everything
-else (the core math, the schemas, the control loop, the structure and the linters) runs
-without a participant: ``pytest -m 'not dds'`` (``make test-fast``). A new in-process test
-of the loop under ``test/control`` or ``src/<pkg>/test`` is in the fast set without more.
+``test/interfaces``). A test is
+marked ``slow`` when its module is in ``SLOW_MODULES``: no DDS, but whole closed-loop runs
+or other programs run in subprocesses, tens of seconds each on 2 cores. Everything else
+(the core math, the schemas, the control loop, the structure and the linters) is the fast
+set: ``pytest -m 'not dds and not slow'`` (``make test-fast``, ``tools/test_fast.sh``). A new
+in-process test, e.g. of the loop under ``test/control`` or ``src/<pkg>/test``, is in it
+without more.
 """
 import os
 
@@ -23,6 +26,16 @@ DDS_FOLDERS = (os.path.join('test', 'graph'), os.path.join('test', 'nodes'),
                os.path.join('test', 'interfaces'))
 """Folders (from the workspace root) of multi-process tests."""
 ROOT = os.path.dirname(os.path.abspath(__file__))
+SLOW_MODULES = {
+    'test/core/test_four_link_example.py': 'closed-loop runs of the 4-link example',
+    'test/core/test_mujoco_plant.py': 'MuJoCo open- and closed-loop runs over the circle',
+    'test/core/test_urdf_offline.py': 'the offline runner on URDF arms, both engines',
+    'test/core/test_pin_plant.py': 'Pinocchio plant runs against the RK4 plant',
+    'test/tools/test_analyze.py': 'the analysis and its plots in subprocesses',
+    'test/tools/test_reindex.py': 'the reindex tool in subprocesses',
+    'test/workspace/test_setup_errors.py': 'tools/setup.sh in subprocesses',
+}
+"""Modules of ``slow`` tests (workspace-relative path: why), run by ``make test`` only."""
 
 _module_starts_dds = {}
 
@@ -53,14 +66,20 @@ def needs_dds(item):
 
 
 def pytest_configure(config):
-    """Declare the ``dds`` marker."""
+    """Declare the ``dds`` and ``slow`` markers."""
     config.addinivalue_line(
         'markers', 'dds: needs DDS: node processes or an rclpy participant in the test '
-                   "(set by the root conftest; make test-fast runs -m 'not dds')")
+                   '(set by the root conftest; make test-fast leaves it out)')
+    config.addinivalue_line(
+        'markers', 'slow: no DDS, but whole runs or programs in subprocesses (set by the '
+                   'root conftest from SLOW_MODULES; make test-fast leaves it out)')
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark every test that needs DDS with ``dds``."""
+    """Mark every test that needs DDS with ``dds``, every one of ``SLOW_MODULES`` ``slow``."""
     for item in items:
         if needs_dds(item):
             item.add_marker(pytest.mark.dds)
+        rel = os.path.relpath(str(item.path), ROOT).replace(os.sep, '/')
+        if rel in SLOW_MODULES:
+            item.add_marker(pytest.mark.slow)
