@@ -5,17 +5,18 @@ Two runs, each in a ROS domain of its own (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCAL
 every wait bounded, every process stopped whatever happens:
 
 * the echo: ``bench/echo_node.py`` (a bare rclpy node: ``joint_states`` in, a
-  ``Float64MultiArray`` on ``effort_controller/commands`` out, the contract's QoS) driven
-  in lockstep by this process: state k is published once the answer to k - 1 came,
+  ``Float64MultiArray`` on ``effort_controller/commands`` out, the contract's QoS), once
+  on the executor the controller runs on (``config/controller.yaml``: ``events``) and
+  once on the ``single_threaded`` one, each driven in lockstep by this process: state k is published once the answer to k - 1 came,
   ``TICKS`` times after a warm-up; the echo process's CPU seconds (``/proc/<pid>/stat``)
   over the measured ticks, per tick;
 * the graph in lockstep, a process per node, the recorder on: ``bench/graph.py``'s
   lockstep run (the 5-s horizontal case), its ``sim_node`` and ``controller_node`` CPU
   per tick (the graph benchmark's own run when ``make bench`` ran it just before).
 
-Rows: the three CPU figures per tick and the ratios controller / echo and simulator /
-echo (what the node costs per tick beyond what any rclpy node answering a state with a
-command costs). Benchmarks assert nothing. Usage: ``. tools/env.sh && python bench/echo.py``,
+Rows: the CPU figures per tick and the ratios controller / echo and simulator / echo,
+the echo on the controller's executor (what the node costs per tick beyond what any rclpy
+node answering a state with a command on that executor costs). Benchmarks assert nothing. Usage: ``. tools/env.sh && python bench/echo.py``,
 or ``make bench BENCH=echo``.
 """
 
@@ -97,20 +98,27 @@ def drive_echo(client, ticks=TICKS, warmup=WARMUP):
     return measure
 
 
-def echo_cpu_per_tick(ticks=TICKS):
-    """Return the echo node's CPU per lockstep tick [us] (a run of its own)."""
+def controller_executor():
+    """Return the executor ``config/controller.yaml`` runs the controller on."""
+    from freejoint_control.params import SCHEMA
+    return SCHEMA.yaml_values(os.path.join(graph_bench.CONFIG, 'controller.yaml'))['executor']
+
+
+def echo_cpu_per_tick(executor, ticks=TICKS):
+    """Return the echo node's CPU per lockstep tick [us] on ``executor`` (a run of its own)."""
     env = graph_bench._env(ECHO_DOMAIN_INDEX)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
-    run_dir = os.path.join(graph_bench.OUT, 'echo')
+    run_dir = os.path.join(graph_bench.OUT, 'echo_' + executor)
     procs = graph_bench.Graph(os.path.join(run_dir, 'logs'), 'echo', env)
     client = graph_bench.Client()
     try:
-        proc = procs.start_script(ECHO_NODE, 'echo_node')
+        proc = procs.start_script(ECHO_NODE, 'echo_node', [executor])
         start = time.perf_counter()
         seconds = drive_echo(client, ticks)(lambda: graph_bench.proc_cpu_seconds(proc.pid))
-        graph_bench.say('echo: %d ticks in %.2f s wall, %.1f us CPU per tick'
-                        % (ticks, time.perf_counter() - start, 1e6 * seconds / ticks))
+        graph_bench.say('echo (%s executor): %d ticks in %.2f s wall, %.1f us CPU per tick'
+                        % (executor, ticks, time.perf_counter() - start,
+                           1e6 * seconds / ticks))
         return 1e6 * seconds / ticks
     finally:
         client.close()
@@ -144,25 +152,31 @@ def graph_cpu_per_tick():
 
 def run():
     """Return the benchmark rows: list of dict(name, value, unit, target)."""
-    echo = echo_cpu_per_tick()
+    kind = controller_executor()
+    echo = echo_cpu_per_tick(kind)
+    other = 'single_threaded' if kind == 'events' else 'events'
+    echo_other = echo_cpu_per_tick(other)
     nodes = graph_cpu_per_tick()
     ctl, sim = nodes.get('controller_node'), nodes.get('sim_node')
 
     def ratio(value):
         return None if value is None or not echo else value / echo
 
-    graph_bench.say('CPU per lockstep tick: echo %.1f us, controller %s us, simulator %s us'
-                    % (echo, '%.1f' % ctl if ctl is not None else 'n/a',
+    graph_bench.say('CPU per lockstep tick: echo (%s) %.1f us, controller %s us, simulator %s us'
+                    % (kind, echo, '%.1f' % ctl if ctl is not None else 'n/a',
                        '%.1f' % sim if sim is not None else 'n/a'))
     return [
-        {'name': 'lockstep: bare rclpy echo node CPU per tick', 'value': echo, 'unit': 'us'},
+        {'name': 'lockstep: rclpy echo node CPU per tick (%s)' % kind, 'value': echo,
+         'unit': 'us'},
+        {'name': 'lockstep: rclpy echo node CPU per tick (%s)' % other,
+         'value': echo_other, 'unit': 'us'},
         {'name': 'lockstep: controller_node CPU per tick (beside the echo)', 'value': ctl,
          'unit': 'us'},
         {'name': 'lockstep: sim_node CPU per tick (beside the echo)', 'value': sim,
          'unit': 'us'},
-        {'name': 'lockstep: controller / echo CPU per tick', 'value': ratio(ctl),
-         'unit': 'x', 'target': '<= 1.5'},
-        {'name': 'lockstep: simulator / echo CPU per tick', 'value': ratio(sim),
+        {'name': 'lockstep: controller / echo (%s) CPU per tick' % kind,
+         'value': ratio(ctl), 'unit': 'x', 'target': '<= 1.5'},
+        {'name': 'lockstep: simulator / echo (%s) CPU per tick' % kind, 'value': ratio(sim),
          'unit': 'x'},
     ]
 
