@@ -1,14 +1,14 @@
 """
 Benchmark: the controller's and the simulator's CPU per lockstep tick against a bare echo.
 
-Two runs, each in a ROS domain of its own (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``),
+Runs each in a ROS domain of its own (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``),
 every wait bounded, every process stopped whatever happens:
 
 * the echo: ``bench/echo_node.py`` (a bare rclpy node: ``joint_states`` in, a
   ``Float64MultiArray`` on ``effort_controller/commands`` out, the contract's QoS), once
   on the executor the controller runs on (``config/controller.yaml``: ``events``) and
-  once on the ``single_threaded`` one, each driven in lockstep by this process: state k is published once the answer to k - 1 came,
-  ``TICKS`` times after a warm-up; the echo process's CPU seconds (``/proc/<pid>/stat``)
+  once on the ``single_threaded`` one, each driven in lockstep by this process: state k
+  is published once the answer to k - 1 came, ``TICKS`` times after a warm-up; the echo process's CPU seconds (``/proc/<pid>/stat``)
   over the measured ticks, per tick;
 * the graph in lockstep, a process per node, the recorder on: ``bench/graph.py``'s
   lockstep run (the 5-s horizontal case), its ``sim_node`` and ``controller_node`` CPU
@@ -16,8 +16,8 @@ every wait bounded, every process stopped whatever happens:
 
 Rows: the CPU figures per tick and the ratios controller / echo and simulator / echo,
 the echo on the controller's executor (what the node costs per tick beyond what any rclpy
-node answering a state with a command on that executor costs). Benchmarks assert nothing. Usage: ``. tools/env.sh && python bench/echo.py``,
-or ``make bench BENCH=echo``.
+node answering a state with a command on that executor costs). Benchmarks assert
+nothing. Usage: ``. tools/env.sh && python bench/echo.py``, or ``make bench BENCH=echo``.
 """
 
 import os
