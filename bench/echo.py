@@ -8,8 +8,8 @@ every wait bounded, every process stopped whatever happens:
   ``Float64MultiArray`` on ``effort_controller/commands`` out, the contract's QoS), once
   on the executor the controller runs on (``config/controller.yaml``: ``events``) and
   once on the ``single_threaded`` one, each driven in lockstep by this process: state k
-  is published once the answer to k - 1 came, ``TICKS`` times after a warm-up; the echo process's CPU seconds (``/proc/<pid>/stat``)
-  over the measured ticks, per tick;
+  is published once the answer to k - 1 came, ``TICKS`` times after a warm-up; the echo
+  process's CPU seconds (``/proc/<pid>/stat``) over the measured ticks, per tick;
 * the graph in lockstep, a process per node, the recorder on: ``bench/graph.py``'s
   lockstep run (the 5-s horizontal case), its ``sim_node`` and ``controller_node`` CPU
   per tick (the graph benchmark's own run when ``make bench`` ran it just before).
