@@ -11,7 +11,7 @@ help:
 	@echo '              ARM=four_link: the shipped 4-link example instead (config/four_link)'
 	@echo 'make test     run every test (core math, nodes, interfaces, linters)'
 	@echo 'make test-fast  the tests without DDS or node processes (core math, schemas,'
-	@echo '              loop logic, linters): the edit-run loop, under a minute'
+	@echo '              loop logic, linters) in two pytest processes: the edit-run loop'
 	@echo 'make setup    only set up: .venv with ROS 2 Jazzy wheels, colcon build'
 	@echo 'make offline  offline closed-loop runner (reference table, bags/offline/metrics.json)'
 	@echo 'make bench    benchmarks (figures printed and written to bags/bench/bench.json);'
