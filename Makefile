@@ -4,15 +4,18 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := . tools/env.sh &&
 
-.PHONY: help setup demo test offline bench soak analyze clean
+.PHONY: help setup demo test test-fast offline bench soak analyze clean
 
 help:
 	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
 	@echo '              ARM=four_link: the shipped 4-link example instead (config/four_link)'
 	@echo 'make test     run every test (core math, nodes, interfaces, linters)'
+	@echo 'make test-fast  the tests without DDS or node processes (core math, schemas,'
+	@echo '              loop logic, linters) in two pytest processes: the edit-run loop'
 	@echo 'make setup    only set up: .venv with ROS 2 Jazzy wheels, colcon build'
 	@echo 'make offline  offline closed-loop runner (reference table, bags/offline/metrics.json)'
-	@echo 'make bench    benchmarks (figures printed and written to bags/bench/bench.json)'
+	@echo 'make bench    benchmarks (figures printed and written to bags/bench/bench.json);'
+	@echo '              BENCH="graph echo": only those (bench/run_all.py MODULES)'
 	@echo 'make soak     real-time soak, both cases, 5 x 30 s each (bags/soak/soak.json);'
 	@echo '              SOAK_ARGS="--runs 2 --seconds 10 --hogs 2 --cases vertical"'
 	@echo 'make analyze BAGS="bags/demo/..."  metrics and plots from recorded bags'
@@ -26,11 +29,14 @@ demo: setup
 test: setup
 	@$(ENV) python -m pytest -c pytest.ini
 
+test-fast: setup
+	@$(ENV) bash tools/test_fast.sh
+
 offline: setup
 	@$(ENV) python -m freejoint_core.offline
 
 bench: setup
-	@$(ENV) python bench/run_all.py
+	@$(ENV) python bench/run_all.py $(if $(BENCH),--only $(BENCH))
 
 soak: setup
 	@$(ENV) python bench/soak.py $(SOAK_ARGS)

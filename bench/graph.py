@@ -412,7 +412,13 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True):
     rows += _node_rows(tag, cpu0, cpu1, hwm, ticks + 100)
     rows.append({'name': '%s: load average (1 min) at the end' % tag, 'value': load1,
                  'unit': '', 'target': None})
+    LOCKSTEP_ROWS[layout] = rows
     return rows
+
+
+LOCKSTEP_ROWS = {}
+"""{layout: the rows of this process's last lockstep run} (``bench/echo.py`` takes the
+controller's and the simulator's CPU per tick from them when ``make bench`` ran one)."""
 
 
 # -- real time --------------------------------------------------------------------------

@@ -3,7 +3,8 @@ Run every benchmark, print one table and write it to bags/bench/bench.json.
 
 Each module in MODULES has `run() -> list of dict(name, value, unit, target)`; `target` is
 a string such as '<= 20' or '>= 2' (or None). Benchmarks print figures; they assert nothing.
-Usage: python bench/run_all.py [--only MODULE ...] [--out PATH]
+Usage: python bench/run_all.py [--only MODULE ...] [--out PATH]; `make bench BENCH="graph echo"`
+runs only those modules.
 """
 import argparse
 import importlib
@@ -16,7 +17,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 MODULES = ['core_law_plant', 'core_delay', 'core_map_offline', 'core_singularity_nlink',
-           'core_urdf', 'tools_recorder', 'graph', 'viewer']
+           'core_urdf', 'tools_recorder', 'graph', 'echo', 'viewer']
 
 
 def meets(value, target):

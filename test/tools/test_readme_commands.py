@@ -1,10 +1,12 @@
 """
-Every command line of the README's two install sections, run as the user types it.
+Every command line of the install sections the README points to, run as the user types it.
 
-The sections "On a full ROS 2 Jazzy install", "Without ROS installed (ROS 2 from PyPI)" and
-"Bring your own arm" (its ``my_arm.urdf``: a copy of the shipped paper arm's URDF) are read
-from README.md, their ```bash blocks split into commands, and each is run in order in a
-scratch directory (``config/`` linked in), under ``. tools/env.sh``:
+The sections "On a full ROS 2 Jazzy install" and "Without ROS installed (ROS 2 from PyPI)"
+(docs/ros-install.md), "The controller on ros2_control's topics" (docs/real-arm.md, run
+after the Jazzy section, as it continues it) and "Bring your own arm" (docs/own-arm.md; its
+``my_arm.urdf``: a copy of the shipped paper arm's URDF) are read, their ```bash blocks
+split into commands, and each is run in order in a scratch directory (``config/`` linked
+in), under ``. tools/env.sh``:
 
 - a node's start (``ros2 run <pkg> <exe> ...``, ``fj run ...`` or the bare executable) is
   started in the background and must come up (its parameter services answer); a block
@@ -32,6 +34,9 @@ pytestmark = pytest.mark.ros
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 README = os.path.join(ROOT, 'README.md')
+ROS_INSTALL = os.path.join(ROOT, 'docs', 'ros-install.md')
+REAL_ARM = os.path.join(ROOT, 'docs', 'real-arm.md')
+OWN_ARM_DOC = os.path.join(ROOT, 'docs', 'own-arm.md')
 FJ = os.path.join(ROOT, 'install', 'freejoint_tools', 'lib', 'freejoint_tools', 'fj')
 NODE_NAMES = {'sim_node': '/sim_node', 'planner_node': '/freejoint_planner',
               'controller_node': '/controller_node', 'recorder': '/recorder'}
@@ -49,15 +54,16 @@ COVERED = {
 JAZZY = '## On a full ROS 2 Jazzy install'
 PYPI = '## Without ROS installed (ROS 2 from PyPI)'
 OWN_ARM = '## Bring your own arm'
+ROS2_CONTROL = "## The controller on ros2_control's topics"
 MY_ARM = os.path.join(ROOT, 'src', 'freejoint_description', 'urdf', 'paper_arm.urdf')
 """The URDF the test gives the README's ``my_arm.urdf``."""
 
 
-def readme_blocks(title):
-    """Return the commands of each ```bash block of the README section ``title``."""
-    with open(README) as f:
+def readme_blocks(title, path=README):
+    """Return the commands of each ```bash block of the section ``title`` of ``path``."""
+    with open(path) as f:
         text = f.read()
-    assert title in text, 'README has no section %r' % title
+    assert title in text, '%s has no section %r' % (os.path.relpath(path, ROOT), title)
     section = text.split(title, 1)[1].split('\n## ', 1)[0]
     blocks = []
     for block in re.findall(r'```bash\n(.*?)```', section, re.S):
@@ -66,6 +72,13 @@ def readme_blocks(title):
                        if line.strip() and not line.strip().startswith('#')])
     assert blocks, 'no ```bash block in %r' % title
     return blocks
+
+
+def test_the_readme_points_to_each_page_whose_commands_are_run_here():
+    with open(README) as f:
+        text = f.read()
+    for path in (ROS_INSTALL, REAL_ARM, OWN_ARM_DOC):
+        assert os.path.relpath(path, ROOT) in text, path
 
 
 class Runner:
@@ -174,7 +187,7 @@ def runner(tmp_path):
 
 
 def test_every_line_of_the_full_jazzy_section_works_with_fj_in_place_of_ros2(runner):
-    blocks = readme_blocks(JAZZY)
+    blocks = readme_blocks(JAZZY, ROS_INSTALL) + readme_blocks(ROS2_CONTROL, REAL_ARM)
     for lines in blocks:
         runner.run_block(lines)
     kinds = [kind for kind, _ in runner.ran]
@@ -188,7 +201,7 @@ def test_every_line_of_the_full_jazzy_section_works_with_fj_in_place_of_ros2(run
                     reason='set up on a sourced ROS 2 (the PyPI section is for a set-up '
                     'without ROS: tools/env.sh leaves PATH to ros2 there)')
 def test_every_line_of_the_pypi_section_works_as_typed_after_env_sh(runner):
-    blocks = readme_blocks(PYPI)
+    blocks = readme_blocks(PYPI, ROS_INSTALL)
     for lines in blocks:
         runner.run_block(lines)
     kinds = [kind for kind, _ in runner.ran]
@@ -200,7 +213,7 @@ def test_every_line_of_the_pypi_section_works_as_typed_after_env_sh(runner):
 
 def test_every_line_of_the_own_arm_section_brings_up_the_nodes_on_the_urdf_it_names(runner):
     shutil.copy(MY_ARM, os.path.join(runner.cwd, 'my_arm.urdf'))
-    blocks = readme_blocks(OWN_ARM)
+    blocks = readme_blocks(OWN_ARM, OWN_ARM_DOC)
     own = [lines for lines in blocks if any('my_arm.urdf' in line for line in lines)]
     assert own, 'no block of %r starts a node on my_arm.urdf' % OWN_ARM
     for lines in blocks:

@@ -19,11 +19,12 @@ Anything else is parsed by ``freejoint_core.urdf.parse_urdf`` (the shipped
 model with one line naming the problem. :func:`resolve_arm` is plain Python (no ROS).
 """
 
+import collections
 from dataclasses import dataclass
 import math
 import os
 
-from freejoint_common.node_tools import Spec
+from freejoint_common.schema import Spec
 from freejoint_core.arm import ArmParams, table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.urdf import GRAVITY_BY_CASE, load_urdf, parse_urdf, SHIPPED
@@ -121,7 +122,65 @@ def _gravity(value, case):
 
 def resolve_arm(values):
     """
-    Return the arm of the node's parameters.
+    Return the arm of the node's parameters (resolved once per distinct arm input).
+
+    The arm of the last few distinct values of ``case`` and the ``ARM_SPECS`` entries is
+    kept: the checks and the config builder of a schema, which each ask for the arm, and
+    a parameter change that leaves the arm's parameters as they were, parse no URDF and
+    build no model again.
+
+    Parameters
+    ----------
+    values : dict
+        ``case`` and the entries of ``ARM_SPECS``.
+
+    Returns
+    -------
+    NodeArm
+
+    Raises
+    ------
+    FreejointValueError
+        One line naming the parameter (``robot_description: ...``,
+        ``passive_joints: ...``, ...).
+
+    """
+    key = _arm_key(values)
+    try:
+        arm = _RESOLVED.get(key)
+    except TypeError:       # a value of no hashable kind: refused by _resolve, naming it
+        return _resolve(values)
+    if arm is None:
+        arm = _resolve(values)
+        _RESOLVED[key] = arm
+        while len(_RESOLVED) > _KEEP:
+            _RESOLVED.popitem(last=False)
+    else:
+        _RESOLVED.move_to_end(key)
+    return arm
+
+
+_KEEP = 8
+"""How many distinct arms :func:`resolve_arm` keeps."""
+_RESOLVED = collections.OrderedDict()
+"""``{arm key: NodeArm}``, least recently used first."""
+
+
+def _arm_key(values):
+    """Return a hashable key of what the arm depends on (its parameters, the prefixes)."""
+    def frozen(value):
+        if isinstance(value, (list, tuple)):
+            return tuple(frozen(v) for v in value)
+        return (type(value).__name__, value)
+    path = values['description_file'] or ''
+    prefixes = os.environ.get('AMENT_PREFIX_PATH', '') if path else ''
+    return (frozen(values['case']), frozen(values['robot_description']), frozen(path),
+            frozen(values['passive_joints']), frozen(values['gravity']), prefixes)
+
+
+def _resolve(values):
+    """
+    Return the arm of the node's parameters (parsed: no cache).
 
     Parameters
     ----------

@@ -16,7 +16,7 @@ import gc
 import time
 
 from freejoint_common.scheduling import process_scheduling, rt_budget, rt_budget_note
-from freejoint_common.schema import Param, SCHEDULING
+from freejoint_common.schema import SCHEDULING, Spec, unique_names  # noqa: F401
 from freejoint_core.errors import FreejointValueError
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
@@ -24,20 +24,6 @@ from rclpy.parameter import Parameter
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
 _monotonic = time.monotonic
-
-
-Spec = Param
-"""One parameter entry (``freejoint_common.schema.Param``; the name nodes used before)."""
-
-
-def unique_names(name, value):
-    """Return ``value`` as a tuple of unique non-empty names, or raise naming ``name``."""
-    names = tuple(value)
-    if not names or any(not isinstance(v, str) or not v for v in names):
-        raise FreejointValueError(f'{name}: expected non-empty joint names, got {list(names)}')
-    if len(set(names)) != len(names):
-        raise FreejointValueError(f'{name}: joint names must be unique, got {list(names)}')
-    return names
 
 
 class Throttle:

@@ -65,6 +65,20 @@ class Param:
         return None if problem is None else f'{self.name}: {problem}'
 
 
+Spec = Param
+"""One parameter entry (the name the nodes' schemas used before :class:`Param`)."""
+
+
+def unique_names(name, value):
+    """Return ``value`` as a tuple of unique non-empty names, or raise naming ``name``."""
+    names = tuple(value)
+    if not names or any(not isinstance(v, str) or not v for v in names):
+        raise FreejointValueError(f'{name}: expected non-empty joint names, got {list(names)}')
+    if len(set(names)) != len(names):
+        raise FreejointValueError(f'{name}: joint names must be unique, got {list(names)}')
+    return names
+
+
 def _type_problem(default, value):
     """Return why ``value`` is not of the type of ``default``, or None."""
     if default is None:

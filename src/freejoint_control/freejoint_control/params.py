@@ -16,10 +16,9 @@ from dataclasses import dataclass, field
 import math
 
 from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve_arm
-from freejoint_common.node_tools import unique_names
 from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR, JOINT_NAMES
 from freejoint_common.schema import JOINTS, LoopConfig, NOMINAL_SCALE, one_of, Param
-from freejoint_common.schema import SCHEDULING, Schema
+from freejoint_common.schema import SCHEDULING, Schema, unique_names
 from freejoint_core.arm import ArmParams
 from freejoint_core.control import Gains, H_FORMS
 from freejoint_core.errors import FreejointValueError

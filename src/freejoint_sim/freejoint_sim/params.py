@@ -18,9 +18,9 @@ from dataclasses import dataclass, replace
 import math
 
 from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve_arm
-from freejoint_common.node_tools import unique_names
 from freejoint_common.schema import CASE, CONTROL_PERIOD, EXECUTOR, FRAME_ID, JOINT_NAMES
 from freejoint_common.schema import JOINTS, LoopConfig, one_of, Param, SCHEDULING, Schema
+from freejoint_common.schema import unique_names
 from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.offline import DEFAULT_Q3_0_DEG

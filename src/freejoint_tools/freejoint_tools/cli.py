@@ -43,6 +43,8 @@ import os
 import sys
 import time
 
+from freejoint_tools.resend import first_answer
+
 HIDDEN_PREFIX = '_'
 TYPE_NAMES = {
     1: 'boolean', 2: 'integer', 3: 'double', 4: 'string', 5: 'byte array',
@@ -153,25 +155,25 @@ class Session:
 
         ``future`` may be a callable that sends the request and returns its future (an
         idempotent request: the parameter services'): it is sent again once if half of
-        the time passed without an answer (a response can be lost while the server's side
-        of a service just discovered has not matched this client yet).
+        the time passed without an answer, and the first answer of either is taken (a
+        response can be lost while the server's side of a service just discovered has not
+        matched this client yet; ``freejoint_tools.resend``).
         """
-        send = future if callable(future) else None
-        future = send() if send else future
-        start = time.monotonic()
-        deadline = start + self.args.service_timeout
-        while not future.done() and time.monotonic() < deadline:
-            self.executor.spin_once(timeout_sec=0.05)
-            if send is not None and time.monotonic() - start > 0.5 * self.args.service_timeout:
-                future.cancel()
-                future, send = send(), None
-        if not future.done():
-            future.cancel()
-            raise CommandError('No answer from %s within %g s'
-                               % (what, self.args.service_timeout))
-        if future.exception() is not None:
-            raise CommandError('Exception while calling %s: %s' % (what, future.exception()))
-        return future.result()
+        send = future if callable(future) else (lambda: future)
+        timeout = self.args.service_timeout
+        answer, _ = first_answer(send, self._spin_while, timeout,
+                                 resend=0.5 * timeout if callable(future) else None)
+        if answer is None:
+            raise CommandError('No answer from %s within %g s' % (what, timeout))
+        if answer.exception() is not None:
+            raise CommandError('Exception while calling %s: %s' % (what, answer.exception()))
+        return answer.result()
+
+    def _spin_while(self, predicate, seconds):
+        """Spin until ``predicate()`` or ``seconds`` passed (the ``wait`` of first_answer)."""
+        deadline = time.monotonic() + seconds
+        while not predicate() and time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=min(0.05, max(0.0, deadline - time.monotonic())))
 
     def parameter_client(self, node_name):
         """Return rclpy's AsyncParameterClient of ``node_name`` once its services are up."""

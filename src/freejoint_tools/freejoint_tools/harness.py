@@ -22,6 +22,8 @@ import subprocess
 import sys
 import time
 
+from freejoint_tools.resend import first_answer
+
 
 def executable(pkg, exe):
     """Return what ``ros2 run <pkg> <exe>`` starts: <prefix of pkg>/lib/<pkg>/<exe>."""
@@ -196,26 +198,13 @@ class ServiceCalls:
         is answered or ``timeout`` s have passed: rmw_fastrtps drops a response sent before
         the server matched the client's response reader (ros2/rmw_fastrtps#390, #467), and
         waiting longer never brings it. ``sent`` is the number of requests sent; the
-        others' futures are cancelled (a late answer goes nowhere).
+        others' futures are cancelled (a late answer goes nowhere). The loop is
+        ``freejoint_tools.resend.first_answer``, spinning this executor while it waits.
         """
-        deadline = time.monotonic() + timeout
-        futures = []
-
-        def answered():
-            return [f for f in futures if f.done() and not f.cancelled()]
-        try:
-            while True:
-                futures.append(send())
-                left = deadline - time.monotonic()
-                wait = left if resend is None else min(resend, left)
-                if (self.spin_until(lambda: bool(answered()), max(0.0, wait), step=0.01)
-                        or time.monotonic() >= deadline):
-                    break
-        finally:
-            for future in futures:
-                future.cancel()
-        done = answered()
-        return (done[0].result() if done else None), len(futures)
+        future, sent = first_answer(
+            send, lambda predicate, seconds: self.spin_until(predicate, seconds, step=0.01),
+            timeout, resend)
+        return (None if future is None else future.result()), sent
 
     def call(self, srv_type, name, request, timeout, resend=None):
         """

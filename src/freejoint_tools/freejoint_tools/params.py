@@ -1,5 +1,5 @@
 """
-Parameters of the recorder and the player: their schemas (no ROS types).
+Parameters of the recorder, the player and the viewer: their schemas (no ROS types).
 
 Both are read-only (set at start-up); the entries they share (``topics``, ``exclude``,
 ``queue_depth``) are built once by :func:`topic_selection` / :func:`queue_depth`. Each
@@ -142,3 +142,26 @@ PLAYER = Schema((
     queue_depth(1000, 'Publisher depth where the recording does not know it'),
 ), build=_config)
 """The player's parameters."""
+
+
+VIEWER = Schema((
+    Param('host', '127.0.0.1', 'address the Foxglove WebSocket server binds to (0.0.0.0: '
+          'every interface; the default serves this machine only)', read_only=True),
+    Param('port', 8765, 'TCP port of the Foxglove WebSocket server (0: any free port, '
+          'logged)', (0, 65535), read_only=True),
+    Param('description_file', '', 'URDF of the arm for /tf and /robot_description; empty = '
+          "the graph's /robot_description (the simulator's), the shipped paper_arm.urdf "
+          '(freejoint_description) until it arrives', read_only=True),
+    Param('joint_states_topic', 'joint_states', 'JointState topic the transforms are '
+          'computed from', read_only=True),
+    Param('tf_rate', 50.0, 'most /tf updates per second sent to clients (joint_states '
+          'arrive at up to 1 kHz)', (0.1, 1000.0)),
+    Param('services', ['/freejoint_planner/plan_circle=freejoint_msgs/srv/PlanCircle'],
+          'services offered to clients, each as name=pkg/srv/Type', read_only=True),
+    Param('call_timeout', 5.0, 'seconds to wait for a node to answer a parameter request or '
+          'a service call', (0.1, 60.0)),
+    Param('discovery_period', 2.0, 'seconds between looks for new topics and nodes',
+          (0.1, 60.0)),
+))
+"""The viewer's parameters (declared by ``freejoint_tools.viewer``, which checks ``tf_rate``
+changes itself)."""

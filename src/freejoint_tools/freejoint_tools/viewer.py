@@ -43,7 +43,7 @@ import time
 
 from freejoint_common.contract import PLANNED_PATH, profile, ROBOT_DESCRIPTION
 from freejoint_common.contract import SEMI_SINGULAR_MAP, stamp_from_ns
-from freejoint_common.node_tools import declare, Spec
+from freejoint_common.node_tools import declare
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.kinematic_tree import KinematicTree
@@ -56,7 +56,9 @@ from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.serialization import deserialize_message, serialize_message
 
+from .params import VIEWER
 from .recorder import _is_hidden, GRAPH_TOPICS
+from .resend import first_answer, Wakeup
 from .typedefs import DefinitionError, Definitions, message_class
 
 TF_TOPIC = '/tf'
@@ -67,25 +69,8 @@ DESCRIPTION_TOPIC = ROBOT_DESCRIPTION.name
 # when a client subscribes); every other one best effort, volatile.
 LATCHED = (SEMI_SINGULAR_MAP.name, PLANNED_PATH.name)
 
-SPECS = (
-    Spec('host', '127.0.0.1', 'address the Foxglove WebSocket server binds to (0.0.0.0: '
-         'every interface; the default serves this machine only)', read_only=True),
-    Spec('port', 8765, 'TCP port of the Foxglove WebSocket server (0: any free port, '
-         'logged)', (0, 65535), read_only=True),
-    Spec('description_file', '', 'URDF of the arm for /tf and /robot_description; empty = '
-         "the graph's /robot_description (the simulator's), the shipped paper_arm.urdf "
-         '(freejoint_description) until it arrives', read_only=True),
-    Spec('joint_states_topic', 'joint_states', 'JointState topic the transforms are '
-         'computed from', read_only=True),
-    Spec('tf_rate', 50.0, 'most /tf updates per second sent to clients (joint_states '
-         'arrive at up to 1 kHz)', (0.1, 1000.0)),
-    Spec('services', ['/freejoint_planner/plan_circle=freejoint_msgs/srv/PlanCircle'],
-         'services offered to clients, each as name=pkg/srv/Type', read_only=True),
-    Spec('call_timeout', 5.0, 'seconds to wait for a node to answer a parameter request or '
-         'a service call', (0.1, 60.0)),
-    Spec('discovery_period', 2.0, 'seconds between looks for new topics and nodes',
-         (0.1, 60.0)),
-)
+SPECS = VIEWER.params
+"""The viewer's parameters (``freejoint_tools.params.VIEWER``)."""
 
 _HINTS = {RosType.PARAMETER_DOUBLE: 'Float64', RosType.PARAMETER_DOUBLE_ARRAY: 'Float64Array',
           RosType.PARAMETER_BYTE_ARRAY: 'ByteArray'}
@@ -271,27 +256,14 @@ class Viewer(Node, Lifecycle):
         moment ago can meet. ``resend=None`` for a request that must not run twice.
         """
         timeout = self.values['call_timeout']
-        deadline = time.monotonic() + timeout
-        done = concurrent.futures.Future()
+        wakeup = Wakeup()
 
-        def finished(f):          # on the executor thread, as every start()
-            if done.done():
-                return
-            if f.exception() is not None:
-                done.set_exception(f.exception())
-            else:
-                done.set_result(f.result())
-
-        def start():
-            make_future().add_done_callback(finished)
-        while True:
-            self._submit(start).result(timeout)
-            left = deadline - time.monotonic()
-            try:
-                return done.result(max(0.0, left if resend is None else min(resend, left)))
-            except concurrent.futures.TimeoutError:
-                if time.monotonic() >= deadline:
-                    raise
+        def send():             # the request is made on the executor thread
+            return self._submit(lambda: wakeup.watch(make_future())).result(timeout)
+        answer, _ = first_answer(send, wakeup, timeout, resend)
+        if answer is None:
+            raise TimeoutError('no answer within %g s' % timeout)
+        return answer.result()
 
     # -- the server ----------------------------------------------------------------------
     def _start_server(self):
@@ -570,7 +542,7 @@ class Viewer(Node, Lifecycle):
                 time.sleep(0.02)
             try:
                 response = self._await(lambda: cli.call_async(ros_request), resend=None)
-            except concurrent.futures.TimeoutError:
+            except (TimeoutError, concurrent.futures.TimeoutError):
                 raise RuntimeError('%s: no answer within %.1f s'
                                    % (name, self.values['call_timeout']))
             return serialize_message(response)

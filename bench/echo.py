@@ -1,0 +1,195 @@
+"""
+Benchmark: the controller's and the simulator's CPU per lockstep tick against a bare echo.
+
+Runs each in a ROS domain of its own (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``),
+every wait bounded, every process stopped whatever happens:
+
+* the echo: ``bench/echo_node.py`` (a bare rclpy node: ``joint_states`` in, a
+  ``Float64MultiArray`` on ``effort_controller/commands`` out, the contract's QoS), once
+  on the executor the controller runs on (``config/controller.yaml``: ``events``) and
+  once on the ``single_threaded`` one, each driven in lockstep by this process: state k
+  is published once the answer to k - 1 came, ``TICKS`` times after a warm-up; the echo
+  process's CPU seconds (``/proc/<pid>/stat``) over the measured ticks, per tick;
+* the graph in lockstep, a process per node, the recorder on: ``bench/graph.py``'s
+  lockstep run (the 5-s horizontal case), its ``sim_node`` and ``controller_node`` CPU
+  per tick (the graph benchmark's own run when ``make bench`` ran it just before).
+
+Rows: the CPU figures per tick and the ratios controller / echo and simulator / echo,
+the echo on the controller's executor (what the node costs per tick beyond what any rclpy
+node answering a state with a command on that executor costs). Benchmarks assert
+nothing. Usage: ``. tools/env.sh && python bench/echo.py``, or ``make bench BENCH=echo``.
+"""
+
+import os
+import sys
+import time
+
+import graph as graph_bench
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ECHO_NODE = os.path.join(HERE, 'echo_node.py')
+TICKS = graph_bench.LOCKSTEP_TICKS
+WARMUP = 100
+ECHO_DOMAIN_INDEX = 7
+"""``graph._env`` index of the echo run (the graph's runs take 0..6)."""
+TICK_TIMEOUT = 10.0
+"""Seconds a state may wait for its answer before the run is given up."""
+
+
+def drive_echo(client, ticks=TICKS, warmup=WARMUP):
+    """
+    Publish states in lockstep to the echo node; return the CPU seconds it spent on ``ticks``.
+
+    Parameters
+    ----------
+    client : graph.Client
+        The bench's rclpy node (its executor is spun here).
+    ticks, warmup : int
+        Measured ticks, and ticks before them (not measured).
+
+    Returns
+    -------
+    callable
+        ``measure(cpu) -> float``: runs the ticks and returns ``cpu()`` after minus before.
+
+    """
+    from freejoint_common.contract import COMMANDS, JOINT_STATES
+    node = client.node
+    answers = []
+    pub = node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, JOINT_STATES.qos)
+    sub = node.create_subscription(COMMANDS.msg_type, COMMANDS.name,
+                                   lambda msg: answers.append(msg.data[0]), COMMANDS.qos)
+    state = JOINT_STATES.msg_type()
+    state.name = ['joint1', 'joint2', 'joint3']
+    state.velocity = [0.0, 0.0, 0.0]
+    state.effort = [0.0, 0.0, 0.0]
+
+    def send(k):
+        state.position = [float(k), 0.0, 0.0]
+        pub.publish(state)
+
+    def answered(k):
+        return bool(answers) and answers[-1] == float(k)
+
+    def measure(cpu):
+        try:
+            if not client.spin_until(
+                    lambda: pub.get_subscription_count() >= 1
+                    and node.count_publishers(COMMANDS.name) >= 1, 60.0):
+                raise RuntimeError('the echo node did not match within 60 s')
+            for _ in range(30):       # the first state again until answered (matching)
+                send(0)
+                if client.spin_until(lambda: answered(0), 1.0):
+                    break
+            else:
+                raise RuntimeError('the echo node did not answer within 30 s')
+            cpu0 = None
+            for k in range(1, warmup + ticks + 1):
+                if k == warmup + 1:
+                    cpu0 = cpu()
+                send(k)
+                if not client.spin_until(lambda: answered(k), TICK_TIMEOUT):
+                    raise RuntimeError('no answer to state %d within %g s' % (k, TICK_TIMEOUT))
+            return cpu() - cpu0
+        finally:
+            node.destroy_publisher(pub)
+            node.destroy_subscription(sub)
+
+    return measure
+
+
+def controller_executor():
+    """Return the executor ``config/controller.yaml`` runs the controller on."""
+    from freejoint_control.params import SCHEMA
+    return SCHEMA.yaml_values(os.path.join(graph_bench.CONFIG, 'controller.yaml'))['executor']
+
+
+def echo_cpu_per_tick(executor, ticks=TICKS):
+    """Return the echo node's CPU per lockstep tick [us] on ``executor`` (a run of its own)."""
+    env = graph_bench._env(ECHO_DOMAIN_INDEX)
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
+    run_dir = os.path.join(graph_bench.OUT, 'echo_' + executor)
+    procs = graph_bench.Graph(os.path.join(run_dir, 'logs'), 'echo', env)
+    client = graph_bench.Client()
+    try:
+        proc = procs.start_script(ECHO_NODE, 'echo_node', [executor])
+        start = time.perf_counter()
+        seconds = drive_echo(client, ticks)(lambda: graph_bench.proc_cpu_seconds(proc.pid))
+        graph_bench.say('echo (%s executor): %d ticks in %.2f s wall, %.1f us CPU per tick'
+                        % (executor, ticks, time.perf_counter() - start,
+                           1e6 * seconds / ticks))
+        return 1e6 * seconds / ticks
+    finally:
+        client.close()
+        procs.stop_all(order=('echo_node',))
+
+
+def graph_cpu_per_tick():
+    """
+    Return ``{node: CPU per lockstep tick [us]}`` of sim_node and controller_node.
+
+    From the graph benchmark's lockstep run (a process per node) if this process ran one
+    (``make bench``: ``graph`` runs before ``echo``), else from a run of its own.
+    """
+    rows = graph_bench.LOCKSTEP_ROWS.get('separate')
+    if rows is None:
+        env = graph_bench._env(0)
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
+        client = graph_bench.Client()
+        try:
+            rows = graph_bench.lockstep(client, env, 'separate')
+        finally:
+            client.close()
+    found = {}
+    for row in rows:
+        for node in ('sim_node', 'controller_node'):
+            if row['name'] == 'lockstep: %s CPU per tick' % node:
+                found[node] = row['value']
+    return found
+
+
+def run():
+    """Return the benchmark rows: list of dict(name, value, unit, target)."""
+    kind = controller_executor()
+    echo = echo_cpu_per_tick(kind)
+    other = 'single_threaded' if kind == 'events' else 'events'
+    echo_other = echo_cpu_per_tick(other)
+    nodes = graph_cpu_per_tick()
+    ctl, sim = nodes.get('controller_node'), nodes.get('sim_node')
+
+    def ratio(value):
+        return None if value is None or not echo else value / echo
+
+    graph_bench.say('CPU per lockstep tick: echo (%s) %.1f us, controller %s us, simulator %s us'
+                    % (kind, echo, '%.1f' % ctl if ctl is not None else 'n/a',
+                       '%.1f' % sim if sim is not None else 'n/a'))
+    return [
+        {'name': 'lockstep: rclpy echo node CPU per tick (%s)' % kind, 'value': echo,
+         'unit': 'us'},
+        {'name': 'lockstep: rclpy echo node CPU per tick (%s)' % other,
+         'value': echo_other, 'unit': 'us'},
+        {'name': 'lockstep: controller_node CPU per tick (beside the echo)', 'value': ctl,
+         'unit': 'us'},
+        {'name': 'lockstep: sim_node CPU per tick (beside the echo)', 'value': sim,
+         'unit': 'us'},
+        {'name': 'lockstep: controller / echo (%s) CPU per tick' % kind,
+         'value': ratio(ctl), 'unit': 'x', 'target': '<= 1.5'},
+        {'name': 'lockstep: simulator / echo (%s) CPU per tick' % kind, 'value': ratio(sim),
+         'unit': 'x'},
+    ]
+
+
+def main():
+    """Run the benchmark from the command line; print the rows."""
+    for row in run():
+        value = row['value']
+        print('%-58s %12s %-8s %s' % (row['name'], 'n/a' if value is None else '%.4g' % value,
+                                      row['unit'], row.get('target') or ''))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.path.insert(0, HERE)
+    sys.exit(main())

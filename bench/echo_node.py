@@ -1,0 +1,64 @@
+"""
+A bare rclpy echo node: JointState in, Float64MultiArray out (the bench's baseline).
+
+What any rclpy node answering the simulator's state with a command costs at least: it
+subscribes to ``joint_states`` and publishes on ``effort_controller/commands`` with the
+graph contract's types and QoS (``freejoint_common.contract``), and answers each state
+with the positions of the first two joints, nothing else (no parameters beyond rclpy's,
+no diagnostics, no law). The executor is the one named by the argument (``events``:
+rclpy's ``EventsExecutor``, as ``config/controller.yaml`` runs the controller;
+``single_threaded``: ``SingleThreadedExecutor``), driven by ``spin_once`` as the project's
+runner drives every node, until SIGINT / SIGTERM.
+
+Usage: ``python bench/echo_node.py [events | single_threaded]`` (under ``. tools/env.sh``);
+``bench/echo.py`` runs it.
+"""
+
+import signal
+import sys
+
+from freejoint_common.contract import COMMANDS, JOINT_STATES
+import rclpy
+
+NODE_NAME = 'echo_node'
+
+
+def make_executor(kind):
+    """Return the rclpy executor ``kind`` names ('events' or 'single_threaded')."""
+    if kind == 'events':
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    if kind == 'single_threaded':
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor()
+    raise SystemExit('echo_node: executor must be events or single_threaded, got %r' % kind)
+
+
+def main(argv):
+    """Echo states as commands until SIGINT / SIGTERM."""
+    kind = argv[0] if argv else 'events'
+    stop = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.append(True))
+    rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    executor = make_executor(kind)      # after init: an executor takes the default context
+    node = rclpy.create_node(NODE_NAME)
+    pub = node.create_publisher(COMMANDS.msg_type, COMMANDS.name, COMMANDS.qos)
+
+    def echo(state):
+        out = COMMANDS.msg_type()
+        out.data = list(state.position[:2])
+        pub.publish(out)
+
+    node.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name, echo, JOINT_STATES.qos)
+    executor.add_node(node)
+    while not stop:
+        executor.spin_once(timeout_sec=0.1)
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))
