@@ -16,6 +16,9 @@ ROS_FREE = (
     'freejoint_control.params',
     'freejoint_sim.params',
     'freejoint_planner.params',
+    'freejoint_control.loop',
+    'freejoint_core.laws',
+    'freejoint_core.guards',
 )
 """Modules that must import without rclpy (the nodes' schemas and what they build on)."""
 

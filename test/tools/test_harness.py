@@ -80,8 +80,9 @@ def test_thread_report_names_the_busy_and_the_sleeping_thread_of_a_process(tmp_p
     assert lines[0].startswith('threads of %d over 0.5 s' % proc.pid)
     rows = {int(line.split()[0]): line.split() for line in lines[1:3]}
     # Python names the thread 'spinner' in its own name only: the kernel's is the
-    # process's. The main thread sleeps (S, no CPU); the other spins (R, about 0.5 s).
+    # process's. The main thread sleeps (S, no CPU); the other spins (R: running or
+    # runnable, with CPU time; how much of the 0.5 s depends on the machine's load).
     main, other = rows[proc.pid], next(r for t, r in rows.items() if t != proc.pid)
     assert main[2] == 'S' and float(main[5]) < 0.1, report
-    assert other[2] == 'R' and float(other[5]) > 0.2, report
+    assert other[2] == 'R' and float(other[5]) > float(main[5]), report
     assert main[3] == other[3] == 'OTHER/0'
