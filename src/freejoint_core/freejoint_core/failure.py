@@ -303,7 +303,7 @@ class ResidualDetector:
 
     def set_watch(self, joints):
         """Watch only ``joints`` (indices in ``[0, n)``) from now; counts restart."""
-        joints = tuple(sorted(set(int(j) for j in joints)))
+        joints = tuple(sorted({int(j) for j in joints}))
         if any(j < 0 or j >= self.n for j in joints):
             raise FreejointValueError(f'joints: indices must lie in [0, {self.n}), got {joints}')
         self.watch = joints
@@ -371,7 +371,7 @@ class EffortDetector:
 
     def set_watch(self, joints):
         """Watch only ``joints`` from now; counts restart."""
-        joints = tuple(sorted(set(int(j) for j in joints)))
+        joints = tuple(sorted({int(j) for j in joints}))
         if any(j < 0 or j >= self.n for j in joints):
             raise FreejointValueError(f'joints: indices must lie in [0, {self.n}), got {joints}')
         self.watch = joints
@@ -442,43 +442,62 @@ class Assessment:
 
 DEFAULT_DET_MIN = 1e-3
 """Assessment: smallest acceptable det(Da Da^T) at the pose and along the internal motion."""
-DEFAULT_GROWTH_MAX = 100.0
-"""Assessment: largest acceptable amplification of a passive-angle perturbation."""
-DEFAULT_QD_MAX = 20.0
+DEFAULT_GROWTH_MAX = math.inf
+"""Assessment: largest acceptable amplification of a passive-angle perturbation (default
+no limit: reported only; a swinging free link's phase drift grows it without divergence)."""
+DEFAULT_QD_MAX = 100.0
 """Assessment: fastest acceptable joint speed of the internal motion [rad/s]."""
 
 
-def _zero_dynamics_rates(model, passive, q, qd, ref, kv, kp):
-    """qdd of the nominal model under computed torque: J qdd = a_ref, passive rows free."""
+def _rates_general(model, passive, kv, kp):
+    """qdd(q, qd, ref) of the nominal model under computed torque (any n, r = m)."""
     n = model.n
-    mass = model.mass_matrix(q)
-    h = model.coriolis(q, qd) + model.gravity_torque(q)
-    jac = model.jacobian(q)
-    p = model.fk(q)
-    e = p - ref[0:2]
-    ed = jac @ qd - ref[2:4]
-    a_ref = ref[4:6] - kv * ed - kp * e - model.jdot_qdot(q, qd)
-    # unknowns (qdd (n), tau_a (r)); rows: M qdd - B tau = -h (n), J qdd = a_ref (2)
     active = [j for j in range(n) if j not in passive]
-    r = len(active)
-    mat = np.zeros((n + M_TASK, n + r))
-    mat[:n, :n] = mass
-    for c, j in enumerate(active):
-        mat[j, n + c] = -1.0
-    mat[n:, :n] = jac
-    rhs = np.concatenate([-h, a_ref])
-    sol = np.linalg.solve(mat, rhs)
-    return sol[:n]
+
+    def rates(q, qd, ref):
+        e = model.fk(q) - ref[0:2]
+        jac = model.jacobian(q)
+        a_ref = ref[4:6] - kv * (jac @ qd - ref[2:4]) - kp * e - model.jdot_qdot(q, qd)
+        # unknowns (qdd (n), tau_a (r)); rows: M qdd - B tau = -h (n), J qdd = a_ref (2)
+        mat = np.zeros((n + M_TASK, n + len(active)))
+        mat[:n, :n] = model.mass_matrix(q)
+        for c, j in enumerate(active):
+            mat[j, n + c] = -1.0
+        mat[n:, :n] = jac
+        rhs = np.concatenate([-(model.coriolis(q, qd) + model.gravity_torque(q)), a_ref])
+        return np.linalg.solve(mat, rhs)[:n]
+
+    return rates
 
 
-def _simulate_internal(model, passive, q, qd, trajectory, t0, horizon, dt, kv, kp):
+def _rates_fast3(model, kv, kp):
+    """The same for the 3-link kernel with one passive joint: ``Da^-1 (a_ref - b)``."""
+    ia, ib = model.active
+
+    def rates(q, qd, ref):
+        q0, q1, q2 = q.tolist()
+        w0, w1, w2 = qd.tolist()
+        px, py, vx, vy, d00, d01, d10, d11, bx, by = model.task(q0, q1, q2, w0, w1, w2)
+        wx = ref[4] - kv * (vx - ref[2]) - kp * (px - ref[0]) - bx
+        wy = ref[5] - kv * (vy - ref[3]) - kp * (py - ref[1]) - by
+        det = d00 * d11 - d01 * d10
+        tau = [0.0, 0.0, 0.0]
+        tau[ia] = (d11 * wx - d01 * wy) / det
+        tau[ib] = (d00 * wy - d10 * wx) / det
+        return np.array(model.qdd(q0, q1, q2, w0, w1, w2, *tau))
+
+    return rates
+
+
+def _simulate_internal(sub, q, qd, trajectory, t0, horizon, dt, kv, kp):
     """RK4 of the zero dynamics; returns (min det, list of passive angles, max |qd|)."""
     steps = int(round(horizon / dt))
+    passive = list(sub.passive)
+    model = make_model(sub)
+    rates = _rates_fast3(model, kv, kp) if hasattr(model, 'task') else \
+        _rates_general(model, passive, kv, kp)
     q = np.array(q, dtype=float)
     qd = np.array(qd, dtype=float)
-    sub = replace(model.params, passive=tuple(passive)) if len(passive) <= model.n - M_TASK \
-        else None
-    dmodel = make_model(sub) if sub is not None else None
     min_det, qp, max_qd = math.inf, [], 0.0
 
     def ref(t):
@@ -486,29 +505,27 @@ def _simulate_internal(model, passive, q, qd, trajectory, t0, horizon, dt, kv, k
 
     for k in range(steps):
         t = t0 + k * dt
-        if dmodel is not None:
-            da, _ = dmodel.decoupling(q, qd)
-            min_det = min(min_det, float(np.linalg.det(da @ da.T)))
-        qp.append(q[list(passive)].copy())
+        da, _ = model.decoupling(q, qd)
+        min_det = min(min_det, float(np.linalg.det(da @ da.T)))
+        qp.append(q[passive].copy())
         r0, r1, r2 = ref(t), ref(t + 0.5 * dt), ref(t + dt)
-        a1 = _zero_dynamics_rates(model, passive, q, qd, r0, kv, kp)
-        a2 = _zero_dynamics_rates(model, passive, q + 0.5 * dt * qd, qd + 0.5 * dt * a1, r1,
-                                  kv, kp)
-        a3 = _zero_dynamics_rates(model, passive, q + 0.5 * dt * (qd + 0.5 * dt * a1),
-                                  qd + 0.5 * dt * a2, r1, kv, kp)
-        a4 = _zero_dynamics_rates(model, passive, q + dt * (qd + 0.5 * dt * a2),
-                                  qd + dt * a3, r2, kv, kp)
+        a1 = rates(q, qd, r0)
+        a2 = rates(q + 0.5 * dt * qd, qd + 0.5 * dt * a1, r1)
+        a3 = rates(q + 0.5 * dt * (qd + 0.5 * dt * a1), qd + 0.5 * dt * a2, r1)
+        a4 = rates(q + dt * (qd + 0.5 * dt * a2), qd + dt * a3, r2)
         q = q + dt * qd + dt * dt / 6.0 * (a1 + a2 + a3)
         qd = qd + dt / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
             return min_det, qp, math.inf
         max_qd = max(max_qd, float(np.max(np.abs(qd))))
-    qp.append(q[list(passive)].copy())
+        if max_qd > 1e3:
+            return min_det, qp, math.inf
+    qp.append(q[passive].copy())
     return min_det, qp, max_qd
 
 
 def assess_passive_set(params, passive, q, qd, trajectory=None, t=0.0, horizon=None,
-                       dt=2e-3, delta=1e-3, det_min=DEFAULT_DET_MIN,
+                       dt=4e-3, delta=1e-3, det_min=DEFAULT_DET_MIN,
                        growth_max=DEFAULT_GROWTH_MAX, qd_max=DEFAULT_QD_MAX,
                        gains=(100.0, 50.0)):
     """
@@ -545,7 +562,7 @@ def assess_passive_set(params, passive, q, qd, trajectory=None, t=0.0, horizon=N
     """
     if not isinstance(params, ArmParams):
         raise FreejointValueError(f'params: expected ArmParams, got {type(params).__name__}')
-    passive = tuple(sorted(set(int(j) for j in passive)))
+    passive = tuple(sorted({int(j) for j in passive}))
     if any(j < 0 or j >= params.n for j in passive):
         raise FreejointValueError(f'passive: indices must lie in [0, {params.n}), got {passive}')
     q = check_vector(q, params.n, 'q')
@@ -567,14 +584,14 @@ def assess_passive_set(params, passive, q, qd, trajectory=None, t=0.0, horizon=N
     horizon = positive('horizon', horizon)
     k, lam = gains
     kv, kp = k + lam, k * lam
-    gen = ArmModel(sub)
     try:
-        min_det, base, max_qd = _simulate_internal(gen, passive, q, qd, trajectory, t, horizon,
-                                                   dt, kv, kp)
-        q_pert = q.copy()
-        q_pert[list(passive)] += delta
-        _, pert, max_qd2 = _simulate_internal(gen, passive, q_pert, qd, trajectory, t, horizon,
-                                              dt, kv, kp)
+        with np.errstate(all='ignore'):
+            min_det, base, max_qd = _simulate_internal(sub, q, qd, trajectory, t, horizon, dt,
+                                                       kv, kp)
+            q_pert = q.copy()
+            q_pert[list(passive)] += delta
+            _, pert, max_qd2 = _simulate_internal(sub, q_pert, qd, trajectory, t, horizon, dt,
+                                                  kv, kp)
     except (np.linalg.LinAlgError, ArithmeticError, ValueError):
         return Assessment(CANNOT_TRACK, 'the internal motion cannot be integrated', det)
     max_qd = max(max_qd, max_qd2)
