@@ -204,7 +204,7 @@ class MomentumObserver:
         return mom.tolist(), beta.tolist()
 
     def _terms3(self, q, qd):
-        """Closed form on absolute angles: ``p = S^T M_phi w``, ``beta = S^T (dT/dphi - G)``."""
+        """Compute ``p = S^T M_phi w``, ``beta = S^T (dT/dphi - G)`` on absolute angles."""
         f1 = q[0]
         f2 = f1 + q[1]
         f3 = f2 + q[2]
@@ -471,7 +471,7 @@ def _rates_general(model, passive, kv, kp):
 
 
 def _rates_fast3(model, kv, kp):
-    """The same for the 3-link kernel with one passive joint: ``Da^-1 (a_ref - b)``."""
+    """Return the same for the 3-link kernel with one passive joint: ``Da^-1 (a_ref - b)``."""
     ia, ib = model.active
 
     def rates(q, qd, ref):
@@ -612,7 +612,7 @@ def assess_passive_set(params, passive, q, qd, trajectory=None, t=0.0, horizon=N
 def least_harm_torque(params, active, q, qd, q_hold, damping=DEFAULT_DAMPING,
                       kp=DEFAULT_HOLD_KP, kd=DEFAULT_HOLD_KD, limit=None):
     """
-    What the remaining joints do when the arm cannot track.
+    Return the torque of the remaining joints when the arm cannot track.
 
     No gravity: a light damper ``tau_i = -damping qd_i``.  With gravity: a soft hold
     with gravity compensation ``tau_i = G_i(q) - kp (q_i - q_hold_i) - kd qd_i`` (nominal

@@ -151,7 +151,7 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
                        assess=assess, trajectory=traj)
     n = real.n
     plant_active = real.active
-    fail_at = {j: at for j, at in fail}
+    fail_at = dict(fail)
     detected = {}
     detected_by = None
     false_alarm = False
