@@ -20,7 +20,11 @@ One record per run (``bags/offline/failures.json``): ``case``, ``seed``, ``actua
 never), ``detected_by``, ``max_mm`` (whole circle), ``max_mm_after_failure`` (circle
 ticks from the first failure), ``hold_max_mm`` (the hold), ``effort_peak`` (per joint
 [N m]), ``effort_ok`` (within ``EFFORT_LIMITS``), ``diverged_at_s``, ``verdict``,
-``verdict_at_s``, ``false_alarm`` (a detection before any failure, or of a healthy joint).
+``verdict_at_s``, ``false_alarm`` (a detection before any failure, or of a healthy joint),
+``residual_peak`` (largest ``|r_i|`` before the first failure [N m]) and
+``residual_peak_after_switch`` (after the last switch, while tracking), ``switches``.
+
+``--suite`` runs every scenario of docs/failures.md and prints its tables.
 
 Divergence: a non-finite state or torque, a joint faster than 1000 rad/s, or (while the
 verdict is ``tracking``) a tracking error above 0.5 m.  Without ``--fail`` the runs measure
@@ -162,6 +166,8 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
     t_first = fail[0][1] if fail else math.inf
     err = np.full(n_ticks, np.nan)
     peak = [0.0] * n
+    res_before = [0.0] * n
+    res_after = [0.0] * n
     trace = {'t': [], 'q': [], 'qd': [], 'e': [], 'tau': [], 'residual': []} \
         if record_trace else None
     for k in range(n_ticks):
@@ -226,6 +232,11 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
             trace['e'].append(e)
             trace['tau'].append(full)
             trace['residual'].append(rec.observer.residual.copy())
+        res = rec.observer.residual.tolist()
+        if t < t_first - 1e-9:
+            res_before = [max(a, abs(b)) for a, b in zip(res_before, res)]
+        elif rec.switches and rec.verdict == TRACKING:
+            res_after = [max(a, abs(b)) for a, b in zip(res_after, res)]
         if rec.verdict == TRACKING and err[k] > diverge_m:
             diverged = t
             break
@@ -259,6 +270,9 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
         'verdict': rec.verdict,
         'verdict_at_s': verdict_at,
         'false_alarm': false_alarm,
+        'residual_peak': [round(v, 4) for v in res_before],
+        'residual_peak_after_switch': [round(v, 4) for v in res_after] if rec.switches
+        else None,
         'switches': [{'joint': s.joint + 1, 't': s.t, 'by': s.detected_by,
                       'passive': [p + 1 for p in s.passive], 'verdict': s.verdict,
                       'reason': s.assessment.reason} for s in rec.switches],
@@ -285,6 +299,67 @@ def measure_levels(case, seeds, actuated, k_o=DEFAULT_K_O, duration=None):
         lv = np.max(np.abs(tr['residual']), axis=0)
         worst = lv if worst is None else np.maximum(worst, lv)
     return worst
+
+
+SUITE = (
+    # name, actuated, fail, notice, effort, cases
+    ('fault-free, all', 'all', '', False, False, CASES),
+    ('fault-free, paper', 'paper', '', False, False, CASES),
+    ('joint3@2.5 residual', 'all', 'joint3@2.5', False, False, CASES),
+    ('joint3@2.5 notice', 'all', 'joint3@2.5', True, False, CASES),
+    ('joint3@2.5 effort', 'all', 'joint3@2.5', False, True, CASES),
+    ('joint2@2.5 residual', 'all', 'joint2@2.5', False, False, CASES),
+    ('joint2+3@2.5 residual', 'all', 'joint2@2.5,joint3@2.5', False, False, CASES),
+)
+"""The scenarios of ``--suite`` (docs/failures.md)."""
+
+
+def summarise(name, records):
+    """
+    One Markdown table row per case of a scenario's records.
+
+    Returns
+    -------
+    list of str
+    """
+    rows = []
+    for case in CASES:
+        recs = [r for r in records if r['case'] == case]
+        if not recs:
+            continue
+        delays = [d - a for r in recs if r['failed_at_s'] and r['detected_at_s'][0] is not None
+                  for d, a in [(min(x for x in r['detected_at_s'] if x is not None),
+                                r['failed_at_s'][0])]]
+        missed = sum(1 for r in recs if r['failed_at_s'] and
+                     all(x is None for x in r['detected_at_s']))
+        verdict_delay = [r['verdict_at_s'] - r['failed_at_s'][0] for r in recs
+                         if r['verdict_at_s'] is not None and r['failed_at_s']]
+        peaks = np.max([r['effort_peak'] for r in recs], axis=0)
+        res = np.max([r['residual_peak'] for r in recs], axis=0)
+
+        def rng(vals, scale=1.0, fmt='{:.3g}'):
+            if not vals:
+                return '-'
+            lo, hi = min(vals) * scale, max(vals) * scale
+            return fmt.format(lo) if lo == hi else f'{fmt.format(lo)}-{fmt.format(hi)}'
+
+        maxes = [r['max_mm'] for r in recs if r['max_mm'] is not None]
+        rows.append(
+            f'| {name} | {case} | {len(recs)} | {sum(r["false_alarm"] for r in recs)} '
+            f'| {rng(delays, 1e3, "{:.0f}")}{f" ({missed} missed)" if missed else ""} '
+            f'| {rng(maxes)} | {rng(verdict_delay, 1e3, "{:.0f}")} '
+            f'| {", ".join(sorted({r["verdict"] for r in recs}))} '
+            f'| {sum(r["diverged_at_s"] is not None for r in recs)} '
+            f'| {", ".join(f"{v:.3g}" for v in peaks)} '
+            f'| {"yes" if all(r["effort_ok"] for r in recs) else "NO"} '
+            f'| {", ".join(f"{v:.3g}" for v in res)} |')
+    return rows
+
+
+SUITE_HEADER = ('| scenario | case | runs | false alarms | detection delay (ms) | max (mm) '
+                '| verdict delay (ms) | verdict | diverged | effort peak (N m) | within '
+                'limits | fault-free residual peak (N m) |\n'
+                '|---|---|---:|---:|---|---|---|---|---:|---|---|---|')
 
 
 def _seeds(spec):
@@ -315,6 +390,9 @@ def _parse(argv):
                     help='no residual/effort detection (with --notice: notices only)')
     ap.add_argument('--margin', type=float, default=DEFAULT_MARGIN)
     ap.add_argument('--ticks', type=int, default=DEFAULT_TICKS)
+    ap.add_argument('--suite', action='store_true',
+                    help='every scenario of docs/failures.md (ignores --fail, --actuated, '
+                    '--notice, --effort); prints the tables')
     ap.add_argument('--levels', action='store_true',
                     help='only measure the fault-free residual levels and print them')
     ap.add_argument('--out', default=None, help=f'records JSON (default {DEFAULT_OUT}); "" '
@@ -331,18 +409,30 @@ def main(argv=None):
             lv = measure_levels(case, seeds, args.actuated)
             print(f'{case} {args.actuated}: levels {np.round(lv, 3).tolist()} N m')
         return 0
-    fail = parse_fail(args.fail) if args.fail else []
+    suite = SUITE if args.suite else (
+        ('', args.actuated, args.fail, args.notice, args.effort, args.cases),)
     records = []
+    rows = []
     t0 = time.perf_counter()
-    for case in args.cases:
-        for seed in seeds:
-            rec, _ = run_failure_case(case, seed, fail, actuated=args.actuated,
-                                      notice=args.notice, effort=args.effort,
-                                      detect=not args.no_detect, margin=args.margin,
-                                      ticks=args.ticks)
-            records.append(rec)
-            print(json.dumps({k: v for k, v in rec.items() if k != 'switches'}))
+    for name, actuated, spec, notice, effort, cases in suite:
+        fail = parse_fail(spec) if spec else []
+        recs = []
+        for case in cases:
+            if case not in args.cases:
+                continue
+            for seed in seeds:
+                rec, _ = run_failure_case(case, seed, fail, actuated=actuated, notice=notice,
+                                          effort=effort, detect=not args.no_detect,
+                                          margin=args.margin, ticks=args.ticks)
+                rec['scenario'] = name or spec or 'fault-free'
+                recs.append(rec)
+                print(json.dumps({k: v for k, v in rec.items() if k != 'switches'}),
+                      flush=True)
+        records.extend(recs)
+        rows.extend(summarise(name or spec or 'fault-free', recs))
     print(f'failure_offline: {len(records)} runs, {time.perf_counter() - t0:.1f} s wall')
+    print(SUITE_HEADER)
+    print('\n'.join(rows))
     out = DEFAULT_OUT if args.out is None else args.out
     if out:
         os.makedirs(os.path.dirname(out) or '.', exist_ok=True)
