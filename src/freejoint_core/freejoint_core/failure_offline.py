@@ -302,14 +302,14 @@ def measure_levels(case, seeds, actuated, k_o=DEFAULT_K_O, duration=None):
 
 
 SUITE = (
-    # name, actuated, fail, notice, effort, cases
-    ('fault-free, all', 'all', '', False, False, CASES),
-    ('fault-free, paper', 'paper', '', False, False, CASES),
-    ('joint3@2.5 residual', 'all', 'joint3@2.5', False, False, CASES),
-    ('joint3@2.5 notice', 'all', 'joint3@2.5', True, False, CASES),
-    ('joint3@2.5 effort', 'all', 'joint3@2.5', False, True, CASES),
-    ('joint2@2.5 residual', 'all', 'joint2@2.5', False, False, CASES),
-    ('joint2+3@2.5 residual', 'all', 'joint2@2.5,joint3@2.5', False, False, CASES),
+    # name, actuated, fail, notice, effort, duration (None: circle + hold), seeds (None: all)
+    ('joint3@2.5 residual', 'all', 'joint3@2.5', False, False, 5.0, None),
+    ('fault-free, all', 'all', '', False, False, None, None),
+    ('joint2@2.5 residual', 'all', 'joint2@2.5', False, False, None, None),
+    ('joint2+3@2.5 residual', 'all', 'joint2@2.5,joint3@2.5', False, False, None, None),
+    ('fault-free, paper', 'paper', '', False, False, None, None),
+    ('joint3@2.5 notice', 'all', 'joint3@2.5', True, False, 5.0, 3),
+    ('joint3@2.5 effort', 'all', 'joint3@2.5', False, True, 5.0, 3),
 )
 """The scenarios of ``--suite`` (docs/failures.md)."""
 
@@ -410,36 +410,40 @@ def main(argv=None):
             print(f'{case} {args.actuated}: levels {np.round(lv, 3).tolist()} N m')
         return 0
     suite = SUITE if args.suite else (
-        ('', args.actuated, args.fail, args.notice, args.effort, args.cases),)
+        ('', args.actuated, args.fail, args.notice, args.effort, None, None),)
     records = []
     rows = []
     t0 = time.perf_counter()
-    for name, actuated, spec, notice, effort, cases in suite:
+    out = DEFAULT_OUT if args.out is None else args.out
+    for name, actuated, spec, notice, effort, duration, n_seeds in suite:
         fail = parse_fail(spec) if spec else []
         recs = []
-        for case in cases:
-            if case not in args.cases:
-                continue
-            for seed in seeds:
+        for case in args.cases:
+            for seed in seeds[:n_seeds]:
                 rec, _ = run_failure_case(case, seed, fail, actuated=actuated, notice=notice,
                                           effort=effort, detect=not args.no_detect,
-                                          margin=args.margin, ticks=args.ticks)
+                                          margin=args.margin, ticks=args.ticks,
+                                          duration=duration)
                 rec['scenario'] = name or spec or 'fault-free'
                 recs.append(rec)
                 print(json.dumps({k: v for k, v in rec.items() if k != 'switches'}),
                       flush=True)
         records.extend(recs)
         rows.extend(summarise(name or spec or 'fault-free', recs))
+        if out:
+            _write(out, records)
     print(f'failure_offline: {len(records)} runs, {time.perf_counter() - t0:.1f} s wall')
     print(SUITE_HEADER)
     print('\n'.join(rows))
-    out = DEFAULT_OUT if args.out is None else args.out
     if out:
-        os.makedirs(os.path.dirname(out) or '.', exist_ok=True)
-        with open(out, 'w') as fh:
-            json.dump(records, fh, indent=1)
         print(f'records written to {out}')
     return 0
+
+
+def _write(path, records):
+    os.makedirs(os.path.dirname(path) or '.', exist_ok=True)
+    with open(path, 'w') as fh:
+        json.dump(records, fh, indent=1)
 
 
 if __name__ == '__main__':
