@@ -187,9 +187,23 @@ def test_a_notice_switches_to_the_paper_law_at_once_and_rebases_the_observer():
 
 def test_notice_path_switches_at_the_first_tick_of_the_failure():
     rec, _ = run_failure_case('horizontal', 0, [(2, 0.02)], notice=True, detect=False,
-                              duration=0.03)
+                              duration=0.03, assess={'horizon': 0.3})
     assert rec['detected_at_s'] == [0.02] and rec['detected_by'] == 'notice'
     assert rec['verdict'] == TRACKING and rec['switches'][0]['passive'] == [3]
+
+
+def test_the_residual_isolates_a_failed_joint_within_the_vertical_budget():
+    rec, _ = run_failure_case('vertical', 4, [(2, 0.3)], duration=0.33,
+                              assess={'horizon': 0.5})
+    assert rec['detected_by'] == 'residual' and rec['switches'][0]['joint'] == 3
+    assert 0.3 < rec['detected_at_s'][0] <= 0.32
+    assert rec['verdict'] == TRACKING and not rec['false_alarm']
+
+
+def test_joints_two_and_three_failing_give_cannot_track_and_a_bounded_least_harm_torque():
+    rec, _ = run_failure_case('vertical', 0, [(1, 0.2), (2, 0.2)], duration=0.5)
+    assert rec['verdict'] == CANNOT_TRACK and rec['verdict_at_s'] <= 0.25
+    assert rec['effort_ok'] and rec['diverged_at_s'] is None
 
 
 def test_no_false_alarm_on_a_short_fault_free_run():

@@ -193,7 +193,7 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
         for j, how in found:
             if j not in fail_at or t < fail_at[j] - 1e-9:
                 false_alarm = True
-            detected[j] = t
+            detected[j] = round(t, 9)
             detected_by = detected_by or how
             sw = rec.switch(j, t, how, q, qd)
             if sw.verdict == TRACKING:
@@ -201,7 +201,7 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
                     ctrl.nullspace = None
                 ctrl.set_nominal(sw.nominal)
             elif verdict_at is None:
-                verdict_at = t
+                verdict_at = round(t, 9)
                 hold_q = q.copy()
         full = [0.0] * n
         if rec.verdict == TRACKING:
