@@ -5,7 +5,8 @@ import math
 
 from freejoint_core.arm import ArmModel, table1
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.failure import (assess_passive_set, CANNOT_TRACK, EffortDetector,
+from freejoint_core.failure import (assess_passive_set, CANNOT_TRACK, default_levels,
+                                    DEFAULT_LEVELS, EffortDetector,
                                     least_harm_torque, MomentumObserver, Reconfigurer,
                                     ResidualDetector, TRACKING)
 from freejoint_core.failure_offline import parse_fail, run_failure_case
@@ -217,3 +218,11 @@ def test_parse_fail_reads_one_based_joints_and_times():
     assert parse_fail('joint2@2.5,joint3@2.5') == [(1, 2.5), (2, 2.5)]
     with pytest.raises(FreejointValueError, match='^fail:'):
         parse_fail('joint4@1')
+
+
+def test_levels_of_an_unmeasured_passive_set_are_the_largest_measured_of_its_case():
+    arm = _full_arm('horizontal')
+    assert default_levels(arm) == DEFAULT_LEVELS[(False, ())]
+    joint2_free = dataclasses.replace(arm, passive=(1,))
+    rows = [DEFAULT_LEVELS[(False, ())], DEFAULT_LEVELS[(False, (2,))]]
+    assert default_levels(joint2_free) == tuple(max(c) for c in zip(*rows))

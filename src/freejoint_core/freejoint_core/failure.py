@@ -108,15 +108,22 @@ def default_levels(params):
     Returns
     -------
     tuple of float, (n,), or None
-        ``DEFAULT_LEVELS`` row [N m]; None when the arm is not the paper's 3-link arm
-        with that passive set (levels must then be measured and given).
+        The ``DEFAULT_LEVELS`` row [N m]; for a passive set without a measured row (e.g.
+        joint 2 free) the element-wise largest row of the same case (conservative: fewer
+        false alarms, slower detection); None when the arm is not the paper's 3-link arm
+        (levels must then be measured and given).
 
     """
     if not isinstance(params, ArmParams):
         raise FreejointValueError(f'params: expected ArmParams, got {type(params).__name__}')
     if params.n != 3:
         return None
-    return DEFAULT_LEVELS.get((params.gravity > 0.0, params.passive))
+    vertical = params.gravity > 0.0
+    row = DEFAULT_LEVELS.get((vertical, params.passive))
+    if row is None:
+        rows = [v for (g, _), v in DEFAULT_LEVELS.items() if g == vertical]
+        row = tuple(max(col) for col in zip(*rows))
+    return row
 
 
 def _n_vector(x, n, name):

@@ -393,6 +393,8 @@ def _parse(argv):
     ap.add_argument('--suite', action='store_true',
                     help='every scenario of docs/failures.md (ignores --fail, --actuated, '
                     '--notice, --effort); prints the tables')
+    ap.add_argument('--only', nargs='+', default=None, metavar='TEXT',
+                    help='with --suite: only the scenarios whose name contains one of these')
     ap.add_argument('--levels', action='store_true',
                     help='only measure the fault-free residual levels and print them')
     ap.add_argument('--out', default=None, help=f'records JSON (default {DEFAULT_OUT}); "" '
@@ -416,6 +418,8 @@ def main(argv=None):
     t0 = time.perf_counter()
     out = DEFAULT_OUT if args.out is None else args.out
     for name, actuated, spec, notice, effort, duration, n_seeds in suite:
+        if args.only and not any(x in name for x in args.only):
+            continue
         fail = parse_fail(spec) if spec else []
         recs = []
         for case in args.cases:
