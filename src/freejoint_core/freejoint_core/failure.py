@@ -682,7 +682,7 @@ class Switch:
     passive : tuple of int
         The passive set from now (old passive plus every failed joint).
     nominal : ArmParams or None
-        The nominal arm with that passive set (None when r < m).
+        The nominal arm with that passive set (None when r < m or after cannot_track).
     assessment : Assessment
         The verdict and why.
 
@@ -788,12 +788,14 @@ class Reconfigurer:
 
         """
         res = self.observer.step(q, qd, tau_last, self.dt)
-        if self.verdict != TRACKING:
-            return None
         if self.effort is not None and effort is not None:
             j = self.effort.update(tau_last, effort)
             if j is not None:
                 return j, 'effort'
+        if self.verdict != TRACKING:
+            # a falling arm's model error is no fault-free level: only the effort
+            # mismatch still isolates a further failure (dropped from the least-harm set)
+            return None
         j = self.detector.update(res)
         if j is not None:
             return j, 'residual'
@@ -827,6 +829,15 @@ class Reconfigurer:
             raise FreejointValueError(f'joint: expected an int in [0, {self.n}), got {joint!r}')
         joint = int(joint)
         self.failed = tuple(sorted(set(self.failed) | {joint}))
+        if self.verdict != TRACKING:
+            passive = tuple(sorted(set(self.nominal.passive) | set(self.failed)))
+            sw = Switch(joint, float(t), detected_by, passive, None, Assessment(
+                CANNOT_TRACK, 'a further failure after cannot_track', 0.0))
+            self.detector.set_watch([j for j in self.detector.watch if j != joint])
+            if self.effort is not None:
+                self.effort.set_watch([j for j in self.effort.watch if j != joint])
+            self.switches.append(sw)
+            return sw
         passive = tuple(sorted(set(self.nominal.passive) | set(self.failed)))
         assessment = assess_passive_set(self.nominal, passive, q, qd, self.trajectory, t,
                                         **self._assess)
@@ -840,6 +851,8 @@ class Reconfigurer:
             self._make_detector()
         else:
             self.detector.set_watch([j for j in self.detector.watch if j != joint])
+            if self.effort is not None:
+                self.effort.set_watch([j for j in self.effort.watch if j != joint])
         self.observer.rebase()
         sw = Switch(joint, float(t), detected_by, passive, new, assessment)
         self.switches.append(sw)

@@ -187,8 +187,7 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
             rec.observer.step(q, qd, tau_last, dt)
         if notice:
             for j, at in fail:
-                if t >= at - 1e-9 and j not in detected and rec.verdict == TRACKING \
-                        and all(h[0] != j for h in found):
+                if t >= at - 1e-9 and j not in detected and all(h[0] != j for h in found):
                     found.append((j, 'notice'))
         for j, how in found:
             if j not in fail_at or t < fail_at[j] - 1e-9:
