@@ -226,3 +226,16 @@ def test_levels_of_an_unmeasured_passive_set_are_the_largest_measured_of_its_cas
     joint2_free = dataclasses.replace(arm, passive=(1,))
     rows = [DEFAULT_LEVELS[(False, ())], DEFAULT_LEVELS[(False, (2,))]]
     assert default_levels(joint2_free) == tuple(max(c) for c in zip(*rows))
+
+
+def test_after_cannot_track_a_further_failure_leaves_the_least_harm_set():
+    nominal = table1('vertical').scaled(0.7)   # the paper's arm: joint 3 free
+    rec = Reconfigurer(nominal, DT, effort=True)
+    q = initial_state(table1('vertical'))
+    first = rec.switch(1, 1.0, 'residual', q, [0.0] * 3)
+    assert first.verdict == CANNOT_TRACK and first.nominal is None and rec.active == (0,)
+    assert rec.observe(q, [0.0] * 3, [5.0, 0.0, 0.0], [5.0, 0.0, 0.0]) is None
+    assert rec.observe(q, [0.0] * 3, [5.0, 0.0, 0.0], [0.0, 0.0, 0.0]) is None
+    assert rec.observe(q, [0.0] * 3, [5.0, 0.0, 0.0], [0.0, 0.0, 0.0]) == (0, 'effort')
+    second = rec.switch(0, 1.002, 'effort', q, [0.0] * 3)
+    assert second.verdict == CANNOT_TRACK and rec.active == ()
