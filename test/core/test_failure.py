@@ -5,14 +5,16 @@ import math
 
 from freejoint_core.arm import ArmModel, table1
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.failure import (assess_passive_set, CANNOT_TRACK, default_levels,
-                                    DEFAULT_LEVELS, EffortDetector,
+from freejoint_core.failure import (assess_passive_set, CANNOT_TRACK, DEFAULT_LEVELS,
+                                    default_levels, EffortDetector,
                                     least_harm_torque, MomentumObserver, Reconfigurer,
                                     ResidualDetector, TRACKING)
 from freejoint_core.failure_offline import parse_fail, run_failure_case
+from freejoint_core.mujoco_plant import MujocoPlant
 from freejoint_core.offline import initial_state
 from freejoint_core.plant import Plant
 from freejoint_core.trajectory import CircleQuintic
+from freejoint_core.urdf import paper_arm
 import numpy as np
 import pytest
 
@@ -239,3 +241,17 @@ def test_after_cannot_track_a_further_failure_leaves_the_least_harm_set():
     assert rec.observe(q, [0.0] * 3, [5.0, 0.0, 0.0], [0.0, 0.0, 0.0]) == (0, 'effort')
     second = rec.switch(0, 1.002, 'effort', q, [0.0] * 3)
     assert second.verdict == CANNOT_TRACK and rec.active == ()
+
+
+def test_a_failed_joint_on_the_mujoco_plant_moves_as_its_torque_zeroed():
+    arm = paper_arm('vertical')   # joint 3 free: the active joints are 1 and 2
+    q0 = initial_state(table1('vertical'))
+    failing = MujocoPlant(arm, seed=2, q0=q0)
+    failing.fail_joint(1, 0.02)
+    zeroed = MujocoPlant(arm, seed=2, q0=q0)
+    for k in range(40):
+        tau = _torques(k)[:2]
+        failing.step(tau, DT)
+        zeroed.step([tau[0], 0.0 if k >= 20 else tau[1]], DT)
+    assert failing.q.tolist() == zeroed.q.tolist()
+    assert failing.last_effort == (tau[0], 0.0, 0.0)
