@@ -91,7 +91,8 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
                      nominal_scale=NOMINAL_SCALE, dist_bound=DEFAULT_DIST_BOUND,
                      nullspace_kd=DEFAULT_NULLSPACE_KD, k_o=DEFAULT_K_O,
                      margin=DEFAULT_MARGIN, ticks=DEFAULT_TICKS, detect=True, assess=None,
-                     diverge_m=0.5, diverge_qd=1000.0, record_trace=False):
+                     diverge_m=0.5, diverge_qd=1000.0, record_trace=False,
+                     internal_check=True):
     """
     Run one failure scenario and return its record (and trace).
 
@@ -125,6 +126,9 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
         Divergence limits (module notes).
     record_trace : bool
         Also return ``t``, ``q``, ``qd``, ``e``, ``tau`` (all joints), ``residual``.
+    internal_check : bool
+        False: the verdict checks only r and ``det`` at the pose, not the internal motion
+        (to see what the law does with a passive set the check would refuse).
 
     Returns
     -------
@@ -152,7 +156,7 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
     for j, at in fail:
         plant.fail_joint(j, at)
     rec = Reconfigurer(nominal, dt, k_o=k_o, margin=margin, ticks=ticks, effort=effort,
-                       assess=assess, trajectory=traj)
+                       assess=assess, trajectory=traj if internal_check else None)
     n = real.n
     plant_active = real.active
     fail_at = dict(fail)
@@ -387,6 +391,9 @@ def _parse(argv):
                     help='measured effort available: also the effort detector')
     ap.add_argument('--no-detect', action='store_true',
                     help='no residual/effort detection (with --notice: notices only)')
+    ap.add_argument('--no-internal-check', action='store_true',
+                    help='verdict from r and det(Da Da^T) only (what the law does without '
+                    'the internal-motion check)')
     ap.add_argument('--margin', type=float, default=DEFAULT_MARGIN)
     ap.add_argument('--ticks', type=int, default=DEFAULT_TICKS)
     ap.add_argument('--suite', action='store_true',
@@ -426,7 +433,8 @@ def main(argv=None):
                 rec, _ = run_failure_case(case, seed, fail, actuated=actuated, notice=notice,
                                           effort=effort, detect=not args.no_detect,
                                           margin=args.margin, ticks=args.ticks,
-                                          duration=duration)
+                                          duration=duration,
+                                          internal_check=not args.no_internal_check)
                 rec['scenario'] = name or spec or 'fault-free'
                 recs.append(rec)
                 print(json.dumps({k: v for k, v in rec.items() if k != 'switches'}),
