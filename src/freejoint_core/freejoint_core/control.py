@@ -56,6 +56,7 @@ from typing import NamedTuple
 
 from freejoint_core.arm import ArmModel, ArmParams, check_vector
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.internal import NullSpace, projector, weighted_inverse
 from freejoint_core.models import make_model
 import numpy as np
 
@@ -259,6 +260,10 @@ class RobustController:
         The nominal model's implementation, of ``nominal_params`` (e.g.
         ``freejoint_core.pin_model.PinArmModel`` of a URDF arm: Pinocchio instead of
         the general numpy path); default ``make_model(nominal_params)``.
+    nullspace : freejoint_core.internal.NullSpace, optional
+        Null-space term and right inverse for r > m (``freejoint_core.internal``);
+        None (default): the paper's law exactly.  Set, the tick runs on the general
+        numpy path.
 
     Attributes
     ----------
@@ -267,8 +272,12 @@ class RobustController:
 
     """
 
-    def __init__(self, nominal_params, gains=None, use_fast=True, model=None):
+    def __init__(self, nominal_params, gains=None, use_fast=True, model=None, nullspace=None):
         self._use_fast = bool(use_fast)
+        if nullspace is not None and not isinstance(nullspace, NullSpace):
+            raise FreejointValueError(
+                f'nullspace: expected None or NullSpace, got {type(nullspace).__name__}')
+        self.nullspace = nullspace
         self.set_nominal(nominal_params, model)
         self._theta = None
         self.stiffness = 1.0
@@ -304,8 +313,10 @@ class RobustController:
         if model is None:
             model = make_model(params) if self._use_fast else ArmModel(params)
         self.model = model
+        if getattr(self, 'nullspace', None) is not None:
+            self.nullspace.check(self.r)
         self._fast = self._use_fast and self.n == 3 and self.r == 2 and hasattr(
-            self.model, 'task')
+            self.model, 'task') and getattr(self, 'nullspace', None) is None
         self._task = self.model.task if self._fast else None
         if getattr(self, 'gains', None) is not None:
             self.set_gains(self.gains)
@@ -576,7 +587,10 @@ class RobustController:
         if abs(det) < self._thr:
             a = a + _dls_lambda2(det, float(np.trace(a)), self._thr) * np.eye(2)
             status = STATUS_NEAR_SINGULAR
-        tau = da.T @ np.linalg.solve(a, v + dv - b)
+        if self.nullspace is None:
+            tau = da.T @ np.linalg.solve(a, v + dv - b)
+        else:
+            tau = self._null_space_torque(q, qd, da, a, status, v + dv - b)
         if self._limit is not None:
             lim = np.array(self._limit)
             clipped = np.clip(tau, -lim, lim)
@@ -585,3 +599,20 @@ class RobustController:
             tau = clipped
         return ControlOutput(tau, e, edot, s, np.array(self._theta), rho, dv, abs(det), p,
                              status)
+
+    def _null_space_torque(self, q, qd, da, a, status, w):
+        """``Da# w + N tau_0`` of ``freejoint_core.internal`` (a: ``Da Da^T``, damped)."""
+        ns = self.nullspace
+        pinv = np.linalg.solve(a, da).T
+        weighted = None
+        if (ns.inverse == 'weighted' or ns.projector == 'dynamic') and not (
+                status & STATUS_NEAR_SINGULAR):
+            weighted = weighted_inverse(da, self.model.effective(q)[1])
+        task_inv = weighted if ns.inverse == 'weighted' and weighted is not None else pinv
+        tau = task_inv @ w
+        if self.r > 2:
+            act = list(self.nominal.active)
+            # near a singularity both fall back to the damped pinv: N stays bounded (<= 1)
+            proj_inv = weighted if ns.projector == 'dynamic' and weighted is not None else pinv
+            tau = tau + projector(da, proj_inv) @ ns.tau0(q[act], qd[act])
+        return tau

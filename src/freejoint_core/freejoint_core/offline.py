@@ -61,12 +61,14 @@ from .arm import ArmModel, CASES, NOMINAL_SCALE, table1
 from .control import Gains, RobustController
 from .delay import DEFAULT_BIAS_GAIN, extrapolate_setpoint, StatePredictor
 from .errors import FreejointValueError, positive
+from .internal import NullSpace
 from .metrics import compute_record, format_summary, format_table, write_records
 from .models import make_model
 from .plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
 from .trajectory import CircleQuintic
 
 VARIANTS = ('robust', 'robust_off', 'exact')
+ACTUATED = ('paper', 'all')
 DEFAULT_OUT = 'bags/offline/metrics.json'
 DEFAULT_DT = 1e-3
 """The paper's control period [s]."""
@@ -112,7 +114,8 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
              dt_sub=DEFAULT_DT_SUB, duration=5.0, nominal_scale=NOMINAL_SCALE,
              dist_bound=DEFAULT_DIST_BOUND, gains=None, record_trace=False,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0, delay_ticks=0, predict=False,
-             bias_gain=DEFAULT_BIAS_GAIN, predict_ticks=None, echo=False, delay_jitter=0):
+             bias_gain=DEFAULT_BIAS_GAIN, predict_ticks=None, echo=False, delay_jitter=0,
+             actuated='paper', nullspace=None):
     """
     Run one closed-loop case and return its metrics record (and trace).
 
@@ -166,6 +169,11 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
         generator, seeded from ``seed``), in order (never before the previous
         one); each plant step applies the newest command arrived (a late one
         is held, one overtaken before its step is never applied).
+    actuated : {'paper', 'all'}
+        'paper': joint 3 free (Table I); 'all': every joint driven (r = 3 > m = 2, the
+        start pose unchanged); the variant is labelled ``<variant> all``.
+    nullspace : freejoint_core.internal.NullSpace, optional
+        The controller's null-space option (r > m); labelled ``+ns``.
 
     Returns
     -------
@@ -225,7 +233,12 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     if n_sub < 1 or abs(n_sub * dt_sub - dt) > 1e-9 * dt:
         raise FreejointValueError(
             f'dt_sub: dt = {dt} s is not an integer multiple of dt_sub = {dt_sub} s')
+    if actuated not in ACTUATED:
+        raise FreejointValueError(f'actuated: expected one of {ACTUATED}, got {actuated!r}')
     real = table1(case)
+    start_arm = real
+    if actuated == 'all':
+        real = dataclasses.replace(real, passive=())
     if variant == 'exact':
         nominal, dist = real, 0.0
     else:
@@ -234,14 +247,14 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     if variant == 'robust_off':
         gains = dataclasses.replace(gains, robust=False)
     px0, py0 = trajectory.sample(0.0)[0]
-    q0 = initial_state(real, q3_0_deg, (px0, py0))
+    q0 = initial_state(start_arm, q3_0_deg, (px0, py0))
     plant = Plant(real, dt_sub, dist_bound=dist, seed=seed, q0=q0)
-    ctrl = RobustController(nominal, gains)
-    label = variant
+    ctrl = RobustController(nominal, gains, nullspace=nullspace)
+    label = variant + (' all' if actuated == 'all' else '') + ('+ns' if nullspace else '')
     pred = None
     pipeline = bool(delay_ticks or delay_jitter)
     if pipeline:
-        label = f'{variant} d{delay_ticks}' + (f'~{delay_jitter}' if delay_jitter else '') \
+        label = f'{label} d{delay_ticks}' + (f'~{delay_jitter}' if delay_jitter else '') \
             + ('+p' if predict else '')
         if predict and predict_ticks != delay_ticks:
             label += f'{predict_ticks}'
@@ -263,7 +276,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     des = [sample(k * dt) for k in range(n_ticks)]
     t_arr = np.arange(n_ticks) * dt
     p_buf = np.empty((n_ticks, 2))
-    tau_buf = np.empty((n_ticks, 2))
+    tau_buf = np.empty((n_ticks, real.r))
     det_buf = np.empty(n_ticks)
     q3_buf = np.empty(n_ticks)
     if record_trace:
@@ -276,7 +289,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
             ql_buf = np.empty((n_ticks, 3))
             qdl_buf = np.empty((n_ticks, 3))
     isfinite = math.isfinite
-    passive = real.passive[0]
+    passive = start_arm.passive[0]
     limit2 = diverge_m * diverge_m
     theta = ctrl.theta
     diverged = None
@@ -310,15 +323,15 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
             px, py = out.p.tolist()
         else:
             px, py = fk_real(q).tolist()
-        t0, t1 = out.tau.tolist()
+        tau_k = out.tau.tolist()
         ex = px - pdx
         ey = py - pdy
         err2 = ex * ex + ey * ey
-        if not (isfinite(err2) and isfinite(t0) and isfinite(t1) and isfinite(out.det)):
+        if not (isfinite(err2) and all(map(isfinite, tau_k)) and isfinite(out.det)):
             diverged = t
             break
         p_buf[k] = px, py
-        tau_buf[k] = t0, t1
+        tau_buf[k] = tau_k
         det_buf[k] = out.det
         q3_buf[k] = q[passive]
         theta = out.theta
@@ -394,7 +407,8 @@ def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
     bias_gain : float
         The predictor's bias observer gain.
     **delay_options
-        ``predict_ticks``, ``echo``, ``delay_jitter`` of :func:`run_case`.
+        ``predict_ticks``, ``echo``, ``delay_jitter``, ``actuated``, ``nullspace`` of
+        :func:`run_case`.
 
     Returns
     -------
@@ -566,6 +580,15 @@ def _parse(argv):
     ap.add_argument('--echo', action='store_true',
                     help='predictor horizon and observer from the applied command the plant '
                     'reports (joint_states.effort)')
+    ap.add_argument('--actuated', choices=ACTUATED, default='paper',
+                    help="'paper': joint 3 free (default); 'all': every joint driven "
+                    '(r = 3 > m = 2)')
+    ap.add_argument('--nullspace-kd', type=float, default=None, metavar='KD',
+                    help='null-space damping of the active joints for r > m (N m s/rad, e.g. '
+                    '3; default off: the paper\'s law); see docs/internal-motion.md')
+    ap.add_argument('--weighted', action='store_true',
+                    help='with --nullspace-kd: inertia-weighted inverse and dynamically '
+                    'consistent projector instead of the pseudo-inverse ones')
     ap.add_argument('--delay-study', action='store_true',
                     help='only the delay study of docs/delay.md: robust over the seeds, '
                     f'delays {", ".join(map(str, DELAY_STUDY_MS))} ms, predictor off and on')
@@ -589,7 +612,8 @@ def main(argv=None):
     records = run_all(range(args.seeds), args.cases, args.dt_sub, off,
                       delay_ticks=args.delay_ticks, predict=args.predict,
                       bias_gain=args.bias_gain, predict_ticks=args.predict_ticks,
-                      echo=args.echo, delay_jitter=args.delay_jitter)
+                      echo=args.echo, delay_jitter=args.delay_jitter,
+                      **_internal_options(args))
     wall = time.perf_counter() - t0
     print(f'offline: {len(records)} runs, dt = 1 ms, dt_sub = {args.dt_sub:g} s, '
           f'{wall:.1f} s wall')
@@ -623,6 +647,17 @@ def main(argv=None):
         print(f'  diverged in both: {diff["diverged"]} runs, divergence time changed by up to '
               f'{diff["diverged_at_s"]:.3g} s; diverged in one only: {diff["mismatch"]}')
     return 0
+
+
+def _internal_options(args):
+    """The ``actuated`` / ``nullspace`` keywords of :func:`run_case` from the CLI."""
+    out = {}
+    if args.actuated != 'paper':
+        out['actuated'] = args.actuated
+    if args.nullspace_kd is not None:
+        kind = {'inverse': 'weighted', 'projector': 'dynamic'} if args.weighted else {}
+        out['nullspace'] = NullSpace(kd=args.nullspace_kd, **kind)
+    return out
 
 
 def _main_delay_study(args):

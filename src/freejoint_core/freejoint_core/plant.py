@@ -90,6 +90,11 @@ class PeriodPlant:
         Number of ``step`` calls since construction/reset.
     last_disturbance : tuple of float
         The disturbance [N m] held over the last step (zeros if disabled).
+    last_effort : tuple of float, (n,)
+        Actuator torque [N m] each joint received over the last step (0 on passive and
+        failed joints; zeros before the first step).
+    failed : tuple of int
+        Joints whose failure has taken effect (see ``fail_joint``).
 
     """
 
@@ -107,6 +112,7 @@ class PeriodPlant:
         self._qd0 = self._state(qd0, 'qd0')
         self._active = params.active
         self._dt_cache = (None, 0)
+        self._fail_at = {}
 
     @staticmethod
     def _check_seed(seed):
@@ -144,6 +150,49 @@ class PeriodPlant:
         self.t = 0.0
         self.k = 0
         self.last_disturbance = (0.0,) * self.n
+        self.last_effort = (0.0,) * self.n
+        self._fail_at = {}
+
+    def fail_joint(self, joint, at_s=None):
+        """
+        Make a joint's actuator and brake fail (from now or from a later time).
+
+        Parameters
+        ----------
+        joint : int
+            Joint index (0-based), in ``[0, n)``.  A passive joint has nothing to lose and
+            is accepted (no effect).
+        at_s : float, optional
+            Simulated time [s] from which the joint gets no torque: the first period that
+            starts at ``t >= at_s - 1e-9`` (tick-aligned); default now (``self.t``).  An
+            earlier failure of the same joint is kept.  ``reset`` clears every failure.
+
+        Raises
+        ------
+        FreejointValueError
+            Naming ``joint`` or ``at_s`` if they are bad.
+
+        """
+        if isinstance(joint, bool) or not isinstance(joint, (int, np.integer)) \
+                or not 0 <= joint < self.n:
+            raise FreejointValueError(f'joint: expected an int in [0, {self.n}), got {joint!r}')
+        at = self.t if at_s is None else float(at_s) if isinstance(
+            at_s, (int, float, np.integer, np.floating)) and not isinstance(at_s, bool) \
+            else math.nan
+        if not math.isfinite(at) or at < 0.0:
+            raise FreejointValueError(f'at_s: expected a finite time >= 0 s, got {at_s!r}')
+        joint = int(joint)
+        self._fail_at[joint] = min(at, self._fail_at.get(joint, math.inf))
+
+    @property
+    def failed(self):
+        """Return the sorted tuple of joints whose failure has taken effect (t >= at_s)."""
+        return tuple(sorted(j for j, at in self._fail_at.items() if self.t >= at - 1e-9))
+
+    @property
+    def failures(self):
+        """Return ``{joint: at_s}`` of every scheduled or effective failure (a copy)."""
+        return dict(self._fail_at)
 
     def _substeps(self, dt):
         if dt == self._dt_cache[0]:
@@ -184,13 +233,23 @@ class PeriodPlant:
             self.last_disturbance = tuple(full)
         else:
             full = [0.0] * self.n
-        for j, v in zip(self._active, tau):
-            full[j] += float(v)
+        effort = [0.0] * self.n
+        if self._fail_at:
+            dead = self.failed
+            for j, v in zip(self._active, tau):
+                if j not in dead:
+                    effort[j] = float(v)
+                    full[j] += float(v)
+        else:
+            for j, v in zip(self._active, tau):
+                effort[j] = float(v)
+                full[j] += float(v)
         why = self._advance(n_sub, full)
         if why is not None:
             raise PlantDivergedError(
                 f'tau_active: the integration over step {self.k} diverged ({why}) from '
                 f'q = {self.q.tolist()}, qd = {self.qd.tolist()}; the state is left as it was')
+        self.last_effort = tuple(effort)
         self.t += dt
         self.k += 1
 
