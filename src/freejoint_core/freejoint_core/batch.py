@@ -386,7 +386,7 @@ def _rk4(c, q, w, tau, h, n_sub):
     return [q0, q1, q2], [w0, w1, w2]
 
 
-def _grid_check(dt, dt_sub, duration):
+def check_grid(dt, dt_sub, duration):
     n_ticks = int(round(duration / dt))
     if n_ticks < 1 or abs(n_ticks * dt - duration) > 1e-9 * duration:
         raise FreejointValueError(
@@ -469,7 +469,7 @@ def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration
     if not isinstance(gains, Gains):
         raise FreejointValueError(f'gains: expected Gains, got {type(gains).__name__}')
     trajectory = CircleQuintic() if trajectory is None else trajectory
-    n_ticks, n_sub = _grid_check(dt, dt_sub, duration)
+    n_ticks, n_sub = check_grid(dt, dt_sub, duration)
     if engine == 'numba':
         return _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory,
                                diverge_m, diverge_qd, record_trace)
@@ -786,7 +786,7 @@ def run_scalar(run, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duratio
     r = {k: v[0] for k, v in check_runs({k: [v] for k, v in run.items()}).items()}
     gains = Gains() if gains is None else gains
     trajectory = CircleQuintic() if trajectory is None else trajectory
-    n_ticks, n_sub = _grid_check(dt, dt_sub, duration)
+    n_ticks, n_sub = check_grid(dt, dt_sub, duration)
     real = table1('vertical' if r['vertical'] else 'horizontal')
     nominal = nominal_params(real, r['scale_mass'], r['scale_inertia'], r['scale_lc'])
     seed = int(r['seed'])

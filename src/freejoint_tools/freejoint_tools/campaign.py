@@ -278,9 +278,9 @@ def parse(raw):
         c[key] = v
     if c['duration'] / c['dt'] > 1e6:
         raise CampaignError(f'duration: {c["duration"]} s is more than 1e6 ticks')
-    from freejoint_core.batch import _grid_check
+    from freejoint_core.batch import check_grid
     try:
-        _grid_check(c['dt'], c['dt_sub'], c['duration'])
+        check_grid(c['dt'], c['dt_sub'], c['duration'])
     except FreejointValueError as exc:
         raise CampaignError(str(exc)) from None
     c['_gains'] = _check_controller(raw.get('controller') or {})
