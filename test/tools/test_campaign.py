@@ -1,0 +1,121 @@
+"""Campaign files are checked before any run; designs expand as written; runs resume."""
+import os
+
+from freejoint_tools import campaign
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+GOOD = """
+name: tiny
+case: vertical
+duration: 0.2
+task: {centre: [0.0, 0.0], radius: 0.2, duration: 5.0}
+design: {kind: grid}
+seeds: 2
+chunk: 5
+axes:
+  scale: {values: [0.5, 0.7, 1.5]}
+  delay: {values: [0, 3]}
+"""
+
+
+def _file(tmp_path, text, name='c.yaml'):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+@pytest.mark.parametrize('replace,named', [
+    (('  delay: {values: [0, 3]}', '  wind: {values: [0, 3]}'), 'axes.wind: unknown axis'),
+    (('{values: [0.5, 0.7, 1.5]}', '{range: [1.5, 0.5], steps: 3}'),
+     'axes.scale.range: low must be < high'),
+    (('{values: [0.5, 0.7, 1.5]}', '{values: [0.5, -0.7]}'),
+     'axes.scale.values[1]: -0.7 is out of range'),
+    (('{values: [0, 3]}', '{range: [0, 3]}'), 'axes.delay.steps: a grid range needs steps'),
+    (('seeds: 2', 'seeds: 2\ncontroller: {Kp: [1, 2]}'),
+     'controller.Kp: not a parameter of the controller node'),
+    (('seeds: 2', 'seeds: 2\ncontroller: {K: [1, 2, 3]}'), 'controller.K: expected shape (2,)'),
+    (('seeds: 2', 'seeds: 2\ncontroller: {stale_timeout: 0.5}'),
+     'controller.stale_timeout: a node parameter the offline loop does not model'),
+    (('case: vertical', 'case: sideways'), 'case: expected one of'),
+    (('case: vertical', 'case: vertical\narm: {urdf: /nonexistent.urdf}'), 'arm.urdf:'),
+    (('design: {kind: grid}', 'design: {kind: sobol}'), 'design.kind: expected one of'),
+    (('seeds: 2', 'seeds: 2\nfixed: {noise_q: -1.0}'), 'fixed.noise_q: -1.0 is out of range'),
+    (('duration: 0.2', 'duration: 0.2\nspeed: 3'), 'speed: unknown key'),
+])
+def test_a_bad_campaign_file_ends_with_one_line_naming_the_field_exit_2_before_any_run(
+        tmp_path, capsys, replace, named):
+    path = _file(tmp_path, GOOD.replace(*replace))
+    out_dir = str(tmp_path / 'out')
+    assert campaign.main(['run', path, '--out', out_dir]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith('campaign: ') and named in err, err
+    assert not os.path.exists(out_dir)
+
+
+def test_a_urdf_arm_that_loads_is_refused_as_not_yet_supported(tmp_path, capsys):
+    from freejoint_core.urdf import shipped_urdf_path
+    text = GOOD.replace('case: vertical', f'case: vertical\narm: {{urdf: {shipped_urdf_path("paper_arm")}}}')
+    assert campaign.main(['run', _file(tmp_path, text), '--out', str(tmp_path / 'o')]) == 2
+    assert 'not yet supported' in capsys.readouterr().err
+
+
+def test_a_grid_design_is_the_product_of_the_axes_times_the_seeds(tmp_path):
+    rows = campaign.design(campaign.load(_file(tmp_path, GOOD)))
+    assert rows['run_index'].tolist() == list(range(12))
+    assert rows['scale_mass'].tolist() == [0.5] * 4 + [0.7] * 4 + [1.5] * 4
+    assert rows['scale_lc'].tolist() == rows['scale_inertia'].tolist() == \
+        rows['scale_mass'].tolist()
+    assert rows['delay'].tolist() == [0, 0, 3, 3] * 3
+    assert rows['seed'].tolist() == [0, 1] * 6
+    assert set(rows['dist_bound']) == {0.5} and set(rows['q3_0_deg']) == {120.0}
+
+
+def test_a_latin_hypercube_puts_one_run_in_each_stratum_of_each_axis(tmp_path):
+    text = GOOD.replace('design: {kind: grid}', 'design: {kind: lhs, samples: 40, seed: 3}') \
+        .replace('seeds: 2', 'seeds: 1').replace('{values: [0.5, 0.7, 1.5]}', '{range: [0.5, 1.5]}') \
+        .replace('{values: [0, 3]}', '{range: [0, 39]}')
+    camp = campaign.load(_file(tmp_path, text))
+    rows = campaign.design(camp)
+    strata = np.floor((rows['scale_mass'] - 0.5) / 1.0 * 40).astype(int)
+    assert sorted(strata.tolist()) == list(range(40))
+    assert sorted(rows['delay'].tolist()) == list(range(40))
+    assert rows['seed'].tolist() == list(range(40))
+    again = campaign.design(campaign.load(_file(tmp_path, text, 'd.yaml')))
+    assert np.array_equal(again['scale_mass'], rows['scale_mass'])
+
+
+def test_a_stopped_campaign_resumes_to_the_table_of_one_uninterrupted_run(tmp_path):
+    camp = campaign.load(_file(tmp_path, GOOD))
+    whole = campaign.run(camp, str(tmp_path / 'whole'), progress=False)
+    part = str(tmp_path / 'part')
+    assert campaign.run(camp, part, progress=False, max_chunks=1) is None
+    assert len(os.listdir(os.path.join(part, 'chunks'))) == 1
+    resumed = campaign.run(camp, part, progress=False)
+    with open(whole, 'rb') as fa, open(resumed, 'rb') as fb:
+        assert fa.read() == fb.read()
+    a = pq.read_table(whole)
+    assert a.column('run_index').to_pylist() == list(range(12))
+    holds = a.column('holds').to_pylist()
+    paper = [i for i in range(12) if a.column('scale_mass')[i].as_py() == 0.7
+             and a.column('delay')[i].as_py() == 0]
+    assert all(holds[i] for i in paper)
+
+
+def test_a_results_folder_of_another_campaign_is_refused(tmp_path, capsys):
+    out_dir = str(tmp_path / 'out')
+    campaign.run(campaign.load(_file(tmp_path, GOOD)), out_dir, progress=False, max_chunks=1)
+    other = _file(tmp_path, GOOD.replace('seeds: 2', 'seeds: 3'), 'other.yaml')
+    assert campaign.main(['run', other, '--out', out_dir, '--no-progress']) == 2
+    assert 'another campaign' in capsys.readouterr().err
+
+
+def test_the_report_prints_the_summary_and_draws_a_heatmap_per_pair_of_axes(tmp_path, capsys):
+    out_dir = str(tmp_path / 'out')
+    campaign.run(campaign.load(_file(tmp_path, GOOD)), out_dir, progress=False)
+    assert campaign.main(['report', out_dir]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith('runs: 12, law holds in ')
+    assert '| scale | 0.7 | 4 |' in text and '| delay | 3 | 6 |' in text
+    assert os.path.exists(os.path.join(out_dir, 'heatmap_scale__delay.png'))
