@@ -56,7 +56,8 @@ def test_a_bad_campaign_file_ends_with_one_line_naming_the_field_exit_2_before_a
 
 def test_a_urdf_arm_that_loads_is_refused_as_not_yet_supported(tmp_path, capsys):
     from freejoint_core.urdf import shipped_urdf_path
-    text = GOOD.replace('case: vertical', f'case: vertical\narm: {{urdf: {shipped_urdf_path("paper_arm")}}}')
+    urdf = shipped_urdf_path('paper_arm')
+    text = GOOD.replace('case: vertical', f'case: vertical\narm: {{urdf: {urdf}}}')
     assert campaign.main(['run', _file(tmp_path, text), '--out', str(tmp_path / 'o')]) == 2
     assert 'not yet supported' in capsys.readouterr().err
 
@@ -73,9 +74,9 @@ def test_a_grid_design_is_the_product_of_the_axes_times_the_seeds(tmp_path):
 
 
 def test_a_latin_hypercube_puts_one_run_in_each_stratum_of_each_axis(tmp_path):
-    text = GOOD.replace('design: {kind: grid}', 'design: {kind: lhs, samples: 40, seed: 3}') \
-        .replace('seeds: 2', 'seeds: 1').replace('{values: [0.5, 0.7, 1.5]}', '{range: [0.5, 1.5]}') \
-        .replace('{values: [0, 3]}', '{range: [0, 39]}')
+    text = GOOD.replace('design: {kind: grid}', 'design: {kind: lhs, samples: 40, seed: 3}')
+    text = text.replace('seeds: 2', 'seeds: 1').replace('{values: [0, 3]}', '{range: [0, 39]}')
+    text = text.replace('{values: [0.5, 0.7, 1.5]}', '{range: [0.5, 1.5]}')
     camp = campaign.load(_file(tmp_path, text))
     rows = campaign.design(camp)
     strata = np.floor((rows['scale_mass'] - 0.5) / 1.0 * 40).astype(int)

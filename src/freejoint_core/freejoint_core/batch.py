@@ -42,7 +42,9 @@ seed, nominal_scale=s, dist_bound=b, q3_0_deg=...)`` (equal scales ``s``);
 (tests: ``test/core/test_batch.py``).
 """
 
+from concurrent.futures import ThreadPoolExecutor
 import math
+import os
 
 import numpy as np
 
@@ -387,6 +389,20 @@ def _rk4(c, q, w, tau, h, n_sub):
 
 
 def check_grid(dt, dt_sub, duration):
+    """
+    Return ``(ticks, sub-steps)`` of a run, or raise naming ``duration`` or ``dt_sub``.
+
+    Parameters
+    ----------
+    dt, dt_sub, duration : float
+        Control period, RK4 step and run length (s).
+
+    Returns
+    -------
+    tuple of int
+        ``duration / dt`` and ``dt / dt_sub`` (both integers, checked).
+
+    """
     n_ticks = int(round(duration / dt))
     if n_ticks < 1 or abs(n_ticks * dt - duration) > 1e-9 * duration:
         raise FreejointValueError(
@@ -431,7 +447,7 @@ class _Streams:
 
 def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration=5.0,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0, record_trace=False,
-             block=250, engine='numba'):
+             block=250, engine='numba', threads=None):
     """
     Run every run of ``runs`` together and return their metrics.
 
@@ -454,6 +470,8 @@ def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration
     engine : {'numba', 'numpy'}
         ``numba``: the compiled kernel (``batch_kernel``, threads over runs);
         ``numpy``: every operation an array over the runs (slower; same numbers).
+    threads : int, optional
+        Threads of the numba engine (default: every core).
 
     Returns
     -------
@@ -472,7 +490,7 @@ def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration
     n_ticks, n_sub = check_grid(dt, dt_sub, duration)
     if engine == 'numba':
         return _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory,
-                               diverge_m, diverge_qd, record_trace)
+                               diverge_m, diverge_qd, record_trace, threads)
     n = runs['seed'].shape[0]
     reals = {v: table1('vertical' if v else 'horizontal') for v in (False, True)}
     real_list = [reals[bool(v)] for v in runs['vertical']]
@@ -683,7 +701,7 @@ def _prepare(runs, trajectory, dt, n_ticks):
 
 
 def _gain_vector(gains, dt):
-    """The ``gp`` layout of ``batch_kernel``."""
+    """Return the gains in the ``gp`` layout of ``batch_kernel``."""
     law = _Law(gains, dt)
     inf = math.inf
     tmax = law.tmax if law.tmax is not None else (inf,) * 5
@@ -696,7 +714,7 @@ def _gain_vector(gains, dt):
 
 def draws(runs, n_ticks):
     """
-    The random numbers of every run, from the generators of the scalar reference.
+    Return the random numbers of every run, from the generators of the scalar reference.
 
     Parameters
     ----------
@@ -738,7 +756,7 @@ def draws(runs, n_ticks):
 
 
 def _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory, diverge_m,
-                    diverge_qd, record_trace):
+                    diverge_qd, record_trace, threads):
     from . import batch_kernel
     cr, cn, ln, q_init, des = _prepare(runs, trajectory, dt, n_ticks)
     dist, nq, nqd, ntau, flags = draws(runs, n_ticks)
@@ -747,10 +765,17 @@ def _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory, diverge
     n = cr.shape[0]
     out = np.empty((n, batch_kernel.N_OUT))
     out_p = np.full((n, n_ticks, 2) if record_trace else (1, 1, 2), np.nan)
-    batch_kernel.run_all(cr, cn, ln, q_init, des, _gain_vector(gains, dt), dist, nq, nqd,
-                         ntau, flags, runs['delay'], alpha, float(dt), float(dt_sub),
-                         int(n_sub), float(diverge_m * diverge_m), float(diverge_qd),
-                         bool(record_trace), out, out_p)
+    args = (cr, cn, ln, q_init, des, _gain_vector(gains, dt), dist, nq, nqd, ntau, flags,
+            runs['delay'], alpha, float(dt), float(dt_sub), int(n_sub),
+            float(diverge_m * diverge_m), float(diverge_qd), bool(record_trace), out, out_p)
+    threads = max(1, min(threads or os.cpu_count() or 1, n))
+    if threads == 1:
+        batch_kernel.run_range(0, n, 1, *args)
+    else:   # interleaved: neighbouring runs (alike, similar cost) go to different threads
+        with ThreadPoolExecutor(threads) as pool:
+            for f in [pool.submit(batch_kernel.run_range, j, n, threads, *args)
+                      for j in range(threads)]:
+                f.result()
     if np.any(out[:, 10] == 0):
         raise FreejointValueError('gains: the first tick already fails for some run')
     res = {name: out[:, j] for j, name in enumerate(METRICS)}

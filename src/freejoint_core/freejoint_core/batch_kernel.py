@@ -1,9 +1,10 @@
 """
-Compiled kernel of :func:`freejoint_core.batch.simulate` (numba, threads over runs).
+Compiled kernel of :func:`freejoint_core.batch.simulate` (numba, runs split over threads).
 
 One run per thread iteration, tick by tick, with the very operations (same order) of
 ``fast3.Arm3Model``, ``RobustController._step_fast`` and ``Plant._rk4_fast3``; no
-fast-math, numpy's error model (a division by zero gives inf, caught by the
+fast-math, no parfors (``run_range`` releases the GIL; ``batch`` runs one per thread, which
+compiles in seconds where ``parallel=True`` took minutes on a loaded machine), numpy's error model (a division by zero gives inf, caught by the
 divergence rule like the exception ``offline.run_case`` catches).  The random numbers
 are drawn outside (``batch``), per run, from the generators the scalar reference uses.
 
@@ -25,7 +26,7 @@ import numpy as np
 N_OUT = 11
 
 
-@numba.njit(cache=True, inline='always', error_model='numpy')
+@numba.njit(cache=True, error_model='numpy')
 def _terms(c, q0, q1, q2, w0, w1, w2):
     f2 = q0 + q1
     f3 = f2 + q2
@@ -63,7 +64,7 @@ def _terms(c, q0, q1, q2, w0, w1, w2):
             a11, b12, b13, a22, b23, a33, inv)
 
 
-@numba.njit(cache=True, inline='always', error_model='numpy')
+@numba.njit(cache=True, error_model='numpy')
 def _qdd(c, q0, q1, q2, w0, w1, w2, t0, t1, t2):
     (c1, _, c2, _, c3, _, _, _, k1, k2, k3, a12, a13, a23,
      a11, b12, b13, a22, b23, a33, inv) = _terms(c, q0, q1, q2, w0, w1, w2)
@@ -106,7 +107,7 @@ def _task(c, ln, q0, q1, q2, w0, w1, w2):
     return px, py, vx, vy, vx1, vx2 - vx1, vy1, vy2 - vy1, bx, by
 
 
-@numba.njit(cache=True, error_model='numpy')
+@numba.njit(cache=True, nogil=True, error_model='numpy')
 def _run(i, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay, alpha, dt, h,
          n_sub, limit2, qd_max, record, out, out_p):
     n_ticks = des.shape[0]
@@ -333,10 +334,10 @@ def _run(i, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay, alph
     out[i, 10] = n_rec
 
 
-@numba.njit(cache=True, parallel=True, error_model='numpy')
-def run_all(cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay, alpha, dt, h,
-            n_sub, limit2, qd_max, record, out, out_p):
-    """Run every run ``i`` of the arrays (threads over ``i``); fills ``out``, ``out_p``."""
-    for i in numba.prange(cr.shape[0]):
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def run_range(lo, hi, step, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay,
+              alpha, dt, h, n_sub, limit2, qd_max, record, out, out_p):
+    """Run the runs ``lo, lo + step, ... < hi`` (without the GIL); fills ``out``, ``out_p``."""
+    for i in range(lo, hi, step):
         _run(i, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay, alpha, dt, h,
              n_sub, limit2, qd_max, record, out, out_p)

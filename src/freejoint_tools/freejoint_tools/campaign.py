@@ -760,7 +760,7 @@ def heatmaps(cols, names, folder, paper=PAPER_POINT):
             py = np.interp(paper[b], cb, np.arange(len(cb))) if b in paper else None
             if px is not None and py is not None:
                 ax.plot(px, py, marker='*', color='w', markeredgecolor='k', markersize=14)
-        fig.suptitle(f'{a} x {b}: {len(holds)} runs (star: the paper\'s point; black: '
+        fig.suptitle(f"{a} x {b}: {len(holds)} runs (star: the paper's point; black: "
                      '50 % boundary)', fontsize=9)
         fig.tight_layout()
         path = os.path.join(folder, f'heatmap_{a}__{b}.png')
