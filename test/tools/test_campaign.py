@@ -33,6 +33,7 @@ def _file(tmp_path, text, name='c.yaml'):
     (('{values: [0.5, 0.7, 1.5]}', '{values: [0.5, -0.7]}'),
      'axes.scale.values[1]: -0.7 is out of range'),
     (('{values: [0, 3]}', '{range: [0, 3]}'), 'axes.delay.steps: a grid range needs steps'),
+    (('{values: [0.5, 0.7, 1.5]}', '{values: [2.1]}'), 'axes.scale.values[0]: 2.1 is out of'),
     (('seeds: 2', 'seeds: 2\ncontroller: {Kp: [1, 2]}'),
      'controller.Kp: not a parameter of the controller node'),
     (('seeds: 2', 'seeds: 2\ncontroller: {K: [1, 2, 3]}'), 'controller.K: expected shape (2,)'),

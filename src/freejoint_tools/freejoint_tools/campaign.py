@@ -60,8 +60,9 @@ PAPER_POINT = {'scale': 0.7, 'scale_mass': 0.7, 'scale_inertia': 0.7, 'scale_lc'
                'noise_tau': 0.0, 'delay': 0, 'lag': 0.0, 'q3_0_deg': 120.0, 'seed': 0}
 """The paper's point (Sec. 4): 70 % nominal, |d| <= 0.5 N m, exact sensors and actuators."""
 _BOUNDS = {  # axis: (lowest, highest, lowest excluded, integer)
-    'scale': (0.0, 10.0, True, False), 'scale_mass': (0.0, 10.0, True, False),
-    'scale_inertia': (0.0, 10.0, True, False), 'scale_lc': (0.0, 10.0, True, False),
+    # scale, scale_lc <= 2: Table I's COM (0.25 m) stays within its 0.5 m link.
+    'scale': (0.0, 2.0, True, False), 'scale_mass': (0.0, 10.0, True, False),
+    'scale_inertia': (0.0, 10.0, True, False), 'scale_lc': (0.0, 2.0, True, False),
     'dist_bound': (0.0, 1e3, False, False), 'noise_q': (0.0, 1.0, False, False),
     'noise_qd': (0.0, 100.0, False, False), 'noise_tau': (0.0, 1e3, False, False),
     'delay': (0, 1000, False, True), 'lag': (0.0, 10.0, False, False),
@@ -70,7 +71,7 @@ TOP_KEYS = ('name', 'arm', 'case', 'task', 'duration', 'dt', 'dt_sub', 'controll
             'success', 'design', 'seeds', 'fixed', 'axes', 'chunk')
 DESIGNS = ('grid', 'lhs', 'random')
 SUCCESS_KEYS = ('max_mm', 'rms_mm', 'final_mm')
-DEFAULT_CHUNK = 500
+DEFAULT_CHUNK = 250
 INPUT_COLUMNS = ('run_index',) + tuple(a for a in AXES if a != 'scale')
 METRIC_COLUMNS = ('rms_mm', 'max_mm', 'final_mm', 'tau_peak_1_nm', 'tau_peak_2_nm',
                   'q3_min_deg', 'q3_max_deg', 'q3_range_deg', 'min_det', 'theta_final_norm',
