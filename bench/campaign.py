@@ -22,6 +22,7 @@ Also ``run()`` for bench/run_all.py is not provided: this bench takes minutes.
 """
 import argparse
 import os
+import secrets
 import signal
 import socket
 import subprocess
@@ -90,15 +91,22 @@ class Cluster:
     """A two-node Ray cluster on 127.0.0.1 started by this process (stopped by ``close``)."""
 
     def __init__(self):
+        # Ray 2.60 authenticates with a token: ours, for this cluster and its drivers only.
+        os.environ['RAY_AUTH_MODE'] = 'token'
+        os.environ['RAY_AUTH_TOKEN'] = secrets.token_hex(32)
+        self.head = self.node = None
         self.port = _free_port()
+        self.address = f'127.0.0.1:{self.port}'
         self.tmp = tempfile.mkdtemp(prefix='ray_bench_')
+
+    def start(self):
+        """Start the head, wait for it, add the second node, wait for both."""
         ray = os.path.join(os.path.dirname(sys.executable), 'ray')
         common = ['--num-cpus', '1', '--block', '--disable-usage-stats']
         self.head = subprocess.Popen(
             [ray, 'start', '--head', '--port', str(self.port), '--node-ip-address', '127.0.0.1',
              '--include-dashboard', 'false', '--temp-dir', self.tmp] + common,
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-        self.address = f'127.0.0.1:{self.port}'
         self._wait_nodes(1)
         self.node = subprocess.Popen(
             [ray, 'start', '--address', self.address, '--node-ip-address', '127.0.0.1'] + common,
@@ -124,18 +132,20 @@ class Cluster:
             + _descendants(self.node.pid)
 
     def close(self):
-        """Stop both nodes (their process groups)."""
-        for proc in (self.node, self.head):
+        """Stop both nodes: SIGTERM to each ``ray start``, then SIGKILL to its group."""
+        procs = [p for p in (self.node, self.head) if p is not None]
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
             try:
-                os.killpg(proc.pid, signal.SIGTERM)
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                pass
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
-        for proc in (self.node, self.head):
-            try:
-                proc.wait(timeout=60)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
+            proc.wait()
 
 
 def _same(a, b):
@@ -152,6 +162,8 @@ def main(argv=None):
     ap.add_argument('--scalar-runs', type=int, default=5)
     ap.add_argument('--no-ray', action='store_true')
     ap.add_argument('--no-kill', action='store_true')
+    ap.add_argument('--inprocess-dir', default=None,
+                    help='results folder of an in-process run of the same file (skips it)')
     args = ap.parse_args(argv)
     from freejoint_tools import campaign
     camp = campaign.load(args.file)
@@ -164,20 +176,25 @@ def main(argv=None):
     per_scalar = _scalar(args.scalar_runs)
     print(f'scalar offline runner: {per_scalar:.3f} s per run ({1 / per_scalar:.2f} runs/s, '
           f'{args.scalar_runs} runs), load {os.getloadavg()[0]:.2f}')
-    inproc = os.path.join(work, 'inprocess')
+    inproc = args.inprocess_dir or os.path.join(work, 'inprocess')
     t0 = time.perf_counter()
     c0 = os.times()
-    code, _, err = _campaign(args.file, inproc)
-    wall = time.perf_counter() - t0
-    c1 = os.times()
-    cpu = (c1.children_user + c1.children_system) - (c0.children_user + c0.children_system)
-    print(f'in-process (1 worker, all cores): {wall:.1f} s wall, {n / wall:.0f} runs/s, '
-          f'{cpu:.1f} s CPU, {n / wall * per_scalar:.0f}x the scalar runner, load '
-          f'{os.getloadavg()[0]:.2f}' + ('' if code == 0 else f'  FAILED: {err.strip()}'))
+    if not args.inprocess_dir:
+        code, _, err = _campaign(args.file, inproc)
+        wall = time.perf_counter() - t0
+        c1 = os.times()
+        cpu = (c1.children_user + c1.children_system) - (c0.children_user + c0.children_system)
+        print(f'in-process (1 worker, all cores): {wall:.1f} s wall, {n / wall:.0f} runs/s, '
+              f'{cpu:.1f} s CPU, {n / wall * per_scalar:.0f}x the scalar runner, load '
+              f'{os.getloadavg()[0]:.2f}' + ('' if code == 0 else f'  FAILED: {err.strip()}'))
     if args.no_ray:
         return 0
-    cluster = Cluster()
+    cluster = None
     try:
+        cluster = Cluster()
+        cluster.start()
+        print(f'Ray cluster up: {cluster.address}, 2 nodes, load {os.getloadavg()[0]:.2f}',
+              flush=True)
         ray_dir = os.path.join(work, 'ray')
         t0 = time.perf_counter()
         code, _, err = _campaign(args.file, ray_dir, cluster.address)
@@ -206,7 +223,8 @@ def main(argv=None):
                   f'{proc.returncode == 0 and _same(inproc, kill_dir)}'
                   + ('' if proc.returncode == 0 else f' {err.strip()[-300:]}'))
     finally:
-        cluster.close()
+        if cluster is not None:
+            cluster.close()
     return 0
 
 
