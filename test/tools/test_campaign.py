@@ -121,3 +121,24 @@ def test_the_report_prints_the_summary_and_draws_a_heatmap_per_pair_of_axes(tmp_
     assert text.startswith('runs: 12, law holds in ')
     assert '| scale | 0.7 | 4 |' in text and '| delay | 3 | 6 |' in text
     assert os.path.exists(os.path.join(out_dir, 'heatmap_scale__delay.png'))
+
+
+def test_ctrl_c_keeps_the_finished_chunks_and_the_same_command_resumes(tmp_path, capsys,
+                                                                       monkeypatch):
+    path = _file(tmp_path, GOOD)
+    out_dir = str(tmp_path / 'out')
+    real = campaign.run_chunk
+    calls = []
+
+    def interrupted(camp, rows):
+        calls.append(len(rows['run_index']))
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(camp, rows)
+
+    monkeypatch.setattr(campaign, 'run_chunk', interrupted)
+    assert campaign.main(['run', path, '--out', out_dir, '--no-progress']) == 130
+    assert 'stopped; 1 of 3 chunks kept' in capsys.readouterr().err
+    monkeypatch.setattr(campaign, 'run_chunk', real)
+    assert campaign.main(['run', path, '--out', out_dir, '--no-progress']) == 0
+    assert pq.read_table(os.path.join(out_dir, 'results.parquet')).num_rows == 12
