@@ -142,3 +142,12 @@ def test_ctrl_c_keeps_the_finished_chunks_and_the_same_command_resumes(tmp_path,
     monkeypatch.setattr(campaign, 'run_chunk', real)
     assert campaign.main(['run', path, '--out', out_dir, '--no-progress']) == 0
     assert pq.read_table(os.path.join(out_dir, 'results.parquet')).num_rows == 12
+
+
+def test_fj_campaign_delegates_to_the_campaign_command(tmp_path, capsys):
+    from freejoint_tools import cli
+    path = _file(tmp_path, GOOD.replace('seeds: 2', 'seeds: 0'))
+    assert cli.main(['campaign', 'run', path, '--out', str(tmp_path / 'o')]) == 2
+    assert capsys.readouterr().err == 'campaign: seeds: expected 1 .. 1e6, got 0\n'
+    assert cli.main(['campaign', 'run', _file(tmp_path, GOOD, 'g.yaml'), '--check']) == 0
+    assert capsys.readouterr().out == 'campaign tiny: 12 runs, axes scale, delay\n'
