@@ -1,12 +1,13 @@
 """
 Compiled kernel of :func:`freejoint_core.batch.simulate` (numba, runs split over threads).
 
-One run per thread iteration, tick by tick, with the very operations (same order) of
+One run per loop iteration, tick by tick, with the very operations (same order) of
 ``fast3.Arm3Model``, ``RobustController._step_fast`` and ``Plant._rk4_fast3``; no
-fast-math, no parfors (``run_range`` releases the GIL; ``batch`` runs one per thread, which
-compiles in seconds where ``parallel=True`` took minutes on a loaded machine), numpy's error model (a division by zero gives inf, caught by the
-divergence rule like the exception ``offline.run_case`` catches).  The random numbers
-are drawn outside (``batch``), per run, from the generators the scalar reference uses.
+fast-math; numpy's error model (a division by zero gives inf, caught by the divergence
+rule like the exception ``offline.run_case`` catches).  No parfors: ``run_range``
+releases the GIL and ``batch`` runs one per thread (a short compile; docs/campaigns.md).
+The random numbers are drawn outside (``batch``), per run, from the generators the scalar
+reference uses.
 
 Layouts (n runs, N ticks):
 
