@@ -4,7 +4,7 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := . tools/env.sh &&
 
-.PHONY: help setup demo test test-fast offline bench soak analyze clean
+.PHONY: help setup demo test test-fast offline bench soak analyze clean campaign
 
 help:
 	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
@@ -19,6 +19,8 @@ help:
 	@echo 'make soak     real-time soak, both cases, 5 x 30 s each (bags/soak/soak.json);'
 	@echo '              SOAK_ARGS="--runs 2 --seconds 10 --hogs 2 --cases vertical"'
 	@echo 'make analyze BAGS="bags/demo/..."  metrics and plots from recorded bags'
+	@echo 'make campaign robustness campaign of the paper'"'"'s arm over the six categories'
+	@echo '              (bags/campaigns/paper_six_categories; CAMPAIGN=FILE for another)'
 
 setup:
 	@bash tools/setup.sh
@@ -43,6 +45,9 @@ soak: setup
 
 analyze: setup
 	@$(ENV) python -m freejoint_tools.analyze $(BAGS)
+
+campaign: setup
+	@$(ENV) python -m freejoint_tools.campaign run $(or $(CAMPAIGN),config/campaigns/paper_six_categories.yaml) --report
 
 clean:
 	rm -rf build install log .stamps

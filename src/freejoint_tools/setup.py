@@ -25,6 +25,7 @@ setup(
             'reindex = freejoint_tools.reindex:main',
             'fj = freejoint_tools.cli:main',
             'viewer = freejoint_tools.viewer:main',
+            'campaign = freejoint_tools.campaign:main',
         ],
     },
 )

@@ -571,6 +571,11 @@ def _waits(parser, spin=False):
                             'came for 1.5 s (default %(default)s)')
 
 
+def _campaign(args):
+    from freejoint_tools import campaign
+    return campaign.main(args.argv)
+
+
 def build_parser():
     """Return the argparse parser of ``fj``."""
     parser = argparse.ArgumentParser(
@@ -583,6 +588,12 @@ def build_parser():
     run.add_argument('executable_name')
     run.add_argument('argv', nargs=argparse.REMAINDER)
     run.set_defaults(func=_run, session=False)
+
+    camp = cmds.add_parser('campaign', add_help=False,
+                           help='robustness campaigns: run FILE, report RESULTS '
+                           '(freejoint_tools.campaign)')
+    camp.add_argument('argv', nargs=argparse.REMAINDER)
+    camp.set_defaults(func=_campaign, session=False)
 
     node = cmds.add_parser('node', help='nodes').add_subparsers(
         dest='verb', required=True, metavar='verb')

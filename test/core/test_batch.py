@@ -1,0 +1,123 @@
+"""The batched simulator runs the offline runner's loop: per run equal to the scalar runs."""
+import math
+
+from freejoint_core import batch
+from freejoint_core.arm import table1
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.offline import run_case
+from freejoint_core.plant import Plant
+import numpy as np
+import pytest
+
+DURATION = 1.5
+
+
+def _sample():
+    """Six runs: both cases, every axis on in some run (two of them diverge)."""
+    runs = batch.run_defaults(6)
+    runs['vertical'][:] = [False, True, True, False, True, False]
+    runs['noise_q'][:] = [0.0, 1e-3, 0.0, 0.0, 2e-4, 0.0]
+    runs['noise_qd'][:] = [0.0, 1e-2, 0.0, 0.0, 0.0, 5e-3]
+    runs['noise_tau'][:] = [0.0, 0.0, 0.1, 0.0, 0.0, 0.05]
+    runs['delay'][:] = [0, 2, 25, 1, 0, 3]
+    runs['lag'][:] = [0.0, 0.005, 0.0, 0.002, 0.01, 0.0]
+    runs['dist_type'][:] = [0, 1, 0, 1, 0, 0]
+    runs['dist_bound'][:] = [0.5, 0.5, 1.0, 0.0, 2.0, 0.5]
+    runs['scale_mass'][:] = [0.7, 0.5, 1.2, 0.7, 0.3, 0.9]
+    runs['scale_inertia'][:] = [0.7, 0.9, 1.2, 0.4, 0.7, 0.9]
+    runs['scale_lc'][:] = [0.7, 0.6, 1.0, 1.3, 0.7, 1.1]
+    runs['q3_0_deg'][:] = [120.0, 100.0, 120.0, 140.0, 120.0, 110.0]
+    runs['seed'][:] = [0, 3, 5, 7, 11, 13]
+    return runs
+
+
+@pytest.fixture(scope='module')
+def references():
+    runs = _sample()
+    return runs, [batch.run_scalar({k: v[i] for k, v in runs.items()}, duration=DURATION)
+                  for i in range(6)]
+
+
+@pytest.mark.parametrize('engine', batch.ENGINES)
+def test_each_batched_run_follows_its_scalar_run_to_1e9_m_with_every_axis_on(
+        references, engine):
+    runs, refs = references
+    out = batch.simulate(runs, duration=DURATION, record_trace=True, engine=engine)
+    assert {bool(v) for v in runs['vertical']} == {False, True}
+    stopped = 0
+    for i, (metrics, p) in enumerate(refs):
+        ticks = len(p)
+        assert out['ticks'][i] == ticks == metrics['ticks']
+        assert np.max(np.abs(out['p'][i, :ticks] - p)) <= 1e-9
+        assert np.all(np.isnan(out['p'][i, ticks:]))
+        div = metrics['diverged_at_s']
+        assert (math.isnan(div) and math.isnan(out['diverged_at_s'][i])) \
+            or out['diverged_at_s'][i] == div
+        stopped += not math.isnan(div)
+        for name in batch.METRICS:
+            if name not in ('diverged_at_s', 'ticks'):
+                assert out[name][i] == pytest.approx(metrics[name], rel=1e-9, abs=1e-9), name
+    assert stopped >= 1   # the divergence rule is exercised
+
+
+@pytest.mark.parametrize('case', ['horizontal', 'vertical'])
+def test_with_the_axes_off_the_scalar_reference_is_the_offline_runner(case):
+    rec, trace = run_case(case, 'robust', 4, duration=1.0, record_trace=True)
+    runs = batch.run_defaults(1)
+    runs['vertical'][:] = case == 'vertical'
+    runs['seed'][:] = 4
+    metrics, p = batch.run_scalar({k: v[0] for k, v in runs.items()}, duration=1.0)
+    assert np.array_equal(p, trace['p'])
+    assert metrics['rms_mm'] == rec['rms_mm'] and metrics['max_mm'] == rec['max_mm']
+    assert [metrics['tau_peak_1_nm'], metrics['tau_peak_2_nm']] == rec['tau_peak_nm']
+    assert [metrics['q3_min_deg'], metrics['q3_max_deg']] == rec['q3_range_deg']
+    assert metrics['min_det'] == rec['min_det']
+
+
+def test_a_delayed_batched_run_is_the_offline_runners_delay_ticks():
+    rec, trace = run_case('vertical', 'robust', 2, duration=1.0, delay_ticks=4,
+                          record_trace=True)
+    runs = batch.run_defaults(1)
+    runs['vertical'][:] = True
+    runs['seed'][:] = 2
+    runs['delay'][:] = 4
+    out = batch.simulate(runs, duration=1.0, record_trace=True)
+    assert np.max(np.abs(out['p'][0] - trace['p'])) <= 1e-12
+    assert out['max_mm'][0] == pytest.approx(rec['max_mm'], rel=1e-12)
+
+
+def test_the_disturbance_draws_are_the_plants_stream_of_the_same_seed():
+    runs = batch.check_runs(batch.run_defaults(3))
+    runs['dist_bound'][:] = [0.5, 0.0, 1.5]
+    dist, _, _, _, flags = batch.draws(runs, 20)
+    assert not flags.any()
+    for i in range(3):
+        plant = Plant(table1('horizontal'), dist_bound=runs['dist_bound'][i],
+                      seed=int(runs['seed'][i]))
+        for k in range(20):
+            plant.step([0.0, 0.0], 1e-3)
+            assert list(plant.last_disturbance) == (dist[i, k].tolist() if i != 1
+                                                    else [0.0, 0.0, 0.0])
+
+
+def test_a_constant_disturbance_is_one_draw_held_and_noise_is_seeded_per_run():
+    runs = batch.check_runs(batch.run_defaults(2))
+    runs['dist_type'][:] = 1
+    runs['noise_q'][:] = [0.0, 0.01]
+    dist, nq, _, _, flags = batch.draws(runs, 5)
+    first = np.random.default_rng(0).uniform(-0.5, 0.5, 3)
+    assert np.array_equal(dist[0], np.tile(first, (5, 1)))
+    assert flags[:, 0].tolist() == [False, True]
+    expected = 0.01 * np.random.default_rng([24, 1, 1]).standard_normal((5, 3))
+    assert np.array_equal(nq[1], expected)
+
+
+@pytest.mark.parametrize('change,field', [
+    ({'scale_mass': [0.0]}, 'scale_mass'), ({'delay': [-1]}, 'delay'),
+    ({'noise_q': [math.nan]}, 'noise_q'), ({'dist_type': [2]}, 'dist_type'),
+    ({'lag': [1.0, 2.0]}, 'lag'), ({'wind': [1.0]}, 'wind')])
+def test_bad_per_run_inputs_are_refused_naming_the_field(change, field):
+    runs = batch.run_defaults(1)
+    runs.update(change)
+    with pytest.raises(FreejointValueError, match=field):
+        batch.check_runs(runs)

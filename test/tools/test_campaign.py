@@ -1,0 +1,153 @@
+"""Campaign files are checked before any run; designs expand as written; runs resume."""
+import os
+
+from freejoint_tools import campaign
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+GOOD = """
+name: tiny
+case: vertical
+duration: 0.2
+task: {centre: [0.0, 0.0], radius: 0.2, duration: 5.0}
+design: {kind: grid}
+seeds: 2
+chunk: 5
+axes:
+  scale: {values: [0.5, 0.7, 1.5]}
+  delay: {values: [0, 3]}
+"""
+
+
+def _file(tmp_path, text, name='c.yaml'):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+@pytest.mark.parametrize('replace,named', [
+    (('  delay: {values: [0, 3]}', '  wind: {values: [0, 3]}'), 'axes.wind: unknown axis'),
+    (('{values: [0.5, 0.7, 1.5]}', '{range: [1.5, 0.5], steps: 3}'),
+     'axes.scale.range: low must be < high'),
+    (('{values: [0.5, 0.7, 1.5]}', '{values: [0.5, -0.7]}'),
+     'axes.scale.values[1]: -0.7 is out of range'),
+    (('{values: [0, 3]}', '{range: [0, 3]}'), 'axes.delay.steps: a grid range needs steps'),
+    (('{values: [0.5, 0.7, 1.5]}', '{values: [2.1]}'), 'axes.scale.values[0]: 2.1 is out of'),
+    (('seeds: 2', 'seeds: 2\ncontroller: {Kp: [1, 2]}'),
+     'controller.Kp: not a parameter of the controller node'),
+    (('seeds: 2', 'seeds: 2\ncontroller: {K: [1, 2, 3]}'), 'controller.K: expected shape (2,)'),
+    (('seeds: 2', 'seeds: 2\ncontroller: {stale_timeout: 0.5}'),
+     'controller.stale_timeout: a node parameter the offline loop does not model'),
+    (('case: vertical', 'case: sideways'), 'case: expected one of'),
+    (('case: vertical', 'case: vertical\narm: {urdf: /nonexistent.urdf}'), 'arm.urdf:'),
+    (('design: {kind: grid}', 'design: {kind: sobol}'), 'design.kind: expected one of'),
+    (('seeds: 2', 'seeds: 2\nfixed: {noise_q: -1.0}'), 'fixed.noise_q: -1.0 is out of range'),
+    (('duration: 0.2', 'duration: 0.2\nspeed: 3'), 'speed: unknown key'),
+])
+def test_a_bad_campaign_file_ends_with_one_line_naming_the_field_exit_2_before_any_run(
+        tmp_path, capsys, replace, named):
+    path = _file(tmp_path, GOOD.replace(*replace))
+    out_dir = str(tmp_path / 'out')
+    assert campaign.main(['run', path, '--out', out_dir]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith('campaign: ') and named in err, err
+    assert not os.path.exists(out_dir)
+
+
+def test_a_urdf_arm_that_loads_is_refused_as_not_yet_supported(tmp_path, capsys):
+    from freejoint_core.urdf import shipped_urdf_path
+    urdf = shipped_urdf_path('paper_arm')
+    text = GOOD.replace('case: vertical', f'case: vertical\narm: {{urdf: {urdf}}}')
+    assert campaign.main(['run', _file(tmp_path, text), '--out', str(tmp_path / 'o')]) == 2
+    assert 'not yet supported' in capsys.readouterr().err
+
+
+def test_a_grid_design_is_the_product_of_the_axes_times_the_seeds(tmp_path):
+    rows = campaign.design(campaign.load(_file(tmp_path, GOOD)))
+    assert rows['run_index'].tolist() == list(range(12))
+    assert rows['scale_mass'].tolist() == [0.5] * 4 + [0.7] * 4 + [1.5] * 4
+    assert rows['scale_lc'].tolist() == rows['scale_inertia'].tolist() == \
+        rows['scale_mass'].tolist()
+    assert rows['delay'].tolist() == [0, 0, 3, 3] * 3
+    assert rows['seed'].tolist() == [0, 1] * 6
+    assert set(rows['dist_bound']) == {0.5} and set(rows['q3_0_deg']) == {120.0}
+
+
+def test_a_latin_hypercube_puts_one_run_in_each_stratum_of_each_axis(tmp_path):
+    text = GOOD.replace('design: {kind: grid}', 'design: {kind: lhs, samples: 40, seed: 3}')
+    text = text.replace('seeds: 2', 'seeds: 1').replace('{values: [0, 3]}', '{range: [0, 39]}')
+    text = text.replace('{values: [0.5, 0.7, 1.5]}', '{range: [0.5, 1.5]}')
+    camp = campaign.load(_file(tmp_path, text))
+    rows = campaign.design(camp)
+    strata = np.floor((rows['scale_mass'] - 0.5) / 1.0 * 40).astype(int)
+    assert sorted(strata.tolist()) == list(range(40))
+    assert sorted(rows['delay'].tolist()) == list(range(40))
+    assert rows['seed'].tolist() == list(range(40))
+    again = campaign.design(campaign.load(_file(tmp_path, text, 'd.yaml')))
+    assert np.array_equal(again['scale_mass'], rows['scale_mass'])
+
+
+def test_a_stopped_campaign_resumes_to_the_table_of_one_uninterrupted_run(tmp_path):
+    camp = campaign.load(_file(tmp_path, GOOD))
+    whole = campaign.run(camp, str(tmp_path / 'whole'), progress=False)
+    part = str(tmp_path / 'part')
+    assert campaign.run(camp, part, progress=False, max_chunks=1) is None
+    assert len(os.listdir(os.path.join(part, 'chunks'))) == 1
+    resumed = campaign.run(camp, part, progress=False)
+    with open(whole, 'rb') as fa, open(resumed, 'rb') as fb:
+        assert fa.read() == fb.read()
+    a = pq.read_table(whole)
+    assert a.column('run_index').to_pylist() == list(range(12))
+    holds = a.column('holds').to_pylist()
+    paper = [i for i in range(12) if a.column('scale_mass')[i].as_py() == 0.7
+             and a.column('delay')[i].as_py() == 0]
+    assert all(holds[i] for i in paper)
+
+
+def test_a_results_folder_of_another_campaign_is_refused(tmp_path, capsys):
+    out_dir = str(tmp_path / 'out')
+    campaign.run(campaign.load(_file(tmp_path, GOOD)), out_dir, progress=False, max_chunks=1)
+    other = _file(tmp_path, GOOD.replace('seeds: 2', 'seeds: 3'), 'other.yaml')
+    assert campaign.main(['run', other, '--out', out_dir, '--no-progress']) == 2
+    assert 'another campaign' in capsys.readouterr().err
+
+
+def test_the_report_prints_the_summary_and_draws_a_heatmap_per_pair_of_axes(tmp_path, capsys):
+    out_dir = str(tmp_path / 'out')
+    campaign.run(campaign.load(_file(tmp_path, GOOD)), out_dir, progress=False)
+    assert campaign.main(['report', out_dir]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith('runs: 12, law holds in ')
+    assert '| scale | 0.7 | 4 |' in text and '| delay | 3 | 6 |' in text
+    assert os.path.exists(os.path.join(out_dir, 'heatmap_scale__delay.png'))
+
+
+def test_ctrl_c_keeps_the_finished_chunks_and_the_same_command_resumes(tmp_path, capsys,
+                                                                       monkeypatch):
+    path = _file(tmp_path, GOOD)
+    out_dir = str(tmp_path / 'out')
+    real = campaign.run_chunk
+    calls = []
+
+    def interrupted(camp, rows):
+        calls.append(len(rows['run_index']))
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(camp, rows)
+
+    monkeypatch.setattr(campaign, 'run_chunk', interrupted)
+    assert campaign.main(['run', path, '--out', out_dir, '--no-progress']) == 130
+    assert 'stopped; 1 of 3 chunks kept' in capsys.readouterr().err
+    monkeypatch.setattr(campaign, 'run_chunk', real)
+    assert campaign.main(['run', path, '--out', out_dir, '--no-progress']) == 0
+    assert pq.read_table(os.path.join(out_dir, 'results.parquet')).num_rows == 12
+
+
+def test_fj_campaign_delegates_to_the_campaign_command(tmp_path, capsys):
+    from freejoint_tools import cli
+    path = _file(tmp_path, GOOD.replace('seeds: 2', 'seeds: 0'))
+    assert cli.main(['campaign', 'run', path, '--out', str(tmp_path / 'o')]) == 2
+    assert capsys.readouterr().err == 'campaign: seeds: expected 1 .. 1e6, got 0\n'
+    assert cli.main(['campaign', 'run', _file(tmp_path, GOOD, 'g.yaml'), '--check']) == 0
+    assert capsys.readouterr().out == 'campaign tiny: 12 runs, axes scale, delay\n'
