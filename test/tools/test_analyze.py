@@ -112,3 +112,25 @@ def test_bad_input_gives_one_line_naming_the_file_and_a_non_zero_exit(
     assert len(lines) == 1, done.stderr
     assert lines[0].startswith('analyze: error: ' + expected), lines[0]
     assert done.stdout == ''
+
+
+def test_a_real_time_bag_is_analysed_in_seconds_from_its_first_tick(tmp_path, make_bag):
+    from freejoint_tools.analyze import analyse_bag
+    path = str(tmp_path / 'horizontal')
+    t0_ns = 1_795_695_095_917_000_000             # the real-time run, Unix time
+    make_bag(path, 300, custom_data={'case': 'horizontal', 'variant': 'robust'}, t0_ns=t0_ns)
+    _, trace, _ = analyse_bag(path)
+    assert trace['t0'] == pytest.approx(t0_ns * 1e-9, abs=1e-6)
+    assert trace['t'][0] == 0.0
+    # tick k is k ms after the first (within the float rounding of 1.8e9 s: 0.24 us)
+    assert trace['t'][-1] == pytest.approx(0.299, abs=1e-6)
+    assert len(trace['joints']['joint3']) == 300        # the joint states still paired
+
+
+def test_a_lockstep_bag_keeps_its_sim_time(tmp_path, make_bag):
+    from freejoint_tools.analyze import analyse_bag
+    path = str(tmp_path / 'horizontal')
+    make_bag(path, 50, custom_data={'case': 'horizontal', 'variant': 'robust'})
+    _, trace, _ = analyse_bag(path)
+    assert trace['t0'] == 0.0
+    assert trace['t'][0] == 0.0 and trace['t'][-1] == pytest.approx(0.049, abs=1e-12)

@@ -21,6 +21,10 @@ parameter: ``case``, ``variant``, ``seed``, and optionally ``passive_joint``,
 bag's directory name if that is a case name, the variant is ``'unknown'`` and the seed
 None (a warning says so). Command-line options override the bag.
 
+Time: a lockstep run's stamps are sim time (from 0 at its start) and stay as they are; a
+real-time run's are system time (Unix time), and its figures count from its first tick
+(``time_origin``; the trace keeps the origin as ``t0``).
+
 Figures (PNG): per bag ``fig3_<bag>.png`` (Case 1, horizontal) or ``fig4_<bag>.png``
 (Case 2, vertical) - the paper's Figs. 3/4: desired and actual path in the x-y plane,
 tracking errors, active torques, passive joint angle, theta-hat over time; once
@@ -41,7 +45,7 @@ import sys
 
 from freejoint_common.contract import CONTROLLER_STATE, JOINT_STATES, seconds_to_ns, to_ns
 
-from .bagfile import BagError, open_bag
+from .bagfile import BagError, open_bag, SYSTEM_TIME_NS
 
 STATE_TYPE = CONTROLLER_STATE.type_name
 JOINT_TYPE = JOINT_STATES.type_name
@@ -164,6 +168,8 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     trace['info'] = info
     trace['finalised'] = bag.finalised
     trace['joints'] = _joint_positions(joints, arrays['t'])
+    trace['t0'] = time_origin(arrays['t'])
+    trace['t'] = arrays['t'] - trace['t0']
     trace['grid'] = trace['path'] = None
     grids = bag.topics_of_type(GRID_TYPE)
     if grids and bag.topics[grids[0]].count:
@@ -174,16 +180,42 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     return record, trace, warnings
 
 
+def time_origin(t):
+    """
+    Return the time (s) the figures count from: 0 in sim time, else the first tick's.
+
+    Parameters
+    ----------
+    t : numpy.ndarray, shape (N,)
+        The ticks' stamps (s), increasing.
+
+    Returns
+    -------
+    float
+        0.0 for sim-time stamps (a lockstep run: its time already counts from its start),
+        ``t[0]`` for system-time ones (a real-time run: Unix time, ``SYSTEM_TIME_NS``).
+
+    """
+    first = float(t[0])
+    return first if seconds_to_ns(first) >= SYSTEM_TIME_NS else 0.0
+
+
 def _joint_positions(joint_states, t):
-    """Return ``{joint name: positions (N,)}`` at the tick times ``t`` (first per stamp)."""
+    """
+    Return ``{joint name: positions (N,)}`` at the tick times ``t`` (first per stamp).
+
+    A stamp is matched by its time in s computed as ``arrays_from_messages`` computes
+    ``t`` (``ns * 1e-9``, the same float): system-time seconds (1.8e9 s) hold no whole
+    nanoseconds to round back to.
+    """
     import numpy as np
-    wanted = {seconds_to_ns(v) for v in t}
+    wanted = {float(v) for v in t}
     first = {}
     for msg in joint_states:
-        ns = to_ns(msg.header.stamp)
+        ns = to_ns(msg.header.stamp) * 1e-9
         if ns in wanted and ns not in first:
             first[ns] = msg
-    stamps = [seconds_to_ns(v) for v in t]
+    stamps = [float(v) for v in t]
     if not stamps or any(ns not in first for ns in stamps):
         return {}
     names = list(first[stamps[0]].name)

@@ -31,6 +31,11 @@ def _label(trace):
     return '%s (%s%s)' % (trace['name'], info['variant'], seed)
 
 
+def _time_label(trace):
+    """Return the time axis label: sim time, or system time from the run's first tick."""
+    return 't [s]' if not trace.get('t0') else 't [s] from the first tick'
+
+
 def run_figure_name(trace):
     """Return the file name of a run's figure: fig3_<bag>.png, fig4_<bag>.png or run_."""
     number = FIG_NUMBER.get(trace['info']['case'])
@@ -41,6 +46,7 @@ def run_figure_name(trace):
 def figure_run(trace, path):
     """Write Fig. 3/4 of one run to ``path``."""
     t = trace['t']
+    tlabel = _time_label(trace)
     p, p_d = trace['p'], trace['p_d']
     err_mm = 1000.0 * (p - p_d)
     fig = Figure(figsize=(12.0, 6.6))
@@ -57,34 +63,34 @@ def figure_run(trace, path):
     ax = axes[0, 1]
     ax.plot(t, err_mm[:, 0], label='$e_x$')
     ax.plot(t, err_mm[:, 1], label='$e_y$')
-    ax.set_xlabel('t [s]')
+    ax.set_xlabel(tlabel)
     ax.set_ylabel('error [mm]')
     ax.set_title('(b) tracking errors')
     ax.legend(fontsize=8)
     ax = axes[0, 2]
     for i in range(trace['tau'].shape[1]):
         ax.plot(t, trace['tau'][:, i], lw=0.8, label=r'$\tau_%d$' % (i + 1))
-    ax.set_xlabel('t [s]')
+    ax.set_xlabel(tlabel)
     ax.set_ylabel('torque [N m]')
     ax.set_title('(c) active joint torques')
     ax.legend(fontsize=8)
     ax = axes[1, 0]
     ax.plot(t, np.degrees(trace['q_passive']), 'C2')
-    ax.set_xlabel('t [s]')
+    ax.set_xlabel(tlabel)
     ax.set_ylabel('$q_3$ [deg]')
     ax.set_title('(d) passive joint angle')
     ax = axes[1, 1]
     theta = np.atleast_2d(trace['theta'])
     for i in range(theta.shape[1]):
         ax.plot(t, theta[:, i], lw=1.0, label=r'$\hat\theta_%d$' % (i + 1))
-    ax.set_xlabel('t [s]')
+    ax.set_xlabel(tlabel)
     ax.set_ylabel(r'$\hat\theta$')
     ax.set_title(r'(e) adaptive estimates $\hat\theta$')
     ax.legend(fontsize=7, ncol=2)
     ax = axes[1, 2]
     norm = np.hypot(err_mm[:, 0], err_mm[:, 1])
     ax.semilogy(t, np.maximum(norm, 1e-6), 'C4')
-    ax.set_xlabel('t [s]')
+    ax.set_xlabel(tlabel)
     ax.set_ylabel(r'$\|p - p_d\|$ [mm]')
     ax.set_title('(f) error norm')
     for ax in axes.flat:
@@ -186,13 +192,13 @@ def figure_compare(traces, path):
     ax_p.set_xlabel('x [m]')
     ax_p.set_ylabel('y [m]')
     ax_p.set_title('path')
-    ax_e.set_xlabel('t [s]')
+    ax_e.set_xlabel(_time_label(traces[0]))
     ax_e.set_ylabel(r'$\|p - p_d\|$ [mm]')
     ax_e.set_title('tracking error')
-    ax_q.set_xlabel('t [s]')
+    ax_q.set_xlabel(_time_label(traces[0]))
     ax_q.set_ylabel('$q_3$ [deg]')
     ax_q.set_title('passive joint')
-    ax_t.set_xlabel('t [s]')
+    ax_t.set_xlabel(_time_label(traces[0]))
     ax_t.set_ylabel(r'max$_i |\tau_i|$ [N m]')
     ax_t.set_title('largest active torque')
     for ax in (ax_p, ax_e, ax_q, ax_t):
