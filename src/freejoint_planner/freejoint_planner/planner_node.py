@@ -369,7 +369,8 @@ class PlannerNode(Node, Lifecycle):
         """
         got = None
         try:
-            with self._js_sub.handle as handle:
+            handle = self._js_sub.handle
+            with handle:
                 while True:
                     taken = handle.take_message(self._js_sub.msg_type, False)
                     if taken is None:
