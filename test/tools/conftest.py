@@ -30,13 +30,14 @@ class BagMaker:
         self.module = module
 
     def __call__(self, path, ticks, custom_data=None, finalise=True, chunk_size=64 * 1024,
-                 flush_every=0, compression='none', t0_ns=0, extra=()):
+                 flush_every=0, compression='none', t0_ns=0, extra=(), joints=None):
         """
         Write ``ticks`` ticks (joint_states, setpoint, controller_state, /clock) and the map.
 
         ``t0_ns`` > 0: a real-time run's bag instead: every stamp and log time shifted by
         it (system time), no /clock. ``extra``: ``(topic, type, transient local, message)``
-        written first (e.g. /robot_description).
+        written first (e.g. /robot_description). ``joints``: ``(all, active)`` joint names
+        of another arm (joint states padded with zero positions, one effort per active).
 
         Returns the dict topic -> list of the rclpy messages written, in order; the bytes
         written (their serialization: CDR padding bytes are not reproducible from one
@@ -79,6 +80,13 @@ class BagMaker:
         from rosgraph_msgs.msg import Clock
         for k in range(ticks):
             js, sp, cs = self.module.tick_messages(k)
+            if joints is not None:
+                names, active = joints
+                js.name = list(names)
+                js.position = (list(js.position) + [0.0] * len(names))[:len(names)]
+                js.velocity = js.effort = [0.0] * len(names)
+                cs.joint_names = list(active)
+                cs.effort = (list(cs.effort) * len(active))[:len(active)]
             t_ns = t0_ns + k * self.module.DT_NS
             if t0_ns:
                 for msg in (js, sp, cs):
