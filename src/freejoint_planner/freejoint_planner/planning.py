@@ -140,8 +140,10 @@ class SingularityModel:
         """Return a one-line summary of the region (for the log)."""
         lo, hi = self.region.reach
         bands = ', '.join(f'[{a:.4f}, {b:.4f}]' for a, b in self.region.intervals) or 'none'
+        # no case: the map holds no gravity (Da = J M^-1 B); the node logs the arm with its
+        # gravity vector beside it
         return (f'semi-singular annuli {bands} m in reach [{lo:.4f}, {hi:.4f}] m '
-                f'(case {self.case}, nominal_scale {self.nominal_scale:g}, '
+                f'(nominal_scale {self.nominal_scale:g}, '
                 f'resolution {self.resolution_deg:g} deg, eps_d {self.eps_d:g})')
 
     def usable(self):
@@ -154,7 +156,7 @@ class SingularityModel:
         """
         lo, hi = self.region.reach
         free, start = [], lo
-        for a, b in sorted(self.region.intervals):
+        for a, b in np.asarray(self.region.intervals, dtype=float).reshape(-1, 2):
             if a > start:
                 free.append((start, min(a, hi)))
             start = max(start, b)

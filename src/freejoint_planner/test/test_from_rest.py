@@ -154,3 +154,17 @@ def test_after_time_went_back_the_running_plan_joins_from_rest_again(model):
 
 def test_the_usable_region_is_the_reach_without_the_semi_singular_annuli(model):
     assert model.usable() == 'usable: 0.0000 <= |p| <= 0.4782 m from the base'
+
+
+def test_the_usable_region_of_several_annuli_names_each_of_them():
+    from types import SimpleNamespace
+
+    from freejoint_planner.planning import SingularityModel
+    region = SimpleNamespace(reach=(0.05, 0.9), intervals=np.array([[0.1, 0.2], [0.3, 0.4],
+                                                                       [0.85, 0.9]]))
+    m = SingularityModel('horizontal', 0.7, 1.0, 1e-7, None, region, 0.0)
+    assert m.usable() == ('usable: 0.0500 <= |p| <= 0.1000 m or 0.2000 <= |p| <= 0.3000 m or '
+                          '0.4000 <= |p| <= 0.8500 m from the base (a path must stay within '
+                          'one of these annuli)')
+    region.intervals = np.array([[0.0, 0.9]])
+    assert m.usable() == 'usable: none (the semi-singular annuli cover the reach)'
