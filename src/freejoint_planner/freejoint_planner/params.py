@@ -80,7 +80,7 @@ PARAMS = (
           'Circle centre (x, y) in m, base frame. The whole circle must stay in the usable '
           'region: distances from the base inside the reach and outside the semi-singular '
           'annuli of the map; every refusal (~/plan_circle answer, parameter set) names '
-          "that region, and ~/plan_circle with execute false checks a circle without "
+          'that region, and ~/plan_circle with execute false checks a circle without '
           'starting it.', validator=_centre),
     Param('radius', _CIRCLE['radius'], 'Circle radius (m), > 0.', (0.0, 10.0),
           exclusive_min=True),

@@ -160,8 +160,8 @@ def test_the_usable_region_of_several_annuli_names_each_of_them():
     from types import SimpleNamespace
 
     from freejoint_planner.planning import SingularityModel
-    region = SimpleNamespace(reach=(0.05, 0.9), intervals=np.array([[0.1, 0.2], [0.3, 0.4],
-                                                                       [0.85, 0.9]]))
+    bands = np.array([[0.1, 0.2], [0.3, 0.4], [0.85, 0.9]])
+    region = SimpleNamespace(reach=(0.05, 0.9), intervals=bands)
     m = SingularityModel('horizontal', 0.7, 1.0, 1e-7, None, region, 0.0)
     assert m.usable() == ('usable: 0.0500 <= |p| <= 0.1000 m or 0.2000 <= |p| <= 0.3000 m or '
                           '0.4000 <= |p| <= 0.8500 m from the base (a path must stay within '
