@@ -233,11 +233,10 @@ def figure2(trace, path):
     ax_c.legend(loc='lower right', fontsize=8)
     for ax in (ax_j, ax_c):
         ax.grid(True, alpha=0.3)
-    who = ('the nominal Table I parameters' if arm['name'] == 'Table I' else
-           "the nominal model of the recorded arm '%s' (passive %s)"
-           % (arm['name'], ', '.join(arm['passive'])))
-    fig.suptitle('Fig. 2 - recomputed from %s (x%.2f) on a %g deg grid; run %s'
-                 % (who, scale, resolution_deg, trace['name']))
+    who = ('Table I arm' if arm['name'] == 'Table I' else
+           "recorded arm '%s', passive %s" % (arm['name'], ', '.join(arm['passive'])))
+    fig.suptitle('Fig. 2 - nominal model (x%.2f) of the %s, %g deg grid; run %s'
+                 % (scale, who, resolution_deg, trace['name']), fontsize=11)
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     return path
