@@ -6,7 +6,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..')
 AWK = os.path.join(ROOT, 'tools', 'colcon_progress.awk')
 
 # What `colcon build --event-handlers console_direct- status- console_start_end+` prints
-COLCON = '''Starting >>> freejoint_core
+COLCON = """Starting >>> freejoint_core
 Starting >>> freejoint_msgs
 Finished <<< freejoint_core [2.41s]
 --- stderr: freejoint_msgs
@@ -17,7 +17,7 @@ Starting >>> freejoint_common
 Failed   <<< freejoint_common [0.52s, exited with code 1]
 
 Summary: 2 packages finished [1min 55s]
-'''
+"""
 
 
 def test_each_package_started_and_built_is_a_line_as_it_happens():
