@@ -47,13 +47,15 @@ circle's own peaks and largest step per tick (``planning.transition_from_rest``)
 refused with the reason. The joint states are taken only when needed (a subscription of
 depth 1 on a hidden helper node no executor spins: no callback per tick); with a
 ``joint_states`` publisher but no state yet the plan waits for one (the stream only follows
-the clock); with none at all it starts at the circle's start as before (logged).
+the clock); with none at all (in real time: none within ``ARM_DISCOVERY_S`` of the
+planner's start) it starts at the circle's start as before (logged).
 Refusals name the usable region (``SingularityModel.usable``). Every circle is
 held to the arm's reach and to ``max_speed`` / ``max_acceleration``. ``lookahead`` is checked
 against the clock spacing rule at run time.
 """
 
 import math
+import time
 
 from freejoint_common.arm_description import resolve_arm
 from freejoint_common.clock import own_clock, set_ros_time
@@ -77,6 +79,11 @@ from .planning import prepare_transition
 from .stream import Plan, SetpointStream
 
 NODE_NAME = 'freejoint_planner'
+ARM_DISCOVERY_S = 2.0
+"""[s] Real time: how long after its start the planner waits for a joint_states publisher
+before a plan from rest starts without the arm's position (discovery of a node started
+together can take that long; in sim time the simulator's /clock and joint_states come
+together, and a planner alone is driven by its /clock)."""
 
 MARKER_POINTS = 361
 
@@ -109,6 +116,7 @@ class PlannerNode(Node, Lifecycle):
         self._arm_xy = None         # the end effector of the newest joint state taken
         self._arm_note = ''         # why the newest joint state gave no position
         self._waits_logged = None   # plan id whose wait for the arm was logged
+        self._born = time.monotonic()
         self._sim = self.get_parameter('use_sim_time').value
         own_clock(self)     # one /clock delivery: _on_clock sets the ROS clock
         self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS), arm=self._arm)
@@ -395,6 +403,9 @@ class PlannerNode(Node, Lifecycle):
                 wait = (f"waiting for the arm's position: joint_states has {count} "
                         f'publisher(s), no state with the joints {list(self._joint_names)} '
                         'yet')
+            elif not self._sim and time.monotonic() - self._born < ARM_DISCOVERY_S:
+                wait = (f"waiting up to {ARM_DISCOVERY_S:g} s from the planner's start for a "
+                        "joint_states publisher (the arm's position)")
         action, text = join_from_arm(
             plan, self._stream, self._model, position, wait,
             self._cfg['transition_max_duration'],
