@@ -214,3 +214,16 @@ def test_a_four_link_bag_gives_its_figures_without_options(tmp_path, make_bag, a
     done = analyze(path, '--figures-dir', str(tmp_path / 'figs'))
     assert done.returncode == 0, done.stderr
     assert sorted(os.listdir(tmp_path / 'figs')) == ['fig2_singularity.png', 'fig3_four.png']
+
+
+def test_a_fine_joint_space_map_is_drawn_in_blocks_that_keep_every_flagged_sample():
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from freejoint_tools.plots import _joint_space_mask
+    mask = np.zeros((1440, 1440), dtype=bool)
+    mask[721, :] = True                                   # one row: q2 = 180.25 deg
+    shown, block = _joint_space_mask(SimpleNamespace(singular_mask=mask))
+    assert block == 8 and shown.shape == (180, 180)
+    assert shown[90].all() and shown.sum() == 180         # 721 // 8 = 90

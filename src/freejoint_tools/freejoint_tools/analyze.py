@@ -246,8 +246,11 @@ def bag_arm(bag, store, states, joint_states, info):
         text = bag.decode(texts[0], store)[-1][1].data
         try:
             urdf = parse_urdf(text, passive)
+            # the shipped paper_arm.urdf is the Table I arm (gravity aside: not in the map)
+            paper = urdf.params == table1('horizontal')
             return {'joints': list(urdf.joint_names), 'passive': list(urdf.passive_joints),
-                    'params': urdf.params, 'name': urdf.name or 'URDF arm',
+                    'params': table1(case) if paper else urdf.params,
+                    'name': 'Table I' if paper else urdf.name or 'URDF arm',
                     'source': 'the recorded %s' % ROBOT_DESCRIPTION.absolute, 'notes': notes}
         except FreejointValueError as exc:
             notes.append('%s: the recorded %s is not an arm the analysis models (%s); '
