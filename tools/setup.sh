@@ -124,16 +124,25 @@ src_hash=$(cd "$ROOT" && find src -type f ! -path '*/__pycache__/*' \
   ! \( -name '*.py' ! -name setup.py \) | sort | xargs sha256sum | sha256sum | cut -c1-16)
 want_build="$src_hash $(cat "$STAMPS/venv")"
 if [ "$want_build" != "$(cat "$STAMPS/build" 2>/dev/null || true)" ] || [ ! -d "$ROOT/install" ]; then
-  say "colcon build (interfaces take about a minute the first time)"
   # shellcheck disable=SC1091
   . "$ROOT/tools/env.sh" --no-install
   cd "$ROOT"
+  total=$(colcon list --names-only 2>/dev/null | wc -l)
+  say "colcon build of $total packages (the interfaces, freejoint_msgs, take a minute or more the first time)"
+  # Progress from colcon's start/end events (tools/colcon_progress.awk): a line per
+  # package started and per package built, "k/total", as they happen.
+  set +e
   colcon --log-base log build --symlink-install --event-handlers console_direct- status- \
-    --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF \
-    >"$STAMPS/colcon.log" 2>&1 || {
-      tail -30 "$STAMPS/colcon.log" >&2
-      die "colcon build failed (log: .stamps/colcon.log, last lines above)."
-    }
+    console_start_end+ \
+    --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF 2>&1 \
+    | tee "$STAMPS/colcon.log" \
+    | awk -v n="$total" -f "$ROOT/tools/colcon_progress.awk"
+  rc=${PIPESTATUS[0]}
+  set -e
+  if [ "$rc" -ne 0 ]; then
+    tail -30 "$STAMPS/colcon.log" >&2
+    die "colcon build failed (log: .stamps/colcon.log, last lines above)."
+  fi
   grep -E '^Summary' "$STAMPS/colcon.log" | sed 's/^/[setup] /' || true
   printf '%s' "$want_build" >"$STAMPS/build"
 else

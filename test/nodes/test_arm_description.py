@@ -55,7 +55,8 @@ REFUSALS = [
     ('prismatic', _joint2('type="revolute"', 'type="prismatic"'), '[joint1]',
      'robot_description', "joint 'joint2': type 'prismatic' is not supported"),
     ('axis_not_parallel', _joint2('<axis xyz="0 0 1"/>', '<axis xyz="1 0 0"/>'), '[joint1]',
-     'robot_description', "joint 'joint2': axis (1 0 0) is not parallel to z"),
+     'robot_description', "joint 'joint2': axis (1 0 0 in the base frame) is not parallel to the "
+     "axis of joint 'joint1'"),
     ('floating', _joint2('type="revolute"', 'type="floating"'), '[joint1]',
      'robot_description', "joint 'joint2': type 'floating' is not supported"),
     ('missing_inertial', _no_inertial, '[joint1]',

@@ -30,9 +30,14 @@ class BagMaker:
         self.module = module
 
     def __call__(self, path, ticks, custom_data=None, finalise=True, chunk_size=64 * 1024,
-                 flush_every=0, compression='none'):
+                 flush_every=0, compression='none', t0_ns=0, extra=(), joints=None):
         """
         Write ``ticks`` ticks (joint_states, setpoint, controller_state, /clock) and the map.
+
+        ``t0_ns`` > 0: a real-time run's bag instead: every stamp and log time shifted by
+        it (system time), no /clock. ``extra``: ``(topic, type, transient local, message)``
+        written first (e.g. /robot_description). ``joints``: ``(all, active)`` joint names
+        of another arm (joint states padded with zero positions, one effort per active).
 
         Returns the dict topic -> list of the rclpy messages written, in order; the bytes
         written (their serialization: CDR padding bytes are not reproducible from one
@@ -45,12 +50,15 @@ class BagMaker:
         defs = Definitions()
         writer = BagWriter(path, custom_data, chunk_size=chunk_size, compression=compression)
         grid, marker = self.module.latched_messages()
-        topics = [('/joint_states', 'sensor_msgs/msg/JointState', 'volatile'),
-                  ('/setpoint', 'freejoint_msgs/msg/CartesianSetpoint', 'transient_local'),
-                  ('/controller_state', 'freejoint_msgs/msg/ControllerState', 'volatile'),
-                  ('/clock', 'rosgraph_msgs/msg/Clock', 'volatile'),
-                  ('/semi_singular_map', 'nav_msgs/msg/OccupancyGrid', 'transient_local'),
-                  ('/planned_path', 'visualization_msgs/msg/Marker', 'transient_local')]
+        topics = [(name, msgtype, 'transient_local' if latched else 'volatile')
+                  for name, msgtype, latched, _ in extra]
+        topics += [('/joint_states', 'sensor_msgs/msg/JointState', 'volatile'),
+                   ('/setpoint', 'freejoint_msgs/msg/CartesianSetpoint', 'transient_local'),
+                   ('/controller_state', 'freejoint_msgs/msg/ControllerState', 'volatile'),
+                   ('/semi_singular_map', 'nav_msgs/msg/OccupancyGrid', 'transient_local'),
+                   ('/planned_path', 'visualization_msgs/msg/Marker', 'transient_local')]
+        if not t0_ns:
+            topics.insert(len(extra) + 3, ('/clock', 'rosgraph_msgs/msg/Clock', 'volatile'))
         channels = {}
         for name, msgtype, durability in topics:
             text, digest = defs.lookup(msgtype)
@@ -65,15 +73,28 @@ class BagMaker:
             written[name].append(msg)
             self.data[name].append(data)
 
-        put('/semi_singular_map', 0, grid)
-        put('/planned_path', 0, marker)
+        for name, _, _, msg in extra:
+            put(name, t0_ns, msg)
+        put('/semi_singular_map', t0_ns, grid)
+        put('/planned_path', t0_ns, marker)
         from rosgraph_msgs.msg import Clock
         for k in range(ticks):
             js, sp, cs = self.module.tick_messages(k)
-            t_ns = k * self.module.DT_NS
-            clock = Clock()
-            clock.clock = js.header.stamp
-            put('/clock', t_ns, clock)
+            if joints is not None:
+                names, active = joints
+                js.name = list(names)
+                js.position = (list(js.position) + [0.0] * len(names))[:len(names)]
+                js.velocity = js.effort = [0.0] * len(names)
+                cs.joint_names = list(active)
+                cs.effort = (list(cs.effort) * len(active))[:len(active)]
+            t_ns = t0_ns + k * self.module.DT_NS
+            if t0_ns:
+                for msg in (js, sp, cs):
+                    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 10 ** 9)
+            else:
+                clock = Clock()
+                clock.clock = js.header.stamp
+                put('/clock', t_ns, clock)
             put('/joint_states', t_ns, js)
             put('/setpoint', t_ns, sp)
             put('/controller_state', t_ns, cs)

@@ -1,5 +1,6 @@
 """The analysis computes the graph's records from bags and draws the paper's figures."""
 import json
+import math
 import os
 
 import pytest
@@ -112,3 +113,117 @@ def test_bad_input_gives_one_line_naming_the_file_and_a_non_zero_exit(
     assert len(lines) == 1, done.stderr
     assert lines[0].startswith('analyze: error: ' + expected), lines[0]
     assert done.stdout == ''
+
+
+def test_a_real_time_bag_is_analysed_in_seconds_from_its_first_tick(tmp_path, make_bag):
+    from freejoint_tools.analyze import analyse_bag
+    path = str(tmp_path / 'horizontal')
+    t0_ns = 1_795_695_095_917_000_000             # the issue's real-time run, Unix time
+    make_bag(path, 300, custom_data={'case': 'horizontal', 'variant': 'robust'}, t0_ns=t0_ns)
+    _, trace, _ = analyse_bag(path)
+    assert trace['t0'] == pytest.approx(t0_ns * 1e-9, abs=1e-6)
+    assert trace['t'][0] == 0.0
+    # tick k is k ms after the first (within the float rounding of 1.8e9 s: 0.24 us)
+    assert trace['t'][-1] == pytest.approx(0.299, abs=1e-6)
+    assert len(trace['joints']['joint3']) == 300        # the joint states still paired
+
+
+def test_a_lockstep_bag_keeps_its_sim_time(tmp_path, make_bag):
+    from freejoint_tools.analyze import analyse_bag
+    path = str(tmp_path / 'horizontal')
+    make_bag(path, 50, custom_data={'case': 'horizontal', 'variant': 'robust'})
+    _, trace, _ = analyse_bag(path)
+    assert trace['t0'] == 0.0
+    assert trace['t'][0] == 0.0 and trace['t'][-1] == pytest.approx(0.049, abs=1e-12)
+
+
+# ---- the analysis of any arm: the arm, its passive joint and Fig. 2 from the bag ---------
+
+FOUR = (('joint1', 'joint2', 'joint3', 'joint4'), ('joint2', 'joint3', 'joint4'))
+
+
+def _description(name):
+    from std_msgs.msg import String
+
+    from freejoint_core.urdf import shipped_urdf_path
+    with open(shipped_urdf_path(name), encoding='utf-8') as fh:
+        return ('/robot_description', 'std_msgs/msg/String', True, String(data=fh.read()))
+
+
+def test_the_passive_joint_is_the_one_the_controller_does_not_command(tmp_path, make_bag):
+    from freejoint_tools.analyze import analyse_bag
+    path = str(tmp_path / 'by_hand')                  # a hand-run recorder: no run info
+    make_bag(path, 100, joints=FOUR, extra=[_description('four_link_arm')])
+    record, trace, warnings = analyse_bag(path)
+    assert trace['info']['passive_joint'] == 'joint1'
+    arm = trace['arm']
+    assert arm['passive'] == ['joint1'] and arm['joints'] == list(FOUR[0])
+    assert arm['source'] == 'the recorded /robot_description' and arm['params'].n == 4
+    assert arm['params'].passive == (0,)
+    # joint1 of the bag maker's joint states: 0.1 sin(k / 100), k = 0 .. 99
+    assert record['q3_range_deg'][1] == pytest.approx(
+        max(math.degrees(0.1 * math.sin(k / 100.0)) for k in range(100)), abs=1e-12)
+
+
+def test_without_a_description_the_paper_arm_and_its_joint3_are_taken(tmp_path, make_bag):
+    from freejoint_tools.analyze import analyse_bag
+    path = str(tmp_path / 'horizontal')
+    make_bag(path, 20, custom_data={'case': 'horizontal', 'variant': 'robust'})
+    _, trace, _ = analyse_bag(path)
+    assert trace['info']['passive_joint'] == 'joint3'
+    assert trace['arm']['name'] == 'Table I' and trace['arm']['params'].passive == (2,)
+
+
+def test_the_run_information_still_names_the_passive_joint_first(tmp_path, make_bag):
+    from freejoint_tools.analyze import analyse_bag
+    path = str(tmp_path / 'run')
+    make_bag(path, 20, custom_data={'case': 'horizontal', 'passive_joint': 'joint2'})
+    _, trace, _ = analyse_bag(path)
+    assert trace['info']['passive_joint'] == 'joint2'
+
+
+def test_run_titles_name_the_case_once():
+    from freejoint_tools.plots import run_title
+    trace = {'name': 'horizontal', 'finalised': True, 'arm': None,
+             'info': {'case': 'horizontal', 'variant': 'robust', 'seed': 0}}
+    assert run_title(trace) == 'Case 1 (horizontal motion): robust, seed 0, from the bag'
+    trace['name'] = 'mine'
+    trace['arm'] = {'name': 'four_link_arm', 'passive': ['joint1']}
+    assert run_title(trace) == ('Case 1 (horizontal motion): robust, seed 0, bag mine, '
+                                'four_link_arm arm, passive joint1, from the bag')
+
+
+def test_fig2_is_computed_for_the_arm_on_the_finest_grid_its_map_allows():
+    from freejoint_core.arm import table1
+    from freejoint_core.singularity import det_map, EPS_D, semi_singular
+    from freejoint_core.urdf import four_link_arm
+    from freejoint_tools.plots import fig2_region
+    region, step, _ = fig2_region(table1('horizontal'), 0.7)
+    assert step == 0.25
+    paper = semi_singular(det_map(table1('horizontal').scaled(0.7), 0.25), EPS_D)
+    assert (region.intervals == paper.intervals).all() and region.reach == paper.reach
+    # 4 links: a (q2, q3, q4) map; 0.25 .. 1 deg exceed the core's sample limit
+    region, step, nominal = fig2_region(four_link_arm().params, 0.7)
+    assert step == 2.0 and nominal.n == 4 and region.singular_mask.ndim == 3
+
+
+def test_a_four_link_bag_gives_its_figures_without_options(tmp_path, make_bag, analyze):
+    path = str(tmp_path / 'four')
+    make_bag(path, 60, joints=FOUR, extra=[_description('four_link_arm')],
+             custom_data={'case': 'horizontal', 'variant': 'robust', 'seed': '0'})
+    done = analyze(path, '--figures-dir', str(tmp_path / 'figs'))
+    assert done.returncode == 0, done.stderr
+    assert sorted(os.listdir(tmp_path / 'figs')) == ['fig2_singularity.png', 'fig3_four.png']
+
+
+def test_a_fine_joint_space_map_is_drawn_in_blocks_that_keep_every_flagged_sample():
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from freejoint_tools.plots import _joint_space_mask
+    mask = np.zeros((1440, 1440), dtype=bool)
+    mask[721, :] = True                                   # one row: q2 = 180.25 deg
+    shown, block = _joint_space_mask(SimpleNamespace(singular_mask=mask))
+    assert block == 8 and shown.shape == (180, 180)
+    assert shown[90].all() and shown.sum() == 180         # 721 // 8 = 90

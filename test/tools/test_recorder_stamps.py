@@ -50,11 +50,33 @@ def test_a_hole_right_after_the_first_stamp_is_still_counted():
     assert grid.missed() == (1, [(1, 1)])
 
 
-def test_system_time_stamps_are_not_a_grid_and_only_the_first_stamp_is_named():
+def test_system_time_stamps_are_not_a_grid_and_are_named_from_the_first_stamp():
     t0 = 1_763_000_000_123_456_789
     grid = _grid([t0 + k * MS + (k * 7919) % 50_000 for k in range(200)])
     assert grid.off_grid and not grid.on_grid() and grid.missed() is None
-    assert grid.describe() == 'first stamp %.6f s' % (t0 * 1e-9)
+    # last stamp: k = 199, 199 ms + (199 * 7919) % 50000 ns = 199.025881 ms after t0
+    assert grid.describe() == ('first stamp +0.000000 s, last +0.199026 s (from the first '
+                               'stamp recorded)')
+
+
+def test_a_real_time_stream_on_a_1_ms_wall_grid_counts_no_ticks():
+    # the real-time run: stamps of the wall clock, each a whole millisecond
+    t0 = 1_795_695_095_917 * MS
+    grid = _grid([t0 + k * MS for k in range(500)])
+    assert grid.system_time() and not grid.on_grid()
+    assert grid.missed() is None
+    assert grid.describe(origin=t0 - 41 * MS) == (
+        'first stamp +0.041000 s, last +0.540000 s (from the first stamp recorded)')
+
+
+def test_the_origin_of_a_recording_is_the_first_system_time_stamp_of_any_stream():
+    from freejoint_tools.recorder import first_system_stamp
+    t0 = 1_795_695_095_917 * MS
+    streams = [_grid([t0 + 5 * MS + k * MS for k in range(20)]),
+               _grid([t0 + 2 * MS + k * MS for k in range(20)]),
+               _grid([k * MS for k in range(20)]), _grid([])]   # sim time, no stamp
+    assert first_system_stamp(streams) == t0 + 2 * MS
+    assert first_system_stamp(streams[2:]) is None
 
 
 def test_too_few_stamps_or_stamps_going_back_are_not_a_grid():

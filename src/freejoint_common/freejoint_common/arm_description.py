@@ -42,8 +42,8 @@ NO_GRAVITY = [0.0, 0.0, 0.0]
 ARM_SPECS = (
     Spec('robot_description', '',
          'URDF text of the arm (as robot_state_publisher and ros2_control take it): a '
-         'planar serial chain of revolute joints about parallel z axes ending in a fixed '
-         "end-effector joint (freejoint_core.urdf); '' = description_file, or the paper's "
+         'planar serial chain of revolute joints about parallel axes, in its own frames '
+         "(freejoint_core.urdf); '' = description_file, or the paper's "
          'Table I arm if that is empty too', read_only=True),
     Spec('description_file', '',
          "path of the arm's URDF, read at start-up (when robot_description is empty); "
@@ -54,6 +54,11 @@ ARM_SPECS = (
          'names of the passive (free, unactuated) joints of the arm; at least two joints '
          "stay active (the task is the end effector's x, y); the paper's arm: joint3",
          read_only=True),
+    Spec('tip_link', '',
+         'link of the URDF whose origin is the task point (the end effector), as '
+         "kinematics_interface's tip; '' = the chain's last link (past the last revolute "
+         'joint along a single fixed end-effector joint; sensor and camera branches are not '
+         'the chain)', read_only=True),
     Spec('gravity', list(NO_GRAVITY),
          'gravity [m/s^2] in the base frame of the URDF, its in-plane part along -y; '
          '[0, 0, 0] = the vector of case (horizontal: 0 0 -9.81, vertical: 0 -9.81 0)'),
@@ -209,21 +214,26 @@ def _resolve(values):
             'description_file: give robot_description or description_file, not both')
     passive = list(values['passive_joints'] or ())
     given, gravity = _gravity(values['gravity'], case)
-    if not text and not path and passive == PAPER_PASSIVE and given is None:
+    tip = values.get('tip_link') or ''
+    if not text and not path and passive == PAPER_PASSIVE and given is None and not tip:
         params = table1(case)
         return NodeArm(params=params, joint_names=PAPER_JOINTS,
                        active_names=tuple(PAPER_JOINTS[i] for i in params.active),
                        urdf_arm=None, source=f'Table I ({case})')
     if text:
-        arm = parse_urdf(text, passive, gravity)
+        arm = parse_urdf(text, passive, gravity, tip)
         source = f'robot_description ({arm.name})'
     elif path:
-        arm = load_urdf(package_path(path), passive, gravity)
+        arm = load_urdf(package_path(path), passive, gravity, tip)
         source = f'description_file {path}'
     else:
-        arm = parse_urdf(_paper_text(), passive, gravity)
+        arm = parse_urdf(_paper_text(), passive, gravity, tip)
         source = 'paper_arm.urdf'
     active = tuple(name for name in arm.joint_names if name not in arm.passive_joints)
+    frame = arm.task_frame
+    if frame != ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)):
+        source += ', tip %s, task frame: origin (%s) x (%s) y (%s) in the base frame' % (
+            arm.ee_link, *(' '.join('%g' % v for v in vec) for vec in frame))
     return NodeArm(params=arm.params, joint_names=arm.joint_names, active_names=active,
                    urdf_arm=arm, source='%s, passive %s, gravity (%s)' % (
                        source, list(arm.passive_joints), ' '.join('%g' % g for g in gravity)))

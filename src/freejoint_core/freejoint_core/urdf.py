@@ -1,25 +1,34 @@
 """
 Planar serial arms from URDF: the core's ``ArmParams`` from a robot description.
 
-Supported descriptions (anything else is refused with one line naming the problem):
+Supported descriptions (anything else is refused with one line naming the problem), read
+in their own frames (each joint's ``<origin>`` and ``<axis>`` composed from the root at
+zero angles, as robot_state_publisher does):
 
-* one serial chain from the root link (fixed mounts before joint 1 allowed if they
-  neither rotate nor shift in x-y): revolute (or continuous) joints, every axis
-  ``0 0 1`` in its joint frame and every joint origin without rotation, so all axes are
-  parallel to the base z axis and the arm moves in the base x-y plane;
-* joint 1 at the base origin (``x = y = 0``); joint i + 1 at ``(L_i, 0, z)`` in the
-  frame of link i (``z`` free: it does not enter the planar dynamics), so link i runs
-  along its x axis and the joint angles are the core's relative angles;
-* one fixed joint after the last revolute one, at ``(L_n, 0, z)``: its child is the end
-  effector (the task point); it carries no mass;
-* every moving link has an ``<inertial>`` with mass > 0 and its centre of mass on the
-  link's x axis (``y = 0``), at ``0 < x <= L``; the moment of inertia about the COM
-  along z (``izz`` after the inertial origin's rotation) is the core's ``I_i``.
+* a tree of links whose chain from the root to the task point (``tip_link``, default the
+  chain's last link: from the root into the one child joint below which something moves,
+  past the last revolute joint along a single fixed end-effector joint) holds revolute
+  (or continuous) joints and fixed joints; fixed mounts before joint 1 may shift and turn
+  the arm anywhere (a base offset); branches off the chain with nothing moving below
+  (sensors, cameras) are no part of the chain;
+* every revolute axis of the chain, in the base frame, is the same unit vector ``a``
+  (any direction: +-x, +-y, +-z or other): the arm moves in a plane normal to ``a``;
+* at zero angles the arm is straight: every joint and the task point lie on one line
+  in that plane (any direction ``x``); link i runs from joint i to joint i + 1 (the last
+  one to the task point) and its length is that distance in the plane (offsets along
+  ``a`` do not enter the planar dynamics);
+* the task frame (the core's x, y: setpoints, circles, ``ee_position``) has its origin on
+  joint 1's axis, x along the straight arm and y = a x x (``UrdfArm.task_frame``); for the
+  shipped arms (axes +z, links along +x, joint 1 at the origin) it is the base frame;
+* each moving link has its mass: the link itself with every link fixed to it folded in
+  (a tool, a sensor); links without ``<inertial>`` or with zero mass add nothing; the
+  folded centre of mass lies on the link's line, in ``(0, L]``; the moment of inertia is
+  about ``a`` through that centre (parallel-axis sums).
 
 Gravity and the passive joints are not URDF elements: they are given beside the
 description.  Gravity is a vector in the base frame; its in-plane part must point
-along -y (the core's convention), its z part acts along the joint axes and exerts no
-joint torque.  The horizontal case (Case 1) is ``GRAVITY_HORIZONTAL = (0, 0, -9.81)``,
+along -y of the task frame (the core's convention), its part along the joint axes exerts
+no joint torque.  The horizontal case (Case 1) is ``GRAVITY_HORIZONTAL = (0, 0, -9.81)``,
 the vertical one (Case 2) ``GRAVITY_VERTICAL = (0, -9.81, 0)``.
 
 The nominal model of the controller is ``UrdfArm.nominal(scale)``: masses, inertias
@@ -49,6 +58,10 @@ SHIPPED = ('paper_arm', 'four_link_arm')
 
 _TOL = 1e-12   # geometric tolerance (m, rad) for "on the axis" / "no rotation"
 _REVOLUTE = ('revolute', 'continuous')
+OFF_LINE = 1e-6
+"""A link's (folded) centre of mass this far off its line, relative to its length, is on it:
+the core's planar model has no offset across the link (a 1e-5 kg camera 5 cm beside a 1 kg
+link moves it 5e-7 of its length)."""
 
 
 @dataclass(frozen=True)
@@ -67,7 +80,7 @@ class UrdfArm:
     link_names : tuple of str, (n,)
         The child link of each joint.
     base_link : str
-        The root link (base frame).
+        The link joint 1 is mounted on (the root, or the last link of a fixed mount).
     ee_link : str
         The end-effector link (child of the fixed tip joint).
     passive_joints : tuple of str
@@ -76,7 +89,12 @@ class UrdfArm:
         Gravity [m/s^2] in the base frame.
     params : ArmParams
         The real parameters (lengths, masses, inertias, COM distances from the URDF;
-        ``passive`` the indices of ``passive_joints``; ``gravity = -gravity_vector[1]``).
+        ``passive`` the indices of ``passive_joints``; ``gravity`` the part of
+        ``gravity_vector`` along -y of the task frame).
+    task_frame : tuple
+        ``(origin, x, y)`` in the root link's frame (m, unit vectors): where the core's task
+        coordinates lie (origin on joint 1's axis, x along the arm at zero angles, y =
+        axis x x); ``((0, 0, 0), (1, 0, 0), (0, 1, 0))`` for an arm in the base x-y plane.
 
     """
 
@@ -89,6 +107,7 @@ class UrdfArm:
     passive_joints: tuple
     gravity_vector: tuple
     params: ArmParams
+    task_frame: tuple = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
 
     def nominal(self, scale):
         """
@@ -203,9 +222,9 @@ def _named(root, tag):
         yield name, elem
 
 
-def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
+def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL, tip_link=''):
     """
-    Read a planar serial arm from URDF text.
+    Read a planar serial arm from URDF text, in its own frames.
 
     Parameters
     ----------
@@ -215,6 +234,9 @@ def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
         Names of the free (unactuated) joints; at least two joints must stay active.
     gravity : sequence of float, (3,)
         Gravity [m/s^2] in the base frame (see the module notes).
+    tip_link : str
+        The link whose origin is the task point (kinematics_interface's ``tip``); ''
+        = the chain's last link (see the module notes).
 
     Returns
     -------
@@ -224,7 +246,8 @@ def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
     ------
     FreejointValueError
         One line naming the problem: ``robot_description: ...`` for the URDF,
-        ``passive_joints: ...`` or ``gravity: ...`` for the other arguments.
+        ``passive_joints: ...``, ``gravity: ...`` or ``tip_link: ...`` for the other
+        arguments.
 
     """
     root = robot_root(text)
@@ -236,125 +259,70 @@ def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
         raise FreejointValueError(
             f'passive_joints: expected joint names (strings), got {passive_joints!r}')
     gvec = _gravity(gravity)
-
-    links = dict(_named(root, 'link'))
-    children = {}   # parent link -> joints
-    child_links = set()
-    for jname, joint in _named(root, 'joint'):
-        parent, child = joint.find('parent'), joint.find('child')
-        if parent is None or child is None or not parent.get('link') or not child.get('link'):
-            raise FreejointValueError(
-                f'robot_description: joint {jname!r} needs <parent link> and <child link>')
-        for end in (parent.get('link'), child.get('link')):
-            if end not in links:
-                raise FreejointValueError(
-                    f'robot_description: joint {jname!r} refers to link {end!r}, not defined')
-        if child.get('link') in child_links:
-            raise FreejointValueError(
-                f'robot_description: link {child.get("link")!r} is the child of two joints')
-        child_links.add(child.get('link'))
-        children.setdefault(parent.get('link'), []).append(joint)
-    roots = [name for name in links if name not in child_links]
-    if len(roots) != 1:
-        raise FreejointValueError(
-            f'robot_description: expected one root link, got {len(roots)} ({roots})')
-    base = roots[0]
-
-    joint_names, link_names, lengths, masses, inertias, coms = [], [], [], [], [], []
-    ee_link = None
-    current = base
-    while True:
-        out = children.get(current, [])
-        if not out:
-            break
-        if len(out) > 1:
-            raise FreejointValueError(
-                f'robot_description: link {current!r} has {len(out)} child joints '
-                f'({", ".join(j.get("name") for j in out)}); only serial chains are supported')
-        joint = out[0]
-        jname, jtype = joint.get('name'), joint.get('type')
-        child = joint.find('child').get('link')
-        what = f'robot_description: joint {jname!r}'
-        if joint.find('mimic') is not None:
-            raise FreejointValueError(f'{what}: <mimic> joints are not supported')
-        xyz, rpy = _origin(joint, what)
-        if ee_link is not None:
-            raise FreejointValueError(
-                f'{what}: joint after the end-effector joint; the fixed joint must be the last')
-        if jtype in _REVOLUTE:
-            axis_el = joint.find('axis')
-            axis = (_floats(axis_el.get('xyz'), 3, f'{what} axis') if axis_el is not None
-                    else (1.0, 0.0, 0.0))   # URDF default axis
-            norm = math.sqrt(sum(a * a for a in axis))
-            if norm == 0.0:
-                raise FreejointValueError(f'{what}: axis is the zero vector')
-            unit = tuple(a / norm for a in axis)
-            if abs(unit[0]) > _TOL or abs(unit[1]) > _TOL:
-                raise FreejointValueError(
-                    f'{what}: axis ({_fmt(axis)}) is not parallel to z; a planar arm needs '
-                    f'every revolute axis along z (0 0 1)')
-            if unit[2] < 0.0:
-                raise FreejointValueError(
-                    f'{what}: axis ({_fmt(axis)}) points along -z; use 0 0 1 (joint angles are '
-                    f'counter-clockwise about +z)')
-            limit = joint.find('limit')
-            if jtype == 'revolute' and limit is None:
-                raise FreejointValueError(f'{what}: revolute joint without <limit>')
-            if jtype == 'continuous' and limit is not None and (
-                    limit.get('lower') is not None or limit.get('upper') is not None):
-                raise FreejointValueError(
-                    f'{what}: continuous joint with position limits (lower/upper); use a '
-                    f'revolute joint')
-        elif jtype == 'fixed':
-            pass
-        else:
-            raise FreejointValueError(
-                f'{what}: type {jtype!r} is not supported (revolute or continuous joints '
-                f'about parallel z axes, then one fixed end-effector joint)')
-        if any(abs(a) > _TOL for a in rpy):
-            raise FreejointValueError(
-                f'{what}: origin rpy ({_fmt(rpy)}) rotates the joint frame; the planar '
-                f'model needs rpy = 0 0 0 (links along x, axes along z)')
-        if not joint_names:
-            if abs(xyz[0]) > _TOL or abs(xyz[1]) > _TOL:
-                first = 'a fixed joint before joint 1' if jtype == 'fixed' else 'the first joint'
-                raise FreejointValueError(
-                    f'{what}: {first} must sit at the base origin (x = y = 0), got '
-                    f'xyz = ({_fmt(xyz)})')
-            if jtype == 'fixed':    # a mount (e.g. world -> base_link): same x-y frame
-                base = current = child
-                continue
-        else:
-            if abs(xyz[1]) > _TOL or xyz[0] <= 0.0:
-                raise FreejointValueError(
-                    f'{what}: must sit on the x axis of link {current!r} at x = L > 0 '
-                    f'(y = 0), got xyz = ({_fmt(xyz)})')
-            lengths.append(xyz[0])
-        if jtype == 'fixed':
-            ee_link = child
-            ee = links[child].find('inertial')
-            if ee is not None and ee.find('mass') is not None:
-                (m_ee,) = _floats(ee.find('mass').get('value'), 1,
-                                  f'robot_description: link {child!r} mass')
-                if m_ee != 0.0:
-                    raise FreejointValueError(
-                        f'robot_description: end-effector link {child!r} has mass {m_ee:g}; '
-                        f'put the mass of a tool in the inertial of link {current!r}')
-        else:
-            mass, com, izz = _inertial(links[child], child)
-            joint_names.append(jname)
-            link_names.append(child)
-            masses.append(mass)
-            coms.append(com)
-            inertias.append(izz)
-        current = child
-    if not joint_names:
+    links, joint_of, children, base = _tree(root)
+    chain = _chain(links, joint_of, children, base, tip_link or '')
+    tip = chain[-1].find('child').get('link') if chain else base
+    frames = _Frames(joint_of, children)
+    revolute = [j for j in chain if j.get('type') in _REVOLUTE]
+    for joint in chain:
+        _check_joint(joint)
+    if not revolute:
         raise FreejointValueError('robot_description: no revolute joint found from the root '
                                   f'link {base!r}')
-    if ee_link is None:
-        raise FreejointValueError(
-            f'robot_description: no end effector: add a fixed joint from {current!r} to an '
-            f'end-effector link at the tip (its x is the length of {current!r})')
+    # the common axis: every revolute joint's axis in the base frame, at zero angles
+    n = frames.axis(revolute[0])
+    for joint in revolute[1:]:
+        a = frames.axis(joint)
+        if np.linalg.norm(a - n) > 1e-9:
+            what = f"robot_description: joint {joint.get('name')!r}"
+            if np.linalg.norm(a + n) <= 1e-9:
+                raise FreejointValueError(
+                    f'{what}: axis points opposite to the axis of joint '
+                    f"{revolute[0].get('name')!r} ({_fmt(n)} in the base frame); a planar arm "
+                    f'needs every joint counter-clockwise about the same axis')
+            raise FreejointValueError(
+                f'{what}: axis ({_fmt(a)} in the base frame) is not parallel to the axis of '
+                f"joint {revolute[0].get('name')!r} ({_fmt(n)}); a planar arm needs every "
+                f'revolute axis parallel')
+    joint_names = [j.get('name') for j in revolute]
+    link_names = [j.find('child').get('link') for j in revolute]
+    # link i: from joint i to joint i + 1 (the last one to the tip), its in-plane vector
+    lengths, direction = [], None
+    ends = revolute[1:] + [None]
+    for i, (joint, nxt) in enumerate(zip(revolute, ends)):
+        vec = frames.between(joint, nxt, tip)
+        flat = vec - float(vec @ n) * n
+        length = float(np.sqrt(flat @ flat))
+        what = (f"robot_description: joint {nxt.get('name')!r}" if nxt is not None else
+                f'robot_description: the task point {tip!r}')
+        if nxt is None and length <= _TOL:
+            raise FreejointValueError(
+                f'robot_description: no end effector: the task point {tip!r} sits on joint '
+                f'{joint.get("name")!r} (link {link_names[i]!r} has no length); add a fixed '
+                f'joint from {link_names[i]!r} to an end-effector link at its tip, or name '
+                f'such a link as tip_link')
+        if length <= _TOL:
+            raise FreejointValueError(
+                f'{what}: sits on the axis of joint {joint.get("name")!r}: link '
+                f'{link_names[i]!r} has no length in the plane of the arm')
+        unit = flat / length
+        if direction is None:
+            direction = unit
+        elif np.linalg.norm(unit - direction) > 1e-9:
+            raise FreejointValueError(
+                f'{what}: must sit on the line of link {link_names[0]!r} at zero angles '
+                f'(link {link_names[i]!r} runs along ({_fmt(unit)}), link {link_names[0]!r} '
+                f'along ({_fmt(direction)}) in the base frame): the core takes zero angles as '
+                f'a straight arm')
+        lengths.append(length)
+    side = np.cross(n, direction)
+    masses, inertias, coms = [], [], []
+    for i, joint in enumerate(revolute):
+        mass, com, izz = frames.link_inertia(joint, ends[i], links, n, direction, side,
+                                             lengths[i])
+        masses.append(mass)
+        coms.append(com)
+        inertias.append(izz)
     for pname in passive_joints:
         if pname not in joint_names:
             raise FreejointValueError(
@@ -378,16 +346,267 @@ def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
             raise FreejointValueError(
                 f'robot_description: link {lname!r}: mass ({m:g}) and izz ({izz:g}) must be '
                 f'> 0')
+    g = np.asarray(gvec, dtype=float)
+    g_x, g_y = float(g @ direction), float(g @ side)
+    if abs(g_x) > _TOL or g_y > 0.0:
+        raise FreejointValueError(
+            f"gravity: the in-plane part of ({_fmt(gvec)}) must point along -y of the arm's "
+            f'task frame (x along the arm at zero angles ({_fmt(direction)}), y = axis x x = '
+            f'({_fmt(side)}) in the base frame): rotate the base frame of the URDF so that '
+            f'it does')
     params = ArmParams(lengths=tuple(lengths), masses=tuple(masses),
                        inertias=tuple(inertias), com=tuple(coms), passive=passive_idx,
-                       gravity=-gvec[1] + 0.0)
+                       gravity=-g_y + 0.0)
+    origin = frames.position(revolute[0])
     return UrdfArm(name=root.get('name', ''), urdf=text, joint_names=tuple(joint_names),
-                   link_names=tuple(link_names), base_link=base, ee_link=ee_link,
+                   link_names=tuple(link_names),
+                   base_link=revolute[0].find('parent').get('link'), ee_link=tip,
                    passive_joints=tuple(joint_names[i] for i in passive_idx),
-                   gravity_vector=gvec, params=params)
+                   gravity_vector=gvec, params=params,
+                   task_frame=(tuple(float(v) for v in origin),
+                               tuple(float(v) for v in direction),
+                               tuple(float(v) for v in side)))
 
 
-def load_urdf(path, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
+def _tree(root):
+    """Return ``(links, joint_of child, children of parent, root link)`` of a URDF."""
+    links = dict(_named(root, 'link'))
+    children = {}   # parent link -> joints
+    joint_of = {}   # child link -> joint
+    for jname, joint in _named(root, 'joint'):
+        parent, child = joint.find('parent'), joint.find('child')
+        if parent is None or child is None or not parent.get('link') or not child.get('link'):
+            raise FreejointValueError(
+                f'robot_description: joint {jname!r} needs <parent link> and <child link>')
+        for end in (parent.get('link'), child.get('link')):
+            if end not in links:
+                raise FreejointValueError(
+                    f'robot_description: joint {jname!r} refers to link {end!r}, not defined')
+        if child.get('link') in joint_of:
+            raise FreejointValueError(
+                f'robot_description: link {child.get("link")!r} is the child of two joints')
+        joint_of[child.get('link')] = joint
+        children.setdefault(parent.get('link'), []).append(joint)
+    roots = [name for name in links if name not in joint_of]
+    if len(roots) != 1:
+        raise FreejointValueError(
+            f'robot_description: expected one root link, got {len(roots)} ({roots})')
+    return links, joint_of, children, roots[0]
+
+
+def _moves(link, children):
+    """Return True if a moving joint lies below ``link``."""
+    for joint in children.get(link, []):
+        if joint.get('type') != 'fixed' or _moves(joint.find('child').get('link'), children):
+            return True
+    return False
+
+
+def _chain(links, joint_of, children, base, tip_link):
+    """
+    Return the joints from the root to the task point, in order.
+
+    ``tip_link`` given: the path to it. Else the chain's last link: from the root, into the
+    one child joint below which something moves; past the last moving joint, along a
+    single fixed joint (an end-effector joint) while there is exactly one; sensor and
+    camera branches (fixed, nothing moving below) are not the chain.
+    """
+    if tip_link:
+        if tip_link not in links:
+            raise FreejointValueError(f'tip_link: no link {tip_link!r} in the URDF')
+        path, link = [], tip_link
+        while link in joint_of:
+            joint = joint_of[link]
+            path.append(joint)
+            link = joint.find('parent').get('link')
+        return path[::-1]
+    path, link = [], base
+    while True:
+        out = children.get(link, [])
+        moving = [j for j in out
+                  if j.get('type') != 'fixed' or _moves(j.find('child').get('link'), children)]
+        if len(moving) > 1:
+            raise FreejointValueError(
+                f'robot_description: link {link!r} has {len(moving)} child joints with moving '
+                f'joints below ({", ".join(j.get("name") for j in moving)}); only serial '
+                f'chains are supported')
+        if moving:
+            joint = moving[0]
+        elif len(out) == 1 and path:
+            joint = out[0]           # the end-effector joint
+        else:
+            return path
+        path.append(joint)
+        link = joint.find('child').get('link')
+
+
+def _check_joint(joint):
+    """Refuse a chain joint the planar model does not have (type, mimic, limits)."""
+    jname, jtype = joint.get('name'), joint.get('type')
+    what = f'robot_description: joint {jname!r}'
+    if joint.find('mimic') is not None:
+        raise FreejointValueError(f'{what}: <mimic> joints are not supported')
+    if jtype in _REVOLUTE:
+        limit = joint.find('limit')
+        if jtype == 'revolute' and limit is None:
+            raise FreejointValueError(f'{what}: revolute joint without <limit>')
+        if jtype == 'continuous' and limit is not None and (
+                limit.get('lower') is not None or limit.get('upper') is not None):
+            raise FreejointValueError(
+                f'{what}: continuous joint with position limits (lower/upper); use a '
+                f'revolute joint')
+    elif jtype != 'fixed':
+        raise FreejointValueError(
+            f'{what}: type {jtype!r} is not supported (revolute or continuous joints '
+            f'about parallel axes, fixed joints between them)')
+
+
+class _Frames:
+    """Link frames at zero joint angles, in the base frame (rotation, origin)."""
+
+    def __init__(self, joint_of, children):
+        self._joint_of = joint_of
+        self._children = children
+        self._cache = {}
+
+    def frame(self, link):
+        """Return the rotation (3 x 3) and origin (3,) of ``link`` in the base frame."""
+        if link not in self._cache:
+            joint = self._joint_of.get(link)
+            if joint is None:
+                self._cache[link] = (np.eye(3), np.zeros(3))
+            else:
+                rot, pos = self.frame(joint.find('parent').get('link'))
+                xyz, rpy = _origin(joint, f"robot_description: joint {joint.get('name')!r}")
+                self._cache[link] = (rot @ _rpy_matrix(rpy), pos + rot @ np.array(xyz))
+        return self._cache[link]
+
+    def position(self, joint):
+        """Return the joint's origin in the base frame."""
+        return self.frame(joint.find('child').get('link'))[1]
+
+    def axis(self, joint):
+        """Return the joint's unit axis in the base frame (URDF default ``1 0 0``)."""
+        what = f"robot_description: joint {joint.get('name')!r}"
+        axis_el = joint.find('axis')
+        axis = (_floats(axis_el.get('xyz'), 3, f'{what} axis') if axis_el is not None
+                else (1.0, 0.0, 0.0))
+        norm = math.sqrt(sum(a * a for a in axis))
+        if norm == 0.0:
+            raise FreejointValueError(f'{what}: axis is the zero vector')
+        rot = self.frame(joint.find('child').get('link'))[0]
+        return rot @ np.array([a / norm for a in axis])
+
+    def between(self, joint, nxt, tip):
+        """
+        Return the vector from ``joint`` to ``nxt`` (None: to the link ``tip``), base frame.
+
+        Summed joint by joint from ``joint``'s child link (each origin rotated into the base
+        frame), so that one straight link gives its URDF numbers exactly.
+        """
+        target = nxt.find('child').get('link') if nxt is not None else tip
+        start = joint.find('child').get('link')
+        steps, link = [], target
+        while link != start:
+            step = self._joint_of[link]
+            steps.append(step)
+            link = step.find('parent').get('link')
+        vec = np.zeros(3)
+        for step in reversed(steps):
+            rot = self.frame(step.find('parent').get('link'))[0]
+            xyz, _ = _origin(step, f"robot_description: joint {step.get('name')!r}")
+            vec = vec + rot @ np.array(xyz)
+        return vec
+
+    def _moving_group(self, joint, nxt):
+        """Return the links moving with ``joint``'s link: it, and fixed descendants."""
+        stop = None if nxt is None else nxt.find('child').get('link')
+        group, todo = [], [joint.find('child').get('link')]
+        while todo:
+            link = todo.pop()
+            group.append(link)
+            for child in self._children.get(link, []):
+                child_link = child.find('child').get('link')
+                if child.get('type') == 'fixed' and child_link != stop:
+                    todo.append(child_link)
+        return group
+
+    def link_inertia(self, joint, nxt, links, n, x, y, length):
+        """
+        Return ``(mass, com along the link, inertia about the axis at the COM)`` of link i.
+
+        The link of ``joint`` with every link fixed to it (a tool, a sensor, a camera)
+        folded in; links without ``<inertial>`` or with zero mass add nothing. The COM
+        must lie on the link's line (y = 0 in the task frame, within ``OFF_LINE`` of the
+        length: a sensor of 10 g a few cm beside a 1 kg link is on it).
+        """
+        origin = self.position(joint)
+        parts = []
+        own = joint.find('child').get('link')
+        for name in self._moving_group(joint, nxt):
+            inertial = links[name].find('inertial')
+            if inertial is None or inertial.find('mass') is None:
+                if name == own and len(self._moving_group(joint, nxt)) == 1:
+                    _inertial(links[name], name)          # raises: no <inertial>
+                continue
+            mass, rel, izz = _inertial_frame(links[name], name, self.frame(name)[0], n)
+            if mass == 0.0:
+                continue
+            rot, pos = self.frame(name)
+            parts.append((name, mass, pos - origin if name != own else np.zeros(3), rel, izz))
+        if not parts and links[own].find('inertial') is not None:
+            mass, rel, izz = _inertial_frame(links[own], own, self.frame(own)[0], n)
+            return mass, float(rel @ x), izz        # mass 0: refused by the caller
+        if not parts:
+            raise FreejointValueError(
+                f'robot_description: link {own!r} has no <inertial> (a moving link needs its '
+                f'mass, centre of mass and inertia)')
+        coms = [offset + rel for _, _, offset, rel, _ in parts]
+        if len(parts) == 1:
+            _, mass, _, _, izz = parts[0]
+            com = coms[0]
+        else:
+            mass = sum(p[1] for p in parts)
+            com = sum(p[1] * c for p, c in zip(parts, coms)) / mass
+            izz = 0.0
+            for (_, m, _, _, i_c), c in zip(parts, coms):
+                d = c - com
+                d = d - float(d @ n) * n
+                izz += i_c + m * float(d @ d)
+        off = float(com @ y)
+        if abs(off) > max(_TOL, OFF_LINE * length):
+            raise FreejointValueError(
+                f'robot_description: link {own!r}: centre of mass off the link axis (y = '
+                f'{off:g} m{", with the links fixed to it" if len(parts) > 1 else ""}); the '
+                f'model of the core needs it on the line of the link')
+        return mass, float(com @ x), izz
+
+
+def _inertial_frame(link, name, rot, n):
+    """Return ``(mass, COM in base axes from the link origin, inertia about n at the COM)``."""
+    inertial = link.find('inertial')
+    mass_el = inertial.find('mass')
+    (mass,) = _floats(mass_el.get('value'), 1, f'robot_description: link {name!r} mass')
+    xyz, rpy = _origin(inertial, f'robot_description: link {name!r} inertial')
+    inertia = inertial.find('inertia')
+    if inertia is None:
+        if mass == 0.0:
+            return 0.0, np.zeros(3), 0.0
+        raise FreejointValueError(
+            f'robot_description: link {name!r}: <inertial> has no <inertia>')
+    comps = {}
+    for key in ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz'):
+        (comps[key],) = _floats(inertia.get(key, '0'), 1,
+                                f'robot_description: link {name!r} inertia {key}')
+    tensor = np.array([[comps['ixx'], comps['ixy'], comps['ixz']],
+                       [comps['ixy'], comps['iyy'], comps['iyz']],
+                       [comps['ixz'], comps['iyz'], comps['izz']]])
+    full = rot @ _rpy_matrix(rpy)
+    izz = float(n @ (full @ tensor @ full.T) @ n)
+    return mass, rot @ np.array(xyz), izz
+
+
+def load_urdf(path, passive_joints=(), gravity=GRAVITY_HORIZONTAL, tip_link=''):
     """
     Read a planar serial arm from a URDF file.
 
@@ -395,7 +614,7 @@ def load_urdf(path, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
     ----------
     path : str
         The file (``description_file``).
-    passive_joints, gravity
+    passive_joints, gravity, tip_link
         As :func:`parse_urdf`.
 
     Returns
@@ -414,7 +633,7 @@ def load_urdf(path, passive_joints=(), gravity=GRAVITY_HORIZONTAL):
             text = f.read()
     except (OSError, UnicodeDecodeError, TypeError) as exc:
         raise FreejointValueError(f'description_file: cannot read {path!r} ({exc})') from None
-    return parse_urdf(text, passive_joints, gravity)
+    return parse_urdf(text, passive_joints, gravity, tip_link)
 
 
 def shipped_urdf_path(name):

@@ -76,8 +76,12 @@ PARAMS = (
           'Setpoints published ahead of ROS time (ticks), >= 1. Sim time: with /clock every '
           'N ticks, >= N - 1 (a smaller value is refused once N is known; found too small '
           'when N is learnt, it is raised to 2 N - 1).', (1, 1000)),
-    Param('centre', list(_CIRCLE['centre']), 'Circle centre (x, y) in m, base frame.',
-          validator=_centre),
+    Param('centre', list(_CIRCLE['centre']),
+          'Circle centre (x, y) in m, base frame. The whole circle must stay in the usable '
+          'region: distances from the base inside the reach and outside the semi-singular '
+          'annuli of the map; every refusal (~/plan_circle answer, parameter set) names '
+          'that region, and ~/plan_circle with execute false checks a circle without '
+          'starting it.', validator=_centre),
     Param('radius', _CIRCLE['radius'], 'Circle radius (m), > 0.', (0.0, 10.0),
           exclusive_min=True),
     Param('duration', _CIRCLE['duration'], 'Time of the revolution (s), > 0.', (0.0, 3600.0),

@@ -39,33 +39,51 @@ No step in the reference (``docs/GRAPH.md``, Plan changes): a plan accepted once
 has published a tick starts from the stream's state at its first unpublished tick, by a
 quintic transition into the circle's start (``planning.prepare_transition``,
 ``freejoint_core.trajectory.plan_transition``), refused with the reason when none fits the
-bounds or its path enters the region, and while another transition runs. Every circle is
+bounds or its path enters the region, and while another transition runs. A plan from rest
+(nothing streamed yet on the time base: the first plan, or the running one after ROS time
+went back) starts where the arm is: the end effector of the newest ``joint_states`` (the
+nominal model's kinematics) by a transition from rest into the circle's start, held to the
+circle's own peaks and largest step per tick (``planning.transition_from_rest``), or is
+refused with the reason. The joint states are taken only when needed (a subscription of
+depth 1 on a hidden helper node no executor spins: no callback per tick); with a
+``joint_states`` publisher but no state yet the plan waits for one (the stream only follows
+the clock); with none at all (in real time: none within ``ARM_DISCOVERY_S`` of the
+planner's start) it starts at the circle's start as before (logged).
+Refusals name the usable region (``SingularityModel.usable``). Every circle is
 held to the arm's reach and to ``max_speed`` / ``max_acceleration``. ``lookahead`` is checked
 against the clock spacing rule at run time.
 """
 
 import math
+import time
 
 from freejoint_common.arm_description import resolve_arm
 from freejoint_common.clock import own_clock, set_ros_time
-from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, PLAN_CIRCLE, PLANNED_PATH
-from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINT, to_ns
+from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, JOINT_STATES, PLAN_CIRCLE
+from freejoint_common.contract import PLANNED_PATH, profile, SEMI_SINGULAR_MAP, SETPOINT, to_ns
 from freejoint_common.node_tools import NodeParameters, overridable, QOS_OVERRIDES
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
 from freejoint_core.trajectory import CircleQuintic
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .conversions import occupancy_grid, path_marker, setpoint_msg
 from .params import CIRCLE_KEYS, LOOKAHEAD_MAX, MAP_KEYS, SCHEMA, validate
-from .planning import circle_bounds, compute_model, grid_bound, grid_extent
-from .planning import make_circle, prepare_transition
+from .planning import circle_bounds, compute_model, describe_join, end_effector, grid_bound
+from .planning import grid_extent, join_from_arm, JOIN_REFUSED, JOIN_WAIT, make_circle
+from .planning import prepare_transition
 from .stream import Plan, SetpointStream
 
 NODE_NAME = 'freejoint_planner'
+ARM_DISCOVERY_S = 2.0
+"""[s] Real time: how long after its start the planner waits for a joint_states publisher
+before a plan from rest starts without the arm's position (discovery of a node started
+together can take that long; in sim time the simulator's /clock and joint_states come
+together, and a planner alone is driven by its /clock)."""
 
 MARKER_POINTS = 361
 
@@ -85,6 +103,20 @@ class PlannerNode(Node, Lifecycle):
         # nominal model is the map's; read-only but gravity, which the map does not hold.
         arm = resolve_arm(self._cfg)
         self._arm = None if arm.urdf_arm is None else arm.params
+        self._joint_names = arm.joint_names
+        self._arm_source = arm.source
+        # Where the arm is, for a plan from rest: joint_states taken only when needed (a
+        # depth-1 subscription on a hidden node no executor spins: no callback per state).
+        self._js_node = Node('_%s_arm' % self.get_name(), namespace=self.get_namespace(),
+                             context=self.context, use_global_arguments=False,
+                             enable_rosout=False, start_parameter_services=False)
+        self._js_sub = self._js_node.create_subscription(
+            JOINT_STATES.msg_type, self.resolve_topic_name(JOINT_STATES.name),
+            lambda _msg: None, profile(1, reliable=False))
+        self._arm_xy = None         # the end effector of the newest joint state taken
+        self._arm_note = ''         # why the newest joint state gave no position
+        self._waits_logged = None   # plan id whose wait for the arm was logged
+        self._born = time.monotonic()
         self._sim = self.get_parameter('use_sim_time').value
         own_clock(self)     # one /clock delivery: _on_clock sets the ROS clock
         self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS), arm=self._arm)
@@ -95,7 +127,7 @@ class PlannerNode(Node, Lifecycle):
             raise FreejointValueError(reason)
         self.get_logger().info(
             f'singularity map computed in {self._model.seconds * 1e3:.0f} ms: '
-            f'{self._model.describe()}')
+            f'{self._model.describe()}; {self._model.usable()}; arm: {self._arm_source}')
         # QoS overridable (qos_overrides./setpoint.publisher.<history|depth|reliability>).
         self._setpoint_pub = self.create_publisher(SETPOINT.msg_type, SETPOINT.name,
                                                    overridable(SETPOINT.qos),
@@ -244,25 +276,33 @@ class PlannerNode(Node, Lifecycle):
         """
         reason = circle_bounds(circle, model, cfg['max_speed'], cfg['max_acceleration'])
         if reason:
-            return reason, math.nan, None, None
+            return f'{reason} ({model.usable()})', math.nan, None, None
         check = model.check(circle)
-        if not check.ok or not transition:
-            return check.reason, check.margin, None, None
+        if not check.ok:
+            return f'{check.reason} ({model.usable()})', check.margin, None, None
+        if not transition:
+            return '', check.margin, None, None
         reason, choice, tick = prepare_transition(
             self._stream, circle, model, cfg['transition_max_duration'],
-            bounds=(cfg['max_speed'], cfg['max_acceleration']))
+            bounds=(cfg['max_speed'], cfg['max_acceleration']),
+            arm=self._arm_position() if self._stream.fresh() else None)
         return reason, check.margin, choice, tick
 
     def _execute(self, circle, start_delay, margin, source, choice=None, tick=None):
         """Replace the running plan by ``circle``; it starts at the next trigger."""
         self._last_plan_id += 1
         segment = None if choice is None else choice.segment
+        from_rest = self._stream.fresh()
         plan = Plan(self._last_plan_id, circle, round(float(start_delay) * 1e9),
                     transition=segment, ticks=0 if segment is None else choice.ticks,
-                    transition_tick=tick)
+                    transition_tick=tick, joined=not (from_rest and choice is None))
         self._stream.start(plan)
         self._publish_marker(plan)
-        if segment is None:
+        if not plan.joined:
+            how = 'from rest: where the arm is is decided when it starts'
+        elif from_rest:
+            how = 'from rest: ' + describe_join(self._arm_xy, choice)
+        elif segment is None:
             how = 'starts at its start point'
         else:
             how = (f'transition of {choice.ticks} ticks from tick {tick} (peaks '
@@ -327,11 +367,80 @@ class PlannerNode(Node, Lifecycle):
                                              self._cfg['frame_id'], self._now_ns(),
                                              plan.plan_id))
 
+    def _arm_position(self):
+        """
+        Return the arm's end effector (x, y) from the newest joint state, None if unknown.
+
+        Takes what the depth-1 subscription holds (the newest state; nothing new: the one
+        taken before); a state without the arm's joints gives None and says why
+        (``_arm_note``).
+        """
+        got = None
+        try:
+            handle = self._js_sub.handle
+            with handle:
+                while True:
+                    taken = handle.take_message(self._js_sub.msg_type, False)
+                    if taken is None:
+                        break
+                    got = taken[0]
+        except InvalidHandle:          # destroyed at shutdown
+            return self._arm_xy
+        if got is not None:
+            self._arm_xy = end_effector(self._model, self._joint_names, got.name, got.position)
+            self._arm_note = '' if self._arm_xy is not None else (
+                f'joint_states has no finite positions of the joints {list(self._joint_names)} '
+                f'(it names {list(got.name)})')
+        return self._arm_xy
+
+    def _join(self, plan):
+        """Decide how a plan from rest starts (``planning.join_from_arm``); True: hold."""
+        position = self._arm_position()
+        wait = None
+        if position is None and not self._arm_note:
+            count = self._js_sub.get_publisher_count()
+            if count:
+                wait = (f"waiting for the arm's position: joint_states has {count} "
+                        f'publisher(s), no state with the joints {list(self._joint_names)} '
+                        'yet')
+            elif not self._sim and time.monotonic() - self._born < ARM_DISCOVERY_S:
+                wait = (f"waiting up to {ARM_DISCOVERY_S:g} s from the planner's start for a "
+                        "joint_states publisher (the arm's position)")
+        action, text = join_from_arm(
+            plan, self._stream, self._model, position, wait,
+            self._cfg['transition_max_duration'],
+            (self._cfg['max_speed'], self._cfg['max_acceleration']))
+        if action == JOIN_WAIT:
+            if self._waits_logged != plan.plan_id:
+                self._waits_logged = plan.plan_id
+                self.get_logger().info(f'plan {plan.plan_id}: {text}')
+            return True
+        if action == JOIN_REFUSED:
+            self._stream.plan = None
+            self.get_logger().error(f'plan {plan.plan_id} refused at its start, nothing '
+                                    f'streams: {text}')
+            return True
+        if position is None:
+            text += f': {self._arm_note}' if self._arm_note else ''
+            self.get_logger().warning(f'plan {plan.plan_id} {text}')
+        else:
+            self.get_logger().info(f'plan {plan.plan_id} from rest: {text}')
+        return False
+
     def _advance(self, now_ns):
         frame_id = self._cfg['frame_id']
         publish = self._setpoint_pub.publish
         stream = self._stream
-        for sp in stream.advance(now_ns):
+        if stream.last_now_ns is not None and now_ns < stream.last_now_ns:
+            # ROS time went back (a reset simulator): the arm's position taken before is
+            # stale, and the running plan joins from rest again
+            self._arm_xy = None
+            self._arm_note = ''
+            stream.advance(now_ns, hold=True)
+        plan = stream.plan
+        hold = (plan is not None and plan.start_tick is None and not plan.joined
+                and self._join(plan))
+        for sp in stream.advance(now_ns, hold=hold):
             publish(setpoint_msg(sp, frame_id))
         if stream.restarts != self._restarts_logged:
             self._restarts_logged = stream.restarts
@@ -400,6 +509,11 @@ class PlannerNode(Node, Lifecycle):
     def _on_timer(self):
         if not self._sim:
             self._advance(self._now_ns())
+
+    def destroy_node(self):
+        """Destroy the node and its hidden joint-state helper."""
+        self._js_node.destroy_node()
+        super().destroy_node()
 
 
 def main(args=None):

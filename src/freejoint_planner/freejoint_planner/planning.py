@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import math
 import time
 
-from freejoint_core.arm import table1
+from freejoint_core.arm import ArmModel, table1
 from freejoint_core.singularity import check_path
 from freejoint_core.singularity_nlink import arm_region
 from freejoint_core.trajectory import circle_peaks, CircleQuintic, plan_transition
@@ -22,6 +22,12 @@ import numpy as np
 
 # Largest arc length (m) between the points of a circle handed to check_path.
 CHECK_STEP = 5e-4
+AT_START = 1e-6
+"""An arm at rest this close (m) to a circle's start (and no farther than the circle's own
+largest step per tick) starts the circle there at once: no transition (the IK round-off of
+a simulator started on the circle's start, an encoder's resolution)."""
+JOIN_START, JOIN_WAIT, JOIN_REFUSED = 'start', 'wait', 'refused'
+"""What :func:`join_from_arm` tells the node to do with a plan from rest."""
 
 
 def circle_bounds(circle, model, max_speed, max_acceleration):
@@ -134,9 +140,33 @@ class SingularityModel:
         """Return a one-line summary of the region (for the log)."""
         lo, hi = self.region.reach
         bands = ', '.join(f'[{a:.4f}, {b:.4f}]' for a, b in self.region.intervals) or 'none'
+        # no case: the map holds no gravity (Da = J M^-1 B); the node logs the arm with its
+        # gravity vector beside it
         return (f'semi-singular annuli {bands} m in reach [{lo:.4f}, {hi:.4f}] m '
-                f'(case {self.case}, nominal_scale {self.nominal_scale:g}, '
+                f'(nominal_scale {self.nominal_scale:g}, '
                 f'resolution {self.resolution_deg:g} deg, eps_d {self.eps_d:g})')
+
+    def usable(self):
+        """
+        Return the usable region in one line: the distances from the base a path may take.
+
+        The reach annulus minus the semi-singular annuli (both about the base), e.g.
+        ``usable: 0.0142 <= |p| <= 0.3528 m from the base (a path must stay within one
+        of these annuli)``; what a ``~/plan_circle`` refusal names.
+        """
+        lo, hi = self.region.reach
+        free, start = [], lo
+        for a, b in np.asarray(self.region.intervals, dtype=float).reshape(-1, 2):
+            if a > start:
+                free.append((start, min(a, hi)))
+            start = max(start, b)
+        if start < hi:
+            free.append((start, hi))
+        if not free:
+            return 'usable: none (the semi-singular annuli cover the reach)'
+        return 'usable: ' + ' or '.join(f'{a:.4f} <= |p| <= {b:.4f} m' for a, b in free) + (
+            ' from the base (a path must stay within one of these annuli)' if len(free) > 1
+            else ' from the base')
 
 
 def compute_model(case, nominal_scale, resolution_deg, eps_d, cells=True, arm=None):
@@ -201,7 +231,168 @@ def grid_extent(reach, cell):
     return (-half, half, -half, half)
 
 
-def prepare_transition(stream, circle, model, max_duration, bounds=None):
+def joint_indices(joint_names, names):
+    """
+    Return where each of ``joint_names`` sits in a joint state's ``names``, None if missing.
+
+    Parameters
+    ----------
+    joint_names : sequence of str, (n,)
+        The arm's joints, base to tip (the model's order).
+    names : sequence of str
+        ``JointState.name`` (any order, extra joints allowed).
+
+    Returns
+    -------
+    list of int or None
+
+    """
+    where = {name: i for i, name in enumerate(names)}
+    try:
+        return [where[name] for name in joint_names]
+    except KeyError:
+        return None
+
+
+def end_effector(model, joint_names, names, positions):
+    """
+    Return the end effector's position (x, y) of a joint state, None if a joint is missing.
+
+    Parameters
+    ----------
+    model : SingularityModel
+        Its nominal arm gives the kinematics (lengths are exact: only masses are scaled).
+    joint_names : sequence of str, (n,)
+        The arm's joints, base to tip.
+    names, positions : sequence
+        ``JointState.name`` and ``.position`` (rad).
+
+    Returns
+    -------
+    numpy.ndarray, shape (2,), m, or None
+        None also when a position is missing or not finite.
+
+    """
+    index = joint_indices(joint_names, names)
+    if index is None or max(index, default=-1) >= len(positions):
+        return None
+    q = np.array([positions[i] for i in index], dtype=float)
+    if not np.all(np.isfinite(q)):
+        return None
+    return ArmModel(model.nominal).fk(q)
+
+
+def transition_from_rest(position, circle, model, dt, max_duration, bounds=None):
+    """
+    Plan how a plan from rest reaches its circle's start from the arm's end effector.
+
+    The transition starts at rest at ``position`` and ends at rest on the circle's start,
+    held to the circle's own peak speed, acceleration and largest per-tick step (and to
+    ``bounds``), its path checked against the region. An arm within ``AT_START`` (and one
+    circle step) of the start needs none: the circle starts at once.
+
+    Parameters
+    ----------
+    position : array_like, shape (2,)
+        The arm's end effector (m).
+    circle : CircleQuintic
+        The plan's circle.
+    model : SingularityModel
+        Region the transition's path is checked against.
+    dt : float
+        Control period (s).
+    max_duration : float
+        Longest transition (s).
+    bounds : tuple of float, optional
+        ``(max_speed, max_acceleration)`` (m/s, m/s^2).
+
+    Returns
+    -------
+    tuple
+        ``(reason, choice)``: ``reason`` '' if the plan may start (``choice.segment``
+        the transition, None if none is needed), else why not.
+
+    """
+    p0 = np.asarray(position, dtype=float)
+    limits = transition_limits(circle, dt, (0.0, 0.0), (0.0, 0.0))
+    if bounds is not None:
+        limits = (min(limits[0], bounds[0]), min(limits[1], bounds[1]), limits[2])
+    start = np.array(circle.sample_tuple(0.0)[:2])
+    if float(np.hypot(*(p0 - start))) <= min(AT_START, limits[2]):
+        p0 = start
+    choice = plan_transition(p0, (0.0, 0.0), (0.0, 0.0), circle, dt,
+                             max_duration=max_duration, path_check=model.check_points,
+                             limits=limits)
+    if not choice.ok:
+        return (f'no safe transition from the arm at ({p0[0]:.4f}, {p0[1]:.4f}) m into the '
+                f"circle's start ({start[0]:.4f}, {start[1]:.4f}) m: {choice.reason}"), choice
+    return '', choice
+
+
+def join_from_arm(plan, stream, model, position, wait_reason, max_duration, bounds=None):
+    """
+    Decide how a plan from rest starts: from where the arm is, wait for it, or not at all.
+
+    Called before the stream's ``advance`` while the plan has not started and its join is
+    open (``plan.joined`` false: accepted with nothing streamed and the arm's position not
+    known then, or restarted on a new time base). Sets the plan's transition (anchored at
+    its first tick) and ``joined`` when it may start.
+
+    Parameters
+    ----------
+    plan : Plan
+        The stream's plan (not started).
+    stream : SetpointStream
+        Its stream (``dt``).
+    model : SingularityModel
+        Region and kinematics.
+    position : array_like, shape (2,), or None
+        The arm's end effector (m), None if not known.
+    wait_reason : str or None
+        Without a position: why waiting for it is right (a joint state publisher is
+        there, no state yet), or None: start at the circle's start as is (no arm known).
+    max_duration : float
+        Longest transition (s).
+    bounds : tuple of float, optional
+        ``(max_speed, max_acceleration)``.
+
+    Returns
+    -------
+    tuple of (str, str)
+        ``(action, text)``: ``JOIN_START`` (text: how it starts, for the log),
+        ``JOIN_WAIT`` (text: ``wait_reason``) or ``JOIN_REFUSED`` (text: why; the caller
+        drops the plan).
+
+    """
+    if plan.joined:
+        return JOIN_START, ''
+    if position is None:
+        if wait_reason:
+            return JOIN_WAIT, wait_reason
+        plan.joined = True
+        return JOIN_START, ("starts at its start point: the arm's position is not known "
+                            '(no joint_states): a step if the arm is elsewhere')
+    reason, choice = transition_from_rest(position, plan.trajectory, model, stream.dt,
+                                          max_duration, bounds)
+    if reason:
+        return JOIN_REFUSED, reason
+    plan.set_transition(choice.segment, choice.ticks)
+    plan.joined = True
+    return JOIN_START, describe_join(position, choice)
+
+
+def describe_join(position, choice):
+    """Return how a plan from rest starts, for the log (``choice``: its TransitionChoice)."""
+    where = f'the arm at ({position[0]:.4f}, {position[1]:.4f}) m'
+    if choice.segment is None:
+        return f'starts at its start point ({where}, on it)'
+    return (f'transition of {choice.ticks} ticks from {where} (peaks '
+            f'{choice.peak_speed:.4g} m/s, {choice.peak_acceleration:.4g} m/s^2, '
+            f'{choice.max_step * 1e3:.4g} mm per tick of at most {choice.limits[2] * 1e3:.4g}; '
+            f'path margin {choice.margin:.4f} m) into its start')
+
+
+def prepare_transition(stream, circle, model, max_duration, bounds=None, arm=None):
     """
     Decide how a newly accepted ``circle`` joins the stream: directly or by a transition.
 
@@ -218,19 +409,27 @@ def prepare_transition(stream, circle, model, max_duration, bounds=None):
     bounds : tuple of float, optional
         ``(max_speed, max_acceleration)`` (m/s, m/s^2): caps on the transition's limits
         (the circle's own peaks, or the start state's when faster).
+    arm : array_like, shape (2,), optional
+        The arm's end effector (m), if known: a plan from rest (nothing streamed yet on
+        this time base) starts there (:func:`transition_from_rest`).
 
     Returns
     -------
     tuple
         ``(reason, choice, tick)``: ``reason`` '' if the plan may start, else why not;
         ``choice`` the ``TransitionChoice`` (None when nothing streamed yet on this time
-        base: the plan starts as the first one always did); ``tick`` the transition's
-        first tick (the stream's first unpublished tick) or None.
+        base and ``arm`` is None: the join is decided when the plan starts,
+        :func:`join_from_arm`); ``tick`` the transition's first tick (the stream's first
+        unpublished tick), None for a plan from rest (its own first tick).
 
     """
     pending = stream.pending()
     if pending is None:
-        return '', None, None
+        if arm is None:
+            return '', None, None
+        reason, choice = transition_from_rest(arm, circle, model, stream.dt, max_duration,
+                                              bounds)
+        return reason, choice, None
     k, state = pending
     busy = stream.in_transition(k)
     if busy is not None:

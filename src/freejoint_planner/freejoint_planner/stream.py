@@ -26,6 +26,12 @@ was accepted, ``state_at(kt)`` its start state): tick ``kt + j`` carries the tra
 ceil((now + start_delay) / dt))`` (its start point held in between). Transition ticks carry
 the new plan's id, ``plan_time = (k - k0) dt < 0`` and ``final = False``.
 
+A plan from rest (nothing streamed yet on its time base: the first plan, or the running one
+after ROS time went back) has no stream state to start from: the node starts it where the
+arm is (``planning.join_from_arm``), by a transition anchored at the plan's own first tick
+(``transition_tick`` None until ``advance`` starts the plan); until that is decided
+(``Plan.joined`` false) ``advance(now, hold=True)`` only follows the clock.
+
 Clock spacing rule (sim time). ROS time only advances with ``/clock``, and the lockstep
 simulator may publish it every ``N``-th step only (its ``clock_rate``). The ticks strictly
 between two ``/clock`` messages, ``k + 1 .. k + N - 1``, must all be out when ``/clock =
@@ -113,29 +119,46 @@ class Plan:
 
     transition : object, optional
         Has ``sample_tuple(t)``: the segment into the trajectory's start, ``ticks`` long,
-        from tick ``transition_tick`` on (both required with it).
+        from tick ``transition_tick`` on.
     ticks : int
         Length of the transition in ticks (> 0 with a transition).
-    transition_tick : int
-        Its first tick: the stream's first unpublished tick when the plan was accepted.
+    transition_tick : int, optional
+        Its first tick: the stream's first unpublished tick when the plan was accepted;
+        None: the plan's own first tick (a plan from rest, anchored when it starts).
+    joined : bool
+        How the plan joins the stream is decided (a transition or none); false: the node
+        decides it from the arm's position before the plan starts (a plan from rest).
 
     """
 
     def __init__(self, plan_id, trajectory, start_delay_ns=0, transition=None, ticks=0,
-                 transition_tick=None):
+                 transition_tick=None, joined=True):
         self.plan_id = int(plan_id)
         self.trajectory = trajectory
         self.start_delay_ns = int(start_delay_ns)
         self.start_tick = None          # fixed by SetpointStream.advance
-        self.transition = transition
-        self.transition_ticks = int(ticks) if transition is not None else 0
-        self.transition_tick = None if transition is None else int(transition_tick)
-        if transition is not None and self.transition_ticks <= 0:
+        self.joined = bool(joined)
+        self.transition = None
+        self.transition_ticks = 0
+        self.transition_tick = None
+        if transition is not None:
+            self.set_transition(transition, ticks, transition_tick)
+
+    def set_transition(self, transition, ticks, transition_tick=None):
+        """
+        Give the plan its transition (None: none), ``ticks`` long, from ``transition_tick``.
+
+        ``transition_tick`` None anchors it at the plan's first tick (when it starts).
+        """
+        if transition is not None and int(ticks) <= 0:
             raise ValueError(f'ticks: expected > 0 with a transition, got {ticks}')
+        self.transition = transition
+        self.transition_ticks = 0 if transition is None else int(ticks)
+        self.transition_tick = None if transition_tick is None else int(transition_tick)
 
     def transition_end(self):
-        """Return the first tick after the transition (None without one)."""
-        if self.transition is None:
+        """Return the first tick after the transition (None without one, or not anchored)."""
+        if self.transition is None or self.transition_tick is None:
             return None
         return self.transition_tick + self.transition_ticks
 
@@ -143,7 +166,7 @@ class Plan:
         return (f'Plan(plan_id={self.plan_id}, trajectory={self.trajectory!r}, '
                 f'start_delay_ns={self.start_delay_ns}, start_tick={self.start_tick}, '
                 f'transition={self.transition!r}, transition_tick={self.transition_tick}, '
-                f'ticks={self.transition_ticks})')
+                f'ticks={self.transition_ticks}, joined={self.joined})')
 
 
 class SetpointStream:
@@ -195,16 +218,24 @@ class SetpointStream:
         self.plan = plan
 
     def reset_time_base(self):
-        """Forget the clock (a new time base): restart the stream and the running plan."""
+        """
+        Forget the clock (a new time base): restart the stream and the running plan.
+
+        The plan's transition is dropped and it is a plan from rest again (``joined``
+        false: the node decides anew from where the arm is, e.g. a reset simulator's start).
+        """
         self.next_tick = None
         self.last_now_ns = None
         self.spacing = 0
         self.streamed = False
         if self.plan is not None:
             self.plan.start_tick = None
-            self.plan.transition = None
-            self.plan.transition_tick = None
-            self.plan.transition_ticks = 0
+            self.plan.set_transition(None, 0)
+            self.plan.joined = False
+
+    def fresh(self):
+        """Return True if nothing was published on this time base (a plan starts from rest)."""
+        return not self.streamed
 
     def pending(self):
         """
@@ -223,20 +254,22 @@ class SetpointStream:
     def in_transition(self, k):
         """Return the running plan if tick ``k`` is one of its transition ticks, else None."""
         plan = self.plan
-        if plan is None or plan.transition is None:
+        if plan is None or plan.transition_end() is None:
             return None
         return plan if plan.transition_tick <= k < plan.transition_end() else None
 
     def state_at(self, k):
         """Return ``(px, py, vx, vy, ax, ay)`` of the running plan at tick ``k``."""
         plan = self.plan
+        if plan.transition is not None and plan.transition_tick is None:
+            return plan.transition.sample_tuple(0.0)        # anchored at its first tick
         if plan.transition is not None and k < plan.transition_end():
             return plan.transition.sample_tuple((k - plan.transition_tick) * self.dt)
         if plan.start_tick is None:
             return plan.trajectory.sample_tuple(0.0)
         return plan.trajectory.sample_tuple((k - plan.start_tick) * self.dt)
 
-    def advance(self, now_ns):
+    def advance(self, now_ns, hold=False):
         """
         Return the setpoints due at ROS time ``now_ns`` (int ns), marking them published.
 
@@ -244,6 +277,9 @@ class SetpointStream:
         ----------
         now_ns : int
             Current ROS time (ns).
+        hold : bool
+            Do not start a plan that has not started yet (it waits for its join from
+            rest): the stream only follows the clock, as without a plan.
 
         Returns
         -------
@@ -263,16 +299,19 @@ class SetpointStream:
             if gap > self.spacing:
                 self.spacing = gap
         self.last_now_ns = now_ns
+        plan = self.plan
+        waiting = plan is None or (hold and plan.start_tick is None)
         if self.next_tick is None:
             self.next_tick = first
-        elif self.next_tick < first and (self.skip_late or self.plan is None):
-            if self.plan is not None:
+        elif self.next_tick < first and (self.skip_late or waiting):
+            if not waiting:
                 self.skipped += first - self.next_tick
             self.next_tick = first
-        plan = self.plan
-        if plan is None:
+        if waiting:
             return []
         if plan.start_tick is None:
+            if plan.transition is not None and plan.transition_tick is None:
+                plan.transition_tick = self.next_tick       # a plan from rest: from here
             plan.start_tick = max(self.next_tick if plan.transition is None
                                   else plan.transition_end(),
                                   first_tick_at_or_after(now_ns + plan.start_delay_ns, dt_ns))
@@ -291,7 +330,7 @@ class SetpointStream:
         plan = self.plan
         traj = plan.trajectory
         k_plan = k - plan.start_tick
-        if plan.transition is not None and k < plan.transition_tick + plan.transition_ticks:
+        if plan.transition is not None and k < plan.transition_end():
             px, py, vx, vy, ax, ay = plan.transition.sample_tuple(
                 (k - plan.transition_tick) * self.dt)
             return Setpoint(k * self.dt_ns, px, py, vx, vy, ax, ay, plan.plan_id,

@@ -21,6 +21,17 @@ parameter: ``case``, ``variant``, ``seed``, and optionally ``passive_joint``,
 bag's directory name if that is a case name, the variant is ``'unknown'`` and the seed
 None (a warning says so). Command-line options override the bag.
 
+The arm is read from the bag too (:func:`bag_arm`), so a bag of any arm is analysed without
+options: its passive joints are the joints of ``joint_states`` that the controller does not
+command (``ControllerState.joint_names`` are the active ones), the first of them the one
+plotted unless ``passive_joint`` is given; its model is the recorded
+``/robot_description`` (the simulator publishes the URDF it runs, latched), parsed with
+those passive joints, else the paper's Table I arm (joints ``joint1..3``).
+
+Time: a lockstep run's stamps are sim time (from 0 at its start) and stay as they are; a
+real-time run's are system time (Unix time), and its figures count from its first tick
+(``time_origin``; the trace keeps the origin as ``t0``).
+
 Figures (PNG): per bag ``fig3_<bag>.png`` (Case 1, horizontal) or ``fig4_<bag>.png``
 (Case 2, vertical) - the paper's Figs. 3/4: desired and actual path in the x-y plane,
 tracking errors, active torques, passive joint angle, theta-hat over time; once
@@ -39,15 +50,17 @@ import argparse
 import os
 import sys
 
-from freejoint_common.contract import CONTROLLER_STATE, JOINT_STATES, seconds_to_ns, to_ns
+from freejoint_common.contract import CONTROLLER_STATE, JOINT_STATES, ROBOT_DESCRIPTION
+from freejoint_common.contract import seconds_to_ns, to_ns
 
-from .bagfile import BagError, open_bag
+from .bagfile import BagError, open_bag, SYSTEM_TIME_NS
 
 STATE_TYPE = CONTROLLER_STATE.type_name
 JOINT_TYPE = JOINT_STATES.type_name
 GRID_TYPE = 'nav_msgs/msg/OccupancyGrid'
 MARKER_TYPE = 'visualization_msgs/msg/Marker'
 DEFAULT_PASSIVE = 'joint3'
+DESCRIPTION_TYPE = ROBOT_DESCRIPTION.type_name
 
 
 class AnalysisError(Exception):
@@ -99,7 +112,7 @@ def run_info(bag, overrides=None):
             warnings.append('%s: no run information in the bag (case unknown)' % bag.path)
     if not info['variant']:
         info['variant'] = 'unknown'
-    info['passive_joint'] = info['passive_joint'] or DEFAULT_PASSIVE
+    info['passive_joint'] = info['passive_joint'] or None     # else from the messages
 
     def number(key, kind):
         value = info[key]
@@ -148,6 +161,10 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     decoded = bag.decode_topics([states_topic, joints_topic], store)
     states = [m for _, m in decoded[states_topic]]
     joints = [m for _, m in decoded[joints_topic]]
+    arm = bag_arm(bag, store, states, joints, info)
+    if not info['passive_joint']:
+        info['passive_joint'] = arm['passive'][0] if arm['passive'] else DEFAULT_PASSIVE
+    warnings += arm['notes']
     try:
         arrays = arrays_from_messages(states, joints, info['passive_joint'],
                                       max_ticks=info['max_ticks'])
@@ -164,6 +181,9 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     trace['info'] = info
     trace['finalised'] = bag.finalised
     trace['joints'] = _joint_positions(joints, arrays['t'])
+    trace['arm'] = arm
+    trace['t0'] = time_origin(arrays['t'])
+    trace['t'] = arrays['t'] - trace['t0']
     trace['grid'] = trace['path'] = None
     grids = bag.topics_of_type(GRID_TYPE)
     if grids and bag.topics[grids[0]].count:
@@ -174,16 +194,110 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     return record, trace, warnings
 
 
+def passive_from_messages(states, joint_states):
+    """
+    Return the passive joints of a run: joint states' joints the controller does not command.
+
+    Parameters
+    ----------
+    states : iterable of ControllerState
+        Their ``joint_names`` are the active joints (the first non-empty list counts).
+    joint_states : iterable of JointState
+        Their ``name`` lists every joint, base to tip (the first non-empty one counts).
+
+    Returns
+    -------
+    tuple of (list of str, list of str)
+        ``(all joints, passive joints)`` in the joint states' order; empty if either
+        list is missing.
+
+    """
+    active = next((list(m.joint_names) for m in states if len(m.joint_names)), None)
+    names = next((list(m.name) for m in joint_states if len(m.name)), None)
+    if not active or not names:
+        return names or [], []
+    return names, [n for n in names if n not in active]
+
+
+def bag_arm(bag, store, states, joint_states, info):
+    """
+    Return the arm of a bag: its joints, passive joints and model (see the module notes).
+
+    Returns
+    -------
+    dict
+        ``joints`` (all, base to tip), ``passive`` (names), ``params`` (ArmParams of the
+        real arm: the recorded ``/robot_description``, else Table I of the case),
+        ``name`` (the URDF's robot name, or 'Table I'), ``source`` (where it came from),
+        ``notes`` (warnings).
+
+    """
+    from freejoint_core.arm import table1
+    from freejoint_core.errors import FreejointValueError
+    from freejoint_core.urdf import parse_urdf
+    names, passive = passive_from_messages(states, joint_states)
+    if info.get('passive_joint'):
+        passive = [info['passive_joint']] + [p for p in passive if p != info['passive_joint']]
+    case = info['case'] if info['case'] in ('horizontal', 'vertical') else 'horizontal'
+    notes = []
+    texts = [t for t in bag.topics_of_type(DESCRIPTION_TYPE)
+             if t == ROBOT_DESCRIPTION.absolute and bag.topics[t].count]
+    if texts:
+        text = bag.decode(texts[0], store)[-1][1].data
+        try:
+            urdf = parse_urdf(text, passive)
+            # the shipped paper_arm.urdf is the Table I arm (gravity aside: not in the map)
+            paper = urdf.params == table1('horizontal')
+            return {'joints': list(urdf.joint_names), 'passive': list(urdf.passive_joints),
+                    'params': table1(case) if paper else urdf.params,
+                    'name': 'Table I' if paper else urdf.name or 'URDF arm',
+                    'source': 'the recorded %s' % ROBOT_DESCRIPTION.absolute, 'notes': notes}
+        except FreejointValueError as exc:
+            notes.append('%s: the recorded %s is not an arm the analysis models (%s); '
+                         'Fig. 2 shows the Table I arm' % (bag.path, texts[0], exc))
+    params = table1(case)
+    joints = names or ['joint1', 'joint2', 'joint3']
+    return {'joints': joints, 'passive': passive or [DEFAULT_PASSIVE], 'params': params,
+            'name': 'Table I', 'source': 'Table I (no %s in the bag)'
+            % ROBOT_DESCRIPTION.absolute if not texts else 'Table I', 'notes': notes}
+
+
+def time_origin(t):
+    """
+    Return the time (s) the figures count from: 0 in sim time, else the first tick's.
+
+    Parameters
+    ----------
+    t : numpy.ndarray, shape (N,)
+        The ticks' stamps (s), increasing.
+
+    Returns
+    -------
+    float
+        0.0 for sim-time stamps (a lockstep run: its time already counts from its start),
+        ``t[0]`` for system-time ones (a real-time run: Unix time, ``SYSTEM_TIME_NS``).
+
+    """
+    first = float(t[0])
+    return first if seconds_to_ns(first) >= SYSTEM_TIME_NS else 0.0
+
+
 def _joint_positions(joint_states, t):
-    """Return ``{joint name: positions (N,)}`` at the tick times ``t`` (first per stamp)."""
+    """
+    Return ``{joint name: positions (N,)}`` at the tick times ``t`` (first per stamp).
+
+    A stamp is matched by its time in s computed as ``arrays_from_messages`` computes
+    ``t`` (``ns * 1e-9``, the same float): system-time seconds (1.8e9 s) hold no whole
+    nanoseconds to round back to.
+    """
     import numpy as np
-    wanted = {seconds_to_ns(v) for v in t}
+    wanted = {float(v) for v in t}
     first = {}
     for msg in joint_states:
-        ns = to_ns(msg.header.stamp)
+        ns = to_ns(msg.header.stamp) * 1e-9
         if ns in wanted and ns not in first:
             first[ns] = msg
-    stamps = [seconds_to_ns(v) for v in t]
+    stamps = [float(v) for v in t]
     if not stamps or any(ns not in first for ns in stamps):
         return {}
     names = list(first[stamps[0]].name)
@@ -206,7 +320,8 @@ def _parse(argv):
                         "bag, the others into the bags' common parent)")
     parser.add_argument('--no-plots', action='store_true', help='only the metrics')
     parser.add_argument('--passive-joint', default=None,
-                        help='passive joint name (default: from the bag, else joint3)')
+                        help="passive joint name (default: the bag's run information, else "
+                        'the joint the controller does not command)')
     parser.add_argument('--max-ticks', type=int, default=None,
                         help='use only the first N ticks (default: from the bag, else all)')
     parser.add_argument('--case', default=None, help='override the case of every bag')

@@ -72,6 +72,11 @@ COMPRESSIONS = {'none': CompressionType.NONE, 'zstd': CompressionType.ZSTD}
 # twice the size the chunk indexes have reached.
 RESERVE_BASE = 256 * 1024
 _NO_TIME = 1 << 63
+SYSTEM_TIME_NS = 10 ** 18
+"""Stamps (ns) from this one on (2001-09-09, 1e9 s of Unix time) are system time: a
+real-time run's, never a sim clock's (sim time starts at 0; a lockstep run would need 31
+years to get there). The recorder counts ticks and the analysis keeps the stamps as
+they are only below it; above it both use the time from the first stamp."""
 
 
 class BagError(Exception):

@@ -2,8 +2,11 @@
 The paper's figures from analysed bags (matplotlib, Agg, PNG; no pyplot state).
 
 * :func:`figure2` - Fig. 2: (a) the singular samples of ``|det(Da Da^T)| <= eps_d`` in
-  joint space (q2, q3; any q1) and (b) the semi-singular annuli in Cartesian space, both
-  recomputed by ``freejoint_core.singularity`` from the nominal Table I parameters, with
+  joint space (the relative joints 2 and 3; any base angle; a longer arm's map projected
+  onto them) and (b) the semi-singular annuli in Cartesian space, both recomputed by
+  ``freejoint_core.singularity_nlink.arm_region`` for the nominal model of the bag's arm
+  (``analyze.bag_arm``: the recorded URDF, else Table I), on the finest grid of
+  ``FIG2_GRIDS_DEG`` the map allows (0.25 deg for a 3-link arm; the title states it), with
   the recorded planner map (OccupancyGrid, shaded) and planned path (Marker) overlaid when
   the bag has them, and the run's recorded path and joint trajectory;
 * :func:`figure_run` - Figs. 3/4 of one run: path in the x-y plane (desired and actual),
@@ -20,6 +23,9 @@ from matplotlib.patches import Circle, Wedge  # noqa: E402
 import numpy as np  # noqa: E402
 
 DPI = 72
+FIG2_GRIDS_DEG = (0.25, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0)
+"""Fig. 2's joint-space grid steps, finest first: the first whose map is within the core's
+sample limit is computed (0.25 deg, the planner's default, for a 3-link arm)."""
 FIG_NUMBER = {'horizontal': 3, 'vertical': 4}
 CASE_TITLE = {'horizontal': 'Case 1 (horizontal motion)',
               'vertical': 'Case 2 (vertical motion)'}
@@ -29,6 +35,44 @@ def _label(trace):
     info = trace['info']
     seed = '' if info['seed'] is None else ', seed %d' % info['seed']
     return '%s (%s%s)' % (trace['name'], info['variant'], seed)
+
+
+def _passive(trace):
+    """Return the name of the plotted passive joint."""
+    return trace['info']['passive_joint']
+
+
+def _arm_text(trace):
+    """Return the arm of a run for a title ('' for the paper's Table I arm)."""
+    arm = trace.get('arm')
+    if not arm or arm['name'] == 'Table I':
+        return ''
+    return '%s arm, passive %s' % (arm['name'], ', '.join(arm['passive']))
+
+
+def run_title(trace):
+    """
+    Return the title of a run's figure: the case once, then what else tells the run apart.
+
+    ``Case 1 (horizontal motion): robust, seed 0`` for a bag named after its case; the
+    bag's name is added when it says something else, and the arm when it is not Table I.
+    """
+    info = trace['info']
+    case = info['case']
+    parts = [CASE_TITLE.get(case, 'case %s' % case)]
+    what = [info['variant']] + ([] if info['seed'] is None else ['seed %d' % info['seed']])
+    if trace['name'] != case:
+        what.append('bag %s' % trace['name'])
+    arm = _arm_text(trace)
+    if arm:
+        what.append(arm)
+    return '%s: %s, from the bag%s' % (parts[0], ', '.join(what),
+                                       '' if trace['finalised'] else ' (not finalised)')
+
+
+def _time_label(trace):
+    """Return the time axis label: sim time, or system time from the run's first tick."""
+    return 't [s]' if not trace.get('t0') else 't [s] from the first tick'
 
 
 def run_figure_name(trace):
@@ -41,6 +85,7 @@ def run_figure_name(trace):
 def figure_run(trace, path):
     """Write Fig. 3/4 of one run to ``path``."""
     t = trace['t']
+    tlabel = _time_label(trace)
     p, p_d = trace['p'], trace['p_d']
     err_mm = 1000.0 * (p - p_d)
     fig = Figure(figsize=(12.0, 6.6))
@@ -57,74 +102,115 @@ def figure_run(trace, path):
     ax = axes[0, 1]
     ax.plot(t, err_mm[:, 0], label='$e_x$')
     ax.plot(t, err_mm[:, 1], label='$e_y$')
-    ax.set_xlabel('t [s]')
+    ax.set_xlabel(tlabel)
     ax.set_ylabel('error [mm]')
     ax.set_title('(b) tracking errors')
     ax.legend(fontsize=8)
     ax = axes[0, 2]
     for i in range(trace['tau'].shape[1]):
         ax.plot(t, trace['tau'][:, i], lw=0.8, label=r'$\tau_%d$' % (i + 1))
-    ax.set_xlabel('t [s]')
+    ax.set_xlabel(tlabel)
     ax.set_ylabel('torque [N m]')
     ax.set_title('(c) active joint torques')
     ax.legend(fontsize=8)
     ax = axes[1, 0]
     ax.plot(t, np.degrees(trace['q_passive']), 'C2')
-    ax.set_xlabel('t [s]')
-    ax.set_ylabel('$q_3$ [deg]')
-    ax.set_title('(d) passive joint angle')
+    ax.set_xlabel(tlabel)
+    ax.set_ylabel('%s [deg]' % _passive(trace))
+    ax.set_title('(d) passive joint %s' % _passive(trace))
     ax = axes[1, 1]
     theta = np.atleast_2d(trace['theta'])
     for i in range(theta.shape[1]):
         ax.plot(t, theta[:, i], lw=1.0, label=r'$\hat\theta_%d$' % (i + 1))
-    ax.set_xlabel('t [s]')
+    ax.set_xlabel(tlabel)
     ax.set_ylabel(r'$\hat\theta$')
     ax.set_title(r'(e) adaptive estimates $\hat\theta$')
     ax.legend(fontsize=7, ncol=2)
     ax = axes[1, 2]
     norm = np.hypot(err_mm[:, 0], err_mm[:, 1])
     ax.semilogy(t, np.maximum(norm, 1e-6), 'C4')
-    ax.set_xlabel('t [s]')
+    ax.set_xlabel(tlabel)
     ax.set_ylabel(r'$\|p - p_d\|$ [mm]')
     ax.set_title('(f) error norm')
     for ax in axes.flat:
         ax.grid(True, alpha=0.3)
-    case = trace['info']['case']
-    fig.suptitle('%s - %s, from the bag%s' % (
-        CASE_TITLE.get(case, 'case %s' % case), _label(trace),
-        '' if trace['finalised'] else ' (not finalised)'))
+    fig.suptitle(run_title(trace))
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     return path
 
 
-def figure2(trace, path, resolution_deg=1.0):
-    """Write Fig. 2 (singular regions; see the module notes) to ``path``."""
+def fig2_region(params, scale, grids=FIG2_GRIDS_DEG):
+    """
+    Return ``(region, resolution_deg, nominal)`` of Fig. 2 for an arm's real parameters.
+
+    The nominal model ``params.scaled(scale)``; the region of
+    ``freejoint_core.singularity_nlink.arm_region`` on the finest step of ``grids`` whose
+    map the core computes (a longer arm's finer maps exceed its sample limit).
+    """
+    from freejoint_core.errors import FreejointValueError
+    from freejoint_core.singularity import EPS_D
+    from freejoint_core.singularity_nlink import arm_region
+    nominal = params.scaled(scale)
+    last = None
+    for step in grids:
+        try:
+            return arm_region(nominal, step, EPS_D, cells=False), step, nominal
+        except FreejointValueError as exc:      # above the sample limit: a coarser grid
+            last = exc
+    raise last
+
+
+def _joint_space_mask(region, pixels=180):
+    """
+    Return the flagged samples over the relative joints 2 and 3 (others projected).
+
+    A grid finer than ``pixels`` a side is shown in blocks (a block is flagged if any of
+    its samples is): one-sample bands of a 0.25 deg map would vanish in the figure.
+    Returns ``(mask, samples per block a side)``.
+    """
+    mask = np.asarray(region.singular_mask, dtype=bool)
+    while mask.ndim > 2:
+        mask = mask.any(axis=-1)
+    side = mask.shape[0]
+    block = -(-side // pixels)
+    if block > 1 and side % block == 0 and mask.shape[1] == side:
+        return mask.reshape(side // block, block, side // block, block).any(axis=(1, 3)), block
+    return mask, 1
+
+
+def figure2(trace, path):
+    """Write Fig. 2 (singular regions of the run's arm; see the module notes) to ``path``."""
     from freejoint_core.arm import NOMINAL_SCALE, table1
-    from freejoint_core.singularity import det_map, EPS_D, semi_singular
     info = trace['info']
     case = info['case'] if info['case'] in FIG_NUMBER else 'horizontal'
     scale = info.get('nominal_scale') or NOMINAL_SCALE
-    nominal = table1(case).scaled(scale)
-    dmap = det_map(nominal, resolution_deg)
-    region = semi_singular(dmap, EPS_D)
+    arm = trace.get('arm') or {'params': table1(case), 'joints': ['joint1', 'joint2', 'joint3'],
+                               'name': 'Table I', 'passive': ['joint3']}
+    region, resolution_deg, _ = fig2_region(arm['params'], scale)
+    names = list(arm['joints'])
     fig = Figure(figsize=(11.0, 5.2))
     ax_j, ax_c = fig.subplots(1, 2)
-    mask = np.asarray(region.singular_mask, dtype=float)
+    mask, block = _joint_space_mask(region)
+    mask = mask.astype(float)
     ax_j.imshow(np.ma.masked_equal(mask.T, 0.0), origin='lower', extent=(0, 360, 0, 360),
                 cmap='Reds', vmin=0.0, vmax=1.2, interpolation='nearest', aspect='auto')
     joints = trace.get('joints') or {}
-    if 'joint2' in joints and 'joint3' in joints:
-        q2 = np.degrees(joints['joint2']) % 360.0
-        q3 = np.degrees(joints['joint3']) % 360.0
-        ax_j.plot(q2, q3, '.', ms=1.0, color='C0', label='run (q2, q3)')
+    ja, jb = names[1], names[2]
+    if ja in joints and jb in joints:
+        qa = np.degrees(joints[ja]) % 360.0
+        qb = np.degrees(joints[jb]) % 360.0
+        ax_j.plot(qa, qb, '.', ms=1.0, color='C0', label='run (%s, %s)' % (ja, jb))
         ax_j.legend(loc='upper right', fontsize=8)
     ax_j.set_xlim(-6, 366)      # the q2 = 0 band sits on the edge
     ax_j.set_ylim(-6, 366)
-    ax_j.set_xlabel('$q_2$ [deg]')
-    ax_j.set_ylabel('$q_3$ [deg]')
-    ax_j.set_title(r'(a) joint space: singular ($|\det(\hat D_a \hat D_a^T)| \leq %g$, red)'
-                   % region.eps_d, fontsize=10)
+    ax_j.set_xlabel('%s [deg]' % ja)
+    ax_j.set_ylabel('%s [deg]' % jb)
+    projected = '' if len(names) <= 3 else ', projected over %s' % ', '.join(names[3:])
+    if block > 1:
+        projected += ', in %g deg blocks' % (block * resolution_deg)
+    ax_j.set_title(r'(a) joint space: singular ($|\det(\hat D_a \hat D_a^T)| \leq %g$, red)%s'
+                   % (region.eps_d, projected), fontsize=10)
     lo, hi = region.reach
     grid = trace.get('grid')
     if grid is not None and grid.info.width and grid.info.height:
@@ -160,8 +246,10 @@ def figure2(trace, path, resolution_deg=1.0):
     ax_c.legend(loc='lower right', fontsize=8)
     for ax in (ax_j, ax_c):
         ax.grid(True, alpha=0.3)
-    fig.suptitle('Fig. 2 - recomputed from the nominal Table I parameters (x%.2f), '
-                 '%g deg grid; run %s' % (scale, resolution_deg, trace['name']))
+    who = ('Table I arm' if arm['name'] == 'Table I' else
+           "recorded arm '%s', passive %s" % (arm['name'], ', '.join(arm['passive'])))
+    fig.suptitle('Fig. 2 - nominal model (x%.2f) of the %s, %g deg grid; run %s'
+                 % (scale, who, resolution_deg, trace['name']), fontsize=11)
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     return path
@@ -186,13 +274,14 @@ def figure_compare(traces, path):
     ax_p.set_xlabel('x [m]')
     ax_p.set_ylabel('y [m]')
     ax_p.set_title('path')
-    ax_e.set_xlabel('t [s]')
+    ax_e.set_xlabel(_time_label(traces[0]))
     ax_e.set_ylabel(r'$\|p - p_d\|$ [mm]')
     ax_e.set_title('tracking error')
-    ax_q.set_xlabel('t [s]')
-    ax_q.set_ylabel('$q_3$ [deg]')
-    ax_q.set_title('passive joint')
-    ax_t.set_xlabel('t [s]')
+    ax_q.set_xlabel(_time_label(traces[0]))
+    passive = sorted({_passive(tr) for tr in traces})
+    ax_q.set_ylabel('%s [deg]' % ', '.join(passive))
+    ax_q.set_title('passive joint %s' % ', '.join(passive))
+    ax_t.set_xlabel(_time_label(traces[0]))
     ax_t.set_ylabel(r'max$_i |\tau_i|$ [N m]')
     ax_t.set_title('largest active torque')
     for ax in (ax_p, ax_e, ax_q, ax_t):

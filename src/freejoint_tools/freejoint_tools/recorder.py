@@ -27,8 +27,10 @@ What ``ros2 bag record -s mcap`` does, for this workspace where rosbag2 is not i
   SIGKILL loses at most that much of the tail; SIGINT and SIGTERM take what is already
   queued, then finalise the bag (summary, statistics, ``metadata.yaml``) and print what
   was received per topic (and any loss the middleware reported), the first stamp it got
-  and, for a stream on a grid (lockstep ``joint_states``: ``t_k = k dt``), the ticks it
-  missed (:class:`StampGrid`; also metadata.yaml ``custom_data`` ``recorder_missed_ticks``);
+  (system-time stamps, a real-time run's, in seconds from the recording's first stamp,
+  first and last) and, for a lockstep stream on a grid (``joint_states``: ``t_k = k dt``),
+  the ticks it missed (:class:`StampGrid`; also metadata.yaml ``custom_data``
+  ``recorder_missed_ticks``);
 * a write error (full disk) stops the writing (the bag stays readable up to it, see
   ``bagfile``), is logged once, and every message received from then on is counted ``not
   written`` for its topic (summary, ``~/status``, ``custom_data`` ``recorder_not_written``);
@@ -39,8 +41,9 @@ command) can be discovered late - Fast DDS sometimes needs seconds to discover o
 several participants started at once. The recorder therefore subscribes to the graph's
 contract topics at start (``graph_topics``), and its service ``~/status``
 (std_srvs/Trigger) answers ``success: true`` only once every topic of ``ready_topics``
-(default: the graph's topics) has a matched publisher; its message lists the matched
-publishers per topic. A launcher that must lose nothing starts the nodes, waits for that,
+(default: the graph's topics but ``/clock``, which a real-time graph does not have) and, in
+sim time, ``/clock`` has a matched publisher; its message lists the matched publishers per
+topic. A launcher that must lose nothing starts the nodes, waits for that,
 then starts the run (e.g. the planner's ``~/plan_circle`` with ``autostart: false``).
 
 Stopping a run: on one machine Fast DDS moves data through shared memory (rmw_fastrtps
@@ -96,7 +99,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
-from .bagfile import BagError, BagWriter
+from .bagfile import BagError, BagWriter, SYSTEM_TIME_NS
 from .params import RECORDER
 from .qos import profile_to_dict, subscription_qos
 from .typedefs import DefinitionError, Definitions, message_class
@@ -137,14 +140,16 @@ def _refuse_sim_time_change(params, _values, _config):
 
 class StampGrid:
     """
-    The stamps of one recorded stream: the first one and, on a grid, the ticks missing.
+    The stamps of one recorded stream: the first and last one and, on a grid, the ticks missing.
 
-    Fed the header stamp (ns) of every message received, in receive order. The stream is
-    on a grid if its distinct stamps are all multiples of their smallest spacing (the sim's
-    ``joint_states`` in lockstep: ``t_k = k dt``); tick k is then ``stamp // step``, and
-    a grid anchored at zero (the first stamp a multiple of the step) misses the ticks
-    before the first stamp too. Repeated stamps (the sim's tick 0 while it waits for the
-    first command) count once; a stamp earlier than the latest is counted, not gridded.
+    Fed the header stamp (ns) of every message received, in receive order. Ticks are
+    counted only for a lockstep stream: stamps of a sim clock (below ``SYSTEM_TIME_NS``;
+    system-time stamps, a real-time run's, are Unix time and never ticks) whose distinct
+    values are all multiples of their smallest spacing (the sim's ``joint_states`` in
+    lockstep: ``t_k = k dt``); tick k is then ``stamp // step``, and a grid anchored at zero
+    (the first stamp a multiple of the step) misses the ticks before the first stamp too.
+    Repeated stamps (the sim's tick 0 while it waits for the first command) count once; a
+    stamp earlier than the latest is counted, not gridded.
     """
 
     __slots__ = ('first', 'last', 'count', 'step', 'min_diff', 'gaps', 'backwards',
@@ -196,10 +201,14 @@ class StampGrid:
         if len(self.gaps) < _GAPS_KEPT:
             self.gaps.append((last, t))
 
+    def system_time(self):
+        """Return True if the stamps are system time (Unix time: a real-time stream)."""
+        return self.first is not None and self.first >= SYSTEM_TIME_NS
+
     def on_grid(self):
-        """Return True if the stamps lie on a grid (see the class notes)."""
+        """Return True if the stamps are a lockstep stream's grid (see the class notes)."""
         return (not self.off_grid and not self.backwards and self.count >= GRID_MIN_STAMPS
-                and self.step == self.min_diff)
+                and self.step == self.min_diff and not self.system_time())
 
     def missed(self):
         """
@@ -222,10 +231,20 @@ class StampGrid:
                 ranges.append((a // step + 1, b // step - 1))
         return before + inside, ranges
 
-    def describe(self):
-        """Return the first stamp and the ticks missed, for the end-of-run summary."""
+    def describe(self, origin=None):
+        """
+        Return the first stamp and the ticks missed, for the end-of-run summary.
+
+        System-time stamps (a real-time stream) are given as seconds from ``origin`` (ns:
+        the first stamp of the recording; default this stream's first), first and last;
+        sim-time stamps as they are (sim time starts at 0), with the ticks missed on a grid.
+        """
         if self.first is None:
             return 'no stamp'
+        if self.system_time():
+            origin = self.first if origin is None else origin
+            return 'first stamp %+.6f s, last %+.6f s (from the first stamp recorded)' % (
+                (self.first - origin) * 1e-9, (self.last - origin) * 1e-9)
         text = 'first stamp %.6f s' % (self.first * 1e-9)
         missed = self.missed()
         if missed is None:
@@ -236,6 +255,58 @@ class StampGrid:
         count, ranges = missed
         text += ' (grid %g ms), missed %s' % (step * 1e-6, _ticks_text(count, ranges))
         return text
+
+
+def first_system_stamp(grids):
+    """Return the earliest first stamp (ns) of the system-time streams among ``grids``."""
+    firsts = [g.first for g in grids if g.system_time()]
+    return min(firsts) if firsts else None
+
+
+def ready_topic_names(names, sim_time):
+    """
+    Return the topics ``~/status`` waits for: ``names``, and ``/clock`` in sim time.
+
+    A recorder in sim time takes its log times from ``/clock``, so it is ready only once
+    ``/clock`` has a publisher too (the lockstep simulator); in system time (a real-time
+    graph, which has no ``/clock``) only the topics named.
+    """
+    out = list(dict.fromkeys(names))
+    if sim_time and CLOCK_TOPIC not in out:
+        out.append(CLOCK_TOPIC)
+    return out
+
+
+def status_answer(ready_topics, matched, closed, problem, received, not_written):
+    """
+    Return ``(success, message)`` of a ``~/status`` answer.
+
+    Parameters
+    ----------
+    ready_topics : list of str
+        The topics waited for (:func:`ready_topic_names`).
+    matched : dict
+        ``{topic: matched publishers}``.
+    closed : bool
+        The bag is finalised.
+    problem : str or None
+        Why the bag is not whole (a write error), None if it is.
+    received, not_written : int
+        Messages received so far; of them, not written.
+
+    Returns
+    -------
+    tuple of (bool, str)
+
+    """
+    waiting = [t for t in ready_topics if not matched.get(t)]
+    success = not waiting and not closed and problem is None
+    message = '%s; received %d; not written %d; matched publishers: %s' % (
+        'closed' if closed else
+        'cannot write the bag: %s' % problem if problem is not None else
+        'recording' if success else 'waiting for ' + ', '.join(waiting),
+        received, not_written, ', '.join('%s %d' % kv for kv in sorted(matched.items())))
+    return success, message
 
 
 def _ticks_text(count, ranges):
@@ -338,7 +409,8 @@ class Recorder(Node, Lifecycle):
                 message_class('rosgraph_msgs/msg/Clock'), CLOCK_TOPIC, _never_called,
                 profile(p['queue_depth'], reliable=False), raw=True)
             self._update_takers()
-        self._ready_topics = [self.resolve_topic_name(t) for t in p['ready_topics']]
+        self._ready_topics = ready_topic_names(
+            [self.resolve_topic_name(t) for t in p['ready_topics']], self._sim_time)
         self.create_service(RECORDER_STATUS.srv_type, RECORDER_STATUS.name, self._status)
         self._discover()
 
@@ -616,19 +688,16 @@ class Recorder(Node, Lifecycle):
 
     def matched(self):
         """Return ``{topic: matched publishers}`` of the recorder's subscriptions."""
-        return {name: sub.get_publisher_count() for name, sub in self._subs.items()}
+        out = {name: sub.get_publisher_count() for name, sub in self._subs.items()}
+        if self._clock_only is not None:        # sim time, /clock taken but not recorded
+            out[CLOCK_TOPIC] = self._clock_only.get_publisher_count()
+        return out
 
     def _status(self, request, response):
         """~/status: success once every ready topic has a matched publisher; the count so far."""
-        matched = self.matched()
-        waiting = [t for t in self._ready_topics if not matched.get(t)]
-        response.success = not waiting and not self._closed and self.problem is None
-        response.message = '%s; received %d; not written %d; matched publishers: %s' % (
-            'closed' if self._closed else
-            'cannot write the bag: %s' % self.problem if self.problem is not None else
-            'recording' if response.success else 'waiting for ' + ', '.join(waiting),
-            sum(self.received.values()), sum(self.not_written().values()),
-            ', '.join('%s %d' % kv for kv in sorted(matched.items())))
+        response.success, response.message = status_answer(
+            self._ready_topics, self.matched(), self._closed, self.problem,
+            sum(self.received.values()), sum(self.not_written().values()))
         return response
 
     def _read_lost(self):
@@ -709,12 +778,18 @@ class Recorder(Node, Lifecycle):
             self.output, 'finalised' if self.writer.closed and not self.problem else
             'closed after a problem', self.total_received(), len(self._channels))]
         not_written = self.not_written()
+        origin = first_system_stamp(self._grids.values())
+        if origin is not None:
+            lines.append('  system-time stamps (real time) in s from the first stamp recorded, '
+                         '%s UTC' % datetime.datetime.fromtimestamp(
+                             origin * 1e-9, datetime.timezone.utc).strftime(
+                                 '%Y-%m-%d %H:%M:%S.%f'))
         for name in sorted(self._channels):
             written = self.writer.count(self._channels[name][0])
             grid = self._grids.get(name)
             lines.append('  %s: received %d, written %d, not written %d, lost (middleware) %d%s'
                          % (name, self.received[name], written, not_written[name],
-                            self.lost[name], '; ' + grid.describe() if grid else ''))
+                            self.lost[name], '; ' + grid.describe(origin) if grid else ''))
         if self.problem:
             lines.append('  problem: %s' % self.problem)
         if self._write_errors:
