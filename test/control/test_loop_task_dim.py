@@ -42,3 +42,12 @@ def test_a_setpoint_of_another_size_is_refused_counted_and_named_in_the_hold():
     assert 'last setpoint refused: position, velocity, acceleration have 3, 2, 2' in res.message
     assert len(res.position_desired) == len(res.error) == len(res.sliding) == 2
     assert len(res.law_state_values) == len(res.law_state_names) == 8
+
+
+def test_the_gain_parameters_take_as_many_values_as_the_task_dimension():
+    values = dict(FILE, K=[100.0, 100.0, 100.0])
+    assert SCHEMA.reason(values) == ("K: expected 2 values (the task dimension of the arm's "
+                                     'model), got [100.0, 100.0, 100.0]')
+    assert SCHEMA.reason(dict(FILE, R=[-1.0, 1.0])).startswith('R: values must be finite and > 0')
+    cfg = SCHEMA.config(dict(FILE))
+    assert cfg.gains.task_dim == 2 and cfg.gains.K == tuple(FILE['K'])

@@ -96,3 +96,20 @@ def test_the_planar_setpoint_guard_reads_as_before():
     assert setpoint_refusal((1.2, 0.5, 0, 0, 0, 0), 0.9, 5.0, 50.0) == (
         'position (1.2, 0.5) is 1.3 m from the base, beyond the reach 0.9 m')
     assert np.hypot(1.2, 0.5) == 1.3
+
+
+def test_the_task_space_gains_are_sized_by_the_task_dimension():
+    assert Gains().K == (100.0, 100.0) and Gains().task_dim == 2
+    three = Gains(task_dim=3)
+    assert three.K == (100.0,) * 3 and three.Lambda == (50.0,) * 3 and three.R == (2.0,) * 3
+    assert Gains(K=(1.0, 2.0, 3.0), Lambda=1.0, R=1.0, task_dim=3).K == (1.0, 2.0, 3.0)
+    with pytest.raises(FreejointValueError, match=r'K: expected shape \(3,\), got \(2,\)'):
+        Gains(K=(1.0, 2.0), task_dim=3)
+    with pytest.raises(FreejointValueError, match='task_dim: expected an int >= 1'):
+        Gains(task_dim=0)
+
+
+def test_a_law_refuses_gains_of_another_task_dimension_than_its_models():
+    with pytest.raises(FreejointValueError, match='gains: sized for task dimension 3, the '
+                                                  'model has 2'):
+        make_law('robust', table1('horizontal').scaled(0.7), Gains(task_dim=3))
