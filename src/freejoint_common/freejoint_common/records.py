@@ -37,7 +37,7 @@ THETA_NAMES = tuple('theta_hat[%d]' % i for i in range(5))
 
 def theta_hat(msg):
     """
-    Return the paper's law's theta_hat (5) of a ControllerState, either layout.
+    Return the paper's law's adaptive estimate (5 values) of a ControllerState, either layout.
 
     Parameters
     ----------

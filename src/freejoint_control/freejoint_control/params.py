@@ -99,7 +99,7 @@ PARAMS = (
           "arm's model: 2 for a planar arm) [1/s]", validator=_gain('K')),
     Param('Lambda', list(_DEFAULT.Lambda), 'diagonal of Lambda (m values > 0, m the task '
           "dimension of the arm's model: 2 for a planar arm) [1/s]", validator=_gain('Lambda')),
-    Param('R', list(_DEFAULT.R), "diagonal of R (m values > 0, m the task dimension of the "
+    Param('R', list(_DEFAULT.R), 'diagonal of R (m values > 0, m the task dimension of the '
           "arm's model: 2 for a planar arm)", validator=_gain('R')),
     Param('Gamma', list(_DEFAULT.Gamma), 'diagonal of the adaptation gain Gamma (5 values >= 0)',
           validator=_gain('Gamma')),
