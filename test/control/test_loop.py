@@ -175,14 +175,15 @@ def test_each_lockstep_tick_is_the_core_law_and_a_repeated_stamp_gets_the_same_a
         assert setpoint(loop, k, _setpoint(k)) is None
         res = state(loop, k, q, qd)
         out = ctl.step(q, qd, _setpoint(k)[0:2], _setpoint(k)[2:4], _setpoint(k)[4:6], DT)
-        assert res.effort == out.tau.tolist() and list(res.theta_hat) == out.theta.tolist()
+        assert res.effort == out.tau.tolist()
+        assert res.law_state_values[:5] == out.theta.tolist()
         assert list(res.position) == out.p.tolist() and res.det_dd == out.det
         assert res.position_desired == _setpoint(k)[0:2]
         assert res.status == 0 and res.message == '' and res.stamp_ns == k * DT_NS
         assert res.law_state_names[:5] == tuple('theta_hat[%d]' % i for i in range(5))
         assert res.law_state_values == out.theta.tolist() + [out.rho] + out.dv.tolist()
     again = state(loop, 4, *_state_q(4))
-    assert again.repeated and list(again.theta_hat) == ctl.theta.tolist()
+    assert again.repeated and again.law_state_values[:5] == ctl.theta.tolist()
 
 
 def test_a_state_comes_before_its_setpoint_and_is_answered_when_the_setpoint_comes():
@@ -207,7 +208,8 @@ def test_joint_state_in_another_order_with_extra_joints_drives_it_the_same():
                         (0.0, qd[2], 5.0, qd[0], qd[1]), names)
         else:
             res = state(loop, k, q, qd)
-        assert res.effort == out.tau.tolist() and list(res.theta_hat) == out.theta.tolist()
+        assert res.effort == out.tau.tolist()
+        assert res.law_state_values[:5] == out.theta.tolist()
 
 
 def test_lockstep_holds_when_setpoints_go_stale_and_answers_at_once_while_holding():
@@ -223,7 +225,8 @@ def test_lockstep_holds_when_setpoints_go_stale_and_answers_at_once_while_holdin
     effort, _, _, out = rep.tick(DT_NS, q1, QD0, None)
     assert res.effort == effort and res.effort != [0.0, 0.0]
     assert res.status & STATUS_HOLDING and res.status & STATUS_STALE_SETPOINT, res.message
-    assert res.position_desired == tuple(rep.fk(q1)) and list(res.theta_hat) == out.theta.tolist()
+    assert res.position_desired == tuple(rep.fk(q1))
+    assert res.law_state_values[:5] == out.theta.tolist()
     assert any('holding position' in text for _, _, text in logs)
     res = state(loop, 2)                             # answered at once, same frozen reference
     assert res.effort == rep.tick(2 * DT_NS, Q0, QD0, None)[0]
@@ -281,7 +284,7 @@ def test_missing_joint_short_arrays_and_non_finite_state_are_refused_with_zero_e
                    DT).tau.tolist()
     assert res.effort == [max(-20.0, min(20.0, x)) for x in tau]
     assert res.status == (STATUS_RATE_LIMITED if res.effort != tau else 0)
-    assert list(res.theta_hat) == ctl.theta.tolist()
+    assert res.law_state_values[:5] == ctl.theta.tolist()
 
 
 FAULTS = {
@@ -305,13 +308,13 @@ def test_absurd_input_is_refused_with_a_reason_and_tracking_resumes_within_half_
         setpoint(loop, k, _setpoint(k))
         res = state(loop, k)
         assert res.effort == rep.tick(k * DT_NS, Q0, QD0, _setpoint(k))[0]
-    theta_before = list(res.theta_hat)
+    theta_before = res.law_state_values[:5]
     k = k_fault
     if kind == 'state':
         setpoint(loop, k, _setpoint(k))
         res = state(loop, k, *corrupt(Q0, QD0))
         assert res.effort == [0.0, 0.0] and res.status == STATUS_BAD_INPUT, res.message
-        assert reason in res.message and list(res.theta_hat) == theta_before
+        assert reason in res.message and res.law_state_values[:5] == theta_before
         assert 'implausible state' in logs[-1][2]
         rep.zero(k * DT_NS)
     elif kind == 'setpoint':
@@ -331,7 +334,7 @@ def test_absurd_input_is_refused_with_a_reason_and_tracking_resumes_within_half_
         setpoint(loop, k, _setpoint(k))
         res = state(loop, k)
         assert res.effort == rep.tick(k * DT_NS, Q0, QD0, _setpoint(k))[0]
-    assert _finite_within(res.effort) and all(map(math.isfinite, res.theta_hat))
+    assert _finite_within(res.effort) and all(map(math.isfinite, res.law_state_values))
     resumed = None
     for k in range(k_fault + 1, k_fault + 501):
         setpoint(loop, k, _setpoint(k))
@@ -357,7 +360,7 @@ def test_a_live_gain_change_applies_on_the_next_tick():
     res = state(loop, 1, q, qd)
     assert res.effort == ctl.step(q, qd, _setpoint(1)[0:2], _setpoint(1)[2:4],
                                   _setpoint(1)[4:6], DT).tau.tolist()
-    assert list(res.delta_v) == [0.0, 0.0]
+    assert res.law_state_values[6:8] == [0.0, 0.0]
 
 
 def test_per_joint_effort_limits_clip_each_joint_and_say_so():
@@ -395,7 +398,7 @@ def test_real_time_holds_against_gravity_before_the_first_setpoint_and_resumes_w
         res = loop.on_state(ns, NAMES, q, qd, ns + 500_000, 0.0)
         used = _moving_setpoint(min(k, 79), hold) if 80 <= k < 100 else sp
         effort, ref, dt, out = rep.tick(ns, q, qd, used, 79 * DT_NS if 80 <= k < 100 else None)
-        assert res.effort == effort and list(res.theta_hat) == out.theta.tolist(), k
+        assert res.effort == effort and res.law_state_values[:5] == out.theta.tolist(), k
         assert res.position_desired == tuple(ref[0:2]) and res.dt == dt
         assert res.state_age == 5e-4
         if k in (0, 100):
@@ -461,14 +464,14 @@ def test_reset_restarts_theta_hat_and_blends_in_again_from_the_arm():
         setpoint(loop, k, _setpoint(k))
         res = state(loop, k, Q0, qd)
         assert res.effort == rep.tick(k * DT_NS, Q0, qd, _setpoint(k))[0]
-    assert max(res.theta_hat) > 0.0 and not res.status & STATUS_RESUMING
+    assert max(res.law_state_values[:5]) > 0.0 and not res.status & STATUS_RESUMING
     loop.reset()
     loop.reset()            # twice: as once
     rep.reset()
     setpoint(loop, 25, _setpoint(25))
     res = state(loop, 25, Q0, qd)
     effort, ref, _, out = rep.tick(25 * DT_NS, Q0, qd, _setpoint(25))
-    assert res.effort == effort and list(res.theta_hat) == out.theta.tolist()
+    assert res.effort == effort and res.law_state_values[:5] == out.theta.tolist()
     assert res.status & STATUS_RESUMING and res.position_desired == tuple(rep.fk(Q0))
 
 
@@ -479,7 +482,8 @@ def test_time_going_back_restarts_the_law_and_forgets_the_setpoints():
         state(loop, k, Q0, (1.0, -2.0, 3.0))
     res = state(loop, 0)
     assert res.status & STATUS_HOLDING and 'no setpoint yet' not in res.message
-    assert list(res.theta_hat) == list(Gains().theta0) or max(res.theta_hat) < 1e-6
+    theta = res.law_state_values[:5]
+    assert theta == list(Gains().theta0) or max(theta) < 1e-6
     assert any('state time went back from 14000000 to 0 ns' in t for _, _, t in logs), logs
 
 
@@ -585,18 +589,18 @@ def test_a_non_finite_law_result_is_never_returned_and_the_law_state_is_restored
         tick['k'] = k
         setpoint(loop, k, _setpoint(k))
         res = state(loop, k)
-        results.append((list(res.effort), list(res.theta_hat), res.status))
-        assert _finite_within(res.effort) and all(map(math.isfinite, res.theta_hat))
+        results.append((list(res.effort), res.law_state_values[:5], res.status))
+        assert _finite_within(res.effort) and all(map(math.isfinite, res.law_state_values))
         if k == k_bad:
             assert res.status & STATUS_LAW_FAULT and 'law fault' in res.message
-            assert res.effort == results[-2][0] and list(res.theta_hat) == results[-2][1]
+            assert res.effort == results[-2][0] and res.law_state_values[:5] == results[-2][1]
             assert loop.law.save_state() == tuple(results[-2][1])
             rep.shaper.track(k * DT_NS * 1e-9, _setpoint(k), None)
             rep.last_ns = k * DT_NS
             rep.armed = False
         else:
             expected, _, _, out = rep.tick(k * DT_NS, Q0, QD0, _setpoint(k))
-            assert res.effort == expected and list(res.theta_hat) == out.theta.tolist(), k
+            assert res.effort == expected and res.law_state_values[:5] == out.theta.tolist(), k
             assert not res.status & STATUS_LAW_FAULT
     assert loop.faults == 1 and '1 law faults' in loop.report()
     assert any(kind == 'fault' for _, kind, _ in logs)

@@ -2,7 +2,7 @@
 from types import SimpleNamespace as NS
 
 from freejoint_common.contract import stamp_from_ns
-from freejoint_common.records import arrays_from_messages, stamp_ns
+from freejoint_common.records import arrays_from_messages, stamp_ns, theta_hat
 from freejoint_core.metrics import compute_record
 import numpy as np
 import pytest
@@ -58,3 +58,30 @@ def test_no_tick_with_the_passive_joint_is_an_error_naming_it():
 
 def test_stamp_ns_reads_the_header():
     assert stamp_ns(_state(1234)) == 1_234_000_000
+
+
+ROBUST_NAMES = ['theta_hat[%d]' % i for i in range(5)] + ['rho_hat', 'delta_v[0]', 'delta_v[1]']
+
+
+def test_theta_hat_is_read_from_the_generic_law_state_by_name_or_from_the_old_field():
+    new = NS(law_state_names=ROBUST_NAMES, law_state=[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0])
+    assert theta_hat(new) == (1.0, 2.0, 3.0, 4.0, 5.0)
+    shuffled = NS(law_state_names=['z'] + ROBUST_NAMES[::-1],
+                  law_state=[9.0, 8.0, 7.0, 6.0, 5.0, 4.0, 3.0, 2.0, 1.0])
+    assert theta_hat(shuffled) == (1.0, 2.0, 3.0, 4.0, 5.0)
+    assert theta_hat(NS(law_state_names=['z[0]'], law_state=[1.0])) == (0.0,) * 5
+    assert theta_hat(NS(theta_hat=[0.5] * 5)) == (0.5,) * 5          # the old layout
+
+
+def test_new_layout_states_give_the_same_arrays_as_old_layout_states():
+    old = [_state(k) for k in range(3)]
+    new = []
+    for k in range(3):
+        s = _state(k)
+        del s.theta_hat
+        s.law_state_names = ROBUST_NAMES
+        s.law_state = [0.1 * k] * 5 + [0.0, 0.0, 0.0]
+        new.append(s)
+    joints = [_joints(k) for k in range(3)]
+    a, b = arrays_from_messages(old, joints, 'joint3'), arrays_from_messages(new, joints, 'joint3')
+    assert set(a) == set(b) and all(np.array_equal(a[key], b[key]) for key in a)

@@ -31,9 +31,9 @@ def _state():
     msg.error = [1e-4, -2e-4]
     msg.error_rate = [0.5, 0.25]
     msg.sliding = [0.3, -0.3]
-    msg.theta_hat = [0.1, 0.2, 0.3, 0.4, 0.5]
-    msg.rho_hat = 1.25
-    msg.delta_v = [-0.7, 0.7]
+    msg.law_state_names = ['theta_hat[0]', 'theta_hat[1]', 'theta_hat[2]', 'theta_hat[3]',
+                           'theta_hat[4]', 'rho_hat', 'delta_v[0]', 'delta_v[1]']
+    msg.law_state = [0.1, 0.2, 0.3, 0.4, 0.5, 1.25, -0.7, 0.7]
     msg.effort = [3.5, -2.0]
     msg.joint_names = ['joint1', 'joint2']
     msg.det_dd = 1.5e-3

@@ -68,9 +68,15 @@ def tick_messages(k):
     cs.position = [sp.position[0] + 1e-3 * math.sin(k / 7.0),
                    sp.position[1] - 1e-3 * math.cos(k / 11.0)]
     cs.error = [cs.position[0] - sp.position[0], cs.position[1] - sp.position[1]]
+    # Every task vector filled, as the controller does (m values): an empty float64[] is
+    # serialized by these rclpy wheels with an alignment rosbags does not expect.
+    cs.error_rate = [1e-2 * math.cos(k / 7.0), 2e-3 * math.sin(k / 11.0)]
+    cs.sliding = [cs.error_rate[0] + 50.0 * cs.error[0], cs.error_rate[1] + 50.0 * cs.error[1]]
     cs.effort = [2.0 * math.sin(k / 13.0), -1.5 * math.cos(k / 17.0)]
     cs.joint_names = ['joint1', 'joint2']
-    cs.theta_hat = [1e-5 * k, 2e-5 * k, 0.0, 1e-6 * k, 0.5]
+    cs.law_state_names = ['theta_hat[%d]' % i for i in range(5)] + [
+        'rho_hat', 'delta_v[0]', 'delta_v[1]']
+    cs.law_state = [1e-5 * k, 2e-5 * k, 0.0, 1e-6 * k, 0.5, 0.25, -0.1, 0.1]
     cs.det_dd = 1e-3 + 1e-4 * math.sin(k / 3.0)
     cs.status = k % 2
     cs.message = '' if k % 2 == 0 else 'near singular'

@@ -54,7 +54,7 @@ def test_rosbags_reads_every_message_back_with_the_stored_definitions_only(tmp_p
     assert counts == {name: len(msgs) for name, msgs in written.items()}
     last = decoded['/controller_state'][-1]
     sent = written['/controller_state'][-1]
-    assert list(last.theta_hat) == list(sent.theta_hat)
+    assert list(last.law_state) == list(sent.law_state)
     assert list(last.effort) == list(sent.effort)
     assert last.message == sent.message and last.det_dd == sent.det_dd
     assert last.STATUS_BAD_INPUT == 16             # constants travel with the definition
@@ -179,7 +179,7 @@ def test_definitions_come_from_the_installed_msg_files_for_custom_types():
     from freejoint_tools.typedefs import DefinitionError, Definitions
     defs = Definitions()
     text, digest = defs.lookup('freejoint_msgs/msg/ControllerState')
-    assert 'float64[5] theta_hat' in text and 'MSG: std_msgs/Header' in text
+    assert 'float64[] law_state' in text and 'MSG: std_msgs/Header' in text
     assert digest.startswith('RIHS01_')
     with pytest.raises(DefinitionError, match='no_such_pkg'):
         defs.lookup('no_such_pkg/msg/Thing')

@@ -109,7 +109,7 @@ def test_recorder_holds_every_message_of_a_1khz_lockstep_like_run(procs, wait, t
             store.register(get_types_from_msg(conn.msgdef.data, conn.msgtype))
         states = [store.deserialize_cdr(raw, c.msgtype)
                   for c, _, raw in reader.messages() if c.topic == '/controller_state']
-    assert [list(s.theta_hat) for s in states] == [list(t[2].theta_hat) for t in ticks]
+    assert [list(s.law_state) for s in states] == [list(t[2].law_state) for t in ticks]
 
     # log times are sim time (use_sim_time): the stamps' time base, not the wall clock
     log_times = [t for name, t, _, _ in bag.messages() if name == '/joint_states']

@@ -50,7 +50,7 @@ def test_foxglove_layout_panels_all_configured_and_every_plot_path_is_a_served_f
         assert field in fields, path
         assert (index is not None) == ('[' in fields[field] or 'sequence' in fields[field]), path
     wanted = {'/controller_state.error[0]', '/controller_state.effort[0]',
-              '/joint_states.position[2]', '/controller_state.theta_hat[0]',
+              '/joint_states.position[2]', '/controller_state.law_state[0]',
               '/controller_state.status'}
     assert wanted <= set(paths)
 

@@ -31,6 +31,39 @@ def stamp_ns(msg):
     return to_ns(msg.header.stamp)
 
 
+THETA_NAMES = tuple('theta_hat[%d]' % i for i in range(5))
+"""The names of the paper's law's adaptive estimate in ``ControllerState.law_state_names``."""
+
+
+def theta_hat(msg):
+    """
+    Return the paper's law's adaptive estimate (5 values) of a ControllerState, either layout.
+
+    Parameters
+    ----------
+    msg : freejoint_msgs/ControllerState
+        Since the law's state is generic: ``law_state`` named by ``law_state_names``
+        (``theta_hat[0]`` .. ``theta_hat[4]``); before (old bags): ``theta_hat float64[5]``.
+
+    Returns
+    -------
+    tuple of float, (5,)
+        Zeros for a law without a theta_hat (its state has no such names).
+
+    """
+    names = getattr(msg, 'law_state_names', None)
+    if names is None:
+        return tuple(msg.theta_hat)
+    names = list(names)
+    values = msg.law_state
+    if names[:5] == list(THETA_NAMES):
+        return tuple(values[:5])
+    try:
+        return tuple(values[names.index(n)] for n in THETA_NAMES)
+    except ValueError:
+        return (0.0,) * 5
+
+
 def arrays_from_messages(states, joint_states, passive_joint, max_ticks=None):
     """
     Pair controller states with joint states by stamp; return the per-tick arrays.
@@ -44,7 +77,8 @@ def arrays_from_messages(states, joint_states, passive_joint, max_ticks=None):
     ----------
     states : iterable of freejoint_msgs/ControllerState
         Per tick: ``position`` (p), ``position_desired`` (p_d), ``effort`` (tau),
-        ``theta_hat`` and ``det_dd``.
+        ``det_dd`` and theta_hat (:func:`theta_hat`: ``law_state`` by its names, or the
+        field ``theta_hat`` of the layout before the law's state was generic).
     joint_states : iterable of sensor_msgs/JointState
         Per tick: the position of ``passive_joint`` (the passive angle, rad).
     passive_joint : str
@@ -55,7 +89,7 @@ def arrays_from_messages(states, joint_states, passive_joint, max_ticks=None):
     Returns
     -------
     dict
-        ``t`` (N,) s, ``p`` (N, 2), ``p_d`` (N, 2), ``tau`` (N, r), ``theta`` (N, 5),
+        ``t`` (N,) s, ``p`` (N, m), ``p_d`` (N, m), ``tau`` (N, r), ``theta`` (N, 5),
         ``q_passive`` (N,), ``det`` (N,): the keyword arguments of
         ``compute_record`` (``compute_record(case, variant, seed, **arrays, ...)``).
 
@@ -94,7 +128,7 @@ def arrays_from_messages(states, joint_states, passive_joint, max_ticks=None):
         'p': np.array([tuple(m.position) for m in picked], dtype=float),
         'p_d': np.array([tuple(m.position_desired) for m in picked], dtype=float),
         'tau': np.array([tuple(m.effort) for m in picked], dtype=float).reshape(-1, r),
-        'theta': np.array([tuple(m.theta_hat) for m in picked], dtype=float),
+        'theta': np.array([theta_hat(m) for m in picked], dtype=float).reshape(-1, 5),
         'q_passive': np.array([q_passive[ns] for ns in stamps], dtype=float),
         'det': np.array([m.det_dd for m in picked], dtype=float),
     }

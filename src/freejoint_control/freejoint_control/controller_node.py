@@ -24,6 +24,7 @@ measured motion, the torque ramped from zero.
 
 """
 
+from array import array
 import signal
 import time
 
@@ -65,6 +66,8 @@ class ControllerNode(Node, Lifecycle):
         self._dim = self._cmd.layout.dim[0]
         self._state = ControllerState()
         self._state.joint_names = list(cfg.joints)
+        self._state.law_state_names = list(self._loop.result.law_state_names)
+        self._m = self._loop.task_dim
         self._state_pub_ns = None       # stamp of the last ControllerState published
         self._latency = LatencyWindow()
         self._quiet_sent = False
@@ -221,11 +224,17 @@ class ControllerNode(Node, Lifecycle):
         if self._activation_requested and self._loop.standby:
             self._on_activation_requested()
         stamp = msg.header.stamp
+        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         p = msg.position
         v = msg.velocity
         a = msg.acceleration
-        res = self._loop.on_setpoint(stamp.sec * 1_000_000_000 + stamp.nanosec,
-                                     (p[0], p[1], v[0], v[1], a[0], a[1]), 0, _monotonic())
+        m = self._m
+        if len(p) != m or len(v) != m or len(a) != m:
+            self._loop.refuse_setpoint(ns, 'position, velocity, acceleration have %d, %d, %d '
+                                       'values, the task dimension is %d' % (
+                                           len(p), len(v), len(a), m))
+            return
+        res = self._loop.on_setpoint(ns, (*p, *v, *a), 0, _monotonic())
         if res is not None:
             self._publish(res)
 
@@ -255,16 +264,14 @@ class ControllerNode(Node, Lifecycle):
         if ns >= 0:
             stamp_from_ns(ns, st.header.stamp)
             self._state_pub_ns = ns
-        st.error = res.error
-        st.error_rate = res.error_rate
-        st.sliding = res.sliding
-        st.theta_hat = res.theta_hat
-        st.rho_hat = res.rho_hat
-        st.delta_v = res.delta_v
+        st.error = array('d', res.error)
+        st.error_rate = array('d', res.error_rate)
+        st.sliding = array('d', res.sliding)
+        st.law_state = array('d', res.law_state_values)
         st.effort = res.effort
         st.det_dd = res.det_dd
-        st.position = res.position
-        st.position_desired = res.position_desired
+        st.position = array('d', res.position)
+        st.position_desired = array('d', res.position_desired)
         st.status = res.status
         st.message = res.message
         if res.setpoint_ns is None:

@@ -2,7 +2,8 @@
 The controller's loop without ROS: what the controller node decides, as plain Python.
 
 :class:`ControlLoop` takes the samples the node converts from its messages - a joint state
-(stamp [ns], names, positions, velocities), a setpoint (stamp [ns], six values) - and the
+(stamp [ns], names, positions, velocities), a setpoint (stamp [ns], its ``3 m`` values:
+position, velocity, acceleration, m the task dimension of the law's model) - and the
 clock values the node reads (system time ``now_ns`` [ns], monotonic time ``mono`` [s]);
 it reads no clock itself, so a test drives it deterministically.  Per input it returns
 the :class:`Result` to publish (the command and the ControllerState's fields as plain
@@ -61,8 +62,6 @@ RECEIPT = 'receipt'
 
 _isfinite = math.isfinite
 _NAME_MAP_CACHE = 16
-_ZERO2 = (0.0, 0.0)
-_THETA_NAMES = tuple('theta_hat[%d]' % i for i in range(5))
 
 
 def _no_log(level, kind, text):
@@ -79,12 +78,9 @@ class Result:
         Stamp [ns] of the state answered (-1: none answered yet).
     effort : list of float, (r,)
         The command [N m] in the order of parameter ``joints``.
-    error, error_rate, sliding, delta_v, position, position_desired : sequence, (2,)
-        ControllerState's task-space terms [m, m/s, m/s^2].
-    theta_hat : sequence of float, (5,)
-        The paper's law's estimate (ControllerState's field of that law; the law's
-        ``numpy.ndarray`` after a step, given to the message as it is).
-    rho_hat, det_dd, state_age, setpoint_age, dt : float
+    error, error_rate, sliding, position, position_desired : sequence of float, (m,)
+        ControllerState's task-space terms [m, m/s] (m: the task dimension).
+    det_dd, state_age, setpoint_age, dt : float
         As ControllerState's fields.
     status : int
         Status bits; ``message`` says why when not 0.
@@ -93,7 +89,7 @@ class Result:
     law_state_names : tuple of str
         Names of the law's internal state (``ControlLaw.state_names``).
     law_state_values : list of float
-        Its values after this answer.
+        Its values after this answer (ControllerState's ``law_state``).
     repeated : bool
         The state's stamp was answered before: the same answer again.
     latency_ns : int, RECEIPT or None
@@ -103,18 +99,18 @@ class Result:
 
     """
 
-    __slots__ = ('stamp_ns', 'effort', 'error', 'error_rate', 'sliding', 'theta_hat',
-                 'rho_hat', 'delta_v', 'det_dd', 'position', 'position_desired', 'status',
+    __slots__ = ('stamp_ns', 'effort', 'error', 'error_rate', 'sliding', 'det_dd',
+                 'position', 'position_desired', 'status',
                  'message', 'setpoint_ns', 'setpoint_age', 'dt', 'state_age',
                  'law_state_names', 'law_state_values', 'repeated', 'latency_ns')
 
-    def __init__(self):
+    def __init__(self, m=2):
+        zero = (0.0,) * m
         self.stamp_ns = -1
         self.effort = []
-        self.error = self.error_rate = self.sliding = self.delta_v = _ZERO2
-        self.position = self.position_desired = _ZERO2
-        self.theta_hat = [0.0] * 5
-        self.rho_hat = self.det_dd = self.state_age = self.setpoint_age = self.dt = 0.0
+        self.error = self.error_rate = self.sliding = zero
+        self.position = self.position_desired = zero
+        self.det_dd = self.state_age = self.setpoint_age = self.dt = 0.0
         self.status = 0
         self.message = ''
         self.setpoint_ns = None
@@ -141,20 +137,22 @@ class ControlLoop:
         cfg = config
         self.log = log or _no_log
         self.law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
-        self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep)
+        m = self.task_dim = self.law.model.task_dim
+        self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep, m=m)
         self._predictor = None
+        self._zero_task = (0.0,) * m
         self._install(cfg)
-        self.result = Result()
+        self.result = Result(m)
         self.result.law_state_names = tuple(self.law.state_names)
         self._zero = [0.0] * len(cfg.joints)
         self.last_ns = -1               # stamp of the last answered state
         self.pending = None             # lockstep: (ns, q, qd, since) waiting for a setpoint
-        self._setpoints = {}            # lockstep: stamp_ns -> (px, py, vx, vy, ax, ay)
+        self._setpoints = {}            # lockstep: stamp_ns -> (p, v, a) flat, (3 m,)
         self._recent = []               # real time: [(stamp_ns, values)], in arrival order
         self._setpoint_seen = False     # a setpoint was received (lockstep: stale timeout on)
         self._setpoint_used = False     # a setpoint was tracked (else: 'no setpoint yet')
         self._late = False              # real time: the last setpoint used was late
-        self._last_sp = _ZERO2
+        self._last_sp = self._zero_task
         self.last_state_wall = None     # monotonic time of the last state received
         self.stale_reported = False
         self._last_q = None
@@ -473,18 +471,18 @@ class ControlLoop:
 
     def on_setpoint(self, ns, values, now_ns, mono):
         """
-        Take a setpoint ``(px, py, vx, vy, ax, ay)`` stamped ``ns``; return a Result or None.
+        Take a setpoint stamped ``ns``; return a Result or None.
+
+        ``values``: its position, velocity and acceleration, m values each, in one flat
+        sequence (``3 m``; planar: ``(px, py, vx, vy, ax, ay)``).
 
         Lockstep: the state waiting for it is answered now. A setpoint the guards refuse is
         dropped (counted, the reason logged and noted for the next hold's message).
         """
         reach, vmax, amax = self._sp_bounds
-        reason = setpoint_refusal(values, reach, vmax, amax)
+        reason = setpoint_refusal(values, reach, vmax, amax, self.task_dim)
         if reason is not None:
-            self.refused_setpoints += 1
-            self._last_sp_refusal = reason
-            self.log(ERROR, 'setpoint',
-                     'setpoint stamped %d ns refused: %s; dropped' % (ns, reason))
+            self.refuse_setpoint(ns, reason)
             return None
         self._last_sp_refusal = ''
         self._setpoint_seen = True
@@ -507,6 +505,12 @@ class ControlLoop:
                 for key in sorted(setpoints)[:5000]:
                     del setpoints[key]
         return None
+
+    def refuse_setpoint(self, ns, reason):
+        """Drop the setpoint stamped ``ns`` for ``reason``: counted, logged, noted."""
+        self.refused_setpoints += 1
+        self._last_sp_refusal = reason
+        self.log(ERROR, 'setpoint', 'setpoint stamped %d ns refused: %s; dropped' % (ns, reason))
 
     def watchdog(self, now_ns, mono):
         """
@@ -582,13 +586,14 @@ class ControlLoop:
         stiffness = shaper.stiffness(self._hold_stiffness)
         if stiffness != law.stiffness:
             law.set_stiffness(stiffness)
-        px, py, vx, vy, ax, ay = ref
+        m = self.task_dim
+        p_ref = ref[0:m]
         pred = self._predictor
         limits = self._limits
         fault = None
         try:
             if pred is None:
-                out = law.step(q, qd, (px, py), (vx, vy), (ax, ay), dt)
+                out = law.step(q, qd, p_ref, ref[m:2 * m], ref[2 * m:3 * m], dt)
             else:
                 out = self._predicted_step(pred, ns, q, qd, ref, dt, now_ns)
         except (FreejointValueError, ArithmeticError) as exc:
@@ -628,13 +633,10 @@ class ControlLoop:
         res.error = out.e
         res.error_rate = out.edot
         res.sliding = out.s
-        res.theta_hat = out.theta
-        res.rho_hat = out.rho
-        res.delta_v = out.dv
         res.law_state_values = values
         res.det_dd = out.det
         res.position = out.p if pred is None else law.model.fk(q)
-        res.position_desired = (px, py)
+        res.position_desired = p_ref
         res.status = status
         res.message = _status_message(status, out.det, self.config, hold_reason,
                                       shaper) if status else ''
@@ -656,30 +658,32 @@ class ControlLoop:
             res.latency_ns = age_ns
         self.period_bits |= status
         self.last_ns = ns
-        self._last_sp = (px, py)
+        self._last_sp = p_ref
         self._last_det = out.det
         self.ticks += 1
         return res
 
     def _fault_output(self, q):
         """Return the published terms of a tick whose law result was refused."""
-        zero2 = np.zeros(2)
-        return ControlOutput(np.zeros(len(self._zero)), zero2, zero2, zero2,
-                             np.array(_theta_hat(self.law)), 0.0, zero2, self._last_det,
+        zero = np.zeros(self.task_dim)
+        return ControlOutput(np.zeros(len(self._zero)), zero, zero, zero,
+                             np.zeros(0), 0.0, zero, self._last_det,
                              self.law.model.fk(q), 0)
 
     def _predicted_step(self, pred, ns, q, qd, ref, dt, now_ns):
         """Run the law on the state predicted to when the command takes effect."""
         age = (now_ns - ns) * 1e-9
         ticks = min(pred.max_ticks, max(1, math.ceil(age / self._dt - 1e-9)))
+        m = self.task_dim
+        p_d, v_d, a_d = ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
         try:
             q_pred, qd_pred = pred.predict(q, qd, ticks)
             h = ticks * self._dt
-            p, v, a = extrapolate_setpoint(ref[0:2], ref[2:4], ref[4:6], h)
+            p, v, a = extrapolate_setpoint(p_d, v_d, a_d, h)
         except FreejointValueError as exc:
             self.log(ERROR, 'predict', 'state prediction failed (%s): the law uses the '
                      'measured state' % exc)
-            return self.law.step(q, qd, ref[0:2], ref[2:4], ref[4:6], dt)
+            return self.law.step(q, qd, p_d, v_d, a_d, dt)
         return self.law.step(q_pred, qd_pred, p, v, a, dt)
 
     def _push(self, effort):
@@ -696,9 +700,7 @@ class ControlLoop:
         res.repeated = False
         res.stamp_ns = ns
         res.effort = self._zero
-        res.error = res.error_rate = res.sliding = res.delta_v = _ZERO2
-        res.theta_hat = _theta_hat(law)
-        res.rho_hat = 0.0
+        res.error = res.error_rate = res.sliding = self._zero_task
         res.law_state_values = law.state_values()
         res.det_dd = self._last_det
         q = self._last_q
@@ -825,19 +827,13 @@ class ControlLoop:
                    self.refused_setpoints, self.faults, self.old_states))
 
 
-def _theta_hat(law):
-    """Return ControllerState's theta_hat (5) of a law: its first 5 values, or zeros."""
-    if law.state_names[:5] == _THETA_NAMES:
-        return law.state_values()[:5]
-    return [0.0] * 5
-
-
 def _status_message(status, det, cfg, hold_reason, shaper):
     """Return the ControllerState message of a computed answer's status bits."""
     parts = []
     if status & STATUS_HOLDING:
         hold = shaper.hold_position
-        parts.append('holding at (%.4f, %.4f) m: %s' % (hold[0], hold[1], hold_reason))
+        parts.append('holding at (%s) m: %s' % (', '.join('%.4f' % x for x in hold),
+                                                hold_reason))
     if status & STATUS_RESUMING:
         parts.append('resuming: blending from the hold to the setpoint over %.3g s'
                      % shaper.blend_duration)

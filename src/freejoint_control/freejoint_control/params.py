@@ -19,7 +19,7 @@ from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve
 from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR, JOINT_NAMES
 from freejoint_common.schema import JOINTS, LoopConfig, NOMINAL_SCALE, one_of, Param
 from freejoint_common.schema import SCHEDULING, Schema, unique_names
-from freejoint_core.arm import ArmParams
+from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.control import Gains, H_FORMS
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.laws import LAWS
@@ -51,7 +51,11 @@ def _gain(name):
     upper = GAIN_MAX.get(name)
 
     def check(value):
-        Gains(**{name: tuple(value) if isinstance(value, list) else value})
+        given = tuple(value) if isinstance(value, list) else value
+        if name in TASK_GAINS and isinstance(given, tuple):
+            Gains(**{name: given, 'task_dim': max(1, len(given))})   # the size: _check_task
+        else:
+            Gains(**{name: given})
         if upper is not None and any(v > upper for v in value):
             return f'values must be <= {upper:g}, got {tuple(float(v) for v in value)}'
         return None
@@ -90,11 +94,12 @@ PARAMS = (
           '(subscribes; the first state activates it); then it starts from the measured '
           'motion',
           read_only=True),
-    Param('K', list(_DEFAULT.K), 'diagonal of K (2 values > 0) [1/s]',
-          validator=_gain('K')),
-    Param('Lambda', list(_DEFAULT.Lambda), 'diagonal of Lambda (2 values > 0) [1/s]',
-          validator=_gain('Lambda')),
-    Param('R', list(_DEFAULT.R), 'diagonal of R (2 values > 0)', validator=_gain('R')),
+    Param('K', list(_DEFAULT.K), 'diagonal of K (m values > 0, m the task dimension of the '
+          "arm's model: 2 for a planar arm) [1/s]", validator=_gain('K')),
+    Param('Lambda', list(_DEFAULT.Lambda), 'diagonal of Lambda (m values > 0, m the task '
+          "dimension of the arm's model: 2 for a planar arm) [1/s]", validator=_gain('Lambda')),
+    Param('R', list(_DEFAULT.R), 'diagonal of R (m values > 0, m the task dimension of the '
+          "arm's model: 2 for a planar arm)", validator=_gain('R')),
     Param('Gamma', list(_DEFAULT.Gamma), 'diagonal of the adaptation gain Gamma (5 values >= 0)',
           validator=_gain('Gamma')),
     Param('sigma', list(_DEFAULT.sigma), 'diagonal of the sigma-modification (5 values >= 0)',
@@ -278,8 +283,20 @@ def _check_standby(values):
     return None
 
 
+def _check_task(values):
+    # The task dimension of the arm's model class, without building the model (every arm
+    # the controller takes is a planar ArmModel: Arm3Model, ArmModel, PinArmModel); build()
+    # sizes the gains by the model it builds.
+    m = ArmModel.task_dim
+    for name in TASK_GAINS:
+        if len(values[name]) != m:
+            return (f"{name}: expected {m} values (the task dimension of the arm's model), "
+                    f'got {list(values[name])}')
+    return None
+
+
 CHECKS = (_check_joints, _check_loop_rate, _check_theta0, _check_effort_limits,
-          _check_delay_compensation, _check_state_bounds, _check_standby)
+          _check_delay_compensation, _check_state_bounds, _check_standby, _check_task)
 
 
 @dataclass(frozen=True)
@@ -307,11 +324,15 @@ GAIN_NAMES = ('K', 'Lambda', 'R', 'Gamma', 'sigma', 'epsilon', 'h_form', 'theta0
 """The parameters that are ``Gains`` fields of the same name."""
 
 
-def gains(values, tau_limit=None, theta_max=None):
+TASK_GAINS = ('K', 'Lambda', 'R')
+"""The gains sized by the task dimension m."""
+
+
+def gains(values, tau_limit=None, theta_max=None, task_dim=2):
     """Return the core's ``Gains`` of a parameter dict (the fields named as the parameters)."""
     return Gains(**{name: (tuple(values[name]) if isinstance(values[name], list)
                            else values[name]) for name in GAIN_NAMES},
-                 tau_limit=tau_limit, theta_max=theta_max)
+                 tau_limit=tau_limit, theta_max=theta_max, task_dim=task_dim)
 
 
 def _nominal_model(values):
@@ -327,17 +348,19 @@ def build(values):
     active_names = [joint_names[i] for i in nominal.active]
     limits = _floats('effort_limits', values['effort_limits'])
     dt = float(values['control_period'])
+    model = _nominal_model(values)
     return Config(
         values=dict(values), nominal=nominal,
         gains=gains(values, tuple(limits[joints.index(name)] for name in active_names),
-                    _floats('theta_max', values['theta_max'])),
+                    _floats('theta_max', values['theta_max']),
+                    (model if model is not None else ArmModel).task_dim),
         joint_names=joint_names, joints=joints,
         cmd_index=tuple(active_names.index(name) for name in joints), dt=dt,
         dt_ns=round(dt * 1e9), lockstep=bool(values['lockstep']), effort_limits=limits,
         position_lower=_floats('joint_position_lower', values['joint_position_lower']),
         position_upper=_floats('joint_position_upper', values['joint_position_upper']),
         velocity_limit=_floats('joint_velocity_limit', values['joint_velocity_limit']),
-        reach=float(sum(nominal.lengths)), nominal_model=_nominal_model(values))
+        reach=float(sum(nominal.lengths)), nominal_model=model)
 
 
 SCHEMA = Schema(PARAMS, CHECKS, build)

@@ -252,7 +252,15 @@ class ArmModel:
     params : ArmParams
         Physical parameters.
 
+    Attributes
+    ----------
+    task_dim : int
+        Task dimension m: the number of end-effector coordinates the model's ``fk`` and
+        ``jacobian`` give (a planar arm: 2, ``(x, y)``).
+
     """
+
+    task_dim = 2
 
     def __init__(self, params):
         if not isinstance(params, ArmParams):

@@ -100,8 +100,8 @@ class Gains:
 
     Attributes
     ----------
-    K, Lambda, R : tuple of float, (2,)
-        Diagonals of K, Lambda, R, > 0 (a scalar is broadcast).
+    K, Lambda, R : tuple of float, (m,)
+        Diagonals of K, Lambda, R, > 0 (a scalar is broadcast), m = ``task_dim``.
     Gamma, sigma : tuple of float, (5,)
         Diagonals of the adaptation gain and sigma-modification, >= 0.
     epsilon : float
@@ -119,12 +119,15 @@ class Gains:
     theta_max : None, float or tuple of float, (5,)
         Element-wise upper bound of theta_hat, > 0, applied inside the update
         (``theta_{k+1} = min(theta_{k+1}, theta_max)``); None disables it.
+    task_dim : int
+        Task dimension m the task-space gains are sized by (2: the planar arms); a law
+        refuses gains of another m than its model's.
 
     """
 
-    K: tuple = (100.0, 100.0)
-    Lambda: tuple = (50.0, 50.0)
-    R: tuple = (2.0, 2.0)
+    K: object = 100.0
+    Lambda: object = 50.0
+    R: object = 2.0
     Gamma: tuple = (0.01,) * 5
     sigma: tuple = (0.1,) * 5
     epsilon: float = 0.1
@@ -134,11 +137,16 @@ class Gains:
     det_threshold: float = 1e-7
     tau_limit: object = None
     theta_max: object = None
+    task_dim: int = 2
 
     def __post_init__(self):
         """Validate and normalise to tuples of floats."""
-        for name, n, lower, strict in (('K', 2, 0.0, True), ('Lambda', 2, 0.0, True),
-                                       ('R', 2, 0.0, True), ('Gamma', 5, 0.0, False),
+        m = self.task_dim
+        if not isinstance(m, (int, np.integer)) or isinstance(m, bool) or m < 1:
+            raise FreejointValueError(f'task_dim: expected an int >= 1, got {m!r}')
+        object.__setattr__(self, 'task_dim', int(m))
+        for name, n, lower, strict in (('K', m, 0.0, True), ('Lambda', m, 0.0, True),
+                                       ('R', m, 0.0, True), ('Gamma', 5, 0.0, False),
                                        ('sigma', 5, 0.0, False), ('theta0', 5, 0.0, False)):
             object.__setattr__(self, name, _vector(getattr(self, name), n, name, lower, strict))
         for name in ('epsilon', 'det_threshold'):
@@ -343,6 +351,10 @@ class RobustController:
         """
         if not isinstance(gains, Gains):
             raise FreejointValueError(f'gains: expected Gains, got {type(gains).__name__}')
+        m = self.model.task_dim
+        if gains.task_dim != m:
+            raise FreejointValueError(f'gains: sized for task dimension {gains.task_dim}, the '
+                                      f'model has {m}')
         limit = self._resolve_limit(gains.tau_limit, self.r)
         self.gains = gains
         self._limit = limit

@@ -452,21 +452,22 @@ def extrapolate_setpoint(p_d, pd_d, pdd_d, h):
 
     Parameters
     ----------
-    p_d, pd_d, pdd_d : array_like, (2,)
+    p_d, pd_d, pdd_d : array_like, (m,)
         Desired end-effector position [m], velocity [m/s], acceleration
-        [m/s^2] at ``t``.
+        [m/s^2] at ``t`` (m, the task dimension, from ``p_d``).
     h : float
         Shift [s], >= 0.
 
     Returns
     -------
-    p, pd, pdd : numpy.ndarray, (2,)
+    p, pd, pdd : numpy.ndarray, (m,)
         ``p_d + h pd_d + h^2/2 pdd_d``, ``pd_d + h pdd_d``, ``pdd_d`` at ``t + h``.
 
     """
-    p_d = check_vector(p_d, 2, 'p_d')
-    pd_d = check_vector(pd_d, 2, 'pd_d')
-    pdd_d = check_vector(pdd_d, 2, 'pdd_d')
+    m = np.shape(p_d)[0] if np.ndim(p_d) == 1 and np.shape(p_d)[0] > 0 else 2
+    p_d = check_vector(p_d, m, 'p_d')
+    pd_d = check_vector(pd_d, m, 'pd_d')
+    pdd_d = check_vector(pdd_d, m, 'pdd_d')
     try:
         h = float(h)
     except (TypeError, ValueError):

@@ -134,35 +134,46 @@ def state_refusal(q, qd, lower, upper, vmax):
     return None
 
 
-def setpoint_refusal(sp, reach, vmax, amax):
+def setpoint_refusal(sp, reach, vmax, amax, m=2):
     """
     Return why a setpoint is implausible, or None when it is within the bounds.
 
     Parameters
     ----------
-    sp : sequence of float, (6,)
-        ``(px, py, vx, vy, ax, ay)`` [m, m/s, m/s^2].
+    sp : sequence of float, (3 m,)
+        Position, velocity and acceleration, m values each (planar:
+        ``(px, py, vx, vy, ax, ay)``) [m, m/s, m/s^2].
     reach : float
         Largest distance of a reachable point from the base [m].
     vmax, amax : float
         Bounds on the setpoint's speed [m/s] and acceleration magnitude [m/s^2].
+    m : int, optional
+        Task dimension (default 2).
 
     Returns
     -------
     str or None
 
     """
+    if len(sp) != 3 * m:
+        return '%d values, expected %d (position, velocity, acceleration of %d each)' % (
+            len(sp), 3 * m, m)
     for x in sp:
         if not _isfinite(x):
             return 'non-finite value in %s' % (list(sp),)
-    r = math.hypot(sp[0], sp[1])
+    if m == 2:
+        r = math.hypot(sp[0], sp[1])
+        v = math.hypot(sp[2], sp[3])
+        a = math.hypot(sp[4], sp[5])
+    else:
+        r = math.hypot(*sp[0:m])
+        v = math.hypot(*sp[m:2 * m])
+        a = math.hypot(*sp[2 * m:3 * m])
     if not r <= reach:
-        return 'position (%g, %g) is %g m from the base, beyond the reach %g m' % (
-            sp[0], sp[1], r, reach)
-    v = math.hypot(sp[2], sp[3])
+        return 'position (%s) is %g m from the base, beyond the reach %g m' % (
+            ', '.join('%g' % x for x in sp[0:m]), r, reach)
     if not v <= vmax:
         return 'velocity %g m/s beyond %g m/s' % (v, vmax)
-    a = math.hypot(sp[4], sp[5])
     if not a <= amax:
         return 'acceleration %g m/s^2 beyond %g m/s^2' % (a, amax)
     return None

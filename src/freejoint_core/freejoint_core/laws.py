@@ -107,23 +107,23 @@ class RobustLaw(RobustController, ControlLaw):
     The paper's robust law with sigma-modified adaptation (``RobustController``).
 
     State: ``theta_hat[0..4]`` (after the tick's update), ``rho_hat`` (used in the tick)
-    and ``delta_v[0..1]`` (the robust term [m/s^2]); ``theta_hat`` within
-    ``[0, gains.theta_max]``.
+    and ``delta_v[0..m-1]`` (the robust term [m/s^2], m the model's task dimension);
+    ``theta_hat`` within ``[0, gains.theta_max]``.
     """
 
     name = 'robust'
-    state_names = ('theta_hat[0]', 'theta_hat[1]', 'theta_hat[2]', 'theta_hat[3]',
-                   'theta_hat[4]', 'rho_hat', 'delta_v[0]', 'delta_v[1]')
 
     def __init__(self, nominal_params, gains=None, model=None):
         self._last = None
         super().__init__(nominal_params, gains, model=model)
+        self.state_names = _robust_state_names(self.model.task_dim)
 
     def set_gains(self, gains):
         """Install new gains (``RobustController.set_gains``) and the state's bounds."""
         super().set_gains(gains)
         tmax = gains.theta_max if gains.theta_max is not None else (INF,) * 5
-        self.state_bounds = tuple((0.0, t) for t in tmax) + ((-INF, INF),) * 3
+        self.state_bounds = tuple((0.0, t) for t in tmax) + (
+            (-INF, INF),) * (1 + self.model.task_dim)
 
     def step(self, q, qd, p_d, pd_d, pdd_d, dt):
         """Return ``RobustController.step`` (the paper's law) and keep it for the state."""
@@ -137,10 +137,10 @@ class RobustLaw(RobustController, ControlLaw):
         self._last = None
 
     def state_values(self):
-        """Return theta_hat (5, now), rho_hat and delta_v (2) of the last step (or 0)."""
+        """Return theta_hat (5, now), rho_hat and delta_v (m) of the last step (or 0)."""
         out = self._last
         if out is None:
-            return list(self._theta) + [0.0, 0.0, 0.0]
+            return list(self._theta) + [0.0] * (1 + self.model.task_dim)
         return list(self._theta) + [out.rho] + out.dv.tolist()
 
     def save_state(self):
@@ -151,6 +151,12 @@ class RobustLaw(RobustController, ControlLaw):
         """Put theta_hat back (``set_theta``); rho_hat and delta_v read 0 until a step."""
         self.set_theta(saved)
         self._last = None
+
+
+def _robust_state_names(m):
+    """Return the names of the paper's law's state for task dimension ``m``."""
+    return tuple('theta_hat[%d]' % i for i in range(5)) + ('rho_hat',) + tuple(
+        'delta_v[%d]' % i for i in range(m))
 
 
 LAWS = {}

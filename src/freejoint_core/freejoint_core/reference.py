@@ -18,7 +18,9 @@ A real arm must not go limp when its setpoints stop, nor jump when they come bac
 
 Besides, :func:`extrapolate` carries a late setpoint forward to the state's time (the
 controller's guards are ``freejoint_core.guards``).
-Plain floats and tuples, no ROS types.
+Plain floats and tuples, no ROS types.  A reference (and a setpoint) is one flat tuple of
+``3 m`` values, position, velocity, acceleration (m the task dimension; the planar arms'
+``(px, py, vx, vy, ax, ay)``, which has its own unrolled path).
 
 """
 
@@ -89,6 +91,8 @@ class ReferenceShaper:
         position offset ``d``: the blend lasts ``max(resume_time, 1.875 d / max_velocity,
         sqrt(5.7735 d / max_acceleration))`` (the peaks of a rest-to-rest quintic), so an
         arm found far from the stream is brought back gently.  None: no bound.
+    m : int, optional
+        Task dimension (default 2): references are ``3 m`` values.
 
     Attributes
     ----------
@@ -100,7 +104,11 @@ class ReferenceShaper:
     """
 
     def __init__(self, resume_time, blend_on_start=True, max_velocity=None,
-                 max_acceleration=None):
+                 max_acceleration=None, m=2):
+        if not isinstance(m, int) or isinstance(m, bool) or m < 1:
+            raise FreejointValueError(f'm: expected an int >= 1, got {m!r}')
+        self.m = m
+        self._zero3 = (0.0,) * (2 * m)
         self.set_resume_time(resume_time)
         self.set_bounds(max_velocity, max_acceleration)
         self.blend_on_start = bool(blend_on_start)
@@ -144,10 +152,10 @@ class ReferenceShaper:
         self.mode = MODE_NONE
         self.progress = 1.0
         self._hold = None
-        self._last = None        # (px, py, vx, vy, ax, ay) of the last reference
+        self._last = None        # (p, v, a) of the last reference, (3 m,)
         self._t0 = 0.0
         self._off0 = None
-        self._start = None       # (px, py, vx, vy, 0, 0) given by start_from
+        self._start = None       # (p, v, 0) given by start_from
 
     def start_from(self, p, v):
         """
@@ -163,22 +171,23 @@ class ReferenceShaper:
 
         Parameters
         ----------
-        p : sequence of float, (2,)
+        p : sequence of float, (m,)
             Measured end-effector position ``fk(q)`` [m].
-        v : sequence of float, (2,)
+        v : sequence of float, (m,)
             Measured end-effector velocity ``J(q) qd`` [m/s].
 
         """
+        m = self.m
         vals = [float(x) for x in p] + [float(x) for x in v]
-        if len(vals) != 4 or not all(map(_isfinite, vals)):
+        if len(p) != m or len(vals) != 2 * m or not all(map(_isfinite, vals)):
             raise FreejointValueError(
-                f'p, v: expected 2 finite values each, got {list(p)!r}, {list(v)!r}')
+                f'p, v: expected {m} finite values each, got {list(p)!r}, {list(v)!r}')
         self.reset()
-        self._start = (vals[0], vals[1], vals[2], vals[3], 0.0, 0.0)
+        self._start = tuple(vals) + (0.0,) * m
 
     @property
     def hold_position(self):
-        """Return the frozen hold position ``(x, y)`` [m], or None when not holding."""
+        """Return the frozen hold position (m,) [m], or None when not holding."""
         return self._hold if self.mode == MODE_HOLD else None
 
     def restart_blend(self):
@@ -218,20 +227,20 @@ class ReferenceShaper:
 
         Parameters
         ----------
-        p_now : tuple of float, (2,)
+        p_now : tuple of float, (m,)
             Measured end-effector position [m] (used only at the onset of the hold).
 
         Returns
         -------
-        tuple of float, (6,)
-            ``(px, py, 0, 0, 0, 0)``: position [m], velocity [m/s], acceleration [m/s^2].
+        tuple of float, (3 m,)
+            ``(p, 0, 0)``: position [m], velocity [m/s], acceleration [m/s^2].
 
         """
         if self.mode != MODE_HOLD:
             self.mode = MODE_HOLD
             self._start = None
-            self._hold = (float(p_now[0]), float(p_now[1]))
-        ref = (self._hold[0], self._hold[1], 0.0, 0.0, 0.0, 0.0)
+            self._hold = tuple([float(x) for x in p_now[0:self.m]])
+        ref = self._hold + self._zero3
         self._last = ref
         return ref
 
@@ -243,17 +252,17 @@ class ReferenceShaper:
         ----------
         t : float
             Time of the tick [s] (the state's stamp; only differences are used).
-        sp : tuple of float, (6,)
-            Setpoint ``(px, py, vx, vy, ax, ay)`` [m, m/s, m/s^2].
-        p_now : tuple of float, (2,)
+        sp : tuple of float, (3 m,)
+            Setpoint: position, velocity, acceleration [m, m/s, m/s^2].
+        p_now : tuple of float, (m,)
             Measured end-effector position [m]: the start of the blend when the
             controller starts (``blend_on_start``) with no reference yet (unused after
             :meth:`start_from`).
 
         Returns
         -------
-        ref : tuple of float, (6,)
-            The reference ``(px, py, vx, vy, ax, ay)``.
+        ref : tuple of float, (3 m,)
+            The reference (position, velocity, acceleration).
         blending : bool
             True while the offset is still decaying.
 
@@ -271,7 +280,7 @@ class ReferenceShaper:
                 self._last = sp
                 return sp, False
             else:
-                self._last = (float(p_now[0]), float(p_now[1]), 0.0, 0.0, 0.0, 0.0)
+                self._last = tuple([float(x) for x in p_now[0:self.m]]) + self._zero3
             mode = MODE_HOLD
         if mode == MODE_HOLD:
             if self.resume_time <= 0.0:
@@ -279,10 +288,10 @@ class ReferenceShaper:
                 self._last = sp
                 return sp, False
             last = self._last
-            self._off0 = tuple(last[i] - sp[i] for i in range(6))
+            self._off0 = tuple(last[i] - sp[i] for i in range(3 * self.m))
             self._t0 = t
             self.mode = MODE_BLEND
-            d = math.hypot(self._off0[0], self._off0[1])
+            d = math.hypot(*self._off0[0:self.m])
             duration = self.resume_time
             if self.max_velocity is not None:
                 duration = max(duration, 1.875 * d / self.max_velocity)
@@ -297,9 +306,19 @@ class ReferenceShaper:
             return sp, False
         self.progress = tau / duration
         o = self._off0
-        dx, vx, ax = quintic_offset(o[0], o[2], o[4], duration, tau)
-        dy, vy, ay = quintic_offset(o[1], o[3], o[5], duration, tau)
-        ref = (sp[0] + dx, sp[1] + dy, sp[2] + vx, sp[3] + vy, sp[4] + ax, sp[5] + ay)
+        m = self.m
+        if m == 2:
+            dx, vx, ax = quintic_offset(o[0], o[2], o[4], duration, tau)
+            dy, vy, ay = quintic_offset(o[1], o[3], o[5], duration, tau)
+            ref = (sp[0] + dx, sp[1] + dy, sp[2] + vx, sp[3] + vy, sp[4] + ax, sp[5] + ay)
+        else:
+            pos, vel, acc = [], [], []
+            for i in range(m):
+                d, v, a = quintic_offset(o[i], o[m + i], o[2 * m + i], duration, tau)
+                pos.append(sp[i] + d)
+                vel.append(sp[m + i] + v)
+                acc.append(sp[2 * m + i] + a)
+            ref = tuple(pos + vel + acc)
         self._last = ref
         return ref, True
 
@@ -310,17 +329,24 @@ def extrapolate(sp, h):
 
     Parameters
     ----------
-    sp : tuple of float, (6,)
-        ``(px, py, vx, vy, ax, ay)`` [m, m/s, m/s^2] at ``t``.
+    sp : tuple of float, (3 m,)
+        Position, velocity, acceleration [m, m/s, m/s^2] at ``t`` (planar:
+        ``(px, py, vx, vy, ax, ay)``).
     h : float
         Shift [s].
 
     Returns
     -------
-    tuple of float, (6,)
+    tuple of float, (3 m,)
         The setpoint at ``t + h``.
 
     """
-    px, py, vx, vy, ax, ay = sp
     hh = 0.5 * h * h
-    return (px + h * vx + hh * ax, py + h * vy + hh * ay, vx + h * ax, vy + h * ay, ax, ay)
+    if len(sp) == 6:
+        px, py, vx, vy, ax, ay = sp
+        return (px + h * vx + hh * ax, py + h * vy + hh * ay, vx + h * ax, vy + h * ay,
+                ax, ay)
+    m = len(sp) // 3
+    p, v, a = sp[0:m], sp[m:2 * m], sp[2 * m:3 * m]
+    return (tuple([p[i] + h * v[i] + hh * a[i] for i in range(m)])
+            + tuple([v[i] + h * a[i] for i in range(m)]) + tuple(a))

@@ -16,16 +16,13 @@ from visualization_msgs.msg import Marker
 
 
 def setpoint_msg(sp, frame_id):
-    """Return the ``freejoint_msgs/CartesianSetpoint`` of a ``stream.Setpoint``."""
+    """Return the ``freejoint_msgs/CartesianSetpoint`` of a ``stream.Setpoint`` (planar: m = 2)."""
     msg = SETPOINT.msg_type()
     stamp_from_ns(sp.stamp_ns, msg.header.stamp)
     msg.header.frame_id = frame_id
-    msg.position[0] = sp.px
-    msg.position[1] = sp.py
-    msg.velocity[0] = sp.vx
-    msg.velocity[1] = sp.vy
-    msg.acceleration[0] = sp.ax
-    msg.acceleration[1] = sp.ay
+    msg.position = array.array('d', (sp.px, sp.py))
+    msg.velocity = array.array('d', (sp.vx, sp.vy))
+    msg.acceleration = array.array('d', (sp.ax, sp.ay))
     msg.plan_id = sp.plan_id
     msg.plan_time = sp.plan_time
     msg.final = sp.final
