@@ -25,7 +25,8 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 FILE = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'))
-FULL = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller_fully_actuated.yaml'))
+FULL = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'),
+                          os.path.join(ROOT, 'config', 'fully_actuated', 'controller.yaml'))
 DT = 0.001
 DT_NS = 1_000_000
 NAMES = ['joint1', 'joint2', 'joint3']
