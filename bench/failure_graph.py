@@ -4,13 +4,14 @@ A joint fails in the lockstep graph: the same run as the offline runner (issue 2
 Runs the simulator, the controller and the planner in lockstep (``tools/demo.py``'s
 harness, no recorder) with the fully actuated arm (``config/fully_actuated/``), the
 simulator's ``fail_joint`` set (default ``joint3@2.5``) and the controller's
-``joint_failures: detect``; then ``freejoint_core.failure_offline.run_failure_case`` on the
+``joint_failures: detect`` (with the effort of joint_states; ``--no-effort``: the residual
+only); then ``freejoint_core.failure_offline.run_failure_case`` on the
 same case and seed, and prints, per case, the detection (from the controller's log), the
 largest difference of the commands (controller_state ``effort``) and of the joint angles
 (joint_states) between the graph and the offline runner, and the tracking error::
 
     . tools/env.sh && python bench/failure_graph.py [--cases vertical horizontal]
-        [--fail joint3@2.5] [--seed 0] [--duration 2.7]
+        [--fail joint3@2.5] [--seed 0] [--duration 2.7] [--no-effort]
 
 Exit 1 if a difference is above 1e-9 (the lockstep graph must equal the offline run to
 round-off).
@@ -38,13 +39,15 @@ def _demo():
     return demo
 
 
-def _overlay(directory, fail):
+def _overlay(directory, fail, effort):
     """Write the overlay files (the fully actuated arm, the failure) into ``directory``."""
     for node in ('controller', 'planner', 'sim'):
         with open(os.path.join(CONFIG, 'fully_actuated', node + '.yaml')) as fh:
             text = fh.read()
         if node == 'sim':
             text = text.rstrip('\n') + "\n    fail_joint: '%s'\n" % fail
+        if node == 'controller' and not effort:
+            text = text.rstrip('\n') + '\n    failure_use_effort: false\n'
         with open(os.path.join(directory, node + '.yaml'), 'w') as fh:
             fh.write(text)
 
@@ -55,6 +58,8 @@ def main(argv=None):
     ap.add_argument('--cases', nargs='+', choices=CASES, default=list(CASES))
     ap.add_argument('--fail', default='joint3@2.5')
     ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--no-effort', action='store_true',
+                    help="the controller ignores joint_states' effort (residual only)")
     ap.add_argument('--duration', type=float, default=2.7,
                     help='simulated time [s] per case (default 2.7)')
     args = ap.parse_args(argv)
@@ -72,7 +77,7 @@ def main(argv=None):
     out = tempfile.mkdtemp(prefix='failure_graph_')
     overlay = os.path.join(out, 'overlay')
     os.makedirs(overlay)
-    _overlay(overlay, args.fail)
+    _overlay(overlay, args.fail, not args.no_effort)
     rclpy.init()
     node = rclpy.create_node('failure_graph')
     executor = EventsExecutor()
@@ -97,7 +102,8 @@ def main(argv=None):
             err = max(math.hypot(*(np.array(states[k * MS].position)
                                    - states[k * MS].position_desired)) for k in ticks)
             rec, trace = run_failure_case(case, args.seed, parse_fail(args.fail),
-                                          duration=n_ticks * dt, record_trace=True)
+                                          duration=n_ticks * dt, record_trace=True,
+                                          effort=not args.no_effort)
             d_cmd = float(np.max(np.abs(cmd - trace['tau'][ticks])))
             d_q = float(np.max(np.abs(q - trace['q'][ticks])))
             with open([p for p in run['logs'] if 'controller' in p][0]) as fh:
