@@ -203,3 +203,52 @@ def test_detection_on_without_a_failure_commands_what_detection_off_commands():
     b = run(off, 'vertical', 1.0)
     assert on.failures.events == []
     assert np.array_equal(a['cmd'], b['cmd'])
+
+
+def test_joint2_failing_vertically_gives_cannot_track_within_50_ms_and_no_runaway():
+    # Joint 2 free in the vertical plane passes det(Da Da^T) but its internal motion runs
+    # away: the start-up check refuses it; the remaining joints get the least-harm command.
+    loop, logs = make(FULL, case='vertical', failure_use_effort=False)
+    out = run(loop, 'vertical', 3.0, fail=[(1, 2.5)])
+    (event,) = loop.failures.events
+    assert event['joint'] == 'joint2' and event['by'] == 'residual'
+    assert event['verdict'] == CANNOT_TRACK and 'runs away' in event['reason']
+    assert event['t'] - 2.5 <= 0.050
+    k = int(round(event['t'] / DT))
+    assert np.all(out['cmd'][k:, 1] == 0.0)
+    assert np.all(np.isfinite(out['cmd'])) and np.all(np.isfinite(out['qd']))
+    assert np.all(np.abs(out['cmd']) <= np.array(FULL['effort_limits']))
+    assert np.max(np.abs(out['qd'][k:])) < 20.0       # the arm sags, it does not run away
+
+
+def test_a_parameter_change_after_a_switch_keeps_the_failed_joint_out():
+    loop, logs = make(FULL, case='vertical', joint_failures='notice')
+    out = run(loop, 'vertical', 0.05, fail=[(2, 0.02)], notices={20: ['joint3']})
+    assert loop.law.nominal.passive == (2,)
+    old = loop.config
+    values = dict(FULL, case='vertical', joint_failures='notice', R=[3.0, 3.0])
+    loop.apply(old, SCHEMA.config(values))
+    assert loop.law.gains.R == (3.0, 3.0)
+    k = len(out['cmd'])
+    ns = k * DT_NS
+    sp = TRAJ.sample_tuple(k * DT)
+    loop.on_state(ns, NAMES, out['q'][-1].tolist(), out['qd'][-1].tolist(), 0, 200.0)
+    res = loop.on_setpoint(ns, sp, 0, 200.0)
+    assert loop.law.nominal.passive == (2,) and res.effort[2] == 0.0
+    assert all(math.isfinite(v) for v in res.effort)
+    assert [e['joint'] for e in loop.failures.events] == ['joint3', 'joint3']
+
+
+def test_real_time_effort_check_takes_the_nearer_of_the_last_two_commands():
+    # A driver that applied the command of two ticks ago (a late answer) is no failure; a
+    # joint reading 0 against both commands is.
+    cfg = SCHEMA.config(dict(FULL, lockstep=False))
+    loop = ControlLoop(cfg)
+    monitor = loop.failures
+    assert monitor._effort_reference([1.0, 2.0, 3.0], [0.5, 2.0, 0.0]) == [1.0, 2.0, 3.0]
+    # joints 1, 2: the older command is the one applied (gap 0); joint 3 reads 0: the
+    # smaller command, 3.0, is its reference (still a gap of 3 N m)
+    assert monitor._effort_reference([1.2, 2.5, 3.2], [1.0, 2.0, 0.0]) == [1.0, 2.0, 3.0]
+    locked = make(FULL)[0].failures
+    locked._effort_reference([1.0, 2.0, 3.0], [1.0, 2.0, 3.0])
+    assert locked._effort_reference([1.2, 2.5, 3.2], [1.0, 2.0, 0.0]) == [1.2, 2.5, 3.2]

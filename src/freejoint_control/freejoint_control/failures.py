@@ -157,8 +157,11 @@ class FailureMonitor:
                                 margin=cfg.values['failure_margin'],
                                 ticks=cfg.values['failure_ticks'], effort=self.use_effort)
         self.precomputed = precompute_verdicts(cfg.nominal, cfg.values['case'], cfg.gains)
+        self._nullspace = getattr(law, 'nullspace', None)
         self._dt_ns = cfg.dt_ns
         self._last_ns = None
+        self._tau_before = None
+        self._lockstep = cfg.lockstep
         self._notices = []
         self._hold_q = None
         self.events = []
@@ -221,12 +224,43 @@ class FailureMonitor:
         found = [(j, 'notice') for j in self._notices]
         self._notices = []
         if self.detect:
-            hit = rec.observe(q, qd, tau_last, effort if self.use_effort else None)
+            if self.use_effort and effort is not None:
+                hit = self._observe_with_effort(q, qd, tau_last, effort)
+            else:
+                hit = rec.observe(q, qd, tau_last, None)
             if hit is not None and all(h[0] != hit[0] for h in found):
                 found.append(hit)
         for j, how in found:
             if j in rec.active:
                 self._switch(j, ns * 1e-9, how, q, qd)
+
+    def _effort_reference(self, tau_last, effort):
+        """
+        Return, per joint, the command of the last two ticks nearer the measured effort.
+
+        Lockstep the measured effort is the last command exactly (a healthy joint: gap 0):
+        the last command is the reference, as offline.  In real time the driver may have
+        applied the one before for the period (a late answer); a failed joint reads 0
+        against both.
+        """
+        before = self._tau_before
+        self._tau_before = tau_last
+        if self._lockstep or before is None:
+            return tau_last
+        return [a if abs(a - m) <= abs(b - m) else b
+                for a, b, m in zip(tau_last, before, effort)]
+
+    def _observe_with_effort(self, q, qd, tau_last, effort):
+        """Return ``Reconfigurer.observe``'s finding with the effort detector's reference."""
+        rec = self.rec
+        res = rec.observer.step(q, qd, tau_last, rec.dt)
+        j = rec.effort.update(self._effort_reference(tau_last, effort), effort)
+        if j is not None:
+            return j, 'effort'
+        if rec.verdict != TRACKING:
+            return None
+        j = rec.detector.update(res)
+        return None if j is None else (j, 'residual')
 
     def _switch(self, j, t, how, q, qd):
         rec = self.rec
@@ -273,6 +307,28 @@ class FailureMonitor:
             law.nullspace = None
         law.set_nominal(nominal)
         law.set_gains(replace(gains, tau_limit=limit))
+
+    def release(self):
+        """Put the law back on the configured arm (before a change of its model or gains)."""
+        law = self.law
+        law.set_gains(replace(law.gains, tau_limit=None))
+        if self._nullspace is not None:
+            law.nullspace = self._nullspace
+        law.set_nominal(self.configured)
+        law.set_gains(self._gains)
+
+    def renewed(self, cfg):
+        """
+        Return the monitor of a changed configuration, the failures known so far kept.
+
+        The joints failed so far are taken again at the next tick (as notices: the new
+        model's verdict), the events so far kept.
+        """
+        new = FailureMonitor(cfg, self.law, self.log)
+        new.events = list(self.events)
+        failed = set(self.rec.nominal.passive) - set(self.configured.passive)
+        new._notices.extend(sorted(failed | set(self.rec.failed)))
+        return new
 
     # -- outputs -----------------------------------------------------------------------
     def after_law(self, out):

@@ -222,6 +222,10 @@ class ControlLoop:
     def apply(self, old, cfg):
         """Take a validated parameter change (effective on the next state)."""
         law = self.law
+        fm = self.failures
+        renew = fm is not None and (cfg.nominal != old.nominal or cfg.gains != old.gains)
+        if renew:
+            fm.release()        # the law back on the configured arm, then the change
         if cfg.nominal != old.nominal:
             law.set_nominal(cfg.nominal, cfg.nominal_model)
         if cfg.gains != old.gains:
@@ -229,6 +233,8 @@ class ControlLoop:
             if cfg.gains.theta0 != old.gains.theta0:
                 law.reset()
             self._good_state = law.save_state()
+        if renew:
+            self.failures = fm.renewed(cfg)
         self._install(cfg)
 
     def reset(self):
