@@ -11,7 +11,7 @@ largest difference of the commands (controller_state ``effort``) and of the join
 (joint_states) between the graph and the offline runner, and the tracking error::
 
     . tools/env.sh && python bench/failure_graph.py [--cases vertical horizontal]
-        [--fail joint3@2.5] [--seed 0] [--duration 2.7] [--no-effort]
+        [--fail joint3@2.5] [--seeds 0-9] [--duration 2.7] [--no-effort]
 
 Exit 1 if a difference is above 1e-9 (the lockstep graph must equal the offline run to
 round-off).
@@ -57,7 +57,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(prog='failure_graph', description=__doc__.split('\n')[1])
     ap.add_argument('--cases', nargs='+', choices=CASES, default=list(CASES))
     ap.add_argument('--fail', default='joint3@2.5')
-    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--seeds', default='0', help='A or A-B (default 0)')
     ap.add_argument('--no-effort', action='store_true',
                     help="the controller ignores joint_states' effort (residual only)")
     ap.add_argument('--duration', type=float, default=2.7,
@@ -84,11 +84,15 @@ def main(argv=None):
     executor.add_node(node)
     failed = False
     try:
-        for case in args.cases:
+        lo, _, hi = args.seeds.partition('-')
+        runs = [(case, seed) for case in args.cases
+                for seed in range(int(lo), int(hi or lo) + 1)]
+        for case, seed in runs:
             collector = demo.Collector(node)
-            run = demo.run_graph(case, args.seed, n_ticks, round(dt * 1e9), collector,
-                                 executor, out, os.path.join(out, 'logs'), record=False,
-                                 progress=lambda text: None, arm=overlay)
+            logs = os.path.join(out, 'logs', '%s_%d' % (case, seed))
+            run = demo.run_graph(case, seed, n_ticks, round(dt * 1e9), collector, executor,
+                                 out, logs, record=False, progress=lambda text: None,
+                                 arm=overlay)
             states = {}
             for msg in collector.messages('controller_state'):
                 states.setdefault(to_ns(msg.header.stamp), msg)
@@ -101,7 +105,7 @@ def main(argv=None):
             q = np.array([list(joints[k * MS].position) for k in ticks])
             err = max(math.hypot(*(np.array(states[k * MS].position)
                                    - states[k * MS].position_desired)) for k in ticks)
-            rec, trace = run_failure_case(case, args.seed, parse_fail(args.fail),
+            rec, trace = run_failure_case(case, seed, parse_fail(args.fail),
                                           duration=n_ticks * dt, record_trace=True,
                                           effort=not args.no_effort)
             d_cmd = float(np.max(np.abs(cmd - trace['tau'][ticks])))
@@ -112,7 +116,7 @@ def main(argv=None):
             print('%s seed %d, %s: %d of %d ticks; graph: %s; offline: detected at %s by %s; '
                   'max |command difference| %.3g N m, max |q difference| %.3g rad, max '
                   'tracking error %.3f mm (offline %.3f mm); %.2f s wall'
-                  % (case, args.seed, args.fail, len(ticks), n_ticks, found or 'no detection',
+                  % (case, seed, args.fail, len(ticks), n_ticks, found or 'no detection',
                      rec['detected_at_s'], rec['detected_by'], d_cmd, d_q, err * 1e3,
                      rec['max_mm'], run['wall_s']), flush=True)
             failed = failed or len(ticks) != n_ticks or d_cmd > 1e-9 or d_q > 1e-9
