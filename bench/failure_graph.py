@@ -101,6 +101,11 @@ def main(argv=None):
                 joints.setdefault(to_ns(msg.header.stamp), msg)
             collector.close()
             ticks = [k for k in range(n_ticks) if k * MS in states and k * MS in joints]
+            if not ticks:
+                print('%s seed %d: no tick collected (another graph in ROS domain %s?); '
+                      'logs in %s' % (case, seed, os.environ['ROS_DOMAIN_ID'], logs))
+                failed = True
+                continue
             cmd = np.array([list(states[k * MS].effort) for k in ticks])
             q = np.array([list(joints[k * MS].position) for k in ticks])
             err = max(math.hypot(*(np.array(states[k * MS].position)
