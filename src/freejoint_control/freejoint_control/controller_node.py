@@ -21,6 +21,9 @@ its commands and setpoints are matched as the graph lists them and the setpoint 
 caught up (then it idles at SCHED_FIFO 1, before at the default scheduler); the signal
 subscribes it and the first state activates it, its reference starting from the arm's
 measured motion, the torque ramped from zero.
+With ``joint_failures`` not ``off`` it subscribes ``joint_failures`` (std_msgs/String, a
+driver's or operator's notice) and passes the JointState's efforts to the loop's failure
+monitor (``freejoint_control.failures``, docs/failures.md).
 
 """
 

@@ -11,7 +11,11 @@ initial configuration, at rest, with a freshly seeded disturbance, at the next s
 keeps running), and clears a divergence.  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray,
 one status named ``<node>: simulator``) at 1 Hz: OK / WARN with steps, step rate, command
 latency (state to command), command timeouts, refused commands, dropped steps, brakes;
-ERROR with the reason at once when the plant diverges.
+ERROR with the reason at once when the plant diverges.  Joint failures (issue 23,
+``freejoint_sim.failure_injection``): parameter ``fail_joint`` (``joint3@2.5``) and
+``~/fail_joint`` (freejoint_msgs/FailJoint) make a joint's actuator and brake fail; its
+effort then reads 0, the log and ``/diagnostics`` say when, and with ``report_failures``
+a notice goes out on ``joint_failures``.
 
 Modes (docs/GRAPH.md):
 
