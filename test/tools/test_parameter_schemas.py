@@ -135,9 +135,10 @@ def test_a_params_file_sets_no_parameter_to_the_value_it_has_anyway(name):
     base = os.path.join(ROOT, 'config', name)
     assert _repeated_values(CONFIGS[name], base) == [], (
         '%s repeats schema defaults: remove them (the default lives in the schema)' % base)
-    overlay = os.path.join(ROOT, 'config', 'four_link', name)
-    assert _repeated_values(CONFIGS[name], overlay, [base]) == [], (
-        '%s repeats values it has from %s or the schema: remove them' % (overlay, base))
+    for example in ('four_link', 'fully_actuated'):
+        overlay = os.path.join(ROOT, 'config', example, name)
+        assert _repeated_values(CONFIGS[name], overlay, [base]) == [], (
+            '%s repeats values it has from %s or the schema: remove them' % (overlay, base))
 
 
 def test_the_repeated_value_check_finds_a_default_and_an_overlay_repeat(tmp_path):
@@ -188,7 +189,7 @@ def test_every_parameter_table_of_graph_md_is_a_generated_schema_table():
 @pytest.mark.parametrize('name', sorted(CONFIGS))
 def test_every_name_of_a_params_file_is_a_schema_entry_and_the_file_builds(name):
     import yaml
-    for folder in ('', 'four_link'):
+    for folder in ('', 'four_link', 'fully_actuated'):
         path = os.path.join(ROOT, 'config', folder, name)
         with open(path) as fh:
             given = yaml.safe_load(fh)['/**']['ros__parameters']

@@ -27,7 +27,7 @@ from typing import NamedTuple
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from freejoint_msgs.msg import CartesianSetpoint, ControllerState
-from freejoint_msgs.srv import PlanCircle
+from freejoint_msgs.srv import FailJoint, PlanCircle
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import OccupancyGrid
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -156,6 +156,15 @@ PLAN_CIRCLE = Service('~/plan_circle', PlanCircle)
 """Planner: check (and execute) a circle."""
 RECORDER_STATUS = Service('~/status', Trigger)
 """Recorder: success once every graph topic has a matched publisher."""
+
+# -- joint failures (issue 23) ----------------------------------------------------------------
+FAILURE_NOTICE_QOS = profile(10, latched=True)
+"""``joint_failures``: reliable, transient local (a controller started later still learns
+of a failure already reported), depth 10."""
+JOINT_FAILURES = Topic('joint_failures', String, FAILURE_NOTICE_QOS)
+"""A driver's or operator's notice that a joint failed: ``data`` = the joint's name."""
+FAIL_JOINT = Service('~/fail_joint', FailJoint)
+"""Simulator: make a joint's actuator and brake fail from the next step."""
 
 # -- stamps ---------------------------------------------------------------------------------
 NS_PER_S = 1_000_000_000

@@ -21,6 +21,9 @@ its commands and setpoints are matched as the graph lists them and the setpoint 
 caught up (then it idles at SCHED_FIFO 1, before at the default scheduler); the signal
 subscribes it and the first state activates it, its reference starting from the arm's
 measured motion, the torque ramped from zero.
+With ``joint_failures`` not ``off`` it subscribes ``joint_failures`` (std_msgs/String, a
+driver's or operator's notice) and passes the JointState's efforts to the loop's failure
+monitor (``freejoint_control.failures``, docs/failures.md).
 
 """
 
@@ -29,6 +32,7 @@ import signal
 import time
 
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, JOINT_STATES
+from freejoint_common.contract import JOINT_FAILURES
 from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_from_ns
 from freejoint_common.contract import stamp_label, STANDBY_SETPOINT_QOS
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
@@ -113,6 +117,10 @@ class ControllerNode(Node, Lifecycle):
         if not cfg.standby:
             self._subscribe_states()
         self.create_service(RESET.srv_type, RESET.name, self._on_reset)
+        # Joint failures (issue 23): a driver's or operator's notice (joint_failures on).
+        if cfg.joint_failures != 'off':
+            self.create_subscription(JOINT_FAILURES.msg_type, JOINT_FAILURES.name,
+                                     self._on_failure_notice, JOINT_FAILURES.qos)
         self._diagnostics = Diagnostics(self, 'controller', 'freejoint_control',
                                         self._on_diagnostics_timer)
         self._diag_window = (_monotonic(), self._loop.counters())
@@ -216,9 +224,17 @@ class ControllerNode(Node, Lifecycle):
         stamp = msg.header.stamp
         res = loop.on_state(stamp.sec * 1_000_000_000 + stamp.nanosec, msg.name,
                             msg.position, msg.velocity,
-                            0 if self._lockstep else self._now_ns(), _monotonic())
+                            0 if self._lockstep else self._now_ns(), _monotonic(),
+                            msg.effort)
         if res is not None:
             self._publish(res)
+
+    def _on_failure_notice(self, msg):
+        """joint_failures: the joint named by ``data`` failed (the law switches next tick)."""
+        why = self._loop.on_failure_notice(msg.data)
+        if not why:
+            self.get_logger().warn('joint failure notice: %s (taken at the next tick)'
+                                   % msg.data)
 
     def _on_setpoint(self, msg):
         if self._activation_requested and self._loop.standby:

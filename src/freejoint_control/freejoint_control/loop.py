@@ -29,6 +29,7 @@ throttled kind of line, None: always); status bits are ControllerState's.
 
 import math
 
+from freejoint_control import failures
 from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
                                     STATUS_TORQUE_LIMITED)
@@ -137,6 +138,11 @@ class ControlLoop:
         cfg = config
         self.log = log or _no_log
         self.law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
+        failures.install_nullspace(self.law, cfg)
+        # Joint failures (issue 23, freejoint_control/failures.py): None when off.
+        self.failures = None if cfg.values['joint_failures'] == 'off' else \
+            failures.FailureMonitor(cfg, self.law, self.log)
+        self._state_effort = None
         m = self.task_dim = self.law.model.task_dim
         self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep, m=m)
         self._predictor = None
@@ -214,6 +220,10 @@ class ControlLoop:
     def apply(self, old, cfg):
         """Take a validated parameter change (effective on the next state)."""
         law = self.law
+        fm = self.failures
+        renew = fm is not None and (cfg.nominal != old.nominal or cfg.gains != old.gains)
+        if renew:
+            fm.release()        # the law back on the configured arm, then the change
         if cfg.nominal != old.nominal:
             law.set_nominal(cfg.nominal, cfg.nominal_model)
         if cfg.gains != old.gains:
@@ -221,6 +231,8 @@ class ControlLoop:
             if cfg.gains.theta0 != old.gains.theta0:
                 law.reset()
             self._good_state = law.save_state()
+        if renew:
+            self.failures = fm.renewed(cfg)
         self._install(cfg)
 
     def reset(self):
@@ -319,7 +331,7 @@ class ControlLoop:
         self._map = found
         return found
 
-    def on_state(self, ns, names, pos, vel, now_ns, mono):
+    def on_state(self, ns, names, pos, vel, now_ns, mono, effort=None):
         """
         Take a joint state; return the Result to publish, or None (none yet).
 
@@ -335,9 +347,12 @@ class ControlLoop:
             System time [ns] (only read in real time: state ages).
         mono : float
             Monotonic time [s] (its receipt).
+        effort : sequence of float, optional
+            Efforts in the order of ``names`` (read only by the failure monitor).
 
         """
         self.last_state_wall = mono
+        self._state_effort = effort
         self.stale_reported = False
         if self._max_age_ns:
             age_ns = now_ns - ns
@@ -591,8 +606,13 @@ class ControlLoop:
         pred = self._predictor
         limits = self._limits
         fault = None
+        fm = self.failures
+        if fm is not None:
+            fm.before_law(ns, q, qd, self._prev_cmd, self._effort_of(len(q)))
         try:
-            if pred is None:
+            if fm is not None and fm.cannot_track:
+                out = fm.least_harm(q, qd, p_ref, self._last_det)
+            elif pred is None:
                 out = law.step(q, qd, p_ref, ref[m:2 * m], ref[2 * m:3 * m], dt)
             else:
                 out = self._predicted_step(pred, ns, q, qd, ref, dt, now_ns)
@@ -600,6 +620,8 @@ class ControlLoop:
             out = None
             fault = 'result (%s: %s)' % (type(exc).__name__, exc)
         if out is not None:
+            if fm is not None:
+                out = fm.after_law(out)
             tau = out.tau.tolist()
             effort = tau if self._identity else [tau[i] for i in self._cmd_index]
             values = law.state_values()
@@ -640,6 +662,8 @@ class ControlLoop:
         res.status = status
         res.message = _status_message(status, out.det, self.config, hold_reason,
                                       shaper) if status else ''
+        if fm is not None and fm.message:
+            res.message = fm.message + ('; ' + res.message if res.message else '')
         if sp_ns is None:
             res.setpoint_ns = None
             res.setpoint_age = 0.0
@@ -662,6 +686,26 @@ class ControlLoop:
         self._last_det = out.det
         self.ticks += 1
         return res
+
+    def _effort_of(self, n):
+        """Return the state's efforts in model order (n), or None (none or not finite)."""
+        eff = self._state_effort
+        idx = self._map[0] if self._map is not None else None
+        if eff is None or idx is None or len(eff) < len(self._map_names):
+            return None
+        return failures.finite_or_none([eff[i] for i in idx], n)
+
+    def on_failure_notice(self, name):
+        """
+        Take a driver's or operator's notice that the joint ``name`` failed (next tick).
+
+        Returns '' if taken, else why not (failure handling off, unknown joint, ...).
+        """
+        if self.failures is None:
+            why = ('joint failure notice for %r ignored: joint_failures is off' % name)
+            self.log(WARN, None, why)
+            return why
+        return self.failures.notice(name)
 
     def _fault_output(self, q):
         """Return the published terms of a tick whose law result was refused."""
@@ -799,6 +843,10 @@ class ControlLoop:
                   % self.pending[0])
         else:
             ok = res.message or 'tracking'
+        if self.failures is not None:
+            extra = self.failures.diagnostics(errors, warnings)
+        else:
+            extra = ()
         values = (
             ('mode', 'lockstep' if self.lockstep else 'realtime'),
             ('activated from standby', 'no' if activated_at is None
@@ -815,7 +863,7 @@ class ControlLoop:
             ('refused states', self.refused_states),
             ('refused setpoints', self.refused_setpoints),
             ('law faults', self.faults),
-            ('old states skipped', self.old_states))
+            ('old states skipped', self.old_states)) + extra
         return errors, warnings, ok, values
 
     def report(self):

@@ -22,11 +22,13 @@ from freejoint_common.schema import SCHEDULING, Schema, unique_names
 from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.control import Gains, H_FORMS
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.failure import DEFAULT_K_O, DEFAULT_MARGIN, DEFAULT_TICKS
 from freejoint_core.laws import LAWS
 from freejoint_core.urdf_offline import nominal_model
 
 ON_STALE = ('hold', 'zero')
 DELAY_COMPENSATION = ('off', 'predict')
+FAILURE_MODES = ('off', 'notice', 'detect')
 GAIN_MAX = {'K': 1e4, 'Lambda': 1e4, 'R': 1e3, 'Gamma': 1e3, 'sigma': 1e3}
 """Upper bounds of the gain vectors (K, Lambda in 1/s; beyond them the law is meaningless
 at any control rate this node runs; (K + Lambda) * control_period <= 1 is checked too)."""
@@ -81,6 +83,33 @@ def _theta_max(value):
         return f'expected 5 values in (0, {THETA_MAX_MAX:g}], got {list(vals)}'
     return None
 
+
+# Joint failures (issue 23, freejoint_control/failures.py); defaults: freejoint_core.failure.
+FAILURE_PARAMS = (
+    Param('joint_failures', 'off',
+          "'off': no failure handling (the paper's law exactly); 'notice': a notice on "
+          'joint_failures (std_msgs/String, the joint name) switches the law at the next '
+          "tick; 'detect': notices and the momentum residual (and the effort the JointState "
+          'reports, with failure_use_effort) detect a joint that lost its torque',
+          read_only=True, validator=one_of(FAILURE_MODES)),
+    Param('failure_observer_gain', DEFAULT_K_O,
+          'gain K_O [1/s] of the momentum observer (its bandwidth); K_O * control_period < 2',
+          (1e-3, 1e5), read_only=True, validator=above(0.0)),
+    Param('failure_margin', DEFAULT_MARGIN,
+          'a joint is flagged when |r_i| > failure_margin x its fault-free level '
+          '(freejoint_core.failure.DEFAULT_LEVELS, docs/failures.md)', (1e-3, 1e3),
+          read_only=True, validator=above(0.0)),
+    Param('failure_ticks', DEFAULT_TICKS,
+          'consecutive ticks over the threshold before a joint is flagged', (1, 10000),
+          read_only=True),
+    Param('failure_use_effort', True,
+          "detect: also compare the command with the JointState's effort (a failed joint "
+          'reads 0) when the state has one per joint', read_only=True),
+    Param('nullspace_kd', 0.0,
+          'null-space damping [N m s/rad] of the active joint rates when more joints are '
+          'driven than the task has (r > 2, freejoint_core.internal.NullSpace); 0 = none '
+          "(the paper's law exactly)", (0.0, 1e4), read_only=True),
+)
 
 PARAMS = (
     CASE, ARM_SPECS, NOMINAL_SCALE, JOINT_NAMES, JOINTS, CONTROL_PERIOD,
@@ -196,7 +225,7 @@ PARAMS = (
           'rate [Hz of state stamps] of controller_state (as ros2_control state publishers '
           'thin theirs): 0 = one per answered state; else at most one per 1/rate s, and '
           'every answer whose status differs from the last published one', (0.0, 1e6)),
-)
+) + FAILURE_PARAMS
 
 
 # -- cross-parameter checks ------------------------------------------------------------
@@ -295,8 +324,17 @@ def _check_task(values):
     return None
 
 
+def _check_failures(values):
+    if values['joint_failures'] != 'off' and \
+            values['failure_observer_gain'] * float(values['control_period']) >= 2.0:
+        return ('failure_observer_gain: failure_observer_gain x control_period must be < 2 '
+                '(the observer would be unstable)')
+    return None
+
+
 CHECKS = (_check_joints, _check_loop_rate, _check_theta0, _check_effort_limits,
-          _check_delay_compensation, _check_state_bounds, _check_standby, _check_task)
+          _check_delay_compensation, _check_state_bounds, _check_standby, _check_task,
+          _check_failures)
 
 
 @dataclass(frozen=True)

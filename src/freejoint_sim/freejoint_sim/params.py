@@ -25,6 +25,7 @@ from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.offline import DEFAULT_Q3_0_DEG
 from freejoint_core.plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB
+from freejoint_sim.failure_injection import parse_fail_joint
 
 MODES = ('lockstep', 'realtime')
 ENGINES = ('rk4', 'mujoco')
@@ -149,6 +150,16 @@ PARAMS = (
           validator=lambda v: None if 0 <= v <= MAX_TIMING_STEPS else
           f'expected an integer in [0, {MAX_TIMING_STEPS}], got {v!r}'),
     SCHEDULING,
+    # Joint failures (issue 23, freejoint_sim/failure_injection.py).
+    Param('fail_joint', '',
+          "scheduled failures: '<joint>@<t>[,<joint>@<t>]' (e.g. 'joint3@2.5': the joint's "
+          'actuator and brake fail from simulation time 2.5 s: no torque, the disturbance '
+          "only, effort 0 in joint_states); '' = none; takes effect on reset (the service "
+          '~/fail_joint: from the next step)'),
+    Param('report_failures', False,
+          'publish a notice on joint_failures (std_msgs/String, the joint name) when a '
+          'failure takes effect, as a driver reporting the fault would; false: only the log '
+          'line and /diagnostics say it', read_only=True),
 )
 
 
@@ -236,7 +247,12 @@ def _check_timing(values):
     return None
 
 
-CHECKS = (_check_joints, _check_steps, _check_timing)
+def _check_fail_joint(values):
+    arm = resolve_arm(values)
+    parse_fail_joint(values['fail_joint'], _joints(values, arm)[0], arm.params.active)
+
+
+CHECKS = (_check_joints, _check_steps, _check_timing, _check_fail_joint)
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,11 @@ initial configuration, at rest, with a freshly seeded disturbance, at the next s
 keeps running), and clears a divergence.  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray,
 one status named ``<node>: simulator``) at 1 Hz: OK / WARN with steps, step rate, command
 latency (state to command), command timeouts, refused commands, dropped steps, brakes;
-ERROR with the reason at once when the plant diverges.
+ERROR with the reason at once when the plant diverges.  Joint failures (issue 23,
+``freejoint_sim.failure_injection``): parameter ``fail_joint`` (``joint3@2.5``) and
+``~/fail_joint`` (freejoint_msgs/FailJoint) make a joint's actuator and brake fail; its
+effort then reads 0, the log and ``/diagnostics`` say when, and with ``report_failures``
+a notice goes out on ``joint_failures``.
 
 Modes (docs/GRAPH.md):
 
@@ -50,7 +54,8 @@ import time
 
 from builtin_interfaces.msg import Time
 from freejoint_common.contract import CLOCK, COMMANDS, EE_POSITION, JOINT_STATES, label_stamp
-from freejoint_common.contract import RESET, ROBOT_DESCRIPTION, stamp_from_ns
+from freejoint_common.contract import FAIL_JOINT, JOINT_FAILURES, RESET, ROBOT_DESCRIPTION
+from freejoint_common.contract import stamp_from_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import Throttle
@@ -58,6 +63,7 @@ from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.guards import divergence_reason
 from freejoint_sim.engines import make_plant
+from freejoint_sim.failure_injection import Injector, parse_fail_joint
 from freejoint_sim.params import SCHEMA
 from freejoint_sim.timing import StepTiming
 from rclpy.clock import Clock, ClockType
@@ -82,6 +88,8 @@ class SimNode(Node, Lifecycle):
         cfg = self.config = self._params.config
         self._plant = make_plant(cfg)
         self._fk = self._plant.model.fk
+        self._injector = self._make_injector(cfg)
+        self._fail_requests = []
         self._install(cfg)
         self._params.listen(self._apply)
 
@@ -141,6 +149,11 @@ class SimNode(Node, Lifecycle):
                                  self._on_command, overridable(COMMANDS.qos),
                                  qos_overriding_options=QOS_OVERRIDES)
         self.create_service(RESET.srv_type, RESET.name, self._on_reset)
+        # Joint failures (issue 23): ~/fail_joint, the notices a driver would publish.
+        self.create_service(FAIL_JOINT.srv_type, FAIL_JOINT.name, self._on_fail_joint)
+        self._pub_failures = (self.create_publisher(JOINT_FAILURES.msg_type,
+                                                    JOINT_FAILURES.name, JOINT_FAILURES.qos)
+                              if cfg.report_failures else None)
         self._publish_description(cfg.arm)
         self._diagnostics = Diagnostics(self, 'simulator', 'freejoint_sim',
                                         self._on_diagnostics_timer)
@@ -221,6 +234,7 @@ class SimNode(Node, Lifecycle):
         self._reset_pending = False
         self._plant = make_plant(cfg)
         self._fk = self._plant.model.fk
+        self._injector = self._make_injector(cfg)
         self._applied = [0.0] * cfg.params.n
         self._diverged = None
         self._take_state()
@@ -229,6 +243,47 @@ class SimNode(Node, Lifecycle):
             self._braked_since = _monotonic()
             self._brake_reason = ''
             self.get_logger().info('reset: brakes engaged until the next command')
+
+    # -- joint failures (issue 23) ----------------------------------------------
+    def _make_injector(self, cfg):
+        """Return the failure schedule of a new plant (parameter ``fail_joint``)."""
+        injector = Injector(self._plant, cfg.joint_names)
+        for j, at in parse_fail_joint(cfg.fail_joint, cfg.joint_names, cfg.params.active):
+            injector.schedule(j, at, 'parameter fail_joint')
+        return injector
+
+    def _on_fail_joint(self, request, response):
+        """~/fail_joint: the joint's actuator and brake fail from the next step."""
+        cfg = self.config
+        try:
+            ((j, _),) = parse_fail_joint('%s@0' % request.joint, cfg.joint_names,
+                                         cfg.params.active)
+        except (FreejointValueError, ValueError) as exc:
+            response.success = False
+            response.message = str(exc).replace('fail_joint: ', 'joint: ', 1)
+            return response
+        # Taken by the stepping thread before its next step (real time: no change of the
+        # plant's schedule while it steps).
+        self._fail_requests.append(j)
+        at = self._plant.t
+        response.success = True
+        response.at = at
+        response.message = '%s fails from the next step (t = %.3f s, step %d)' % (
+            request.joint, at, self._k)
+        self.get_logger().warn('fail_joint: ' + response.message)
+        return response
+
+    def _failures_after_step(self, applied):
+        """Failed joints read 0 effort; log, report and publish a failure taking effect."""
+        injector = self._injector
+        injector.effort(applied)
+        for name, at, how in injector.check():
+            self.get_logger().warn('joint failure injected: %s failed at t = %.3f s (%s): '
+                                   'no torque from then on, effort 0 in joint_states'
+                                   % (name, at, how))
+            if self._pub_failures is not None:
+                self._pub_failures.publish(JOINT_FAILURES.msg_type(data=name))
+            self._publish_diagnostics(update=False)
 
     # -- commands --------------------------------------------------------------
     def _command_effort(self, msg):
@@ -301,6 +356,9 @@ class SimNode(Node, Lifecycle):
         if self._reset_pending:
             self._do_reset()
         else:
+            while self._fail_requests:
+                self._injector.schedule(self._fail_requests.pop(0), self._plant.t,
+                                        'service ~/fail_joint')
             if self._braked or self._diverged is not None:
                 tau = self._zero
             else:
@@ -315,6 +373,8 @@ class SimNode(Node, Lifecycle):
             applied = self._applied
             for i, v in zip(self._active, tau):
                 applied[i] = v
+            if self._injector.scheduled:
+                self._failures_after_step(applied)
         self._k += 1
         self._t_ns = self._k * self._dt_ns
         if self._lockstep or self._k % self._every == 0:
@@ -540,6 +600,9 @@ class SimNode(Node, Lifecycle):
             ok = 'holding at max_steps'
         else:
             ok = 'running'
+        if self._injector.taken:
+            warnings.append('joint failure injected: ' + ', '.join(
+                '%s at t = %.3f s (%s)' % taken for taken in self._injector.taken))
         errors = [] if self._diverged is None else [
             'plant diverged at %s; publishing the last sane state (call ~/reset)'
             % self._diverged]
@@ -558,7 +621,9 @@ class SimNode(Node, Lifecycle):
             ('brakes', 'engaged' if self._braked else 'released'),
             ('brake engagements (no command)', self._brake_engagements),
             ('divergences', self._divergences),
-            ('diverged', 'true' if self._diverged is not None else 'false')))
+            ('diverged', 'true' if self._diverged is not None else 'false'),
+            ('failed joints', ', '.join('%s at %.3f s' % taken[:2]
+                                        for taken in self._injector.taken) or 'none')))
 
     def report(self):
         """One line for the end of the run: steps, timeouts, refusals, brakes, divergences."""

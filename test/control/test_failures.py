@@ -1,0 +1,254 @@
+"""
+A joint fails during the task: the controller's loop in one process (issue 23).
+
+The loop is driven in lockstep by the core's plant stepped here (``Plant.fail_joint``), no
+DDS, no clock; the setpoints are the paper's circle.  The reference for the detection and
+the switch is the offline runner (``freejoint_core.failure_offline``) on the same seed.
+"""
+from dataclasses import replace
+import math
+import os
+
+from freejoint_control.failures import FailureMonitor, precompute_verdicts
+from freejoint_control.loop import ControlLoop
+from freejoint_control.params import SCHEMA
+from freejoint_core.arm import NOMINAL_SCALE, table1
+from freejoint_core.control import Gains, RobustController
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.failure import CANNOT_TRACK, TRACKING
+from freejoint_core.failure_offline import run_failure_case
+from freejoint_core.offline import initial_state
+from freejoint_core.plant import DEFAULT_DT_SUB, Plant
+from freejoint_core.trajectory import CircleQuintic
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+FILE = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'))
+FULL = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'),
+                          os.path.join(ROOT, 'config', 'fully_actuated', 'controller.yaml'))
+DT = 0.001
+DT_NS = 1_000_000
+NAMES = ['joint1', 'joint2', 'joint3']
+TRAJ = CircleQuintic()
+
+
+def make(base, **given):
+    """Return (loop, log lines) of a parameter file's values with ``given`` on top."""
+    values = dict(base)
+    values.update(given)
+    logs = []
+    loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: logs.append(
+        (level, kind, text)))
+    return loop, logs
+
+
+def run(loop, case, seconds, fail=(), seed=0, notices=None, effort=True, passive=()):
+    """
+    Drive ``loop`` in lockstep with the core plant (its joints failing as ``fail`` says).
+
+    Returns
+    -------
+    dict
+        ``cmd`` (ticks, r) commands, ``err`` (ticks,) tracking error [m], ``msg`` the
+        status messages, ``q``, ``qd`` (ticks, n) the states answered.
+
+    """
+    real = table1(case)
+    q0 = initial_state(real, 120.0, TRAJ.sample(0.0)[0])
+    plant = Plant(replace(real, passive=tuple(passive)), DEFAULT_DT_SUB, seed=seed, q0=q0)
+    for j, at in fail:
+        plant.fail_joint(j, at)
+    notices = dict(notices or {})
+    out = {'cmd': [], 'err': [], 'msg': [], 'q': [], 'qd': []}
+    for k in range(int(round(seconds / DT))):
+        t = k * DT
+        for name in notices.pop(k, ()):
+            assert loop.on_failure_notice(name) == ''
+        ns = k * DT_NS
+        q, qd = plant.q.tolist(), plant.qd.tolist()
+        assert loop.on_state(ns, NAMES, q, qd, 0, 100.0 + t,
+                             list(plant.last_effort) if effort else None) is None
+        sp = TRAJ.sample_tuple(t)
+        res = loop.on_setpoint(ns, sp, 0, 100.0 + t)
+        cmd = list(res.effort)
+        out['cmd'].append(cmd)
+        out['err'].append(math.hypot(res.position[0] - sp[0], res.position[1] - sp[1]))
+        out['msg'].append(res.message)
+        out['q'].append(q)
+        out['qd'].append(qd)
+        plant.step(cmd, DT)
+    for key in ('cmd', 'err', 'q', 'qd'):
+        out[key] = np.array(out[key])
+    return out
+
+
+def test_the_fully_actuated_config_drives_all_three_joints_with_nullspace_damping():
+    cfg = SCHEMA.config(dict(FULL))
+    assert cfg.nominal.passive == () and cfg.nominal.r == 3
+    assert tuple(cfg.joints) == tuple(NAMES)
+    loop, _ = make(FULL)
+    assert loop.law.nullspace is not None and loop.law.nullspace.kd == 3.0
+    assert loop.failures is not None and loop.failures.detect
+
+
+def test_joint_failures_off_builds_no_monitor_and_takes_no_notice():
+    loop, logs = make(FILE)
+    assert loop.failures is None
+    assert 'joint_failures is off' in loop.on_failure_notice('joint2')
+    assert logs and 'ignored' in logs[-1][2]
+
+
+def test_a_bad_failure_parameter_is_refused_naming_it():
+    with pytest.raises(FreejointValueError, match='joint_failures'):
+        SCHEMA.config(dict(FILE, joint_failures='sometimes'))
+    with pytest.raises(FreejointValueError, match='failure_observer_gain'):
+        SCHEMA.config(dict(FILE, joint_failures='detect', failure_observer_gain=2500.0))
+
+
+def test_detection_off_a_failing_joint_changes_nothing_the_bare_law_bit_for_bit():
+    # Joint 2 of the paper's arm goes limp at 0.1 s; with joint_failures off every command
+    # is RobustController's on the same states, element by element.
+    loop, logs = make(FILE, case='vertical')
+    out = run(loop, 'vertical', 0.3, fail=[(1, 0.1)], passive=(2,))
+    ctl = RobustController(table1('vertical').scaled(NOMINAL_SCALE),
+                           Gains(tau_limit=tuple(FILE['effort_limits']),
+                                 theta_max=(100.0,) * 5))
+    for k in range(len(out['cmd'])):
+        px, py, vx, vy, ax, ay = TRAJ.sample_tuple(k * DT)
+        tau = ctl.step(out['q'][k], out['qd'][k], (px, py), (vx, vy), (ax, ay), DT).tau
+        assert tau.tolist() == out['cmd'][k].tolist()
+    assert not any('failed' in m for m in out['msg'])
+    assert not any('fail' in text for _, _, text in logs)
+
+
+@pytest.mark.parametrize('case', ['vertical', 'horizontal'])
+def test_joint3_failure_is_found_by_the_residual_the_law_switches_as_offline_bit_for_bit(case):
+    # Fully actuated, seed 0, joint 3 limp from 2.5 s, residual only (no effort, no notice).
+    loop, logs = make(FULL, case=case, failure_use_effort=False)
+    out = run(loop, case, 2.7, fail=[(2, 2.5)])
+    (event,) = loop.failures.events
+    assert event['joint'] == 'joint3' and event['by'] == 'residual'
+    assert event['verdict'] == TRACKING and event['passive'] == ['joint3']
+    delay = event['t'] - 2.5
+    assert 0.0 < delay <= (0.020 if case == 'vertical' else 0.100)
+    k_switch = int(round(event['t'] / DT))
+    assert np.all(out['cmd'][k_switch:, 2] == 0.0)          # joint 3 no longer commanded
+    assert np.any(out['cmd'][2400:k_switch, 2] != 0.0)
+    assert loop.law.nominal.passive == (2,) and loop.law.nullspace is None
+    assert 'joint3 failed at t = %.3f s (detected by residual)' % event['t'] in \
+        out['msg'][k_switch]
+    assert any(level == 'warn' and 'joint3 failed' in text for level, _, text in logs)
+    assert out['err'].max() < (5.5e-3 if case == 'vertical' else 1.7e-3)
+    # The offline runner on the same seed: same detection tick, same commands, same states.
+    rec, trace = run_failure_case(case, 0, [(2, 2.5)], duration=2.7, record_trace=True)
+    assert rec['detected_at_s'] == [round(event['t'], 9)]
+    assert np.array_equal(out['cmd'], trace['tau'])
+    assert np.array_equal(out['q'], trace['q'])
+
+
+def test_a_notice_switches_the_law_at_the_next_tick():
+    # The notice comes in between tick 2499 and 2500 (the failure at 2.5 s): the answer to
+    # state 2500 already runs the law with joint 3 free; detection off (notices only).
+    loop, logs = make(FULL, case='vertical', joint_failures='notice')
+    out = run(loop, 'vertical', 2.52, fail=[(2, 2.5)], notices={2500: ['joint3']})
+    (event,) = loop.failures.events
+    assert event['by'] == 'notice' and abs(event['t'] - 2.5) < 1e-12
+    assert out['cmd'][2499, 2] != 0.0 and np.all(out['cmd'][2500:, 2] == 0.0)
+    assert 'detected by notice' in out['msg'][2500]
+    assert out['err'].max() < 5.5e-3
+
+
+def test_a_notice_for_an_unknown_or_undriven_joint_is_ignored_saying_why():
+    loop, logs = make(FILE, joint_failures='notice')
+    assert 'not a joint' in loop.on_failure_notice('elbow')
+    assert 'not driven' in loop.on_failure_notice('joint3')     # the paper's free joint
+    assert loop.on_failure_notice('joint2') == ''
+
+
+def test_joints_2_and_3_failing_give_cannot_track_and_a_finite_least_harm_command():
+    # r = 1 < m: the controller says it cannot track within 50 ms and damps / holds what is
+    # left (joint 1: gravity compensation and a soft hold), never a non-finite command.
+    loop, logs = make(FULL, case='vertical')
+    out = run(loop, 'vertical', 2.7, fail=[(1, 2.5), (2, 2.5)])
+    verdicts = [e for e in loop.failures.events if e['verdict'] == CANNOT_TRACK]
+    assert verdicts and verdicts[0]['t'] - 2.5 <= 0.050
+    k = int(round(verdicts[0]['t'] / DT))
+    assert np.all(np.isfinite(out['cmd']))
+    limits = np.array(FULL['effort_limits'])
+    assert np.all(np.abs(out['cmd']) <= limits)
+    assert np.all(out['cmd'][k:, 1:] == 0.0) and np.any(out['cmd'][k:, 0] != 0.0)
+    assert 'cannot_track' in out['msg'][-1] and 'least-harm' in out['msg'][-1]
+    assert any(level == 'error' and 'cannot_track' in text for level, _, text in logs)
+    errors, warnings = [], []
+    values = dict(loop.failures.diagnostics(errors, warnings))
+    assert errors and 'cannot_track' in errors[0]
+    assert values['failure verdict'] == CANNOT_TRACK
+
+
+def test_joint2_free_vertical_is_refused_by_the_check_precomputed_at_start_up():
+    # docs/failures.md: joint 2 free in the vertical plane passes det(Da Da^T) and diverges.
+    cfg = SCHEMA.config(dict(FULL, case='vertical'))
+    verdicts = precompute_verdicts(cfg.nominal, 'vertical', cfg.gains)
+    assert set(verdicts) == {(0,), (1,), (2,)}
+    assert verdicts[(1,)].verdict == CANNOT_TRACK and verdicts[(2,)].verdict == TRACKING
+    monitor = FailureMonitor(cfg, make(FULL, case='vertical')[0].law, lambda *a: None)
+    assert monitor.precomputed.keys() == verdicts.keys()
+
+
+def test_detection_on_without_a_failure_commands_what_detection_off_commands():
+    on, _ = make(FULL, case='vertical')
+    off, _ = make(FULL, case='vertical', joint_failures='off')
+    a = run(on, 'vertical', 1.0)
+    b = run(off, 'vertical', 1.0)
+    assert on.failures.events == []
+    assert np.array_equal(a['cmd'], b['cmd'])
+
+
+def test_joint2_failing_vertically_gives_cannot_track_within_50_ms_and_no_runaway():
+    # Joint 2 free in the vertical plane passes det(Da Da^T) but its internal motion runs
+    # away: the start-up check refuses it; the remaining joints get the least-harm command.
+    loop, logs = make(FULL, case='vertical', failure_use_effort=False)
+    out = run(loop, 'vertical', 3.0, fail=[(1, 2.5)])
+    (event,) = loop.failures.events
+    assert event['joint'] == 'joint2' and event['by'] == 'residual'
+    assert event['verdict'] == CANNOT_TRACK and 'runs away' in event['reason']
+    assert event['t'] - 2.5 <= 0.050
+    k = int(round(event['t'] / DT))
+    assert np.all(out['cmd'][k:, 1] == 0.0)
+    assert np.all(np.isfinite(out['cmd'])) and np.all(np.isfinite(out['qd']))
+    assert np.all(np.abs(out['cmd']) <= np.array(FULL['effort_limits']))
+    assert np.max(np.abs(out['qd'][k:])) < 20.0       # the arm sags, it does not run away
+
+
+def test_a_parameter_change_after_a_switch_keeps_the_failed_joint_out():
+    loop, logs = make(FULL, case='vertical', joint_failures='notice')
+    out = run(loop, 'vertical', 0.05, fail=[(2, 0.02)], notices={20: ['joint3']})
+    assert loop.law.nominal.passive == (2,)
+    old = loop.config
+    values = dict(FULL, case='vertical', joint_failures='notice', R=[3.0, 3.0])
+    loop.apply(old, SCHEMA.config(values))
+    assert loop.law.gains.R == (3.0, 3.0)
+    k = len(out['cmd'])
+    ns = k * DT_NS
+    sp = TRAJ.sample_tuple(k * DT)
+    loop.on_state(ns, NAMES, out['q'][-1].tolist(), out['qd'][-1].tolist(), 0, 200.0)
+    res = loop.on_setpoint(ns, sp, 0, 200.0)
+    assert loop.law.nominal.passive == (2,) and res.effort[2] == 0.0
+    assert all(math.isfinite(v) for v in res.effort)
+    assert [e['joint'] for e in loop.failures.events] == ['joint3', 'joint3']
+
+
+def test_real_time_effort_check_takes_the_nearer_of_the_last_two_commands():
+    # A driver that applied the command of two ticks ago (a late answer) is no failure; a
+    # joint reading 0 against both commands is.
+    cfg = SCHEMA.config(dict(FULL, lockstep=False))
+    loop = ControlLoop(cfg)
+    monitor = loop.failures
+    assert monitor._effort_reference([1.0, 2.0, 3.0], [0.5, 2.0, 0.0]) == [1.0, 2.0, 3.0]
+    # joints 1, 2: the older command is the one applied (gap 0); joint 3 reads 0: the
+    # smaller command, 3.0, is its reference (still a gap of 3 N m)
+    assert monitor._effort_reference([1.2, 2.5, 3.2], [1.0, 2.0, 0.0]) == [1.0, 2.0, 3.0]
+    locked = make(FULL)[0].failures
+    locked._effort_reference([1.0, 2.0, 3.0], [1.0, 2.0, 3.0])
+    assert locked._effort_reference([1.2, 2.5, 3.2], [1.0, 2.0, 0.0]) == [1.2, 2.5, 3.2]
