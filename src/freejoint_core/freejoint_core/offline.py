@@ -655,9 +655,16 @@ def _main_circles(args):
     if args.start is not None:
         opts['start'] = args.start
     t0 = time.perf_counter()
+    def progress(recs):
+        last = recs[-1]
+        print(f'  {last["case"]} {last["variant"]} seed {last["seed"]}: {len(recs)} circles, '
+              f'max {max(r["max_mm"] for r in recs):.3g} mm, peak effort '
+              f'{max(max(r["effort_peak"]) for r in recs):.3g} N m, diverged at '
+              f'{last["diverged_at_s"]}', flush=True)
+
     records = circle_study(args.cases, range(args.seeds), args.circles, args.rest, args.hold,
                            stabilise=args.stabilise, arm=args.arm,
-                           delta_max=args.delta_max, **opts)
+                           delta_max=args.delta_max, progress=progress, **opts)
     print(f'offline circles: {args.circles} per run, rest {args.rest:g} s, seeds '
           f'0-{args.seeds - 1}, stabilise {"on" if args.stabilise else "off"}, '
           f'{time.perf_counter() - t0:.1f} s wall')
