@@ -304,3 +304,18 @@ def test_circles_runner_writes_one_record_per_circle_with_its_rest():
         assert len(r['effort_peak']) == 2 and r['diverged_at_s'] is None
         assert r['swing_deg'] is None          # no gravity: no hanging angle to swing about
         assert r['max_mm'] < 1.0
+
+
+def test_offline_cli_takes_circles_rests_and_the_stabilisation_flag(tmp_path, capsys):
+    from freejoint_core import offline
+    args = offline._parse(['--circles', '3', '--rest', '1.0', '--stabilise', '--actuated',
+                           'all', '--nullspace-kd', '5'])
+    assert (args.circles, args.rest, args.stabilise) == (3, 1.0, True)
+    assert offline._internal_options(args)['nullspace'] == NullSpace(kd=5.0)
+    out = tmp_path / 'circles.json'
+    assert offline.main(['--circles', '1', '--seeds', '1', '--cases', 'horizontal',
+                         '--out', str(out)]) == 0
+    import json
+    recs = json.loads(out.read_text())
+    assert len(recs) == 1 and recs[0]['circle'] == 1 and recs[0]['case'] == 'horizontal'
+    assert 'rms mean / worst' in capsys.readouterr().out
