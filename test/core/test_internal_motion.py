@@ -6,8 +6,9 @@ import math
 from freejoint_core.arm import ArmModel, table1
 from freejoint_core.control import Gains, RobustController
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.internal import (equilibrium_pose, hanging_pose, NullSpace, projector,
-                                     pseudo_inverse, weighted_inverse)
+from freejoint_core.internal import (equilibrium_pose, free_link_swing, FreeLinkModulation,
+                                     hanging_pose, NullSpace, projector, pseudo_inverse,
+                                     weighted_inverse)
 from freejoint_core.offline import initial_state
 from freejoint_core.plant import Plant
 from freejoint_core.trajectory import CircleQuintic
@@ -169,3 +170,152 @@ def test_equilibrium_pose_errors_name_the_argument():
         hanging_pose(table1('vertical'), (3.0, 0.0))
     with pytest.raises(FreejointValueError, match='^params:'):
         hanging_pose(_all_active('vertical'), (0.2, 0.0))
+
+
+# -- the free link's zero dynamics (r = m) -------------------------------------
+
+def test_modulation_leaves_the_setpoint_alone_with_the_link_hanging_still():
+    params = table1('vertical').scaled(0.7)
+    mod = FreeLinkModulation(params)
+    q = hanging_pose(table1('vertical'), (0.2, 0.0))
+    for _ in range(3):
+        p, v, a = mod.step(q, [0.0, 0.0, 0.0], (0.2, 0.0), (0.0, 0.0), (0.0, 0.0), 1e-3)
+        assert np.array_equal(p, [0.2, 0.0]) and not np.any(v) and not np.any(a)
+
+
+def test_modulation_pushes_the_end_effector_along_u3perp_against_the_link_rate():
+    # theta3 = -90 deg (hanging), rate 2 rad/s: u3perp = (-sin, cos)(-pi/2) = (1, 0);
+    # drive = k2 * 2 * (1, 0) = (0.4, 0) m/s^2 at k2 = 0.2, delta still 0.
+    params = table1('vertical').scaled(0.7)
+    mod = FreeLinkModulation(params, gains=(0.0, 0.2, 9.0, 6.0))
+    q = hanging_pose(table1('vertical'), (0.2, 0.0))
+    _, _, a = mod.step(q, [0.0, 0.0, 2.0], (0.2, 0.0), (0.0, 0.0), (0.0, 0.0), 1e-3)
+    assert np.allclose(a, [0.4, 0.0], rtol=0, atol=1e-12)
+    # the link equation J thdd = -m3 c3 u3perp . pdd: that acceleration slows it down
+    assert -params.masses[2] * params.com[2] * a[0] < 0.0
+
+
+def test_modulation_offset_stays_within_its_bound_for_any_link_motion():
+    params = table1('vertical').scaled(0.7)
+    mod = FreeLinkModulation(params, delta_max=0.002)
+    assert mod.a_max == 4.0 and mod.delta_max == 0.002
+    q = hanging_pose(table1('vertical'), (0.2, 0.0))
+    worst = 0.0
+    for k in range(6000):
+        # a saturating drive, held 2 s (delta creeps up to its bound), then switching
+        sign = 1.0 if k < 2000 else math.copysign(1.0, math.sin(k / 100.0))
+        mod.step(q, [0.0, 0.0, 50.0 * sign], (0.2, 0.0), (0.0, 0.0), (0.0, 0.0), 1e-3)
+        worst = max(worst, float(np.linalg.norm(mod.delta)))
+    assert 0.95 * 0.002 < worst <= 0.002
+
+
+def test_modulation_rejects_bad_options_naming_them():
+    params = table1('vertical')
+    with pytest.raises(FreejointValueError, match='^gains:'):
+        FreeLinkModulation(params, gains=(0.0, 0.2, 9.0, 1.0))     # k4^2 < 4 k3
+    with pytest.raises(FreejointValueError, match='^delta_max:'):
+        FreeLinkModulation(params, delta_max=0.0)
+    with pytest.raises(FreejointValueError, match='^mode:'):
+        FreeLinkModulation(params, mode='sometimes')
+    with pytest.raises(FreejointValueError, match='^params:'):
+        FreeLinkModulation(_all_active('vertical'))
+
+
+def _link_spin(q, rate):
+    """Joint rates turning the last link at ``rate`` about the still end effector."""
+    null = np.linalg.svd(ArmModel(table1('vertical')).jacobian(q))[2][2]
+    return rate * null / null.sum()
+
+
+def _hold_swing(modulation, seconds=2.5):
+    """Hold the end effector at (0.2, 0), the hanging link given 3 rad/s; final swing."""
+    real = table1('vertical')
+    q0 = hanging_pose(real, (0.2, 0.0))
+    plant = Plant(real, seed=0, q0=q0, qd0=_link_spin(q0, 3.0))
+    ctrl = RobustController(real.scaled(0.7), Gains())
+    for _ in range(int(round(seconds / 1e-3))):
+        sp = ((0.2, 0.0), (0.0, 0.0), (0.0, 0.0))
+        if modulation is not None:
+            sp = modulation.step(plant.q, plant.qd, *sp, 1e-3)
+        plant.step(ctrl.step(plant.q, plant.qd, *sp, 1e-3).tau, 1e-3)
+    return math.degrees(free_link_swing(real, plant.q, plant.qd))
+
+
+def test_swinging_free_link_keeps_swinging_under_the_paper_law_and_settles_when_damped():
+    q0 = hanging_pose(table1('vertical'), (0.2, 0.0))
+    start = math.degrees(free_link_swing(table1('vertical'), q0, _link_spin(q0, 3.0)))
+    assert 20.0 < start < 25.0     # acos(1 - J_eff 9 / (2 m3 c3 g)) = 21.5 deg
+    undamped = _hold_swing(None)
+    damped = _hold_swing(FreeLinkModulation(table1('vertical').scaled(0.7), delta_max=0.01))
+    assert undamped > 20.0          # (the 70 % model even pumps it up slowly)
+    assert damped < 12.0            # measured 9.6 deg: the 10-mm bound limits the rate
+
+
+def test_swing_of_a_hanging_link_at_rest_is_zero_and_revolving_is_pi():
+    real = table1('vertical')
+    q = hanging_pose(real, (0.2, 0.0))
+    assert free_link_swing(real, q, [0.0, 0.0, 0.0]) == pytest.approx(0.0, abs=1e-6)
+    assert free_link_swing(real, q, [0.0, 0.0, 50.0]) == math.pi
+
+
+# -- the r > m arm that diverges without the option -----------------------------
+
+def _four_link_hold_circle(nullspace, ticks):
+    """Run the 4-link vertical example from a static equilibrium folded the other way."""
+    from freejoint_core.mujoco_plant import MujocoPlant
+    from freejoint_core.pin_model import PinArmModel
+    from freejoint_core.urdf import four_link_arm, FOUR_LINK_CIRCLE
+    arm = four_link_arm('vertical')
+    traj = CircleQuintic(centre=FOUR_LINK_CIRCLE['centre'], radius=FOUR_LINK_CIRCLE['radius'])
+    q0 = equilibrium_pose(ArmModel(arm.params), traj.sample(0.0)[0],
+                          np.radians([-120.0, 150.0, 55.0, -55.0]))
+    plant = MujocoPlant(arm, dist_bound=0.5, seed=0, q0=q0)
+    model = PinArmModel(arm, 0.7)
+    ctrl = RobustController(model.params, Gains(), model=model, nullspace=nullspace)
+    worst = 0.0
+    for k in range(ticks):
+        pdx, pdy, vx, vy, ax, ay = traj.sample_tuple(k * 1e-3)
+        out = ctrl.step(plant.q, plant.qd, (pdx, pdy), (vx, vy), (ax, ay), 1e-3)
+        worst = max(worst, math.hypot(out.p[0] - pdx, out.p[1] - pdy))
+        if worst > 0.05 or not np.all(np.isfinite(out.tau)):
+            return k, worst, plant.qd
+        plant.step(out.tau, 1e-3)
+    return ticks, worst, plant.qd
+
+
+def test_four_link_vertical_diverges_without_null_space_damping_and_holds_with_it():
+    lost_at, _, _ = _four_link_hold_circle(None, 1000)
+    assert lost_at < 500            # measured: lost 0.2 s into the circle
+    ticks, worst, qd = _four_link_hold_circle(NullSpace(kd=5.0), 1500)
+    assert ticks == 1500 and worst < 5e-3
+    assert np.all(np.abs(qd) < 20.0)
+
+
+# -- the circles runner ----------------------------------------------------------
+
+def test_circles_runner_writes_one_record_per_circle_with_its_rest():
+    from freejoint_core.circles import run_circles
+    recs, _ = run_circles('horizontal', 'exact', 0, circles=2, rest=0.5, hold=0.2)
+    assert [r['circle'] for r in recs] == [1, 2]
+    assert [r['rest_s'] for r in recs] == [0.5, 0.2]
+    for r in recs:
+        assert {'case', 'variant', 'seed', 'circle', 'rms_mm', 'max_mm', 'effort_peak',
+                'swing_deg', 'diverged_at_s'} <= set(r)
+        assert len(r['effort_peak']) == 2 and r['diverged_at_s'] is None
+        assert r['swing_deg'] is None          # no gravity: no hanging angle to swing about
+        assert r['max_mm'] < 1.0
+
+
+def test_offline_cli_takes_circles_rests_and_the_stabilisation_flag(tmp_path, capsys):
+    from freejoint_core import offline
+    args = offline._parse(['--circles', '3', '--rest', '1.0', '--stabilise', '--actuated',
+                           'all', '--nullspace-kd', '5'])
+    assert (args.circles, args.rest, args.stabilise) == (3, 1.0, True)
+    assert offline._internal_options(args)['nullspace'] == NullSpace(kd=5.0)
+    out = tmp_path / 'circles.json'
+    assert offline.main(['--circles', '1', '--seeds', '1', '--cases', 'horizontal',
+                         '--out', str(out)]) == 0
+    import json
+    recs = json.loads(out.read_text())
+    assert len(recs) == 1 and recs[0]['circle'] == 1 and recs[0]['case'] == 'horizontal'
+    assert 'rms mean / worst' in capsys.readouterr().out

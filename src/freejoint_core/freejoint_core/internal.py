@@ -28,11 +28,13 @@ measurements):
 from dataclasses import dataclass
 import math
 
-from freejoint_core.arm import check_vector
+from freejoint_core.arm import ArmModel, check_vector
 from freejoint_core.errors import FreejointValueError
 import numpy as np
 
 INVERSES = ('pseudo', 'weighted')
+DEFAULT_Q3_0_DEG = 120.0
+"""The paper's initial passive joint angle [deg] (the offline runner's start)."""
 PROJECTORS = ('kinematic', 'dynamic')
 
 
@@ -333,3 +335,268 @@ def hanging_pose(params, p, branch=1):
     q1 = math.atan2(y, x) - math.atan2(l2 * math.sin(q2), l1 + l2 * math.cos(q2))
     q3 = -0.5 * math.pi - q1 - q2
     return np.array([math.remainder(v, 2.0 * math.pi) for v in (q1, q2, q3)])
+
+
+MODES = ('always', 'rest')
+
+
+class FreeLinkModulation:
+    """
+    Damping of the free link's zero dynamics by a bounded modulation of the task reference.
+
+    For the arm whose last joint is free (r = m = 2, the paper's), with the end
+    effector at the free link's tip the link obeys (the issue's and
+    docs/internal-motion.md's derivation)::
+
+        J_eff thdd3 = -m3 c3 u3perp(th3) . (pdd_E + g y) + d3,
+        J_eff = I3 + m3 c3 (c3 - L3),  u3perp = (-sin th3, cos th3)
+
+    so an end-effector acceleration along ``u3perp`` proportional to the link's rate
+    damps it.  The setpoint the paper's law tracks is shifted by ``delta`` (2,)::
+
+        w      = k1 sin(th3 - th_qs) + k2 (thd3 - thd_qs)
+        dd     = sigma(t) sat(u3perp w, a_max) - k3 delta - k4 d_delta
+        th_qs  = atan2(-(pdd_d,y + g), -pdd_d,x)
+
+    (``th_qs``: the angle the link would keep under the planned acceleration;
+    ``thd_qs`` its finite-difference rate; ``sigma`` 1 always or only while the
+    setpoint rests).  ``delta`` is the output of a critically (or over-) damped filter
+    (``k4^2 >= 4 k3``: non-negative impulse response of gain ``1/k3``) driven by an
+    input of norm ``<= sat``, so ``|delta| <= sat / k3`` from rest.  ``delta_max``
+    bounds it harder: a step that would leave the disc ``|delta| <= delta_max`` is
+    projected back onto it (and the outward part of ``d_delta`` dropped), so the
+    task deviation the modulation adds never exceeds ``delta_max``.  (Scaling the
+    drive down to ``k3 delta_max`` instead would also bound it, but the link swings at
+    ~8 rad/s, where a millimetre offset already means ~0.1 m/s^2: that wastes the
+    bound on the filter's DC gain and left a 21-degree swing undamped.)
+
+    Parameters
+    ----------
+    params : freejoint_core.arm.ArmParams
+        The nominal arm (last joint free: ``passive == (n - 1,)``).
+    gains : tuple of float, (4,)
+        ``(k1, k2, k3, k4)`` [m/s^2, m/s, 1/s^2, 1/s]; k1, k2 >= 0, k3, k4 > 0,
+        ``k4^2 >= 4 k3``.
+    sat : float
+        Saturation of the drive [m/s^2], > 0.
+    delta_max : float or None
+        Bound of ``|delta|`` [m], > 0; None: none but ``sat / k3``.
+    mode : {'always', 'rest'}
+        ``sigma = 1`` always, or only while the setpoint's velocity and acceleration are 0.
+    k2_rest : float or None
+        The rate gain ``k2`` while the setpoint rests [m/s], >= 0 (the disturbance's
+        swing floor falls with it); None: ``k2``.
+
+    """
+
+    def __init__(self, params, gains=(0.0, 0.2, 9.0, 6.0), sat=4.0, delta_max=None,
+                 mode='always', k2_rest=None):
+        if params.passive != (params.n - 1,):
+            raise FreejointValueError(
+                f'params: the modulation needs the last joint free, got passive {params.passive}')
+        try:
+            k1, k2, k3, k4 = (float(v) for v in gains)
+        except (TypeError, ValueError) as exc:
+            raise FreejointValueError(f'gains: expected 4 numbers, got {gains!r}') from exc
+        if not (all(map(math.isfinite, (k1, k2, k3, k4))) and k1 >= 0.0 and k2 >= 0.0
+                and k3 > 0.0 and k4 > 0.0 and k4 * k4 >= 4.0 * k3 * (1.0 - 1e-12)):
+            raise FreejointValueError(
+                f'gains: need k1, k2 >= 0, k3, k4 > 0 and k4^2 >= 4 k3, got {gains!r}')
+        sat = float(sat)
+        if not (math.isfinite(sat) and sat > 0.0):
+            raise FreejointValueError(f'sat: must be finite and > 0, got {sat}')
+        if delta_max is not None:
+            delta_max = float(delta_max)
+            if not (math.isfinite(delta_max) and delta_max > 0.0):
+                raise FreejointValueError(f'delta_max: must be finite and > 0, got {delta_max}')
+            delta_max = min(delta_max, sat / k3)
+        else:
+            delta_max = sat / k3
+        k2_rest = k2 if k2_rest is None else float(k2_rest)
+        if not (math.isfinite(k2_rest) and k2_rest >= 0.0):
+            raise FreejointValueError(f'k2_rest: must be finite and >= 0, got {k2_rest}')
+        self.k2_rest = k2_rest
+        if mode not in MODES:
+            raise FreejointValueError(f'mode: expected one of {MODES}, got {mode!r}')
+        self.params = params
+        self.gains = (k1, k2, k3, k4)
+        self.a_max = sat
+        self.delta_max = delta_max
+        self.mode = mode
+        self._g = params.gravity
+        self.reset()
+
+    def reset(self):
+        """Zero ``delta`` and its rate; forget the last quasi-static angle."""
+        self._delta = (0.0, 0.0)
+        self._delta_dot = (0.0, 0.0)
+        self._th_qs = None
+
+    def quasi_static_angle(self, pdd_d):
+        """
+        Free link angle ``atan2(-(pdd_y + g), -pdd_x)`` [rad] under the acceleration.
+
+        Parameters
+        ----------
+        pdd_d : array_like, (2,)
+            Planned end-effector acceleration [m/s^2].
+
+        Returns
+        -------
+        float or None
+            None when ``pdd_d + g y`` vanishes (horizontal arm at rest).
+
+        """
+        ax, ay = float(pdd_d[0]), float(pdd_d[1]) + self._g
+        if ax * ax + ay * ay < 1e-18:
+            return None
+        return math.atan2(-ay, -ax)
+
+    def step(self, q, qd, p_d, pd_d, pdd_d, dt):
+        """
+        Modulate one setpoint and advance ``delta`` over ``dt``.
+
+        Parameters
+        ----------
+        q, qd : array_like, (n,)
+            Measured joint angles [rad] and rates [rad/s].
+        p_d, pd_d, pdd_d : array_like, (2,)
+            The planned setpoint [m, m/s, m/s^2].
+        dt : float
+            Control period [s], > 0.
+
+        Returns
+        -------
+        tuple of numpy.ndarray, (2,) each
+            ``(p_d + delta, pd_d + d_delta, pdd_d + dd_delta)`` for this tick.
+
+        """
+        n = self.params.n
+        q = check_vector(q, n, 'q').tolist()
+        qd = check_vector(qd, n, 'qd').tolist()
+        px, py = check_vector(p_d, 2, 'p_d').tolist()
+        vx, vy = check_vector(pd_d, 2, 'pd_d').tolist()
+        ax, ay = check_vector(pdd_d, 2, 'pdd_d').tolist()
+        dt = float(dt)
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise FreejointValueError(f'dt: must be finite and > 0, got {dt}')
+        k1, k2, k3, k4 = self.gains
+        th = math.fsum(q)
+        thd = math.fsum(qd)
+        th_qs = self.quasi_static_angle((ax, ay))
+        resting = not (vx or vy or ax or ay)
+        if resting:
+            k2 = self.k2_rest
+        if th_qs is None:
+            w = k2 * thd
+            self._th_qs = None
+        else:
+            thd_qs = 0.0 if self._th_qs is None else math.remainder(
+                th_qs - self._th_qs, 2.0 * math.pi) / dt
+            self._th_qs = th_qs
+            w = k1 * math.sin(th - th_qs) + k2 * (thd - thd_qs)
+        dx = dy = 0.0
+        if self.mode == 'always' or resting:
+            dx, dy = -w * math.sin(th), w * math.cos(th)
+            norm = math.hypot(dx, dy)
+            if norm > self.a_max:
+                dx *= self.a_max / norm
+                dy *= self.a_max / norm
+        x, y = self._delta
+        u, v = self._delta_dot
+        ddx = dx - k3 * x - k4 * u
+        ddy = dy - k3 * y - k4 * v
+        out = (np.array((px + x, py + y)), np.array((vx + u, vy + v)),
+               np.array((ax + ddx, ay + ddy)))
+        # semi-implicit Euler: exact enough at 1 ms for a 3 rad/s filter
+        u += dt * ddx
+        v += dt * ddy
+        x += dt * u
+        y += dt * v
+        r = math.hypot(x, y)
+        if r > self.delta_max:
+            x *= self.delta_max / r
+            y *= self.delta_max / r
+            out_rate = (u * x + v * y) / (self.delta_max * self.delta_max)
+            if out_rate > 0.0:
+                u -= out_rate * x
+                v -= out_rate * y
+        self._delta = (x, y)
+        self._delta_dot = (u, v)
+        return out
+
+    @property
+    def delta(self):
+        """Return the current offset ``delta`` [m], numpy copy (2,)."""
+        return np.array(self._delta)
+
+    @property
+    def delta_dot(self):
+        """Return its rate [m/s], numpy copy (2,)."""
+        return np.array(self._delta_dot)
+
+
+def free_link_swing(params, q, qd):
+    """
+    Swing amplitude of the free last link about hanging, from its energy [rad].
+
+    With the end effector at rest the link is the pendulum of
+    :class:`FreeLinkModulation` (``J_eff thdd = -m3 c3 g cos th``); its energy above
+    the hanging angle ``-pi/2``, ``E = J_eff thd^2 / 2 + m3 c3 g (1 + sin th)``, gives
+    the amplitude ``acos(1 - E / (m3 c3 g))`` (pi once it would revolve).
+
+    Parameters
+    ----------
+    params : freejoint_core.arm.ArmParams
+        The (real) arm, last joint free, gravity > 0, ``J_eff > 0``.
+    q, qd : array_like, (n,)
+        Joint angles [rad] and rates [rad/s].
+
+    Returns
+    -------
+    float
+        [rad], in [0, pi].
+
+    """
+    m3, c3, l3, i3 = (params.masses[-1], params.com[-1], params.lengths[-1],
+                      params.inertias[-1])
+    j_eff = i3 + m3 * c3 * (c3 - l3)
+    mgc = m3 * c3 * params.gravity
+    if mgc <= 0.0 or j_eff <= 0.0:
+        raise FreejointValueError('params: the swing needs gravity and J_eff > 0')
+    th = math.fsum(q)
+    thd = math.fsum(qd)
+    energy = 0.5 * j_eff * thd * thd + mgc * (1.0 + math.sin(th))
+    return math.acos(max(-1.0, 1.0 - energy / mgc))
+
+
+def initial_state(params, q3_0_deg=DEFAULT_Q3_0_DEG, start=(0.2, 0.0)):
+    """
+    Joint angles (rad) putting the end effector at ``start`` with ``q3 = q3_0_deg``.
+
+    Parameters
+    ----------
+    params : ArmParams
+        The (real) arm, one passive joint.
+    q3_0_deg : float
+        Initial passive joint angle (deg).
+    start : sequence of float, shape (2,)
+        End-effector start (m).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        ``q(0)`` (rad) from ``ArmModel.ik`` on branch +1.
+
+    """
+    try:
+        q3 = math.radians(float(q3_0_deg))
+    except (TypeError, ValueError):
+        raise FreejointValueError(f'q3_0_deg: expected a number, got {q3_0_deg!r}') from None
+    if not math.isfinite(q3):
+        raise FreejointValueError(f'q3_0_deg: must be finite, got {q3_0_deg}')
+    try:
+        return ArmModel(params).ik(start, [q3], branch=1)
+    except FreejointValueError as exc:
+        raise FreejointValueError(f'q3_0_deg: no configuration reaches the start: {exc}') \
+            from None

@@ -57,11 +57,11 @@ import time
 
 import numpy as np
 
-from .arm import ArmModel, CASES, NOMINAL_SCALE, table1
+from .arm import CASES, NOMINAL_SCALE, table1
 from .control import Gains, RobustController
 from .delay import DEFAULT_BIAS_GAIN, extrapolate_setpoint, StatePredictor
 from .errors import FreejointValueError, positive
-from .internal import NullSpace
+from .internal import DEFAULT_Q3_0_DEG, initial_state, NullSpace  # noqa: F401 (API)
 from .metrics import compute_record, format_summary, format_table, write_records
 from .models import make_model
 from .plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
@@ -72,42 +72,8 @@ ACTUATED = ('paper', 'all')
 DEFAULT_OUT = 'bags/offline/metrics.json'
 DEFAULT_DT = 1e-3
 """The paper's control period [s]."""
-DEFAULT_Q3_0_DEG = 120.0
-"""The paper's initial passive joint angle [deg]."""
 # Errors that mean "the numbers blew up" inside the model/controller/plant.
 _BLOWUP = (ArithmeticError, ValueError, np.linalg.LinAlgError)
-
-
-def initial_state(params, q3_0_deg=DEFAULT_Q3_0_DEG, start=(0.2, 0.0)):
-    """
-    Joint angles (rad) putting the end effector at ``start`` with ``q3 = q3_0_deg``.
-
-    Parameters
-    ----------
-    params : ArmParams
-        The (real) arm, one passive joint.
-    q3_0_deg : float
-        Initial passive joint angle (deg).
-    start : sequence of float, shape (2,)
-        End-effector start (m).
-
-    Returns
-    -------
-    numpy.ndarray, shape (n,)
-        ``q(0)`` (rad) from ``ArmModel.ik`` on branch +1.
-
-    """
-    try:
-        q3 = math.radians(float(q3_0_deg))
-    except (TypeError, ValueError):
-        raise FreejointValueError(f'q3_0_deg: expected a number, got {q3_0_deg!r}') from None
-    if not math.isfinite(q3):
-        raise FreejointValueError(f'q3_0_deg: must be finite, got {q3_0_deg}')
-    try:
-        return ArmModel(params).ik(start, [q3], branch=1)
-    except FreejointValueError as exc:
-        raise FreejointValueError(f'q3_0_deg: no configuration reaches the start: {exc}') \
-            from None
 
 
 def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
@@ -589,6 +555,24 @@ def _parse(argv):
     ap.add_argument('--weighted', action='store_true',
                     help='with --nullspace-kd: inertia-weighted inverse and dynamically '
                     'consistent projector instead of the pseudo-inverse ones')
+    ap.add_argument('--circles', type=int, default=None, metavar='N',
+                    help='tasks back to back: N circles per run, one record per circle to '
+                    'bags/offline/circles.json (with --out: there); see docs/internal-motion.md')
+    ap.add_argument('--rest', type=float, default=0.0, metavar='S',
+                    help='with --circles: the setpoint rests S s at the start point between '
+                    'circles (default 0: back to back)')
+    ap.add_argument('--hold', type=float, default=0.0, metavar='S',
+                    help='with --circles: hold S s after the last circle (settle metrics)')
+    ap.add_argument('--stabilise', action='store_true',
+                    help='with --circles: internal-motion stabilisation on (vertical paper '
+                    'arm: hanging start + free-link damping by a bounded reference '
+                    'modulation; r > m: null-space damping)')
+    ap.add_argument('--delta-max', type=float, default=None, metavar='M',
+                    help='with --stabilise: bound of the modulation\'s task deviation (m)')
+    ap.add_argument('--arm', choices=('paper', 'four_link'), default='paper',
+                    help='with --circles: the paper arm (default) or the 4-link example')
+    ap.add_argument('--start', default=None,
+                    help='with --circles: start pose paper | hanging | example | equilibrium')
     ap.add_argument('--delay-study', action='store_true',
                     help='only the delay study of docs/delay.md: robust over the seeds, '
                     f'delays {", ".join(map(str, DELAY_STUDY_MS))} ms, predictor off and on')
@@ -607,6 +591,8 @@ def main(argv=None):
         raise SystemExit('offline: --bias-gain must lie in [0, 1]')
     if args.delay_study:
         return _main_delay_study(args)
+    if args.circles is not None:
+        return _main_circles(args)
     off = None if args.off_seeds is None else range(args.off_seeds)
     t0 = time.perf_counter()
     records = run_all(range(args.seeds), args.cases, args.dt_sub, off,
@@ -658,6 +644,36 @@ def _internal_options(args):
         kind = {'inverse': 'weighted', 'projector': 'dynamic'} if args.weighted else {}
         out['nullspace'] = NullSpace(kd=args.nullspace_kd, **kind)
     return out
+
+
+def _main_circles(args):
+    from .circles import circle_study, DEFAULT_OUT as CIRCLES_OUT, format_circle_summary, \
+        summarize_circles, write_circles
+    if args.circles < 1 or args.rest < 0 or args.hold < 0:
+        raise SystemExit('offline: --circles must be >= 1, --rest and --hold >= 0')
+    opts = _internal_options(args)
+    if args.start is not None:
+        opts['start'] = args.start
+    t0 = time.perf_counter()
+    def progress(recs):
+        last = recs[-1]
+        print(f'  {last["case"]} {last["variant"]} seed {last["seed"]}: {len(recs)} circles, '
+              f'max {max(r["max_mm"] for r in recs):.3g} mm, peak effort '
+              f'{max(max(r["effort_peak"]) for r in recs):.3g} N m, diverged at '
+              f'{last["diverged_at_s"]}', flush=True)
+
+    records = circle_study(args.cases, range(args.seeds), args.circles, args.rest, args.hold,
+                           stabilise=args.stabilise, arm=args.arm,
+                           delta_max=args.delta_max, progress=progress, **opts)
+    print(f'offline circles: {args.circles} per run, rest {args.rest:g} s, seeds '
+          f'0-{args.seeds - 1}, stabilise {"on" if args.stabilise else "off"}, '
+          f'{time.perf_counter() - t0:.1f} s wall')
+    print(format_circle_summary(summarize_circles(records)))
+    out = CIRCLES_OUT if args.out is None else args.out
+    if out:
+        write_circles(out, records)
+        print(f'\nrecords written to {out}')
+    return 0
 
 
 def _main_delay_study(args):
