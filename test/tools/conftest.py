@@ -45,6 +45,7 @@ class BagMaker:
         """
         from rclpy.serialization import serialize_message
 
+        from freejoint_common.contract import stamp_from_ns
         from freejoint_tools.bagfile import BagWriter, default_qos_dict
         from freejoint_tools.typedefs import Definitions
         defs = Definitions()
@@ -90,7 +91,7 @@ class BagMaker:
             t_ns = t0_ns + k * self.module.DT_NS
             if t0_ns:
                 for msg in (js, sp, cs):
-                    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 10 ** 9)
+                    stamp_from_ns(t_ns, msg.header.stamp)
             else:
                 clock = Clock()
                 clock.clock = js.header.stamp

@@ -70,7 +70,8 @@ def _write_old_bag(path, ticks):
     for k in range(ticks):
         ns = k * DT_NS
         p, p_d, tau, theta, det, q3 = _tick(k)
-        stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+        ros_stamp = stamp_from_ns(ns)
+        stamp = Time(sec=ros_stamp.sec, nanosec=ros_stamp.nanosec)
         e = np.subtract(p, p_d)
         msg = Old(header=Header(stamp=stamp, frame_id='base_link'), error=e,
                   error_rate=np.zeros(2), sliding=np.zeros(2), theta_hat=np.array(theta),

@@ -34,7 +34,7 @@ import time
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, JOINT_STATES
 from freejoint_common.contract import JOINT_FAILURES
 from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_from_ns
-from freejoint_common.contract import stamp_label, STANDBY_SETPOINT_QOS
+from freejoint_common.contract import stamp_label, STANDBY_SETPOINT_QOS, to_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import Throttle
@@ -222,7 +222,7 @@ class ControllerNode(Node, Lifecycle):
         if loop.standby:
             self._activate()    # the first state after SIGUSR1 (subscribed at the signal)
         stamp = msg.header.stamp
-        res = loop.on_state(stamp.sec * 1_000_000_000 + stamp.nanosec, msg.name,
+        res = loop.on_state(to_ns(stamp), msg.name,
                             msg.position, msg.velocity,
                             0 if self._lockstep else self._now_ns(), _monotonic(),
                             msg.effort)
@@ -240,7 +240,7 @@ class ControllerNode(Node, Lifecycle):
         if self._activation_requested and self._loop.standby:
             self._on_activation_requested()
         stamp = msg.header.stamp
-        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        ns = to_ns(stamp)
         p = msg.position
         v = msg.velocity
         a = msg.acceleration
