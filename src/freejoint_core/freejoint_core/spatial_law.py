@@ -13,6 +13,14 @@ with ``W = M~aa`` (``inverse='weighted'``) or ``I`` (``'pseudo'``), the projecto
 the same inverse, ``tau_0`` of ``freejoint_core.internal.NullSpace`` (null-space
 damping ``-kd qd_a``), and ``tau`` clipped to the URDF's effort limits.
 
+Free-joint damping (option ``free_damping = kf``): a free joint has no torque and no
+damping, so a random joint disturbance makes its rate a random walk (over 15 s the
+Panda's joint 7 passes its URDF speed limit).  For r > m the null space can act on it:
+``tau_0`` gets ``y`` with ``(M^-1)[p, a] N y = -kf qd_p`` (damped least squares), so the
+nominal free-joint acceleration gains ``-kf qd_p`` while ``Da N y = 0`` leaves the task
+untouched; ``y`` is scaled down to at most ``FREE_SHARE`` (10 %) of each active joint's
+effort limit (where the coupling is weak the request would be large).
+
 Singularity (:func:`task_conditioning`): ``kappa = sqrt(lmin / lmax)`` of
 ``A = Ds Da M~aa Da^T Ds``, ``Ds = diag(1, 1, 1, L, L, L)[:m, :m] / L`` (``L`` the arm's
 reach, so the position rows are in rad/s^2 like the orientation rows).  ``A`` is the
@@ -47,6 +55,10 @@ from freejoint_core.internal import NullSpace
 from freejoint_core.spatial_model import SpatialArm
 import numpy as np
 import pinocchio as pin
+
+
+FREE_SHARE = 0.1
+"""Largest share of an active joint's effort limit the free-joint damping may ask."""
 
 
 @dataclass(frozen=True)
@@ -215,10 +227,17 @@ class SpatialLaw:
     nullspace : NullSpace, optional
         Inverse, projector and null-space damping; default weighted inverse, dynamic
         projector, ``kd = 0``.
+    free_damping : float
+        ``kf`` [1/s], >= 0: the null-space torque also asks the free joints for
+        ``qdd_p = -kf qd_p`` (module notes); 0 (default): off.
 
     """
 
-    def __init__(self, nominal, gains=None, nullspace=None):
+    def __init__(self, nominal, gains=None, nullspace=None, free_damping=0.0):
+        kf = float(free_damping)
+        if not (math.isfinite(kf) and kf >= 0.0):
+            raise FreejointValueError(f'free_damping: must be finite and >= 0, got {kf!r}')
+        self.free_damping = kf
         if not isinstance(nominal, SpatialArm):
             raise FreejointValueError(
                 f'nominal: expected SpatialArm, got {type(nominal).__name__}')
@@ -335,17 +354,32 @@ class SpatialLaw:
             if self.nullspace.projector == 'kinematic':
                 xp = np.linalg.solve(da @ da.T, da).T
                 proj = np.eye(arm.r) - xp @ da
-            tau = tau + proj @ self.nullspace.tau0(np.asarray(q, dtype=float)[act], qd[act])
+            tau0 = self.nullspace.tau0(np.asarray(q, dtype=float)[act], qd[act])
+            if self.free_damping > 0.0:
+                tau0 = tau0 + self._free_damping(terms, proj, qd)
+            tau = tau + proj @ tau0
         clipped = np.clip(tau, -self._limit, self._limit)
         if np.any(clipped != tau):
             status |= STATUS_TORQUE_LIMITED
         return SpatialOutput(clipped, e, edot, s, self.theta.copy(), rho, kappa, terms.p,
                              status)
 
+    def _free_damping(self, terms, proj, qd):
+        """``y`` with ``(M^-1)[p, a] N y = -kf qd_p`` (damped least squares)."""
+        arm = self.model
+        gmat = terms.Minv[np.ix_(list(arm.passive), list(arm.active))] @ proj
+        ggt = gmat @ gmat.T
+        mu = 1e-6 * max(float(np.trace(ggt)), 1e-300)
+        target = -self.free_damping * qd[list(arm.passive)]
+        y = gmat.T @ np.linalg.solve(ggt + mu * np.eye(len(target)), target)
+        # at most FREE_SHARE of each active joint's effort limit (weak coupling: no blow-up)
+        peak = float(np.max(np.abs(y) / self._limit))
+        return y if peak <= FREE_SHARE else y * (FREE_SHARE / peak)
+
 
 def gravity_carrying_free_joint(arm, q, tol=1e-6, max_iter=60):
     """
-    Plan-time check: can the free joints sit at rest with the tip where ``q`` puts it?
+    Find a rest posture of the free joints with the tip where ``q`` puts it (plan time).
 
     Gauss-Newton minimum-norm steps from ``q`` on ``(fk(x) - fk(q), G_p(x))`` (tip
     position held; for m = 6 the orientation too), inside the URDF position limits

@@ -1,5 +1,7 @@
 """
-Offline study of spatial arms with a free joint (issue 25): ``python -m freejoint_core.spatial_offline``.
+Offline study of spatial arms with a free joint (issue 25).
+
+Run ``python -m freejoint_core.spatial_offline`` (``--help``).
 
 One run (:func:`run_case`): the arm starts at rest in the rest posture of
 :func:`freejoint_core.spatial_law.gravity_carrying_free_joint` near its planned posture
@@ -14,10 +16,11 @@ period ``dt`` (0.5 ms), torque and one disturbance draw ``uniform(-0.5, 0.5)`` N
 joint (free joints included; seeded) held over the period.  Law:
 :class:`freejoint_core.spatial_law.SpatialLaw` on the 70 % nominal model (masses,
 inertias and COM levers), weighted inverse, dynamically consistent projector, null-space
-damping ``kd``, URDF effort limits.
+damping ``kd`` and free-joint damping ``kf``, URDF effort limits.
 
 Reported per run: rms and max tip error over the whole run [mm], the largest
-``|tau_i| / effort_i`` and ``|qd_i| / velocity_i`` (URDF limits), the max error over the
+``|tau_i| / effort_i`` and ``|qd_i| / velocity_i`` (URDF limits; the active joints and,
+apart, the free joint), the max error over the
 last second of the hold, and ``diverged``.
 """
 
@@ -44,7 +47,8 @@ T_HOLD = 10.0
 DT = 5e-4
 NOMINAL = 0.7
 DIST = 0.5
-KD = 2.0
+KD = 20.0
+KF = 0.0
 
 
 def quintic(tau):
@@ -102,7 +106,7 @@ def _rk4(arm, q, qd, tau, dt):
 
 
 def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL,
-             dist=DIST, kd=KD, inverse='weighted'):
+             dist=DIST, kd=KD, kf=KF, inverse='weighted', t_stop=None):
     """
     One closed-loop run (module notes).
 
@@ -120,8 +124,12 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
         Disturbance bound [N m].
     kd : float
         Null-space damping [N m s/rad].
+    kf : float
+        Free-joint damping through the null space [1/s] (``SpatialLaw``).
     inverse : {'weighted', 'pseudo'}
         Right inverse (and projector) of the law.
+    t_stop : float, optional
+        End the run early at this time [s] (tests).
 
     Returns
     -------
@@ -144,14 +152,14 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
     qd = np.zeros(real.n)
     proj = 'dynamic' if inverse == 'weighted' else 'kinematic'
     law = SpatialLaw(real.nominal(nominal), SpatialGains(m=3),
-                     NullSpace(kd=kd, inverse=inverse, projector=proj))
+                     NullSpace(kd=kd, inverse=inverse, projector=proj), free_damping=kf)
     rng = np.random.default_rng(seed)
     p0 = real.fk(q)
-    steps = int(round((t_move + t_hold) / dt))
+    steps = int(round(((t_move + t_hold) if t_stop is None else t_stop) / dt))
     last = int(round(1.0 / dt))
     act = list(real.active)
     err = np.empty(steps)
-    tau_ratio = vel_ratio = 0.0
+    tau_ratio = vel_ratio = vel_free = 0.0
     diverged = False
     tau_full = np.zeros(real.n)
     t_law = 0.0
@@ -171,13 +179,16 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
             diverged = True
             err = err[:k + 1]
             break
-        vel_ratio = max(vel_ratio, float(np.max(np.abs(qd) / real.velocity)))
+        vel = np.abs(qd) / real.velocity
+        vel_ratio = max(vel_ratio, float(np.max(vel[act])))
+        vel_free = max(vel_free, float(np.max(vel[list(real.passive)])))
     return {
-        'case': case, 'seed': seed, 'inverse': inverse, 'kd': kd,
+        'case': case, 'seed': seed, 'inverse': inverse, 'kd': kd, 'kf': kf,
         'rms_mm': 1e3 * float(np.sqrt(np.mean(err ** 2))),
         'max_mm': 1e3 * float(np.max(err)),
         'hold_last_s_max_mm': 1e3 * float(np.max(err[-last:])),
-        'tau_ratio': tau_ratio, 'vel_ratio': vel_ratio, 'diverged': diverged,
+        'tau_ratio': tau_ratio, 'vel_ratio': vel_ratio, 'vel_ratio_free': vel_free,
+        'diverged': diverged,
         'tick_us': 1e6 * t_law / len(err),
     }
 
@@ -191,11 +202,13 @@ def main(argv=None):
     ap.add_argument('--t-move', type=float, default=T_MOVE)
     ap.add_argument('--t-hold', type=float, default=T_HOLD)
     ap.add_argument('--kd', type=float, default=KD)
+    ap.add_argument('--kf', type=float, default=KF)
     ap.add_argument('--inverse', choices=('weighted', 'pseudo'), default='weighted')
     args = ap.parse_args(argv)
     for case in args.case or sorted(CASES):
         for seed in range(args.seeds):
             rec = run_case(case, seed, t_move=args.t_move, t_hold=args.t_hold, kd=args.kd,
+                           kf=args.kf,
                            inverse=args.inverse)
             print(json.dumps({k: round(v, 4) if isinstance(v, float) else v
                               for k, v in rec.items()}), flush=True)
