@@ -18,7 +18,7 @@ from core_timing import per_call_us, print_rows
 from freejoint_core.internal import NullSpace
 from freejoint_core.spatial_law import SpatialLaw, task_conditioning
 from freejoint_core.spatial_model import known_arm
-from freejoint_core.spatial_offline import _rk4, CASES
+from freejoint_core.spatial_offline import CASES, rk4_step
 import numpy as np
 
 CALLS = 300
@@ -48,7 +48,7 @@ def main():
                 ('terms', lambda: arm.terms(q, qd)),
                 ('terms + decoupling', lambda: arm.decoupling(arm.terms(q, qd))),
                 ('SpatialLaw.step (m = 3)', lambda: law.step(q, qd, p_d, zero3, zero3, 5e-4)),
-                ('plant RK4 step (4 ABA)', lambda: _rk4(arm, q, qd, tau, 5e-4)),
+                ('plant RK4 step (4 ABA)', lambda: rk4_step(arm, q, qd, tau, 5e-4)),
                 ('kappa per sample (terms + decoupling + kappa)', sample),
                 ('task_conditioning alone', lambda: task_conditioning(da, maa, 1.0))):
             rows.append({'name': f'{case}: {label}', 'value': per_call_us(fun, CALLS),

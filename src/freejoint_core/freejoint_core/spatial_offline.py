@@ -94,7 +94,16 @@ def circle(p0, radius, t, t_move):
     return pos, dpos * sd, ddpos * sd * sd + dpos * sdd
 
 
-def _rk4(arm, q, qd, tau, dt):
+def rk4_step(arm, q, qd, tau, dt):
+    """
+    One RK4 step of ``arm``'s ABA with ``tau`` (n,) [N m] held over ``dt`` [s].
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray), each (n,)
+        Angles [rad] and rates [rad/s] after ``dt``.
+
+    """
     def f(x, v):
         return v, arm.forward_dynamics(x, v, tau)
     k1 = f(q, qd)
@@ -174,7 +183,7 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
         tau_full[act] = out.tau
         tau_ratio = max(tau_ratio, float(np.max(np.abs(out.tau) / real.effort[act])))
         d = rng.uniform(-dist, dist, real.n) if dist > 0.0 else 0.0
-        q, qd = _rk4(real, q, qd, tau_full + d, dt)
+        q, qd = rk4_step(real, q, qd, tau_full + d, dt)
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))) or err[k] > 1.0:
             diverged = True
             err = err[:k + 1]
