@@ -4,6 +4,7 @@ import re
 
 from freejoint_core.control import Gains, STATUS_TORQUE_LIMITED
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.internal import NullSpace
 from freejoint_core.spatial_law import gravity_carrying_free_joint, SpatialGains, SpatialLaw
 from freejoint_core.spatial_law import task_conditioning
 from freejoint_core.spatial_model import known_arm
@@ -187,3 +188,30 @@ def test_ur5_with_wrist_2_free_tracks_within_3_mm_for_the_first_half_second():
     assert not rec['diverged']
     assert rec['max_mm'] < 3.0
     assert rec['tau_ratio'] <= 1.0 and rec['vel_ratio'] < 1.0 and rec['vel_ratio_free'] < 1.0
+
+
+def test_null_space_terms_leave_the_nominal_task_acceleration_unchanged():
+    arm = known_arm('panda', ['panda_joint7'])
+    nominal = arm.nominal(0.7)
+    q, qd = PANDA_PLAN, np.linspace(-0.3, 0.3, 7)
+    p_d = arm.fk(q) + 0.001
+    plain = SpatialLaw(nominal).step(q, qd, p_d, np.zeros(3), np.zeros(3), 5e-4)
+    damped = SpatialLaw(nominal, nullspace=NullSpace(kd=20.0, inverse='weighted',
+                                                     projector='dynamic'),
+                        free_damping=10.0).step(q, qd, p_d, np.zeros(3), np.zeros(3), 5e-4)
+    assert not (plain.status | damped.status) & STATUS_TORQUE_LIMITED
+    assert np.linalg.norm(damped.tau - plain.tau) > 1e-3
+    da, _, _ = nominal.decoupling(nominal.terms(q, qd))
+    np.testing.assert_allclose(da @ damped.tau, da @ plain.tau, atol=1e-9)
+
+
+def test_pose_task_error_is_zero_at_the_measured_pose_and_six_rows_long():
+    arm = known_arm('panda', [], m=6)
+    law = SpatialLaw(arm.nominal(0.7))
+    pos, rot = arm.placement(PANDA_PLAN)
+    out = law.step(PANDA_PLAN, np.zeros(7), pos, np.zeros(6), np.zeros(6), 5e-4, rot_d=rot)
+    assert out.e.shape == (6,)
+    np.testing.assert_allclose(out.e, 0.0, atol=1e-12)
+    assert np.all(np.isfinite(out.tau)) and out.tau.shape == (7,)
+    with pytest.raises(FreejointValueError, match='rot_d'):
+        law.step(PANDA_PLAN, np.zeros(7), pos, np.zeros(6), np.zeros(6), 5e-4)
