@@ -215,3 +215,16 @@ def test_pose_task_error_is_zero_at_the_measured_pose_and_six_rows_long():
     assert np.all(np.isfinite(out.tau)) and out.tau.shape == (7,)
     with pytest.raises(FreejointValueError, match='rot_d'):
         law.step(PANDA_PLAN, np.zeros(7), pos, np.zeros(6), np.zeros(6), 5e-4)
+
+
+def test_holding_the_panda_hand_orientation_with_joint_7_free_is_singular_everywhere():
+    # Nothing but the free joint turns the hand about its own axis (its mass lies on the
+    # axis): the orientation row along that axis is out of reach of every active torque.
+    arm = known_arm('panda', ['panda_joint7'], m=6)
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        q = rng.uniform(arm.lower, arm.upper)
+        da, _, maa = arm.decoupling(arm.terms(q, np.zeros(7)))
+        assert task_conditioning(da, maa, 1.0)[0] < 1e-6 < SpatialGains(m=6).kappa_min
+    with pytest.raises(FreejointValueError, match='cannot drive m = 6'):
+        known_arm('ur5', ['wrist_2_joint'], m=6)
