@@ -39,8 +39,8 @@ the planned start posture, Gauss-Newton minimum-norm steps on
 ``(fk(q) - fk(q_start), G_p(q))`` (the tip held, the free joints' gravity torque) must
 reach ``|G_p| <= tol`` inside the URDF position limits; a free joint for which no such
 pose is found (Panda joint 4, UR5 elbow: the forearm cannot hang vertically over its
-axis with the tip in front) is refused with one line naming it and the least gravity
-torque reached.  The search is local (the posture branch of the plan): a rest posture
+axis with the tip in front) is refused with one line naming it and the closest iterate
+(tip error, gravity torque).  The search is local (the posture branch of the plan): a rest posture
 in another branch is not looked for.
 """
 
@@ -255,9 +255,8 @@ class SpatialLaw:
         self._kd = np.array(gains.K) + self._lam
         self._kp = np.array(gains.K) * self._lam
         self._limit = nominal.effort[list(nominal.active)]
-        coef = []
         self._dt = None
-        self._coef = coef
+        self._coef = None
         self.reset()
 
     def reset(self):
