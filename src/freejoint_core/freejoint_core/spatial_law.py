@@ -1,0 +1,442 @@
+"""
+The paper's robust law for spatial arms (m = 3 or 6 task rows), and its plan-time checks.
+
+:class:`SpatialLaw` is ``control.RobustController``'s general path with the task sized by
+``m`` (:class:`SpatialGains`; the planar ``Gains`` keep m = 2), on a
+:class:`freejoint_core.spatial_model.SpatialArm` nominal model::
+
+    e = (p - p_d, log(R R_d^T)),   edot = J qd - pd_d,   s = edot + Lam e
+    v = pdd_d - (K + Lam) edot - K Lam e,   dv = -rho a / h   (a = R s; eqs. 16-19)
+    tau = X (v + dv - b) + N tau_0,   X = W Da^T (Da W Da^T)^-1,   N = I - X Da
+
+with ``W = M~aa`` (``inverse='weighted'``) or ``I`` (``'pseudo'``), the projector from
+the same inverse, ``tau_0`` of ``freejoint_core.internal.NullSpace`` (null-space
+damping ``-kd qd_a``), and ``tau`` clipped to the URDF's effort limits.
+
+Free-joint damping (option ``free_damping = kf``): a free joint has no torque and no
+damping, so a random joint disturbance makes its rate a random walk (over 15 s the
+Panda's joint 7 passes its URDF speed limit).  For r > m the null space can act on it:
+``tau_0`` gets ``y`` with ``(M^-1)[p, a] N y = -kf qd_p`` (damped least squares), so the
+nominal free-joint acceleration gains ``-kf qd_p`` while ``Da N y = 0`` leaves the task
+untouched; ``y`` is scaled down to at most ``FREE_SHARE`` (10 %) of each active joint's
+effort limit (where the coupling is weak the request would be large).
+
+Singularity (:func:`task_conditioning`): ``kappa = sqrt(lmin / lmax)`` of
+``A = Ds Da M~aa Da^T Ds``, ``Ds = diag(1, 1, 1, L, L, L)[:m, :m] / L`` (``L`` the arm's
+reach, so the position rows are in rad/s^2 like the orientation rows).  ``A`` is the
+inverse of the task-space inertia of the constrained arm (``Da M~aa Da^T =
+J~ M~aa^-1 J~^T``), the matrix the weighted inverse inverts; ``kappa`` is in [0, 1], 0 at
+a singularity, and unchanged by a common factor on every mass and inertia (``Da`` scales
+by ``1/s``, ``M~aa`` by ``s``), by the gravity (no gravity term) and, with ``L``, by the
+unit of length.  Below ``gains.kappa_min`` the tick damps ``A`` to ``A + lam2 I``,
+``lam2 = kappa_min^2 lmax - lmin`` (``kappa`` of the damped matrix about ``kappa_min``)
+and reports ``STATUS_NEAR_SINGULAR``.
+
+Gravity-carrying free joints (:func:`gravity_carrying_free_joint`): the free joints must
+be at rest at the start of the path (the arm starts and holds from rest; a free joint
+has no torque, so it must sit where its gravity torque vanishes).  The criterion: from
+the planned start posture, Gauss-Newton minimum-norm steps on
+``(fk(q) - fk(q_start), G_p(q))`` (the tip held, the free joints' gravity torque) must
+reach ``|G_p| <= tol`` inside the URDF position limits; a free joint for which no such
+pose is found (Panda joint 4, UR5 elbow: the forearm cannot hang vertically over its
+axis with the tip in front) is refused with one line naming it and the closest iterate
+(tip error, gravity torque).  The search is local (the posture branch of the plan): a rest posture
+in another branch is not looked for.
+"""
+
+from dataclasses import dataclass
+import math
+from typing import NamedTuple
+
+from freejoint_core.control import _vector, H_FORMS, STATUS_NEAR_SINGULAR, STATUS_OK
+from freejoint_core.control import STATUS_TORQUE_LIMITED
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.internal import NullSpace
+from freejoint_core.spatial_model import SpatialArm
+import numpy as np
+import pinocchio as pin
+
+
+FREE_SHARE = 0.1
+"""Largest share of an active joint's effort limit the free-joint damping may ask."""
+
+
+@dataclass(frozen=True)
+class SpatialGains:
+    """
+    Gains of the spatial law, task sized by ``m`` (planar m = 2: ``control.Gains``).
+
+    Attributes
+    ----------
+    m : {3, 6}
+        Task rows.
+    K, Lambda, R : float or tuple of float, (m,)
+        Diagonals, > 0 (a scalar is broadcast); defaults as ``Gains`` per row.
+    Gamma, sigma, theta0 : tuple of float, (5,)
+        Adaptation gain, sigma-modification, initial estimate, >= 0.
+    epsilon : float
+        Chattering bound of h, > 0.
+    h_form : {'sum', 'sat'}
+        As ``Gains``.
+    robust : bool
+        False: no robust term, no adaptation.
+    kappa_min : float
+        Singularity threshold on ``kappa`` (module notes), in (0, 1).
+    theta_max : None or tuple of float, (5,)
+        Bound of theta_hat, > 0.
+
+    """
+
+    m: int = 3
+    K: object = 100.0
+    Lambda: object = 50.0
+    R: object = 2.0
+    Gamma: tuple = (0.01,) * 5
+    sigma: tuple = (0.1,) * 5
+    epsilon: float = 0.1
+    h_form: str = 'sum'
+    theta0: tuple = (0.0,) * 5
+    robust: bool = True
+    kappa_min: float = 1e-3
+    theta_max: object = None
+
+    def __post_init__(self):
+        """Validate and normalise."""
+        if self.m not in (3, 6):
+            raise FreejointValueError(f'm: expected 3 or 6, got {self.m!r}')
+        for name, n, strict in (('K', self.m, True), ('Lambda', self.m, True),
+                                ('R', self.m, True), ('Gamma', 5, False), ('sigma', 5, False),
+                                ('theta0', 5, False)):
+            object.__setattr__(self, name, _vector(getattr(self, name), n, name, 0.0, strict))
+        object.__setattr__(self, 'epsilon', _vector(self.epsilon, 1, 'epsilon', 0.0, True)[0])
+        kmin = _vector(self.kappa_min, 1, 'kappa_min', 0.0, True)[0]
+        if kmin >= 1.0:
+            raise FreejointValueError(f'kappa_min: must be < 1, got {kmin}')
+        object.__setattr__(self, 'kappa_min', kmin)
+        if self.h_form not in H_FORMS:
+            raise FreejointValueError(f'h_form: expected one of {H_FORMS}, got {self.h_form!r}')
+        object.__setattr__(self, 'robust', bool(self.robust))
+        if self.theta_max is not None:
+            object.__setattr__(self, 'theta_max',
+                               _vector(self.theta_max, 5, 'theta_max', 0.0, True))
+
+
+class SpatialOutput(NamedTuple):
+    """
+    One tick of :class:`SpatialLaw` (arrays owned by the caller).
+
+    Attributes
+    ----------
+    tau : numpy.ndarray, (r,)
+        Active joint torques [N m], within the effort limits.
+    e, edot, s : numpy.ndarray, (m,)
+        Task error [m; rad], its rate, ``edot + Lam e``.
+    theta : numpy.ndarray, (5,)
+        Estimate after the update.
+    rho : float
+        Robust gain used.
+    kappa : float
+        Conditioning of the nominal task (module notes).
+    p : numpy.ndarray, (3,)
+        Measured tip position [m].
+    status : int
+        ``control.STATUS_*`` bits.
+
+    """
+
+    tau: np.ndarray
+    e: np.ndarray
+    edot: np.ndarray
+    s: np.ndarray
+    theta: np.ndarray
+    rho: float
+    kappa: float
+    p: np.ndarray
+    status: int
+
+
+def arm_reach(arm):
+    """
+    Length scale ``L`` of an arm [m]: the sum of the joint-to-joint distances to the tip at q = 0.
+
+    Parameters
+    ----------
+    arm : SpatialArm
+
+    Returns
+    -------
+    float
+
+    """
+    q = np.zeros(arm.n)
+    pin.framesForwardKinematics(arm.model, arm.data, q)
+    pts = [np.array(arm.data.oMi[j].translation) for j in range(1, arm.model.njoints)]
+    pts.append(np.array(arm.data.oMf[arm.frame].translation))
+    return float(sum(np.linalg.norm(b - a) for a, b in zip(pts[:-1], pts[1:])))
+
+
+def task_conditioning(da, maa, reach):
+    """
+    Scale-free conditioning ``kappa`` of the task (module notes) and the matrix ``A``.
+
+    Parameters
+    ----------
+    da : numpy.ndarray, (m, r)
+        Decoupling matrix.
+    maa : numpy.ndarray, (r, r)
+        Effective inertia of the active joints.
+    reach : float
+        Length scale ``L`` [m].
+
+    Returns
+    -------
+    kappa : float
+        In [0, 1].
+    a : numpy.ndarray, (m, m)
+        ``Da M~aa Da^T`` (unscaled).
+    lmax : float
+        Largest eigenvalue of the scaled ``A``.
+
+    """
+    a = da @ maa @ da.T
+    m = a.shape[0]
+    ds = np.ones(m) / reach
+    if m == 6:
+        ds[3:] = 1.0
+    eig = np.linalg.eigvalsh(a * np.outer(ds, ds))
+    lmax = float(eig[-1])
+    kappa = math.sqrt(max(float(eig[0]), 0.0) / lmax) if lmax > 0.0 else 0.0
+    return kappa, a, lmax
+
+
+def rotation_error(rot, rot_d):
+    """Rotation vector of ``R R_d^T`` (root frame) [rad], (3,)."""
+    return np.array(pin.log3(rot @ rot_d.T))
+
+
+class SpatialLaw:
+    """
+    The robust law on a spatial arm (module notes).
+
+    Parameters
+    ----------
+    nominal : SpatialArm
+        Nominal model (e.g. ``arm.nominal(0.7)``).
+    gains : SpatialGains
+        ``gains.m`` must equal ``nominal.m``.
+    nullspace : NullSpace, optional
+        Inverse, projector and null-space damping; default weighted inverse, dynamic
+        projector, ``kd = 0``.
+    free_damping : float
+        ``kf`` [1/s], >= 0: the null-space torque also asks the free joints for
+        ``qdd_p = -kf qd_p`` (module notes); 0 (default): off.
+
+    """
+
+    def __init__(self, nominal, gains=None, nullspace=None, free_damping=0.0):
+        kf = float(free_damping)
+        if not (math.isfinite(kf) and kf >= 0.0):
+            raise FreejointValueError(f'free_damping: must be finite and >= 0, got {kf!r}')
+        self.free_damping = kf
+        if not isinstance(nominal, SpatialArm):
+            raise FreejointValueError(
+                f'nominal: expected SpatialArm, got {type(nominal).__name__}')
+        gains = SpatialGains(m=nominal.m) if gains is None else gains
+        if not isinstance(gains, SpatialGains) or gains.m != nominal.m:
+            raise FreejointValueError(f'gains: expected SpatialGains with m = {nominal.m}')
+        ns = NullSpace(inverse='weighted', projector='dynamic') if nullspace is None \
+            else nullspace
+        if not isinstance(ns, NullSpace):
+            raise FreejointValueError(f'nullspace: expected NullSpace, got {type(ns).__name__}')
+        ns.check(nominal.r)
+        self.model, self.gains, self.nullspace = nominal, gains, ns
+        self.reach = arm_reach(nominal)
+        self._lam = np.array(gains.Lambda)
+        self._kd = np.array(gains.K) + self._lam
+        self._kp = np.array(gains.K) * self._lam
+        self._limit = nominal.effort[list(nominal.active)]
+        self._dt = None
+        self._coef = None
+        self.reset()
+
+    def reset(self):
+        """Set theta back to ``gains.theta0``."""
+        self.theta = np.array(self.gains.theta0)
+
+    def _decay(self, dt):
+        if self._dt != dt:
+            g, sg = np.array(self.gains.Gamma), np.array(self.gains.sigma)
+            with np.errstate(divide='ignore', invalid='ignore'):
+                a = np.exp(-g * sg * dt)
+                c = np.where(sg > 0.0, (1.0 - a) / np.where(sg > 0.0, sg, 1.0), g * dt)
+            self._dt, self._coef = dt, (a, c)
+        return self._coef
+
+    def step(self, q, qd, p_d, pd_d, pdd_d, dt, rot_d=None):
+        """
+        Torques of one tick; advances the adaptation by ``dt``.
+
+        Parameters
+        ----------
+        q, qd : array_like, (n,)
+            Measured angles [rad] and rates [rad/s].
+        p_d : array_like, (3,)
+            Desired tip position [m].
+        pd_d, pdd_d : array_like, (m,)
+            Desired task velocity and acceleration (linear, then angular for m = 6).
+        dt : float
+            Period [s], > 0.
+        rot_d : numpy.ndarray, (3, 3), optional
+            Desired orientation (required for m = 6).
+
+        Returns
+        -------
+        SpatialOutput
+
+        """
+        dt = float(dt)
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise FreejointValueError(f'dt: must be finite and > 0, got {dt!r}')
+        arm, m = self.model, self.model.m
+        vals = {}
+        for name, val, k in (('p_d', p_d, 3), ('pd_d', pd_d, m), ('pdd_d', pdd_d, m)):
+            arr = np.asarray(val, dtype=float)
+            if arr.shape != (k,) or not np.all(np.isfinite(arr)):
+                raise FreejointValueError(f'{name}: expected {k} finite numbers, got {val!r}')
+            vals[name] = arr
+        if m == 6:
+            rot_d = np.asarray(rot_d, dtype=float) if rot_d is not None else None
+            if rot_d is None or rot_d.shape != (3, 3) or not np.all(np.isfinite(rot_d)):
+                raise FreejointValueError(f'rot_d: expected a 3 x 3 rotation, got {rot_d!r}')
+        terms = arm.terms(q, qd)
+        qd = np.asarray(qd, dtype=float)
+        e = terms.p - vals['p_d']
+        if m == 6:
+            e = np.concatenate([e, rotation_error(terms.R, rot_d)])
+        edot = terms.J @ qd - vals['pd_d']
+        s = edot + self._lam * e
+        pdd = vals['pdd_d']
+        v = pdd - self._kd * edot - self._kp * e
+        gains = self.gains
+        rho = 0.0
+        if gains.robust:
+            alpha = np.array(gains.R) * s
+            na = float(np.linalg.norm(alpha))
+            h = na + gains.epsilon if gains.h_form == 'sum' else max(na, gains.epsilon)
+            psi = np.array([1.0, float(qd @ qd), np.linalg.norm(pdd), np.linalg.norm(edot),
+                            np.linalg.norm(e)])
+            rho = float(self.theta @ psi)
+            v = v - rho * alpha / h
+            a_c, c_c = self._decay(dt)
+            new = a_c * self.theta + c_c * (na * na / h) * psi
+            if gains.theta_max is not None:
+                new = np.minimum(new, gains.theta_max)
+            self.theta = new
+        da, b, maa = arm.decoupling(terms)
+        kappa, amat, lmax = task_conditioning(da, maa, self.reach)
+        status = STATUS_OK
+        weight = maa if self.nullspace.inverse == 'weighted' else np.eye(arm.r)
+        wd = weight @ da.T
+        amat = da @ wd
+        if kappa < gains.kappa_min:
+            scale = np.ones(m) * self.reach
+            if m == 6:
+                scale[3:] = 1.0
+            lam2 = gains.kappa_min ** 2 * lmax - kappa ** 2 * lmax
+            amat = amat + lam2 * np.diag(scale * scale)
+            status = STATUS_NEAR_SINGULAR
+        x = np.linalg.solve(amat, wd.T).T
+        tau = x @ (v - b)
+        if arm.r > m:
+            act = list(arm.active)
+            proj = np.eye(arm.r) - x @ da
+            if self.nullspace.projector == 'kinematic':
+                xp = np.linalg.solve(da @ da.T, da).T
+                proj = np.eye(arm.r) - xp @ da
+            tau0 = self.nullspace.tau0(np.asarray(q, dtype=float)[act], qd[act])
+            if self.free_damping > 0.0:
+                tau0 = tau0 + self._free_damping(terms, proj, qd)
+            tau = tau + proj @ tau0
+        clipped = np.clip(tau, -self._limit, self._limit)
+        if np.any(clipped != tau):
+            status |= STATUS_TORQUE_LIMITED
+        return SpatialOutput(clipped, e, edot, s, self.theta.copy(), rho, kappa, terms.p,
+                             status)
+
+    def _free_damping(self, terms, proj, qd):
+        """``y`` with ``(M^-1)[p, a] N y = -kf qd_p`` (damped least squares)."""
+        arm = self.model
+        gmat = terms.Minv[np.ix_(list(arm.passive), list(arm.active))] @ proj
+        ggt = gmat @ gmat.T
+        mu = 1e-6 * max(float(np.trace(ggt)), 1e-300)
+        target = -self.free_damping * qd[list(arm.passive)]
+        y = gmat.T @ np.linalg.solve(ggt + mu * np.eye(len(target)), target)
+        # at most FREE_SHARE of each active joint's effort limit (weak coupling: no blow-up)
+        peak = float(np.max(np.abs(y) / self._limit))
+        return y if peak <= FREE_SHARE else y * (FREE_SHARE / peak)
+
+
+def gravity_carrying_free_joint(arm, q, tol=1e-6, max_iter=60):
+    """
+    Find a rest posture of the free joints with the tip where ``q`` puts it (plan time).
+
+    Gauss-Newton minimum-norm steps from ``q`` on ``(fk(x) - fk(q), G_p(x))`` (tip
+    position held; for m = 6 the orientation too), inside the URDF position limits
+    (module notes).
+
+    Parameters
+    ----------
+    arm : SpatialArm
+        The arm (its free joints).
+    q : array_like, (n,)
+        Planned start posture [rad].
+    tol : float
+        Residual bound [m, N m].
+    max_iter : int
+        Iteration bound.
+
+    Returns
+    -------
+    (numpy.ndarray or None, str or None)
+        The rest posture (n,) and None, or None and one line saying which free joint
+        carries gravity and why.
+
+    """
+    if not isinstance(arm, SpatialArm):
+        raise FreejointValueError(f'arm: expected SpatialArm, got {type(arm).__name__}')
+    x = np.array(arm._state(q), dtype=float)
+    passive = list(arm.passive)
+    if not passive:
+        return x, None
+    p0, r0 = arm.placement(x)
+
+    def residual(y):
+        pos, rot = arm.placement(y)
+        parts = [pos - p0]
+        if arm.m == 6:
+            parts.append(rotation_error(rot, r0))
+        parts.append(arm.gravity_torque(y)[passive])
+        return np.concatenate(parts)
+
+    best = (math.inf, math.inf, math.inf)
+    step_h = 1e-6
+    for _ in range(max_iter):
+        res = residual(x)
+        norm = float(np.linalg.norm(res))
+        if norm < best[0]:
+            best = (norm, float(np.linalg.norm(res[:3])),
+                    float(np.max(np.abs(res[-len(passive):]))))
+        if np.linalg.norm(res) < tol:
+            if np.all(x >= arm.lower - 1e-9) and np.all(x <= arm.upper + 1e-9):
+                return x, None
+            break
+        jac = np.empty((res.size, arm.n))
+        for j in range(arm.n):
+            dx = np.zeros(arm.n)
+            dx[j] = step_h
+            jac[:, j] = (residual(x + dx) - residual(x - dx)) / (2.0 * step_h)
+        x = np.clip(x - np.linalg.lstsq(jac, res, rcond=None)[0], arm.lower, arm.upper)
+    names = ', '.join(arm.joint_names[i] for i in passive)
+    return None, (f'free joint {names} must carry gravity: no rest posture within the joint '
+                  f'limits holds the tip at {np.round(p0, 3).tolist()} m (closest: tip off by '
+                  f'{1e3 * best[1]:.3g} mm, gravity torque {best[2]:.3g} N m)')

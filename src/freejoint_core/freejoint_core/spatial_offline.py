@@ -1,0 +1,228 @@
+"""
+Offline study of spatial arms with a free joint (issue 25).
+
+Run ``python -m freejoint_core.spatial_offline`` (``--help``).
+
+One run (:func:`run_case`): the arm starts at rest in the rest posture of
+:func:`freejoint_core.spatial_law.gravity_carrying_free_joint` near its planned posture
+(:data:`CASES`; a free joint that must carry gravity is refused there), and its tip
+follows a circle of radius 0.1 m in the vertical plane facing the robot (spanned by the
+horizontal direction across the base-to-tip line and the vertical), starting and ending
+at the start point: a quintic time law over ``t_move`` (5 s), then a hold of ``t_hold``
+(10 s).  Task m = 3 (tip position).
+
+Plant: the URDF's Pinocchio model (real masses), ABA integrated by RK4 at the control
+period ``dt`` (0.5 ms), torque and one disturbance draw ``uniform(-0.5, 0.5)`` N m per
+joint (free joints included; seeded) held over the period.  Law:
+:class:`freejoint_core.spatial_law.SpatialLaw` on the 70 % nominal model (masses,
+inertias and COM levers), weighted inverse, dynamically consistent projector, null-space
+damping ``kd`` and free-joint damping ``kf``, URDF effort limits.
+
+Reported per run: rms and max tip error over the whole run [mm], the largest
+``|tau_i| / effort_i`` and ``|qd_i| / velocity_i`` (URDF limits; the active joints and,
+apart, the free joint), the max error over the
+last second of the hold, and ``diverged``.
+"""
+
+import argparse
+import json
+import math
+import sys
+import time
+
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.internal import NullSpace
+from freejoint_core.spatial_law import gravity_carrying_free_joint, SpatialGains, SpatialLaw
+from freejoint_core.spatial_model import known_arm
+import numpy as np
+
+#: case -> (arm, free joint, planned start posture [rad])
+CASES = {
+    'ur5_wrist2': ('ur5', 'wrist_2_joint', (0.0, -1.2, 1.6, -1.97, -1.5708, 0.0)),
+    'panda_j7': ('panda', 'panda_joint7', (0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.785)),
+}
+RADIUS = 0.1
+T_MOVE = 5.0
+T_HOLD = 10.0
+DT = 5e-4
+NOMINAL = 0.7
+DIST = 0.5
+KD = 20.0
+KF = 0.0
+
+
+def quintic(tau):
+    """``s = 10 tau^3 - 15 tau^4 + 6 tau^5`` and its first two derivatives in ``tau``."""
+    return (tau ** 3 * (10.0 - 15.0 * tau + 6.0 * tau * tau),
+            30.0 * tau * tau * (1.0 - tau) ** 2,
+            60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau))
+
+
+def circle(p0, radius, t, t_move):
+    """
+    Setpoint of the circle at ``t`` (module notes).
+
+    Parameters
+    ----------
+    p0 : numpy.ndarray, (3,)
+        Start (and end) point [m].
+    radius : float
+        [m].
+    t : float
+        Time [s].
+    t_move : float
+        Duration of the circle [s].
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray, numpy.ndarray), each (3,)
+        Position [m], velocity [m/s], acceleration [m/s^2].
+
+    """
+    across = np.array([-p0[1], p0[0], 0.0])
+    across = across / np.linalg.norm(across)
+    e1, e2 = -across, np.array([0.0, 0.0, 1.0])
+    centre = p0 - radius * e1
+    s, sd, sdd = quintic(t / t_move) if t < t_move else (1.0, 0.0, 0.0)
+    sd, sdd = sd / t_move, sdd / t_move ** 2
+    ang = 2.0 * math.pi * s
+    c, si = math.cos(ang), math.sin(ang)
+    w = 2.0 * math.pi
+    pos = centre + radius * (c * e1 + si * e2)
+    dpos = radius * w * (-si * e1 + c * e2)
+    ddpos = radius * (-w * w * (c * e1 + si * e2))
+    return pos, dpos * sd, ddpos * sd * sd + dpos * sdd
+
+
+def rk4_step(arm, q, qd, tau, dt):
+    """
+    One RK4 step of ``arm``'s ABA with ``tau`` (n,) [N m] held over ``dt`` [s].
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray), each (n,)
+        Angles [rad] and rates [rad/s] after ``dt``.
+
+    """
+    def f(x, v):
+        return v, arm.forward_dynamics(x, v, tau)
+    k1 = f(q, qd)
+    k2 = f(q + 0.5 * dt * k1[0], qd + 0.5 * dt * k1[1])
+    k3 = f(q + 0.5 * dt * k2[0], qd + 0.5 * dt * k2[1])
+    k4 = f(q + dt * k3[0], qd + dt * k3[1])
+    return (q + dt / 6.0 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0]),
+            qd + dt / 6.0 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1]))
+
+
+def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL,
+             dist=DIST, kd=KD, kf=KF, inverse='weighted', t_stop=None):
+    """
+    One closed-loop run (module notes).
+
+    Parameters
+    ----------
+    case : str
+        Key of :data:`CASES`.
+    seed : int
+        Disturbance seed.
+    t_move, t_hold, dt : float
+        Circle duration, hold duration, control period [s].
+    nominal : float
+        Nominal factor of the law's model.
+    dist : float
+        Disturbance bound [N m].
+    kd : float
+        Null-space damping [N m s/rad].
+    kf : float
+        Free-joint damping through the null space [1/s] (``SpatialLaw``).
+    inverse : {'weighted', 'pseudo'}
+        Right inverse (and projector) of the law.
+    t_stop : float, optional
+        End the run early at this time [s] (tests).
+
+    Returns
+    -------
+    dict
+        Metrics (module notes) and ``tick_us``, the mean wall time of one control tick.
+
+    Raises
+    ------
+    FreejointValueError
+        Unknown case, or its free joint must carry gravity (the one-line reason).
+
+    """
+    if case not in CASES:
+        raise FreejointValueError(f'case: expected one of {sorted(CASES)}, got {case!r}')
+    name, free, q_plan = CASES[case]
+    real = known_arm(name, [free])
+    q, why = gravity_carrying_free_joint(real.nominal(nominal), np.array(q_plan))
+    if q is None:
+        raise FreejointValueError(why)
+    qd = np.zeros(real.n)
+    proj = 'dynamic' if inverse == 'weighted' else 'kinematic'
+    law = SpatialLaw(real.nominal(nominal), SpatialGains(m=3),
+                     NullSpace(kd=kd, inverse=inverse, projector=proj), free_damping=kf)
+    rng = np.random.default_rng(seed)
+    p0 = real.fk(q)
+    steps = int(round(((t_move + t_hold) if t_stop is None else t_stop) / dt))
+    last = int(round(1.0 / dt))
+    act = list(real.active)
+    err = np.empty(steps)
+    tau_ratio = vel_ratio = vel_free = 0.0
+    diverged = False
+    tau_full = np.zeros(real.n)
+    t_law = 0.0
+    for k in range(steps):
+        t = k * dt
+        p_d, v_d, a_d = circle(p0, RADIUS, t, t_move)
+        c0 = time.perf_counter()
+        out = law.step(q, qd, p_d, v_d, a_d, dt)
+        t_law += time.perf_counter() - c0
+        err[k] = np.linalg.norm(out.e)
+        tau_full[:] = 0.0
+        tau_full[act] = out.tau
+        tau_ratio = max(tau_ratio, float(np.max(np.abs(out.tau) / real.effort[act])))
+        d = rng.uniform(-dist, dist, real.n) if dist > 0.0 else 0.0
+        q, qd = rk4_step(real, q, qd, tau_full + d, dt)
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))) or err[k] > 1.0:
+            diverged = True
+            err = err[:k + 1]
+            break
+        vel = np.abs(qd) / real.velocity
+        vel_ratio = max(vel_ratio, float(np.max(vel[act])))
+        vel_free = max(vel_free, float(np.max(vel[list(real.passive)])))
+    return {
+        'case': case, 'seed': seed, 'inverse': inverse, 'kd': kd, 'kf': kf,
+        'rms_mm': 1e3 * float(np.sqrt(np.mean(err ** 2))),
+        'max_mm': 1e3 * float(np.max(err)),
+        'hold_last_s_max_mm': 1e3 * float(np.max(err[-last:])),
+        'tau_ratio': tau_ratio, 'vel_ratio': vel_ratio, 'vel_ratio_free': vel_free,
+        'diverged': diverged,
+        'tick_us': 1e6 * t_law / len(err),
+    }
+
+
+def main(argv=None):
+    """Command line: run cases over seeds, print one JSON line per run."""
+    ap = argparse.ArgumentParser(prog='python -m freejoint_core.spatial_offline',
+                                 description=__doc__.split('\n')[1])
+    ap.add_argument('--case', action='append', choices=sorted(CASES))
+    ap.add_argument('--seeds', type=int, default=10, help='seeds 0..N-1')
+    ap.add_argument('--t-move', type=float, default=T_MOVE)
+    ap.add_argument('--t-hold', type=float, default=T_HOLD)
+    ap.add_argument('--kd', type=float, default=KD)
+    ap.add_argument('--kf', type=float, default=KF)
+    ap.add_argument('--inverse', choices=('weighted', 'pseudo'), default='weighted')
+    args = ap.parse_args(argv)
+    for case in args.case or sorted(CASES):
+        for seed in range(args.seeds):
+            rec = run_case(case, seed, t_move=args.t_move, t_hold=args.t_hold, kd=args.kd,
+                           kf=args.kf,
+                           inverse=args.inverse)
+            print(json.dumps({k: round(v, 4) if isinstance(v, float) else v
+                              for k, v in rec.items()}), flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
