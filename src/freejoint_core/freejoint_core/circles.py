@@ -309,7 +309,7 @@ MODULATION = {'delta_max': 0.01}
 
 def stabilised_options(case, arm='paper', actuated='paper', delta_max=None):
     """
-    The internal-motion stabilisation of an arm and case (``--stabilise``), as options.
+    Return the internal-motion stabilisation of an arm and case (``--stabilise``), as options.
 
     * paper arm, joint 3 free, vertical: start with the free link hanging and the free
       link damped through the bounded reference modulation (always on);

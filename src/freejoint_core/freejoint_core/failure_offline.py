@@ -319,11 +319,19 @@ SUITE = (
 
 def summarise(name, records):
     """
-    One Markdown table row per case of a scenario's records.
+    Return one Markdown table row per case of a scenario's records.
+
+    Parameters
+    ----------
+    name : str
+        The scenario's name (first column).
+    records : list of dict
+        The scenario's run records.
 
     Returns
     -------
     list of str
+
     """
     rows = []
     for case in CASES:

@@ -39,7 +39,7 @@ PROJECTORS = ('kinematic', 'dynamic')
 
 
 def _gain(value, name):
-    """A finite gain >= 0: a number or a sequence (kept as a tuple of floats)."""
+    """Return a finite gain >= 0 from a number or a sequence (as a tuple of floats)."""
     if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
         vals = (float(value),)
         scalar = True
@@ -229,7 +229,7 @@ def null_space_velocity(jac_a_eff, qd_a):
 
 def equilibrium_pose(model, p, guess, tol=1e-12, max_iter=50):
     """
-    A configuration with the end effector at ``p`` where the free joints hang at rest.
+    Return a configuration with the end effector at ``p`` where the free joints hang at rest.
 
     Solves ``fk(q) = p`` and ``G_p(q) = 0`` (the gravity torque of every passive joint)
     by Gauss-Newton minimum-norm steps from ``guess``: with the active joints held the
@@ -292,7 +292,7 @@ def equilibrium_pose(model, p, guess, tol=1e-12, max_iter=50):
 
 def hanging_pose(params, p, branch=1):
     """
-    The 3-link arm (joint 3 free) at ``p`` with its free link hanging straight down.
+    Return the 3-link arm (joint 3 free) at ``p`` with its free link hanging straight down.
 
     Closed form: the free link's absolute angle is ``-pi/2`` (its gravity torque
     ``g m3 c3 cos(theta3)`` vanishes, and with the end effector held the equilibrium is

@@ -551,7 +551,7 @@ def _parse(argv):
                     '(r = 3 > m = 2)')
     ap.add_argument('--nullspace-kd', type=float, default=None, metavar='KD',
                     help='null-space damping of the active joints for r > m (N m s/rad, e.g. '
-                    '3; default off: the paper\'s law); see docs/internal-motion.md')
+                    "3; default off: the paper's law); see docs/internal-motion.md")
     ap.add_argument('--weighted', action='store_true',
                     help='with --nullspace-kd: inertia-weighted inverse and dynamically '
                     'consistent projector instead of the pseudo-inverse ones')
@@ -568,7 +568,7 @@ def _parse(argv):
                     'arm: hanging start + free-link damping by a bounded reference '
                     'modulation; r > m: null-space damping)')
     ap.add_argument('--delta-max', type=float, default=None, metavar='M',
-                    help='with --stabilise: bound of the modulation\'s task deviation (m)')
+                    help="with --stabilise: bound of the modulation's task deviation (m)")
     ap.add_argument('--arm', choices=('paper', 'four_link'), default='paper',
                     help='with --circles: the paper arm (default) or the 4-link example')
     ap.add_argument('--start', default=None,
@@ -636,7 +636,7 @@ def main(argv=None):
 
 
 def _internal_options(args):
-    """The ``actuated`` / ``nullspace`` keywords of :func:`run_case` from the CLI."""
+    """Return the ``actuated`` / ``nullspace`` keywords of :func:`run_case` from the CLI."""
     out = {}
     if args.actuated != 'paper':
         out['actuated'] = args.actuated
@@ -655,6 +655,7 @@ def _main_circles(args):
     if args.start is not None:
         opts['start'] = args.start
     t0 = time.perf_counter()
+
     def progress(recs):
         last = recs[-1]
         print(f'  {last["case"]} {last["variant"]} seed {last["seed"]}: {len(recs)} circles, '

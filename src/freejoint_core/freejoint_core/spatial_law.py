@@ -162,6 +162,7 @@ def arm_reach(arm):
     Parameters
     ----------
     arm : SpatialArm
+        The arm (its Pinocchio model and tip frame).
 
     Returns
     -------
