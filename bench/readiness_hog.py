@@ -44,7 +44,7 @@ def one_run(case, duration, hogs, extra, log_dir, tag):
 
     def on_diag(msg):
         for st in msg.status:
-            if 'controller' in st.name and st.level >= 2:
+            if 'controller' in st.name and ord(st.level) >= 2:
                 statuses.append(st.message)
     node.create_subscription(DIAGNOSTICS.msg_type, DIAGNOSTICS.name, on_diag, DIAGNOSTICS.qos)
     load0 = os.getloadavg()

@@ -6,7 +6,8 @@ judged at the first state whose stamp is a window (0.1 s) past the window's firs
 """
 import os
 
-from freejoint_control.loop import ControlLoop, ERROR, STATUS_HOLDING, STATUS_RESUMING, WARN
+from freejoint_control.loop import (ControlLoop, ERROR, INFO, STATUS_HOLDING, STATUS_RESUMING,
+                                    WARN)
 from freejoint_control.params import SCHEMA
 from freejoint_control.readiness import (effective_periods, MEASURED_MARGIN, ReadinessGuard,
                                          tolerated_delay)
@@ -25,25 +26,34 @@ Q0 = (-1.369438, 1.691679, 2.094395)    # the paper's start: end effector at (0.
 QD0 = (0.0, 0.0, 0.0)
 
 
-def make(**given):
-    """Return (loop, log lines) of a real-time vertical controller, ``given`` on top."""
+def make(warm=True, **given):
+    """
+    Return (loop, log lines) of a real-time vertical controller, ``given`` on top.
+
+    ``warm``: fed the 5 good windows (stamps 0-499 ms, on time) after which it is ready
+    (it starts not ready); the test's tick 0 is stamped 500 ms and judges the fifth.
+    """
     values = dict(FILE, case='vertical', lockstep=False, max_state_age=0.0, stale_timeout=2.0)
     values.update(given)
     logs = []
     loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: logs.append(
         (level, kind, text)))
+    if warm and loop._readiness is not None:
+        answers = feed(loop, range(-500, 0), 0)
+        if loop.config.readiness_action == 'brake':
+            assert answers == [None] * 500
     return loop, logs
 
 
 def feed(loop, ks, age_ns, target=(0.2, 0.0)):
     """
-    Feed the states of ticks ``ks`` (stamp k ms), each ``age_ns`` old; return the Results.
+    Feed the states of ticks ``ks`` (stamp k + 500 ms), each ``age_ns`` old; return Results.
 
     Each state after a setpoint at rest at ``target`` of the same stamp.
     """
     answers = []
     for k in ks:
-        ns = k * DT_NS
+        ns = (k + 500) * DT_NS
         loop.on_setpoint(ns, tuple(target) + (0.0, 0.0, 0.0, 0.0), 0, k * 1e-3)
         res = loop.on_state(ns, NAMES, list(Q0), list(QD0), ns + age_ns, 100.0 + k * 1e-3)
         answers.append(None if res is None else (res.status, res.message, list(res.effort)))
@@ -97,18 +107,39 @@ def test_states_answered_late_trip_the_guard_no_command_and_the_reason_logged_an
     # Still no command while not ready, even for a good or an implausible state (a zero
     # command would release the driver's brakes).
     assert feed(loop, range(201, 250), 0) == [None] * 49
-    assert loop.on_state(250 * DT_NS, NAMES, list(Q0), [0.0, 500.0, 0.0], 250 * DT_NS,
-                         100.25) is None
-    assert loop.refused_states == 0 and loop.withheld == 51
+    assert loop.on_state(750 * DT_NS, NAMES, list(Q0), [0.0, 500.0, 0.0], 750 * DT_NS,
+                         100.75) is None
+    assert loop.refused_states == 0 and loop.withheld == 500 + 51
     errors, warnings, ok, values = loop.diagnostics(1.0, loop.counters(), False, ('-', '-'),
                                                     '/joint_states', None)
     assert errors == ['real-time loop not ready: mean state->command delay 3 ms > the 2 ms the '
-                      'law tolerates over 0.1 s: no command sent (the driver brakes); 51 '
+                      'law tolerates over 0.1 s: no command sent (the driver brakes); 551 '
                       'states not answered']
     values = dict(values)
     assert values['readiness'] == 'not ready' and values['readiness trips'] == 1
     assert values['window mean delay [ms]'] == '3' and values['tolerated delay [ms]'] == '2'
-    assert 'readiness guard: 1 trips, 51 states not answered' in loop.report()
+    assert 'readiness guard: 1 trips, 551 states not answered' in loop.report()
+
+
+def test_the_loop_does_not_start_tracking_before_its_good_windows_and_says_why():
+    loop, logs = make(warm=False)
+    # Not ready at start: no command, so the driver's brakes (engaged at start) stay on.
+    assert feed(loop, range(-500, 0), 0) == [None] * 500
+    # Said at the first state, then at most once per second of stamps.
+    assert [(level, text) for level, kind, text in logs if kind == 'readiness'] == [
+        (ERROR, 'real-time loop not judged yet: waiting for 5 good windows of 0.1 s: no '
+                'command sent, the driver brakes the arm')]
+    status, message, effort = feed(loop, [0], 0)[0]     # the fifth good window judged
+    assert logs[-1] == (INFO, None, 'real-time loop ready (5 good windows: mean delay 1 ms, '
+                        '100 % of the states answered): tracking starts from a hold where '
+                        'the arm is')
+    assert loop._readiness.trips == 0 and loop._readiness.recoveries == 0
+
+
+def test_a_hot_spare_starts_ready():
+    loop, _ = make(warm=False, standby=True)
+    loop.activate()
+    assert feed(loop, [0], 0)[0] is not None
 
 
 def test_a_mean_delay_equal_to_the_tolerated_one_does_not_trip():
@@ -124,7 +155,7 @@ def test_a_stream_at_a_quarter_of_the_rate_trips_the_guard():
     # Every fourth state, on time: 25 of the 100 expected in the first window.
     answers = feed(loop, range(0, 101, 4), 0)
     assert None not in answers[:-1] and answers[-1] is None
-    assert [text for level, kind, text in logs if level == ERROR] == [
+    assert [text for level, kind, text in logs if level == ERROR and kind is None] == [
         'real-time loop not ready: 25 of 100 states answered (25 % < 80 %) over 0.1 s: no '
         'command sent, the driver brakes the arm']
 
@@ -155,7 +186,7 @@ def test_the_hold_action_holds_with_the_reason_in_the_message():
     assert message.startswith('holding at (0.2000, 0.0000) m: real-time loop not ready: mean '
                               'state->command delay 3 ms > the 2 ms the law tolerates')
     assert any(v != 0.0 for v in effort)
-    assert loop.holds == 1 and loop.withheld == 0
+    assert loop.holds == 2 and loop.withheld == 0     # at start (not judged yet), at 200 ms
 
 
 def test_lockstep_never_trips_whatever_the_rate_and_the_clock():

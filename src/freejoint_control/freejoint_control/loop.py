@@ -151,6 +151,7 @@ class ControlLoop:
         self._readiness_key = None
         self._guard_ns = None           # stamp of the last state the guard took
         self._withholding = False       # not ready, 'brake': no command sent
+        self._said_ns = None            # stamp of the last 'not ready' line
         self.withheld = 0               # states not answered by the readiness guard
         self._install(cfg)
         self.result = Result()
@@ -237,9 +238,9 @@ class ControlLoop:
         if key == self._readiness_key:
             return
         old = self._readiness
-        guard = ReadinessGuard(*key)
+        guard = ReadinessGuard(*key, start_ready=cfg.standby)
         if old is not None:
-            guard.ready, guard.reason = old.ready, old.reason
+            guard.ready, guard.reason, guard.started = old.ready, old.reason, old.started
             guard.trips, guard.recoveries = old.trips, old.recoveries
         self._readiness = guard
         self._readiness_key = key
@@ -388,8 +389,9 @@ class ControlLoop:
                 change = guard.observe(ns, now_ns)
                 if change:
                     self._readiness_changed(change)
+                    self._said_ns = ns
             if not guard.ready and self._guard_brakes:
-                return self._withhold(change == 0)
+                return self._withhold(ns)
             if self._withholding:
                 self._resume_after_brake()
         if self._max_age_ns:
@@ -479,17 +481,22 @@ class ControlLoop:
                       else 'holding position')
             self.log(ERROR, None, '%s: %s' % (guard.reason, action))
         else:
-            self.log(WARN, None, 'real-time loop ready again (%d good windows: mean delay '
-                     '%.3g ms, %.0f %% of the states answered): tracking resumes from a '
-                     'hold where the arm is' % (guard.recover_windows, guard.last_delay * 1e3,
-                                                guard.last_rate * 100.0))
+            self.log(WARN if guard.recoveries else INFO, None,
+                     'real-time loop ready%s (%d good windows: mean delay %.3g ms, %.0f %% of '
+                     'the states answered): tracking %s from a hold where the arm is' % (
+                         ' again' if guard.recoveries else '', guard.recover_windows,
+                         guard.last_delay * 1e3, guard.last_rate * 100.0,
+                         'resumes' if guard.recoveries else 'starts'))
 
-    def _withhold(self, say):
+    def _withhold(self, ns):
         """Not ready, 'brake': answer nothing (the driver's command watchdog brakes)."""
         self._withholding = True
         self.withheld += 1
         self.pending = None
-        if say:
+        said = self._said_ns
+        if said is None or not 0 <= ns - said < 1_000_000_000:
+            # At most once per second of stamps (a transition is said at once).
+            self._said_ns = ns
             self.log(ERROR, 'readiness', '%s: no command sent, the driver brakes the arm'
                      % self._readiness.reason)
         return None

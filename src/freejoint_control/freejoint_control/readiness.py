@@ -15,7 +15,9 @@ each state the loop does not answer holds the previous command one period longer
 - the answer rate: states taken / states expected (the window's stamp span over the
   control period), against ``readiness_min_answer_rate``.
 
-One bad window makes the loop not ready (it stops tracking: the loop withholds its
+A loop starts not ready (the driver's brakes, engaged at start, stay on) until
+``readiness_recover_windows`` good windows; a hot spare starts ready (it must take over at
+once).  One bad window makes the loop not ready (it stops tracking: the loop withholds its
 commands, so the driver's watchdog brakes, or holds, parameter ``readiness_action``);
 ``readiness_recover_windows`` consecutive good windows make it ready again.  Lockstep
 never trips (the simulator waits for each command: no delay).  It reads no clock: the
@@ -94,11 +96,16 @@ class ReadinessGuard:
         Window length [s of state stamps] (at least 2 periods).
     recover_windows : int
         Consecutive good windows that make a not-ready loop ready again (>= 1).
+    start_ready : bool
+        Ready before any window was judged (a hot spare); else not ready until
+        ``recover_windows`` good windows.
 
     Attributes
     ----------
     ready : bool
-        The loop keeps within the bounds (starts True: judged from the first window on).
+        The loop keeps within the bounds.
+    started : bool
+        It was ready at least once.
     reason : str
         Why it is not ready ('' when ready): the bad window's figures and the bound.
     trips, recoveries : int
@@ -108,7 +115,8 @@ class ReadinessGuard:
 
     """
 
-    def __init__(self, dt_ns, max_delay, min_rate, window, recover_windows):
+    def __init__(self, dt_ns, max_delay, min_rate, window, recover_windows,
+                 start_ready=False):
         if not (isinstance(dt_ns, int) and dt_ns > 0):
             raise FreejointValueError('dt_ns: expected an int > 0, got %r' % (dt_ns,))
         if not max_delay > 0.0:
@@ -126,8 +134,10 @@ class ReadinessGuard:
         self.min_rate = float(min_rate)
         self.window_ns = round(window * 1e9)
         self.recover_windows = recover_windows
-        self.ready = True
-        self.reason = ''
+        self.ready = self.started = bool(start_ready)
+        self.reason = '' if start_ready else (
+            'real-time loop not judged yet: waiting for %d good windows of %.3g s'
+            % (recover_windows, window))
         self.trips = 0
         self.recoveries = 0
         self.last_rate = None
@@ -151,7 +161,7 @@ class ReadinessGuard:
         -------
         int
             0: no change; 1: it just became not ready (``reason`` says why); 2: it just
-            became ready again.
+            became ready (``recoveries`` counts the times after the first).
 
         """
         start = self._start_ns
@@ -201,6 +211,8 @@ class ReadinessGuard:
         if self._good >= self.recover_windows:
             self.ready = True
             self.reason = ''
-            self.recoveries += 1
+            if self.started:
+                self.recoveries += 1
+            self.started = True
             return 2
         return 0
