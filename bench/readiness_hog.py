@@ -29,13 +29,13 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HOG = 'import numpy as n; a=n.random.rand(400,400); [a@a for _ in iter(int,1)]'
 
 
-def one_run(case, duration, hogs, extra, log_dir, tag):
+def one_run(case, duration, hogs, extra, log_dir, tag, sim_extra=()):
     """Run the graph once; return the figures (a dict)."""
     import rclpy
     from rclpy.node import Node
     procs = Processes(log_dir, tag=tag)
     hog_procs = [subprocess.Popen([sys.executable, '-c', HOG]) for _ in range(hogs)]
-    rclpy.init()
+    rclpy.init(args=[])
     node = Node('readiness_hog_watch')
     ee = []
     statuses = []
@@ -51,7 +51,7 @@ def one_run(case, duration, hogs, extra, log_dir, tag):
     try:
         procs.start('sim', node_cmd('freejoint_sim', 'sim_node',
                                     os.path.join(ROOT, 'config', 'sim.yaml'),
-                                    ['case:=' + case, 'mode:=realtime']))
+                                    ['case:=' + case, 'mode:=realtime'] + list(sim_extra)))
         procs.start('controller', node_cmd('freejoint_control', 'controller_node',
                                            os.path.join(ROOT, 'config', 'controller.yaml'),
                                            ['case:=' + case, 'lockstep:=false'] + list(extra)))
@@ -75,6 +75,7 @@ def one_run(case, duration, hogs, extra, log_dir, tag):
     stop_line = [ln for ln in ctl_log.splitlines() if 'controller stopped' in ln]
     return {
         'case': case, 'hogs': hogs, 'duration_s': duration, 'extra': list(extra),
+        'sim_extra': list(sim_extra),
         'load_before': [round(v, 2) for v in load0], 'load_after': [round(v, 2) for v in load1],
         'ee_samples': len(ee), 'excursion_max_mm': excursion,
         'sim_diverged': 'plant diverged' in sim_log,
@@ -97,11 +98,13 @@ def main(argv=None):
     ap.add_argument('--hogs', type=int, default=2)
     ap.add_argument('-p', dest='extra', action='append', default=[],
                     help='an extra controller parameter, e.g. -p readiness_guard:=false')
+    ap.add_argument('-s', dest='sim_extra', action='append', default=[],
+                    help='an extra simulator parameter, e.g. -s thread_priority:=80')
     args = ap.parse_args(argv)
     base = tempfile.mkdtemp(prefix='readiness_hog_')
     for i in range(args.runs):
         row = one_run(args.case, args.duration, args.hogs, args.extra, base,
-                      '%s_%d' % (args.case, i))
+                      '%s_%d' % (args.case, i), args.sim_extra)
         print(json.dumps(row), flush=True)
     return 0
 

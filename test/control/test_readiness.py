@@ -150,14 +150,30 @@ def test_a_mean_delay_equal_to_the_tolerated_one_does_not_trip():
     assert loop._readiness.last_delay == pytest.approx(0.002)
 
 
-def test_a_stream_at_a_quarter_of_the_rate_trips_the_guard():
+def test_a_stream_at_a_quarter_of_the_rate_trips_the_guard_once_it_missed_what_a_window_may():
     loop, logs = make(case='horizontal')
-    # Every fourth state, on time: 25 of the 100 expected in the first window.
+    # Every fourth state, on time. A 0.1 s window may miss 20 of its 100 states: at the
+    # state stamped 28 ms, 8 of 29 were taken (21 missed), the window is bad already.
     answers = feed(loop, range(0, 101, 4), 0)
-    assert None not in answers[:-1] and answers[-1] is None
+    assert None not in answers[:7] and answers[7:] == [None] * 19
     assert [text for level, kind, text in logs if level == ERROR and kind is None] == [
-        'real-time loop not ready: 25 of 100 states answered (25 % < 80 %) over 0.1 s: no '
-        'command sent, the driver brakes the arm']
+        'real-time loop not ready: 8 of 29 states answered so far, more than the 20 a 0.1 s '
+        'window may miss (answer rate 80 %): no command sent, the driver brakes the arm']
+
+
+def test_windows_within_the_answer_rate_pass():
+    loop, _ = make(case='horizontal', readiness_min_answer_rate=0.3)
+    # 1 in 3 states: about 34 of 100 per window (66 missed <= the 70 it may miss).
+    assert None not in feed(loop, range(0, 400, 3), 0)
+    assert loop._readiness.trips == 0 and loop._readiness.last_rate == pytest.approx(1 / 3, abs=0.01)
+
+
+def test_a_stall_of_the_loop_trips_the_guard_at_the_first_state_after_it():
+    loop, _ = make()
+    assert None not in feed(loop, range(10), 0)
+    # 30 ms without a state: 30 missed > 20 - the next state is not answered.
+    assert feed(loop, [40], 0) == [None]
+    assert loop._readiness.reason.startswith('real-time loop not ready: 11 of 41 states')
 
 
 def test_the_loop_tracks_again_after_the_recovery_windows_from_a_hold_with_the_torque_ramped():

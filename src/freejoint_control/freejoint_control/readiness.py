@@ -17,7 +17,8 @@ each state the loop does not answer holds the previous command one period longer
 
 A loop starts not ready (the driver's brakes, engaged at start, stay on) until
 ``readiness_recover_windows`` good windows; a hot spare starts ready (it must take over at
-once).  One bad window makes the loop not ready (it stops tracking: the loop withholds its
+once).  One bad window makes the loop not ready (a window that has already missed more states than
+the answer rate allows, e.g. after a stall of the loop, at once, not at its end) (it stops tracking: the loop withholds its
 commands, so the driver's watchdog brakes, or holds, parameter ``readiness_action``);
 ``readiness_recover_windows`` consecutive good windows make it ready again.  Lockstep
 never trips (the simulator waits for each command: no delay).  It reads no clock: the
@@ -133,6 +134,8 @@ class ReadinessGuard:
         self.max_delay = float(max_delay)
         self.min_rate = float(min_rate)
         self.window_ns = round(window * 1e9)
+        # States a window may miss: more, and it is bad whatever follows.
+        self._may_miss = int((1.0 - self.min_rate) * (self.window_ns // dt_ns) + 1e-9)
         self.recover_windows = recover_windows
         self.ready = self.started = bool(start_ready)
         self.reason = '' if start_ready else (
@@ -179,7 +182,25 @@ class ReadinessGuard:
             self._periods = 0
         self._count += 1
         self._periods += effective_periods(now_ns - ns, self.dt_ns)
+        if change == 0 and self.ready:
+            expected = (ns - self._start_ns) // self.dt_ns + 1
+            if expected - self._count > self._may_miss:
+                return self._not_ready(
+                    'real-time loop not ready: %d of %d states answered so far, more than the '
+                    '%d a %.3g s window may miss (answer rate %.0f %%)' % (
+                        self._count, expected, self._may_miss, self.window_ns * 1e-9,
+                        self.min_rate * 100.0))
         return change
+
+    def _not_ready(self, reason):
+        """Note a bad window; return 1 if the loop just became not ready, else 0."""
+        self._good = 0
+        self.reason = reason
+        if self.ready:
+            self.ready = False
+            self.trips += 1
+            return 1
+        return 0
 
     def _judge(self, span):
         """Judge the window of ``span`` ns that just ended; return the change (observe)."""
@@ -197,14 +218,8 @@ class ReadinessGuard:
             bad.append('%d of %d states answered (%.0f %% < %.0f %%)'
                        % (self._count, expected, rate * 100.0, self.min_rate * 100.0))
         if bad:
-            self._good = 0
-            self.reason = ('real-time loop not ready: %s over %.3g s'
-                           % ('; '.join(bad), span * 1e-9))
-            if self.ready:
-                self.ready = False
-                self.trips += 1
-                return 1
-            return 0
+            return self._not_ready('real-time loop not ready: %s over %.3g s'
+                                   % ('; '.join(bad), span * 1e-9))
         if self.ready:
             return 0
         self._good += 1
