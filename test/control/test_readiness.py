@@ -168,7 +168,8 @@ def test_windows_within_the_answer_rate_pass():
     loop, _ = make(case='horizontal', readiness_min_answer_rate=0.3)
     # 1 in 3 states: about 34 of 100 per window (66 missed <= the 70 it may miss).
     assert None not in feed(loop, range(0, 400, 3), 0)
-    assert loop._readiness.trips == 0 and loop._readiness.last_rate == pytest.approx(1 / 3, abs=0.01)
+    guard = loop._readiness
+    assert guard.trips == 0 and guard.last_rate == pytest.approx(1 / 3, abs=0.01)
 
 
 def test_a_stall_of_the_loop_trips_the_guard_at_the_first_state_after_it():

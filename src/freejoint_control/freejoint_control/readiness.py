@@ -17,10 +17,11 @@ each state the loop does not answer holds the previous command one period longer
 
 A loop starts not ready (the driver's brakes, engaged at start, stay on) until
 ``readiness_recover_windows`` good windows; a hot spare starts ready (it must take over at
-once).  One bad window makes the loop not ready (a window that has already missed more states than
-the answer rate allows, e.g. after a stall of the loop, at once, not at its end) (it stops tracking: the loop withholds its
-commands, so the driver's watchdog brakes, or holds, parameter ``readiness_action``);
-``readiness_recover_windows`` consecutive good windows make it ready again.  Lockstep
+once).  One bad window makes the loop not ready: it stops tracking (the loop withholds its
+commands, so the driver's watchdog brakes, or holds: parameter ``readiness_action``); a
+window that has already missed more states than the answer rate allows (a stall of the
+loop) does so at once, not at its end.  ``readiness_recover_windows`` consecutive good
+windows make it ready again.  Lockstep
 never trips (the simulator waits for each command: no delay).  It reads no clock: the
 caller passes the stamps and the system time, so a test drives it deterministically.
 
