@@ -198,6 +198,23 @@ def test_the_loop_tracks_again_after_the_recovery_windows_from_a_hold_with_the_t
     assert max(abs(v) for v in effort) <= 20.0
 
 
+def test_a_marginal_loop_does_not_start_again_hysteresis():
+    loop, _ = make()
+    feed(loop, range(201), 2_500_000)                 # not ready at 200 ms
+    # 1.5 ms old (M = 2): 2 ms, within the 2 ms tolerated but not within half the margin
+    # (1.5 ms): not bad, not good - no command, however long.
+    assert feed(loop, range(201, 1201), 1_500_000) == [None] * 1000
+    guard = loop._readiness
+    assert guard.good_delay == pytest.approx(0.0015) and guard.good_rate == pytest.approx(0.95)
+    assert guard.reason == ('real-time loop not ready: waiting for 5 good windows (mean delay '
+                            '<= 1.5 ms, >= 95 % of the states answered), the last 2 ms, 100 %')
+    # 9 states of 10 (90 % >= 80 %, < 95 %): not good either.
+    assert feed(loop, [k for k in range(1201, 2201) if k % 10], 0) == [None] * 900
+    # Every state on time: good; ready after 5 windows.
+    answers = feed(loop, range(2201, 2702), 0)
+    assert answers[-1] is not None and guard.ready
+
+
 def test_the_hold_action_holds_with_the_reason_in_the_message():
     loop, logs = make(readiness_action='hold')
     feed(loop, range(200), 2_500_000)

@@ -21,7 +21,9 @@ once).  One bad window makes the loop not ready: it stops tracking (the loop wit
 commands, so the driver's watchdog brakes, or holds: parameter ``readiness_action``); a
 window that has already missed more states than the answer rate allows (a stall of the
 loop) does so at once, not at its end.  ``readiness_recover_windows`` consecutive good
-windows make it ready again.  Lockstep
+windows make it ready again, good meaning within half the margins: a mean delay at most
+halfway from one period to the tolerated one, at most a quarter of the states a window may
+miss missed (hysteresis: a marginal loop does not release the brakes).  Lockstep
 never trips (the simulator waits for each command: no delay).  It reads no clock: the
 caller passes the stamps and the system time, so a test drives it deterministically.
 
@@ -110,6 +112,8 @@ class ReadinessGuard:
         It was ready at least once.
     reason : str
         Why it is not ready ('' when ready): the bad window's figures and the bound.
+    good_delay, good_rate : float
+        What a window must keep to count towards readiness [s, fraction]: half the margins.
     trips, recoveries : int
         Transitions to not ready and back.
     last_rate, last_delay : float or None
@@ -135,6 +139,9 @@ class ReadinessGuard:
         self.max_delay = float(max_delay)
         self.min_rate = float(min_rate)
         self.window_ns = round(window * 1e9)
+        # A good window (one of those that make a not-ready loop ready): half the margins.
+        self.good_delay = 0.5 * (dt_ns * 1e-9 + self.max_delay)
+        self.good_rate = 1.0 - 0.25 * (1.0 - self.min_rate)
         # States a window may miss: more, and it is bad whatever follows.
         self._may_miss = int((1.0 - self.min_rate) * (self.window_ns // dt_ns) + 1e-9)
         self.recover_windows = recover_windows
@@ -222,6 +229,15 @@ class ReadinessGuard:
             return self._not_ready('real-time loop not ready: %s over %.3g s'
                                    % ('; '.join(bad), span * 1e-9))
         if self.ready:
+            return 0
+        if delay > self.good_delay or rate < self.good_rate:
+            # Not bad, not good enough to start again (hysteresis): the count restarts.
+            self._good = 0
+            self.reason = ('real-time loop not ready: waiting for %d good windows (mean '
+                           'delay <= %.3g ms, >= %.0f %% of the states answered), the last '
+                           '%.3g ms, %.0f %%' % (self.recover_windows, self.good_delay * 1e3,
+                                                 self.good_rate * 100.0, delay * 1e3,
+                                                 rate * 100.0))
             return 0
         self._good += 1
         if self._good >= self.recover_windows:
