@@ -212,10 +212,12 @@ PARAMS = (
           'least fraction of the expected states (window span / control_period) the loop '
           'must take per window', (0.01, 1.0)),
     Param('readiness_window', 0.2,
-          'window [s of state stamps] over which delay and answer rate are judged; one bad '
-          'window stops tracking (at once when it already missed more states than the rate '
-          'allows: with 0.2 s and 0.8, a stall over 40 ms, near where the driver brakes '
-          'anyway); shorter stalls are within what the law rides out', (0.002, 60.0)),
+          'window [s of state stamps] over which delay and answer rate are judged',
+          (0.002, 60.0)),
+    Param('readiness_trip_windows', 2,
+          'consecutive bad windows after which the loop stops tracking (2: a single stall, '
+          'e.g. of the driver, is ridden out as the law does; a loaded machine is not)',
+          (1, 100000)),
     Param('readiness_recover_windows', 5,
           'consecutive good windows after which a not-ready loop tracks again (hysteresis)',
           (1, 100000)),
