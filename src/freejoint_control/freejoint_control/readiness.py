@@ -17,14 +17,15 @@ each state the loop does not answer holds the previous command one period longer
 
 A loop starts not ready (the driver's brakes, engaged at start, stay on) until
 ``readiness_recover_windows`` good windows; a hot spare starts ready (it must take over at
-once).  ``readiness_trip_windows`` consecutive bad windows (2: one stall is ridden out) make the
-loop not ready: it stops tracking (the loop withholds its commands, so the driver's
-watchdog brakes, or holds: parameter ``readiness_action``).  ``readiness_recover_windows`` consecutive good
-windows make it ready again, good meaning within half the margins: a mean delay at most
-halfway from one period to the tolerated one, at most a quarter of the states a window may
-miss missed (hysteresis: a marginal loop does not release the brakes).  Lockstep
-never trips (the simulator waits for each command: no delay).  It reads no clock: the
-caller passes the stamps and the system time, so a test drives it deterministically.
+once).  ``readiness_trip_windows`` consecutive bad windows (2: one stall is ridden out)
+make the loop not ready: it stops tracking (the loop withholds its commands, so the
+driver's watchdog brakes, or holds: parameter ``readiness_action``).
+``readiness_recover_windows`` consecutive good windows make it ready again, good meaning
+within half the margins: a mean delay at most halfway from one period to the tolerated one,
+at most a quarter of the states a window may miss missed (hysteresis: a marginal loop does
+not release the brakes).  Lockstep never trips (the simulator waits for each command: no
+delay).  It reads no clock: the caller passes the stamps and the system time, so a test
+drives it deterministically.
 
 """
 
