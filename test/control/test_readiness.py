@@ -31,13 +31,13 @@ def make(warm=True, **given):
     Return (loop, log lines) of a real-time vertical controller, ``given`` on top.
 
     Windows of 0.1 s (``readiness_window``), one bad window trips
-    (``readiness_trip_windows``), the other readiness parameters as shipped.
+    (``readiness_trip_windows``), at least 80 % answered, the others as shipped.
 
     ``warm``: fed the 5 good windows (stamps 0-499 ms, on time) after which it is ready
     (it starts not ready); the test's tick 0 is stamped 500 ms and judges the fifth.
     """
     values = dict(FILE, case='vertical', lockstep=False, max_state_age=0.0, stale_timeout=2.0,
-                  readiness_window=0.1, readiness_trip_windows=1)
+                  readiness_window=0.1, readiness_trip_windows=1, readiness_min_answer_rate=0.8)
     values.update(given)
     logs = []
     loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: logs.append(

@@ -17,8 +17,8 @@ each state the loop does not answer holds the previous command one period longer
 
 A loop starts not ready (the driver's brakes, engaged at start, stay on) until
 ``readiness_recover_windows`` good windows; a hot spare starts ready (it must take over at
-once).  ``readiness_trip_windows`` consecutive bad windows (2: one stall is ridden out)
-make the loop not ready: it stops tracking (the loop withholds its commands, so the
+once).  ``readiness_trip_windows`` consecutive bad windows (default 1) make the loop not
+ready: it stops tracking (the loop withholds its commands, so the
 driver's watchdog brakes, or holds: parameter ``readiness_action``).
 ``readiness_recover_windows`` consecutive good windows make it ready again, good meaning
 within half the margins: a mean delay at most halfway from one period to the tolerated one,
