@@ -233,12 +233,12 @@ class ControlLoop:
             return
         max_delay = tolerated_delay(cfg.case, cfg.delay_compensation, cfg.readiness_max_delay)
         key = (cfg.dt_ns, max_delay, cfg.readiness_min_answer_rate, cfg.readiness_window,
-               cfg.readiness_recover_windows, cfg.standby, cfg.readiness_trip_windows)
+               cfg.readiness_recover_windows)
         self._guard_brakes = cfg.readiness_action == 'brake'
         if key == self._readiness_key:
             return
         old = self._readiness
-        guard = ReadinessGuard(*key)
+        guard = ReadinessGuard(*key, start_ready=cfg.standby)
         if old is not None:
             guard.ready, guard.reason, guard.started = old.ready, old.reason, old.started
             guard.trips, guard.recoveries = old.trips, old.recoveries

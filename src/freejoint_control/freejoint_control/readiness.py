@@ -17,15 +17,15 @@ each state the loop does not answer holds the previous command one period longer
 
 A loop starts not ready (the driver's brakes, engaged at start, stay on) until
 ``readiness_recover_windows`` good windows; a hot spare starts ready (it must take over at
-once).  ``readiness_trip_windows`` consecutive bad windows (default 1) make the loop not
-ready: it stops tracking (the loop withholds its commands, so the
-driver's watchdog brakes, or holds: parameter ``readiness_action``).
-``readiness_recover_windows`` consecutive good windows make it ready again, good meaning
-within half the margins: a mean delay at most halfway from one period to the tolerated one,
-at most a quarter of the states a window may miss missed (hysteresis: a marginal loop does
-not release the brakes).  Lockstep never trips (the simulator waits for each command: no
-delay).  It reads no clock: the caller passes the stamps and the system time, so a test
-drives it deterministically.
+once).  One bad window makes the loop not ready: it stops tracking (the loop withholds its
+commands, so the driver's watchdog brakes, or holds: parameter ``readiness_action``); a
+window that has already missed more states than the answer rate allows (a stall of the
+loop) does so at once, not at its end.  ``readiness_recover_windows`` consecutive good
+windows make it ready again, good meaning within half the margins: a mean delay at most
+halfway from one period to the tolerated one, at most a quarter of the states a window may
+miss missed (hysteresis: a marginal loop does not release the brakes).  Lockstep
+never trips (the simulator waits for each command: no delay).  It reads no clock: the
+caller passes the stamps and the system time, so a test drives it deterministically.
 
 """
 
@@ -103,8 +103,6 @@ class ReadinessGuard:
     start_ready : bool
         Ready before any window was judged (a hot spare); else not ready until
         ``recover_windows`` good windows.
-    trip_windows : int
-        Consecutive bad windows that make a ready loop not ready (>= 1).
 
     Attributes
     ----------
@@ -124,7 +122,7 @@ class ReadinessGuard:
     """
 
     def __init__(self, dt_ns, max_delay, min_rate, window, recover_windows,
-                 start_ready=False, trip_windows=1):
+                 start_ready=False):
         if not (isinstance(dt_ns, int) and dt_ns > 0):
             raise FreejointValueError('dt_ns: expected an int > 0, got %r' % (dt_ns,))
         if not max_delay > 0.0:
@@ -134,9 +132,6 @@ class ReadinessGuard:
         if not window >= 2 * dt_ns * 1e-9:
             raise FreejointValueError('window: expected >= 2 control periods (%g s), got %r'
                                       % (2 * dt_ns * 1e-9, window))
-        if not (isinstance(trip_windows, int) and trip_windows >= 1):
-            raise FreejointValueError('trip_windows: expected an int >= 1, got %r'
-                                      % (trip_windows,))
         if not (isinstance(recover_windows, int) and recover_windows >= 1):
             raise FreejointValueError('recover_windows: expected an int >= 1, got %r'
                                       % (recover_windows,))
@@ -147,8 +142,9 @@ class ReadinessGuard:
         # A good window (one of those that make a not-ready loop ready): half the margins.
         self.good_delay = 0.5 * (dt_ns * 1e-9 + self.max_delay)
         self.good_rate = 1.0 - 0.25 * (1.0 - self.min_rate)
+        # States a window may miss: more, and it is bad whatever follows.
+        self._may_miss = int((1.0 - self.min_rate) * (self.window_ns // dt_ns) + 1e-9)
         self.recover_windows = recover_windows
-        self.trip_windows = trip_windows
         self.ready = self.started = bool(start_ready)
         self.reason = '' if start_ready else (
             'real-time loop not judged yet: waiting for %d good windows of %.3g s'
@@ -161,7 +157,6 @@ class ReadinessGuard:
         self._count = 0             # states taken in it
         self._periods = 0           # sum of their effective periods
         self._good = 0              # consecutive good windows while not ready
-        self._bad = 0               # consecutive bad windows
 
     def restart(self):
         """Forget the current window (time went back); keep ready / not ready."""
@@ -195,14 +190,19 @@ class ReadinessGuard:
             self._periods = 0
         self._count += 1
         self._periods += effective_periods(now_ns - ns, self.dt_ns)
+        if change == 0 and self.ready:
+            expected = (ns - self._start_ns) // self.dt_ns + 1
+            if expected - self._count > self._may_miss:
+                return self._not_ready(
+                    'real-time loop not ready: %d of %d states answered so far, more than the '
+                    '%d a %.3g s window may miss (answer rate %.0f %%)' % (
+                        self._count, expected, self._may_miss, self.window_ns * 1e-9,
+                        self.min_rate * 100.0))
         return change
 
     def _not_ready(self, reason):
         """Note a bad window; return 1 if the loop just became not ready, else 0."""
         self._good = 0
-        self._bad += 1
-        if self.ready and self._bad < self.trip_windows:
-            return 0            # one stall: ridden out, as the law does
         self.reason = reason
         if self.ready:
             self.ready = False
@@ -225,8 +225,6 @@ class ReadinessGuard:
         if rate < self.min_rate:
             bad.append('%d of %d states answered (%.0f %% < %.0f %%)'
                        % (self._count, expected, rate * 100.0, self.min_rate * 100.0))
-        if not bad:
-            self._bad = 0
         if bad:
             return self._not_ready('real-time loop not ready: %s over %.3g s'
                                    % ('; '.join(bad), span * 1e-9))
