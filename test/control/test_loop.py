@@ -37,8 +37,12 @@ QD0 = (0.05, -0.1, 0.3)
 
 
 def make(**given):
-    """Return (loop, log lines) of config/controller.yaml with ``given`` on top."""
-    values = dict(FILE)
+    """
+    Return (loop, log lines) of config/controller.yaml with ``given`` on top.
+
+    The readiness guard off unless given (its streams' gaps and ages are test_readiness's).
+    """
+    values = dict(FILE, readiness_guard=False)
     values.update(given)
     logs = []
     loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: logs.append(

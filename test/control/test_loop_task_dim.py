@@ -29,7 +29,7 @@ def test_the_task_dimension_and_the_law_state_names_come_from_the_model_and_the_
 
 
 def test_a_setpoint_of_another_size_is_refused_counted_and_named_in_the_hold():
-    loop, logs = _loop(lockstep=False)
+    loop, logs = _loop(lockstep=False, readiness_guard=False)   # the guard: test_readiness
     assert loop.on_setpoint(0, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 100.0) is None
     assert loop.refused_setpoints == 1
     assert logs[-1][2] == ('setpoint stamped 0 ns refused: 9 values, expected 6 (position, '

@@ -242,7 +242,8 @@ def test_stopping_the_controller_makes_the_sim_apply_zero_effort_within_its_time
                                  lambda m: efforts.append(list(m.effort)), JOINT_STATES.qos)
     sim = run.start('sim', 'mode:=realtime', 'command_timeout:=0.3', 'publish_rate:=100.0',
                     'brake_timeout:=0.0')
-    controller = run.start('controller', 'lockstep:=false')
+    # States at 100 Hz for a 1-kHz loop: the readiness guard would (rightly) never start.
+    controller = run.start('controller', 'lockstep:=false', 'readiness_guard:=false')
     run.start('planner', 'use_sim_time:=false')
     wait(lambda: efforts and efforts[-1][:2] != [0.0, 0.0], 60.0,
          'the controller driving the real-time simulator', spin=run.spin)

@@ -264,7 +264,8 @@ def test_set_parameters_changes_the_next_tick_and_a_bad_value_is_refused(
 
 FILE = SCHEMA.yaml_values(PARAMS)  # what the node takes from config/controller.yaml
 LIMITS = tuple(FILE['effort_limits'])
-OLD_STAMPS = ('-p', 'max_state_age:=0.0')
+# The test's states are stamped by the test (old, a few): not a real-time loop to judge.
+OLD_STAMPS = ('-p', 'max_state_age:=0.0', '-p', 'readiness_guard:=false')
 """Real time with the tests' stamps (from 0, i.e. 1970): no state is skipped as too old."""
 
 
@@ -355,7 +356,8 @@ def test_a_setpoint_delivered_before_a_state_is_applied_before_the_state_is_answ
     from freejoint_control.controller_node import ControllerNode
     node = ControllerNode(parameter_overrides=[
         Parameter('case', value='vertical'), Parameter('lockstep', value=False),
-        Parameter('stale_timeout', value=2.0), Parameter('max_state_age', value=0.0)])
+        Parameter('stale_timeout', value=2.0), Parameter('max_state_age', value=0.0),
+        Parameter('readiness_guard', value=False)])
     executor = make_executor(kind)
     executor.add_node(node)
     if kind == 'events':
@@ -377,7 +379,8 @@ def test_a_setpoint_delivered_before_a_state_is_applied_before_the_state_is_answ
         status, message, effort, sp_ns = states[0]
         assert not status & STATUS_HOLDING and 'no setpoint yet' not in message, message
         assert sp_ns == 0
-        loop = _loop(case='vertical', lockstep=False, stale_timeout=2.0, max_state_age=0.0)
+        loop = _loop(case='vertical', lockstep=False, stale_timeout=2.0, max_state_age=0.0,
+                     readiness_guard=False)
         loop.on_setpoint(0, _setpoint(0), 0, 0.0)
         assert effort == loop.on_state(0, NAMES, q, qd, 0, 0.0).effort
     finally:

@@ -20,7 +20,10 @@ values) or None when nothing is to be published yet.  It owns:
   going back, ``delay_compensation: predict``, :meth:`ControlLoop.reset`;
 - the hot spare's readiness (:meth:`ControlLoop.standby_waits_for`, from the numbers of
   matched and listed endpoints the node passes in), the status message, the counters and
-  the content of the ``/diagnostics`` status (:meth:`ControlLoop.diagnostics`).
+  the content of the ``/diagnostics`` status (:meth:`ControlLoop.diagnostics`);
+- real time, the readiness guard (``freejoint_control.readiness``, parameters
+  ``readiness_*``): while the loop cannot keep within the delay its law tolerates or
+  misses states, no command (the driver's watchdog brakes) or a hold, saying why.
 
 Logging goes through the ``log(level, kind, text)`` callable given (``kind`` names a
 throttled kind of line, None: always); status bits are ControllerState's.
@@ -30,6 +33,7 @@ throttled kind of line, None: always); status bits are ControllerState's.
 import math
 
 from freejoint_control import failures
+from freejoint_control.readiness import ReadinessGuard, tolerated_delay
 from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
                                     STATUS_TORQUE_LIMITED)
@@ -147,6 +151,12 @@ class ControlLoop:
         self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep, m=m)
         self._predictor = None
         self._zero_task = (0.0,) * m
+        self._readiness = None
+        self._readiness_key = None
+        self._guard_ns = None           # stamp of the last state the guard took
+        self._withholding = False       # not ready, 'brake': no command sent
+        self._said_ns = None            # stamp of the last 'not ready' line
+        self.withheld = 0               # states not answered by the readiness guard
         self._install(cfg)
         self.result = Result(m)
         self.result.law_state_names = tuple(self.law.state_names)
@@ -216,6 +226,36 @@ class ControlLoop:
                 self._predictor = StatePredictor(cfg.nominal, cfg.dt)
         else:
             self._predictor = None
+        self._install_readiness(cfg)
+
+    def _install_readiness(self, cfg):
+        """(Re)build the readiness guard when its parameters change (keeps its verdict)."""
+        if cfg.lockstep or not cfg.readiness_guard:
+            self._readiness = None
+            self._readiness_key = None
+            self._withholding = False
+            return
+        max_delay = tolerated_delay(cfg.case, cfg.delay_compensation, cfg.readiness_max_delay)
+        key = (cfg.dt_ns, max_delay, cfg.readiness_min_answer_rate, cfg.readiness_window,
+               cfg.readiness_recover_windows)
+        self._guard_brakes = cfg.readiness_action == 'brake'
+        if key == self._readiness_key:
+            return
+        old = self._readiness
+        guard = ReadinessGuard(*key, start_ready=cfg.standby)
+        if old is not None:
+            guard.ready, guard.reason, guard.started = old.ready, old.reason, old.started
+            guard.trips, guard.recoveries = old.trips, old.recoveries
+        self._readiness = guard
+        self._readiness_key = key
+        self.log(INFO, None, 'readiness guard: tolerated mean state->command delay %.3g ms '
+                 '(%s), at least %.0f %% of the states answered per %.3g s window; '
+                 'not ready: %s' % (
+                     max_delay * 1e3, 'readiness_max_delay' if cfg.readiness_max_delay > 0.0
+                     else 'measured margin of %s, delay_compensation %s' % (
+                         cfg.case, cfg.delay_compensation),
+                     cfg.readiness_min_answer_rate * 100.0, cfg.readiness_window,
+                     'no command (the driver brakes)' if self._guard_brakes else 'hold'))
 
     def apply(self, old, cfg):
         """Take a validated parameter change (effective on the next state)."""
@@ -354,6 +394,19 @@ class ControlLoop:
         self.last_state_wall = mono
         self._state_effort = effort
         self.stale_reported = False
+        guard = self._readiness
+        if guard is not None:
+            change = 0
+            if ns != self._guard_ns:
+                self._guard_ns = ns
+                change = guard.observe(ns, now_ns)
+                if change:
+                    self._readiness_changed(change)
+                    self._said_ns = ns
+            if not guard.ready and self._guard_brakes:
+                return self._withhold(ns)
+            if self._withholding:
+                self._resume_after_brake()
         if self._max_age_ns:
             age_ns = now_ns - ns
             if age_ns > self._max_age_ns:
@@ -423,12 +476,60 @@ class ControlLoop:
                 return None
             self.pending = None
             return self._tick(ns, q, qd, ns, sp, now_ns)
+        if guard is not None and not guard.ready:
+            return self._readiness_hold(ns, q, qd, now_ns, guard)
         found = self._realtime_setpoint(ns)
         if found is None:
             return self._no_setpoint(ns, q, qd, now_ns)
         if ns - found[0] > self._carry_ns and self.hold_on_stale:
             return self._no_setpoint(ns, q, qd, now_ns, (ns - found[0]) * 1e-9)
         return self._tick(ns, q, qd, found[0], found[1], now_ns)
+
+    # -- readiness guard (real time) ---------------------------------------------------
+    def _readiness_changed(self, change):
+        """Log a change of the guard's verdict (once per transition)."""
+        guard = self._readiness
+        if change == 1:
+            action = ('no command sent, the driver brakes the arm' if self._guard_brakes
+                      else 'holding position')
+            self.log(ERROR, None, '%s: %s' % (guard.reason, action))
+        else:
+            self.log(WARN if guard.recoveries else INFO, None,
+                     'real-time loop ready%s (%d good windows: mean delay %.3g ms, %.0f %% of '
+                     'the states answered): tracking %s from a hold where the arm is' % (
+                         ' again' if guard.recoveries else '', guard.recover_windows,
+                         guard.last_delay * 1e3, guard.last_rate * 100.0,
+                         'resumes' if guard.recoveries else 'starts'))
+
+    def _withhold(self, ns):
+        """Not ready, 'brake': answer nothing (the driver's command watchdog brakes)."""
+        self._withholding = True
+        self.withheld += 1
+        self.pending = None
+        said = self._said_ns
+        if said is None or not 0 <= ns - said < 1_000_000_000:
+            # At most once per second of stamps (a transition is said at once).
+            self._said_ns = ns
+            self.log(ERROR, 'readiness', '%s: no command sent, the driver brakes the arm'
+                     % self._readiness.reason)
+        return None
+
+    def _resume_after_brake(self):
+        """Ready again after withholding: start over from where the braked arm is."""
+        self._withholding = False
+        self.shaper.reset()             # hold at fk(q), or blend to the setpoint from it
+        self.last_ns = -1               # dt of the first tick: one control period
+        self._prev_cmd = list(self._zero)   # the braked arm got zero: ramp from it
+        self._rate_armed = True
+        if self._predictor is not None:
+            self._predictor.reset()
+
+    def _readiness_hold(self, ns, q, qd, now_ns, guard):
+        """Not ready, 'hold': hold the end effector, the message saying why."""
+        if self.shaper.mode != MODE_HOLD:
+            self.holds += 1
+        self.log(ERROR, 'readiness', guard.reason + ': holding position')
+        return self._tick(ns, q, qd, None, None, now_ns, guard.reason)
 
     def _start_from(self, q, qd):
         """Start the reference from the measured end-effector motion (fk, J qd)."""
@@ -819,6 +920,11 @@ class ControlLoop:
                 warnings.append(no_state + ' (lockstep: simulation time stands still)')
             else:
                 errors.append(no_state)
+        guard = self._readiness
+        if guard is not None and not guard.ready:
+            errors.append('%s: %s' % (guard.reason, 'no command sent (the driver brakes); '
+                                      '%d states not answered' % self.withheld
+                                      if self._guard_brakes else 'holding position'))
         if faults:
             errors.append('%d law faults %s: the previous command repeated, theta_hat '
                           'restored' % (faults, period))
@@ -864,15 +970,28 @@ class ControlLoop:
             ('refused setpoints', self.refused_setpoints),
             ('law faults', self.faults),
             ('old states skipped', self.old_states)) + extra
+        if guard is not None:
+            values += (
+                ('readiness', 'ready' if guard.ready else 'not ready'),
+                ('readiness trips', guard.trips),
+                ('tolerated delay [ms]', '%.3g' % (guard.max_delay * 1e3)),
+                ('window mean delay [ms]', '-' if guard.last_delay is None
+                 else '%.3g' % (guard.last_delay * 1e3)),
+                ('window answered [%]', '-' if guard.last_rate is None
+                 else '%.0f' % (guard.last_rate * 100.0)),
+                ('states not answered (brake)', self.withheld))
         return errors, warnings, ok, values
 
     def report(self):
         """One line for the end of the run: ticks, zero-effort answers, holds, refusals."""
         return ('controller stopped: %d ticks computed, %d zero-effort answers (stale or bad '
                 'input), %d holds, %d states and %d setpoints refused, %d law faults, %d '
-                'states skipped as too old'
+                'states skipped as too old%s'
                 % (self.ticks, self.zero_answers, self.holds, self.refused_states,
-                   self.refused_setpoints, self.faults, self.old_states))
+                   self.refused_setpoints, self.faults, self.old_states,
+                   '' if self._readiness is None else
+                   ', readiness guard: %d trips, %d states not answered'
+                   % (self._readiness.trips, self.withheld)))
 
 
 def _status_message(status, det, cfg, hold_reason, shaper):

@@ -29,6 +29,7 @@ from freejoint_core.urdf_offline import nominal_model
 ON_STALE = ('hold', 'zero')
 DELAY_COMPENSATION = ('off', 'predict')
 FAILURE_MODES = ('off', 'notice', 'detect')
+READINESS_ACTIONS = ('brake', 'hold')
 GAIN_MAX = {'K': 1e4, 'Lambda': 1e4, 'R': 1e3, 'Gamma': 1e3, 'sigma': 1e3}
 """Upper bounds of the gain vectors (K, Lambda in 1/s; beyond them the law is meaningless
 at any control rate this node runs; (K + Lambda) * control_period <= 1 is checked too)."""
@@ -225,6 +226,32 @@ PARAMS = (
           'rate [Hz of state stamps] of controller_state (as ros2_control state publishers '
           'thin theirs): 0 = one per answered state; else at most one per 1/rate s, and '
           'every answer whose status differs from the last published one', (0.0, 1e6)),
+    Param('readiness_guard', True,
+          'real time: judge the loop (freejoint_control.readiness) over windows of state '
+          'stamps - mean state->command delay against readiness_max_delay, states answered '
+          'against readiness_min_answer_rate - and stop tracking while it cannot keep '
+          'within them (readiness_action), saying why; lockstep is never judged'),
+    Param('readiness_action', 'brake',
+          "what a not-ready loop does: 'brake' = send no command (the driver's watchdog "
+          "brakes the arm where it is: the simulator's brake_timeout), 'hold' = hold the "
+          'end effector with the law (the law still runs on late states)',
+          validator=one_of(READINESS_ACTIONS)),
+    Param('readiness_max_delay', 0.0,
+          'tolerated mean effective delay [s] (state age when taken, in whole control '
+          'periods, plus the one period to the next step); 0 = the delay margin measured '
+          'for the case and delay_compensation (docs/delay.md: vertical 2 ms, horizontal '
+          '10 ms; with predict 10 / 20 ms)', (0.0, 10.0)),
+    Param('readiness_min_answer_rate', 0.8,
+          'least fraction of the expected states (window span / control_period) the loop '
+          'must take per window', (0.01, 1.0)),
+    Param('readiness_window', 0.2,
+          'window [s of state stamps] over which delay and answer rate are judged; one bad '
+          'window stops tracking (at once when it already missed more states than the rate '
+          'allows: with 0.2 s and 0.8, a stall over 40 ms, near where the driver brakes '
+          'anyway); shorter stalls are within what the law rides out', (0.002, 60.0)),
+    Param('readiness_recover_windows', 5,
+          'consecutive good windows after which a not-ready loop tracks again (hysteresis)',
+          (1, 100000)),
 ) + FAILURE_PARAMS
 
 
