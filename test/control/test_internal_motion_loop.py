@@ -7,11 +7,12 @@ reference is the offline runner of circles back to back
 (``freejoint_core.circles.run_circles`` with the stabilised options of the vertical case):
 the same plant, the same modulation, so the same commands, element by element.
 """
+import math
 import os
 
 from freejoint_control.loop import ControlLoop
 from freejoint_control.params import SCHEMA
-from freejoint_core.arm import table1
+from freejoint_core.arm import ArmModel, table1
 from freejoint_core.circles import MODULATION, run_circles, stabilised_options
 from freejoint_core.control import Gains
 from freejoint_core.errors import FreejointValueError
@@ -19,11 +20,18 @@ from freejoint_core.internal import hanging_pose
 from freejoint_core.laws import FreeLinkDampedLaw, RobustLaw
 from freejoint_core.plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
 from freejoint_core.trajectory import CircleQuintic
+from freejoint_sim.params import SCHEMA as SIM
 import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 FILE = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'))
+STAB = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'),
+                          os.path.join(ROOT, 'config', 'stabilised', 'controller.yaml'))
+SIM_STAB = (os.path.join(ROOT, 'config', 'sim.yaml'),
+            os.path.join(ROOT, 'config', 'stabilised', 'sim.yaml'))
+FOUR_SIM = (os.path.join(ROOT, 'config', 'sim.yaml'),
+            os.path.join(ROOT, 'config', 'four_link', 'sim.yaml'))
 FOUR = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'),
                           os.path.join(ROOT, 'config', 'four_link', 'controller.yaml'))
 DT = 0.001
@@ -33,14 +41,21 @@ TRAJ = CircleQuintic()
 REST = 0.5
 
 
-def make(**given):
-    """Return the loop of config/controller.yaml with ``given`` on top."""
-    values = dict(FILE)
+def sim_q0(files, **given):
+    """Return the simulator's q(0) of parameter files with ``given`` on top."""
+    values = SIM.yaml_values(*files)
+    values.update(given)
+    return SIM.config(values).q0
+
+
+def make(base=FILE, **given):
+    """Return the loop of a parameter file's values (config/controller.yaml) with ``given``."""
+    values = dict(base)
     values.update(given)
     return ControlLoop(SCHEMA.config(values))
 
 
-def drive(loop, case, seed, seconds):
+def drive(loop, case, seed, seconds, q0=None):
     """
     Drive ``loop`` in lockstep with the core plant from the hanging start.
 
@@ -50,7 +65,7 @@ def drive(loop, case, seed, seconds):
     real = table1(case)
     p0 = TRAJ.sample(0.0)[0]
     plant = Plant(real, DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND, seed=seed,
-                  q0=hanging_pose(real, p0))
+                  q0=hanging_pose(real, p0) if q0 is None else q0)
     rest = (float(p0[0]), float(p0[1]), 0.0, 0.0, 0.0, 0.0)
     cmds, states = [], []
     for k in range(int(round(seconds / DT))):
@@ -101,8 +116,10 @@ def test_the_loop_with_damping_commands_what_the_offline_circles_run_does_bit_fo
     (rec,), trace = run_circles('vertical', 'robust', 0, circles=1, hold=REST, gains=gains,
                                 record_trace=True, **opts)
     assert rec['diverged_at_s'] is None
-    loop = make(case='vertical', free_link_damping=True)
-    cmds, states = drive(loop, 'vertical', 0, TRAJ.duration + REST)
+    # the overlays config/stabilised/{controller,sim}.yaml: the loop's law and the sim's q(0)
+    loop = make(STAB, case='vertical')
+    q0 = sim_q0(SIM_STAB, case='vertical')
+    cmds, states = drive(loop, 'vertical', 0, TRAJ.duration + REST, q0=q0)
     assert cmds.shape == trace['tau'].shape
     assert np.array_equal(cmds, trace['tau'])
     # the state after tick k is the shift the offline trace records at tick k
@@ -128,3 +145,39 @@ def test_a_restored_snapshot_repeats_the_step_modulation_included():
     assert law.state_values() == after
     law.reset()
     assert law.state_values()[-2:] == [0.0, 0.0]
+
+
+def test_the_simulator_starts_hanging_with_start_pose_hanging():
+    # The overlay's start: the end effector at initial_position (0.2, 0) m, the free link's
+    # absolute angle -90 deg (straight down), so gravity exerts no torque on joint 3.
+    real = table1('vertical')
+    q0 = np.array(sim_q0(SIM_STAB, case='vertical'))
+    assert q0.tolist() == hanging_pose(real, (0.2, 0.0)).tolist()
+    model = ArmModel(real)
+    assert np.allclose(model.fk(q0), (0.2, 0.0), rtol=0.0, atol=1e-12)
+    assert math.isclose(math.remainder(float(np.sum(q0)), 2.0 * math.pi), -0.5 * math.pi,
+                        abs_tol=1e-12)
+    assert abs(model.gravity_torque(q0)[2]) < 1e-12
+    # paper: the default, q3 = 120 deg as before
+    assert math.isclose(sim_q0(SIM_STAB[:1], case='vertical')[2], math.radians(120.0),
+                        rel_tol=1e-12)
+
+
+def test_start_pose_hanging_of_the_four_link_arm_is_its_free_base_at_rest():
+    # Another arm: the equilibrium of its free base nearest initial_joint_positions.
+    values = SIM.yaml_values(*FOUR_SIM)
+    params = SIM.config(dict(values, case='vertical')).params
+    guess = [float(v) for v in values['initial_joint_positions'].split()]
+    q0 = np.array(sim_q0(FOUR_SIM, case='vertical', start_pose='hanging'))
+    model = ArmModel(params)
+    assert np.allclose(model.fk(q0), model.fk(guess), rtol=0.0, atol=1e-9)
+    assert abs(model.gravity_torque(q0)[0]) < 1e-9
+
+
+def test_start_pose_hanging_is_refused_without_gravity_or_a_reachable_point():
+    with pytest.raises(FreejointValueError, match="start_pose: 'hanging' needs"):
+        sim_q0(SIM_STAB, case='horizontal')
+    with pytest.raises(FreejointValueError, match="start_pose: 'hanging' at initial_position"):
+        sim_q0(SIM_STAB, case='vertical', initial_position=[2.0, 0.0])
+    with pytest.raises(FreejointValueError, match='start_pose'):
+        sim_q0(SIM_STAB, case='vertical', start_pose='upright')
