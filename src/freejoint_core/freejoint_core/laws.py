@@ -19,7 +19,9 @@ plausible range ``(lower, upper)``: a value outside it (or non-finite) is a law 
 The paper's law (:class:`RobustLaw`, ``RobustController`` of ``freejoint_core.control``,
 same numbers) is registered as ``'robust'``; :func:`register_law` adds another law (one
 module defining it and calling ``register_law``), :func:`make_law` builds the one a
-controller's parameter ``law`` names.
+controller's parameter ``law`` names.  :class:`FreeLinkDampedLaw` wraps a law so that its
+reference passes through the free link's damping first (the controller's parameter
+``free_link_damping``, issue 22).
 
 """
 
