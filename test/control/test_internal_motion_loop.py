@@ -7,6 +7,7 @@ reference is the offline runner of circles back to back
 (``freejoint_core.circles.run_circles`` with the stabilised options of the vertical case):
 the same plant, the same modulation, so the same commands, element by element.
 """
+import importlib.util
 import math
 import os
 
@@ -181,3 +182,23 @@ def test_start_pose_hanging_is_refused_without_gravity_or_a_reachable_point():
         sim_q0(SIM_STAB, case='vertical', initial_position=[2.0, 0.0])
     with pytest.raises(FreejointValueError, match='start_pose'):
         sim_q0(SIM_STAB, case='vertical', start_pose='upright')
+
+
+def _demo():
+    """Return tools/demo.py as a module."""
+    spec = importlib.util.spec_from_file_location('freejoint_demo',
+                                                  os.path.join(ROOT, 'tools', 'demo.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_demo_stabilise_starts_the_nodes_with_the_overlay_files_there_are():
+    demo = _demo()
+    stab = os.path.join(ROOT, 'config', 'stabilised')
+    assert demo._overlay(demo.STABILISED, 'controller') == [
+        '--params-file', os.path.join(stab, 'controller.yaml')]
+    assert demo._overlay(demo.STABILISED, 'sim') == ['--params-file',
+                                                     os.path.join(stab, 'sim.yaml')]
+    assert demo._overlay(demo.STABILISED, 'planner') == []       # the paper's circle
+    assert demo._overlay(None, 'sim') == []
