@@ -13,6 +13,11 @@ graph's records to ``bags/demo/metrics.json`` and runs ``analyze`` on the bags i
 
 Usage: ``python tools/demo.py [--cases horizontal vertical] [--seed 0] [--out bags/demo]``
 
+``--stabilise`` runs the vertical case with config/stabilised/ on top (issue 22: the free
+link starts hanging, the controller's ``free_link_damping`` on) beside the offline circles
+runner with the same options (``freejoint_core.circles.run_circles``, one circle), into
+``<out>/stabilised``.
+
 ``--arm four_link`` (``make demo ARM=four_link``) runs the shipped 4-link example instead
 (``config/four_link/*.yaml`` on top of ``config/*.yaml``: four_link_arm.urdf, joint1 passive,
 the horizontal case), recorded and analysed, beside its offline runner
@@ -40,6 +45,8 @@ DRAIN_QUIET = 0.5
 """Wall seconds the recorder's count must stay unchanged before the nodes are stopped."""
 FIGURES = os.path.join(ROOT, 'docs', 'figures')
 ARMS = {'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0}}
+STABILISED = 'stabilised'
+"""The overlay of ``--stabilise``: config/stabilised/ (issue 22), the vertical case."""
 """The shipped examples of ``--arm``: parameter overlay ``config/<name>/``, the passive joint
 recorded, the stated tracking bound (horizontal; test/core/test_four_link_example.py)."""
 """Where the figures of the two paper cases go (shown in the README)."""
@@ -202,9 +209,15 @@ def ee_trajectory(points, dt_ns, n_ticks):
     return out
 
 
+def _overlay_files(arm, node):
+    """Return the overlay file ``config/<arm>/<node>.yaml`` in a list (none there: ``[]``)."""
+    path = None if arm is None else os.path.join(CONFIG, arm, node + '.yaml')
+    return [path] if path is not None and os.path.exists(path) else []
+
+
 def _overlay(arm, node):
-    """Return the ``--params-file`` of an example's overlay for ``node`` (none: ``[]``)."""
-    return [] if arm is None else ['--params-file', os.path.join(CONFIG, arm, node + '.yaml')]
+    """Return the ``--params-file`` of an overlay for ``node`` (none: ``[]``)."""
+    return [arg for path in _overlay_files(arm, node) for arg in ('--params-file', path)]
 
 
 def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
@@ -212,8 +225,9 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
     """
     Run one case through the graph in lockstep until tick n_ticks - 1 was published.
 
-    ``arm``: a shipped example of ``ARMS`` (its overlay ``config/<arm>/<node>.yaml`` after
-    each node's parameter file), or None for the paper's arm.
+    ``arm``: a shipped example of ``ARMS`` or ``STABILISED`` (its overlay
+    ``config/<arm>/<node>.yaml`` after each node's parameter file, where there is one), or
+    None for the paper's arm.
 
     All nodes are started (recorder if installed, simulator, controller, planner with
     ``autostart: false``); once the recorder (``~/status``) and this process have matched
@@ -241,7 +255,7 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
         if record and os.path.exists(rec_exe):
             bag = os.path.join(out_dir, case)
             info = 'case=%s, variant=robust, seed=%d, passive_joint=%s, max_ticks=%d' % (
-                case, seed, ARMS[arm]['passive_joint'] if arm else PASSIVE_JOINT, n_ticks)
+                case, seed, ARMS.get(arm, {}).get('passive_joint', PASSIVE_JOINT), n_ticks)
             graph.start('recorder', [rec_exe, '--ros-args', '-p', 'output:=' + bag,
                                      '-p', 'topics:=[]', '-p', 'overwrite:=true',
                                      '-p', 'use_sim_time:=true',
@@ -271,8 +285,8 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
             # (what makes a volatile writer send to the recorder) can lag by tens of ms.
             calls.spin_until(lambda: False, SETTLE)
         from freejoint_planner.params import SCHEMA as PLANNER
-        plan = PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'), *(
-            [] if arm is None else [os.path.join(CONFIG, arm, 'planner.yaml')]))
+        plan = PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'),
+                                   *_overlay_files(arm, 'planner'))
         answer = calls.plan_circle(plan, 30.0)
         if answer is None or not answer.accepted:
             raise RuntimeError('the planner did not start the circle: %s (logs in %s)' % (
@@ -345,6 +359,31 @@ def arm_offline(arm, case, seed, n_ticks):
                    label=case, seed=seed, n_ticks=n_ticks)
 
 
+def stabilised_offline(case, seed, settings):
+    """
+    Return the offline circles runner's record and trace with the stabilised options.
+
+    One circle, the graph's settings (``offline_settings``), the options of
+    ``freejoint_core.circles.stabilised_options`` (the vertical case: hanging start, the
+    free link's damping with the bound of ``MODULATION``); the trace gains ``p`` (ticks, 2),
+    the end effector [m] as the law measured it.
+    """
+    from freejoint_core.circles import run_circles, stabilised_options
+    from freejoint_core.trajectory import CircleQuintic
+    import numpy as np
+    traj = settings['trajectory']
+    if any(traj.sample_tuple(t) != CircleQuintic().sample_tuple(t) for t in (0.0, 1.3, 4.9)):
+        raise SystemExit('demo: --stabilise compares with the circles runner, which runs the '
+                         "paper's circle: planner.yaml plans another")
+    (record,), trace = run_circles(
+        case, 'robust', seed, circles=1, dt=settings['dt'], dt_sub=settings['dt_sub'],
+        nominal_scale=settings['nominal_scale'], dist_bound=settings['dist_bound'],
+        gains=settings['gains'], record_trace=True, **stabilised_options(case))
+    des = np.array([traj.sample(t)[0] for t in trace['t']])
+    trace['p'] = trace['e'] + des
+    return record, trace
+
+
 # -- main -------------------------------------------------------------------------------
 def _parse(argv):
     ap = argparse.ArgumentParser(prog='demo', description=__doc__.split('\n')[1])
@@ -356,6 +395,10 @@ def _parse(argv):
     ap.add_argument('--arm', choices=sorted(ARMS),
                     help='run a shipped example arm instead of the paper cases '
                     '(make demo ARM=four_link)')
+    ap.add_argument('--stabilise', action='store_true',
+                    help='the vertical case with the internal-motion stabilisation '
+                    '(config/stabilised/: the free link starts hanging, its damping on), beside '
+                    'the offline circles runner with the same options')
     ap.add_argument('--view', action='store_true',
                     help='also start the viewer (Foxglove WebSocket on ws://127.0.0.1:8765, '
                     'layout config/foxglove_layout.json; make demo VIEW=1)')
@@ -371,6 +414,15 @@ def main(argv=None):
         # paper's law does not stabilise it (offline: diverges within 0.2 s).
         args.cases = ['horizontal']
         args.out = os.path.join(args.out, args.arm)
+    overlay = args.arm
+    if args.stabilise:
+        if args.arm:
+            say('error: --stabilise is for the paper arm (not with --arm)')
+            return 1
+        # Horizontal: the stabilised options are the paper's law (circles.stabilised_options).
+        args.cases = ['vertical']
+        args.out = os.path.join(args.out, STABILISED)
+        overlay = STABILISED
     if not os.environ.get('ROS_DOMAIN_ID'):
         os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -429,7 +481,7 @@ def main(argv=None):
             collector = Collector(node)
             try:
                 run = run_graph(case, args.seed, n_ticks, dt_ns, collector, executor, out,
-                                log_dir, record=record_bags, arm=args.arm)
+                                log_dir, record=record_bags, arm=overlay)
             except RuntimeError as exc:
                 say('error: %s: %s' % (case, exc))
                 failed = True
@@ -450,7 +502,13 @@ def main(argv=None):
                 say('error: %s: %s' % (case, exc))
                 failed = True
                 break
-            if args.arm:
+            if args.stabilise:
+                off, trace = stabilised_offline(case, args.seed, settings)
+                say('  offline circles runner (%s): rms %.4f mm, max %.4f mm, swing at the '
+                    'end %.3f deg' % (off['variant'], off['rms_mm'], off['max_mm'],
+                                      off['swing_deg']))
+                say('  graph: rms %.4f mm, max %.4f mm' % (record['rms_mm'], record['max_mm']))
+            elif args.arm:
                 off, trace = arm_offline(args.arm, case, args.seed, n_ticks)
                 bound = ARMS[args.arm]['bound_mm']
                 say('  %s example, %s: max tracking error %.3f mm (stated bound %g mm)%s'
@@ -467,7 +525,8 @@ def main(argv=None):
                 '%.3g m over %d ticks%s' % (dev, n_ticks, verdict))
             failed = failed or dev > 1e-9
             graph_records.append(record)
-            offline_records.append(off)
+            if not args.stabilise:          # a circles record: another table
+                offline_records.append(off)
             runs.append(run)
     finally:
         view.stop_all()
@@ -477,14 +536,15 @@ def main(argv=None):
     if graph_records:
         metrics = os.path.join(out, 'metrics.json')
         write_records(metrics, graph_records)
-        rows = [r for pair in zip(offline_records, graph_records) for r in pair]
+        rows = [r for pair in zip(offline_records, graph_records) for r in pair] \
+            if offline_records else graph_records
         print()
         print(format_table(rows))
         print()
     if not failed and os.path.exists(analyze) and record_bags:
         bags = [run['bag'] for run in runs]
         say('analyze %s' % ' '.join(shown(b) for b in bags))
-        figures = FIGURES if not args.arm else os.path.join(out, 'figures')
+        figures = FIGURES if not overlay else os.path.join(out, 'figures')
         code = subprocess.call([analyze, *bags, '--figures-dir', figures], cwd=ROOT)
         if code != 0:
             say('analyze exited with %d' % code)

@@ -41,7 +41,7 @@ from freejoint_core.delay import extrapolate_setpoint, StatePredictor
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import (clamp_dt, law_output_fault, limit_effort,
                                    setpoint_refusal, state_refusal)
-from freejoint_core.laws import make_law
+from freejoint_core.laws import FreeLinkDampedLaw, make_law
 from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
 import numpy as np
 
@@ -143,6 +143,8 @@ class ControlLoop:
         self.log = log or _no_log
         self.law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
         failures.install_nullspace(self.law, cfg)
+        if cfg.values['free_link_damping']:     # issue 22: the reference damps the free link
+            self.law = FreeLinkDampedLaw(self.law, cfg.values['free_link_delta_max'])
         # Joint failures (issue 23, freejoint_control/failures.py): None when off.
         self.failures = None if cfg.values['joint_failures'] == 'off' else \
             failures.FailureMonitor(cfg, self.law, self.log)

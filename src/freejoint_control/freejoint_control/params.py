@@ -20,6 +20,7 @@ from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR, JOINT
 from freejoint_common.schema import JOINTS, LoopConfig, NOMINAL_SCALE, one_of, Param
 from freejoint_common.schema import SCHEDULING, Schema, unique_names
 from freejoint_core.arm import ArmModel, ArmParams
+from freejoint_core.circles import MODULATION
 from freejoint_core.control import Gains, H_FORMS
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.failure import DEFAULT_K_O, DEFAULT_MARGIN, DEFAULT_TICKS
@@ -110,6 +111,18 @@ FAILURE_PARAMS = (
           'null-space damping [N m s/rad] of the active joint rates when more joints are '
           'driven than the task has (r > 2, freejoint_core.internal.NullSpace); 0 = none '
           "(the paper's law exactly)", (0.0, 1e4), read_only=True),
+)
+
+# The free link's damping (issue 22, r = m; freejoint_core.laws.FreeLinkDampedLaw).
+FREE_LINK_PARAMS = (
+    Param('free_link_damping', False,
+          "true: the reference passes through the free link's damping before the law "
+          '(freejoint_core.internal.FreeLinkModulation: a bounded shift of the setpoint, '
+          'docs/internal-motion.md), for the arm whose last joint is free (r = m); '
+          "false: the paper's law exactly", read_only=True),
+    Param('free_link_delta_max', MODULATION['delta_max'],
+          "bound [m] of the free link damping's shift of the reference (the task deviation "
+          'it may add)', (1e-6, 1.0), read_only=True),
 )
 
 PARAMS = (
@@ -252,7 +265,7 @@ PARAMS = (
     Param('readiness_recover_windows', 5,
           'consecutive good windows after which a not-ready loop tracks again (hysteresis)',
           (1, 100000)),
-) + FAILURE_PARAMS
+) + FAILURE_PARAMS + FREE_LINK_PARAMS
 
 
 # -- cross-parameter checks ------------------------------------------------------------
@@ -359,9 +372,23 @@ def _check_failures(values):
     return None
 
 
+def _check_free_link(values):
+    if not values['free_link_damping']:
+        return None
+    nominal = _nominal(values)
+    if nominal.passive != (nominal.n - 1,) or nominal.r != ArmModel.task_dim:
+        return (f'free_link_damping: needs the arm whose last joint alone is free (r = m = '
+                f'{ArmModel.task_dim}), got passive joints {list(nominal.passive)} of '
+                f'{nominal.n}')
+    if values['joint_failures'] != 'off':
+        return ("free_link_damping: not with joint_failures (a failure changes the free "
+                "joints); set joint_failures: 'off'")
+    return None
+
+
 CHECKS = (_check_joints, _check_loop_rate, _check_theta0, _check_effort_limits,
           _check_delay_compensation, _check_state_bounds, _check_standby, _check_task,
-          _check_failures)
+          _check_failures, _check_free_link)
 
 
 @dataclass(frozen=True)

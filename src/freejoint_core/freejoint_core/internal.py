@@ -525,6 +525,14 @@ class FreeLinkModulation:
         self._delta_dot = (u, v)
         return out
 
+    def snapshot(self):
+        """Return the modulation's state (``delta``, its rate, the last angle) as a tuple."""
+        return (self._delta, self._delta_dot, self._th_qs)
+
+    def restore(self, saved):
+        """Put back a :meth:`snapshot`."""
+        self._delta, self._delta_dot, self._th_qs = saved
+
     @property
     def delta(self):
         """Return the current offset ``delta`` [m], numpy copy (2,)."""

@@ -19,7 +19,9 @@ plausible range ``(lower, upper)``: a value outside it (or non-finite) is a law 
 The paper's law (:class:`RobustLaw`, ``RobustController`` of ``freejoint_core.control``,
 same numbers) is registered as ``'robust'``; :func:`register_law` adds another law (one
 module defining it and calling ``register_law``), :func:`make_law` builds the one a
-controller's parameter ``law`` names.
+controller's parameter ``law`` names.  :class:`FreeLinkDampedLaw` wraps a law so that its
+reference passes through the free link's damping first (the controller's parameter
+``free_link_damping``, issue 22).
 
 """
 
@@ -27,6 +29,7 @@ import math
 
 from freejoint_core.control import RobustController
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.internal import FreeLinkModulation
 
 INF = math.inf
 
@@ -214,3 +217,94 @@ def make_law(name, nominal, gains, model=None):
 
 
 register_law(RobustLaw.name, RobustLaw)
+
+
+class FreeLinkDampedLaw(ControlLaw):
+    """
+    A law whose reference passes through the free link's damping first (issue 22, r = m).
+
+    Each step the setpoint goes through
+    :class:`freejoint_core.internal.FreeLinkModulation` (the bounded shift ``delta`` of the
+    reference, ``|delta| <= delta_max``) and the wrapped law tracks the modulated one: what
+    ``freejoint_core.circles.run_circles`` computes with ``stabilise``.  Everything else
+    is the wrapped law's; its state gains ``free_link_delta[0..1]`` (the shift [m] after
+    the step), saved and restored with the law's.
+
+    Parameters
+    ----------
+    law : ControlLaw
+        The wrapped law (its nominal arm with the last joint free, r = m = 2).
+    delta_max : float
+        Bound of the reference's shift [m], > 0.
+    **options
+        Further keywords of ``FreeLinkModulation`` (its defaults otherwise).
+
+    """
+
+    def __init__(self, law, delta_max, **options):
+        self.law = law
+        self._options = dict(options, delta_max=delta_max)
+        self.modulation = FreeLinkModulation(law.nominal, **self._options)
+        self.name = law.name
+        self.state_names = tuple(law.state_names) + ('free_link_delta[0]',
+                                                     'free_link_delta[1]')
+
+    @property
+    def state_bounds(self):
+        """Return the wrapped law's bounds and the shift's (its disc, 1 % slack)."""
+        d = 1.01 * self.modulation.delta_max
+        return tuple(self.law.state_bounds) + ((-d, d), (-d, d))
+
+    @property
+    def model(self):
+        """Return the wrapped law's nominal model."""
+        return self.law.model
+
+    @property
+    def nominal(self):
+        """Return the wrapped law's nominal parameters."""
+        return self.law.nominal
+
+    @property
+    def stiffness(self):
+        """Return the wrapped law's hold stiffness scale."""
+        return self.law.stiffness
+
+    def step(self, q, qd, p_d, pd_d, pdd_d, dt):
+        """Modulate the setpoint (``FreeLinkModulation.step``), then step the wrapped law."""
+        p_m, pd_m, pdd_m = self.modulation.step(q, qd, p_d, pd_d, pdd_d, dt)
+        return self.law.step(q, qd, p_m, pd_m, pdd_m, dt)
+
+    def reset(self):
+        """Reset the wrapped law and the modulation (``delta`` = 0)."""
+        self.law.reset()
+        self.modulation.reset()
+
+    def state_values(self):
+        """Return the wrapped law's state and the shift ``delta`` (2) [m]."""
+        return list(self.law.state_values()) + self.modulation.delta.tolist()
+
+    def save_state(self):
+        """Return the wrapped law's snapshot and the modulation's."""
+        return (self.law.save_state(), self.modulation.snapshot())
+
+    def restore_state(self, saved):
+        """Put both snapshots back."""
+        self.law.restore_state(saved[0])
+        self.modulation.restore(saved[1])
+
+    def set_stiffness(self, scale):
+        """Scale the wrapped law's gains for a hold."""
+        self.law.set_stiffness(scale)
+
+    def set_nominal(self, params, model=None):
+        """Give the wrapped law and the modulation a new nominal arm (the shift kept)."""
+        saved = self.modulation.snapshot()
+        modulation = FreeLinkModulation(params, **self._options)
+        self.law.set_nominal(params, model)
+        modulation.restore(saved)
+        self.modulation = modulation
+
+    def set_gains(self, gains):
+        """Give the wrapped law new gains."""
+        self.law.set_gains(gains)

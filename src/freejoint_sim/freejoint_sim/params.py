@@ -23,12 +23,14 @@ from freejoint_common.schema import JOINTS, LoopConfig, one_of, Param, SCHEDULIN
 from freejoint_common.schema import unique_names
 from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.internal import equilibrium_pose, hanging_pose
 from freejoint_core.offline import DEFAULT_Q3_0_DEG
 from freejoint_core.plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB
 from freejoint_sim.failure_injection import parse_fail_joint
 
 MODES = ('lockstep', 'realtime')
 ENGINES = ('rk4', 'mujoco')
+START_POSES = ('paper', 'hanging')
 MAX_DIST_BOUND = 10.0
 """Upper bound [N m] of ``dist_bound``: 20 times the paper's 0.5 N m and about the peak
 actuator torque of the horizontal case (11 N m); a disturbance as large as what the
@@ -112,6 +114,15 @@ PARAMS = (
           "q(0) [rad], every joint base to tip, as space-separated numbers (e.g. '0 1.0 1.4 "
           "2.2'), instead of initial_position and initial_passive_deg (which need an arm "
           "with one passive and two active joints); '' = those; takes effect on reset"),
+    Param('start_pose', 'paper',
+          "'paper': q(0) as initial_position and initial_passive_deg (or "
+          "initial_joint_positions) give it; 'hanging': the free link at rest under gravity "
+          '(issue 22): for the 3-link arm with joint 3 free, hanging straight down with the '
+          'end effector at initial_position (freejoint_core.internal.hanging_pose); for '
+          'another arm, the static equilibrium of its free joints nearest '
+          'initial_joint_positions, the end effector where those put it '
+          '(freejoint_core.internal.equilibrium_pose); needs gravity; takes effect on reset',
+          validator=one_of(START_POSES)),
     Param('command_timeout', 0.5,
           'wall time [s] without a command after which zero effort is applied (and a '
           'warning given); lockstep: per step, after the first command', (1e-3, 3600.0)),
@@ -275,6 +286,31 @@ class Config(LoopConfig):
     clock_every: int
 
 
+def _hanging(values, params, guess):
+    """Return q(0) of ``start_pose: hanging`` (the free joints at rest), or raise naming it."""
+    if params.p == 0 or params.gravity <= 0.0:
+        raise FreejointValueError(
+            "start_pose: 'hanging' needs a passive joint and gravity (case vertical, or a "
+            f'URDF arm with gravity), got {params.p} passive joints, gravity '
+            f'{params.gravity:g} m/s^2')
+    if params.n == 3 and params.passive == (2,) and guess is None:
+        try:
+            return hanging_pose(params, tuple(values['initial_position'])).tolist()
+        except FreejointValueError as exc:
+            raise FreejointValueError(f"start_pose: 'hanging' at initial_position: {exc}") \
+                from None
+    if guess is None:
+        raise FreejointValueError(
+            f"start_pose: 'hanging' for an arm of {params.n} joints, passive "
+            f'{list(params.passive)}: give initial_joint_positions (the search starts there)')
+    model = ArmModel(params)
+    try:
+        return equilibrium_pose(model, model.fk(guess), guess).tolist()
+    except FreejointValueError as exc:
+        raise FreejointValueError(f"start_pose: 'hanging' from initial_joint_positions: "
+                                  f'{exc}') from None
+
+
 def build(values):
     """
     Return the :class:`Config` of a complete, valid parameter dict.
@@ -288,6 +324,8 @@ def build(values):
     dt = float(values['control_period'])
     passive = float(values['initial_passive_deg'])
     q0 = _initial_joints(values['initial_joint_positions'], params)
+    if values['start_pose'] == 'hanging':
+        q0 = _hanging(values, params, q0)
     if q0 is None and (params.r != 2 or params.p != 1):
         raise FreejointValueError(
             f'initial_joint_positions: the arm has {params.r} active and {params.p} passive '

@@ -1,0 +1,204 @@
+"""
+The free link's damping in the controller's loop, one process (issue 22, r = m).
+
+The loop (``free_link_damping: true``) is driven in lockstep by the core's plant stepped
+here from the hanging start, vertical case, seed 0, over one circle and a rest; the
+reference is the offline runner of circles back to back
+(``freejoint_core.circles.run_circles`` with the stabilised options of the vertical case):
+the same plant, the same modulation, so the same commands, element by element.
+"""
+import importlib.util
+import math
+import os
+
+from freejoint_control.loop import ControlLoop
+from freejoint_control.params import SCHEMA
+from freejoint_core.arm import ArmModel, table1
+from freejoint_core.circles import MODULATION, run_circles, stabilised_options
+from freejoint_core.control import Gains
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.internal import hanging_pose
+from freejoint_core.laws import FreeLinkDampedLaw, RobustLaw
+from freejoint_core.plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
+from freejoint_core.trajectory import CircleQuintic
+from freejoint_sim.params import SCHEMA as SIM
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+FILE = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'))
+STAB = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'),
+                          os.path.join(ROOT, 'config', 'stabilised', 'controller.yaml'))
+SIM_STAB = (os.path.join(ROOT, 'config', 'sim.yaml'),
+            os.path.join(ROOT, 'config', 'stabilised', 'sim.yaml'))
+FOUR_SIM = (os.path.join(ROOT, 'config', 'sim.yaml'),
+            os.path.join(ROOT, 'config', 'four_link', 'sim.yaml'))
+FOUR = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'),
+                          os.path.join(ROOT, 'config', 'four_link', 'controller.yaml'))
+DT = 0.001
+DT_NS = 1_000_000
+NAMES = ['joint1', 'joint2', 'joint3']
+TRAJ = CircleQuintic()
+REST = 0.5
+
+
+def sim_q0(files, **given):
+    """Return the simulator's q(0) of parameter files with ``given`` on top."""
+    values = SIM.yaml_values(*files)
+    values.update(given)
+    return SIM.config(values).q0
+
+
+def make(base=FILE, **given):
+    """Return the loop of a parameter file's values (config/controller.yaml) with ``given``."""
+    values = dict(base)
+    values.update(given)
+    return ControlLoop(SCHEMA.config(values))
+
+
+def drive(loop, case, seed, seconds, q0=None):
+    """
+    Drive ``loop`` in lockstep with the core plant from the hanging start.
+
+    The setpoints are the circle, then its start point at rest.  Returns the commands
+    (ticks, 3) and the law's state values (ticks, k).
+    """
+    real = table1(case)
+    p0 = TRAJ.sample(0.0)[0]
+    plant = Plant(real, DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND, seed=seed,
+                  q0=hanging_pose(real, p0) if q0 is None else q0)
+    rest = (float(p0[0]), float(p0[1]), 0.0, 0.0, 0.0, 0.0)
+    cmds, states = [], []
+    for k in range(int(round(seconds / DT))):
+        t = k * DT
+        ns = k * DT_NS
+        assert loop.on_state(ns, NAMES, plant.q.tolist(), plant.qd.tolist(), 0,
+                             100.0 + t) is None
+        sp = TRAJ.sample_tuple(t) if t < TRAJ.duration - 0.5 * DT else rest
+        res = loop.on_setpoint(ns, sp, 0, 100.0 + t)
+        cmds.append(list(res.effort))
+        states.append(list(res.law_state_values))
+        plant.step(res.effort, DT)
+    return np.array(cmds), np.array(states)
+
+
+def test_the_damping_parameters_default_to_off_and_the_offline_bound():
+    cfg = SCHEMA.config(dict(FILE))
+    assert cfg.values['free_link_damping'] is False
+    assert cfg.values['free_link_delta_max'] == MODULATION['delta_max'] == 0.01
+    loop = make()
+    assert isinstance(loop.law, RobustLaw)
+
+
+def test_damping_on_wraps_the_law_and_reports_the_shift_in_its_state():
+    loop = make(case='vertical', free_link_damping=True, free_link_delta_max=0.004)
+    assert isinstance(loop.law, FreeLinkDampedLaw)
+    assert loop.law.modulation.delta_max == 0.004
+    assert loop.result.law_state_names[-2:] == ('free_link_delta[0]', 'free_link_delta[1]')
+    assert loop.law.state_bounds[-1] == pytest.approx((-0.00404, 0.00404))
+
+
+def test_damping_is_refused_for_an_arm_with_another_free_joint_and_with_failures():
+    with pytest.raises(FreejointValueError, match='free_link_damping: needs the arm'):
+        SCHEMA.config(dict(FOUR, free_link_damping=True))
+    with pytest.raises(FreejointValueError, match='free_link_damping: not with joint_failures'):
+        SCHEMA.config(dict(FILE, free_link_damping=True, joint_failures='notice'))
+    with pytest.raises(FreejointValueError, match='free_link_delta_max'):
+        SCHEMA.config(dict(FILE, free_link_damping=True, free_link_delta_max=0.0))
+
+
+def test_the_loop_with_damping_commands_what_the_offline_circles_run_does_bit_for_bit():
+    # Vertical, seed 0, hanging start, one circle and a 0.5-s rest: the offline runner with
+    # the stabilised options and the loop's gains (its torque limits, theta_max) on the same
+    # plant; every command equal, and the shift equal to the offline one.
+    opts = stabilised_options('vertical')
+    assert opts == {'start': 'hanging', 'stabilise': MODULATION}
+    gains = Gains(tau_limit=tuple(FILE['effort_limits']), theta_max=tuple(FILE['theta_max']))
+    (rec,), trace = run_circles('vertical', 'robust', 0, circles=1, hold=REST, gains=gains,
+                                record_trace=True, **opts)
+    assert rec['diverged_at_s'] is None
+    # the overlays config/stabilised/{controller,sim}.yaml: the loop's law and the sim's q(0)
+    loop = make(STAB, case='vertical')
+    q0 = sim_q0(SIM_STAB, case='vertical')
+    cmds, states = drive(loop, 'vertical', 0, TRAJ.duration + REST, q0=q0)
+    assert cmds.shape == trace['tau'].shape
+    assert np.array_equal(cmds, trace['tau'])
+    # the state after tick k is the shift the offline trace records at tick k
+    assert np.array_equal(states[:, -2:], trace['delta'])
+    assert np.max(np.hypot(states[:, -2], states[:, -1])) <= 0.01 * (1 + 1e-12)
+    assert np.max(np.abs(states[:, -2:])) > 1e-3           # the damping did act
+
+
+def test_a_restored_snapshot_repeats_the_step_modulation_included():
+    # The loop restores the law's snapshot after a law fault: the wrapper's holds the shift.
+    law = make(case='vertical', free_link_damping=True).law
+    real = table1('vertical')
+    q = hanging_pose(real, TRAJ.sample(0.0)[0])
+    qd = np.array([0.1, -0.2, 3.0])
+    sp = TRAJ.sample_tuple(0.3)
+    law.step(q, qd, sp[0:2], sp[2:4], sp[4:6], DT)
+    saved = law.save_state()
+    first = law.step(q, qd, sp[0:2], sp[2:4], sp[4:6], DT).tau
+    after = law.state_values()
+    law.step(q, qd, sp[0:2], sp[2:4], sp[4:6], DT)
+    law.restore_state(saved)
+    assert np.array_equal(law.step(q, qd, sp[0:2], sp[2:4], sp[4:6], DT).tau, first)
+    assert law.state_values() == after
+    law.reset()
+    assert law.state_values()[-2:] == [0.0, 0.0]
+
+
+def test_the_simulator_starts_hanging_with_start_pose_hanging():
+    # The overlay's start: the end effector at initial_position (0.2, 0) m, the free link's
+    # absolute angle -90 deg (straight down), so gravity exerts no torque on joint 3.
+    real = table1('vertical')
+    q0 = np.array(sim_q0(SIM_STAB, case='vertical'))
+    assert q0.tolist() == hanging_pose(real, (0.2, 0.0)).tolist()
+    model = ArmModel(real)
+    assert np.allclose(model.fk(q0), (0.2, 0.0), rtol=0.0, atol=1e-12)
+    assert math.isclose(math.remainder(float(np.sum(q0)), 2.0 * math.pi), -0.5 * math.pi,
+                        abs_tol=1e-12)
+    assert abs(model.gravity_torque(q0)[2]) < 1e-12
+    # paper: the default, q3 = 120 deg as before
+    assert math.isclose(sim_q0(SIM_STAB[:1], case='vertical')[2], math.radians(120.0),
+                        rel_tol=1e-12)
+
+
+def test_start_pose_hanging_of_the_four_link_arm_is_its_free_base_at_rest():
+    # Another arm: the equilibrium of its free base nearest initial_joint_positions.
+    values = SIM.yaml_values(*FOUR_SIM)
+    params = SIM.config(dict(values, case='vertical')).params
+    guess = [float(v) for v in values['initial_joint_positions'].split()]
+    q0 = np.array(sim_q0(FOUR_SIM, case='vertical', start_pose='hanging'))
+    model = ArmModel(params)
+    assert np.allclose(model.fk(q0), model.fk(guess), rtol=0.0, atol=1e-9)
+    assert abs(model.gravity_torque(q0)[0]) < 1e-9
+
+
+def test_start_pose_hanging_is_refused_without_gravity_or_a_reachable_point():
+    with pytest.raises(FreejointValueError, match="start_pose: 'hanging' needs"):
+        sim_q0(SIM_STAB, case='horizontal')
+    with pytest.raises(FreejointValueError, match="start_pose: 'hanging' at initial_position"):
+        sim_q0(SIM_STAB, case='vertical', initial_position=[2.0, 0.0])
+    with pytest.raises(FreejointValueError, match='start_pose'):
+        sim_q0(SIM_STAB, case='vertical', start_pose='upright')
+
+
+def _demo():
+    """Return tools/demo.py as a module."""
+    spec = importlib.util.spec_from_file_location('freejoint_demo',
+                                                  os.path.join(ROOT, 'tools', 'demo.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_demo_stabilise_starts_the_nodes_with_the_overlay_files_there_are():
+    demo = _demo()
+    stab = os.path.join(ROOT, 'config', 'stabilised')
+    assert demo._overlay(demo.STABILISED, 'controller') == [
+        '--params-file', os.path.join(stab, 'controller.yaml')]
+    assert demo._overlay(demo.STABILISED, 'sim') == ['--params-file',
+                                                     os.path.join(stab, 'sim.yaml')]
+    assert demo._overlay(demo.STABILISED, 'planner') == []       # the paper's circle
+    assert demo._overlay(None, 'sim') == []
