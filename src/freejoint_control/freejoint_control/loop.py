@@ -67,6 +67,8 @@ RECEIPT = 'receipt'
 
 _isfinite = math.isfinite
 _NAME_MAP_CACHE = 16
+_SAY_PERIOD_NS = round(1e9)
+"""[ns of stamps] At most one 'not ready' line per this period (a transition at once)."""
 
 
 def _no_log(level, kind, text):
@@ -509,7 +511,7 @@ class ControlLoop:
         self.withheld += 1
         self.pending = None
         said = self._said_ns
-        if said is None or not 0 <= ns - said < 1_000_000_000:
+        if said is None or not 0 <= ns - said < _SAY_PERIOD_NS:
             # At most once per second of stamps (a transition is said at once).
             self._said_ns = ns
             self.log(ERROR, 'readiness', '%s: no command sent, the driver brakes the arm'

@@ -381,7 +381,7 @@ def _check_free_link(values):
                 f'{ArmModel.task_dim}), got passive joints {list(nominal.passive)} of '
                 f'{nominal.n}')
     if values['joint_failures'] != 'off':
-        return ("free_link_damping: not with joint_failures (a failure changes the free "
+        return ('free_link_damping: not with joint_failures (a failure changes the free '
                 "joints); set joint_failures: 'off'")
     return None
 
