@@ -506,14 +506,10 @@ def test_the_planner_takes_thread_priority_and_cpu_affinity_for_every_thread_lik
     params = _param_client(ros_node)
 
     def threads():
-        out = set()
-        for tid in map(int, os.listdir('/proc/%d/task' % proc.pid)):
-            try:
-                out.add((os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority,
-                         tuple(sorted(os.sched_getaffinity(tid)))))
-            except OSError:                       # the thread ended meanwhile
-                pass
-        return out
+        # The threads thread_priority applies to (not the middleware's asynchronous writer,
+        # kept at the default scheduler: freejoint_common.scheduling.BEST_EFFORT_THREADS).
+        from freejoint_tools.harness import thread_scheduling
+        return {(p, prio, tuple(cpus)) for p, prio, cpus in thread_scheduling(proc.pid)[0]}
     if permitted:
         assert threads() == {(os.SCHED_FIFO, 10, (cpu,))}, procs.log(proc)
         assert params.get_values(['thread_priority']) == {'thread_priority': 10}

@@ -33,15 +33,15 @@ def _fifo_permitted():
 
 
 def _threads(pid):
-    """Return [(policy, priority, cpus)] of every thread of process ``pid``."""
-    out = []
-    for tid in map(int, os.listdir('/proc/%d/task' % pid)):
-        try:
-            out.append((os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority,
-                        sorted(os.sched_getaffinity(tid))))
-        except ProcessLookupError:
-            pass
-    return out
+    """Return [(policy, priority, cpus)] of every thread ``thread_priority`` applies to."""
+    from freejoint_tools.harness import thread_scheduling
+    return thread_scheduling(pid)[0]
+
+
+def _best_effort_threads(pid):
+    """Return [(policy, priority, cpus)] of the threads kept at the default scheduler."""
+    from freejoint_tools.harness import thread_scheduling
+    return thread_scheduling(pid)[1]
 
 
 def _explain_stall(exc, proc, procs):
@@ -111,6 +111,8 @@ def test_every_thread_gets_the_priority_and_cpus_and_set_parameters_changes_them
     assert 'thread_priority' in res[0].reason and '98' in res[0].reason, res[0].reason
     assert res[1].reason.startswith('cpu_affinity: CPU %d is not available' % (LAST + 64))
     assert all(t == (policy, prio, [LAST]) for t in _threads(proc.pid))
+    # The middleware's asynchronous writer (it can busy-wait): on the CPUs, not at FIFO.
+    assert all(t == (os.SCHED_OTHER, 0, [LAST]) for t in _best_effort_threads(proc.pid))
     res = params.set_parameters([Parameter('thread_priority', value=0),
                                  Parameter('cpu_affinity', value=CPUS)])
     assert [r.successful for r in res] == [True, True], [r.reason for r in res]

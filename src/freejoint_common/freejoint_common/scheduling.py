@@ -5,7 +5,9 @@ What ros2_control's controller_manager does with its ``thread_priority`` and
 ``cpu_affinity`` parameters (``realtime_tools::configure_sched_fifo`` /
 ``set_current_thread_affinity``), for every thread of a Python node process: the
 executor's thread and the middleware's receive and event threads alike, since a
-message's path through the process crosses all of them.  Threads are found in
+message's path through the process crosses all of them (but the threads named in
+``BEST_EFFORT_THREADS``, the middleware's asynchronous writer, which can busy-wait: they
+keep the default scheduler, on the same CPUs).  Threads are found in
 ``/proc/self/task``; :meth:`ProcessScheduling.refresh` also covers threads started
 later (the middleware starts some on discovery).
 
@@ -24,6 +26,12 @@ from freejoint_core.errors import FreejointValueError
 MAX_PRIORITY = 98
 """Highest priority accepted: 99 stays with the kernel's own watchdog threads."""
 
+
+BEST_EFFORT_THREADS = ('dds.asyn',)
+"""Prefixes of thread names kept at the default scheduler (their CPUs are still set): Fast
+DDS's asynchronous writer thread busy-waits at times (a CI run: 0.95 s of CPU a second while
+the node started), and at the node's SCHED_FIFO priority on the node's one CPU it starved
+every other thread of the process (FIFO threads of one priority do not share a CPU)."""
 
 RT_RUNTIME_FILE = '/proc/sys/kernel/sched_rt_runtime_us'
 RT_PERIOD_FILE = '/proc/sys/kernel/sched_rt_period_us'
@@ -115,6 +123,19 @@ def validate_affinity(value, cpus=None):
     return tuple(sorted(out))
 
 
+def best_effort_thread(name):
+    """Return whether a thread of this name stays at the default scheduler."""
+    return name.startswith(BEST_EFFORT_THREADS)
+
+
+def _thread_name(tid):
+    try:
+        with open('/proc/self/task/%d/comm' % tid) as f:
+            return f.read().strip()
+    except OSError:
+        return ''
+
+
 def _thread_ids():
     try:
         return [int(tid) for tid in os.listdir('/proc/self/task')]
@@ -202,15 +223,14 @@ class ProcessScheduling:
         """Apply the current settings to threads not yet done; return None or the reason."""
         if not self.requests and not self._touched:
             return None             # nothing asked for: leave the process as it started
-        if self.priority:
-            policy, param = os.SCHED_FIFO, os.sched_param(self.priority)
-        else:
-            policy, param = os.SCHED_OTHER, os.sched_param(0)
+        other = os.SCHED_OTHER, os.sched_param(0)
+        fifo = (os.SCHED_FIFO, os.sched_param(self.priority)) if self.priority else other
         cpus = self.affinity or self.cpus
         for tid in _thread_ids():
             if tid in self._done:
                 continue
             self._touched = True
+            policy, param = other if best_effort_thread(_thread_name(tid)) else fifo
             try:
                 os.sched_setaffinity(tid, cpus)
                 os.sched_setscheduler(tid, policy, param)

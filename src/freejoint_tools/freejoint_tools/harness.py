@@ -404,6 +404,33 @@ def _wchan(pid, tid):
         return '?'
 
 
+def thread_scheduling(pid):
+    """
+    Return the scheduling of every thread of process ``pid``, split as the node sets it.
+
+    Returns
+    -------
+    (list, list)
+        ``(policy, priority, cpus)`` of each thread the node's ``thread_priority`` applies
+        to, and of each thread it keeps at the default scheduler
+        (``freejoint_common.scheduling.BEST_EFFORT_THREADS``); ``cpus`` sorted lists. A
+        thread that ended meanwhile is left out.
+
+    """
+    from freejoint_common.scheduling import best_effort_thread
+    node, best_effort = [], []
+    for tid in map(int, os.listdir('/proc/%d/task' % pid)):
+        try:
+            with open('/proc/%d/task/%d/comm' % (pid, tid)) as f:
+                name = f.read().strip()
+            row = (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority,
+                   sorted(os.sched_getaffinity(tid)))
+        except OSError:                       # the thread ended meanwhile
+            continue
+        (best_effort if best_effort_thread(name) else node).append(row)
+    return node, best_effort
+
+
 def thread_report(pid, interval=1.0):
     """
     Describe what the threads of process ``pid`` do, for a process that stopped progressing.
