@@ -147,6 +147,17 @@ def _origin(elem, what):
             _floats(org.get('rpy', '0 0 0'), 3, f'{what} origin rpy'))
 
 
+def _inertia_tensor(inertia, name):
+    """Return the 3x3 inertia tensor [kg m^2] of an ``<inertia>`` element of link ``name``."""
+    comps = {}
+    for key in ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz'):
+        (comps[key],) = _floats(inertia.get(key, '0'), 1,
+                                f'robot_description: link {name!r} inertia {key}')
+    return np.array([[comps['ixx'], comps['ixy'], comps['ixz']],
+                     [comps['ixy'], comps['iyy'], comps['iyz']],
+                     [comps['ixz'], comps['iyz'], comps['izz']]])
+
+
 def _rpy_matrix(rpy):
     """Rotation matrix of URDF roll-pitch-yaw (fixed axes x, y, z)."""
     r, p, y = rpy
@@ -181,13 +192,7 @@ def _inertial(link, name):
     if inertia is None:
         raise FreejointValueError(
             f'robot_description: link {name!r}: <inertial> has no <inertia>')
-    comps = {}
-    for key in ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz'):
-        (comps[key],) = _floats(inertia.get(key, '0'), 1,
-                                f'robot_description: link {name!r} inertia {key}')
-    tensor = np.array([[comps['ixx'], comps['ixy'], comps['ixz']],
-                       [comps['ixy'], comps['iyy'], comps['iyz']],
-                       [comps['ixz'], comps['iyz'], comps['izz']]])
+    tensor = _inertia_tensor(inertia, name)
     rot = _rpy_matrix(rpy)
     izz = float((rot @ tensor @ rot.T)[2, 2])
     return mass, xyz[0], izz
@@ -594,13 +599,7 @@ def _inertial_frame(link, name, rot, n):
             return 0.0, np.zeros(3), 0.0
         raise FreejointValueError(
             f'robot_description: link {name!r}: <inertial> has no <inertia>')
-    comps = {}
-    for key in ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz'):
-        (comps[key],) = _floats(inertia.get(key, '0'), 1,
-                                f'robot_description: link {name!r} inertia {key}')
-    tensor = np.array([[comps['ixx'], comps['ixy'], comps['ixz']],
-                       [comps['ixy'], comps['iyy'], comps['iyz']],
-                       [comps['ixz'], comps['iyz'], comps['izz']]])
+    tensor = _inertia_tensor(inertia, name)
     full = rot @ _rpy_matrix(rpy)
     izz = float(n @ (full @ tensor @ full.T) @ n)
     return mass, rot @ np.array(xyz), izz
