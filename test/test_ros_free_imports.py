@@ -19,6 +19,11 @@ ROS_FREE = (
     'freejoint_control.loop',
     'freejoint_core.laws',
     'freejoint_core.guards',
+    'freejoint_control.readiness',
+    'freejoint_control.failures',
+    'freejoint_core.internal',
+    'freejoint_core.failure',
+    'freejoint_core.spatial_law',
 )
 """Modules that must import without rclpy (the nodes' schemas and what they build on)."""
 

@@ -7,8 +7,6 @@ clock values are the test's, so each run is the same.
 """
 import math
 import os
-import subprocess
-import sys
 
 from freejoint_control.loop import (ControlLoop, STATUS_DT_CLAMPED, STATUS_HOLDING,
                                     STATUS_LAW_FAULT, STATUS_RATE_LIMITED, STATUS_RESUMING,
@@ -155,13 +153,7 @@ class Replica:
 
 
 # -- import and interface ------------------------------------------------------------------
-def test_the_loop_module_imports_without_rclpy_and_without_the_messages():
-    code = ("import sys; sys.modules['rclpy'] = None; sys.modules['freejoint_msgs'] = None; "
-            'import freejoint_control.loop, freejoint_core.laws, freejoint_core.guards')
-    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr
-
-
+# (That the loop imports without rclpy is test/test_ros_free_imports.py.)
 def test_the_status_bits_are_the_controller_state_message_s():
     from freejoint_msgs.msg import ControllerState as CS
     assert (STATUS_HOLDING, STATUS_RATE_LIMITED, STATUS_LAW_FAULT, STATUS_RESUMING,

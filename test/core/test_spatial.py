@@ -102,11 +102,11 @@ def test_bad_links_and_joints_are_named_in_the_error():
 
 
 def test_spatial_gains_are_sized_by_m_and_the_planar_defaults_are_unchanged():
-    assert SpatialGains(m=3).K == (100.0,) * 3
-    assert SpatialGains(m=6).Lambda == (50.0,) * 6
+    assert SpatialGains(task_dim=3).K == (100.0,) * 3
+    assert SpatialGains(task_dim=6).Lambda == (50.0,) * 6
     assert Gains().K == (100.0, 100.0)
     with pytest.raises(FreejointValueError, match='K'):
-        SpatialGains(m=3, K=(1.0, 2.0))
+        SpatialGains(task_dim=3, K=(1.0, 2.0))
 
 
 @pytest.mark.parametrize('name,free,m', [('panda', ['panda_joint7'], 3), ('ur5', [], 6)])
@@ -118,7 +118,7 @@ def test_conditioning_gives_the_same_verdicts_for_the_arm_ten_times_heavier(name
         heavy.model.inertias[j] = pin.Inertia(10.0 * body.mass, body.lever, 10.0 * body.inertia)
     assert heavy.terms(PANDA_PLAN[:heavy.n], np.zeros(heavy.n)).M[0, 0] == pytest.approx(
         10.0 * light.terms(PANDA_PLAN[:heavy.n], np.zeros(heavy.n)).M[0, 0])
-    kappa_min = SpatialGains(m=m).kappa_min
+    kappa_min = SpatialGains(task_dim=m).kappa_min
     rng = np.random.default_rng(5)
     for _ in range(50):
         q = rng.uniform(np.maximum(light.lower, -3.0), np.minimum(light.upper, 3.0))
@@ -225,7 +225,7 @@ def test_holding_the_panda_hand_orientation_with_joint_7_free_is_singular_everyw
     for _ in range(10):
         q = rng.uniform(arm.lower, arm.upper)
         da, _, maa = arm.decoupling(arm.terms(q, np.zeros(7)))
-        assert task_conditioning(da, maa, 1.0)[0] < 1e-6 < SpatialGains(m=6).kappa_min
+        assert task_conditioning(da, maa, 1.0)[0] < 1e-6 < SpatialGains(task_dim=6).kappa_min
     with pytest.raises(FreejointValueError, match='cannot drive m = 6'):
         known_arm('ur5', ['wrist_2_joint'], m=6)
 

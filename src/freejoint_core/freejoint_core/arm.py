@@ -210,6 +210,28 @@ def table1(case='horizontal'):
         gravity=GRAVITY_VERTICAL if case == 'vertical' else 0.0)
 
 
+def number_or_numbers(value, name, expected):
+    """
+    Return ``(values, scalar)``: a number as ``((x,), True)``, a sequence as a tuple, False.
+
+    Parameters
+    ----------
+    value : float or sequence of float
+        Input (a bool is not a number).
+    name : str
+        Argument name used in the error message.
+    expected : str
+        What the message says was expected (e.g. ``'a number or 3 numbers'``).
+
+    """
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+        return (float(value),), True
+    try:
+        return tuple(float(v) for v in value), False
+    except (TypeError, ValueError) as exc:
+        raise FreejointValueError(f'{name}: expected {expected}, got {value!r}') from exc
+
+
 def check_vector(x, n, name):
     """
     Return ``x`` as a finite float numpy array of shape (n,), or raise.

@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import math
 from typing import NamedTuple
 
-from freejoint_core.arm import ArmModel, ArmParams, check_vector
+from freejoint_core.arm import ArmModel, ArmParams, check_vector, number_or_numbers
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace, projector, weighted_inverse
 from freejoint_core.models import make_model
@@ -75,14 +75,9 @@ _sqrt = math.sqrt
 
 def _vector(value, n, name, lower, strict):
     """Validate a gain vector: scalar (broadcast) or n numbers, bounded below."""
-    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
-        vals = (float(value),) * n
-    else:
-        try:
-            vals = tuple(float(v) for v in value)
-        except (TypeError, ValueError) as exc:
-            raise FreejointValueError(
-                f'{name}: expected a number or {n} numbers, got {value!r}') from exc
+    vals, scalar = number_or_numbers(value, name, f'a number or {n} numbers')
+    if scalar:
+        vals *= n
     if len(vals) != n:
         raise FreejointValueError(f'{name}: expected shape ({n},), got ({len(vals)},)')
     for v in vals:

@@ -28,7 +28,7 @@ measurements):
 from dataclasses import dataclass
 import math
 
-from freejoint_core.arm import ArmModel, check_vector
+from freejoint_core.arm import ArmModel, check_vector, number_or_numbers
 from freejoint_core.errors import FreejointValueError
 import numpy as np
 
@@ -40,16 +40,7 @@ PROJECTORS = ('kinematic', 'dynamic')
 
 def _gain(value, name):
     """Return a finite gain >= 0 from a number or a sequence (as a tuple of floats)."""
-    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
-        vals = (float(value),)
-        scalar = True
-    else:
-        try:
-            vals = tuple(float(v) for v in value)
-        except (TypeError, ValueError) as exc:
-            raise FreejointValueError(
-                f'{name}: expected a number or a sequence of numbers, got {value!r}') from exc
-        scalar = False
+    vals, scalar = number_or_numbers(value, name, 'a number or a sequence of numbers')
     if not vals or not all(math.isfinite(v) and v >= 0.0 for v in vals):
         raise FreejointValueError(f'{name}: values must be finite and >= 0, got {value!r}')
     return vals[0] if scalar else vals

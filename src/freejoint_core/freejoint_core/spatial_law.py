@@ -2,7 +2,7 @@
 The paper's robust law for spatial arms (m = 3 or 6 task rows), and its plan-time checks.
 
 :class:`SpatialLaw` is ``control.RobustController``'s general path with the task sized by
-``m`` (:class:`SpatialGains`; the planar ``Gains`` keep m = 2), on a
+``m`` (:class:`SpatialGains`, the planar ``Gains`` with m in {3, 6}), on a
 :class:`freejoint_core.spatial_model.SpatialArm` nominal model::
 
     e = (p - p_d, log(R R_d^T)),   edot = J qd - pd_d,   s = edot + Lam e
@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import math
 from typing import NamedTuple
 
-from freejoint_core.control import _vector, H_FORMS, STATUS_NEAR_SINGULAR, STATUS_OK
+from freejoint_core.control import _vector, Gains, STATUS_NEAR_SINGULAR, STATUS_OK
 from freejoint_core.control import STATUS_TORQUE_LIMITED
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
@@ -62,63 +62,40 @@ FREE_SHARE = 0.1
 
 
 @dataclass(frozen=True)
-class SpatialGains:
+class SpatialGains(Gains):
     """
-    Gains of the spatial law, task sized by ``m`` (planar m = 2: ``control.Gains``).
+    Gains of the spatial law: :class:`control.Gains` with ``task_dim`` m in {3, 6}.
+
+    The task-space diagonals (K, Lambda, R) are sized by m, the rest as ``Gains``; the
+    planar ``det_threshold`` is replaced by ``kappa_min`` and ``tau_limit`` is not read (the
+    effort limits are the model's).
 
     Attributes
     ----------
-    m : {3, 6}
-        Task rows.
-    K, Lambda, R : float or tuple of float, (m,)
-        Diagonals, > 0 (a scalar is broadcast); defaults as ``Gains`` per row.
-    Gamma, sigma, theta0 : tuple of float, (5,)
-        Adaptation gain, sigma-modification, initial estimate, >= 0.
-    epsilon : float
-        Chattering bound of h, > 0.
-    h_form : {'sum', 'sat'}
-        As ``Gains``.
-    robust : bool
-        False: no robust term, no adaptation.
+    task_dim : {3, 6}
+        Task rows m (default 3: position; 6: position and orientation).
     kappa_min : float
         Singularity threshold on ``kappa`` (module notes), in (0, 1).
-    theta_max : None or tuple of float, (5,)
-        Bound of theta_hat, > 0.
 
     """
 
-    m: int = 3
-    K: object = 100.0
-    Lambda: object = 50.0
-    R: object = 2.0
-    Gamma: tuple = (0.01,) * 5
-    sigma: tuple = (0.1,) * 5
-    epsilon: float = 0.1
-    h_form: str = 'sum'
-    theta0: tuple = (0.0,) * 5
-    robust: bool = True
+    task_dim: int = 3
     kappa_min: float = 1e-3
-    theta_max: object = None
 
     def __post_init__(self):
-        """Validate and normalise."""
-        if self.m not in (3, 6):
-            raise FreejointValueError(f'm: expected 3 or 6, got {self.m!r}')
-        for name, n, strict in (('K', self.m, True), ('Lambda', self.m, True),
-                                ('R', self.m, True), ('Gamma', 5, False), ('sigma', 5, False),
-                                ('theta0', 5, False)):
-            object.__setattr__(self, name, _vector(getattr(self, name), n, name, 0.0, strict))
-        object.__setattr__(self, 'epsilon', _vector(self.epsilon, 1, 'epsilon', 0.0, True)[0])
+        """Validate and normalise (``Gains``), then m and kappa_min."""
+        if self.task_dim not in (3, 6) or isinstance(self.task_dim, bool):
+            raise FreejointValueError(f'task_dim: expected 3 or 6, got {self.task_dim!r}')
+        super().__post_init__()
         kmin = _vector(self.kappa_min, 1, 'kappa_min', 0.0, True)[0]
         if kmin >= 1.0:
             raise FreejointValueError(f'kappa_min: must be < 1, got {kmin}')
         object.__setattr__(self, 'kappa_min', kmin)
-        if self.h_form not in H_FORMS:
-            raise FreejointValueError(f'h_form: expected one of {H_FORMS}, got {self.h_form!r}')
-        object.__setattr__(self, 'robust', bool(self.robust))
-        if self.theta_max is not None:
-            object.__setattr__(self, 'theta_max',
-                               _vector(self.theta_max, 5, 'theta_max', 0.0, True))
+
+    @property
+    def m(self):
+        """Return the task rows (``task_dim``)."""
+        return self.task_dim
 
 
 class SpatialOutput(NamedTuple):
@@ -242,7 +219,7 @@ class SpatialLaw:
         if not isinstance(nominal, SpatialArm):
             raise FreejointValueError(
                 f'nominal: expected SpatialArm, got {type(nominal).__name__}')
-        gains = SpatialGains(m=nominal.m) if gains is None else gains
+        gains = SpatialGains(task_dim=nominal.m) if gains is None else gains
         if not isinstance(gains, SpatialGains) or gains.m != nominal.m:
             raise FreejointValueError(f'gains: expected SpatialGains with m = {nominal.m}')
         ns = NullSpace(inverse='weighted', projector='dynamic') if nullspace is None \

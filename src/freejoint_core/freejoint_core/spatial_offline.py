@@ -160,7 +160,7 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
         raise FreejointValueError(why)
     qd = np.zeros(real.n)
     proj = 'dynamic' if inverse == 'weighted' else 'kinematic'
-    law = SpatialLaw(real.nominal(nominal), SpatialGains(m=3),
+    law = SpatialLaw(real.nominal(nominal), SpatialGains(task_dim=3),
                      NullSpace(kd=kd, inverse=inverse, projector=proj), free_damping=kf)
     rng = np.random.default_rng(seed)
     p0 = real.fk(q)
