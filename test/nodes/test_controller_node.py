@@ -320,7 +320,10 @@ def test_reset_service_restarts_theta_hat(procs, ros_node, wait):
 
 
 def test_state_publish_rate_thins_controller_state_but_not_the_commands(procs, ros_node, wait):
-    proc = _start(procs, '-p', 'state_publish_rate:=200.0')     # every 5 ms of stamps
+    # Every 5 ms of stamps. A long stale_timeout: the watchdog's zero effort after 0.5 s
+    # without a state (a status change, so a ControllerState) must not come during the final
+    # spins on a loaded machine (a CI run got one stamped 11 ms).
+    proc = _start(procs, '-p', 'state_publish_rate:=200.0', '-p', 'stale_timeout:=60.0')
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
     for k in range(12):
