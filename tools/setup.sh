@@ -70,7 +70,7 @@ if [ "$want" != "$have" ] || [ ! -x "$VENV/bin/python" ]; then
   fi
   if [ $MODE = system ]; then
     # The ROS install provides rclpy, messages and build tools: add only the Python tools.
-    pkgs=$(grep -E '^(numpy|mcap|mcap-ros2-support|rosbags|pytest|pytest-timeout|matplotlib)==' "$REQ")
+    pkgs=$(grep -E '^(numpy|mcap|mcap-ros2-support|rosbags|pytest|pytest-timeout|pytest-xdist|execnet|matplotlib)==' "$REQ")
     say "installing the Python tools into .venv (ROS itself comes from $AMENT_PREFIX_PATH)"
     # shellcheck disable=SC2086
     "$VENV/bin/pip" install --disable-pip-version-check $pkgs >"$STAMPS/pip.log" 2>&1 \

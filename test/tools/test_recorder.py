@@ -270,6 +270,9 @@ def test_topics_published_interleaved_are_recorded_in_publish_order_after_their_
     """
     Sim time: every message of tick k lies after /clock k and has its time as log time.
 
+    (Unless the middleware reported losses: a repaired message's log time is then the
+    /clock of its arrival, later than its tick's, as the recorder documents.)
+
     Each batch takes the topics one after the other, tens of ticks of each: only the merge
     by receive time puts them back in the order they were published in.
     """
@@ -291,7 +294,15 @@ def test_topics_published_interleaved_are_recorded_in_publish_order_after_their_
     assert len(clocks) > 1000
     timed = [(k * 1_000_000, t) for name, k, t in sequence if k in clocks]
     assert len(timed) > 4000
-    assert [t for _, t in timed] == [expected for expected, _ in timed]
+    lost = sum(_reported_lost(_log(recorder), name) for name in ('/clock',) + TICK_TOPICS)
+    if lost == 0:
+        assert [t for _, t in timed] == [expected for expected, _ in timed]
+    else:
+        # Losses reported (an overloaded machine): a reliable repair arrives after later
+        # ticks' /clock, and its log time is that of its arrival - never before its tick.
+        assert all(t >= expected for expected, t in timed)
+        assert [t for name, k, t in sequence if name == '/clock'] == sorted(
+            k * 1_000_000 for k in clocks)
 
 
 def test_a_burst_of_many_batches_is_recorded_whole_in_publish_order(procs, wait, tmp_path):
