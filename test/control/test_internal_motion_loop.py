@@ -86,6 +86,8 @@ def test_the_damping_parameters_default_to_off_and_the_offline_bound():
     cfg = SCHEMA.config(dict(FILE))
     assert cfg.values['free_link_damping'] is False
     assert cfg.values['free_link_delta_max'] == MODULATION['delta_max'] == 0.01
+    assert cfg.values['free_link_rest_damping'] == MODULATION['k2_rest'] == 1.0
+    assert cfg.values['free_link_rest_after'] == MODULATION['rest_after'] == 1.5
     loop = make()
     assert isinstance(loop.law, RobustLaw)
 
@@ -107,20 +109,22 @@ def test_damping_is_refused_for_an_arm_with_another_free_joint_and_with_failures
         SCHEMA.config(dict(FILE, free_link_damping=True, free_link_delta_max=0.0))
 
 
-def test_the_loop_with_damping_commands_what_the_offline_circles_run_does_bit_for_bit():
-    # Vertical, seed 0, hanging start, one circle and a 0.5-s rest: the offline runner with
-    # the stabilised options and the loop's gains (its torque limits, theta_max) on the same
-    # plant; every command equal, and the shift equal to the offline one.
+@pytest.mark.parametrize('rest', [REST, 2.0])
+def test_the_loop_with_damping_commands_what_the_offline_circles_run_does_bit_for_bit(rest):
+    # Vertical, seed 0, hanging start, one circle and a rest (0.5 s; 2 s: past the settle
+    # step's 1.5 s): the offline runner with the stabilised options and the loop's gains
+    # (its torque limits, theta_max) on the same plant; every command equal, and the shift
+    # equal to the offline one.
     opts = stabilised_options('vertical')
     assert opts == {'start': 'hanging', 'stabilise': MODULATION}
     gains = Gains(tau_limit=tuple(FILE['effort_limits']), theta_max=tuple(FILE['theta_max']))
-    (rec,), trace = run_circles('vertical', 'robust', 0, circles=1, hold=REST, gains=gains,
+    (rec,), trace = run_circles('vertical', 'robust', 0, circles=1, hold=rest, gains=gains,
                                 record_trace=True, **opts)
     assert rec['diverged_at_s'] is None
     # the overlays config/stabilised/{controller,sim}.yaml: the loop's law and the sim's q(0)
     loop = make(STAB, case='vertical')
     q0 = sim_q0(SIM_STAB, case='vertical')
-    cmds, states = drive(loop, 'vertical', 0, TRAJ.duration + REST, q0=q0)
+    cmds, states = drive(loop, 'vertical', 0, TRAJ.duration + rest, q0=q0)
     assert cmds.shape == trace['tau'].shape
     assert np.array_equal(cmds, trace['tau'])
     # the state after tick k is the shift the offline trace records at tick k

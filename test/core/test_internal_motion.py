@@ -195,6 +195,27 @@ def test_modulation_pushes_the_end_effector_along_u3perp_against_the_link_rate()
     assert -params.masses[2] * params.com[2] * a[0] < 0.0
 
 
+def test_the_rest_gain_applies_only_once_the_setpoint_has_rested_rest_after():
+    # Hanging, link rate 2 rad/s, delta 0 on every call (fresh state each tick, the rest
+    # count carried): drive = k2 * 2 along (1, 0), k2 = 0.2 for the first 3 resting ticks
+    # (3 ms < rest_after), then k2_rest = 1.0 -> 2.0 m/s^2; a moving tick restarts the count.
+    params = table1('vertical').scaled(0.7)
+    mod = FreeLinkModulation(params, k2_rest=1.0, rest_after=0.003)
+    q = hanging_pose(table1('vertical'), (0.2, 0.0))
+
+    def drive(moving=False):
+        saved = mod.snapshot()
+        mod.restore(((0.0, 0.0), (0.0, 0.0), None, saved[3]))
+        v = (1e-9, 0.0) if moving else (0.0, 0.0)
+        return mod.step(q, [0.0, 0.0, 2.0], (0.2, 0.0), v, (0.0, 0.0), 1e-3)[2][0]
+
+    assert [drive() for _ in range(5)] == pytest.approx([0.4, 0.4, 0.4, 2.0, 2.0], abs=1e-12)
+    drive(moving=True)
+    assert [drive() for _ in range(4)] == pytest.approx([0.4, 0.4, 0.4, 2.0], abs=1e-12)
+    with pytest.raises(FreejointValueError, match='^rest_after:'):
+        FreeLinkModulation(params, rest_after=-1.0)
+
+
 def test_modulation_offset_stays_within_its_bound_for_any_link_motion():
     params = table1('vertical').scaled(0.7)
     mod = FreeLinkModulation(params, delta_max=0.002)

@@ -146,7 +146,10 @@ class ControlLoop:
         self.law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
         failures.install_nullspace(self.law, cfg)
         if cfg.values['free_link_damping']:     # issue 22: the reference damps the free link
-            self.law = FreeLinkDampedLaw(self.law, cfg.values['free_link_delta_max'])
+            values = cfg.values
+            self.law = FreeLinkDampedLaw(self.law, values['free_link_delta_max'],
+                                         k2_rest=values['free_link_rest_damping'],
+                                         rest_after=values['free_link_rest_after'])
         # Joint failures (issue 23, freejoint_control/failures.py): None when off.
         self.failures = None if cfg.values['joint_failures'] == 'off' else \
             failures.FailureMonitor(cfg, self.law, self.log)

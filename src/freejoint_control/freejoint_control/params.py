@@ -123,6 +123,14 @@ FREE_LINK_PARAMS = (
     Param('free_link_delta_max', MODULATION['delta_max'],
           "bound [m] of the free link damping's shift of the reference (the task deviation "
           'it may add)', (1e-6, 1.0), read_only=True),
+    Param('free_link_rest_damping', MODULATION['k2_rest'],
+          "rate gain k2 [m/s] of the free link's damping once the setpoint has rested "
+          'free_link_rest_after s (the settle step after a task; 0.2 while tracking)',
+          (0.0, 10.0), read_only=True),
+    Param('free_link_rest_after', MODULATION['rest_after'],
+          'rest [s] of the setpoint after which free_link_rest_damping applies (rests '
+          'between tasks shorter than this keep the tracking gain)', (0.0, 3600.0),
+          read_only=True),
 )
 
 PARAMS = (

@@ -303,8 +303,10 @@ def _label(variant, arm, actuated, start, stabilise, nullspace, rest):
 DEFAULT_OUT = 'bags/offline/circles.json'
 NULLSPACE_KD = 5.0
 """Null-space damping [N m s/rad] that ``stabilised_options`` turns on for r > m."""
-MODULATION = {'delta_max': 0.01}
-"""``FreeLinkModulation`` options of ``stabilised_options`` (the rest its defaults)."""
+MODULATION = {'delta_max': 0.01, 'k2_rest': 1.0, 'rest_after': 1.5}
+"""``FreeLinkModulation`` options of ``stabilised_options`` (the rest its defaults): the
+10-mm bound, and a settle step once the setpoint has rested 1.5 s (rate gain 0.2 -> 1.0;
+2.0 pumped the swing up: docs/internal-motion.md)."""
 
 
 def stabilised_options(case, arm='paper', actuated='paper', delta_max=None):

@@ -377,11 +377,14 @@ class FreeLinkModulation:
     k2_rest : float or None
         The rate gain ``k2`` while the setpoint rests [m/s], >= 0 (the disturbance's
         swing floor falls with it); None: ``k2``.
+    rest_after : float
+        ``k2_rest`` applies once the setpoint has rested this long [s], >= 0 (a settle
+        step after a task: rests between tasks shorter than it keep ``k2``).
 
     """
 
     def __init__(self, params, gains=(0.0, 0.2, 9.0, 6.0), sat=4.0, delta_max=None,
-                 mode='always', k2_rest=None):
+                 mode='always', k2_rest=None, rest_after=0.0):
         if params.passive != (params.n - 1,):
             raise FreejointValueError(
                 f'params: the modulation needs the last joint free, got passive {params.passive}')
@@ -407,6 +410,10 @@ class FreeLinkModulation:
         if not (math.isfinite(k2_rest) and k2_rest >= 0.0):
             raise FreejointValueError(f'k2_rest: must be finite and >= 0, got {k2_rest}')
         self.k2_rest = k2_rest
+        rest_after = float(rest_after)
+        if not (math.isfinite(rest_after) and rest_after >= 0.0):
+            raise FreejointValueError(f'rest_after: must be finite and >= 0, got {rest_after}')
+        self.rest_after = rest_after
         if mode not in MODES:
             raise FreejointValueError(f'mode: expected one of {MODES}, got {mode!r}')
         self.params = params
@@ -418,10 +425,11 @@ class FreeLinkModulation:
         self.reset()
 
     def reset(self):
-        """Zero ``delta`` and its rate; forget the last quasi-static angle."""
+        """Zero ``delta`` and its rate; forget the last quasi-static angle and the rest."""
         self._delta = (0.0, 0.0)
         self._delta_dot = (0.0, 0.0)
         self._th_qs = None
+        self._rested = 0.0
 
     def quasi_static_angle(self, pdd_d):
         """
@@ -477,7 +485,11 @@ class FreeLinkModulation:
         th_qs = self.quasi_static_angle((ax, ay))
         resting = not (vx or vy or ax or ay)
         if resting:
-            k2 = self.k2_rest
+            if self._rested >= self.rest_after:
+                k2 = self.k2_rest
+            self._rested += dt
+        else:
+            self._rested = 0.0
         if th_qs is None:
             w = k2 * thd
             self._th_qs = None
@@ -517,12 +529,12 @@ class FreeLinkModulation:
         return out
 
     def snapshot(self):
-        """Return the modulation's state (``delta``, its rate, the last angle) as a tuple."""
-        return (self._delta, self._delta_dot, self._th_qs)
+        """Return the modulation's state (``delta``, its rate, the last angle, the rest)."""
+        return (self._delta, self._delta_dot, self._th_qs, self._rested)
 
     def restore(self, saved):
         """Put back a :meth:`snapshot`."""
-        self._delta, self._delta_dot, self._th_qs = saved
+        self._delta, self._delta_dot, self._th_qs, self._rested = saved
 
     @property
     def delta(self):
