@@ -354,6 +354,7 @@ BAD_START = [
                       'holds, 0.75 m'),
     ('duration', '1.0', 'peaks at 2.35619 m/s, above max_speed 1 m/s (duration >= 2.35619 s)'),
     ('grid_resolution', '0.001', '3000 x 3000 cells for the reach 1.5 m, above 2000 a side'),
+    ('settle_swing_deg', '3.0', 'the settle gate needs gravity'),     # horizontal by default
 ]
 
 
@@ -521,3 +522,58 @@ def test_the_planner_takes_thread_priority_and_cpu_affinity_for_every_thread_lik
     assert _set(params, 'thread_priority', 0).successful
     wait(lambda: {t[:2] for t in threads()} == {(os.SCHED_OTHER, 0)}, 10.0,
          'every thread back on the default scheduler', spin=lambda: _spin(ros_node, 0.1))
+
+
+def test_with_the_settle_gate_a_plan_waits_for_the_free_link_to_settle(procs, ros_node, wait):
+    # Vertical, settle_swing_deg 3: a hanging link turning at 2 rad/s (14 deg real, 18 deg
+    # by the nominal model) is refused 'settling'; at rest it is accepted.
+    from freejoint_common.contract import JOINT_STATES, stamp_from_ns
+    from freejoint_core.arm import table1
+    from freejoint_core.internal import hanging_pose
+    from freejoint_msgs.srv import PlanCircle
+    proc = _start_planner(procs, ('-p', 'use_sim_time:=true', '-p', 'case:=vertical',
+                                  '-p', 'autostart:=false', '-p', 'settle_swing_deg:=3.0'))
+    client = _wait_ready(ros_node, procs, proc, wait)
+    clock = ClockDriver(ros_node)
+    pub = ros_node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, JOINT_STATES.qos)
+    wait(lambda: clock.matched() and pub.get_subscription_count() >= 1, 30.0,
+         'the planner matching /clock, setpoint and joint_states',
+         spin=lambda: _spin(ros_node, 0.05))
+    q = hanging_pose(table1('vertical'), (0.2, 0.0)).tolist()
+    request = PlanCircle.Request(centre=[0.0, 0.0], radius=0.2, duration=5.0,
+                                 start_angle=0.0, direction=1, execute=True)
+
+    def answer_with(qd):
+        msg = JOINT_STATES.msg_type(name=['joint1', 'joint2', 'joint3'], position=q,
+                                    velocity=qd)
+        stamp_from_ns(0, msg.header.stamp)
+        pub.publish(msg)
+        _spin(ros_node, 0.05)
+        return _call(ros_node, client, request, 'plan_circle')
+
+    refusals = []
+
+    def refused_swinging():
+        answer = answer_with([0.0, 0.0, 2.0])
+        assert not answer.accepted and answer.reason.split(' refused: ')[1].startswith(
+            'settling: '), answer.reason
+        refusals.append(answer.reason)
+        return 'the free link swings 18.' in answer.reason
+
+    wait(refused_swinging, 15.0, 'a settling refusal naming the swing',
+         spin=lambda: _spin(ros_node, 0.05))
+    assert 'settle_swing_deg 3' in refusals[-1] and refusals[-1].startswith(
+        'circle centre (0, 0) m radius 0.2 m duration 5 s refused: ')
+    accepted = []
+
+    def accepted_at_rest():
+        answer = answer_with([0.0, 0.0, 0.0])
+        if answer.accepted:
+            accepted.append(answer)
+            return True
+        assert 'settling: the free link swings 18.' in answer.reason, answer.reason
+        return False
+
+    wait(accepted_at_rest, 15.0, 'the plan accepted with the link at rest',
+         spin=lambda: _spin(ros_node, 0.05))
+    assert accepted[0].plan_id == 1 and accepted[0].reason == ''

@@ -107,6 +107,12 @@ PARAMS = (
     Param('transition_max_duration', 60.0,
           "Longest transition (s) from the current setpoint into a new plan's start; none "
           'shorter within the bounds: the plan is refused.', (0.0, 600.0), exclusive_min=True),
+    Param('settle_swing_deg', 0.0,
+          'Settle gate (issue 22): a plan_circle request that would start a plan is refused '
+          "('settling: ...') while the free link swings more than this (deg, from the newest "
+          'joint_states: freejoint_core.internal.free_link_swing) or no joint state tells; '
+          '0 = off. For the arm whose last joint alone is free, with gravity; the '
+          "controller's free_link_damping settles the link meanwhile.", (0.0, 180.0)),
     Param('autostart', True,
           'Start the configured circle at activation and after every accepted change of its '
           'parameters.'),

@@ -75,7 +75,7 @@ from .conversions import occupancy_grid, path_marker, setpoint_msg
 from .params import CIRCLE_KEYS, LOOKAHEAD_MAX, MAP_KEYS, SCHEMA, validate
 from .planning import circle_bounds, compute_model, describe_join, end_effector, grid_bound
 from .planning import grid_extent, join_from_arm, JOIN_REFUSED, JOIN_WAIT, make_circle
-from .planning import prepare_transition
+from .planning import prepare_transition, settle_gate_refusal, swing_deg
 from .stream import Plan, SetpointStream
 
 NODE_NAME = 'freejoint_planner'
@@ -114,6 +114,7 @@ class PlannerNode(Node, Lifecycle):
             JOINT_STATES.msg_type, self.resolve_topic_name(JOINT_STATES.name),
             lambda _msg: None, profile(1, reliable=False))
         self._arm_xy = None         # the end effector of the newest joint state taken
+        self._arm_state = None      # the newest joint state taken (JointState)
         self._arm_note = ''         # why the newest joint state gave no position
         self._waits_logged = None   # plan id whose wait for the arm was logged
         self._born = time.monotonic()
@@ -123,6 +124,8 @@ class PlannerNode(Node, Lifecycle):
         reason = (grid_bound(self._model.region.reach, self._cfg['grid_resolution'])
                   or circle_bounds(make_circle(self._cfg), self._model,
                                    self._cfg['max_speed'], self._cfg['max_acceleration']))
+        if not reason and self._cfg['settle_swing_deg'] > 0.0:
+            reason = settle_gate_refusal(self._model.nominal)
         if reason:
             raise FreejointValueError(reason)
         self.get_logger().info(
@@ -192,6 +195,8 @@ class PlannerNode(Node, Lifecycle):
                     return (f'the running plan {plan.plan_id} would enter the '
                             f'semi-singular region of the new map: {check.reason}')
         reason = grid_bound(model.region.reach, new['grid_resolution'])
+        if not reason and new['settle_swing_deg'] > 0.0:
+            reason = settle_gate_refusal(model.nominal)
         if reason:
             return reason
         if changed and not changed & set(CIRCLE_KEYS):
@@ -337,6 +342,8 @@ class PlannerNode(Node, Lifecycle):
             return response
         reason, margin, choice, tick = self._admit(circle, self._model, self._cfg,
                                                    transition=request.execute)
+        if not reason and request.execute and self._cfg['settle_swing_deg'] > 0.0:
+            reason = self._settling()
         response.accepted = not reason
         response.margin = float(margin)
         response.plan_id = 0
@@ -367,14 +374,8 @@ class PlannerNode(Node, Lifecycle):
                                              self._cfg['frame_id'], self._now_ns(),
                                              plan.plan_id))
 
-    def _arm_position(self):
-        """
-        Return the arm's end effector (x, y) from the newest joint state, None if unknown.
-
-        Takes what the depth-1 subscription holds (the newest state; nothing new: the one
-        taken before); a state without the arm's joints gives None and says why
-        (``_arm_note``).
-        """
+    def _take_arm_state(self):
+        """Take the newest joint state the depth-1 subscription holds (None: nothing new)."""
         got = None
         try:
             handle = self._js_sub.handle
@@ -385,13 +386,42 @@ class PlannerNode(Node, Lifecycle):
                         break
                     got = taken[0]
         except InvalidHandle:          # destroyed at shutdown
-            return self._arm_xy
+            return None
+        if got is not None:
+            self._arm_state = got
+        return got
+
+    def _arm_position(self):
+        """
+        Return the arm's end effector (x, y) from the newest joint state, None if unknown.
+
+        Takes what the depth-1 subscription holds (the newest state; nothing new: the one
+        taken before); a state without the arm's joints gives None and says why
+        (``_arm_note``).
+        """
+        got = self._take_arm_state()
         if got is not None:
             self._arm_xy = end_effector(self._model, self._joint_names, got.name, got.position)
             self._arm_note = '' if self._arm_xy is not None else (
                 f'joint_states has no finite positions of the joints {list(self._joint_names)} '
                 f'(it names {list(got.name)})')
         return self._arm_xy
+
+    def _settling(self):
+        """Return why a plan must wait for the free link to settle ('' : it is settled)."""
+        limit = self._cfg['settle_swing_deg']
+        self._take_arm_state()
+        got = self._arm_state
+        swing = None if got is None else swing_deg(self._model, self._joint_names, got.name,
+                                                   got.position, got.velocity)
+        if swing is None:
+            return ('settling: no joint state with the positions and velocities of '
+                    f"{list(self._joint_names)} to judge the free link's swing by "
+                    f'(settle_swing_deg {limit:g})')
+        if swing > limit:
+            return (f'settling: the free link swings {swing:.2f} deg (> settle_swing_deg '
+                    f'{limit:g}); ask again once it has settled')
+        return ''
 
     def _join(self, plan):
         """Decide how a plan from rest starts (``planning.join_from_arm``); True: hold."""

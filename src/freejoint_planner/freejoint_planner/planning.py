@@ -14,6 +14,8 @@ import math
 import time
 
 from freejoint_core.arm import ArmModel, table1
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.internal import free_link_swing
 from freejoint_core.singularity import check_path
 from freejoint_core.singularity_nlink import arm_region
 from freejoint_core.trajectory import circle_peaks, CircleQuintic, plan_transition
@@ -280,6 +282,65 @@ def end_effector(model, joint_names, names, positions):
     if not np.all(np.isfinite(q)):
         return None
     return ArmModel(model.nominal).fk(q)
+
+
+def settle_gate_refusal(params):
+    """
+    Return why the settle gate cannot judge this arm ('' : it can).
+
+    The gate judges the swing of a free last link under gravity
+    (``freejoint_core.internal.free_link_swing``): the arm's last joint alone is passive,
+    gravity is on and the link's effective inertia about its joint is positive.
+
+    Parameters
+    ----------
+    params : freejoint_core.arm.ArmParams
+        The nominal arm.
+
+    Returns
+    -------
+    str
+
+    """
+    if tuple(params.passive) != (params.n - 1,):
+        return (f'settle_swing_deg: the settle gate needs the arm whose last joint alone is '
+                f'free, this one has passive joints {list(params.passive)}')
+    try:
+        free_link_swing(params, [0.0] * params.n, [0.0] * params.n)
+    except FreejointValueError:
+        return ('settle_swing_deg: the settle gate needs gravity (a free link with no '
+                'restoring force has no swing to settle: the horizontal case)')
+    return ''
+
+
+def swing_deg(model, joint_names, names, positions, velocities):
+    """
+    Return the free last link's swing amplitude [deg] of a joint state, None if unknown.
+
+    Parameters
+    ----------
+    model : SingularityModel
+        Its nominal arm: the swing is the nominal model's estimate (the 70 % model of the
+        paper's vertical arm, its com scaled too, puts a real 14.2-deg swing at 18.2 deg).
+    joint_names : sequence of str, (n,)
+        The arm's joints, base to tip.
+    names, positions, velocities : sequence
+        ``JointState.name``, ``.position`` [rad], ``.velocity`` [rad/s].
+
+    Returns
+    -------
+    float in [0, 180] or None
+        None when a joint, a position or a velocity is missing or not finite.
+
+    """
+    index = joint_indices(joint_names, names)
+    if index is None or max(index, default=-1) >= min(len(positions), len(velocities)):
+        return None
+    q = [float(positions[i]) for i in index]
+    qd = [float(velocities[i]) for i in index]
+    if not all(map(math.isfinite, q + qd)):
+        return None
+    return math.degrees(free_link_swing(model.nominal, q, qd))
 
 
 def transition_from_rest(position, circle, model, dt, max_duration, bounds=None):
