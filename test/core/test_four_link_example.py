@@ -87,3 +87,16 @@ def test_four_link_example_tracks_its_circle_within_the_stated_bound_horizontal(
     assert plant.k == 5000
     assert 1e3 * worst <= BOUND_MM, f'max error {1e3 * worst:.3f} mm'
     assert np.all(np.abs(plant.qd) < 5.0)     # the internal motion has settled
+
+
+def test_the_stabilised_four_link_example_tracks_circles_back_to_back_in_the_vertical_plane():
+    # Issue 22: base joint free under gravity, hanging-equilibrium start, null-space damping
+    # and twice the paper's task gains (circles.stabilised_options); seed 0, 2 circles back
+    # to back within the stated bound (10 seeds x 10 circles: docs/internal-motion.md).
+    from freejoint_core.circles import FOUR_LINK_TASK_GAINS, run_circles, stabilised_options
+    opts = stabilised_options('vertical', arm='four_link')
+    assert opts['gains'] == Gains(**FOUR_LINK_TASK_GAINS)
+    records, _ = run_circles('vertical', 'robust', 0, circles=2, arm='four_link', **opts)
+    assert [r['diverged_at_s'] for r in records] == [None, None]
+    assert max(r['max_mm'] for r in records) <= BOUND_MM
+    assert max(max(r['effort_peak']) for r in records) < 20.0
