@@ -13,6 +13,7 @@ XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 help:
 	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
 	@echo '              ARM=four_link: the shipped 4-link example instead (config/four_link)'
+	@echo '              STABILISE=1: the vertical case, internal motion stabilised (issue 22)'
 	@echo 'make test     run every test (core math, nodes, interfaces, linters), JOBS (nproc + 1)'
 	@echo '              pytest processes at once; JOBS=1: one'
 	@echo 'make test-fast  the tests without DDS or node processes (core math, schemas,'
@@ -31,7 +32,7 @@ setup:
 	@bash tools/setup.sh
 
 demo: setup
-	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM))
+	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise)
 
 test: setup
 	@$(ENV) python -m pytest -c pytest.ini $(XDIST)

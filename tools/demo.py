@@ -22,6 +22,9 @@ runner with the same options (``freejoint_core.circles.run_circles``, one circle
 (``config/four_link/*.yaml`` on top of ``config/*.yaml``: four_link_arm.urdf, joint1 passive,
 the horizontal case), recorded and analysed, beside its offline runner
 (``freejoint_core.urdf_offline.run_arm``), and checks its tracking bound (``ARMS``).
+With ``--stabilise`` too (``make demo ARM=four_link STABILISE=1``) it runs the example in
+the vertical plane with ``config/four_link/stabilised/`` on top (its hanging equilibrium,
+null-space damping, twice the paper's task gains) beside the offline circles runner.
 (``make demo`` runs it after ``tools/setup.sh``).  The graph runs in ROS domain
 ``$ROS_DOMAIN_ID`` (if unset, a free one is picked and printed) and sees only this machine
 unless ``ROS_AUTOMATIC_DISCOVERY_RANGE`` says otherwise.
@@ -209,25 +212,26 @@ def ee_trajectory(points, dt_ns, n_ticks):
     return out
 
 
-def _overlay_files(arm, node):
-    """Return the overlay file ``config/<arm>/<node>.yaml`` in a list (none there: ``[]``)."""
-    path = None if arm is None else os.path.join(CONFIG, arm, node + '.yaml')
-    return [path] if path is not None and os.path.exists(path) else []
+def _overlay_files(overlays, node):
+    """Return the files ``config/<dir>/<node>.yaml`` of ``overlays`` (dirs) that exist."""
+    paths = [os.path.join(CONFIG, name, node + '.yaml') for name in overlays]
+    return [path for path in paths if os.path.exists(path)]
 
 
-def _overlay(arm, node):
-    """Return the ``--params-file`` of an overlay for ``node`` (none: ``[]``)."""
-    return [arg for path in _overlay_files(arm, node) for arg in ('--params-file', path)]
+def _overlay(overlays, node):
+    """Return the ``--params-file`` arguments of the overlays for ``node`` (none: ``[]``)."""
+    return [arg for path in _overlay_files(overlays, node) for arg in ('--params-file', path)]
 
 
 def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
-              record=True, progress=say, arm=None):
+              record=True, progress=say, overlays=(), passive_joint=PASSIVE_JOINT):
     """
     Run one case through the graph in lockstep until tick n_ticks - 1 was published.
 
-    ``arm``: a shipped example of ``ARMS`` or ``STABILISED`` (its overlay
-    ``config/<arm>/<node>.yaml`` after each node's parameter file, where there is one), or
-    None for the paper's arm.
+    ``overlays``: directories under config/ (a shipped example of ``ARMS``, ``STABILISED``,
+    or both of ``--arm four_link --stabilise``) whose ``<node>.yaml`` follow each node's
+    parameter file, in order, where there is one; () for the paper's arm.
+    ``passive_joint``: the one the recorder's metadata names.
 
     All nodes are started (recorder if installed, simulator, controller, planner with
     ``autostart: false``); once the recorder (``~/status``) and this process have matched
@@ -255,7 +259,7 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
         if record and os.path.exists(rec_exe):
             bag = os.path.join(out_dir, case)
             info = 'case=%s, variant=robust, seed=%d, passive_joint=%s, max_ticks=%d' % (
-                case, seed, ARMS.get(arm, {}).get('passive_joint', PASSIVE_JOINT), n_ticks)
+                case, seed, passive_joint, n_ticks)
             graph.start('recorder', [rec_exe, '--ros-args', '-p', 'output:=' + bag,
                                      '-p', 'topics:=[]', '-p', 'overwrite:=true',
                                      '-p', 'use_sim_time:=true',
@@ -263,15 +267,16 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
         graph.start('sim_node', node_cmd('freejoint_sim', 'sim_node',
                                          os.path.join(CONFIG, 'sim.yaml'),
                                          ['case:=' + case, 'seed:=%d' % seed,
-                                          'max_steps:=%d' % n_ticks]) + _overlay(arm, 'sim'))
+                                          'max_steps:=%d' % n_ticks])
+                    + _overlay(overlays, 'sim'))
         graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
                                                 os.path.join(CONFIG, 'controller.yaml'),
                                                 ['case:=' + case])
-                    + _overlay(arm, 'controller'))
+                    + _overlay(overlays, 'controller'))
         graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node',
                                              os.path.join(CONFIG, 'planner.yaml'),
                                              ['case:=' + case, 'autostart:=false'])
-                    + _overlay(arm, 'planner'))
+                    + _overlay(overlays, 'planner'))
         if not calls.spin_until(lambda: collector.publishers_ready() or graph.exited(),
                                 60.0) or graph.exited():
             raise RuntimeError('the nodes did not come up within 60 s%s (logs in %s)' % (
@@ -286,7 +291,7 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
             calls.spin_until(lambda: False, SETTLE)
         from freejoint_planner.params import SCHEMA as PLANNER
         plan = PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'),
-                                   *_overlay_files(arm, 'planner'))
+                                   *_overlay_files(overlays, 'planner'))
         answer = calls.plan_circle(plan, 30.0)
         if answer is None or not answer.accepted:
             raise RuntimeError('the planner did not start the circle: %s (logs in %s)' % (
@@ -359,29 +364,54 @@ def arm_offline(arm, case, seed, n_ticks):
                    label=case, seed=seed, n_ticks=n_ticks)
 
 
-def stabilised_offline(case, seed, settings):
+def stabilised_offline(case, seed, settings, overlays=(STABILISED,), arm=None):
     """
     Return the offline circles runner's record and trace with the stabilised options.
 
     One circle, the graph's settings (``offline_settings``), the options of
-    ``freejoint_core.circles.stabilised_options`` (the vertical case: hanging start, the
-    free link's damping with the bound of ``MODULATION``); the trace gains ``p`` (ticks, 2),
-    the end effector [m] as the law measured it.
+    ``freejoint_core.circles.stabilised_options`` (the paper arm, vertical: hanging start,
+    the free link's damping with the bound of ``MODULATION``; the 4-link example
+    (``arm``): its hanging equilibrium, null-space damping), the gains those of the graph's
+    controller (config/controller.yaml and the ``overlays``' files); the trace gains ``p``
+    (ticks, 2), the end effector [m] as the law measured it.
     """
+    from freejoint_control.params import SCHEMA as CONTROLLER
     from freejoint_core.circles import run_circles, stabilised_options
-    from freejoint_core.trajectory import CircleQuintic
+    from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_planner.planning import make_circle
     import numpy as np
-    traj = settings['trajectory']
-    if any(traj.sample_tuple(t) != CircleQuintic().sample_tuple(t) for t in (0.0, 1.3, 4.9)):
-        raise SystemExit('demo: --stabilise compares with the circles runner, which runs the '
-                         "paper's circle: planner.yaml plans another")
-    (record,), trace = run_circles(
-        case, 'robust', seed, circles=1, dt=settings['dt'], dt_sub=settings['dt_sub'],
-        nominal_scale=settings['nominal_scale'], dist_bound=settings['dist_bound'],
-        gains=settings['gains'], record_trace=True, **stabilised_options(case))
+    traj = make_circle(PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'),
+                                           *_overlay_files(overlays, 'planner')))
+    options = stabilised_options(case, arm or 'paper')
+    expected = options.pop('gains', None)
+    gains = CONTROLLER.from_yaml(os.path.join(CONFIG, 'controller.yaml'),
+                                 *_overlay_files(overlays, 'controller')).gains
+    if expected is not None and (gains.K, gains.Lambda) != (expected.K, expected.Lambda):
+        raise SystemExit('demo: K, Lambda %s, %s of the controller overlay are not those of '
+                         'the stabilised options, %s, %s' % (gains.K, gains.Lambda, expected.K,
+                                                             expected.Lambda))
+    runner = run_circles(case, 'robust', seed, circles=1, arm=arm or 'paper',
+                         dt=settings['dt'], dt_sub=settings['dt_sub'],
+                         nominal_scale=settings['nominal_scale'],
+                         dist_bound=settings['dist_bound'], gains=gains, record_trace=True,
+                         **options)
+    (record,), trace = runner
+    for t in (0.0, 1.3, 4.9):
+        if traj.sample_tuple(t) != _runner_circle(arm).sample_tuple(t):
+            raise SystemExit('demo: --stabilise compares with the circles runner, which runs '
+                             "the arm's own circle: the planner's files plan another")
     des = np.array([traj.sample(t)[0] for t in trace['t']])
     trace['p'] = trace['e'] + des
     return record, trace
+
+
+def _runner_circle(arm):
+    """Return the circle ``run_circles`` runs for ``arm`` (None: the paper's)."""
+    from freejoint_core.trajectory import CircleQuintic
+    if arm is None:
+        return CircleQuintic()
+    from freejoint_core.urdf import FOUR_LINK_CIRCLE
+    return CircleQuintic(centre=FOUR_LINK_CIRCLE['centre'], radius=FOUR_LINK_CIRCLE['radius'])
 
 
 # -- main -------------------------------------------------------------------------------
@@ -397,8 +427,9 @@ def _parse(argv):
                     '(make demo ARM=four_link)')
     ap.add_argument('--stabilise', action='store_true',
                     help='the vertical case with the internal-motion stabilisation '
-                    '(config/stabilised/: the free link starts hanging, its damping on), beside '
-                    'the offline circles runner with the same options')
+                    '(config/stabilised/: the free link starts hanging, its damping on; with '
+                    '--arm four_link config/four_link/stabilised/), beside the offline circles '
+                    'runner with the same options')
     ap.add_argument('--view', action='store_true',
                     help='also start the viewer (Foxglove WebSocket on ws://127.0.0.1:8765, '
                     'layout config/foxglove_layout.json; make demo VIEW=1)')
@@ -409,20 +440,19 @@ def main(argv=None):
     """Run the demo; return the exit code."""
     args = _parse(sys.argv[1:] if argv is None else argv)
     t_start = time.monotonic()
+    overlays = ()
     if args.arm:
-        # The example is the horizontal case: with the free base pivot under gravity the
-        # paper's law does not stabilise it (offline: diverges within 0.2 s).
+        # The example alone is the horizontal case: with the free base pivot under gravity
+        # the paper's law does not stabilise it (offline: diverges within 0.2 s).
         args.cases = ['horizontal']
         args.out = os.path.join(args.out, args.arm)
-    overlay = args.arm
+        overlays = (args.arm,)
     if args.stabilise:
-        if args.arm:
-            say('error: --stabilise is for the paper arm (not with --arm)')
-            return 1
-        # Horizontal: the stabilised options are the paper's law (circles.stabilised_options).
+        # Vertical: the horizontal case's stabilised options are the paper's law for the
+        # paper arm (circles.stabilised_options); the 4-link example has its own overlay.
         args.cases = ['vertical']
         args.out = os.path.join(args.out, STABILISED)
-        overlay = STABILISED
+        overlays += (os.path.join(args.arm, STABILISED) if args.arm else STABILISED,)
     if not os.environ.get('ROS_DOMAIN_ID'):
         os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -442,6 +472,7 @@ def main(argv=None):
     from rclpy.experimental import EventsExecutor
 
     settings = offline_settings()
+    passive_joint = ARMS[args.arm]['passive_joint'] if args.arm else PASSIVE_JOINT
     dt_ns = round(settings['dt'] * 1e9)
     n_ticks = int(round(settings['duration'] / settings['dt']))
     out = os.path.abspath(args.out)
@@ -481,7 +512,8 @@ def main(argv=None):
             collector = Collector(node)
             try:
                 run = run_graph(case, args.seed, n_ticks, dt_ns, collector, executor, out,
-                                log_dir, record=record_bags, arm=overlay)
+                                log_dir, record=record_bags, overlays=overlays,
+                                passive_joint=passive_joint)
             except RuntimeError as exc:
                 say('error: %s: %s' % (case, exc))
                 failed = True
@@ -495,18 +527,18 @@ def main(argv=None):
             if stop_line:
                 say('  ' + stop_line[-1].split(']: ')[-1].strip())
             try:
-                record, arrays = graph_record(
-                    collector, case, args.seed, n_ticks,
-                    ARMS[args.arm]['passive_joint'] if args.arm else PASSIVE_JOINT)
+                record, arrays = graph_record(collector, case, args.seed, n_ticks,
+                                              passive_joint)
             except (RuntimeError, ValueError) as exc:
                 say('error: %s: %s' % (case, exc))
                 failed = True
                 break
             if args.stabilise:
-                off, trace = stabilised_offline(case, args.seed, settings)
-                say('  offline circles runner (%s): rms %.4f mm, max %.4f mm, swing at the '
-                    'end %.3f deg' % (off['variant'], off['rms_mm'], off['max_mm'],
-                                      off['swing_deg']))
+                off, trace = stabilised_offline(case, args.seed, settings, overlays, args.arm)
+                swing = '' if off['swing_deg'] is None else ', swing at the end %.3f deg' % (
+                    off['swing_deg'])
+                say('  offline circles runner (%s): rms %.4f mm, max %.4f mm%s'
+                    % (off['variant'], off['rms_mm'], off['max_mm'], swing))
                 say('  graph: rms %.4f mm, max %.4f mm' % (record['rms_mm'], record['max_mm']))
             elif args.arm:
                 off, trace = arm_offline(args.arm, case, args.seed, n_ticks)
@@ -544,7 +576,7 @@ def main(argv=None):
     if not failed and os.path.exists(analyze) and record_bags:
         bags = [run['bag'] for run in runs]
         say('analyze %s' % ' '.join(shown(b) for b in bags))
-        figures = FIGURES if not overlay else os.path.join(out, 'figures')
+        figures = FIGURES if not overlays else os.path.join(out, 'figures')
         code = subprocess.call([analyze, *bags, '--figures-dir', figures], cwd=ROOT)
         if code != 0:
             say('analyze exited with %d' % code)

@@ -200,9 +200,42 @@ def _demo():
 def test_demo_stabilise_starts_the_nodes_with_the_overlay_files_there_are():
     demo = _demo()
     stab = os.path.join(ROOT, 'config', 'stabilised')
-    assert demo._overlay(demo.STABILISED, 'controller') == [
+    assert demo._overlay((demo.STABILISED,), 'controller') == [
         '--params-file', os.path.join(stab, 'controller.yaml')]
-    assert demo._overlay(demo.STABILISED, 'sim') == ['--params-file',
-                                                     os.path.join(stab, 'sim.yaml')]
-    assert demo._overlay(demo.STABILISED, 'planner') == []       # the paper's circle
-    assert demo._overlay(None, 'sim') == []
+    assert demo._overlay((demo.STABILISED,), 'sim') == ['--params-file',
+                                                        os.path.join(stab, 'sim.yaml')]
+    assert demo._overlay((demo.STABILISED,), 'planner') == []       # the paper's circle
+    assert demo._overlay((), 'sim') == []
+    # --arm four_link --stabilise: the example's files, then its stabilised ones, in order
+    four = os.path.join(ROOT, 'config', 'four_link')
+    both = ('four_link', os.path.join('four_link', demo.STABILISED))
+    assert demo._overlay(both, 'sim') == [
+        '--params-file', os.path.join(four, 'sim.yaml'),
+        '--params-file', os.path.join(four, 'stabilised', 'sim.yaml')]
+    assert demo._overlay(both, 'planner') == ['--params-file',
+                                              os.path.join(four, 'planner.yaml')]
+
+
+def test_the_four_link_stabilised_overlay_is_the_offline_runner_s_stabilised_options():
+    # config/four_link/stabilised/: the simulator starts where run_circles' 'equilibrium'
+    # start does, the controller has its null-space damping and task gains.
+    from freejoint_core.arm import ArmModel
+    from freejoint_core.circles import FOUR_LINK_HANGING_GUESS, FOUR_LINK_TASK_GAINS
+    from freejoint_core.circles import NULLSPACE_KD
+    from freejoint_core.internal import equilibrium_pose
+    from freejoint_core.urdf import four_link_arm, FOUR_LINK_CIRCLE
+    four = os.path.join(ROOT, 'config', 'four_link')
+    sim_files = (os.path.join(ROOT, 'config', 'sim.yaml'), os.path.join(four, 'sim.yaml'),
+                 os.path.join(four, 'stabilised', 'sim.yaml'))
+    model = ArmModel(four_link_arm('vertical').params)
+    start = TRAJ.__class__(**FOUR_LINK_CIRCLE).sample(0.0)[0]
+    expected = equilibrium_pose(model, start, FOUR_LINK_HANGING_GUESS)
+    q0 = sim_q0(sim_files, case='vertical')
+    assert np.allclose(q0, expected, rtol=0, atol=1e-12)
+    assert np.allclose(model.fk(q0), start, rtol=0, atol=1e-12)
+    ctl = SCHEMA.config(SCHEMA.yaml_values(
+        os.path.join(ROOT, 'config', 'controller.yaml'), os.path.join(four, 'controller.yaml'),
+        os.path.join(four, 'stabilised', 'controller.yaml')))
+    assert ctl.values['nullspace_kd'] == NULLSPACE_KD
+    assert ctl.gains.K == (FOUR_LINK_TASK_GAINS['K'],) * 2
+    assert ctl.gains.Lambda == (FOUR_LINK_TASK_GAINS['Lambda'],) * 2
