@@ -439,14 +439,22 @@ def rest_at_q0(client):
     client.spin_until(lambda: False, 0.2)     # the reset step and the hold settle
 
 
-def soak_run(case, index, run, seconds, hogs, back_to_back=False):
+STABILISED = {'vertical': (['start_pose:=hanging'], ['free_link_damping:=true']),
+              'horizontal': ([], [])}
+"""``--stabilise``: (simulator, controller) overrides per case, config/stabilised/'s (issue
+22: the free link starts hanging, its damping on); horizontal, the paper's law
+(``freejoint_core.circles.stabilised_options``)."""
+
+
+def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=False):
     """Make one run of ``case``; return its row (dict)."""
     name = '%s_%d' % (case, run)
+    sim, ctl = STABILISED[case] if stabilise else ([], [])
     bound, factor, worst = bound_of(case, hogs)
     row = {'case': case, 'run': run, 'seconds': seconds, 'bound_mm': bound,
            'bound_factor': factor, 'offline_worst_max_mm': worst}
     load0 = os.getloadavg()[0]
-    with Session(name, index, case, seconds) as s:
+    with Session(name, index, case, seconds, sim=sim, ctl=ctl) as s:
         row['ros_domain_id'] = s.env['ROS_DOMAIN_ID']
         s.up()
         loop = bench_graph.CircleLoop(
@@ -455,6 +463,7 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False):
         s.wait(seconds, loop)
         end = time.monotonic()
     row['back_to_back'] = back_to_back
+    row['stabilised'] = stabilise
     row['exit_codes'] = s.codes
     row['plans'] = len(loop.accepted)
     row['load_before'], row['load_after'] = load0, os.getloadavg()[0]
@@ -543,6 +552,9 @@ def parse(argv):
                     help='circles back to back, without putting the arm back at rest at q(0) '
                     'before each (the vertical arm then drifts beyond the paper: see '
                     'rest_at_q0)')
+    ap.add_argument('--stabilise', action='store_true',
+                    help='internal-motion stabilisation (issue 22): vertical, the free link '
+                    'starts hanging and the controller damps it (config/stabilised/)')
     ap.add_argument('--out', default=os.path.join(OUT, 'soak.json'))
     args = ap.parse_args(argv)
     if args.runs < 1 or args.seconds <= 0 or args.hogs < 0 or not 0 <= args.priority <= 98:
@@ -566,6 +578,7 @@ def main(argv=None):
     cond = conditions(args.priority, args.hogs)
     cond['circles'] = ('back to back' if args.back_to_back else
                        'each from rest at q(0): sim and controller ~/reset before each')
+    cond['stabilised'] = args.stabilise
     say('%d run(s) x %g s per case %s, sim and controller thread_priority %d, %d hog(s), '
         '%d CPUs, load %.2f' % (args.runs, args.seconds, ', '.join(args.cases), args.priority,
                                 args.hogs, os.cpu_count(), os.getloadavg()[0]))
@@ -583,7 +596,8 @@ def main(argv=None):
             for run in range(args.runs):
                 say('%s run %d/%d: %g s' % (case, run + 1, args.runs, args.seconds))
                 try:
-                    row = soak_run(case, index, run, args.seconds, args.hogs, args.back_to_back)
+                    row = soak_run(case, index, run, args.seconds, args.hogs, args.back_to_back,
+                                   args.stabilise)
                 except Exception as exc:  # noqa: B902 - one bad run must not cost the soak
                     say('%s run %d failed: %s: %s' % (case, run, type(exc).__name__, exc))
                     row = {'case': case, 'run': run, 'error': str(exc), 'met': False}
