@@ -516,8 +516,10 @@ def test_diagnostics_say_holding_with_warn_without_setpoints_and_ok_while_tracki
     level, message, values = run_until(
         lambda: diag.find(warn, 'stale setpoint'), 'WARN: stale setpoint',
         lambda j: None)
-    # (A stall of this test beyond stale_timeout between states would add a hold.)
-    assert values['stale setpoint periods'] == '1' and int(values['holds']) >= 2, values
+    # (A stall of this test beyond stale_timeout while it streamed adds a hold and a stale
+    # period - a CI run with a CPU hog beside it counted 2; the exact counting is
+    # test/control/test_loop.py's, in one process.)
+    assert int(values['stale setpoint periods']) >= 1 and int(values['holds']) >= 2, values
     # No more states: ERROR, zero effort.
     wait(lambda: diag.find(error, 'no joint_states for'), 10.0, 'ERROR: no joint_states',
          spin=drv.spin)
