@@ -504,7 +504,9 @@ def test_diagnostics_say_holding_with_warn_without_setpoints_and_ok_while_tracki
     level, message, values = run_until(
         lambda: diag.find(warn, 'holding at'), 'WARN: holding', lambda j: None)
     assert 'no setpoint yet' in message, message
-    assert values['holds'] == '1' and values['stale setpoint periods'] == '0', values
+    # (>= 1: a stall of this test beyond stale_timeout between states - the watchdog's zero
+    # effort - makes the next state a new hold; no setpoint yet: never a stale period.)
+    assert int(values['holds']) >= 1 and values['stale setpoint periods'] == '0', values
     assert float(values['answer rate [Hz]']) > 0.0 and values['latency max [ms]'] != '-'
     assert int(values['status']) & STATUS_HOLDING
     # Setpoints where the arm is: tracking, OK (after the blend and the first period).

@@ -404,7 +404,8 @@ def test_realtime_applies_the_latest_command_and_zero_after_the_timeout(
     wait(lambda: ctl.diagnostics and ctl.diagnostics[-1][1].startswith(
          'no command for 0.3 s: zero effort'), 5.0, 'the timeout in the status', spin=ctl.spin)
     level, _, values = ctl.diagnostics[-1]
-    assert level == WARN and values['command timeouts'] == '1'
+    # (>= 1: a stall of this test over 0.3 s while it was commanding is a timeout too.)
+    assert level == WARN and int(values['command timeouts']) >= 1
     assert values['brakes'] == 'released' and values['diverged'] == 'false'
     assert procs.stop(proc) == 0
 
