@@ -399,7 +399,8 @@ class PlannerNode(Node, Lifecycle):
         taken before); a state without the arm's joints gives None and says why
         (``_arm_note``).
         """
-        got = self._take_arm_state()
+        self._take_arm_state()
+        got = self._arm_state       # the newest taken, here or by the settle gate
         if got is not None:
             self._arm_xy = end_effector(self._model, self._joint_names, got.name, got.position)
             self._arm_note = '' if self._arm_xy is not None else (
