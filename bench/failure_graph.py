@@ -17,7 +17,6 @@ Exit 1 if a difference is above 1e-9 (the lockstep graph must equal the offline 
 round-off).
 """
 import argparse
-import importlib.util
 import math
 import os
 import re
@@ -32,11 +31,8 @@ MS = 1_000_000
 
 
 def _demo():
-    spec = importlib.util.spec_from_file_location('demo', os.path.join(ROOT, 'tools',
-                                                                       'demo.py'))
-    demo = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(demo)
-    return demo
+    from freejoint_tools.harness import load_source
+    return load_source(os.path.join(ROOT, 'tools', 'demo.py'), 'demo')
 
 
 def _overlay(directory, fail, effort):

@@ -7,7 +7,6 @@ reference is the offline runner of circles back to back
 (``freejoint_core.circles.run_circles`` with the stabilised options of the vertical case):
 the same plant, the same modulation, so the same commands, element by element.
 """
-import importlib.util
 import math
 import os
 
@@ -22,6 +21,7 @@ from freejoint_core.laws import FreeLinkDampedLaw, RobustLaw
 from freejoint_core.plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_sim.params import SCHEMA as SIM
+from freejoint_tools.harness import load_source
 import numpy as np
 import pytest
 
@@ -190,11 +190,7 @@ def test_start_pose_hanging_is_refused_without_gravity_or_a_reachable_point():
 
 def _demo():
     """Return tools/demo.py as a module."""
-    spec = importlib.util.spec_from_file_location('freejoint_demo',
-                                                  os.path.join(ROOT, 'tools', 'demo.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_source(os.path.join(ROOT, 'tools', 'demo.py'), 'freejoint_demo')
 
 
 def test_demo_stabilise_starts_the_nodes_with_the_overlay_files_there_are():

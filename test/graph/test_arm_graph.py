@@ -11,12 +11,12 @@ The node graph on another engine and on another arm (issue 13), in lockstep.
   example's stated bound (``test/core/test_four_link_example.py``; recorded and analysed:
   ``make demo ARM=four_link``).
 """
-import importlib.util
 import os
 import time
 
 from freejoint_common.records import arrays_from_messages
 from freejoint_core.offline import run_case
+from freejoint_tools.harness import load_source
 import numpy as np
 import pytest
 
@@ -30,11 +30,7 @@ BOUND_MM = 2.0
 
 
 def _graph_module():
-    spec = importlib.util.spec_from_file_location('freejoint_graph_test',
-                                                  os.path.join(HERE, 'test_graph.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_source(os.path.join(HERE, 'test_graph.py'), 'freejoint_graph_test')
 
 
 graph = _graph_module()

@@ -1,8 +1,8 @@
 """The graph's three nodes in one process (freejoint_bringup graph) run the lockstep loop."""
-import importlib.util
 import os
 
 from freejoint_core.offline import run_case
+from freejoint_tools.harness import load_source
 import numpy as np
 import pytest
 
@@ -15,11 +15,8 @@ DT_NS = 1_000_000
 
 def _offline_settings():
     """Return the offline runner's settings of config/ (tools/demo.py computes them)."""
-    spec = importlib.util.spec_from_file_location('freejoint_demo',
-                                                  os.path.join(ROOT, 'tools', 'demo.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.offline_settings()
+    return load_source(os.path.join(ROOT, 'tools', 'demo.py'),
+                       'freejoint_demo').offline_settings()
 
 
 def test_one_process_graph_reproduces_the_offline_run_and_stops_cleanly(

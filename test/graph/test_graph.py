@@ -6,7 +6,6 @@ lockstep the graph must reproduce the offline runner (``freejoint_core.offline``
 whatever the start order and whatever the order of the joints in the JointState; in real
 time, a silent controller must leave the arm with zero effort.
 """
-import importlib.util
 import os
 import re
 
@@ -14,6 +13,7 @@ from freejoint_common.contract import clock_ns, JOINT_STATES
 from freejoint_common.records import arrays_from_messages
 from freejoint_core.metrics import compute_record, KEYS
 from freejoint_core.offline import run_case
+from freejoint_tools.harness import load_source
 import numpy as np
 import pytest
 
@@ -33,11 +33,7 @@ NODES = {
 
 def _demo():
     """Import tools/demo.py (its Collector and the offline settings of config/)."""
-    spec = importlib.util.spec_from_file_location('freejoint_demo',
-                                                  os.path.join(ROOT, 'tools', 'demo.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_source(os.path.join(ROOT, 'tools', 'demo.py'), 'freejoint_demo')
 
 
 demo = _demo()

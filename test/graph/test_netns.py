@@ -21,6 +21,7 @@ import sys
 
 from freejoint_common.records import arrays_from_messages, stamp_ns
 from freejoint_core.offline import run_case
+from freejoint_tools.harness import load_source
 import numpy as np
 import pytest
 
@@ -140,12 +141,8 @@ def test_without_ip_or_the_privilege_the_netns_test_is_skipped_saying_why(
 
 def test_lockstep_graph_over_two_network_namespaces_equals_the_offline_runner(
         hosts, procs, wait, tmp_path):
-    import importlib.util
     from freejoint_tools.bagfile import open_bag
-    spec = importlib.util.spec_from_file_location('freejoint_demo',
-                                                  os.path.join(ROOT, 'tools', 'demo.py'))
-    demo = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(demo)
+    demo = load_source(os.path.join(ROOT, 'tools', 'demo.py'), 'freejoint_demo')
 
     bag_path = str(tmp_path / 'netns')
     recorder = hosts.node('b', 'freejoint_tools', 'recorder', 'recorder',

@@ -4,12 +4,12 @@ The simulator's joint failures (issue 23) in its own process, driven by this tes
 Every published state is compared with ``freejoint_core.plant.Plant`` stepped here with the
 same commands and the same failures (``Plant.fail_joint``).
 """
-import importlib.util
 import os
 
 from freejoint_core.arm import table1
 from freejoint_core.offline import initial_state
 from freejoint_core.plant import Plant
+from freejoint_tools.harness import load_source
 import pytest
 
 pytestmark = pytest.mark.ros
@@ -21,11 +21,8 @@ DT = 0.001
 
 def _sim_test_helpers():
     """Return test_sim_node.py as a module (its ``Controller``: this test as controller)."""
-    spec = importlib.util.spec_from_file_location(
-        'sim_node_test_helpers', os.path.join(os.path.dirname(__file__), 'test_sim_node.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_source(os.path.join(os.path.dirname(__file__), 'test_sim_node.py'),
+                       'sim_node_test_helpers')
 
 
 def _call_fail_joint(ros_node, joint):

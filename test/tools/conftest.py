@@ -1,9 +1,9 @@
 """Fixtures of the freejoint_tools tests: bags written in-process, the test publisher."""
-import importlib.util
 import os
 import subprocess
 import sys
 
+from freejoint_tools.harness import load_source
 import pytest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -11,10 +11,7 @@ PUBLISHER = os.path.join(HERE, '..', 'nodes', 'tools_publisher.py')
 
 
 def _load_publisher():
-    spec = importlib.util.spec_from_file_location('tools_publisher', PUBLISHER)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_source(PUBLISHER, 'tools_publisher')
 
 
 @pytest.fixture(scope='session')

@@ -22,6 +22,7 @@ from freejoint_core import arm, offline, plant
 from freejoint_core.control import Gains
 from freejoint_planner.params import SCHEMA as PLANNER
 from freejoint_sim.params import SCHEMA as SIM
+from freejoint_tools.harness import load_source
 from freejoint_tools.params import PLAYER, RECORDER
 import pytest
 
@@ -156,11 +157,7 @@ def test_the_repeated_value_check_finds_a_default_and_an_overlay_repeat(tmp_path
 
 
 def test_the_parameter_reference_is_generated_from_the_schemas():
-    import importlib.util
-    spec = importlib.util.spec_from_file_location(
-        'gen_parameters', os.path.join(ROOT, 'tools', 'gen_parameters.py'))
-    gen = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(gen)
+    gen = load_source(os.path.join(ROOT, 'tools', 'gen_parameters.py'), 'gen_parameters')
     for path, text in gen.outputs().items():
         with open(path) as fh:
             assert fh.read() == text, (
@@ -177,11 +174,7 @@ def test_the_parameter_reference_is_generated_from_the_schemas():
 
 
 def test_every_parameter_table_of_graph_md_is_a_generated_schema_table():
-    import importlib.util
-    spec = importlib.util.spec_from_file_location(
-        'gen_parameters', os.path.join(ROOT, 'tools', 'gen_parameters.py'))
-    gen = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(gen)
+    gen = load_source(os.path.join(ROOT, 'tools', 'gen_parameters.py'), 'gen_parameters')
     with open(gen.GRAPH) as fh:
         text = fh.read()
     tables = list(gen.TABLE.finditer(text))

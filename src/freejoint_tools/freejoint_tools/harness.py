@@ -12,10 +12,12 @@ until a condition (bounded), call a service (waiting for it, bounded), the recor
 calls one node's parameter services (set, get, list, describe), sending a request again
 when its answer is lost. :func:`clean_stale_fast_dds_shm` removes the shared-memory files a
 killed node left (the test session calls it). :func:`thread_report` says what the threads
-of a process that stopped progressing do.
+of a process that stopped progressing do. :func:`load_source` imports a script that is not
+a package module (tools/demo.py, a test's helpers) by its path.
 """
 
 import fcntl
+import importlib.util
 import os
 import signal
 import subprocess
@@ -23,6 +25,19 @@ import sys
 import time
 
 from freejoint_tools.resend import first_answer
+
+
+def load_source(path, name):
+    """
+    Return the Python file at ``path`` executed as a module named ``name``.
+
+    For scripts outside the packages (tools/demo.py, tools/gen_parameters.py) and test
+    modules whose helpers another test uses; each call executes the file anew.
+    """
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def executable(pkg, exe):
