@@ -439,17 +439,37 @@ def rest_at_q0(client):
     client.spin_until(lambda: False, 0.2)     # the reset step and the hold settle
 
 
-STABILISED = {'vertical': (['start_pose:=hanging'], ['free_link_damping:=true']),
-              'horizontal': ([], [])}
-"""``--stabilise``: (simulator, controller) overrides per case, config/stabilised/'s (issue
-22: the free link starts hanging, its damping on); horizontal, the paper's law
-(``freejoint_core.circles.stabilised_options``)."""
+STABILISED_CASES = ('vertical',)
+"""Cases ``--stabilise`` changes: config/stabilised/ (issue 22: the free link starts hanging,
+its damping on); horizontal, the paper's law (``freejoint_core.circles.stabilised_options``)."""
+
+
+def overlay_overrides(schema, path):
+    """Return the ``-p`` items (``name:=value``) of what a parameter overlay file sets."""
+    defaults = schema.defaults()
+    items = []
+    for name, value in schema.yaml_values(path).items():
+        if value != defaults[name]:
+            text = ('true' if value else 'false') if isinstance(value, bool) else str(value)
+            items.append('%s:=%s' % (name, text))
+    return items
+
+
+def stabilised_overrides(case):
+    """Return the (simulator, controller) ``-p`` items of ``--stabilise`` for ``case``."""
+    if case not in STABILISED_CASES:
+        return [], []
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_sim.params import SCHEMA as SIM
+    overlay = os.path.join(ROOT, 'config', 'stabilised')
+    return (overlay_overrides(SIM, os.path.join(overlay, 'sim.yaml')),
+            overlay_overrides(CONTROLLER, os.path.join(overlay, 'controller.yaml')))
 
 
 def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=False):
     """Make one run of ``case``; return its row (dict)."""
     name = '%s_%d' % (case, run)
-    sim, ctl = STABILISED[case] if stabilise else ([], [])
+    sim, ctl = stabilised_overrides(case) if stabilise else ([], [])
     bound, factor, worst = bound_of(case, hogs)
     row = {'case': case, 'run': run, 'seconds': seconds, 'bound_mm': bound,
            'bound_factor': factor, 'offline_worst_max_mm': worst}
