@@ -376,7 +376,7 @@ def stabilised_offline(case, seed, settings, overlays=(STABILISED,), arm=None):
     (ticks, 2), the end effector [m] as the law measured it.
     """
     from freejoint_control.params import SCHEMA as CONTROLLER
-    from freejoint_core.circles import run_circles, stabilised_options
+    from freejoint_core.circles import arm_circle, run_circles, stabilised_options
     from freejoint_planner.params import SCHEMA as PLANNER
     from freejoint_planner.planning import make_circle
     import numpy as np
@@ -397,21 +397,12 @@ def stabilised_offline(case, seed, settings, overlays=(STABILISED,), arm=None):
                          **options)
     (record,), trace = runner
     for t in (0.0, 1.3, 4.9):
-        if traj.sample_tuple(t) != _runner_circle(arm).sample_tuple(t):
+        if traj.sample_tuple(t) != arm_circle(arm or 'paper').sample_tuple(t):
             raise SystemExit('demo: --stabilise compares with the circles runner, which runs '
                              "the arm's own circle: the planner's files plan another")
     des = np.array([traj.sample(t)[0] for t in trace['t']])
     trace['p'] = trace['e'] + des
     return record, trace
-
-
-def _runner_circle(arm):
-    """Return the circle ``run_circles`` runs for ``arm`` (None: the paper's)."""
-    from freejoint_core.trajectory import CircleQuintic
-    if arm is None:
-        return CircleQuintic()
-    from freejoint_core.urdf import FOUR_LINK_CIRCLE
-    return CircleQuintic(centre=FOUR_LINK_CIRCLE['centre'], radius=FOUR_LINK_CIRCLE['radius'])
 
 
 # -- main -------------------------------------------------------------------------------

@@ -216,15 +216,15 @@ def test_the_four_link_stabilised_overlay_is_the_offline_runner_s_stabilised_opt
     # config/four_link/stabilised/: the simulator starts where run_circles' 'equilibrium'
     # start does, the controller has its null-space damping and task gains.
     from freejoint_core.arm import ArmModel
-    from freejoint_core.circles import FOUR_LINK_HANGING_GUESS, FOUR_LINK_TASK_GAINS
-    from freejoint_core.circles import NULLSPACE_KD
+    from freejoint_core.circles import arm_circle, FOUR_LINK_HANGING_GUESS
+    from freejoint_core.circles import FOUR_LINK_TASK_GAINS, NULLSPACE_KD
     from freejoint_core.internal import equilibrium_pose
-    from freejoint_core.urdf import four_link_arm, FOUR_LINK_CIRCLE
+    from freejoint_core.urdf import four_link_arm
     four = os.path.join(ROOT, 'config', 'four_link')
     sim_files = (os.path.join(ROOT, 'config', 'sim.yaml'), os.path.join(four, 'sim.yaml'),
                  os.path.join(four, 'stabilised', 'sim.yaml'))
     model = ArmModel(four_link_arm('vertical').params)
-    start = TRAJ.__class__(**FOUR_LINK_CIRCLE).sample(0.0)[0]
+    start = arm_circle('four_link').sample(0.0)[0]
     expected = equilibrium_pose(model, start, FOUR_LINK_HANGING_GUESS)
     q0 = sim_q0(sim_files, case='vertical')
     assert np.allclose(q0, expected, rtol=0, atol=1e-12)

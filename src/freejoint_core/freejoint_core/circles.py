@@ -53,6 +53,14 @@ FOUR_LINK_HANGING_GUESS = tuple(math.radians(a) for a in (-134.0, 149.0, 29.0, 2
 _BLOWUP = (ArithmeticError, ValueError, np.linalg.LinAlgError)
 
 
+def arm_circle(arm):
+    """Return the circle :func:`run_circles` runs for ``arm`` (one of ``ARMS``)."""
+    if arm == 'paper':
+        return CircleQuintic()
+    from .urdf import FOUR_LINK_CIRCLE
+    return CircleQuintic(**FOUR_LINK_CIRCLE)
+
+
 def _setup(arm, case, actuated, nominal_scale, start, dt_sub, dist, seed):
     """Real arm, plant, nominal model and the circle of the chosen arm."""
     if arm == 'paper':
@@ -60,7 +68,7 @@ def _setup(arm, case, actuated, nominal_scale, start, dt_sub, dist, seed):
         start_arm = real
         if actuated == 'all':
             real = dataclasses.replace(real, passive=())
-        traj = CircleQuintic()
+        traj = arm_circle(arm)
         p0 = traj.sample(0.0)[0]
         if start == 'paper':
             q0 = initial_state(start_arm, start=p0)
@@ -73,9 +81,9 @@ def _setup(arm, case, actuated, nominal_scale, start, dt_sub, dist, seed):
         return real, plant, nominal, None, traj
     from .mujoco_plant import MujocoPlant
     from .pin_model import PinArmModel
-    from .urdf import four_link_arm, FOUR_LINK_CIRCLE, FOUR_LINK_Q0
+    from .urdf import four_link_arm, FOUR_LINK_Q0
     urdf_arm = four_link_arm(case)
-    traj = CircleQuintic(centre=FOUR_LINK_CIRCLE['centre'], radius=FOUR_LINK_CIRCLE['radius'])
+    traj = arm_circle(arm)
     if start in ('example', 'paper'):
         q0 = np.array(FOUR_LINK_Q0)
     elif start == 'equilibrium':
