@@ -25,6 +25,15 @@ the horizontal case), recorded and analysed, beside its offline runner
 With ``--stabilise`` too (``make demo ARM=four_link STABILISE=1``) it runs the example in
 the vertical plane with ``config/four_link/stabilised/`` on top (its hanging equilibrium,
 null-space damping, twice the paper's task gains) beside the offline circles runner.
+``--fail joint3@2.5`` (``make demo FAIL=joint3@2.5``, issue 23) runs the paper's arm with
+all three joints driven (``config/fully_actuated/``) whose joint 3 loses its actuator and
+brake at 2.5 s (the simulator's ``fail_joint``): the controller detects it (momentum
+residual and the effort of joint_states) and switches to the law with that joint free,
+announcing it on ``joint_failures``, where the planner learns the new passive set.  Beside
+it the offline failure runner (``freejoint_core.failure_offline.run_failure_case``, same
+case, seed and failure): joint angles and commands compared tick by tick (1e-9), the
+detection and the tracking bound (horizontal 1.7 mm, vertical 5.5 mm) reported, into
+``<out>/failure``.
 (``make demo`` runs it after ``tools/setup.sh``).  The graph runs in ROS domain
 ``$ROS_DOMAIN_ID`` (if unset, a free one is picked and printed) and sees only this machine
 unless ``ROS_AUTOMATIC_DISCOVERY_RANGE`` says otherwise.
@@ -49,6 +58,10 @@ DRAIN_QUIET = 0.5
 FIGURES = os.path.join(ROOT, 'docs', 'figures')
 ARMS = {'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0}}
 STABILISED = 'stabilised'
+FULLY_ACTUATED = 'fully_actuated'
+"""The overlay of ``--fail``: config/fully_actuated/ (issue 23), all three joints driven."""
+FAILURE_BOUND_MM = {'horizontal': 1.7, 'vertical': 5.5}
+"""The paper's single-circle bounds, which a run with a joint failing keeps (issue 23)."""
 """The overlay of ``--stabilise``: config/stabilised/ (issue 22), the vertical case."""
 """The shipped examples of ``--arm``: parameter overlay ``config/<name>/``, the passive joint
 recorded, the stated tracking bound (horizontal; test/core/test_four_link_example.py)."""
@@ -223,15 +236,22 @@ def _overlay(overlays, node):
     return [arg for path in _overlay_files(overlays, node) for arg in ('--params-file', path)]
 
 
+def _args(node_args, node):
+    """Return the ``-p`` arguments of ``node_args[node]`` (none: ``[]``)."""
+    return [arg for item in (node_args or {}).get(node, ()) for arg in ('-p', item)]
+
+
 def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
-              record=True, progress=say, overlays=(), passive_joint=PASSIVE_JOINT):
+              record=True, progress=say, overlays=(), passive_joint=PASSIVE_JOINT,
+              node_args=None):
     """
     Run one case through the graph in lockstep until tick n_ticks - 1 was published.
 
     ``overlays``: directories under config/ (a shipped example of ``ARMS``, ``STABILISED``,
-    or both of ``--arm four_link --stabilise``) whose ``<node>.yaml`` follow each node's
-    parameter file, in order, where there is one; () for the paper's arm.
-    ``passive_joint``: the one the recorder's metadata names.
+    ``FULLY_ACTUATED``, or both of ``--arm four_link --stabilise``) whose ``<node>.yaml``
+    follow each node's parameter file, in order, where there is one; () for the paper's arm.
+    ``passive_joint``: the one the recorder's metadata names.  ``node_args``: ``{'sim' |
+    'controller' | 'planner': ['name:=value', ...]}``, parameters set last.
 
     All nodes are started (recorder if installed, simulator, controller, planner with
     ``autostart: false``); once the recorder (``~/status``) and this process have matched
@@ -268,15 +288,15 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
                                          os.path.join(CONFIG, 'sim.yaml'),
                                          ['case:=' + case, 'seed:=%d' % seed,
                                           'max_steps:=%d' % n_ticks])
-                    + _overlay(overlays, 'sim'))
+                    + _overlay(overlays, 'sim') + _args(node_args, 'sim'))
         graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
                                                 os.path.join(CONFIG, 'controller.yaml'),
                                                 ['case:=' + case])
-                    + _overlay(overlays, 'controller'))
+                    + _overlay(overlays, 'controller') + _args(node_args, 'controller'))
         graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node',
                                              os.path.join(CONFIG, 'planner.yaml'),
                                              ['case:=' + case, 'autostart:=false'])
-                    + _overlay(overlays, 'planner'))
+                    + _overlay(overlays, 'planner') + _args(node_args, 'planner'))
         if not calls.spin_until(lambda: collector.publishers_ready() or graph.exited(),
                                 60.0) or graph.exited():
             raise RuntimeError('the nodes did not come up within 60 s%s (logs in %s)' % (
@@ -405,6 +425,63 @@ def stabilised_offline(case, seed, settings, overlays=(STABILISED,), arm=None):
     return record, trace
 
 
+def failure_comparison(collector, case, seed, fail, n_ticks, dt_ns, logs, effort=True):
+    """
+    Compare a lockstep run whose joint failed with the offline failure runner's.
+
+    Parameters
+    ----------
+    collector : Collector
+        The run's messages (``controller_state``, ``joint_states``).
+    case, seed, fail : str, int, str
+        As the run (``fail``: ``joint3@2.5``, ``failure_offline.parse_fail``).
+    n_ticks, dt_ns : int
+        The run's ticks and control period [ns].
+    logs : list of str
+        The run's node logs (the controller's and the planner's lines are read).
+    effort : bool
+        The controller compared its commands with joint_states' effort.
+
+    Returns
+    -------
+    dict
+        ``ticks`` (collected), ``d_cmd`` [N m], ``d_q`` [rad] (largest differences),
+        ``max_mm`` (the graph's tracking error), ``found`` (the controller's detection
+        lines), ``planner`` (the planner's lines on a failure), ``offline`` (the runner's
+        record).
+
+    """
+    import math
+    import re
+    from freejoint_common.contract import to_ns
+    from freejoint_core.failure_offline import parse_fail, run_failure_case
+    import numpy as np
+    states, joints = {}, {}
+    for msg in collector.messages('controller_state'):
+        states.setdefault(to_ns(msg.header.stamp), msg)
+    for msg in collector.messages('joint_states'):
+        joints.setdefault(to_ns(msg.header.stamp), msg)
+    ticks = [k for k in range(n_ticks) if k * dt_ns in states and k * dt_ns in joints]
+    if not ticks:
+        raise RuntimeError('no tick collected (another graph in ROS domain %s?)'
+                           % os.environ.get('ROS_DOMAIN_ID'))
+    cmd = np.array([list(states[k * dt_ns].effort) for k in ticks])
+    q = np.array([list(joints[k * dt_ns].position) for k in ticks])
+    err = max(math.hypot(*(np.array(states[k * dt_ns].position)
+                           - states[k * dt_ns].position_desired)) for k in ticks)
+    rec, trace = run_failure_case(case, seed, parse_fail(fail), duration=n_ticks * dt_ns * 1e-9,
+                                  record_trace=True, effort=effort)
+
+    def lines(who, pattern):
+        with open([p for p in logs if who in os.path.basename(p)][0]) as fh:
+            return re.findall(pattern, fh.read())
+    return {'ticks': len(ticks), 'd_cmd': float(np.max(np.abs(cmd - trace['tau'][ticks]))),
+            'd_q': float(np.max(np.abs(q - trace['q'][ticks]))), 'max_mm': err * 1e3,
+            'found': lines('controller', r'joint failure: (.*?failed at t = [0-9.]+ s '
+                           r'\(detected by \w+\))'),
+            'planner': lines('planner', r'(joint\d failed: [^\n]*)'), 'offline': rec}
+
+
 # -- main -------------------------------------------------------------------------------
 def _parse(argv):
     ap = argparse.ArgumentParser(prog='demo', description=__doc__.split('\n')[1])
@@ -421,6 +498,10 @@ def _parse(argv):
                     '(config/stabilised/: the free link starts hanging, its damping on; with '
                     '--arm four_link config/four_link/stabilised/), beside the offline circles '
                     'runner with the same options')
+    ap.add_argument('--fail', metavar='JOINT@T',
+                    help='the fully actuated arm whose joint fails at T s, e.g. joint3@2.5 '
+                    "(config/fully_actuated/, the simulator's fail_joint; make demo "
+                    'FAIL=joint3@2.5), beside the offline failure runner')
     ap.add_argument('--view', action='store_true',
                     help='also start the viewer (Foxglove WebSocket on ws://127.0.0.1:8765, '
                     'layout config/foxglove_layout.json; make demo VIEW=1)')
@@ -444,6 +525,22 @@ def main(argv=None):
         args.cases = ['vertical']
         args.out = os.path.join(args.out, STABILISED)
         overlays += (os.path.join(args.arm, STABILISED) if args.arm else STABILISED,)
+    node_args = None
+    if args.fail:
+        if args.arm or args.stabilise:
+            say("error: --fail runs the paper's arm fully actuated: not with --arm or "
+                '--stabilise')
+            return 2
+        from freejoint_core.errors import FreejointValueError
+        from freejoint_core.failure_offline import parse_fail
+        try:
+            failing = parse_fail(args.fail)
+        except FreejointValueError as exc:
+            say('error: --fail %s' % exc)
+            return 2
+        args.out = os.path.join(args.out, 'failure')
+        overlays = (FULLY_ACTUATED,)
+        node_args = {'sim': ['fail_joint:=' + args.fail]}
     if not os.environ.get('ROS_DOMAIN_ID'):
         os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -463,7 +560,8 @@ def main(argv=None):
     from rclpy.experimental import EventsExecutor
 
     settings = offline_settings()
-    passive_joint = ARMS[args.arm]['passive_joint'] if args.arm else PASSIVE_JOINT
+    passive_joint = ARMS[args.arm]['passive_joint'] if args.arm else (
+        'joint%d' % (failing[0][0] + 1) if args.fail else PASSIVE_JOINT)
     dt_ns = round(settings['dt'] * 1e9)
     n_ticks = int(round(settings['duration'] / settings['dt']))
     out = os.path.abspath(args.out)
@@ -504,7 +602,7 @@ def main(argv=None):
             try:
                 run = run_graph(case, args.seed, n_ticks, dt_ns, collector, executor, out,
                                 log_dir, record=record_bags, overlays=overlays,
-                                passive_joint=passive_joint)
+                                passive_joint=passive_joint, node_args=node_args)
             except RuntimeError as exc:
                 say('error: %s: %s' % (case, exc))
                 failed = True
@@ -524,6 +622,27 @@ def main(argv=None):
                 say('error: %s: %s' % (case, exc))
                 failed = True
                 break
+            if args.fail:
+                cmp = failure_comparison(collector, case, args.seed, args.fail, n_ticks,
+                                         dt_ns, run['logs'])
+                off = cmp['offline']
+                bound = FAILURE_BOUND_MM[case]
+                say('  controller: %s' % ('; '.join(cmp['found']) or 'NO DETECTION'))
+                say('  planner: %s' % ('; '.join(cmp['planner']) or 'no line on a failure'))
+                say('  offline failure runner: detected at %s s by %s, max %.4f mm'
+                    % (off['detected_at_s'], off['detected_by'], off['max_mm']))
+                say('  graph: max tracking error %.4f mm (bound %g mm)%s' % (
+                    cmp['max_mm'], bound, '' if cmp['max_mm'] <= bound else '  NOT MET'))
+                verdict = '' if max(cmp['d_cmd'], cmp['d_q']) <= 1e-9 and \
+                    cmp['ticks'] == n_ticks else '  (NOT within 1e-9)'
+                say('  graph vs offline runner over %d of %d ticks: max |command difference| '
+                    '%.3g N m, max |q difference| %.3g rad%s' % (
+                        cmp['ticks'], n_ticks, cmp['d_cmd'], cmp['d_q'], verdict))
+                failed = failed or bool(verdict) or not cmp['found'] or \
+                    cmp['max_mm'] > bound
+                graph_records.append(record)
+                runs.append(run)
+                continue
             if args.stabilise:
                 off, trace = stabilised_offline(case, args.seed, settings, overlays, args.arm)
                 swing = '' if off['swing_deg'] is None else ', swing at the end %.3f deg' % (

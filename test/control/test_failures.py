@@ -140,6 +140,13 @@ def test_joint3_failure_is_found_by_the_residual_the_law_switches_as_offline_bit
         out['msg'][k_switch]
     assert any(level == 'warn' and 'joint3 failed' in text for level, _, text in logs)
     assert out['err'].max() < (5.5e-3 if case == 'vertical' else 1.7e-3)
+    # The detection is announced once (the node publishes it on joint_failures); that
+    # announcement coming back as a notice is taken silently.
+    assert loop.failures.announcements() == ['joint3']
+    assert loop.failures.announcements() == []
+    lines = len(logs)
+    assert loop.on_failure_notice('joint3') == 'joint3 failed already'
+    assert len(logs) == lines and loop.failures.events == [event]
     # The offline runner on the same seed: same detection tick, same commands, same states.
     rec, trace = run_failure_case(case, 0, [(2, 2.5)], duration=2.7, record_trace=True)
     assert rec['detected_at_s'] == [round(event['t'], 9)]
@@ -157,6 +164,7 @@ def test_a_notice_switches_the_law_at_the_next_tick():
     assert out['cmd'][2499, 2] != 0.0 and np.all(out['cmd'][2500:, 2] == 0.0)
     assert 'detected by notice' in out['msg'][2500]
     assert out['err'].max() < 5.5e-3
+    assert loop.failures.announcements() == []      # a notice is not announced again
 
 
 def test_a_notice_for_an_unknown_or_undriven_joint_is_ignored_saying_why():

@@ -577,3 +577,32 @@ def test_with_the_settle_gate_a_plan_waits_for_the_free_link_to_settle(procs, ro
     wait(accepted_at_rest, 15.0, 'the plan accepted with the link at rest',
          spin=lambda: _spin(ros_node, 0.05))
     assert accepted[0].plan_id == 1 and accepted[0].reason == ''
+
+
+def test_a_joint_reported_failed_joins_the_passive_set_and_an_arm_that_cannot_track_refuses_plans(  # noqa: E501
+        procs, ros_node, wait):
+    # The paper's arm (joint 3 free): joint 3 reported failed changes nothing; joint 2
+    # leaves one active joint for the 2-D task, so every plan is refused naming it.
+    from freejoint_common.contract import JOINT_FAILURES
+    from freejoint_msgs.srv import PlanCircle
+    proc = _start_planner(procs, ('-p', 'use_sim_time:=true', '-p', 'autostart:=false'))
+    client = _wait_ready(ros_node, procs, proc, wait)
+    pub = ros_node.create_publisher(JOINT_FAILURES.msg_type, JOINT_FAILURES.name,
+                                    JOINT_FAILURES.qos)
+    wait(lambda: pub.get_subscription_count() >= 1, 30.0, 'the planner matching joint_failures',
+         spin=lambda: _spin(ros_node, 0.05))
+    request = PlanCircle.Request(centre=[0.0, 0.0], radius=0.2, duration=5.0,
+                                 start_angle=0.0, direction=1, execute=False)
+    pub.publish(JOINT_FAILURES.msg_type(data='joint3'))
+    wait(lambda: 'joint3 failed: it is free in the arm the map is of already' in
+         procs.log(proc), 15.0, "the planner's line on joint3 (log: %s)" % procs.log(proc),
+         spin=lambda: _spin(ros_node, 0.05))
+    assert _call(ros_node, client, request, 'plan_circle').accepted
+    pub.publish(JOINT_FAILURES.msg_type(data='joint2'))
+    wait(lambda: 'no plan is accepted from now on' in procs.log(proc), 15.0,
+         "the planner's line on joint2", spin=lambda: _spin(ros_node, 0.05))
+    answer = _call(ros_node, client, request, 'plan_circle')
+    assert not answer.accepted
+    assert answer.reason.endswith('refused: joint2 failed: 1 active joint(s) left for the 2-D '
+                                  "task (passive ['joint2', 'joint3']): no plan can be "
+                                  'tracked'), answer.reason

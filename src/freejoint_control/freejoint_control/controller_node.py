@@ -22,8 +22,9 @@ caught up (then it idles at SCHED_FIFO 1, before at the default scheduler); the 
 subscribes it and the first state activates it, its reference starting from the arm's
 measured motion, the torque ramped from zero.
 With ``joint_failures`` not ``off`` it subscribes ``joint_failures`` (std_msgs/String, a
-driver's or operator's notice) and passes the JointState's efforts to the loop's failure
-monitor (``freejoint_control.failures``, docs/failures.md).
+driver's or operator's notice), passes the JointState's efforts to the loop's failure
+monitor (``freejoint_control.failures``, docs/failures.md) and publishes the joints it
+detects failed there.
 
 """
 
@@ -118,9 +119,13 @@ class ControllerNode(Node, Lifecycle):
             self._subscribe_states()
         self.create_service(RESET.srv_type, RESET.name, self._on_reset)
         # Joint failures (issue 23): a driver's or operator's notice (joint_failures on).
+        # Its detections go out there too (the planner, a spare and the bag learn of them).
+        self._pub_failure = None
         if cfg.joint_failures != 'off':
             self.create_subscription(JOINT_FAILURES.msg_type, JOINT_FAILURES.name,
                                      self._on_failure_notice, JOINT_FAILURES.qos)
+            self._pub_failure = self.create_publisher(JOINT_FAILURES.msg_type,
+                                                      JOINT_FAILURES.name, JOINT_FAILURES.qos)
         self._diagnostics = Diagnostics(self, 'controller', 'freejoint_control',
                                         self._on_diagnostics_timer)
         self._diag_window = (_monotonic(), self._loop.counters())
@@ -228,6 +233,9 @@ class ControllerNode(Node, Lifecycle):
                             msg.effort)
         if res is not None:
             self._publish(res)
+        if self._pub_failure is not None:
+            for name in loop.failures.announcements():
+                self._pub_failure.publish(JOINT_FAILURES.msg_type(data=name))
 
     def _on_failure_notice(self, msg):
         """joint_failures: the joint named by ``data`` failed (the law switches next tick)."""

@@ -165,6 +165,7 @@ class FailureMonitor:
         self._notices = []
         self._hold_q = None
         self.events = []
+        self._announced = 0
         self.message = ''
         self.cannot_track = False
 
@@ -176,7 +177,8 @@ class FailureMonitor:
         Returns
         -------
         str
-            '' if queued, else why it was ignored.
+            '' if queued, else why it was ignored (logged, but for a joint known failed:
+            the announcement of a detection, :meth:`announcements`, comes back).
 
         """
         if name not in self.names:
@@ -184,6 +186,9 @@ class FailureMonitor:
                 name, list(self.names))
         else:
             j = self.names.index(name)
+            if j in self.rec.failed or (j in self.rec.nominal.passive
+                                        and j not in self.configured.passive):
+                return '%s failed already' % name   # e.g. this controller's announcement
             if j not in self.rec.active:
                 why = 'joint failure notice for %s ignored: it is not driven (passive or ' \
                     'failed already)' % name
@@ -195,6 +200,17 @@ class FailureMonitor:
         if why:
             self.log('warn', None, why)
         return why
+
+    def announcements(self):
+        """
+        Return the joints detected failed since the last call (not those notified).
+
+        The node publishes them on ``joint_failures``: the planner, a hot spare and the
+        bag learn of a failure only this controller saw.
+        """
+        new = self.events[self._announced:]
+        self._announced = len(self.events)
+        return [e['joint'] for e in new if e['by'] != 'notice']
 
     def before_law(self, ns, q, qd, prev_cmd, effort):
         """
@@ -326,6 +342,7 @@ class FailureMonitor:
         """
         new = FailureMonitor(cfg, self.law, self.log)
         new.events = list(self.events)
+        new._announced = self._announced
         failed = set(self.rec.nominal.passive) - set(self.configured.passive)
         new._notices.extend(sorted(failed | set(self.rec.failed)))
         return new

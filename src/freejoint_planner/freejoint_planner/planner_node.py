@@ -49,20 +49,29 @@ depth 1 on a hidden helper node no executor spins: no callback per tick); with a
 ``joint_states`` publisher but no state yet the plan waits for one (the stream only follows
 the clock); with none at all (in real time: none within ``ARM_DISCOVERY_S`` of the
 planner's start) it starts at the circle's start as before (logged).
+A joint reported failed on ``joint_failures`` (std_msgs/String, its name: a driver's or
+operator's notice, or the controller's detection, issue 23) joins the passive set of the
+arm the planner plans for (``planning.after_failure``): the map is recomputed for that arm
+and checks the plans from then on, or, if the arm cannot track (fewer active joints than
+the task has, or an internal motion that runs away), every plan is refused saying why; the
+running plan goes on (the controller decides what the arm does).
 Refusals name the usable region (``SingularityModel.usable``). Every circle is
 held to the arm's reach and to ``max_speed`` / ``max_acceleration``. ``lookahead`` is checked
 against the clock spacing rule at run time.
 """
 
+from dataclasses import replace
 import math
 import time
 
 from freejoint_common.arm_description import resolve_arm
 from freejoint_common.clock import own_clock, set_ros_time
-from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, JOINT_STATES, PLAN_CIRCLE
+from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, JOINT_FAILURES
+from freejoint_common.contract import JOINT_STATES, PLAN_CIRCLE
 from freejoint_common.contract import PLANNED_PATH, profile, SEMI_SINGULAR_MAP, SETPOINT, to_ns
 from freejoint_common.node_tools import NodeParameters, overridable, QOS_OVERRIDES
 from freejoint_common.runner import Lifecycle, run
+from freejoint_core.arm import table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
 from freejoint_core.trajectory import CircleQuintic
@@ -73,8 +82,9 @@ from rclpy.parameter import Parameter
 
 from .conversions import occupancy_grid, path_marker, setpoint_msg
 from .params import CIRCLE_KEYS, LOOKAHEAD_MAX, MAP_KEYS, SCHEMA, validate
-from .planning import circle_bounds, compute_model, describe_join, end_effector, grid_bound
-from .planning import grid_extent, join_from_arm, JOIN_REFUSED, JOIN_WAIT, make_circle
+from .planning import after_failure, circle_bounds, compute_model, describe_join
+from .planning import end_effector, grid_bound, grid_extent, join_from_arm, joint_state
+from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle
 from .planning import prepare_transition, settle_gate_refusal, swing_deg
 from .stream import Plan, SetpointStream
 
@@ -103,6 +113,8 @@ class PlannerNode(Node, Lifecycle):
         # nominal model is the map's; read-only but gravity, which the map does not hold.
         arm = resolve_arm(self._cfg)
         self._arm = None if arm.urdf_arm is None else arm.params
+        self._passive = None            # the passive set after reported failures (None: none)
+        self._failure_refusal = ''      # why no plan is accepted since a failure ('' : none)
         self._joint_names = arm.joint_names
         self._arm_source = arm.source
         # Where the arm is, for a plan from rest: joint_states taken only when needed (a
@@ -120,7 +132,8 @@ class PlannerNode(Node, Lifecycle):
         self._born = time.monotonic()
         self._sim = self.get_parameter('use_sim_time').value
         own_clock(self)     # one /clock delivery: _on_clock sets the ROS clock
-        self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS), arm=self._arm)
+        self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS),
+                                    arm=self._map_arm(self._cfg))
         reason = (grid_bound(self._model.region.reach, self._cfg['grid_resolution'])
                   or circle_bounds(make_circle(self._cfg), self._model,
                                    self._cfg['max_speed'], self._cfg['max_acceleration']))
@@ -159,6 +172,10 @@ class PlannerNode(Node, Lifecycle):
         self.create_subscription(CLOCK.msg_type, CLOCK.name, self._on_clock,
                                  CLOCK_SUBSCRIPTION_QOS)
         self._timer = self._make_timer()
+        # A joint reported failed (by a driver, an operator or the controller's detection,
+        # issue 23): plans from then on are for the arm with it free.
+        self.create_subscription(JOINT_FAILURES.msg_type, JOINT_FAILURES.name,
+                                 self._on_joint_failure, JOINT_FAILURES.qos)
         self._params.listen(self._apply, self._check, watch=('use_sim_time',))
         self.create_service(PLAN_CIRCLE.srv_type, PLAN_CIRCLE.name, self._on_plan_circle)
         self.get_logger().info(
@@ -182,7 +199,7 @@ class PlannerNode(Node, Lifecycle):
         changed = {k for k in new if new[k] != self._cfg[k]}
         model = self._model
         if changed & set(MAP_KEYS):
-            model = compute_model(*(new[k] for k in MAP_KEYS), arm=self._arm)
+            model = compute_model(*(new[k] for k in MAP_KEYS), arm=self._map_arm(new))
             self.get_logger().info(f'singularity map recomputed in {model.seconds * 1e3:.0f} '
                                    f'ms: {model.describe()}')
             plan = self._stream.plan
@@ -237,6 +254,30 @@ class PlannerNode(Node, Lifecycle):
         if sim != self._sim:
             self._switch_time_source(sim)
 
+    def _map_arm(self, cfg):
+        """Return the real arm of the map: the configured one, failed joints free."""
+        if self._passive is None:
+            return self._arm
+        return replace(self._arm or table1(cfg['case']), passive=self._passive)
+
+    def _on_joint_failure(self, msg):
+        """joint_failures: plan for the arm with that joint free (``after_failure``)."""
+        cfg = self._cfg
+        self._take_arm_state()
+        got = self._arm_state
+        out = after_failure(self._map_arm(cfg) or table1(cfg['case']), self._joint_names,
+                            msg.data, None if got is None else joint_state(
+                                self._joint_names, got.name, got.position, got.velocity),
+                            make_circle(cfg), cfg['nominal_scale'])
+        self._failure_refusal = self._failure_refusal or out.refusal
+        if out.arm is not None:
+            self._passive = out.arm.passive
+            if not out.refusal:
+                self._model = compute_model(*(cfg[k] for k in MAP_KEYS), arm=out.arm)
+                self._publish_map()
+        self.get_logger().warning(out.note + ('; no plan is accepted from now on, the '
+                                              'running one goes on' if out.refusal else ''))
+
     def _make_timer(self):
         """
         Return the real-time trigger: a wall timer every max(1, lookahead // 2) periods.
@@ -279,6 +320,8 @@ class PlannerNode(Node, Lifecycle):
         margin (m); the ``TransitionChoice`` (None: starts directly) and its first tick.
         ``transition`` false: the circle alone (it is not to be started).
         """
+        if self._failure_refusal:
+            return self._failure_refusal, math.nan, None, None
         reason = circle_bounds(circle, model, cfg['max_speed'], cfg['max_acceleration'])
         if reason:
             return f'{reason} ({model.usable()})', math.nan, None, None

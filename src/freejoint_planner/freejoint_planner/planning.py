@@ -9,12 +9,14 @@ bundles the map with what was computed from it, and samples a circle densely eno
 ``check_path``; the node's parameters are its schema, ``freejoint_planner.params``.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 import time
 
 from freejoint_core.arm import ArmModel, table1
+from freejoint_core.control import Gains
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.failure import assess_passive_set, CANNOT_TRACK, M_TASK
 from freejoint_core.internal import free_link_swing
 from freejoint_core.singularity import check_path
 from freejoint_core.singularity_nlink import arm_region
@@ -333,6 +335,27 @@ def swing_deg(model, joint_names, names, positions, velocities):
         None when a joint, a position or a velocity is missing or not finite.
 
     """
+    state = joint_state(joint_names, names, positions, velocities)
+    return None if state is None else math.degrees(free_link_swing(model.nominal, *state))
+
+
+def joint_state(joint_names, names, positions, velocities):
+    """
+    Return the arm's joint angles and velocities in its order, None if one is unknown.
+
+    Parameters
+    ----------
+    joint_names : sequence of str, (n,)
+        The arm's joints, base to tip.
+    names, positions, velocities : sequence
+        ``JointState.name``, ``.position`` [rad], ``.velocity`` [rad/s].
+
+    Returns
+    -------
+    tuple of list of float, ((n,), (n,)) or None
+        None when a joint, a position or a velocity is missing or not finite.
+
+    """
     index = joint_indices(joint_names, names)
     if index is None or max(index, default=-1) >= min(len(positions), len(velocities)):
         return None
@@ -340,7 +363,101 @@ def swing_deg(model, joint_names, names, positions, velocities):
     qd = [float(velocities[i]) for i in index]
     if not all(map(math.isfinite, q + qd)):
         return None
-    return math.degrees(free_link_swing(model.nominal, q, qd))
+    return q, qd
+
+
+ASSESS_HORIZON = 2.0
+"""[s] How far :func:`after_failure` simulates the internal motion of the arm a failure
+left (``freejoint_core.failure.assess_passive_set``): the paper's arm with joint 2 free
+runs away within it on the paper's circle (vertical: in 1 s, horizontal: in 1-1.5 s), as
+the controller's check over the whole path finds; 0.1-0.25 s of the planner's time."""
+
+
+@dataclass(frozen=True)
+class FailedArm:
+    """
+    What the planner plans for after a reported joint failure (:func:`after_failure`).
+
+    Attributes
+    ----------
+    arm : ArmParams or None
+        The real arm with the new passive set (None: the map's arm stays).
+    refusal : str
+        Why no plan is accepted from now on ('' : plans are checked on the map of ``arm``).
+    note : str
+        The line to log.
+
+    """
+
+    arm: object
+    refusal: str
+    note: str
+
+
+def after_failure(arm, joint_names, name, state=None, trajectory=None, nominal_scale=0.7,
+                  gains=None):
+    """
+    Return the arm the planner plans for once the joint ``name`` failed (issue 23).
+
+    The failed joint joins the passive set.  Fewer active joints than the task has
+    (``r < m``) or an internal motion that runs away or grows (the controller's own
+    check, ``freejoint_core.failure.assess_passive_set`` on the nominal arm from the
+    arm's state along ``trajectory`` for :data:`ASSESS_HORIZON`) refuse every plan from
+    then on, saying why; otherwise the node recomputes its map for the new arm and checks
+    plans on it.  Without a state the internal motion is not assessed (the note says so).
+
+    Parameters
+    ----------
+    arm : ArmParams
+        The real arm the planner's map is of (its passive set: the joints free so far).
+    joint_names : sequence of str, (n,)
+        The arm's joints, base to tip.
+    name : str
+        The joint reported failed (``joint_failures``' ``data``).
+    state : tuple of array_like, ((n,), (n,)), optional
+        Joint angles [rad] and velocities [rad/s] of the arm now, base to tip.
+    trajectory : CircleQuintic, optional
+        The path to assess the internal motion along; default the paper's circle.
+    nominal_scale : float
+        The nominal model's scale of the real arm (the map's).
+    gains : freejoint_core.control.Gains, optional
+        The law's gains (its K and Lambda keep the simulated end effector on the path);
+        default the paper's.
+
+    Returns
+    -------
+    FailedArm
+
+    """
+    names = list(joint_names)
+    if name not in names:
+        return FailedArm(None, '', f'joint failure notice for {name!r} ignored: not a joint '
+                         f'of {names}')
+    j = names.index(name)
+    if j in arm.passive:
+        return FailedArm(None, '', f'{name} failed: it is free in the arm the map is of '
+                         'already; plans are checked as before')
+    passive = tuple(sorted(set(arm.passive) | {j}))
+    free = [names[i] for i in passive]
+    if arm.n - len(passive) < M_TASK:
+        why = (f'{name} failed: {arm.n - len(passive)} active joint(s) left for the '
+               f'{M_TASK}-D task (passive {free}): no plan can be tracked')
+        return FailedArm(None, why, why)
+    new = replace(arm, passive=passive)
+    if state is None:
+        return FailedArm(new, '', f'{name} failed: plans are checked on the map of the arm '
+                         f'with passive {free} (its internal motion not assessed: no joint '
+                         'state)')
+    gains = gains or Gains()
+    verdict = assess_passive_set(new.scaled(nominal_scale), new.passive, *state,
+                                 trajectory or CircleQuintic(), 0.0, horizon=ASSESS_HORIZON,
+                                 gains=(gains.K[0], gains.Lambda[0]))
+    if verdict.verdict == CANNOT_TRACK:
+        why = f'{name} failed: the arm with passive {free} cannot track: {verdict.reason}'
+        return FailedArm(new, why, why)
+    return FailedArm(new, '', f'{name} failed: plans are checked on the map of the arm with '
+                     f'passive {free} (its internal motion assessed over {ASSESS_HORIZON:g} s: '
+                     'held)')
 
 
 def transition_from_rest(position, circle, model, dt, max_duration, bounds=None):
