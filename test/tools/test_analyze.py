@@ -227,3 +227,47 @@ def test_a_fine_joint_space_map_is_drawn_in_blocks_that_keep_every_flagged_sampl
     shown, block = _joint_space_mask(SimpleNamespace(singular_mask=mask))
     assert block == 8 and shown.shape == (180, 180)
     assert shown[90].all() and shown.sum() == 180         # 721 // 8 = 90
+
+
+def test_joint_failures_are_read_from_the_simulators_diagnostics_and_the_controllers_message():
+    from types import SimpleNamespace as Ns
+    from freejoint_tools.analyze import failure_lines, failures_of
+    import numpy as np
+
+    def state(text):
+        return Ns(message=text)
+
+    def diag(value, key='failed joints'):
+        return Ns(status=[Ns(values=[Ns(key='level', value='WARN'), Ns(key=key, value=value)])])
+    switched = ('joint3 failed at t = 2.507 s (detected by effort): law switched to passive '
+                "['joint3']")
+    states = [state(''), state('no setpoint yet'), state(switched), state(switched),
+              state('joint2 failed at t = 3.010 s (detected by residual): cannot_track (r = 1 '
+                    'active joints < m = 2): least-harm command on [0]'),
+              state('joint3 failed at t = 9.000 s (detected by notice): ...')]
+    diagnostics = [diag('none', key='steps'), diag('joint3 at 2.500 s'),
+                   diag('joint3 at 2.500 s, joint2 at 3.000 s'),
+                   diag('joint1 at 4.250 s')]
+    got = failures_of(states, diagnostics)
+    assert got == [
+        {'joint': 'joint3', 'failed_s': 2.5, 'detected_s': 2.507, 'by': 'effort'},
+        {'joint': 'joint2', 'failed_s': 3.0, 'detected_s': 3.01, 'by': 'residual'},
+        {'joint': 'joint1', 'failed_s': 4.25, 'detected_s': None, 'by': None}]
+    # A notice with no injection recorded (a real driver's bag): detected, time unknown.
+    assert failures_of([states[-1]]) == [
+        {'joint': 'joint3', 'failed_s': None, 'detected_s': 9.0, 'by': 'notice'}]
+    assert failures_of(states[:2], diagnostics[:1]) == []
+    # The lines: delay, and the largest error from the failure on (ticks of 1 ms).
+    t = np.arange(5000) * 1e-3
+    error = np.where(t < 2.5, 1e-3, 2e-3)
+    error[3100] = 7e-3
+    lines = failure_lines('vertical', got, t, error)
+    assert lines == [
+        'vertical: joint3 failed at 2.500 s, detected at 2.507 s by effort (delay 7 ms); max '
+        'tracking error after it 7.0000 mm',
+        'vertical: joint2 failed at 3.000 s, detected at 3.010 s by residual (delay 10 ms); '
+        'max tracking error after it 7.0000 mm',
+        'vertical: joint1 failed at 4.250 s, not detected; max tracking error after it 2.0000 mm']
+    assert failure_lines('x', [{'joint': 'joint3', 'failed_s': None, 'detected_s': 9.0,
+                                'by': 'notice'}], t, error) == [
+        'x: joint3 failed at (not recorded), detected at 9.000 s by notice']

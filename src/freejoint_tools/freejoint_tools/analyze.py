@@ -41,6 +41,13 @@ from the nominal parameters, with the recorded planner map (OccupancyGrid) and p
 ``compare.png`` side by side. Per-bag figures go into the bag directory, the others into
 the bags' common parent directory, unless ``--figures-dir`` names one directory for all.
 
+Joint failures (issue 23): a joint the simulator made fail (its ``/diagnostics`` key
+``failed joints``, e.g. ``joint3 at 2.500 s``) and the controller's detection (the first
+``ControllerState.message`` ``joint3 failed at t = 2.507 s (detected by effort) ...``) are
+read from the bag (:func:`failures_of`); per failure one line says when it failed, when and
+how it was detected, the delay and the largest tracking error after it, and Figs. 3/4 mark
+both times.
+
 Bad input (a missing, truncated or foreign bag, a bag without the run's topics) gives one
 line ``analyze: error: <file>: <problem>`` on stderr and exit code 1. A bag whose recorder
 was killed (not finalised) is analysed up to its last complete chunk, with a warning.
@@ -48,9 +55,11 @@ was killed (not finalised) is analysed up to its last complete chunk, with a war
 
 import argparse
 import os
+import re
 import sys
 
-from freejoint_common.contract import CONTROLLER_STATE, JOINT_STATES, ROBOT_DESCRIPTION
+from freejoint_common.contract import CONTROLLER_STATE, DIAGNOSTICS, JOINT_STATES
+from freejoint_common.contract import ROBOT_DESCRIPTION
 from freejoint_common.contract import seconds_to_ns, to_ns
 
 from .bagfile import BagError, open_bag, SYSTEM_TIME_NS
@@ -61,6 +70,10 @@ GRID_TYPE = 'nav_msgs/msg/OccupancyGrid'
 MARKER_TYPE = 'visualization_msgs/msg/Marker'
 DEFAULT_PASSIVE = 'joint3'
 DESCRIPTION_TYPE = ROBOT_DESCRIPTION.type_name
+FAILED_KEY = 'failed joints'
+"""The simulator's ``/diagnostics`` key naming the joints it made fail and when."""
+_INJECTED = re.compile(r'(\S+) at ([0-9.]+) s')
+_DETECTED = re.compile(r'(\S+) failed at t = ([0-9.]+) s \(detected by (\w+)\)')
 
 
 class AnalysisError(Exception):
@@ -158,7 +171,8 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     states_topic = _pick_topic(bag, STATE_TYPE, CONTROLLER_STATE.absolute, state_topic)
     joints_topic = _pick_topic(bag, JOINT_TYPE, JOINT_STATES.absolute, joint_topic)
     store = bag.typestore()
-    decoded = bag.decode_topics([states_topic, joints_topic], store)
+    diag = [DIAGNOSTICS.absolute] if DIAGNOSTICS.absolute in bag.topics else []
+    decoded = bag.decode_topics([states_topic, joints_topic] + diag, store)
     states = [m for _, m in decoded[states_topic]]
     joints = [m for _, m in decoded[joints_topic]]
     arm = bag_arm(bag, store, states, joints, info)
@@ -184,6 +198,7 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     trace['arm'] = arm
     trace['t0'] = time_origin(arrays['t'])
     trace['t'] = arrays['t'] - trace['t0']
+    trace['failures'] = failures_of(states, [m for topic in diag for _, m in decoded[topic]])
     trace['grid'] = trace['path'] = None
     grids = bag.topics_of_type(GRID_TYPE)
     if grids and bag.topics[grids[0]].count:
@@ -192,6 +207,84 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     if markers and bag.topics[markers[0]].count:
         trace['path'] = bag.decode(markers[0], store)[-1][1]
     return record, trace, warnings
+
+
+def failures_of(states, diagnostics=()):
+    """
+    Return the joint failures of a run: when each failed and when it was detected.
+
+    Parameters
+    ----------
+    states : sequence of ControllerState
+        Its ``message`` names a detection (``joint3 failed at t = 2.507 s (detected by
+        effort) ...``, the first one per joint taken).
+    diagnostics : sequence of DiagnosticArray
+        The simulator's key ``failed joints`` (``joint3 at 2.500 s[, ...]``).
+
+    Returns
+    -------
+    list of dict
+        ``joint``, ``failed_s`` (None: not recorded), ``detected_s`` (None: not detected),
+        ``by`` (``residual`` | ``effort`` | ``notice`` | None), ordered by time.
+
+    """
+    found = {}
+    for array in diagnostics:
+        for status in array.status:
+            for kv in status.values:
+                if kv.key == FAILED_KEY:
+                    for joint, at in _INJECTED.findall(kv.value):
+                        found.setdefault(joint, {'joint': joint, 'failed_s': float(at),
+                                                 'detected_s': None, 'by': None})
+    seen = set()
+    last = None
+    for msg in states:
+        text = msg.message
+        if text == last or 'failed at t = ' not in text:
+            continue
+        last = text
+        for joint, at, by in _DETECTED.findall(text):
+            if joint not in seen:
+                seen.add(joint)
+                entry = found.setdefault(joint, {'joint': joint, 'failed_s': None})
+                entry.update(detected_s=float(at), by=by)
+    return sorted(found.values(), key=lambda f: min(
+        t for t in (f['failed_s'], f['detected_s'], float('inf')) if t is not None))
+
+
+def failure_lines(name, failures, t, error_m):
+    """
+    Return one line per failure: when, detected when and how, the error after it.
+
+    Parameters
+    ----------
+    name : str
+        The bag's name.
+    failures : list of dict
+        :func:`failures_of`.
+    t : ndarray, (N,)
+        Tick times [s] on the stamps' time base.
+    error_m : ndarray, (N,)
+        Tracking error norm [m] per tick.
+
+    """
+    out = []
+    for f in failures:
+        failed, detected = f['failed_s'], f['detected_s']
+        text = '%s: %s failed at %s' % (name, f['joint'], '(not recorded)' if failed is None
+                                        else '%.3f s' % failed)
+        if detected is None:
+            text += ', not detected'
+        else:
+            text += ', detected at %.3f s by %s' % (detected, f['by'])
+            if failed is not None:
+                text += ' (delay %.0f ms)' % ((detected - failed) * 1e3)
+        start = failed if failed is not None else detected
+        after = error_m[t >= start - 1e-9] if len(t) else error_m[:0]
+        if len(after):
+            text += '; max tracking error after it %.4f mm' % (float(after.max()) * 1e3)
+        out.append(text)
+    return out
 
 
 def passive_from_messages(states, joint_states):
@@ -358,6 +451,12 @@ def main(argv=None):
         records.append(record)
         traces.append(trace)
     print(format_table(records, theta=opts.theta))
+    import numpy as np
+    for trace in traces:
+        error = np.hypot(*(trace['p'] - trace['p_d']).T)
+        for line in failure_lines(trace['name'], trace['failures'], trace['t'] + trace['t0'],
+                                  error):
+            print('failure: %s' % line)
     if not opts.no_plots:
         from .plots import write_figures
         try:

@@ -134,10 +134,25 @@ def figure_run(trace, path):
     ax.set_title('(f) error norm')
     for ax in axes.flat:
         ax.grid(True, alpha=0.3)
+    _mark_failures(trace, axes.flat[1:])
     fig.suptitle(run_title(trace))
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     return path
+
+
+def _mark_failures(trace, axes):
+    """Mark each joint failure (dashed) and its detection (dotted) on the time axes."""
+    t0 = trace.get('t0', 0.0)
+    for i, f in enumerate(trace.get('failures') or ()):
+        for key, style, what in (('failed_s', '--', 'failed'), ('detected_s', ':', 'detected')):
+            if f[key] is None:
+                continue
+            for ax in axes:
+                ax.axvline(f[key] - t0, color='k', ls=style, lw=0.8,
+                           label='%s %s' % (f['joint'], what) if ax is axes[0] else None)
+    if trace.get('failures'):
+        axes[0].legend(fontsize=8)
 
 
 def fig2_region(params, scale, grids=FIG2_GRIDS_DEG):
