@@ -28,26 +28,25 @@ detects failed there.
 
 """
 
-from array import array
 import signal
 import time
 
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, JOINT_STATES
 from freejoint_common.contract import JOINT_FAILURES
-from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_from_ns
-from freejoint_common.contract import stamp_label, STANDBY_SETPOINT_QOS, to_ns
+from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_label
+from freejoint_common.contract import STANDBY_SETPOINT_QOS, to_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import Throttle
 from freejoint_common.runner import Lifecycle, run
 from freejoint_common.scheduling import process_scheduling
+from freejoint_control.conversions import command_message, controller_state_message
+from freejoint_control.conversions import fill_state
 from freejoint_control.loop import ControlLoop, ERROR, RECEIPT, WARN
 from freejoint_control.params import SCHEMA
 from freejoint_control.supervisor import notify_ready
-from freejoint_msgs.msg import ControllerState
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from std_msgs.msg import MultiArrayDimension
 
 _monotonic = time.monotonic
 
@@ -65,13 +64,9 @@ class ControllerNode(Node, Lifecycle):
         self._lockstep = cfg.lockstep
         self._set_state_rate(cfg)
 
-        self._cmd = COMMANDS.msg_type()
-        self._cmd.layout.dim = [MultiArrayDimension(label=stamp_label(0), size=len(cfg.joints),
-                                                    stride=len(cfg.joints))]
+        self._cmd = command_message(cfg.joints)
         self._dim = self._cmd.layout.dim[0]
-        self._state = ControllerState()
-        self._state.joint_names = list(cfg.joints)
-        self._state.law_state_names = list(self._loop.result.law_state_names)
+        self._state = controller_state_message(cfg.joints, self._loop.result.law_state_names)
         self._m = self._loop.task_dim
         self._state_pub_ns = None       # stamp of the last ControllerState published
         self._latency = LatencyWindow()
@@ -286,36 +281,17 @@ class ControllerNode(Node, Lifecycle):
                 0 <= ns - self._state_pub_ns < period):
             return                      # thinned: state_publish_rate
         if ns >= 0:
-            stamp_from_ns(ns, st.header.stamp)
             self._state_pub_ns = ns
-        st.error = array('d', res.error)
-        st.error_rate = array('d', res.error_rate)
-        st.sliding = array('d', res.sliding)
-        st.law_state = array('d', res.law_state_values)
-        st.effort = res.effort
-        st.det_dd = res.det_dd
-        st.position = array('d', res.position)
-        st.position_desired = array('d', res.position_desired)
-        st.status = res.status
-        st.message = res.message
-        if res.setpoint_ns is None:
-            st.setpoint_stamp.sec = 0
-            st.setpoint_stamp.nanosec = 0
-        else:
-            stamp_from_ns(res.setpoint_ns, st.setpoint_stamp)
-        st.setpoint_age = res.setpoint_age
-        st.dt = res.dt
-        st.state_age = res.state_age
+        fill_state(st, res)
         self._pub_state.publish(st)
 
     def _on_reset(self, request, response):
         """~/reset: restart theta_hat and the hold / blend state (std_srvs/Trigger)."""
         self._loop.reset()
-        self.get_logger().warn('reset: theta_hat = theta0 %s, hold / blend state cleared'
-                               % list(self.config.gains.theta0))
-        response.success = True
         response.message = 'theta_hat reset to theta0 %s; hold / blend state cleared' % (
             list(self.config.gains.theta0),)
+        self.get_logger().warn('reset: ' + response.message)
+        response.success = True
         return response
 
     def _watchdog(self):
