@@ -163,8 +163,8 @@ def test_signal_mid_run_gives_a_finalised_bag_without_gaps(procs, wait, tmp_path
         assert reader.message_count == bag.message_count
         assert sum(1 for _ in reader.messages()) == bag.message_count
     stamps = _stamps_ns(bag, '/joint_states')
-    # What the bag's complete chunks hold: 100 ticks once on a machine three workers and
-    # another job loaded (the publisher slower than its rate), more when quiet.
+    # Not a trivial bag (its size says how much the publisher got out, the rates differ
+    # under load; the gaps are the check).
     assert len(stamps) >= 50
     _assert_every_gap_reported(stamps, _log(recorder), '/joint_states')
     assert bag.topics['/controller_state'].count > 100
