@@ -38,6 +38,7 @@ Usage: ``. tools/env.sh && python bench/soak.py [--runs 5] [--seconds 30]
 
 import argparse
 import json
+import math
 import os
 import platform
 import shutil
@@ -466,22 +467,92 @@ def stabilised_overrides(case):
             overlay_overrides(CONTROLLER, os.path.join(overlay, 'controller.yaml')))
 
 
-def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=False):
+def fully_actuated_overrides():
+    """Return the (simulator, controller, planner) ``-p`` items of config/fully_actuated/."""
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_sim.params import SCHEMA as SIM
+    overlay = os.path.join(ROOT, 'config', 'fully_actuated')
+    return tuple(overlay_overrides(schema, os.path.join(overlay, node + '.yaml'))
+                 for schema, node in ((SIM, 'sim'), (CONTROLLER, 'controller'),
+                                      (PLANNER, 'planner')))
+
+
+FAIL_JOINT = 'joint3'
+"""The joint ``--fail-at`` makes fail (the simulator's ``~/fail_joint``)."""
+
+
+class FailAt:
+    """
+    One circle; ``after`` s past the reply that accepted it the simulator's joint fails.
+
+    ``poll`` as ``graph.CircleLoop``'s; ``wall`` is the system time [s] of the
+    ``~/fail_joint`` call (its answer, ``at``, the simulator's time of it).
+    """
+
+    def __init__(self, client, after):
+        self.circles = bench_graph.CircleLoop(client, period=math.inf)
+        self.client = client
+        self.after = after
+        self.wall = None
+        self.answer = None
+
+    @property
+    def accepted(self):
+        """Return the accepting replies' monotonic times (``CircleLoop.accepted``)."""
+        return self.circles.accepted
+
+    def poll(self):
+        """Ask for the circle, then make the joint fail when due."""
+        self.circles.poll()
+        if self.wall is None and self.accepted and \
+                time.monotonic() >= self.accepted[0] + self.after:
+            from freejoint_msgs.srv import FailJoint
+            self.wall = time.time()
+            self.answer = self.client.call(FailJoint, '/sim_node/fail_joint',
+                                           FailJoint.Request(joint=FAIL_JOINT), 10.0)
+            if self.answer is None or not self.answer.success:
+                raise RuntimeError('~/fail_joint: %s' % (
+                    'no answer' if self.answer is None else self.answer.message))
+
+
+def failure_lines(graph):
+    """Return the controller's 'joint failure:' log lines (its detections)."""
+    out = []
+    for path in graph.procs['controller_node'].logs:
+        with open(path) as f:
+            out += [line.split('joint failure: ', 1)[1].strip() for line in f
+                    if 'joint failure: ' in line]
+    return out
+
+
+def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=False,
+             fully_actuated=False, fail_at=None):
     """Make one run of ``case``; return its row (dict)."""
     name = '%s_%d' % (case, run)
     sim, ctl = stabilised_overrides(case) if stabilise else ([], [])
+    planner = []
+    if fully_actuated:
+        more = fully_actuated_overrides()
+        sim, ctl, planner = sim + more[0], ctl + more[1], more[2]
     bound, factor, worst = bound_of(case, hogs)
     row = {'case': case, 'run': run, 'seconds': seconds, 'bound_mm': bound,
            'bound_factor': factor, 'offline_worst_max_mm': worst}
     load0 = os.getloadavg()[0]
-    with Session(name, index, case, seconds, sim=sim, ctl=ctl) as s:
+    with Session(name, index, case, seconds, sim=sim, ctl=ctl, planner=planner) as s:
         row['ros_domain_id'] = s.env['ROS_DOMAIN_ID']
         s.up()
-        loop = bench_graph.CircleLoop(
-            s.client, before=None if back_to_back else (lambda: rest_at_q0(s.client)))
+        if fail_at is not None:
+            loop = FailAt(s.client, fail_at)
+        else:
+            loop = bench_graph.CircleLoop(
+                s.client, before=None if back_to_back else (lambda: rest_at_q0(s.client)))
         start = time.monotonic()
         s.wait(seconds, loop)
         end = time.monotonic()
+    if fully_actuated:
+        row['failure_lines'] = failure_lines(s.graph)
+        row['detections'] = len(row['failure_lines'])
     row['back_to_back'] = back_to_back
     row['stabilised'] = stabilise
     row['exit_codes'] = s.codes
@@ -500,8 +571,50 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
                            or (row['max_mm'] or 0.0) > DIVERGED_MM)
     row['met'] = bool(row['max_mm'] is not None and row['max_mm'] <= bound
                       and not row['diverged'])
+    if fully_actuated:
+        row.update(failure_judgement(row, ticks, loop if fail_at is not None else None))
     row['bag'] = os.path.relpath(s.bag, ROOT)
     return row
+
+
+def failure_judgement(row, ticks, fail):
+    """
+    Return the failure figures of a fully actuated run.
+
+    No failure made: ``false_alarms`` = the controller's detections.  ``fail`` (a
+    :class:`FailAt`): ``detected`` (the failed joint's first detection, its time from the
+    controller's line, a state stamp in system time), ``delay_ms`` from the
+    ``~/fail_joint`` call, ``false_alarms`` = detections of other joints, ``max_after_mm``
+    the largest tracking error from the call on; ``met`` also asks for a detection within
+    ``FAIL_DELAY_MS`` and no false alarm.
+    """
+    import re
+    import numpy as np
+    lines = row['failure_lines']
+    if fail is None:
+        return {'false_alarms': len(lines), 'met': row['met'] and not lines}
+    if fail.wall is None:
+        return {'false_alarms': len(lines), 'met': False, 'detected': None,
+                'note': 'the joint was not made to fail (the run ended first)'}
+    ours = [line for line in lines if line.startswith(FAIL_JOINT + ' failed at t = ')]
+    delay = None
+    if ours:
+        t = float(re.match(r'\S+ failed at t = ([0-9.]+) s', ours[0]).group(1))
+        delay = (t - fail.wall) * 1e3
+    after = ticks['stamp_ns'] >= fail.wall * 1e9
+    err = ticks['err_mm'][after]
+    out = {'detected': ours[0] if ours else None, 'delay_ms': delay,
+           'false_alarms': len(lines) - len(ours[:1]),
+           'max_after_mm': float(np.max(err)) if len(err) else None,
+           'fail_wall_s': fail.wall, 'fail_answer_at_s': fail.answer.at}
+    out['met'] = bool(row['met'] and ours and delay is not None and delay <= FAIL_DELAY_MS
+                      and out['false_alarms'] == 0)
+    return out
+
+
+FAIL_DELAY_MS = 50.0
+"""A failure made by ``--fail-at`` must be detected within this (issue 23's horizontal
+budget is 100 ms, vertical 20 ms offline; real time adds the service call and a period)."""
 
 
 COLUMNS = (('case', '%-10s'), ('run', '%3s'), ('rms_mm', '%7.3f'), ('max_mm', '%7.3f'),
@@ -575,8 +688,18 @@ def parse(argv):
     ap.add_argument('--stabilise', action='store_true',
                     help='internal-motion stabilisation (issue 22): vertical, the free link '
                     'starts hanging and the controller damps it (config/stabilised/)')
+    ap.add_argument('--fully-actuated', action='store_true',
+                    help='the paper arm with all joints driven and joint failure detection on '
+                    "(config/fully_actuated/, issue 23): each run counts the controller's "
+                    'detections (false alarms without --fail-at)')
+    ap.add_argument('--fail-at', type=float, default=None, metavar='S',
+                    help='with --fully-actuated: one circle per run, joint3 made to fail S s '
+                    "after the plan's acceptance (the simulator's ~/fail_joint); reports the "
+                    'detection delay and the error after it')
     ap.add_argument('--out', default=os.path.join(OUT, 'soak.json'))
     args = ap.parse_args(argv)
+    if args.fail_at is not None and (not args.fully_actuated or args.fail_at < 0):
+        ap.error('--fail-at needs --fully-actuated and S >= 0')
     if args.runs < 1 or args.seconds <= 0 or args.hogs < 0 or not 0 <= args.priority <= 98:
         ap.error('--runs >= 1, --seconds > 0, --hogs >= 0, 0 <= --priority <= 98')
     return args
@@ -599,6 +722,8 @@ def main(argv=None):
     cond['circles'] = ('back to back' if args.back_to_back else
                        'each from rest at q(0): sim and controller ~/reset before each')
     cond['stabilised'] = args.stabilise
+    cond['fully_actuated'] = args.fully_actuated
+    cond['fail_at_s'] = args.fail_at
     say('%d run(s) x %g s per case %s, sim and controller thread_priority %d, %d hog(s), '
         '%d CPUs, load %.2f' % (args.runs, args.seconds, ', '.join(args.cases), args.priority,
                                 args.hogs, os.cpu_count(), os.getloadavg()[0]))
@@ -617,7 +742,7 @@ def main(argv=None):
                 say('%s run %d/%d: %g s' % (case, run + 1, args.runs, args.seconds))
                 try:
                     row = soak_run(case, index, run, args.seconds, args.hogs, args.back_to_back,
-                                   args.stabilise)
+                                   args.stabilise, args.fully_actuated, args.fail_at)
                 except Exception as exc:  # noqa: B902 - one bad run must not cost the soak
                     say('%s run %d failed: %s: %s' % (case, run, type(exc).__name__, exc))
                     row = {'case': case, 'run': run, 'error': str(exc), 'met': False}
@@ -625,6 +750,12 @@ def main(argv=None):
                 index += 1
                 rows.append(row)
                 say(format_row(row) if 'error' not in row else 'run not made')
+                if 'false_alarms' in row:
+                    say('  failures: %s; false alarms %d%s' % (
+                        '; '.join(row['failure_lines']) or 'none detected',
+                        row['false_alarms'], '' if row.get('delay_ms') is None else
+                        '; detected %.1f ms after the ~/fail_joint call, max %.3f mm after '
+                        'it' % (row['delay_ms'], row['max_after_mm'] or math.nan)))
     cond['load_average_end'] = list(os.getloadavg())
     per_case = {case: worst_of([r for r in rows if r['case'] == case]) for case in args.cases}
     print()

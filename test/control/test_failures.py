@@ -260,3 +260,37 @@ def test_real_time_effort_check_takes_the_nearer_of_the_last_two_commands():
     locked = make(FULL)[0].failures
     locked._effort_reference([1.0, 2.0, 3.0], [1.0, 2.0, 3.0])
     assert locked._effort_reference([1.2, 2.5, 3.2], [1.0, 2.0, 0.0]) == [1.2, 2.5, 3.2]
+
+
+def test_real_time_no_torque_on_every_joint_is_a_stopped_drive_and_one_joint_reading_0_a_failure():
+    # Real time, efforts reported: the brakes (or the drive's watchdog) zero every joint's
+    # effort while the controller commands: no failure, the effort judged again 20 ms after
+    # torque is back; then joint 3 alone reading 0 is flagged by effort after the
+    # detector's ticks.  The residual does not judge (the effort is the applied torque).
+    from freejoint_control.failures import HOLDOFF_S
+    from freejoint_core.failure import DEFAULT_EFFORT_TICKS
+    loop, logs = make(FULL, case='vertical', lockstep=False)
+    monitor = loop.failures
+    q = initial_state(table1('vertical'), 120.0, TRAJ.sample(0.0)[0]).tolist()
+    cmd = [40.0, 20.0, 5.0]
+    k = 0
+
+    def tick(effort):
+        nonlocal k
+        monitor.before_law(k * DT_NS, q, [0.0] * 3, cmd, effort)
+        k += 1
+    for _ in range(50):
+        tick(list(cmd))
+    for _ in range(300):                # braked for 0.3 s
+        tick([0.0, 0.0, 0.0])
+    assert monitor.events == [] and monitor.drive_stops == 1
+    holdoff = round(HOLDOFF_S / DT)
+    for _ in range(holdoff):            # joint 3 reads 0 at once: not judged yet
+        tick([40.0, 20.0, 0.0])
+    assert monitor.events == []
+    for _ in range(DEFAULT_EFFORT_TICKS):
+        tick([40.0, 20.0, 0.0])
+    (event,) = monitor.events
+    assert event['joint'] == 'joint3' and event['by'] == 'effort'
+    assert event['t'] == pytest.approx((350 + holdoff + DEFAULT_EFFORT_TICKS - 1) * DT)
+    assert monitor.announcements() == ['joint3']

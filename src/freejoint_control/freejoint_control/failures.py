@@ -55,6 +55,12 @@ import numpy as np
 
 MODES = ('off', 'notice', 'detect')
 """Values of the parameter ``joint_failures``."""
+NO_TORQUE = 1e-9
+"""[N m] A measured effort this small is no torque (a failed joint, a braked or stopped
+drive reads 0)."""
+HOLDOFF_S = 0.02
+"""[s] Real time: after the drive applied no torque on every driven joint (brakes, its
+watchdog, a stop), how long the effort detector waits before it judges again."""
 
 _ZERO2 = np.zeros(2)
 
@@ -162,6 +168,9 @@ class FailureMonitor:
         self._last_ns = None
         self._tau_before = None
         self._lockstep = cfg.lockstep
+        self._holdoff_ticks = max(1, round(HOLDOFF_S / cfg.dt))
+        self._holdoff = 0               # real time: ticks left before the effort is judged
+        self.drive_stops = 0            # real time: onsets of no torque on every joint
         self._notices = []
         self._hold_q = None
         self.events = []
@@ -269,6 +278,8 @@ class FailureMonitor:
     def _observe_with_effort(self, q, qd, tau_last, effort):
         """Return ``Reconfigurer.observe``'s finding with the effort detector's reference."""
         rec = self.rec
+        if not self._lockstep:
+            return self._observe_real_time(q, qd, tau_last, effort)
         res = rec.observer.step(q, qd, tau_last, rec.dt)
         j = rec.effort.update(self._effort_reference(tau_last, effort), effort)
         if j is not None:
@@ -277,6 +288,33 @@ class FailureMonitor:
             return None
         j = rec.detector.update(res)
         return None if j is None else (j, 'residual')
+
+    def _observe_real_time(self, q, qd, tau_last, effort):
+        """
+        Return a joint the effort detector finds failed in real time, or None.
+
+        The measured effort is the torque the drive applied: the residual cannot tell a
+        late answer (the driver applied the previous command) from a lost torque, so in
+        real time, with efforts, the effort detector alone judges and the observer runs
+        on the applied torque (kept current, flags nothing).  Every driven joint reading
+        no torque is the drive stopped (brakes, its watchdog, a stop), not one actuator
+        lost: no judgement then, and for ``HOLDOFF_S`` after.
+        """
+        rec = self.rec
+        rec.observer.step(q, qd, effort, rec.dt)
+        detector = rec.effort
+        reference = self._effort_reference(tau_last, effort)
+        if all(abs(effort[j]) <= NO_TORQUE for j in detector.watch):
+            if self._holdoff == 0:
+                self.drive_stops += 1
+            detector.set_watch(detector.watch)          # the counts restart
+            self._holdoff = self._holdoff_ticks
+            return None
+        if self._holdoff > 0:
+            self._holdoff -= 1
+            return None
+        j = detector.update(reference, effort)
+        return None if j is None else (j, 'effort')
 
     def _switch(self, j, t, how, q, qd):
         rec = self.rec
@@ -397,7 +435,8 @@ class FailureMonitor:
             for e in self.events) or 'none'),
                 ('passive joints', str([self.names[p] for p in self.rec.nominal.passive]
                                        + [self.names[f] for f in self.rec.failed])),
-                ('failure verdict', last['verdict'] if last else TRACKING))
+                ('failure verdict', last['verdict'] if last else TRACKING),
+                ('drive stops (no torque on any joint)', str(self.drive_stops)))
 
 
 def finite_or_none(values, n):
