@@ -247,16 +247,33 @@ def test_a_parameter_change_after_a_switch_keeps_the_failed_joint_out():
     assert [e['joint'] for e in loop.failures.events] == ['joint3', 'joint3']
 
 
-def test_real_time_effort_check_takes_the_nearer_of_the_last_two_commands():
-    # A driver that applied the command of two ticks ago (a late answer) is no failure; a
-    # joint reading 0 against both commands is.
+def test_real_time_effort_is_compared_with_the_recent_command_the_driver_applied():
+    # A driver applies the newest command it has, answering a state up to its latency old:
+    # the reference is the command sent within EFFORT_HISTORY_S nearest to the effort over
+    # the driven joints; a joint reading 0 against it is a gap.
     cfg = SCHEMA.config(dict(FULL, lockstep=False))
     loop = ControlLoop(cfg)
     monitor = loop.failures
     assert monitor._effort_reference([1.0, 2.0, 3.0], [0.5, 2.0, 0.0]) == [1.0, 2.0, 3.0]
-    # joints 1, 2: the older command is the one applied (gap 0); joint 3 reads 0: the
-    # smaller command, 3.0, is its reference (still a gap of 3 N m)
+    # joints 1, 2 match the older command (the one applied); joint 3 reads 0: still a gap
+    # of 3 N m against it
     assert monitor._effort_reference([1.2, 2.5, 3.2], [1.0, 2.0, 0.0]) == [1.0, 2.0, 3.0]
+    # 12 ticks of latency (a loaded machine): the command of 12 ticks ago is found
+    for k in range(12):
+        monitor._effort_reference([10.0 + k, -5.0 - k, 1.0 + k], [0.0] * 3)
+    assert monitor._effort_reference([30.0, -30.0, 30.0], [10.0, -5.0, 1.0]) == \
+        [10.0, -5.0, 1.0]
+    assert monitor._effort_reference([30.0, -30.0, 30.0], [13.0, -8.0, 0.0]) == \
+        [13.0, -8.0, 4.0]
+    # a small command of the failed joint does not choose: joints 1, 2 match the command
+    # of the tick before exactly, joint 3 (commanded -0.058, then -0.021) reads 0
+    monitor._effort_reference([0.097, -0.715, -0.058], [0.0] * 3)
+    assert monitor._effort_reference([0.076, -0.700, -0.021], [0.097, -0.715, 0.0]) == \
+        [0.097, -0.715, -0.058]
+    # the history is EFFORT_HISTORY_S long: older commands are forgotten
+    for _ in range(200):
+        monitor._effort_reference([50.0, 50.0, 50.0], [0.0] * 3)
+    assert monitor._effort_reference([50.0, 50.0, 50.0], [10.0, -5.0, 1.0]) == [50.0] * 3
     locked = make(FULL)[0].failures
     locked._effort_reference([1.0, 2.0, 3.0], [1.0, 2.0, 3.0])
     assert locked._effort_reference([1.2, 2.5, 3.2], [1.0, 2.0, 0.0]) == [1.2, 2.5, 3.2]

@@ -58,6 +58,9 @@ MODES = ('off', 'notice', 'detect')
 NO_TORQUE = 1e-9
 """[N m] A measured effort this small is no torque (a failed joint, a braked or stopped
 drive reads 0)."""
+EFFORT_HISTORY_S = 0.05
+"""[s] Real time: the commands the driver may have applied over the last period are those
+sent this recently (its latency: 3-13 ms measured here, loaded)."""
 HOLDOFF_S = 0.02
 """[s] Real time: after the drive applied no torque on every driven joint (brakes, its
 watchdog, a stop), how long the effort detector waits before it judges again."""
@@ -166,7 +169,9 @@ class FailureMonitor:
         self._nullspace = getattr(law, 'nullspace', None)
         self._dt_ns = cfg.dt_ns
         self._last_ns = None
-        self._tau_before = None
+        # Real time: the commands sent within EFFORT_HISTORY_S (model order; NaN: none).
+        self._sent = np.full((max(2, round(EFFORT_HISTORY_S / cfg.dt)), self.rec.n), np.nan)
+        self._sent_count = 0
         self._lockstep = cfg.lockstep
         self._holdoff_ticks = max(1, round(HOLDOFF_S / cfg.dt))
         self._holdoff = 0               # real time: ticks left before the effort is judged
@@ -261,19 +266,25 @@ class FailureMonitor:
 
     def _effort_reference(self, tau_last, effort):
         """
-        Return, per joint, the command of the last two ticks nearer the measured effort.
+        Return the command the measured effort is to be compared with.
 
         Lockstep the measured effort is the last command exactly (a healthy joint: gap 0):
-        the last command is the reference, as offline.  In real time the driver may have
-        applied the one before for the period (a late answer); a failed joint reads 0
-        against both.
+        the last command is the reference, as offline.  In real time the driver applied
+        whichever command it had last received, answering a state up to its latency old:
+        the reference is the command sent within ``EFFORT_HISTORY_S`` nearest to the
+        effort over the driven joints but the one farthest from it (the healthy ones
+        match the one applied exactly; a failed joint, which reads 0 against every one,
+        must not choose: its commands can be as small as the differences between them).
         """
-        before = self._tau_before
-        self._tau_before = tau_last
-        if self._lockstep or before is None:
+        if self._lockstep:
             return tau_last
-        return [a if abs(a - m) <= abs(b - m) else b
-                for a, b, m in zip(tau_last, before, effort)]
+        ring = self._sent
+        ring[self._sent_count % len(ring)] = tau_last
+        self._sent_count += 1
+        watch = list(self.rec.effort.watch)
+        gaps = np.abs(ring[:, watch] - np.asarray(effort)[watch])
+        distance = gaps.sum(axis=1) - (gaps.max(axis=1) if len(watch) > 1 else 0.0)
+        return ring[int(np.nanargmin(distance))].tolist()
 
     def _observe_with_effort(self, q, qd, tau_last, effort):
         """Return ``Reconfigurer.observe``'s finding with the effort detector's reference."""
