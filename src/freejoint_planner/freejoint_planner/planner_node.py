@@ -54,7 +54,9 @@ operator's notice, or the controller's detection, issue 23) joins the passive se
 arm the planner plans for (``planning.after_failure``): the map is recomputed for that arm
 and checks the plans from then on, or, if the arm cannot track (fewer active joints than
 the task has, or an internal motion that runs away), every plan is refused saying why; the
-running plan goes on (the controller decides what the arm does).
+running plan goes on (the controller decides what the arm does). That assessment and the
+new map (0.05-0.25 s) run on a worker thread so that the stream goes on; a plan asked for
+before they are taken is refused, saying so.
 Refusals name the usable region (``SingularityModel.usable``). Every circle is
 held to the arm's reach and to ``max_speed`` / ``max_acceleration``. ``lookahead`` is checked
 against the clock spacing rule at run time.
@@ -62,6 +64,8 @@ against the clock spacing rule at run time.
 
 from dataclasses import replace
 import math
+import queue
+import threading
 import time
 
 from freejoint_common.arm_description import resolve_arm
@@ -115,6 +119,12 @@ class PlannerNode(Node, Lifecycle):
         self._arm = None if arm.urdf_arm is None else arm.params
         self._passive = None            # the passive set after reported failures (None: none)
         self._failure_refusal = ''      # why no plan is accepted since a failure ('' : none)
+        # Reported failures: assessed by a worker thread (_assess_failures), taken here.
+        self._failure_jobs = queue.SimpleQueue()
+        self._failure_lock = threading.Lock()
+        self._failure_results = []      # (name, FailedArm, model or None), worker -> here
+        self._failures_pending = []     # names reported, not taken yet
+        self._failure_worker = None
         self._joint_names = arm.joint_names
         self._arm_source = arm.source
         # Where the arm is, for a plan from rest: joint_states taken only when needed (a
@@ -261,22 +271,58 @@ class PlannerNode(Node, Lifecycle):
         return replace(self._arm or table1(cfg['case']), passive=self._passive)
 
     def _on_joint_failure(self, msg):
-        """joint_failures: plan for the arm with that joint free (``after_failure``)."""
-        cfg = self._cfg
+        """
+        joint_failures: plan for the arm with that joint free (``after_failure``).
+
+        The assessment and the new map take 0.05-0.25 s: a worker thread does them, so
+        the stream goes on (a stall of the planner is a late setpoint, which the controller
+        holds on); the result is taken on the executor at its next trigger or plan, and
+        plans asked for meanwhile are refused, saying why.
+        """
         self._take_arm_state()
         got = self._arm_state
-        out = after_failure(self._map_arm(cfg) or table1(cfg['case']), self._joint_names,
-                            msg.data, None if got is None else joint_state(
-                                self._joint_names, got.name, got.position, got.velocity),
-                            make_circle(cfg), cfg['nominal_scale'])
-        self._failure_refusal = self._failure_refusal or out.refusal
-        if out.arm is not None:
-            self._passive = out.arm.passive
-            if not out.refusal:
-                self._model = compute_model(*(cfg[k] for k in MAP_KEYS), arm=out.arm)
+        state = None if got is None else joint_state(self._joint_names, got.name,
+                                                     got.position, got.velocity)
+        with self._failure_lock:
+            self._failures_pending.append(msg.data)
+        self._failure_jobs.put((msg.data, state, dict(self._cfg)))
+        if self._failure_worker is None:
+            self._failure_worker = threading.Thread(target=self._assess_failures,
+                                                    name='failure_assessment', daemon=True)
+            self._failure_worker.start()
+
+    def _assess_failures(self):
+        """Worker: assess each reported failure in turn (``after_failure``, the new map)."""
+        arm = None
+        while True:
+            name, state, cfg = self._failure_jobs.get()
+            arm = arm or self._map_arm(cfg) or table1(cfg['case'])
+            out = after_failure(arm, self._joint_names, name, state, make_circle(cfg),
+                                cfg['nominal_scale'])
+            model = None
+            if out.arm is not None:
+                arm = out.arm
+                if not out.refusal:
+                    model = compute_model(*(cfg[k] for k in MAP_KEYS), arm=out.arm)
+            with self._failure_lock:
+                self._failure_results.append((name, out, model))
+            self.get_logger().warning(out.note + (
+                '; no plan is accepted from now on, the running one goes on'
+                if out.refusal else ''))
+
+    def _take_failures(self):
+        """Take the worker's results (executor): passive set, refusal, map."""
+        with self._failure_lock:
+            results, self._failure_results = self._failure_results, []
+            for name, _, _ in results:
+                self._failures_pending.remove(name)
+        for _, out, model in results:
+            self._failure_refusal = self._failure_refusal or out.refusal
+            if out.arm is not None:
+                self._passive = out.arm.passive
+            if model is not None:
+                self._model = model
                 self._publish_map()
-        self.get_logger().warning(out.note + ('; no plan is accepted from now on, the '
-                                              'running one goes on' if out.refusal else ''))
 
     def _make_timer(self):
         """
@@ -320,6 +366,11 @@ class PlannerNode(Node, Lifecycle):
         margin (m); the ``TransitionChoice`` (None: starts directly) and its first tick.
         ``transition`` false: the circle alone (it is not to be started).
         """
+        if self._failure_results:
+            self._take_failures()
+        if self._failures_pending:
+            return (f'{self._failures_pending[0]} reported failed: the arm without it is '
+                    'being assessed (a fraction of a second); ask again', math.nan, None, None)
         if self._failure_refusal:
             return self._failure_refusal, math.nan, None, None
         reason = circle_bounds(circle, model, cfg['max_speed'], cfg['max_acceleration'])
@@ -548,6 +599,8 @@ class PlannerNode(Node, Lifecycle):
                     + ('' if lookahead >= n - 1 else ': ticks will go out late'))
 
     def _on_clock(self, msg):
+        if self._failure_results:
+            self._take_failures()
         if self._sim:
             now_ns = to_ns(msg.clock)
             set_ros_time(self, now_ns)
@@ -581,6 +634,8 @@ class PlannerNode(Node, Lifecycle):
         self._advance(now_ns)
 
     def _on_timer(self):
+        if self._failure_results:
+            self._take_failures()
         if not self._sim:
             self._advance(self._now_ns())
 
