@@ -55,8 +55,8 @@ arm the planner plans for (``planning.after_failure``): the map is recomputed fo
 and checks the plans from then on, or, if the arm cannot track (fewer active joints than
 the task has, or an internal motion that runs away), every plan is refused saying why; the
 running plan goes on (the controller decides what the arm does). That assessment and the
-new map (0.05-0.25 s) run on a worker thread so that the stream goes on; a plan asked for
-before they are taken is refused, saying so.
+new map (0.05-0.25 s of CPU) run in a process of their own so that the stream goes on; a
+plan asked for before they are taken is refused, saying so.
 Refusals name the usable region (``SingularityModel.usable``). Every circle is
 held to the arm's reach and to ``max_speed`` / ``max_acceleration``. ``lookahead`` is checked
 against the clock spacing rule at run time.
@@ -64,8 +64,7 @@ against the clock spacing rule at run time.
 
 from dataclasses import replace
 import math
-import queue
-import threading
+import multiprocessing
 import time
 
 from freejoint_common.arm_description import resolve_arm
@@ -86,8 +85,8 @@ from rclpy.parameter import Parameter
 
 from .conversions import occupancy_grid, path_marker, setpoint_msg
 from .params import CIRCLE_KEYS, LOOKAHEAD_MAX, MAP_KEYS, SCHEMA, validate
-from .planning import after_failure, circle_bounds, compute_model, describe_join
-from .planning import end_effector, grid_bound, grid_extent, join_from_arm, joint_state
+from .planning import circle_bounds, compute_model, describe_join, end_effector
+from .planning import failure_job, grid_bound, grid_extent, join_from_arm, joint_state
 from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle
 from .planning import prepare_transition, settle_gate_refusal, swing_deg
 from .stream import Plan, SetpointStream
@@ -119,12 +118,9 @@ class PlannerNode(Node, Lifecycle):
         self._arm = None if arm.urdf_arm is None else arm.params
         self._passive = None            # the passive set after reported failures (None: none)
         self._failure_refusal = ''      # why no plan is accepted since a failure ('' : none)
-        # Reported failures: assessed by a worker thread (_assess_failures), taken here.
-        self._failure_jobs = queue.SimpleQueue()
-        self._failure_lock = threading.Lock()
-        self._failure_results = []      # (name, FailedArm, model or None), worker -> here
-        self._failures_pending = []     # names reported, not taken yet
-        self._failure_worker = None
+        # Reported failures: assessed one after the other in a process of their own.
+        self._failures_pending = []     # (name, state, parameters), oldest first
+        self._failure_job = None        # (process, pipe end) of the running assessment
         self._joint_names = arm.joint_names
         self._arm_source = arm.source
         # Where the arm is, for a plan from rest: joint_states taken only when needed (a
@@ -272,57 +268,71 @@ class PlannerNode(Node, Lifecycle):
 
     def _on_joint_failure(self, msg):
         """
-        joint_failures: plan for the arm with that joint free (``after_failure``).
+        joint_failures: plan for the arm with that joint free (``planning.after_failure``).
 
-        The assessment and the new map take 0.05-0.25 s: a worker thread does them, so
-        the stream goes on (a stall of the planner is a late setpoint, which the controller
-        holds on); the result is taken on the executor at its next trigger or plan, and
-        plans asked for meanwhile are refused, saying why.
+        The assessment and the new map take 0.05-0.25 s of CPU: a process of their own
+        does them (``planning.failure_job``; on the executor, or a thread of it, they
+        stall the setpoint stream, which the controller then holds on), one failure after
+        the other; the result is taken at the next trigger or plan, and plans asked for
+        meanwhile are refused, saying why.
         """
         self._take_arm_state()
         got = self._arm_state
         state = None if got is None else joint_state(self._joint_names, got.name,
                                                      got.position, got.velocity)
-        with self._failure_lock:
-            self._failures_pending.append(msg.data)
-        self._failure_jobs.put((msg.data, state, dict(self._cfg)))
-        if self._failure_worker is None:
-            self._failure_worker = threading.Thread(target=self._assess_failures,
-                                                    name='failure_assessment', daemon=True)
-            self._failure_worker.start()
+        self._failures_pending.append((msg.data, state, dict(self._cfg)))
+        if self._failure_job is None:
+            self._start_failure_job()
 
-    def _assess_failures(self):
-        """Worker: assess each reported failure in turn (``after_failure``, the new map)."""
-        arm = None
-        while True:
-            name, state, cfg = self._failure_jobs.get()
-            arm = arm or self._map_arm(cfg) or table1(cfg['case'])
-            out = after_failure(arm, self._joint_names, name, state, make_circle(cfg),
-                                cfg['nominal_scale'])
-            model = None
-            if out.arm is not None:
-                arm = out.arm
-                if not out.refusal:
-                    model = compute_model(*(cfg[k] for k in MAP_KEYS), arm=out.arm)
-            with self._failure_lock:
-                self._failure_results.append((name, out, model))
-            self.get_logger().warning(out.note + (
-                '; no plan is accepted from now on, the running one goes on'
-                if out.refusal else ''))
+    def _start_failure_job(self):
+        """Start the assessment of the oldest pending failure in a process of its own."""
+        name, state, cfg = self._failures_pending[0]
+        arm = self._map_arm(cfg) or table1(cfg['case'])
+        context = multiprocessing.get_context('spawn')
+        receive, send = context.Pipe(duplex=False)
+        proc = context.Process(target=failure_job, name='failure_assessment', daemon=True,
+                               args=(send, (arm, self._joint_names, name, state,
+                                            make_circle(cfg), cfg['nominal_scale'],
+                                            tuple(cfg[k] for k in MAP_KEYS))))
+        proc.start()
+        send.close()
+        self._failure_job = (proc, receive)
 
     def _take_failures(self):
-        """Take the worker's results (executor): passive set, refusal, map."""
-        with self._failure_lock:
-            results, self._failure_results = self._failure_results, []
-            for name, _, _ in results:
-                self._failures_pending.remove(name)
-        for _, out, model in results:
+        """Take a finished assessment (executor): passive set, refusal, map; start the next."""
+        proc, receive = self._failure_job
+        if not receive.poll():
+            if proc.is_alive() or receive.poll():
+                return
+            result = RuntimeError('the assessment process exited with %s' % proc.exitcode)
+        else:
+            try:
+                result = receive.recv()
+            except (EOFError, OSError) as exc:
+                result = exc
+        proc.join(1.0)
+        receive.close()
+        self._failure_job = None
+        name = self._failures_pending.pop(0)[0]
+        if isinstance(result, BaseException):
+            out, model = None, None
+            self._failure_refusal = self._failure_refusal or (
+                f'{name} failed: the arm without it could not be assessed '
+                f'({type(result).__name__}: {result}): no plan is accepted')
+            self.get_logger().error(self._failure_refusal)
+        else:
+            out, model = result
             self._failure_refusal = self._failure_refusal or out.refusal
             if out.arm is not None:
                 self._passive = out.arm.passive
             if model is not None:
                 self._model = model
                 self._publish_map()
+            self.get_logger().warning(out.note + (
+                '; no plan is accepted from now on, the running one goes on'
+                if out.refusal else ''))
+        if self._failures_pending:
+            self._start_failure_job()
 
     def _make_timer(self):
         """
@@ -366,11 +376,11 @@ class PlannerNode(Node, Lifecycle):
         margin (m); the ``TransitionChoice`` (None: starts directly) and its first tick.
         ``transition`` false: the circle alone (it is not to be started).
         """
-        if self._failure_results:
+        if self._failure_job is not None:
             self._take_failures()
         if self._failures_pending:
-            return (f'{self._failures_pending[0]} reported failed: the arm without it is '
-                    'being assessed (a fraction of a second); ask again', math.nan, None, None)
+            return (f'{self._failures_pending[0][0]} reported failed: the arm without it is '
+                    'being assessed (about a second); ask again', math.nan, None, None)
         if self._failure_refusal:
             return self._failure_refusal, math.nan, None, None
         reason = circle_bounds(circle, model, cfg['max_speed'], cfg['max_acceleration'])
@@ -599,7 +609,7 @@ class PlannerNode(Node, Lifecycle):
                     + ('' if lookahead >= n - 1 else ': ticks will go out late'))
 
     def _on_clock(self, msg):
-        if self._failure_results:
+        if self._failure_job is not None:
             self._take_failures()
         if self._sim:
             now_ns = to_ns(msg.clock)
@@ -634,13 +644,15 @@ class PlannerNode(Node, Lifecycle):
         self._advance(now_ns)
 
     def _on_timer(self):
-        if self._failure_results:
+        if self._failure_job is not None:
             self._take_failures()
         if not self._sim:
             self._advance(self._now_ns())
 
     def destroy_node(self):
-        """Destroy the node and its hidden joint-state helper."""
+        """Destroy the node, its hidden joint-state helper and a running assessment."""
+        if self._failure_job is not None:
+            self._failure_job[0].terminate()
         self._js_node.destroy_node()
         super().destroy_node()
 
