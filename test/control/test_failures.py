@@ -270,6 +270,11 @@ def test_real_time_effort_is_compared_with_the_recent_command_the_driver_applied
     monitor._effort_reference([0.097, -0.715, -0.058], [0.0] * 3)
     assert monitor._effort_reference([0.076, -0.700, -0.021], [0.097, -0.715, 0.0]) == \
         [0.097, -0.715, -0.058]
+    # two driven joints (after a switch): the command matching both is the one applied
+    monitor.rec.effort.set_watch([0, 1])
+    monitor._effort_reference([5.0, 7.0, 0.0], [0.0] * 3)
+    assert monitor._effort_reference([5.2, 6.0, 0.0], [5.0, 7.0, 0.0]) == [5.0, 7.0, 0.0]
+    monitor.rec.effort.set_watch([0, 1, 2])
     # the history is EFFORT_HISTORY_S long: older commands are forgotten
     for _ in range(200):
         monitor._effort_reference([50.0, 50.0, 50.0], [0.0] * 3)
@@ -311,3 +316,8 @@ def test_real_time_no_torque_on_every_joint_is_a_stopped_drive_and_one_joint_rea
     assert event['joint'] == 'joint3' and event['by'] == 'effort'
     assert event['t'] == pytest.approx((350 + holdoff + DEFAULT_EFFORT_TICKS - 1) * DT)
     assert monitor.announcements() == ['joint3']
+    # A joint that reads torque other than any command sent (a stall longer than the
+    # history) has not failed: no joint flagged.
+    for _ in range(100):
+        tick([25.0, 20.0, 0.0])
+    assert len(monitor.events) == 1

@@ -271,10 +271,11 @@ class FailureMonitor:
         Lockstep the measured effort is the last command exactly (a healthy joint: gap 0):
         the last command is the reference, as offline.  In real time the driver applied
         whichever command it had last received, answering a state up to its latency old:
-        the reference is the command sent within ``EFFORT_HISTORY_S`` nearest to the
-        effort over the driven joints but the one farthest from it (the healthy ones
-        match the one applied exactly; a failed joint, which reads 0 against every one,
-        must not choose: its commands can be as small as the differences between them).
+        the reference is the command sent within ``EFFORT_HISTORY_S`` that matches the
+        effort on every driven joint (within the detector's tolerance), else the one
+        nearest to it on all but the farthest joint (the healthy ones match the one
+        applied exactly; a failed joint, which reads 0 against every one, must not
+        choose: its commands can be as small as the differences between them).
         """
         if self._lockstep:
             return tau_last
@@ -283,8 +284,11 @@ class FailureMonitor:
         self._sent_count += 1
         watch = list(self.rec.effort.watch)
         gaps = np.abs(ring[:, watch] - np.asarray(effort)[watch])
-        distance = gaps.sum(axis=1) - (gaps.max(axis=1) if len(watch) > 1 else 0.0)
-        return ring[int(np.nanargmin(distance))].tolist()
+        total = gaps.sum(axis=1)
+        best = int(np.nanargmin(total))
+        if total[best] > self.rec.effort.tol and len(watch) > 1:
+            best = int(np.nanargmin(total - gaps.max(axis=1)))
+        return ring[best].tolist()
 
     def _observe_with_effort(self, q, qd, tau_last, effort):
         """Return ``Reconfigurer.observe``'s finding with the effort detector's reference."""
@@ -307,9 +311,10 @@ class FailureMonitor:
         The measured effort is the torque the drive applied: the residual cannot tell a
         late answer (the driver applied the previous command) from a lost torque, so in
         real time, with efforts, the effort detector alone judges and the observer runs
-        on the applied torque (kept current, flags nothing).  Every driven joint reading
-        no torque is the drive stopped (brakes, its watchdog, a stop), not one actuator
-        lost: no judgement then, and for ``HOLDOFF_S`` after.
+        on the applied torque (kept current, flags nothing); only a joint that reads no
+        torque (within the detector's tolerance) against its command can be flagged.
+        Every driven joint reading no torque is the drive stopped (brakes, its watchdog,
+        a stop), not one actuator lost: no judgement then, and for ``HOLDOFF_S`` after.
         """
         rec = self.rec
         rec.observer.step(q, qd, effort, rec.dt)
@@ -324,6 +329,9 @@ class FailureMonitor:
         if self._holdoff > 0:
             self._holdoff -= 1
             return None
+        # A failed actuator applies no torque: a joint that reads torque has not failed
+        # (its gap is a command applied that the history does not hold: a stall).
+        reference = [m if abs(m) > detector.tol else c for c, m in zip(reference, effort)]
         j = detector.update(reference, effort)
         return None if j is None else (j, 'effort')
 

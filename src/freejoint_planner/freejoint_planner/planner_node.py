@@ -55,8 +55,9 @@ arm the planner plans for (``planning.after_failure``): the map is recomputed fo
 and checks the plans from then on, or, if the arm cannot track (fewer active joints than
 the task has, or an internal motion that runs away), every plan is refused saying why; the
 running plan goes on (the controller decides what the arm does). That assessment and the
-new map (0.05-0.25 s of CPU) run in a process of their own so that the stream goes on; a
-plan asked for before they are taken is refused, saying so.
+new map (0.05-0.25 s of CPU) are made at the next plan request, not at the failure, when
+the graph needs the CPU (measured in real time: on the executor they stalled the stream,
+in a process beside it they starved the middleware).
 Refusals name the usable region (``SingularityModel.usable``). Every circle is
 held to the arm's reach and to ``max_speed`` / ``max_acceleration``. ``lookahead`` is checked
 against the clock spacing rule at run time.
@@ -64,7 +65,6 @@ against the clock spacing rule at run time.
 
 from dataclasses import replace
 import math
-import multiprocessing
 import time
 
 from freejoint_common.arm_description import resolve_arm
@@ -85,8 +85,8 @@ from rclpy.parameter import Parameter
 
 from .conversions import occupancy_grid, path_marker, setpoint_msg
 from .params import CIRCLE_KEYS, LOOKAHEAD_MAX, MAP_KEYS, SCHEMA, validate
-from .planning import circle_bounds, compute_model, describe_join, end_effector
-from .planning import failure_job, grid_bound, grid_extent, join_from_arm, joint_state
+from .planning import assess_failure, circle_bounds, compute_model, describe_join
+from .planning import end_effector, grid_bound, grid_extent, join_from_arm, joint_state
 from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle
 from .planning import prepare_transition, settle_gate_refusal, swing_deg
 from .stream import Plan, SetpointStream
@@ -118,9 +118,7 @@ class PlannerNode(Node, Lifecycle):
         self._arm = None if arm.urdf_arm is None else arm.params
         self._passive = None            # the passive set after reported failures (None: none)
         self._failure_refusal = ''      # why no plan is accepted since a failure ('' : none)
-        # Reported failures: assessed one after the other in a process of their own.
-        self._failures_pending = []     # (name, state, parameters), oldest first
-        self._failure_job = None        # (process, pipe end) of the running assessment
+        self._failures_pending = []     # joints reported failed, not assessed yet
         self._joint_names = arm.joint_names
         self._arm_source = arm.source
         # Where the arm is, for a plan from rest: joint_states taken only when needed (a
@@ -270,58 +268,27 @@ class PlannerNode(Node, Lifecycle):
         """
         joint_failures: plan for the arm with that joint free (``planning.after_failure``).
 
-        The assessment and the new map take 0.05-0.25 s of CPU: a process of their own
-        does them (``planning.failure_job``; on the executor, or a thread of it, they
-        stall the setpoint stream, which the controller then holds on), one failure after
-        the other; the result is taken at the next trigger or plan, and plans asked for
-        meanwhile are refused, saying why.
+        Only noted here: the assessment and the new map take 0.05-0.25 s of CPU, which
+        at the failure would stall the setpoint stream (the controller then holds) or, in
+        a process or thread beside it, take the CPU and the GIL the graph needs just then
+        (both measured in real time); they are done at the next plan request
+        (:meth:`_take_failures`), as a map parameter change's.
         """
+        self._failures_pending.append(msg.data)
+
+    def _take_failures(self):
+        """Assess the failures reported since the last plan (executor): set, refusal, map."""
+        cfg = self._cfg
         self._take_arm_state()
         got = self._arm_state
         state = None if got is None else joint_state(self._joint_names, got.name,
                                                      got.position, got.velocity)
-        self._failures_pending.append((msg.data, state, dict(self._cfg)))
-        if self._failure_job is None:
-            self._start_failure_job()
-
-    def _start_failure_job(self):
-        """Start the assessment of the oldest pending failure in a process of its own."""
-        name, state, cfg = self._failures_pending[0]
-        arm = self._map_arm(cfg) or table1(cfg['case'])
-        context = multiprocessing.get_context('spawn')
-        receive, send = context.Pipe(duplex=False)
-        proc = context.Process(target=failure_job, name='failure_assessment', daemon=True,
-                               args=(send, (arm, self._joint_names, name, state,
-                                            make_circle(cfg), cfg['nominal_scale'],
-                                            tuple(cfg[k] for k in MAP_KEYS))))
-        proc.start()
-        send.close()
-        self._failure_job = (proc, receive)
-
-    def _take_failures(self):
-        """Take a finished assessment (executor): passive set, refusal, map; start the next."""
-        proc, receive = self._failure_job
-        if not receive.poll():
-            if proc.is_alive() or receive.poll():
-                return
-            result = RuntimeError('the assessment process exited with %s' % proc.exitcode)
-        else:
-            try:
-                result = receive.recv()
-            except (EOFError, OSError) as exc:
-                result = exc
-        proc.join(1.0)
-        receive.close()
-        self._failure_job = None
-        name = self._failures_pending.pop(0)[0]
-        if isinstance(result, BaseException):
-            out, model = None, None
-            self._failure_refusal = self._failure_refusal or (
-                f'{name} failed: the arm without it could not be assessed '
-                f'({type(result).__name__}: {result}): no plan is accepted')
-            self.get_logger().error(self._failure_refusal)
-        else:
-            out, model = result
+        pending, self._failures_pending = self._failures_pending, []
+        for name in pending:
+            out, model = assess_failure(self._map_arm(cfg) or table1(cfg['case']),
+                                        self._joint_names, name, state, make_circle(cfg),
+                                        cfg['nominal_scale'],
+                                        tuple(cfg[k] for k in MAP_KEYS))
             self._failure_refusal = self._failure_refusal or out.refusal
             if out.arm is not None:
                 self._passive = out.arm.passive
@@ -331,8 +298,6 @@ class PlannerNode(Node, Lifecycle):
             self.get_logger().warning(out.note + (
                 '; no plan is accepted from now on, the running one goes on'
                 if out.refusal else ''))
-        if self._failures_pending:
-            self._start_failure_job()
 
     def _make_timer(self):
         """
@@ -376,11 +341,8 @@ class PlannerNode(Node, Lifecycle):
         margin (m); the ``TransitionChoice`` (None: starts directly) and its first tick.
         ``transition`` false: the circle alone (it is not to be started).
         """
-        if self._failure_job is not None:
-            self._take_failures()
         if self._failures_pending:
-            return (f'{self._failures_pending[0][0]} reported failed: the arm without it is '
-                    'being assessed (about a second); ask again', math.nan, None, None)
+            self._take_failures()
         if self._failure_refusal:
             return self._failure_refusal, math.nan, None, None
         reason = circle_bounds(circle, model, cfg['max_speed'], cfg['max_acceleration'])
@@ -609,8 +571,6 @@ class PlannerNode(Node, Lifecycle):
                     + ('' if lookahead >= n - 1 else ': ticks will go out late'))
 
     def _on_clock(self, msg):
-        if self._failure_job is not None:
-            self._take_failures()
         if self._sim:
             now_ns = to_ns(msg.clock)
             set_ros_time(self, now_ns)
@@ -644,15 +604,11 @@ class PlannerNode(Node, Lifecycle):
         self._advance(now_ns)
 
     def _on_timer(self):
-        if self._failure_job is not None:
-            self._take_failures()
         if not self._sim:
             self._advance(self._now_ns())
 
     def destroy_node(self):
-        """Destroy the node, its hidden joint-state helper and a running assessment."""
-        if self._failure_job is not None:
-            self._failure_job[0].terminate()
+        """Destroy the node and its hidden joint-state helper."""
         self._js_node.destroy_node()
         super().destroy_node()
 

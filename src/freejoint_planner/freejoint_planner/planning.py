@@ -11,7 +11,6 @@ bundles the map with what was computed from it, and samples a circle densely eno
 
 from dataclasses import dataclass, replace
 import math
-import os
 import time
 
 from freejoint_core.arm import ArmModel, table1
@@ -473,26 +472,6 @@ def assess_failure(arm, joint_names, name, state, circle, nominal_scale, map_val
     if out.arm is not None and not out.refusal:
         model = compute_model(*map_values, arm=out.arm)
     return out, model
-
-
-def failure_job(conn, args, nice=10):
-    """
-    Run :func:`assess_failure` in a process of its own and send its result on ``conn``.
-
-    The planner starts one per reported failure (``multiprocessing``, spawn): 0.05-0.25 s
-    of CPU that, on the node's executor or a thread of it (the GIL), stalls the setpoint
-    stream.  Niced by ``nice``, so that the graph's own processes keep their CPU; what
-    goes wrong is sent back as the exception.
-    """
-    try:
-        os.nice(nice)
-    except OSError:
-        pass
-    try:
-        conn.send(assess_failure(*args))
-    except Exception as exc:  # noqa: B902 - whatever went wrong goes back to the planner
-        conn.send(exc)
-    conn.close()
 
 
 def transition_from_rest(position, circle, model, dt, max_duration, bounds=None):
