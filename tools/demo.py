@@ -479,7 +479,8 @@ def failure_comparison(collector, case, seed, fail, n_ticks, dt_ns, logs, effort
             'd_q': float(np.max(np.abs(q - trace['q'][ticks]))), 'max_mm': err * 1e3,
             'found': lines('controller', r'joint failure: (.*?failed at t = [0-9.]+ s '
                            r'\(detected by \w+\))'),
-            'planner': lines('planner', r'(joint\d failed: [^\n]*)'), 'offline': rec}
+            'planner': lines('planner', r'(joint\d (?:reported )?failed[:( ][^\n]*)'),
+            'offline': rec}
 
 
 # -- main -------------------------------------------------------------------------------

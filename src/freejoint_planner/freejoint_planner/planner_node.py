@@ -275,6 +275,8 @@ class PlannerNode(Node, Lifecycle):
         (:meth:`_take_failures`), as a map parameter change's.
         """
         self._failures_pending.append(msg.data)
+        self.get_logger().warning(f'{msg.data} reported failed (joint_failures): the arm '
+                                  'without it is assessed at the next plan request')
 
     def _take_failures(self):
         """Assess the failures reported since the last plan (executor): set, refusal, map."""
