@@ -16,7 +16,7 @@ Adding a parameter is then: its entry in the node's params.py, and the code that
 import ast
 import os
 
-from freejoint_common import schema
+from freejoint_common import arm_description, schema
 from freejoint_control.params import GAIN_NAMES, gains, SCHEMA as CONTROLLER
 from freejoint_core import arm, offline, plant
 from freejoint_core.control import Gains
@@ -46,8 +46,10 @@ LOADER_ONLY = ('declare_parameter', 'declare_parameters', 'add_on_set_parameters
 def test_a_parameter_shared_by_nodes_is_one_entry_in_each_schema():
     for name in ('case', 'nominal_scale', 'control_period'):
         assert CONTROLLER[name] is PLANNER[name], name
-    for name in ('control_period', 'joint_names', 'joints', 'frame_id'):
+    for name in ('control_period', 'frame_id'):
         assert SIM[name] is getattr(schema, name.upper()), name
+    for name in ('joint_names', 'joints'):
+        assert SIM[name] is CONTROLLER[name] is getattr(arm_description, 'ARM_' + name.upper())
     for name in ('robot_description', 'description_file', 'passive_joints', 'gravity'):
         assert SIM[name] is CONTROLLER[name] is PLANNER[name], name
     for name in ('thread_priority', 'cpu_affinity'):

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import math
 import os
 
-from freejoint_common.schema import Spec
+from freejoint_common.schema import Param, Spec
 from freejoint_core.arm import ArmParams, table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.urdf import GRAVITY_BY_CASE, load_urdf, parse_urdf, SHIPPED
@@ -328,3 +328,26 @@ def arm_joint_names(values, arm):
     return (joint_list('joint_names', values['joint_names'], arm, PAPER_JOINTS,
                        arm.joint_names),
             joint_list('joints', values['joints'], arm, PAPER_JOINTS[:2], arm.active_names))
+
+
+def _followed(index):
+    """Return what ``joint_names`` (0) / ``joints`` (1) follow: the arm's joints, active ones."""
+    def follows(values):
+        arm = resolve_arm(values)
+        return list(arm.joint_names if index == 0 else arm.active_names)
+    return follows
+
+
+ARM_JOINT_NAMES = Param(
+    'joint_names', list(PAPER_JOINTS),
+    'names of all joints in model order (base to tip), passive ones included; not given: '
+    "the arm's (the URDF's revolute joints; the paper arm's joint1..3), declared with them "
+    'so that a read-back answers the names in use', read_only=True, follows=_followed(0))
+"""``joint_names`` of a node with an arm: declared with the arm's names when not given."""
+ARM_JOINTS = Param(
+    'joints', list(PAPER_JOINTS[:2]),
+    'active joints in the order of the effort command (JointGroupEffortController); not '
+    "given: the arm's active joints, base to tip (the paper arm's joint1, joint2), declared "
+    'with them so that a read-back answers the names in use', read_only=True,
+    follows=_followed(1))
+"""``joints`` of a node with an arm: declared with the arm's active joints when not given."""

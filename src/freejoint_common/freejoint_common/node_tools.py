@@ -57,9 +57,20 @@ class Throttle:
 
 
 def declare(node, specs):
-    """Declare each parameter of ``specs`` once with its descriptor; return the values."""
+    """
+    Declare each parameter of ``specs`` once with its descriptor; return the values.
+
+    A parameter that ``follows`` others is declared after them, its default the value it
+    follows (the schema's default if that cannot be had: the check then says why).
+    """
     values = {}
-    for spec in specs:
+    for spec in sorted(specs, key=lambda spec: spec.follows is not None):
+        default = spec.default
+        if spec.follows is not None:
+            try:
+                default = spec.follows(values)
+            except FreejointValueError:
+                pass
         desc = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
         if spec.default is None:
             param = node.declare_parameter(spec.name, Parameter.Type.INTEGER_ARRAY, desc)
@@ -77,7 +88,7 @@ def declare(node, specs):
         elif spec.bounds is not None:
             desc.floating_point_range = [FloatingPointRange(
                 from_value=float(spec.bounds[0]), to_value=float(spec.bounds[1]), step=0.0)]
-        values[spec.name] = _typed(spec, node.declare_parameter(spec.name, spec.default,
+        values[spec.name] = _typed(spec, node.declare_parameter(spec.name, default,
                                                                 desc).value)
     return values
 

@@ -35,7 +35,10 @@ class Param:
     inclusive, as ``ParameterDescriptor`` ranges; ``exclusive_min`` refuses the lower bound
     itself, with the reason). A default of None declares an empty
     integer array (rclpy cannot declare an empty typed array with a default): the node
-    reads None, ``ros2 param get`` / ``dump`` show ``[]``.
+    reads None, ``ros2 param get`` / ``dump`` show ``[]``. ``follows``: a callable of the
+    other parameters' values giving the value in use when this one is not given (the
+    joints of the arm's URDF); the node declares it with that value, so a read-back tells
+    what the node uses (``default`` is the paper arm's, the one documented).
     """
 
     name: str
@@ -45,6 +48,7 @@ class Param:
     read_only: bool = False
     validator: object = None
     exclusive_min: bool = False
+    follows: object = field(default=None, compare=False)
 
     def reason(self, value):
         """Return why ``value`` is not valid for this parameter (naming it), or None."""
@@ -333,14 +337,6 @@ CONTROL_PERIOD = Param('control_period', DEFAULT_DT,
                        'simulator, the adaptation update, the setpoint stamps; the same for '
                        'every node', (1e-5, 1.0), read_only=True, validator=_whole_ns)
 """The control grid every node of the graph shares."""
-JOINT_NAMES = Param('joint_names', ['joint1', 'joint2', 'joint3'],
-                    'names of all joints in model order (base to tip), passive ones included; '
-                    "left at this default with a URDF arm: the URDF's revolute joints",
-                    read_only=True)
-JOINTS = Param('joints', ['joint1', 'joint2'],
-               'active joints in the order of the effort command (JointGroupEffortController); '
-               "left at this default with a URDF arm: the arm's active joints, base to tip",
-               read_only=True)
 FRAME_ID = Param('frame_id', 'base_link',
                  'frame of the arm base: of ee_position (sim), of the setpoints, map and '
                  'marker (planner)', validator=_frame)

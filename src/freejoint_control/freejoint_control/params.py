@@ -15,9 +15,10 @@ validated build (``FreejointValueError`` naming the parameter).
 from dataclasses import dataclass, field
 import math
 
-from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve_arm
-from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR, JOINT_NAMES
-from freejoint_common.schema import JOINTS, LoopConfig, NOMINAL_SCALE, one_of, Param
+from freejoint_common.arm_description import ARM_JOINT_NAMES, arm_joint_names, ARM_JOINTS
+from freejoint_common.arm_description import ARM_SPECS, resolve_arm
+from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR
+from freejoint_common.schema import LoopConfig, NOMINAL_SCALE, one_of, Param
 from freejoint_common.schema import SCHEDULING, Schema, unique_names
 from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.circles import MODULATION
@@ -134,7 +135,7 @@ FREE_LINK_PARAMS = (
 )
 
 PARAMS = (
-    CASE, ARM_SPECS, NOMINAL_SCALE, JOINT_NAMES, JOINTS, CONTROL_PERIOD,
+    CASE, ARM_SPECS, NOMINAL_SCALE, ARM_JOINT_NAMES, ARM_JOINTS, CONTROL_PERIOD,
     Param('lockstep', True,
           'true: answer the state stamped t_k only with the setpoint stamped t_k; '
           'false (real time): with the newest setpoint stamped <= t_k + dt/2',

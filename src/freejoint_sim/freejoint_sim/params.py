@@ -17,9 +17,10 @@ naming the parameter).
 from dataclasses import dataclass, replace
 import math
 
-from freejoint_common.arm_description import arm_joint_names, ARM_SPECS, resolve_arm
-from freejoint_common.schema import CASE, CONTROL_PERIOD, EXECUTOR, FRAME_ID, JOINT_NAMES
-from freejoint_common.schema import JOINTS, LoopConfig, one_of, Param, SCHEDULING, Schema
+from freejoint_common.arm_description import ARM_JOINT_NAMES, arm_joint_names, ARM_JOINTS
+from freejoint_common.arm_description import ARM_SPECS, resolve_arm
+from freejoint_common.schema import CASE, CONTROL_PERIOD, EXECUTOR, FRAME_ID
+from freejoint_common.schema import LoopConfig, one_of, Param, SCHEDULING, Schema
 from freejoint_common.schema import unique_names
 from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.errors import FreejointValueError
@@ -75,7 +76,7 @@ PARAMS = (
           "'lockstep': own /clock, advance one control period per command; 'realtime': "
           'step on the wall clock and apply the latest command', read_only=True,
           validator=one_of(MODES)),
-    JOINT_NAMES, JOINTS, CONTROL_PERIOD,
+    ARM_JOINT_NAMES, ARM_JOINTS, CONTROL_PERIOD,
     Param('dt_sub', DEFAULT_DT_SUB,
           'RK4 integration step [s]; control_period must be an integer multiple; takes '
           'effect on reset', (1e-7, 1.0)),
