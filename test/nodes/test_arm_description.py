@@ -185,3 +185,17 @@ def test_viewer_takes_the_arm_from_the_simulators_robot_description(procs, wait)
     assert line in procs.log(viewer), procs.log(viewer) + procs.log(sim)
     assert procs.stop(viewer) == 0
     assert procs.stop(sim) == 0
+
+
+def test_the_controller_names_the_gravity_vector_it_was_given_not_the_case(procs, wait):
+    # A vertical gravity given to the 4-link example (case left at horizontal): the ready
+    # line names the arm and that vector, not 'horizontal'.
+    proc = procs.start_node('freejoint_control', 'controller_node', 'controller', [
+        '--ros-args', '--params-file', os.path.join(CONFIG, 'controller.yaml'),
+        '--params-file', os.path.join(CONFIG, 'four_link', 'controller.yaml'),
+        '-p', 'gravity:=[0.0, -9.81, 0.0]'])
+    wait(lambda: 'controller ready' in procs.log(proc), 30.0,
+         'the controller ready (log: %s)' % procs.log(proc))
+    (line,) = [x for x in procs.log(proc).splitlines() if 'controller ready' in x]
+    assert "four_link_arm.urdf, passive ['joint1'], gravity (0 -9.81 0)" in line, line
+    assert 'horizontal' not in line, line

@@ -31,6 +31,7 @@ detects failed there.
 import signal
 import time
 
+from freejoint_common.arm_description import resolve_arm
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, JOINT_STATES
 from freejoint_common.contract import JOINT_FAILURES
 from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_label
@@ -126,10 +127,12 @@ class ControllerNode(Node, Lifecycle):
         self._diag_window = (_monotonic(), self._loop.counters())
         period = min(0.05, cfg.stale_timeout / 4.0)
         self.create_timer(period, self._watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        arm = resolve_arm(cfg.values)   # its gravity vector, not a case name, when given
         self.get_logger().info(
             'controller ready: %s, nominal scale %g, %s, joints %s, dt %g s, law %s, robust %s'
-            % (cfg.case, cfg.nominal_scale, 'lockstep' if cfg.lockstep else 'real time',
-               list(cfg.joints), cfg.dt, cfg.law, cfg.gains.robust)
+            % (arm.source if arm.urdf_arm else cfg.case, cfg.nominal_scale,
+               'lockstep' if cfg.lockstep else 'real time', list(cfg.joints), cfg.dt, cfg.law,
+               cfg.gains.robust)
             + (' (standby: idle until SIGUSR1)' if cfg.standby else ''))
         if not cfg.standby:
             notify_ready()
