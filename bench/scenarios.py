@@ -30,6 +30,12 @@ The tracking bound is 1.5 x the offline runner's worst max error of seeds 0-9 of
     effector's largest deviation from ``initial_position`` before the plan (<= 2 mm); then
     one circle: tracking vs the bound.
 
+``joint_failure``  (f) both cases, issue 23: the fully actuated arm (config/fully_actuated/),
+    one circle, joint 3 made to fail ``--mid`` (2.5) s after its acceptance through the
+    simulator's ``~/fail_joint`` (``soak.py --fully-actuated --fail-at``'s run): the
+    detection and its delay from the failure taking effect, false alarms, tracking after it
+    vs the bound.
+
 Usage: ``. tools/env.sh && python bench/scenarios.py replan [planner_kill ...] | all
 [--cases ...] [--seconds S] [--priority 50]``.
 """
@@ -53,7 +59,8 @@ import soak  # noqa: E402 - bench/soak.py, the session and the bag analysis
 
 RESUMING_BIT = 256
 """freejoint_msgs/ControllerState STATUS_RESUMING: the reference blends onto the stream."""
-SCENARIOS = ('replan', 'planner_kill', 'controller_restart', 'driver500', 'start_order')
+SCENARIOS = ('replan', 'planner_kill', 'controller_restart', 'driver500', 'start_order',
+             'joint_failure')
 NS = NS_PER_S
 
 
@@ -697,9 +704,26 @@ def _fl(values):
     return 'n/a' if values is None else '[%s]' % ', '.join('%.1f' % v for v in values)
 
 
+# -- (f) a joint fails (issue 23) -------------------------------------------------------------
+def joint_failure(args, index):
+    """Both cases: the fully actuated arm's joint 3 fails ``--mid`` s into a circle."""
+    results = []
+    for case in args.cases:
+        row = soak.soak_run(case, index, 0, max(args.seconds, args.mid + 5.5), 0,
+                            fully_actuated=True, fail_at=args.mid)
+        index += 1
+        say('joint_failure %s: %s; false alarms %d; detected %s ms after it took effect; '
+            'max %s mm after it (bound %.3f) -> %s' % (
+                case, row.get('detected') or 'NOT DETECTED', row['false_alarms'],
+                _f(row.get('delay_ms')), _f(row.get('max_after_mm')), row['bound_mm'],
+                verdict(row['met'])))
+        results.append(row)
+    return results, index
+
+
 RUNNERS = {'replan': replan, 'planner_kill': planner_kill,
            'controller_restart': controller_restart, 'driver500': driver500,
-           'start_order': start_order}
+           'start_order': start_order, 'joint_failure': joint_failure}
 
 
 def parse(argv):
@@ -711,7 +735,8 @@ def parse(argv):
                     help='replan / driver500: seconds of circles (default 20)')
     ap.add_argument('--replan-period', type=float, default=1.3)
     ap.add_argument('--mid', type=float, default=2.5,
-                    help='kill this many s after a circle was accepted (default 2.5)')
+                    help='kill (joint_failure: make joint 3 fail) this many s after a '
+                    'circle was accepted (default 2.5)')
     ap.add_argument('--hold-seconds', type=float, default=5.0)
     ap.add_argument('--cycles', type=int, default=5, help='controller_restart cycles')
     ap.add_argument('--down', type=float, default=1.0,
