@@ -562,6 +562,21 @@ def test_with_the_settle_gate_a_plan_waits_for_the_free_link_to_settle(procs, ro
 
     wait(refused_swinging, 15.0, 'a settling refusal naming the swing',
          spin=lambda: _spin(ros_node, 0.05))
+    # and its state on /diagnostics says so (WARN, 'settling'), once a second
+    from freejoint_common.contract import DIAGNOSTICS
+    statuses = []
+    ros_node.create_subscription(
+        DIAGNOSTICS.msg_type, DIAGNOSTICS.name,
+        lambda msg: statuses.extend(s for s in msg.status if 'planner' in s.name),
+        DIAGNOSTICS.qos)
+    wait(lambda: any(s.message.startswith('settling: the free link swings 18.')
+                     for s in statuses), 15.0, 'the planner settling on /diagnostics',
+         spin=lambda: _spin(ros_node, 0.05))
+    settling = [s for s in statuses if s.message.startswith('settling')][0]
+    from diagnostic_msgs.msg import DiagnosticStatus
+    assert settling.level == DiagnosticStatus.WARN
+    assert settling.name == 'freejoint_planner: planner'
+    assert {kv.key: kv.value for kv in settling.values}['state'] == 'settling'
     assert 'settle_swing_deg 3' in refusals[-1] and refusals[-1].startswith(
         'circle centre (0, 0) m radius 0.2 m duration 5 s refused: ')
     accepted = []
@@ -577,6 +592,10 @@ def test_with_the_settle_gate_a_plan_waits_for_the_free_link_to_settle(procs, ro
     wait(accepted_at_rest, 15.0, 'the plan accepted with the link at rest',
          spin=lambda: _spin(ros_node, 0.05))
     assert accepted[0].plan_id == 1 and accepted[0].reason == ''
+    statuses.clear()
+    wait(lambda: any(s.message == 'ready for a plan: the free link settled'
+                     for s in statuses), 15.0, 'the planner ready on /diagnostics',
+         spin=lambda: _spin(ros_node, 0.05))
 
 
 def test_a_joint_reported_failed_joins_the_passive_set_and_an_arm_that_cannot_track_refuses_plans(  # noqa: E501

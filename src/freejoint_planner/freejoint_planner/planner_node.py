@@ -58,6 +58,10 @@ running plan goes on (the controller decides what the arm does). That assessment
 new map (0.05-0.25 s of CPU) are made at the next plan request, not at the failure, when
 the graph needs the CPU (measured in real time: on the executor they stalled the stream,
 in a process beside it they starved the middleware).
+Its state goes on ``/diagnostics`` once a second (``planning.planner_status``): ready
+(OK), settling (WARN: the settle gate's free link still swinging, issue 22) or cannot
+plan (ERROR: a joint failure left an arm that cannot track), with the running plan's id
+and the passive joints of its arm.
 Refusals name the usable region (``SingularityModel.usable``). Every circle is
 held to the arm's reach and to ``max_speed`` / ``max_acceleration``. ``lookahead`` is checked
 against the clock spacing rule at run time.
@@ -72,6 +76,7 @@ from freejoint_common.clock import own_clock, set_ros_time
 from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, JOINT_FAILURES
 from freejoint_common.contract import JOINT_STATES, PLAN_CIRCLE
 from freejoint_common.contract import PLANNED_PATH, profile, SEMI_SINGULAR_MAP, SETPOINT, to_ns
+from freejoint_common.diagnostics import Diagnostics, ERROR, OK, WARN
 from freejoint_common.node_tools import NodeParameters, overridable, QOS_OVERRIDES
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.arm import table1
@@ -87,7 +92,7 @@ from .conversions import occupancy_grid, path_marker, setpoint_msg
 from .params import CIRCLE_KEYS, LOOKAHEAD_MAX, MAP_KEYS, SCHEMA, validate
 from .planning import assess_failure, circle_bounds, compute_model, describe_join
 from .planning import end_effector, grid_bound, grid_extent, join_from_arm, joint_state
-from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle
+from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle, planner_status, READY, SETTLING
 from .planning import prepare_transition, settle_gate_refusal, swing_deg
 from .stream import Plan, SetpointStream
 
@@ -180,6 +185,10 @@ class PlannerNode(Node, Lifecycle):
         # issue 23): plans from then on are for the arm with it free.
         self.create_subscription(JOINT_FAILURES.msg_type, JOINT_FAILURES.name,
                                  self._on_joint_failure, JOINT_FAILURES.qos)
+        # Its state on /diagnostics once a second: ready, settling (the settle gate) or
+        # cannot plan (a joint failure), with the running plan (planning.planner_status).
+        self._diagnostics = Diagnostics(self, 'planner', 'freejoint_planner',
+                                        self._on_diagnostics_timer)
         self._params.listen(self._apply, self._check, watch=('use_sim_time',))
         self.create_service(PLAN_CIRCLE.srv_type, PLAN_CIRCLE.name, self._on_plan_circle)
         self.get_logger().info(
@@ -300,6 +309,17 @@ class PlannerNode(Node, Lifecycle):
             self.get_logger().warning(out.note + (
                 '; no plan is accepted from now on, the running one goes on'
                 if out.refusal else ''))
+
+    def _on_diagnostics_timer(self):
+        """Every second: the planner's state (``planning.planner_status``) and its plan."""
+        settling = self._settling() if self._cfg['settle_swing_deg'] > 0.0 else None
+        state, message = planner_status(self._failure_refusal, self._failures_pending,
+                                        settling)
+        plan = self._stream.plan
+        self._diagnostics.publish(
+            {READY: OK, SETTLING: WARN}.get(state, ERROR), message,
+            (('state', state), ('plan', plan.plan_id if plan is not None else 'none'),
+             ('passive joints', [self._joint_names[i] for i in self._model.nominal.passive])))
 
     def _make_timer(self):
         """

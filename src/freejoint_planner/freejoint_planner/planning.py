@@ -460,6 +460,45 @@ def after_failure(arm, joint_names, name, state=None, trajectory=None, nominal_s
                      'held)')
 
 
+READY, SETTLING, FAILED = 'ready', 'settling', 'cannot_plan'
+"""The planner's states on ``/diagnostics`` (:func:`planner_status`)."""
+
+
+def planner_status(failure_refusal, pending, settling):
+    """
+    Return the planner's state and its one-line message for ``/diagnostics``.
+
+    Parameters
+    ----------
+    failure_refusal : str
+        Why no plan is accepted since a joint failed ('' : none).
+    pending : sequence of str
+        Joints reported failed, assessed at the next plan request.
+    settling : str or None
+        The settle gate's reason ('settling: ...'), '' when settled, None when the gate is
+        off.
+
+    Returns
+    -------
+    tuple of (str, str)
+        ``(FAILED | SETTLING | READY, message)``: ``FAILED`` while no plan can be tracked,
+        ``SETTLING`` while the free link swings beyond the gate (issue 22: the rest between
+        tasks), else ``READY`` (saying what is pending or that the link settled).
+
+    """
+    if failure_refusal:
+        return FAILED, failure_refusal
+    if settling:
+        return SETTLING, settling
+    message = 'ready for a plan'
+    if settling == '':
+        message += ': the free link settled'
+    if pending:
+        message += (f"; {', '.join(pending)} reported failed: assessed at the next plan "
+                    'request')
+    return READY, message
+
+
 def assess_failure(arm, joint_names, name, state, circle, nominal_scale, map_values):
     """
     Return :func:`after_failure`'s ``FailedArm`` and the map of its arm (None: none needed).

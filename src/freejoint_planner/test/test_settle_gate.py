@@ -56,3 +56,15 @@ def test_the_threshold_is_degrees_from_0_off_to_180():
     assert validate({'settle_swing_deg': 2.0}) == ''
     assert 'settle_swing_deg' in validate({'settle_swing_deg': -1.0})
     assert 'settle_swing_deg' in validate({'settle_swing_deg': 181.0})
+
+
+def test_the_planners_state_is_cannot_plan_then_settling_then_ready():
+    from freejoint_planner.planning import FAILED, planner_status, READY, SETTLING
+    why = 'joint2 failed: 1 active joint(s) left for the 2-D task'
+    assert planner_status(why, [], 'settling: the free link swings 9 deg') == (FAILED, why)
+    swinging = 'settling: the free link swings 9.00 deg (> settle_swing_deg 3); ask again'
+    assert planner_status('', [], swinging) == (SETTLING, swinging)
+    assert planner_status('', [], '') == (READY, 'ready for a plan: the free link settled')
+    assert planner_status('', [], None) == (READY, 'ready for a plan')
+    assert planner_status('', ['joint3'], None) == (
+        READY, 'ready for a plan; joint3 reported failed: assessed at the next plan request')
