@@ -364,7 +364,10 @@ class PlannerNode(Node, Lifecycle):
         ``transition`` false: the circle alone (it is not to be started).
         """
         if self._failures_pending:
+            before = self._model
             self._take_failures()
+            if model is before:         # the map the caller had: the failed arm's now
+                model = self._model
         if self._failure_refusal:
             return self._failure_refusal, math.nan, None, None
         reason = circle_bounds(circle, model, cfg['max_speed'], cfg['max_acceleration'])
