@@ -91,6 +91,8 @@ def precompute_verdicts(nominal, case, gains):
     """
     Return the internal-motion verdict of every single-failure passive set of an arm.
 
+    Computed once per distinct (arm, case, K, Lambda) and kept (``_VERDICTS``).
+
     Parameters
     ----------
     nominal : ArmParams
@@ -107,6 +109,22 @@ def precompute_verdicts(nominal, case, gains):
         checks only (at the start state: none, the dict is empty).
 
     """
+    key = (nominal, case, float(gains.K[0]), float(gains.Lambda[0]))
+    if key not in _VERDICTS:
+        _VERDICTS[key] = _verdicts(nominal, case, gains)
+        while len(_VERDICTS) > 8:
+            del _VERDICTS[next(iter(_VERDICTS))]
+    return dict(_VERDICTS[key])
+
+
+_VERDICTS = {}
+"""``precompute_verdicts``' results by (nominal arm, case, K, Lambda): about 1 s of CPU
+each, which a parameter change of the controller (a new monitor, on the executor) or
+another loop of the same arm would otherwise spend again; the last 8 kept."""
+
+
+def _verdicts(nominal, case, gains):
+    """Return :func:`precompute_verdicts`' result, computed."""
     out = {}
     if nominal.n != 3:
         return out
