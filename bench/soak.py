@@ -516,7 +516,7 @@ class FailAt:
                     'no answer' if self.answer is None else self.answer.message))
 
 
-def failure_lines(graph):
+def controller_detections(graph):
     """Return the controller's 'joint failure:' log lines (its detections)."""
     out = []
     for path in graph.procs['controller_node'].logs:
@@ -564,7 +564,7 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
         s.wait(seconds, loop)
         end = time.monotonic()
     if fully_actuated:
-        row['failure_lines'] = failure_lines(s.graph)
+        row['failure_lines'] = controller_detections(s.graph)
         row['detections'] = len(row['failure_lines'])
         row['injected_wall_s'] = injected_at(s.graph)
     row['back_to_back'] = back_to_back
@@ -603,7 +603,7 @@ def failure_judgement(row, ticks, fail):
     ``max_after_mm`` the largest tracking error from the call on; ``met`` also asks for a
     detection within ``FAIL_DELAY_MS`` of it taking effect and no false alarm.
     """
-    import re
+    from freejoint_tools.analyze import DETECTED
     import numpy as np
     lines = row['failure_lines']
     if fail is None:
@@ -614,7 +614,7 @@ def failure_judgement(row, ticks, fail):
     ours = [line for line in lines if line.startswith(FAIL_JOINT + ' failed at t = ')]
     delay = call_delay = None
     if ours:
-        t = float(re.match(r'\S+ failed at t = ([0-9.]+) s', ours[0]).group(1))
+        t = float(DETECTED.match(ours[0]).group(2))
         call_delay = (t - fail.wall) * 1e3
         if row.get('injected_wall_s') is not None:
             delay = (t - row['injected_wall_s']) * 1e3

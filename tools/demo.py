@@ -451,35 +451,36 @@ def failure_comparison(collector, case, seed, fail, n_ticks, dt_ns, logs, effort
         record).
 
     """
-    import math
     import re
-    from freejoint_common.contract import to_ns
+    from freejoint_common.records import arrays_from_messages
     from freejoint_core.failure_offline import parse_fail, run_failure_case
+    from freejoint_tools.analyze import DETECTED, joint_positions
     import numpy as np
-    states, joints = {}, {}
-    for msg in collector.messages('controller_state'):
-        states.setdefault(to_ns(msg.header.stamp), msg)
-    for msg in collector.messages('joint_states'):
-        joints.setdefault(to_ns(msg.header.stamp), msg)
-    ticks = [k for k in range(n_ticks) if k * dt_ns in states and k * dt_ns in joints]
-    if not ticks:
-        raise RuntimeError('no tick collected (another graph in ROS domain %s?)'
-                           % os.environ.get('ROS_DOMAIN_ID'))
-    cmd = np.array([list(states[k * dt_ns].effort) for k in ticks])
-    q = np.array([list(joints[k * dt_ns].position) for k in ticks])
-    err = max(math.hypot(*(np.array(states[k * dt_ns].position)
-                           - states[k * dt_ns].position_desired)) for k in ticks)
-    rec, trace = run_failure_case(case, seed, parse_fail(fail), duration=n_ticks * dt_ns * 1e-9,
+    failing = parse_fail(fail)
+    joint_states = collector.messages('joint_states')
+    try:
+        arrays = arrays_from_messages(collector.messages('controller_state'), joint_states,
+                                      'joint%d' % (failing[0][0] + 1), max_ticks=n_ticks)
+    except ValueError as exc:
+        raise RuntimeError('no tick collected (another graph in ROS domain %s?): %s'
+                           % (os.environ.get('ROS_DOMAIN_ID'), exc)) from None
+    ticks = np.rint(arrays['t'] * 1e9 / dt_ns).astype(int)
+    q = np.column_stack(list(joint_positions(joint_states, arrays['t']).values()))
+    rec, trace = run_failure_case(case, seed, failing, duration=n_ticks * dt_ns * 1e-9,
                                   record_trace=True, effort=effort)
 
-    def lines(who, pattern):
+    def log_text(who):
         with open([p for p in logs if who in os.path.basename(p)][0]) as fh:
-            return re.findall(pattern, fh.read())
-    return {'ticks': len(ticks), 'd_cmd': float(np.max(np.abs(cmd - trace['tau'][ticks]))),
-            'd_q': float(np.max(np.abs(q - trace['q'][ticks]))), 'max_mm': err * 1e3,
-            'found': lines('controller', r'joint failure: (.*?failed at t = [0-9.]+ s '
-                           r'\(detected by \w+\))'),
-            'planner': lines('planner', r'(joint\d (?:reported )?failed[:( ][^\n]*)'),
+            return fh.read()
+    return {'ticks': len(ticks),
+            'd_cmd': float(np.max(np.abs(arrays['tau'] - trace['tau'][ticks]))),
+            'd_q': float(np.max(np.abs(q - trace['q'][ticks]))),
+            'max_mm': float(np.max(np.hypot(*(arrays['p'] - arrays['p_d']).T))) * 1e3,
+            'found': [DETECTED.search(line).group(0)
+                      for line in log_text('controller').splitlines()
+                      if 'joint failure: ' in line and DETECTED.search(line)],
+            'planner': re.findall(r'(joint\d (?:reported )?failed[:( ][^\n]*)',
+                                  log_text('planner')),
             'offline': rec}
 
 

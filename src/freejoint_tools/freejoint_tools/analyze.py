@@ -73,7 +73,9 @@ DESCRIPTION_TYPE = ROBOT_DESCRIPTION.type_name
 FAILED_KEY = 'failed joints'
 """The simulator's ``/diagnostics`` key naming the joints it made fail and when."""
 _INJECTED = re.compile(r'(\S+) at ([0-9.]+) s')
-_DETECTED = re.compile(r'(\S+) failed at t = ([0-9.]+) s \(detected by (\w+)\)')
+DETECTED = re.compile(r'(\S+) failed at t = ([0-9.]+) s \(detected by (\w+)\)')
+"""The controller's detection in its status message and log (``freejoint_control.failures``):
+groups joint, time [s], how."""
 
 
 class AnalysisError(Exception):
@@ -194,7 +196,7 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     trace['name'] = os.path.basename(os.path.normpath(bag.path))
     trace['info'] = info
     trace['finalised'] = bag.finalised
-    trace['joints'] = _joint_positions(joints, arrays['t'])
+    trace['joints'] = joint_positions(joints, arrays['t'])
     trace['arm'] = arm
     trace['t0'] = time_origin(arrays['t'])
     trace['t'] = arrays['t'] - trace['t0']
@@ -243,7 +245,7 @@ def failures_of(states, diagnostics=()):
         if text == last or 'failed at t = ' not in text:
             continue
         last = text
-        for joint, at, by in _DETECTED.findall(text):
+        for joint, at, by in DETECTED.findall(text):
             if joint not in seen:
                 seen.add(joint)
                 entry = found.setdefault(joint, {'joint': joint, 'failed_s': None})
@@ -375,7 +377,7 @@ def time_origin(t):
     return first if seconds_to_ns(first) >= SYSTEM_TIME_NS else 0.0
 
 
-def _joint_positions(joint_states, t):
+def joint_positions(joint_states, t):
     """
     Return ``{joint name: positions (N,)}`` at the tick times ``t`` (first per stamp).
 
