@@ -5,7 +5,10 @@ Two descriptions written here by their published layout (not copied): an rrbot-l
 (the two-link arm of gazebo_ros_demos: a base column, joints about y, links along z, a
 laser and a camera on fixed joints at the top of the last link) and a 3-link arm along x
 whose first joint sits off the base origin. Both are accepted unchanged with ``tip_link``
-set, and the core's kinematics in their task frame match a hand computation.
+set, and the core's kinematics in their task frame match a hand computation. The rrbot
+standing in its own world (gravity -z, its straight zero pose up) turns its task frame to
+put gravity along -y, with joint 1's zero-angle offset; Pinocchio on the URDF in its own
+angles cross-checks the gravity torques.
 """
 import math
 
@@ -112,12 +115,71 @@ def test_rrbot_kinematics_in_its_task_frame_match_a_hand_computation():
     assert ArmModel(arm.params).fk(q) == pytest.approx(hand, abs=1e-15)
 
 
-def test_rrbot_standing_in_gravity_is_refused_with_the_frame_it_would_need():
-    # its own world: gravity -z lies along the straight arm (x of its task frame)
-    with pytest.raises(FreejointValueError, match=r'gravity: the in-plane part of \(0 0 -9.81\) '
-                       r"must point along -y of the arm's task frame \(x along the arm at zero "
-                       r'angles \(0 0 1\), y = axis x x = \(1 0 0\)'):
-        parse_urdf(RRBOT, ['joint3'], (0.0, 0.0, -9.81), tip_link='hokuyo_link')
+STANDING = (0.0, 0.0, -9.81)       # rrbot standing in its own world: gravity -z, its arm up
+
+
+def test_rrbot_standing_turns_its_task_frame_to_put_gravity_along_minus_y():
+    arm = parse_urdf(RRBOT, ['joint3'], STANDING, tip_link='hokuyo_link')
+    # y against gravity (z), x = y x axis = (0 0 1) x (0 1 0) = (-1 0 0); origin on joint1
+    assert arm.task_frame == ((0.0, 0.1, 1.95), (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    # the straight zero pose points up: 90 deg in that frame, on joint 1 alone
+    assert arm.joint_offsets == (math.pi / 2, 0.0, 0.0)
+    assert arm.params.gravity == 9.81
+    assert arm.to_model((0.4, -1.1, 0.5)) == (0.4 + math.pi / 2, -1.1, 0.5)
+    back = arm.to_joints(arm.to_model((0.4, -1.1, 0.5)))
+    assert back == pytest.approx((0.4, -1.1, 0.5), abs=1e-15)
+
+
+def test_rrbot_standing_kinematics_match_a_hand_computation_in_its_turned_frame():
+    arm = parse_urdf(RRBOT, ['joint3'], STANDING, tip_link='hokuyo_link')
+    q = (0.4, -1.1, 0.5)
+    # about y a link at angle phi points along (sin phi, 0, cos phi) in the world; the task
+    # frame's x is -world x, its y is world z
+    phi = (0.4, -0.7, -0.2)
+    lengths = (0.9, 0.9, 0.975)
+    hand = (-sum(L * math.sin(a) for L, a in zip(lengths, phi)),
+            sum(L * math.cos(a) for L, a in zip(lengths, phi)))
+    assert ArmModel(arm.params).fk(arm.to_model(q)) == pytest.approx(hand, abs=1e-15)
+
+
+def test_rrbot_standing_gravity_torques_equal_pinocchios_on_the_urdf_in_its_own_angles():
+    pin = pytest.importorskip('pinocchio')
+    arm = parse_urdf(RRBOT, ['joint3'], STANDING, tip_link='hokuyo_link')
+    model = pin.buildModelFromXML(RRBOT)
+    model.gravity.linear = np.array(STANDING)
+    data = model.createData()
+    for q in ((0.4, -1.1, 0.5), (0.0, 0.0, 0.0), (2.0, 0.3, -2.5)):
+        # continuous joints: Pinocchio's configuration is (cos, sin) per joint
+        cfg = np.ravel([[math.cos(a), math.sin(a)] for a in q])
+        pin_g = pin.computeGeneralizedGravity(model, data, cfg)
+        core_g = ArmModel(arm.params).gravity_torque(arm.to_model(q))
+        # the sensors' 1e-5 kg, folded onto the link's line, are all that differs
+        assert core_g == pytest.approx(pin_g, abs=1e-5)
+    # standing straight up, the arm's weight makes no torque about its joints
+    assert ArmModel(arm.params).gravity_torque(arm.to_model((0.0, 0.0, 0.0))) == pytest.approx(
+        (0.0, 0.0, 0.0), abs=1e-12)
+
+
+def test_pinocchios_model_of_the_standing_rrbot_takes_the_cores_angles_in_its_task_frame():
+    pytest.importorskip('pinocchio')
+    from freejoint_core.pin_model import PinArmModel
+    arm = parse_urdf(RRBOT, ['joint3'], STANDING, tip_link='hokuyo_link')
+    core, pin_arm = ArmModel(arm.params), PinArmModel(arm)
+    q = np.array(arm.to_model((0.4, -1.1, 0.5)))
+    qd = np.array([0.3, -0.2, 0.5])
+    assert pin_arm.fk(q) == pytest.approx(core.fk(q), abs=1e-12)
+    assert pin_arm.jacobian(q) == pytest.approx(core.jacobian(q), abs=1e-12)
+    assert pin_arm.jdot_qdot(q, qd) == pytest.approx(core.jdot_qdot(q, qd), abs=1e-12)
+    assert pin_arm.gravity_torque(q) == pytest.approx(core.gravity_torque(q), abs=1e-5)
+
+
+def test_the_arm_along_x_in_pinocchio_measures_from_its_task_frames_origin():
+    pytest.importorskip('pinocchio')
+    from freejoint_core.pin_model import PinArmModel
+    arm = parse_urdf(ALONG_X, ['joint_3'], (0.0, -9.81, 0.0), tip_link='tool0')
+    assert arm.joint_offsets == ()
+    q = np.array([0.3, 0.8, -0.4])
+    assert PinArmModel(arm).fk(q) == pytest.approx(ArmModel(arm.params).fk(q), abs=1e-12)
 
 
 def test_rrbot_without_a_tip_link_ends_on_its_last_link_and_says_what_to_name():

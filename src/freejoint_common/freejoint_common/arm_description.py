@@ -92,6 +92,19 @@ class NodeArm:
     urdf_arm: object
     source: str
 
+    @property
+    def joint_offsets(self):
+        """Offsets [rad] the core adds to the URDF's joint angles, (n,); () for none."""
+        return self.urdf_arm.joint_offsets if self.urdf_arm is not None else ()
+
+    def to_model(self, q):
+        """Return the core's joint angles (tuple, (n,)) of measured ones (``UrdfArm.to_model``)."""
+        return self.urdf_arm.to_model(q) if self.joint_offsets else tuple(q)
+
+    def to_joints(self, q):
+        """Return the measured joint angles (tuple, (n,)) of the core's (``UrdfArm.to_joints``)."""
+        return self.urdf_arm.to_joints(q) if self.joint_offsets else tuple(q)
+
     def description(self):
         """
         Return the arm as a ``UrdfArm`` (the shipped ``paper_arm.urdf`` for the default).

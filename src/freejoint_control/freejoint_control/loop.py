@@ -228,6 +228,7 @@ class ControlLoop:
         self.shaper.set_bounds(cfg.resume_max_velocity, cfg.resume_max_acceleration)
         self._sp_bounds = (cfg.reach, cfg.setpoint_max_velocity, cfg.setpoint_max_acceleration)
         self._state_bounds = (cfg.position_lower, cfg.position_upper, cfg.velocity_limit)
+        self._offsets = cfg.joint_offsets
         if cfg.delay_compensation == 'predict':
             if self._predictor is None or self._predictor.params != cfg.nominal:
                 self._predictor = StatePredictor(cfg.nominal, cfg.dt)
@@ -464,6 +465,10 @@ class ControlLoop:
                     kind = 'implausible'
                     reason = 'implausible state: ' + implausible
                     q = None
+                elif self._offsets:
+                    # the core's angles: the measured ones plus the arm's offsets (a URDF arm
+                    # whose task frame is turned to put gravity along -y)
+                    q = tuple([a + b for a, b in zip(q, self._offsets)])
         if q is None:
             self.refused_states += 1
             self.log(ERROR, kind, 'state refused: %s; zero effort, theta_hat kept' % reason)

@@ -406,7 +406,9 @@ class Config(LoopConfig):
     Validated controller configuration: what is derived from several parameters.
 
     Besides the loop's fields (:class:`LoopConfig`): the nominal model, the gains, the
-    command order and the limits. Every other parameter is ``config.<name>`` as validated.
+    command order, the limits and the arm's joint offsets (added to the measured angles:
+    ``NodeArm.joint_offsets``, model order). Every other parameter is ``config.<name>``
+    as validated.
     """
 
     nominal: ArmParams
@@ -418,6 +420,7 @@ class Config(LoopConfig):
     velocity_limit: tuple
     reach: float
     nominal_model: object = field(default=None, compare=False)
+    joint_offsets: tuple = ()
 
 
 GAIN_NAMES = ('K', 'Lambda', 'R', 'Gamma', 'sigma', 'epsilon', 'h_form', 'theta0', 'robust',
@@ -461,7 +464,8 @@ def build(values):
         position_lower=_floats('joint_position_lower', values['joint_position_lower']),
         position_upper=_floats('joint_position_upper', values['joint_position_upper']),
         velocity_limit=_floats('joint_velocity_limit', values['joint_velocity_limit']),
-        reach=float(sum(nominal.lengths)), nominal_model=model)
+        reach=float(sum(nominal.lengths)), nominal_model=model,
+        joint_offsets=tuple(resolve_arm(values).joint_offsets))
 
 
 SCHEMA = Schema(PARAMS, CHECKS, build)

@@ -111,6 +111,8 @@ class MujocoPlant(PeriodPlant):
 
     def __init__(self, arm, dt_sub=DEFAULT_DT_SUB, dist_bound=0.5, seed=0, q0=None, qd0=None):
         self.mj_model, self._qadr, self._vadr = build_mj_model(arm, dt_sub)
+        # the core's angles are MuJoCo's (the URDF's) plus the arm's offsets
+        self._offsets = np.array(arm.joint_offsets) if arm.joint_offsets else None
         self.mj_data = mujoco.MjData(self.mj_model)
         self.arm = arm
         self._bad = [int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
@@ -122,7 +124,7 @@ class MujocoPlant(PeriodPlant):
 
     def _set_state(self, q0, qd0):
         mujoco.mj_resetData(self.mj_model, self.mj_data)
-        self.mj_data.qpos[self._qadr] = q0
+        self.mj_data.qpos[self._qadr] = q0 if self._offsets is None else q0 - self._offsets
         self.mj_data.qvel[self._vadr] = qd0
         self._take_bad_warnings()
 
@@ -138,8 +140,9 @@ class MujocoPlant(PeriodPlant):
 
     @property
     def q(self):
-        """Return the joint angles [rad], numpy copy (n,)."""
-        return self.mj_data.qpos[self._qadr].copy()
+        """Return the joint angles [rad] (the core's: the URDF's plus the offsets), copy (n,)."""
+        q = self.mj_data.qpos[self._qadr].copy()
+        return q if self._offsets is None else q + self._offsets
 
     @property
     def qd(self):

@@ -16,6 +16,11 @@ computed by Pinocchio from the URDF text of a :class:`freejoint_core.urdf.UrdfAr
   ``forwardKinematics(q, qd, 0)`` (zero joint acceleration);
 * ``fk``: the x, y of the end-effector frame placement.
 
+x, y are those of the arm's task frame (``UrdfArm.task_frame``: the base frame's own for
+an arm in its x-y plane, else the placement, Jacobian and acceleration projected on the
+frame's axes from its origin), and the core's angles are the URDF's plus
+``UrdfArm.joint_offsets`` (taken off before Pinocchio sees them).
+
 A nominal model (``scale != 1``) multiplies every body's mass, centre-of-mass lever
 and rotational inertia by ``scale``, as ``ArmParams.scaled``.  Continuous joints
 (two configuration entries, cos and sin) are mapped from the core's angles.
@@ -88,6 +93,11 @@ class PinArmModel(ArmModel):
                           and [s[0] for s in slots] == list(range(self.n))
                           and list(self._vperm) == list(range(self.n)))
         self._zero = np.zeros(model.nv)
+        self._offsets = np.array(arm.joint_offsets) if arm.joint_offsets else None
+        origin, x_axis, y_axis = arm.task_frame
+        base = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
+        self._plane = None if arm.task_frame == base else (
+            np.array(origin), np.array([x_axis, y_axis]))
 
     # -- conversions --------------------------------------------------------
     def _q(self, q, name='q'):
@@ -105,6 +115,8 @@ class PinArmModel(ArmModel):
     def _config(self, q):
         """Pinocchio configuration of the core's joint angles (validated)."""
         q = self._q(q)
+        if self._offsets is not None:
+            q = q - self._offsets
         if self._identity:
             return q
         cfg = np.zeros(self.pin_model.nq)
@@ -130,18 +142,31 @@ class PinArmModel(ArmModel):
     def _back_mat(self, mat):
         return np.array(mat[np.ix_(self._vperm, self._vperm)])
 
+    def _point(self, pos):
+        """Task-frame x, y (2,) of a position (3,) in the base frame."""
+        if self._plane is None:
+            return np.array(pos[:2])
+        origin, axes = self._plane
+        return axes @ (np.asarray(pos) - origin)
+
+    def _rows(self, vec):
+        """Task-frame x, y rows of a base-frame vector (3,) or of the linear rows of a Jacobian."""
+        if self._plane is None:
+            return np.array(vec[:2])
+        return self._plane[1] @ np.asarray(vec)[:3]
+
     # -- kinematics ---------------------------------------------------------
     def fk(self, q):
         """End-effector position from the frame placement, see ``ArmModel.fk``."""
         m, d = self.pin_model, self.pin_data
         pin.framesForwardKinematics(m, d, self._config(q))
-        return np.array(d.oMf[self._frame].translation[:2])
+        return self._point(d.oMf[self._frame].translation)
 
     def jacobian(self, q):
         """x, y rows of the frame Jacobian, see ``ArmModel.jacobian``."""
         m, d = self.pin_model, self.pin_data
         jac = pin.computeFrameJacobian(m, d, self._config(q), self._frame, _LWA)
-        return np.array(jac[:2][:, self._vperm])
+        return np.array(self._rows(jac)[:, self._vperm])
 
     def jdot_qdot(self, q, qd):
         """Frame's classical acceleration at zero qdd, see ``ArmModel.jdot_qdot``."""
@@ -149,7 +174,7 @@ class PinArmModel(ArmModel):
         pin.forwardKinematics(m, d, self._config(q), self._vel(qd), self._zero)
         pin.updateFramePlacement(m, d, self._frame)
         acc = pin.getFrameClassicalAcceleration(m, d, self._frame, _LWA)
-        return np.array(acc.linear[:2])
+        return self._rows(acc.linear)
 
     # -- dynamics -----------------------------------------------------------
     def mass_matrix(self, q):
@@ -191,16 +216,16 @@ class PinArmModel(ArmModel):
         pin.computeJointJacobians(m, d, cfg)
         pin.forwardKinematics(m, d, cfg, vel, self._zero)
         pin.updateFramePlacement(m, d, self._frame)
-        jac = pin.getFrameJacobian(m, d, self._frame, _LWA)[:2]
-        acc = pin.getFrameClassicalAcceleration(m, d, self._frame, _LWA).linear[:2]
-        return h, jac, np.array(acc)
+        jac = self._rows(pin.getFrameJacobian(m, d, self._frame, _LWA))
+        acc = self._rows(pin.getFrameClassicalAcceleration(m, d, self._frame, _LWA).linear)
+        return h, jac, acc
 
     def terms(self, q, qd):
         """Return the five terms from one Pinocchio pass, see ``ArmModel.terms``."""
         cfg, vel = self._config(q), self._vel(qd)
         mass = self._sym(pin.crba(self.pin_model, self.pin_data, cfg))
         h, jac, jdqd = self._pass(cfg, vel)
-        p = np.array(self.pin_data.oMf[self._frame].translation[:2])
+        p = self._point(self.pin_data.oMf[self._frame].translation)
         if self._identity:
             return mass, h, np.array(jac), jdqd, p
         return self._back_mat(mass), self._back(h), np.array(jac[:, self._vperm]), jdqd, p

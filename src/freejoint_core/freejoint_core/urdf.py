@@ -19,17 +19,24 @@ zero angles, as robot_state_publisher does):
   ``a`` do not enter the planar dynamics);
 * the task frame (the core's x, y: setpoints, circles, ``ee_position``) has its origin on
   joint 1's axis, x along the straight arm and y = a x x (``UrdfArm.task_frame``); for the
-  shipped arms (axes +z, links along +x, joint 1 at the origin) it is the base frame;
+  shipped arms (axes +z, links along +x, joint 1 at the origin) it is the base frame.
+  When gravity has a part in the plane that does not point along -y of that frame (an
+  rrbot standing up: its straight zero pose points up, against gravity), the task frame is
+  turned about the axis instead, y against that part of gravity and x = y x a, and joint
+  1's zero angle becomes the angle ``joint_offsets[0]`` of the straight arm in it: the
+  core's joint angles are the URDF's plus ``UrdfArm.joint_offsets`` (``to_model`` /
+  ``to_joints``; only joint 1 moves, the others are relative angles);
 * each moving link has its mass: the link itself with every link fixed to it folded in
   (a tool, a sensor); links without ``<inertial>`` or with zero mass add nothing; the
   folded centre of mass lies on the link's line, in ``(0, L]``; the moment of inertia is
   about ``a`` through that centre (parallel-axis sums).
 
 Gravity and the passive joints are not URDF elements: they are given beside the
-description.  Gravity is a vector in the base frame; its in-plane part must point
-along -y of the task frame (the core's convention), its part along the joint axes exerts
-no joint torque.  The horizontal case (Case 1) is ``GRAVITY_HORIZONTAL = (0, 0, -9.81)``,
-the vertical one (Case 2) ``GRAVITY_VERTICAL = (0, -9.81, 0)``.
+description.  Gravity is a vector in the base frame; its in-plane part points along -y of
+the task frame (the core's convention; the frame is turned for it, above), its part along
+the joint axes exerts no joint torque.  The horizontal case (Case 1) is
+``GRAVITY_HORIZONTAL = (0, 0, -9.81)``, the vertical one (Case 2) ``GRAVITY_VERTICAL = (0,
+-9.81, 0)``.
 
 The nominal model of the controller is ``UrdfArm.nominal(scale)``: masses, inertias
 and COM offsets of the URDF times ``scale``, as ``ArmParams.scaled``.
@@ -94,7 +101,12 @@ class UrdfArm:
     task_frame : tuple
         ``(origin, x, y)`` in the root link's frame (m, unit vectors): where the core's task
         coordinates lie (origin on joint 1's axis, x along the arm at zero angles, y =
-        axis x x); ``((0, 0, 0), (1, 0, 0), (0, 1, 0))`` for an arm in the base x-y plane.
+        axis x x, or turned about the axis to put gravity along -y: module notes);
+        ``((0, 0, 0), (1, 0, 0), (0, 1, 0))`` for an arm in the base x-y plane.
+    joint_offsets : tuple of float, (n,) or ()
+        Added to the URDF's joint angles [rad] they give the core's (``to_model``): the
+        angle of the straight zero pose in a turned task frame on joint 1, 0 elsewhere;
+        ``()`` when the frame is not turned (no offset).
 
     """
 
@@ -108,6 +120,32 @@ class UrdfArm:
     gravity_vector: tuple
     params: ArmParams
     task_frame: tuple = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
+    joint_offsets: tuple = ()
+
+    def to_model(self, q):
+        """
+        Return the core's joint angles of the URDF's ``q`` (the offsets added).
+
+        Parameters
+        ----------
+        q : sequence of float, (n,)
+            Joint angles [rad] as the URDF (and ``joint_states``) measure them.
+
+        Returns
+        -------
+        tuple of float, (n,)
+            ``q`` itself (as a tuple) when the arm has no offset.
+
+        """
+        if not self.joint_offsets:
+            return tuple(q)
+        return tuple(a + b for a, b in zip(q, self.joint_offsets))
+
+    def to_joints(self, q):
+        """Return the URDF's joint angles [rad] of the core's ``q``, (n,): ``to_model`` undone."""
+        if not self.joint_offsets:
+            return tuple(q)
+        return tuple(a - b for a, b in zip(q, self.joint_offsets))
 
     def nominal(self, scale):
         """
@@ -207,10 +245,6 @@ def _gravity(gravity):
     if len(g) != 3 or not all(math.isfinite(v) for v in g):
         raise FreejointValueError(
             f'gravity: expected 3 finite numbers (a vector in the base frame), got {gravity!r}')
-    if g[0] != 0.0 or g[1] > 0.0:
-        raise FreejointValueError(
-            f'gravity: the in-plane part of ({_fmt(g)}) must point along -y of the base '
-            f'frame (x = 0, y <= 0): rotate the base frame of the URDF so that it does')
     return g
 
 
@@ -351,17 +385,11 @@ def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL, tip_link='')
             raise FreejointValueError(
                 f'robot_description: link {lname!r}: mass ({m:g}) and izz ({izz:g}) must be '
                 f'> 0')
-    g = np.asarray(gvec, dtype=float)
-    g_x, g_y = float(g @ direction), float(g @ side)
-    if abs(g_x) > _TOL or g_y > 0.0:
-        raise FreejointValueError(
-            f"gravity: the in-plane part of ({_fmt(gvec)}) must point along -y of the arm's "
-            f'task frame (x along the arm at zero angles ({_fmt(direction)}), y = axis x x = '
-            f'({_fmt(side)}) in the base frame): rotate the base frame of the URDF so that '
-            f'it does')
+    x_axis, y_axis, gravity, offsets = _task_axes(np.asarray(gvec, dtype=float), n,
+                                                  direction, side, len(joint_names))
     params = ArmParams(lengths=tuple(lengths), masses=tuple(masses),
                        inertias=tuple(inertias), com=tuple(coms), passive=passive_idx,
-                       gravity=-g_y + 0.0)
+                       gravity=gravity)
     origin = frames.position(revolute[0])
     return UrdfArm(name=root.get('name', ''), urdf=text, joint_names=tuple(joint_names),
                    link_names=tuple(link_names),
@@ -369,8 +397,36 @@ def parse_urdf(text, passive_joints=(), gravity=GRAVITY_HORIZONTAL, tip_link='')
                    passive_joints=tuple(joint_names[i] for i in passive_idx),
                    gravity_vector=gvec, params=params,
                    task_frame=(tuple(float(v) for v in origin),
-                               tuple(float(v) for v in direction),
-                               tuple(float(v) for v in side)))
+                               tuple(float(v) for v in x_axis),
+                               tuple(float(v) for v in y_axis)),
+                   joint_offsets=offsets)
+
+
+def _task_axes(g, axis, direction, side, n):
+    """
+    Return the task frame's ``x, y`` axes, the core's gravity and the joint offsets.
+
+    The frame along the straight arm (``direction``, ``side`` = axis x direction) when the
+    in-plane part of gravity ``g`` points along its -y (or is nil); else turned about
+    ``axis``: y against that part, x = y x axis, and joint 1's offset the angle of
+    ``direction`` in it (module notes).
+
+    Returns
+    -------
+    x, y : numpy.ndarray, (3,)
+    gravity : float
+        Magnitude [m/s^2] of the in-plane part (the core's ``ArmParams.gravity``).
+    offsets : tuple of float, (n,) or ()
+
+    """
+    g_x, g_y = float(g @ direction), float(g @ side)
+    if abs(g_x) <= _TOL and g_y <= 0.0:
+        return direction, side, -g_y + 0.0, ()
+    flat = g - float(g @ axis) * axis
+    up = -flat / float(np.sqrt(flat @ flat)) + 0.0      # + 0.0: no -0 in the frame
+    x_axis = np.cross(up, axis) + 0.0
+    offset = math.atan2(float(direction @ up), float(direction @ x_axis))
+    return x_axis, up, float(np.sqrt(flat @ flat)), (offset,) + (0.0,) * (n - 1)
 
 
 def _tree(root):

@@ -125,6 +125,7 @@ class PlannerNode(Node, Lifecycle):
         self._failure_refusal = ''      # why no plan is accepted since a failure ('' : none)
         self._failures_pending = []     # joints reported failed, not assessed yet
         self._joint_names = arm.joint_names
+        self._offsets = arm.joint_offsets     # measured angles + these = the model's
         self._arm_source = arm.source
         # Where the arm is, for a plan from rest: joint_states taken only when needed (a
         # depth-1 subscription on a hidden node no executor spins: no callback per state).
@@ -293,7 +294,8 @@ class PlannerNode(Node, Lifecycle):
         self._take_arm_state()
         got = self._arm_state
         state = None if got is None else joint_state(self._joint_names, got.name,
-                                                     got.position, got.velocity)
+                                                     got.position, got.velocity,
+                                                     self._offsets)
         pending, self._failures_pending = self._failures_pending, []
         for name in pending:
             out, model = assess_failure(self._map_arm(cfg) or table1(cfg['case']),
@@ -493,7 +495,8 @@ class PlannerNode(Node, Lifecycle):
         self._take_arm_state()
         got = self._arm_state       # the newest taken, here or by the settle gate
         if got is not None:
-            self._arm_xy = end_effector(self._model, self._joint_names, got.name, got.position)
+            self._arm_xy = end_effector(self._model, self._joint_names, got.name, got.position,
+                                        self._offsets)
             self._arm_note = '' if self._arm_xy is not None else (
                 f'joint_states has no finite positions of the joints {list(self._joint_names)} '
                 f'(it names {list(got.name)})')
@@ -505,7 +508,7 @@ class PlannerNode(Node, Lifecycle):
         self._take_arm_state()
         got = self._arm_state
         swing = None if got is None else swing_deg(self._model, self._joint_names, got.name,
-                                                   got.position, got.velocity)
+                                                   got.position, got.velocity, self._offsets)
         if swing is None:
             return ('settling: no joint state with the positions and velocities of '
                     f"{list(self._joint_names)} to judge the free link's swing by "

@@ -258,7 +258,7 @@ def joint_indices(joint_names, names):
         return None
 
 
-def end_effector(model, joint_names, names, positions):
+def end_effector(model, joint_names, names, positions, offsets=()):
     """
     Return the end effector's position (x, y) of a joint state, None if a joint is missing.
 
@@ -270,6 +270,9 @@ def end_effector(model, joint_names, names, positions):
         The arm's joints, base to tip.
     names, positions : sequence
         ``JointState.name`` and ``.position`` (rad).
+    offsets : sequence of float, (n,) or ()
+        Added to the measured angles they give the model's [rad]
+        (``NodeArm.joint_offsets``; () none).
 
     Returns
     -------
@@ -283,6 +286,8 @@ def end_effector(model, joint_names, names, positions):
     q = np.array([positions[i] for i in index], dtype=float)
     if not np.all(np.isfinite(q)):
         return None
+    if offsets:
+        q = q + np.asarray(offsets, dtype=float)
     return ArmModel(model.nominal).fk(q)
 
 
@@ -315,7 +320,7 @@ def settle_gate_refusal(params):
     return ''
 
 
-def swing_deg(model, joint_names, names, positions, velocities):
+def swing_deg(model, joint_names, names, positions, velocities, offsets=()):
     """
     Return the free last link's swing amplitude [deg] of a joint state, None if unknown.
 
@@ -328,6 +333,8 @@ def swing_deg(model, joint_names, names, positions, velocities):
         The arm's joints, base to tip.
     names, positions, velocities : sequence
         ``JointState.name``, ``.position`` [rad], ``.velocity`` [rad/s].
+    offsets : sequence of float, (n,) or ()
+        As :func:`end_effector`.
 
     Returns
     -------
@@ -335,13 +342,13 @@ def swing_deg(model, joint_names, names, positions, velocities):
         None when a joint, a position or a velocity is missing or not finite.
 
     """
-    state = joint_state(joint_names, names, positions, velocities)
+    state = joint_state(joint_names, names, positions, velocities, offsets)
     return None if state is None else math.degrees(free_link_swing(model.nominal, *state))
 
 
-def joint_state(joint_names, names, positions, velocities):
+def joint_state(joint_names, names, positions, velocities, offsets=()):
     """
-    Return the arm's joint angles and velocities in its order, None if one is unknown.
+    Return the arm's joint angles (the model's) and velocities in its order, None if unknown.
 
     Parameters
     ----------
@@ -349,6 +356,8 @@ def joint_state(joint_names, names, positions, velocities):
         The arm's joints, base to tip.
     names, positions, velocities : sequence
         ``JointState.name``, ``.position`` [rad], ``.velocity`` [rad/s].
+    offsets : sequence of float, (n,) or ()
+        As :func:`end_effector`.
 
     Returns
     -------
@@ -363,6 +372,8 @@ def joint_state(joint_names, names, positions, velocities):
     qd = [float(velocities[i]) for i in index]
     if not all(map(math.isfinite, q + qd)):
         return None
+    if offsets:
+        q = [a + b for a, b in zip(q, offsets)]
     return q, qd
 
 

@@ -326,6 +326,8 @@ def build(values):
     dt = float(values['control_period'])
     passive = float(values['initial_passive_deg'])
     q0 = _initial_joints(values['initial_joint_positions'], params)
+    if q0 is not None:
+        q0 = list(arm.to_model(q0))       # given as the joints measure them
     if values['start_pose'] == 'hanging':
         q0 = _hanging(values, params, q0)
     if q0 is None and (params.r != 2 or params.p != 1):
@@ -335,8 +337,10 @@ def build(values):
             f'{params.n} joint angles')
     if q0 is None:
         try:
+            offsets = arm.joint_offsets or (0.0,) * params.n
             q0 = ArmModel(params).ik(tuple(values['initial_position']),
-                                     [math.radians(passive)], branch=1)
+                                     [math.radians(passive) + offsets[params.passive[0]]],
+                                     branch=1)
         except FreejointValueError as exc:
             raise FreejointValueError(
                 f'initial_position: unreachable with initial_passive_deg = '

@@ -172,7 +172,7 @@ class SimNode(Node, Lifecycle):
                 cfg.arm.source if cfg.arm.urdf_arm else cfg.case,
                 'lockstep' if cfg.lockstep else 'real time', cfg.dt,
                 'MuJoCo RK4' if cfg.engine == 'mujoco' else 'RK4', cfg.dt_sub, cfg.dist_bound,
-                cfg.seed, ', '.join('%.6f' % v for v in cfg.q0),
+                cfg.seed, ', '.join('%.6f' % v for v in cfg.arm.to_joints(cfg.q0)),
                 cfg.command_timeout))
         if cfg.lockstep:
             self._publish_state()
@@ -223,7 +223,7 @@ class SimNode(Node, Lifecycle):
         cfg = self.config
         response.success = True
         response.message = ('arm back at q0 = [%s] rad at rest, %s case, seed %d, from step '
-                            '%d on%s' % (', '.join('%.6f' % v for v in cfg.q0),
+                            '%d on%s' % (', '.join('%.6f' % v for v in cfg.arm.to_joints(cfg.q0)),
                                          cfg.case, cfg.seed, self._k + 1,
                                          '; divergence cleared' if self._diverged else ''))
         self.get_logger().info('reset requested: ' + response.message)
@@ -400,7 +400,9 @@ class SimNode(Node, Lifecycle):
                           % (self._k, reason))
             return False
         self._q = q
-        self._q_list = q_list
+        # published as the joints measure them (the URDF's angles: the arm's offsets off)
+        self._q_list = q_list if not self.config.arm.joint_offsets else list(
+            self.config.arm.to_joints(q_list))
         self._qd_list = qd_list
         return True
 
