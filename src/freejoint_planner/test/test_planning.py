@@ -162,3 +162,16 @@ def test_a_grid_resolution_giving_more_than_2000_cells_a_side_is_refused_naming_
     reason = grid_bound((0.0, 1.5), 0.001)
     assert reason == ('grid_resolution: 0.001 m gives a semi_singular_map of 3000 x 3000 cells '
                       'for the reach 1.5 m, above 2000 a side (grid_resolution >= 0.0015 m)')
+
+
+def test_a_joint_state_in_the_urdfs_angles_is_read_with_the_arms_offsets():
+    from freejoint_planner.planning import end_effector, joint_state
+    model = compute_model('horizontal', 0.7, 1.0, 1e-7)    # Table I: links 0.5 m
+    names = ('joint1', 'joint2', 'joint3')
+    offsets = (np.pi / 2, 0.0, 0.0)    # a task frame turned: the straight arm points along y
+    assert end_effector(model, names, names, [0.0, 0.0, 0.0], offsets) == pytest.approx(
+        (0.0, 1.5), abs=1e-12)
+    assert end_effector(model, names, names, [0.0, 0.0, 0.0]) == pytest.approx(
+        (1.5, 0.0), abs=1e-12)
+    q, qd = joint_state(names, names, [0.1, 0.2, 0.3], [1.0, 2.0, 3.0], offsets)
+    assert q == [0.1 + np.pi / 2, 0.2, 0.3] and qd == [1.0, 2.0, 3.0]

@@ -84,3 +84,27 @@ def test_the_declared_ranges_are_the_validated_bounds():
     cfg = build_config(_values(dist_bound=10.0, initial_passive_deg=-240.0,
                                divergence_speed=1e5))
     assert (cfg.dist_bound, cfg.divergence_speed) == (10.0, 1e5)
+
+
+def _turned_paper_arm(**changes):
+    """Return the values of the shipped paper_arm.urdf with gravity along +x (frame turned)."""
+    from freejoint_core.urdf import shipped_urdf_path
+    return _values(description_file=shipped_urdf_path('paper_arm'),
+                   gravity=[9.81, 0.0, 0.0], **changes)
+
+
+def test_initial_joint_positions_are_the_urdfs_angles_the_model_adds_the_offset():
+    import math
+    cfg = build_config(_turned_paper_arm(initial_joint_positions='0.1 0.2 0.3'))
+    # gravity +x: the straight arm (+x) lies at -90 deg in the turned task frame
+    assert cfg.arm.joint_offsets == (-math.pi / 2, 0.0, 0.0)
+    assert cfg.q0 == (0.1 - math.pi / 2, 0.2, 0.3)
+    assert cfg.arm.to_joints(cfg.q0) == pytest.approx((0.1, 0.2, 0.3), abs=1e-15)
+
+
+def test_initial_position_of_a_turned_arm_is_reached_in_its_task_frame():
+    import math
+    from freejoint_core.arm import ArmModel
+    cfg = build_config(_turned_paper_arm(initial_position=[0.2, 0.1], initial_passive_deg=100.0))
+    assert ArmModel(cfg.params).fk(cfg.q0) == pytest.approx((0.2, 0.1), abs=1e-12)
+    assert cfg.q0[2] == pytest.approx(math.radians(100.0), abs=1e-12)  # relative: no offset
