@@ -2,7 +2,7 @@
 import math
 
 from freejoint_core import batch
-from freejoint_core.arm import table1
+from freejoint_core.arm import ArmParams, table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.offline import run_case
 from freejoint_core.plant import Plant
@@ -121,3 +121,53 @@ def test_bad_per_run_inputs_are_refused_naming_the_field(change, field):
     runs.update(change)
     with pytest.raises(FreejointValueError, match=field):
         batch.check_runs(runs)
+
+
+OTHER_ARM = {v: ArmParams(lengths=(0.6, 0.45, 0.35), masses=(1.5, 1.0, 0.4),
+                          inertias=(0.05, 0.03, 0.01), com=(0.3, 0.2, 0.15), passive=(2,),
+                          gravity=9.81 if v else 0.0) for v in (False, True)}
+"""A 3-link arm that is not Table I's (another URDF's), joint 3 passive, per case."""
+
+
+@pytest.mark.parametrize('engine', batch.ENGINES)
+def test_another_three_link_arm_runs_batched_equal_to_its_scalar_runs(engine):
+    runs = _sample()
+    runs['q3_0_deg'][:] = [100.0, 115.0, 110.0, 105.0, 100.0, 120.0]   # reached by both arms
+    refs = [batch.run_scalar({k: v[i] for k, v in runs.items()}, duration=DURATION,
+                             arms=OTHER_ARM) for i in range(6)]
+    out = batch.simulate(runs, duration=DURATION, record_trace=True, engine=engine,
+                         arms=OTHER_ARM)
+    table_one = batch.simulate(runs, duration=DURATION, engine=engine)
+    for i, (metrics, p) in enumerate(refs):
+        ticks = len(p)
+        assert out['ticks'][i] == ticks
+        assert np.max(np.abs(out['p'][i, :ticks] - p)) <= 1e-9
+        assert out['max_mm'][i] == pytest.approx(metrics['max_mm'], rel=1e-9, abs=1e-9)
+    # it is that arm that ran: Table I's runs differ
+    assert not np.allclose(out['max_mm'], table_one['max_mm'])
+
+
+def test_the_scalar_reference_of_another_arm_starts_where_its_own_inverse_kinematics_put_it():
+    from freejoint_core.arm import ArmModel
+    runs = batch.run_defaults(1)
+    runs['vertical'][:] = True
+    runs['q3_0_deg'][:] = 100.0
+    _, p = batch.run_scalar({k: v[0] for k, v in runs.items()}, duration=0.01,
+                            arms=OTHER_ARM)
+    # the paper's circle starts at (0.2, 0): the arm's own kinematics reach it at tick 0
+    assert p[0] == pytest.approx((0.2, 0.0), abs=1e-12)
+    q0 = ArmModel(OTHER_ARM[True]).ik((0.2, 0.0), [math.radians(100.0)], branch=1)
+    assert ArmModel(OTHER_ARM[True]).fk(q0) == pytest.approx(p[0], abs=1e-12)
+
+
+@pytest.mark.parametrize('arms,match', [
+    ({False: table1('horizontal')}, r'arms: expected a mapping of False and True'),
+    ({False: ArmParams(lengths=(0.5,) * 4, masses=(1.0,) * 4, inertias=(0.1,) * 4,
+                       com=(0.25,) * 4, passive=(3,)), True: table1('vertical')},
+     r'arms\[False\]: the batch kernel runs 3-link arms whose joint 3 alone is passive, got 4'),
+    ({False: table1('horizontal'), True: OTHER_ARM[True]}, r'arms: both arms need the same '
+     r'lengths'),
+])
+def test_an_arm_the_batch_kernel_cannot_run_is_refused_naming_it(arms, match):
+    with pytest.raises(FreejointValueError, match=match):
+        batch.simulate(batch.run_defaults(1), duration=0.01, arms=arms)

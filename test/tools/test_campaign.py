@@ -55,12 +55,72 @@ def test_a_bad_campaign_file_ends_with_one_line_naming_the_field_exit_2_before_a
     assert not os.path.exists(out_dir)
 
 
-def test_a_urdf_arm_that_loads_is_refused_as_not_yet_supported(tmp_path, capsys):
+def _urdf_campaign(tmp_path, urdf_text, arm_extra='', name='u.yaml'):
+    urdf = tmp_path / 'arm.urdf'
+    urdf.write_text(urdf_text)
+    text = GOOD.replace('case: vertical',
+                        f'case: vertical\narm: {{urdf: {urdf}{arm_extra}}}')
+    return _file(tmp_path, text, name)
+
+
+def _paper_urdf_text():
     from freejoint_core.urdf import shipped_urdf_path
-    urdf = shipped_urdf_path('paper_arm')
-    text = GOOD.replace('case: vertical', f'case: vertical\narm: {{urdf: {urdf}}}')
+    with open(shipped_urdf_path('paper_arm'), encoding='utf-8') as f:
+        return f.read()
+
+
+def test_the_paper_arms_urdf_as_a_campaign_arm_gives_the_table_i_campaigns_results(tmp_path):
+    # paper_arm.urdf is Table I: the same runs, every input and metric equal
+    paper = campaign.run(campaign.load(_file(tmp_path, GOOD)), str(tmp_path / 'paper'),
+                         progress=False)
+    camp = campaign.load(_urdf_campaign(tmp_path, _paper_urdf_text()))
+    assert camp['arm']['passive_joints'] == ['joint3']
+    assert camp['arm']['gravity'] == [0.0, -9.81, 0.0]      # the case's, not given
+    urdf = campaign.run(camp, str(tmp_path / 'urdf'), progress=False)
+    with open(paper, 'rb') as fa, open(urdf, 'rb') as fb:
+        assert fa.read() == fb.read()
+
+
+def test_a_urdf_arm_runs_its_own_dynamics(tmp_path):
+    # heavier free link (mass 1 -> 3): another arm, other results
+    text = _paper_urdf_text()
+    third = text.rindex('<mass value="1.0"/>')
+    heavier = text[:third] + '<mass value="3.0"/>' + text[third + len('<mass value="1.0"/>'):]
+    paper = pq.read_table(campaign.run(campaign.load(_file(tmp_path, GOOD)),
+                                       str(tmp_path / 'paper'), progress=False))
+    other = pq.read_table(campaign.run(campaign.load(_urdf_campaign(tmp_path, heavier)),
+                                       str(tmp_path / 'other'), progress=False))
+    assert other.column('run_index').to_pylist() == list(range(12))
+    assert other.column('rms_mm').to_pylist() != paper.column('rms_mm').to_pylist()
+
+
+@pytest.mark.parametrize('arm_extra,edit,named', [
+    ('', lambda t: t.replace('<origin xyz="0.25 0 0" rpy="0 0 0"/>\n      <mass',
+                             '<origin xyz="0.4 0 0" rpy="0 0 0"/>\n      <mass', 1),
+     "axes.scale: 1.5 puts a nominal centre of mass beyond its link's end (this arm: at "
+     'most 1.25)'),
+    (', passive_joints: [joint2]', lambda t: t,
+     'arm.passive_joints: campaigns run 3-link arms whose last joint alone is passive'),
+    (', gravity: [0, 0]', lambda t: t, 'gravity: expected 3'),
+    (', wheels: 4', lambda t: t, 'arm.wheels: unknown key'),
+    ('', lambda t: t.replace('<robot', '<rob', 1), 'arm: '),
+])
+def test_a_urdf_arm_the_batch_kernel_cannot_run_ends_with_one_line_naming_it(
+        tmp_path, capsys, arm_extra, edit, named):
+    path = _urdf_campaign(tmp_path, edit(_paper_urdf_text()), arm_extra)
+    assert campaign.main(['run', path, '--out', str(tmp_path / 'o')]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and named in err, err
+    assert not os.path.exists(str(tmp_path / 'o'))
+
+
+def test_the_four_link_urdf_is_refused_naming_its_joints(tmp_path, capsys):
+    from freejoint_core.urdf import shipped_urdf_path
+    text = GOOD.replace('case: vertical', 'case: vertical\narm: {urdf: %s, passive_joints: '
+                        '[joint1]}' % shipped_urdf_path('four_link_arm'))
     assert campaign.main(['run', _file(tmp_path, text), '--out', str(tmp_path / 'o')]) == 2
-    assert 'not yet supported' in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert 'has 4 joints' in err and "passive ['joint1']" in err, err
 
 
 def test_a_grid_design_is_the_product_of_the_axes_times_the_seeds(tmp_path):

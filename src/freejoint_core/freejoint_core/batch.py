@@ -5,12 +5,14 @@ Every run is the offline runner's loop (``freejoint_core.offline``, module notes
 tick ``k``, controller on the state of ``t_k``, RK4 plant over ``[t_k, t_{k+1}]``,
 the same divergence rule) with a few uncertainty axes a robustness campaign
 varies per run (issue 24).  Everything is a numpy array over the runs; the arm
-is Table I's (three links, joint 3 passive), the law the paper's fast path
+is Table I's (three links, joint 3 passive) or, with ``arms``, another 3-link arm whose
+joint 3 alone is passive (a URDF arm's ``ArmParams``), the law the paper's fast path
 (``control.RobustController._step_fast``), the plant ``plant.Plant`` (fast3 RK4).
 
 Per-run inputs (:data:`RUN_FIELDS`), each a 1-D array over the runs:
 
-* ``vertical`` (bool): Case 2 (gravity 9.81 m/s^2) instead of Case 1;
+* ``vertical`` (bool): Case 2 (gravity 9.81 m/s^2) instead of Case 1 (with ``arms``:
+  the arm ``arms[True]`` instead of ``arms[False]``);
 * ``scale_mass``, ``scale_inertia``, ``scale_lc``: the nominal model's masses,
   inertias and COM distances are the real ones times these (lengths exact);
 * ``dist_bound`` [N m] and ``dist_type``: 0 ``uniform`` (the plant's: each
@@ -175,6 +177,43 @@ def _consts(params_list):
         cols['gh2'].append(g * h2)
         cols['gh3'].append(g * h3)
     return {k: np.array(v) for k, v in cols.items()}
+
+
+def real_arms(arms=None):
+    """
+    Return the real arm of each value of ``vertical``: ``{False: ArmParams, True: ArmParams}``.
+
+    Parameters
+    ----------
+    arms : mapping of bool to ArmParams, optional
+        The real arm of the runs with ``vertical`` False and True; default Table I's
+        horizontal and vertical arms. Each has three links, joint 3 alone passive, and
+        both the same lengths (the kernel's geometry).
+
+    Raises
+    ------
+    FreejointValueError
+        Naming ``arms`` and what the batch kernel cannot run.
+
+    """
+    if arms is None:
+        return {v: table1('vertical' if v else 'horizontal') for v in (False, True)}
+    try:
+        out = {False: arms[False], True: arms[True]}
+    except (KeyError, TypeError):
+        raise FreejointValueError(f'arms: expected a mapping of False and True to ArmParams, '
+                                  f'got {arms!r}') from None
+    for v, arm in out.items():
+        if not isinstance(arm, ArmParams):
+            raise FreejointValueError(f'arms[{v}]: expected ArmParams, got {type(arm).__name__}')
+        if arm.n != 3 or arm.passive != (2,):
+            raise FreejointValueError(
+                f'arms[{v}]: the batch kernel runs 3-link arms whose joint 3 alone is passive, '
+                f'got {arm.n} joints, passive {list(arm.passive)}')
+    if out[False].lengths != out[True].lengths:
+        raise FreejointValueError(f'arms: both arms need the same lengths, got '
+                                  f'{out[False].lengths} and {out[True].lengths}')
+    return out
 
 
 def _terms(c, q0, q1, q2, w0, w1, w2):
@@ -447,7 +486,7 @@ class _Streams:
 
 def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration=5.0,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0, record_trace=False,
-             block=250, engine='numba', threads=None):
+             block=250, engine='numba', threads=None, arms=None):
     """
     Run every run of ``runs`` together and return their metrics.
 
@@ -472,6 +511,8 @@ def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration
         ``numpy``: every operation an array over the runs (slower; same numbers).
     threads : int, optional
         Threads of the numba engine (default: every core).
+    arms : mapping of bool to ArmParams, optional
+        The real arm per value of ``vertical`` (:func:`real_arms`; Table I's by default).
 
     Returns
     -------
@@ -488,11 +529,11 @@ def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration
         raise FreejointValueError(f'gains: expected Gains, got {type(gains).__name__}')
     trajectory = CircleQuintic() if trajectory is None else trajectory
     n_ticks, n_sub = check_grid(dt, dt_sub, duration)
+    reals = real_arms(arms)
     if engine == 'numba':
         return _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory,
-                               diverge_m, diverge_qd, record_trace, threads)
+                               diverge_m, diverge_qd, record_trace, threads, reals)
     n = runs['seed'].shape[0]
-    reals = {v: table1('vertical' if v else 'horizontal') for v in (False, True)}
     real_list = [reals[bool(v)] for v in runs['vertical']]
     lengths = reals[False].lengths
     cr_all = _consts(real_list)
@@ -678,10 +719,9 @@ def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration
     return out
 
 
-def _prepare(runs, trajectory, dt, n_ticks):
+def _prepare(runs, trajectory, dt, n_ticks, reals):
     """Real / nominal constants (n, 9), initial states (n, 3) and setpoints (N, 6)."""
     n = runs['seed'].shape[0]
-    reals = {v: table1('vertical' if v else 'horizontal') for v in (False, True)}
     real_list = [reals[bool(v)] for v in runs['vertical']]
     keys = ('d1', 'd2', 'd3', 'h12', 'h13', 'h23', 'gh1', 'gh2', 'gh3')
     cr = _consts(real_list)
@@ -756,9 +796,9 @@ def draws(runs, n_ticks):
 
 
 def _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory, diverge_m,
-                    diverge_qd, record_trace, threads):
+                    diverge_qd, record_trace, threads, reals):
     from . import batch_kernel
-    cr, cn, ln, q_init, des = _prepare(runs, trajectory, dt, n_ticks)
+    cr, cn, ln, q_init, des = _prepare(runs, trajectory, dt, n_ticks, reals)
     dist, nq, nqd, ntau, flags = draws(runs, n_ticks)
     lag = runs['lag']
     alpha = np.where(lag > 0.0, 1.0 - np.exp(-dt / np.where(lag > 0.0, lag, 1.0)), 1.0)
@@ -786,7 +826,7 @@ def _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory, diverge
 
 
 def run_scalar(run, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration=5.0,
-               trajectory=None, diverge_m=0.5, diverge_qd=1000.0):
+               trajectory=None, diverge_m=0.5, diverge_qd=1000.0, arms=None):
     """
     One run of :func:`simulate`, tick by tick with ``Plant`` and ``RobustController``.
 
@@ -797,7 +837,7 @@ def run_scalar(run, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duratio
     ----------
     run : dict
         One value per :data:`RUN_FIELDS` key.
-    gains, dt, dt_sub, duration, trajectory, diverge_m, diverge_qd
+    gains, dt, dt_sub, duration, trajectory, diverge_m, diverge_qd, arms
         As :func:`simulate`.
 
     Returns
@@ -812,7 +852,7 @@ def run_scalar(run, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duratio
     gains = Gains() if gains is None else gains
     trajectory = CircleQuintic() if trajectory is None else trajectory
     n_ticks, n_sub = check_grid(dt, dt_sub, duration)
-    real = table1('vertical' if r['vertical'] else 'horizontal')
+    real = real_arms(arms)[bool(r['vertical'])]
     nominal = nominal_params(real, r['scale_mass'], r['scale_inertia'], r['scale_lc'])
     seed = int(r['seed'])
     px0, py0 = trajectory.sample(0.0)[0]

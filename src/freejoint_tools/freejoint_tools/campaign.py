@@ -15,7 +15,9 @@ holds).  docs/campaigns.md documents the file and the figures.
 Campaign file::
 
     name: paper_vertical          # label (and the default output folder bags/campaigns/NAME)
-    arm: paper                    # Table I (a URDF arm: {urdf: PATH}, not yet supported)
+    arm: paper                    # Table I, or a 3-link URDF arm whose last joint is free:
+                                  # {urdf: PATH, passive_joints: [NAME], tip_link: LINK,
+                                  #  gravity: [x, y, z]} (gravity: default the case's)
     case: vertical                # horizontal (Case 1) | vertical (Case 2, gravity)
     task: {centre: [0.0, 0.0], radius: 0.2, duration: 5.0}   # the desired circle
     duration: 5.0                 # run length (s); dt 0.001, dt_sub 0.0005 by default
@@ -246,22 +248,19 @@ def parse(raw):
                                                         for ch in name):
         raise CampaignError(f'name: expected letters, digits, _ - . only, got {name!r}')
     c['name'] = name
-    arm = raw.get('arm', 'paper')
-    if isinstance(arm, dict) and set(arm) == {'urdf'}:
-        from freejoint_core.urdf import load_urdf
-        try:
-            load_urdf(arm['urdf'])
-        except (FreejointValueError, OSError, TypeError) as exc:
-            raise CampaignError(f'arm.urdf: {exc}') from None
-        raise CampaignError('arm.urdf: URDF arms are not yet supported by campaigns (the '
-                            "batch kernel is the paper's 3-link arm); use arm: paper")
-    if arm != 'paper':
-        raise CampaignError(f"arm: expected 'paper' or {{urdf: PATH}}, got {arm!r}")
-    c['arm'] = 'paper'
     case = raw.get('case', 'vertical')
     if case not in CASES:
         raise CampaignError(f'case: expected one of {list(CASES)}, got {case!r}')
     c['case'] = case
+    arm = raw.get('arm', 'paper')
+    if isinstance(arm, dict):
+        c['arm'], real = _urdf_arm(arm, case)
+        c['_arms'] = {False: real, True: real}
+    elif arm == 'paper':
+        c['arm'] = 'paper'
+        real = table1(case)
+    else:
+        raise CampaignError(f"arm: expected 'paper' or {{urdf: PATH, ...}}, got {arm!r}")
     task = raw.get('task', {})
     if not isinstance(task, dict) or set(task) - {'centre', 'radius', 'duration'}:
         raise CampaignError(f'task: expected a mapping of centre, radius, duration, got {task!r}')
@@ -349,13 +348,72 @@ def parse(raw):
     else:
         q3s.update(np.linspace(spec['range'][0], spec['range'][1], 721).tolist())
     start = CircleQuintic(**c['task']).sample(0.0)[0]
+    _check_lc(c, real)
     for q3 in sorted(q3s):
         try:
-            initial_state(table1(case), q3, start)
+            initial_state(real, q3, start)
         except FreejointValueError:
             raise CampaignError(f'axes.q3_0_deg: {q3:g} deg: no configuration puts the end '
                                 f'effector on the start of the task') from None
     return c
+
+
+URDF_ARM_KEYS = ('urdf', 'passive_joints', 'tip_link', 'gravity')
+"""Keys of a URDF ``arm`` entry (``urdf`` required)."""
+
+
+def _urdf_arm(arm, case):
+    """Return the normalised ``arm`` entry of a URDF arm and its real ``ArmParams``."""
+    from freejoint_common.arm_description import package_path
+    from freejoint_core.errors import FreejointValueError
+    from freejoint_core.urdf import GRAVITY_BY_CASE, parse_urdf
+    bad = sorted(set(arm) - set(URDF_ARM_KEYS))
+    if bad:
+        raise CampaignError(f'arm.{bad[0]}: unknown key (known: {", ".join(URDF_ARM_KEYS)})')
+    path = arm.get('urdf')
+    if not isinstance(path, str) or not path:
+        raise CampaignError(f'arm.urdf: expected the path of a URDF file, got {path!r}')
+    passive = arm.get('passive_joints', ['joint3'])
+    tip = arm.get('tip_link', '')
+    if not isinstance(tip, str):
+        raise CampaignError(f'arm.tip_link: expected a link name, got {tip!r}')
+    gravity = arm.get('gravity', list(GRAVITY_BY_CASE[case]))
+    try:
+        text_path = package_path(path)
+        with open(text_path, encoding='utf-8') as f:
+            text = f.read()
+    except (OSError, FreejointValueError) as exc:
+        raise CampaignError(f'arm.urdf: cannot read {path}: '
+                            f'{getattr(exc, "strerror", None) or exc}') from None
+    try:
+        urdf = parse_urdf(text, passive, gravity, tip)
+    except FreejointValueError as exc:
+        raise CampaignError(f'arm: {path}: {exc}') from None
+    real = urdf.params
+    if real.n != 3 or real.passive != (2,):
+        raise CampaignError(
+            f'arm.passive_joints: campaigns run 3-link arms whose last joint alone is passive '
+            f'(the batch kernel); {path} has {real.n} joints {list(urdf.joint_names)}, '
+            f'passive {list(urdf.passive_joints)}')
+    entry = {'urdf': path, 'passive_joints': list(urdf.passive_joints), 'tip_link': tip,
+             'gravity': [float(g) for g in urdf.gravity_vector],
+             'sha256': hashlib.sha256(text.encode()).hexdigest()[:16]}
+    return entry, real
+
+
+def _check_lc(c, real):
+    """Refuse a COM scale that puts a nominal link's centre of mass beyond its end."""
+    lc_max = min(length / com for length, com in zip(real.lengths, real.com))
+    for name in ('scale', 'scale_lc'):
+        spec = c['axes'].get(name)
+        values = ([c['fixed'][name]] if name in c['fixed'] else []) if spec is None else (
+            spec['values'] if 'values' in spec else list(spec['range']))
+        for v in values:
+            if v > lc_max + 1e-12:
+                where = f'axes.{name}' if spec is not None else f'fixed.{name}'
+                raise CampaignError(
+                    f"{where}: {v:g} puts a nominal centre of mass beyond its link's end "
+                    f'(this arm: at most {lc_max:.4g})')
 
 
 # -- the design -------------------------------------------------------------------------
@@ -472,7 +530,7 @@ def run_chunk(camp, rows):
     from freejoint_core.trajectory import CircleQuintic
     res = simulate(_batch_runs(rows, camp['case']), camp['_gains'], dt=camp['dt'],
                    dt_sub=camp['dt_sub'], duration=camp['duration'],
-                   trajectory=CircleQuintic(**camp['task']))
+                   trajectory=CircleQuintic(**camp['task']), arms=camp.get('_arms'))
     out = dict(rows)
     for k, v in res.items():
         out[k] = v
