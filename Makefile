@@ -15,6 +15,7 @@ help:
 	@echo '              ARM=four_link: the shipped 4-link example instead (config/four_link)'
 	@echo '              STABILISE=1: the vertical case, internal motion stabilised (issue 22)'
 	@echo '              FAIL=joint3@2.5: all joints driven, joint 3 fails at 2.5 s (issue 23)'
+	@echo '              CIRCLES=N REST=S: N revolutions back to back, S s rest between (issue 22)'
 	@echo 'make test     run every test (core math, nodes, interfaces, linters), JOBS (nproc + 1)'
 	@echo '              pytest processes at once; JOBS=1: one'
 	@echo 'make test-fast  the tests without DDS or node processes (core math, schemas,'
@@ -33,7 +34,7 @@ setup:
 	@bash tools/setup.sh
 
 demo: setup
-	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise) $(if $(FAIL),--fail $(FAIL))
+	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise) $(if $(FAIL),--fail $(FAIL)) $(if $(CIRCLES),--circles $(CIRCLES)) $(if $(REST),--rest $(REST))
 
 test: setup
 	@$(ENV) python -m pytest -c pytest.ini $(XDIST)

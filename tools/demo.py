@@ -384,25 +384,30 @@ def arm_offline(arm, case, seed, n_ticks):
                    label=case, seed=seed, n_ticks=n_ticks)
 
 
-def stabilised_offline(case, seed, settings, overlays=(STABILISED,), arm=None):
+def stabilised_offline(case, seed, settings, overlays=(STABILISED,), arm=None, circles=1,
+                       rest=0.0, stabilise=True):
     """
-    Return the offline circles runner's record and trace with the stabilised options.
+    Return the offline circles runner's records and trace with the stabilised options.
 
-    One circle, the graph's settings (``offline_settings``), the options of
+    ``circles`` revolutions with ``rest`` s between them (one by default), the graph's
+    settings (``offline_settings``), the options of
     ``freejoint_core.circles.stabilised_options`` (the paper arm, vertical: hanging start,
     the free link's damping with the bound of ``MODULATION``; the 4-link example
-    (``arm``): its hanging equilibrium, null-space damping), the gains those of the graph's
-    controller (config/controller.yaml and the ``overlays``' files); the trace gains ``p``
-    (ticks, 2), the end effector [m] as the law measured it.
+    (``arm``): its hanging equilibrium, null-space damping; none with ``stabilise`` false:
+    the paper's law and start), the gains those of the graph's controller
+    (config/controller.yaml and the ``overlays``' files); the trace gains ``p`` (ticks, 2),
+    the end effector [m] as the law measured it. Returns ``(records, trace)``, a record
+    per revolution.
     """
     from freejoint_control.params import SCHEMA as CONTROLLER
     from freejoint_core.circles import arm_circle, run_circles, stabilised_options
+    from freejoint_core.trajectory import RepeatedCircle
     from freejoint_planner.params import SCHEMA as PLANNER
     from freejoint_planner.planning import make_circle
     import numpy as np
     traj = make_circle(PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'),
                                            *_overlay_files(overlays, 'planner')))
-    options = stabilised_options(case, arm or 'paper')
+    options = stabilised_options(case, arm or 'paper') if stabilise else {}
     expected = options.pop('gains', None)
     gains = CONTROLLER.from_yaml(os.path.join(CONFIG, 'controller.yaml'),
                                  *_overlay_files(overlays, 'controller')).gains
@@ -410,19 +415,36 @@ def stabilised_offline(case, seed, settings, overlays=(STABILISED,), arm=None):
         raise SystemExit('demo: K, Lambda %s, %s of the controller overlay are not those of '
                          'the stabilised options, %s, %s' % (gains.K, gains.Lambda, expected.K,
                                                              expected.Lambda))
-    runner = run_circles(case, 'robust', seed, circles=1, arm=arm or 'paper',
+    runner = run_circles(case, 'robust', seed, circles=circles, rest=rest, arm=arm or 'paper',
                          dt=settings['dt'], dt_sub=settings['dt_sub'],
                          nominal_scale=settings['nominal_scale'],
                          dist_bound=settings['dist_bound'], gains=gains, record_trace=True,
                          **options)
-    (record,), trace = runner
+    records, trace = runner
     for t in (0.0, 1.3, 4.9):
         if traj.sample_tuple(t) != arm_circle(arm or 'paper').sample_tuple(t):
             raise SystemExit('demo: --stabilise compares with the circles runner, which runs '
                              "the arm's own circle: the planner's files plan another")
-    des = np.array([traj.sample(t)[0] for t in trace['t']])
+    series = RepeatedCircle(traj, circles, rest, settings['dt'])
+    des = np.array([series.sample(t)[0] for t in trace['t']])
     trace['p'] = trace['e'] + des
-    return record, trace
+    return records, trace
+
+
+def per_circle(arrays, n_circle, n_rest, circles):
+    """
+    Return the graph's tracking error per revolution: ``[(rms_mm, max_mm), ...]``.
+
+    As the offline circles runner counts it: over each revolution's ``n_circle`` ticks, not
+    its rest (``arrays``: ``graph_record``'s, ``p`` and ``p_d`` per tick).
+    """
+    import numpy as np
+    err = 1e3 * np.hypot(*(arrays['p'] - arrays['p_d']).T)
+    out = []
+    for c in range(circles):
+        e = err[c * (n_circle + n_rest):c * (n_circle + n_rest) + n_circle]
+        out.append((float(np.sqrt(np.mean(e * e))), float(e.max())))
+    return out
 
 
 def failure_comparison(collector, case, seed, fail, n_ticks, dt_ns, logs, effort=True):
@@ -504,6 +526,12 @@ def _parse(argv):
                     help='the fully actuated arm whose joint fails at T s, e.g. joint3@2.5 '
                     "(config/fully_actuated/, the simulator's fail_joint; make demo "
                     'FAIL=joint3@2.5), beside the offline failure runner')
+    ap.add_argument('--circles', type=int, default=1, metavar='N',
+                    help="N revolutions back to back (the planner's circles; make demo "
+                    'CIRCLES=N), beside the offline circles runner, reported per revolution')
+    ap.add_argument('--rest', type=float, default=0.0, metavar='S',
+                    help="rest (s) between the revolutions (the planner's rest; make demo "
+                    'REST=S)')
     ap.add_argument('--view', action='store_true',
                     help='also start the viewer (Foxglove WebSocket on ws://127.0.0.1:8765, '
                     'layout config/foxglove_layout.json; make demo VIEW=1)')
@@ -528,6 +556,14 @@ def main(argv=None):
         args.out = os.path.join(args.out, STABILISED)
         overlays += (os.path.join(args.arm, STABILISED) if args.arm else STABILISED,)
     node_args = None
+    series = args.circles != 1 or args.rest != 0.0
+    if series:
+        if args.arm or args.fail or args.circles < 1 or args.rest < 0.0:
+            say("error: --circles N (>= 1) and --rest S (>= 0) run the paper's arm (with or "
+                'without --stabilise), not with --arm or --fail')
+            return 2
+        args.out = os.path.join(args.out, 'circles')
+        node_args = {'planner': ['circles:=%d' % args.circles, 'rest:=%r' % args.rest]}
     if args.fail:
         if args.arm or args.stabilise:
             say("error: --fail runs the paper's arm fully actuated: not with --arm or "
@@ -565,7 +601,13 @@ def main(argv=None):
     passive_joint = ARMS[args.arm]['passive_joint'] if args.arm else (
         'joint%d' % (failing[0][0] + 1) if args.fail else PASSIVE_JOINT)
     dt_ns = round(settings['dt'] * 1e9)
-    n_ticks = int(round(settings['duration'] / settings['dt']))
+    n_circle = int(round(settings['duration'] / settings['dt']))
+    n_rest = int(round(args.rest / settings['dt']))
+    if series and abs(n_rest * settings['dt'] - args.rest) > 1e-9:
+        say('error: --rest %g s is not a whole number of control periods (%g s)'
+            % (args.rest, settings['dt']))
+        return 2
+    n_ticks = args.circles * n_circle + (args.circles - 1) * n_rest
     out = os.path.abspath(args.out)
     log_dir = os.path.join(out, 'logs')
     os.makedirs(out, exist_ok=True)
@@ -645,12 +687,21 @@ def main(argv=None):
                 graph_records.append(record)
                 runs.append(run)
                 continue
-            if args.stabilise:
-                off, trace = stabilised_offline(case, args.seed, settings, overlays, args.arm)
-                swing = '' if off['swing_deg'] is None else ', swing at the end %.3f deg' % (
-                    off['swing_deg'])
-                say('  offline circles runner (%s): rms %.4f mm, max %.4f mm%s'
-                    % (off['variant'], off['rms_mm'], off['max_mm'], swing))
+            if args.stabilise or series:
+                offs, trace = stabilised_offline(case, args.seed, settings, overlays, args.arm,
+                                                 args.circles, args.rest, args.stabilise)
+                graph_circles = per_circle(arrays, n_circle, n_rest, args.circles)
+                for c, off in enumerate(offs):
+                    swing = '' if off['swing_deg'] is None else \
+                        ', swing at its end %.3f deg' % off['swing_deg']
+                    say('  revolution %d: offline circles runner (%s): rms %.4f mm, max '
+                        '%.4f mm, peak effort %s N m%s; graph: rms %.4f mm, max %.4f mm'
+                        % (c + 1, off['variant'], off['rms_mm'], off['max_mm'],
+                           ' / '.join('%.1f' % v for v in off['effort_peak']), swing,
+                           *graph_circles[c]))
+                off = offs[-1]
+                if len(offs) < args.circles:
+                    say('  offline circles runner: diverged at %s s' % off['diverged_at_s'])
                 say('  graph: rms %.4f mm, max %.4f mm' % (record['rms_mm'], record['max_mm']))
             elif args.arm:
                 off, trace = arm_offline(args.arm, case, args.seed, n_ticks)
@@ -669,7 +720,7 @@ def main(argv=None):
                 '%.3g m over %d ticks%s' % (dev, n_ticks, verdict))
             failed = failed or dev > 1e-9
             graph_records.append(record)
-            if not args.stabilise:          # a circles record: another table
+            if not (args.stabilise or series):     # circles records: another table
                 offline_records.append(off)
             runs.append(run)
     finally:

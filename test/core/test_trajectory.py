@@ -119,3 +119,43 @@ def test_workspace_annulus_of_equal_links_reaches_the_base():
     assert workspace_annulus((1.0, 0.3, 0.2)) == pytest.approx((0.5, 1.5))
     with pytest.raises(FreejointValueError, match='lengths'):
         workspace_annulus((0.5, -0.5))
+
+
+def test_repeated_circle_ticks_are_the_circles_then_its_start_at_rest():
+    from freejoint_core.trajectory import RepeatedCircle
+    circle = CircleQuintic()                      # 5 s: 5000 ticks of 1 ms
+    series = RepeatedCircle(circle, 3, 0.5, 0.001)  # 5500 ticks per revolution and rest
+    assert series.duration == 3 * 5.0 + 2 * 0.5
+    start = (0.2, 0.0, 0.0, 0.0, 0.0, 0.0)
+    # revolution 2 (c = 1) starts at tick 5500: its tick i is the circle's i
+    for j, i in ((0, 0), (1234, 1234), (4999, 4999), (5500, 0), (5501, 1), (12345, 1345),
+                 (15999, 4999)):
+        assert series.sample_tuple(j * 0.001) == circle.sample_tuple(i * 0.001), j
+    # the rests and after the last revolution: the start point, at rest (not the circle's
+    # end point, whose y is sin(2 pi) * 0.2 = -4.9e-17)
+    for j in (5000, 5499, 10999, 16000, 20000):
+        assert series.sample_tuple(j * 0.001) == start, j
+    assert series.sample_tuple(-0.01) == circle.sample_tuple(-0.01)
+
+
+def test_repeated_circle_refuses_a_rest_off_the_tick_grid_naming_it():
+    from freejoint_core.trajectory import RepeatedCircle
+    with pytest.raises(FreejointValueError, match='rest: 0.0005 s'):
+        RepeatedCircle(CircleQuintic(), 2, 0.0005, 0.001)
+    with pytest.raises(FreejointValueError, match='count: expected an int >= 1'):
+        RepeatedCircle(CircleQuintic(), 0, 0.0, 0.001)
+
+
+def test_repeated_circle_is_the_offline_circles_runners_setpoint_tick_by_tick():
+    from freejoint_core.arm import ArmModel, table1
+    from freejoint_core.circles import run_circles
+    from freejoint_core.trajectory import RepeatedCircle
+    records, trace = run_circles('vertical', 'robust', 0, circles=2, rest=0.5,
+                                 record_trace=True)
+    assert len(records) == 2 and records[-1]['diverged_at_s'] is None
+    series = RepeatedCircle(CircleQuintic(), 2, 0.5, 0.001)
+    model = ArmModel(table1('vertical'))
+    # the runner's setpoint of tick k: the true end effector less the error it recorded
+    for k in range(0, len(trace['t']), 50):
+        des = model.fk(trace['q'][k]) - trace['e'][k]
+        assert des == pytest.approx(series.sample_tuple(k * 0.001)[:2], abs=1e-12), k

@@ -218,6 +218,92 @@ class CircleQuintic:
                 f'direction={self._dir!r})')
 
 
+class RepeatedCircle:
+    """
+    ``count`` revolutions of a circle back to back, each but the last followed by a rest.
+
+    Tick ``j`` (time ``j dt``) of the series falls in revolution ``c = j // (n + m)``
+    (``n = duration / dt`` ticks of the circle, ``m = rest / dt`` of rest) at its tick
+    ``i = j - c (n + m)``: the circle's ``sample_tuple(i dt)`` while ``i < n``, then its
+    start point at rest (zero velocity and acceleration); after the last revolution the
+    start point is held. Exactly the setpoints of the offline circles runner
+    (``freejoint_core.circles.run_circles``, ``circles = count``, ``rest``), tick by tick.
+
+    Parameters
+    ----------
+    circle : CircleQuintic
+        One revolution.
+    count : int
+        Revolutions, >= 1.
+    rest : float
+        Rest after each revolution but the last (s), >= 0, a whole number of ``dt``.
+    dt : float
+        Control period (s), > 0; ``circle.duration`` a whole number of it.
+
+    Raises
+    ------
+    FreejointValueError
+        Naming the argument.
+
+    """
+
+    def __init__(self, circle, count, rest, dt):
+        if not isinstance(circle, CircleQuintic):
+            raise FreejointValueError(f'circle: expected CircleQuintic, got '
+                                      f'{type(circle).__name__}')
+        if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+            raise FreejointValueError(f'count: expected an int >= 1, got {count!r}')
+        dt = _finite_float('dt', dt)
+        if dt <= 0.0:
+            raise FreejointValueError(f'dt: expected > 0 s, got {dt}')
+        rest = _finite_float('rest', rest)
+        if rest < 0.0:
+            raise FreejointValueError(f'rest: expected >= 0 s, got {rest}')
+        n = int(round(circle.duration / dt))
+        m = int(round(rest / dt))
+        if abs(n * dt - circle.duration) > 1e-9 or abs(m * dt - rest) > 1e-9:
+            raise FreejointValueError(
+                f"rest: {rest} s and the circle's {circle.duration} s must be whole numbers "
+                f'of dt = {dt} s')
+        self.circle = circle
+        self.count = count
+        self.rest = rest
+        self.dt = dt
+        self._n = n
+        self._period = n + m
+        px, py = circle.sample(0.0)[0].tolist()
+        self._rest = (px, py, 0.0, 0.0, 0.0, 0.0)
+        self._duration = count * circle.duration + (count - 1) * rest
+
+    @property
+    def duration(self):
+        """Time (s) from the first revolution's start to the last one's end."""
+        return self._duration
+
+    def sample_tuple(self, t):
+        """
+        Sample at time ``t`` (s) as plain floats: ``(px, py, vx, vy, ax, ay)``.
+
+        ``t`` is taken as the tick ``round(t / dt)`` (before 0: the circle's start held).
+        """
+        j = round(t / self.dt)
+        if j < 0:
+            return self.circle.sample_tuple(t)
+        c, i = divmod(j, self._period)
+        if c >= self.count or i >= self._n:
+            return self._rest
+        return self.circle.sample_tuple(i * self.dt)
+
+    def sample(self, t):
+        """Sample position, velocity and acceleration at ``t``: three arrays of shape (2,)."""
+        px, py, vx, vy, ax, ay = self.sample_tuple(_finite_float('t', t))
+        return np.array([px, py]), np.array([vx, vy]), np.array([ax, ay])
+
+    def points(self, num):
+        """Return ``num`` points of the path (the circle's), shape (num, 2)."""
+        return self.circle.points(num)
+
+
 def circle_peaks(circle, num=20001):
     """
     Return the peak speed (m/s) and acceleration (m/s^2) of a ``CircleQuintic``.

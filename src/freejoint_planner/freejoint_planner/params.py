@@ -25,7 +25,8 @@ _CIRCLE = {name: p.default for name, p in
 """The paper's circle: the defaults of ``CircleQuintic``."""
 
 # Parameters of the configured circle; an accepted change of any of them re-checks it.
-CIRCLE_KEYS = ('centre', 'radius', 'duration', 'start_angle', 'direction', 'start_delay')
+CIRCLE_KEYS = ('centre', 'radius', 'duration', 'start_angle', 'direction', 'start_delay',
+               'circles', 'rest')
 # Parameters of the singularity map; an accepted change of any of them recomputes it.
 MAP_KEYS = ('case', 'nominal_scale', 'resolution_deg', 'eps_d', 'singular_cells')
 
@@ -93,6 +94,13 @@ PARAMS = (
           'either way.', (-2.0 * math.pi, 2.0 * math.pi)),
     Param('direction', _CIRCLE['direction'], '+1 counter-clockwise, -1 clockwise.',
           (-1, 1, 2), validator=_direction),
+    Param('circles', 1,
+          'Revolutions of every plan, back to back (issue 22): each but the last followed by '
+          "rest; the stream is the offline circles runner's (freejoint_core.trajectory."
+          'RepeatedCircle).', (1, 100000)),
+    Param('rest', 0.0,
+          'Rest (s) at the start point after each revolution of a plan but the last, a '
+          'whole number of control periods.', (0.0, 3600.0)),
     Param('start_delay', 0.0,
           'Delay from the start of a plan to its motion (s); the start point is held '
           'meanwhile.', (0.0, 3600.0)),
@@ -120,7 +128,22 @@ PARAMS = (
     SCHEDULING,
 )
 
-SCHEMA = Schema(PARAMS)
+
+def _check_rest(values):
+    """Refuse a rest (or a revolution) that is not a whole number of control periods."""
+    from freejoint_core.errors import FreejointValueError
+    from freejoint_core.trajectory import RepeatedCircle
+    if values['circles'] == 1 and values['rest'] == 0.0:
+        return None         # one revolution: the circle itself, any duration
+    try:
+        RepeatedCircle(CircleQuintic(duration=values['duration']), values['circles'],
+                       values['rest'], values['control_period'])
+    except FreejointValueError as exc:
+        return str(exc)
+    return None
+
+
+SCHEMA = Schema(PARAMS, (_check_rest,))
 SPECS = SCHEMA.params
 DEFAULTS = SCHEMA.defaults()
 LOOKAHEAD_MAX = SCHEMA['lookahead'].bounds[1]

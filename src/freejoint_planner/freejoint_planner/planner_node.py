@@ -82,7 +82,7 @@ from freejoint_common.runner import Lifecycle, run
 from freejoint_core.arm import table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
-from freejoint_core.trajectory import CircleQuintic
+from freejoint_core.trajectory import CircleQuintic, RepeatedCircle
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
@@ -352,6 +352,12 @@ class PlannerNode(Node, Lifecycle):
 
     # ---- plans ------------------------------------------------------------------------
     @staticmethod
+    def _series(series):
+        if not isinstance(series, RepeatedCircle):
+            return ''
+        return f', {series.count} revolutions, {series.rest:g} s rest after each but the last'
+
+    @staticmethod
     def _describe(circle):
         c = circle.centre
         return (f'circle centre ({c[0]:.6g}, {c[1]:.6g}) m radius {circle.radius:.6g} m '
@@ -391,7 +397,10 @@ class PlannerNode(Node, Lifecycle):
         self._last_plan_id += 1
         segment = None if choice is None else choice.segment
         from_rest = self._stream.fresh()
-        plan = Plan(self._last_plan_id, circle, round(float(start_delay) * 1e9),
+        cfg = self._cfg
+        series = circle if cfg['circles'] == 1 and cfg['rest'] == 0.0 else RepeatedCircle(
+            circle, cfg['circles'], cfg['rest'], cfg['control_period'])
+        plan = Plan(self._last_plan_id, series, round(float(start_delay) * 1e9),
                     transition=segment, ticks=0 if segment is None else choice.ticks,
                     transition_tick=tick, joined=not (from_rest and choice is None))
         self._stream.start(plan)
@@ -409,7 +418,8 @@ class PlannerNode(Node, Lifecycle):
                    f'{choice.margin:.4f} m) into its start')
         self.get_logger().info(
             f'plan {plan.plan_id} ({source}) accepted with margin {margin:.4f} m: '
-            f'{self._describe(circle)}, start delay {float(start_delay):g} s, {how}')
+            f'{self._describe(circle)}{self._series(series)}, start delay '
+            f'{float(start_delay):g} s, {how}')
         return plan.plan_id
 
     def _on_plan_circle(self, request, response):

@@ -362,3 +362,21 @@ def test_a_transition_starting_faster_than_max_speed_is_refused_with_the_bound()
     reason, choice, _ = prepare_transition(s, CircleQuintic(centre=(0.05, 0.0)), _NoRegion(),
                                            60.0, bounds=(1.0, 5.0))
     assert reason == '' and choice.peak_speed <= choice.limits[0] < 1.0
+
+
+def test_a_plan_of_revolutions_with_rests_streams_the_series_and_is_final_after_the_last():
+    from freejoint_core.trajectory import RepeatedCircle
+    circle = CircleQuintic(duration=0.05)            # 50 ticks
+    series = RepeatedCircle(circle, 2, 0.01, 0.001)  # 50 + 10 rest + 50: final after 110 ms
+    s = _stream(lookahead=0)
+    s.start(Plan(1, series))
+    got = s.advance(0) + s.advance(120 * MS)
+    assert _ticks(got) == list(range(0, 121))
+    start = circle.sample_tuple(0.0)[:2]
+    for sp in got:
+        k = sp.stamp_ns // MS
+        assert (sp.px, sp.py, sp.vx, sp.vy, sp.ax, sp.ay) == series.sample_tuple(k * 0.001)
+        assert sp.final == (k * 0.001 > 0.11)
+    assert (got[55].px, got[55].py) == start and got[55].vx == 0.0          # the rest
+    assert (got[70].px, got[70].py) == circle.sample_tuple(0.01)[:2]        # revolution 2
+    assert (got[115].px, got[115].py) == start                              # after the last
