@@ -45,8 +45,12 @@ to detect).
 
 Hot path: for the 3-link arm with one passive joint (``fast3.Arm3Model``,
 r = 2) the tick is scalar Python floats (no numpy call except building the
-output arrays); any other arm (or ``use_fast=False``) uses the general numpy
-path, which computes the same law (tests check they agree).
+output arrays); so is it for the 3-link arm with every joint driven (r = 3: the
+pseudo-inverse ``Da^T (Da Da^T)^-1`` and, with a null-space term, the kinematic
+projector ``I - Da# Da``, from ``Arm3Model``'s closed forms); any other arm, option
+(``NullSpace`` with the weighted inverse or the dynamic projector) or
+``use_fast=False`` uses the general numpy path, which computes the same law (tests check
+they agree to round-off).
 
 """
 
@@ -321,6 +325,12 @@ class RobustController:
         self._fast = self._use_fast and self.n == 3 and self.r == 2 and hasattr(
             self.model, 'task') and getattr(self, 'nullspace', None) is None
         self._task = self.model.task if self._fast else None
+        ns = getattr(self, 'nullspace', None)
+        self._fast_full = (self._use_fast and self.n == 3 and self.r == 3
+                           and hasattr(self.model, '_task_full')
+                           and (ns is None or (ns.inverse == 'pseudo'
+                                               and ns.projector == 'kinematic')))
+        self._task_full = self.model._task_full if self._fast_full else None
         if getattr(self, 'gains', None) is not None:
             self.set_gains(self.gains)
 
@@ -425,7 +435,7 @@ class RobustController:
     @property
     def uses_fast_path(self):
         """Return True when ticks run on the scalar 3-link kernel."""
-        return self._fast
+        return self._fast or self._fast_full
 
     @property
     def theta(self):
@@ -479,7 +489,115 @@ class RobustController:
             dt = dtf
         if self._fast:
             return self._step_fast(q, qd, p_d, pd_d, pdd_d, dt)
+        if self._fast_full:
+            return self._step_fast_full(q, qd, p_d, pd_d, pdd_d, dt)
         return self._step_general(q, qd, p_d, pd_d, pdd_d, dt)
+
+    def _robust_term(self, sx, sy, w0, w1, w2, adx, ady, edx, edy, ex, ey, dt):
+        """Return ``rho, dvx, dvy`` and advance ``theta`` (scalar paths, eqs. 17-19)."""
+        theta = self._theta
+        rx, ry = self._rr
+        alx = rx * sx
+        aly = ry * sy
+        na2 = alx * alx + aly * aly
+        na = _sqrt(na2)
+        eps = self._eps
+        if self._sum:
+            h = na + eps
+        else:
+            h = na if na > eps else eps
+        psi = (1.0, w0 * w0 + w1 * w1 + w2 * w2, _sqrt(adx * adx + ady * ady),
+               _sqrt(edx * edx + edy * edy), _sqrt(ex * ex + ey * ey))
+        rho = (theta[0] + theta[1] * psi[1] + theta[2] * psi[2] + theta[3] * psi[3]
+               + theta[4] * psi[4])
+        f = rho / h
+        u = na2 / h
+        coef = self._decay(dt)
+        theta = [a * th + c * (u * ps) for (a, c), th, ps in zip(coef, theta, psi)]
+        tmax = self._theta_max
+        if tmax is not None:
+            theta = [tm if th > tm else th for th, tm in zip(theta, tmax)]
+        self._theta = theta
+        return rho, -f * alx, -f * aly
+
+    def _step_fast_full(self, q, qd, p_d, pd_d, pdd_d, dt):
+        """Compute the tick of the 3-link arm with every joint driven (r = 3) on floats."""
+        q0, q1, q2 = _vec3(q, 'q')
+        w0, w1, w2 = _vec3(qd, 'qd')
+        pdx, pdy = _vec2(p_d, 'p_d')
+        vdx, vdy = _vec2(pd_d, 'pd_d')
+        adx, ady = _vec2(pdd_d, 'pdd_d')
+        px, py, vx, vy, (x0, x1, x2), (y0, y1, y2), bx, by = self._task_full(
+            q0, q1, q2, w0, w1, w2)
+        ex = px - pdx
+        ey = py - pdy
+        edx = vx - vdx
+        edy = vy - vdy
+        lx, ly = self._lam
+        sx = edx + lx * ex
+        sy = edy + ly * ey
+        gdx, gdy = self._k_plus_lam
+        gpx, gpy = self._k_times_lam
+        vvx = adx - gdx * edx - gpx * ex
+        vvy = ady - gdy * edy - gpy * ey
+        if self._robust:
+            rho, dvx, dvy = self._robust_term(sx, sy, w0, w1, w2, adx, ady, edx, edy, ex, ey,
+                                              dt)
+        else:
+            rho = dvx = dvy = 0.0
+        wx = vvx + dvx - bx
+        wy = vvy + dvy - by
+        # A = Da Da^T (2x2, symmetric), damped near a singularity as the general path
+        a00 = x0 * x0 + x1 * x1 + x2 * x2
+        a01 = x0 * y0 + x1 * y1 + x2 * y2
+        a11 = y0 * y0 + y1 * y1 + y2 * y2
+        det = a00 * a11 - a01 * a01
+        status = 0
+        if abs(det) < self._thr:
+            lam2 = _dls_lambda2(det, a00 + a11, self._thr)
+            a00 += lam2
+            a11 += lam2
+            det_use = a00 * a11 - a01 * a01
+            status = STATUS_NEAR_SINGULAR
+        else:
+            det_use = det
+        # tau = Da^T A^-1 w (the pseudo-inverse)
+        c0 = (a11 * wx - a01 * wy) / det_use
+        c1 = (a00 * wy - a01 * wx) / det_use
+        t0 = x0 * c0 + y0 * c1
+        t1 = x1 * c0 + y1 * c1
+        t2 = x2 * c0 + y2 * c1
+        ns = self.nullspace
+        if ns is not None:
+            # + (I - Da# Da) tau0, tau0 = -kd qd (+ kp (posture - q))
+            k0, k1, k2 = ns.kd if isinstance(ns.kd, tuple) else (ns.kd,) * 3
+            n0 = -k0 * w0
+            n1 = -k1 * w1
+            n2 = -k2 * w2
+            if ns.posture is not None:
+                p0, p1, p2 = ns.posture
+                s0, s1, s2 = ns.kp if isinstance(ns.kp, tuple) else (ns.kp,) * 3
+                n0 += s0 * (p0 - q0)
+                n1 += s1 * (p1 - q1)
+                n2 += s2 * (p2 - q2)
+            zx = x0 * n0 + x1 * n1 + x2 * n2
+            zy = y0 * n0 + y1 * n1 + y2 * n2
+            u0 = (a11 * zx - a01 * zy) / det_use
+            u1 = (a00 * zy - a01 * zx) / det_use
+            t0 += n0 - (x0 * u0 + y0 * u1)
+            t1 += n1 - (x1 * u0 + y1 * u1)
+            t2 += n2 - (x2 * u0 + y2 * u1)
+        lim = self._limit
+        if lim is not None:
+            l0, l1, l2 = lim
+            if (t0 > l0 or t0 < -l0 or t1 > l1 or t1 < -l1 or t2 > l2 or t2 < -l2):
+                t0 = l0 if t0 > l0 else (-l0 if t0 < -l0 else t0)
+                t1 = l1 if t1 > l1 else (-l1 if t1 < -l1 else t1)
+                t2 = l2 if t2 > l2 else (-l2 if t2 < -l2 else t2)
+                status |= STATUS_TORQUE_LIMITED
+        arr = np.array((t0, t1, t2, ex, ey, edx, edy, sx, sy, dvx, dvy, px, py, *self._theta))
+        return ControlOutput(arr[0:3], arr[3:5], arr[5:7], arr[7:9], arr[13:18], rho,
+                             arr[9:11], abs(det), arr[11:13], status)
 
     def _step_fast(self, q, qd, p_d, pd_d, pdd_d, dt):
         q0, q1, q2 = _vec3(q, 'q')
@@ -499,32 +617,9 @@ class RobustController:
         gpx, gpy = self._k_times_lam
         vvx = adx - gdx * edx - gpx * ex
         vvy = ady - gdy * edy - gpy * ey
-        theta = self._theta
         if self._robust:
-            rx, ry = self._rr
-            alx = rx * sx
-            aly = ry * sy
-            na2 = alx * alx + aly * aly
-            na = _sqrt(na2)
-            eps = self._eps
-            if self._sum:
-                h = na + eps
-            else:
-                h = na if na > eps else eps
-            psi = (1.0, w0 * w0 + w1 * w1 + w2 * w2, _sqrt(adx * adx + ady * ady),
-                   _sqrt(edx * edx + edy * edy), _sqrt(ex * ex + ey * ey))
-            rho = (theta[0] + theta[1] * psi[1] + theta[2] * psi[2] + theta[3] * psi[3]
-                   + theta[4] * psi[4])
-            f = rho / h
-            dvx = -f * alx
-            dvy = -f * aly
-            u = na2 / h
-            coef = self._decay(dt)
-            theta = [a * th + c * (u * ps) for (a, c), th, ps in zip(coef, theta, psi)]
-            tmax = self._theta_max
-            if tmax is not None:
-                theta = [tm if th > tm else th for th, tm in zip(theta, tmax)]
-            self._theta = theta
+            rho, dvx, dvy = self._robust_term(sx, sy, w0, w1, w2, adx, ady, edx, edy, ex, ey,
+                                              dt)
         else:
             rho = dvx = dvy = 0.0
         wx = vvx + dvx - bx
@@ -553,7 +648,7 @@ class RobustController:
                 t0 = l0 if t0 > l0 else (-l0 if t0 < -l0 else t0)
                 t1 = l1 if t1 > l1 else (-l1 if t1 < -l1 else t1)
                 status |= STATUS_TORQUE_LIMITED
-        arr = np.array((t0, t1, ex, ey, edx, edy, sx, sy, dvx, dvy, px, py, *theta))
+        arr = np.array((t0, t1, ex, ey, edx, edy, sx, sy, dvx, dvy, px, py, *self._theta))
         return ControlOutput(arr[0:2], arr[2:4], arr[4:6], arr[6:8], arr[12:17], rho,
                              arr[8:10], abs(det), arr[10:12], status)
 
