@@ -58,6 +58,8 @@ DRAIN_QUIET = 0.5
 FIGURES = os.path.join(ROOT, 'docs', 'figures')
 ARMS = {'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0}}
 STABILISED = 'stabilised'
+STABILISED_HORIZONTAL = 'stabilised_horizontal'
+"""The horizontal case's overlay of ``--stabilise`` (the free link settled in the rests)."""
 FULLY_ACTUATED = 'fully_actuated'
 """The overlay of ``--fail``: config/fully_actuated/ (issue 23), all three joints driven."""
 FAILURE_BOUND_MM = {'horizontal': 1.7, 'vertical': 5.5}
@@ -518,10 +520,11 @@ def _parse(argv):
                     help='run a shipped example arm instead of the paper cases '
                     '(make demo ARM=four_link)')
     ap.add_argument('--stabilise', action='store_true',
-                    help='the vertical case with the internal-motion stabilisation '
-                    '(config/stabilised/: the free link starts hanging, its damping on; with '
-                    '--arm four_link config/four_link/stabilised/), beside the offline circles '
-                    'runner with the same options')
+                    help='the internal-motion stabilisation (vertical: config/stabilised/, the '
+                    'free link starts hanging, its damping on; horizontal: '
+                    'config/stabilised_horizontal/, the free link slowed in the rests; with '
+                    '--arm four_link config/four_link/stabilised/, vertical), beside the '
+                    'offline circles runner with the same options')
     ap.add_argument('--fail', metavar='JOINT@T',
                     help='the fully actuated arm whose joint fails at T s, e.g. joint3@2.5 '
                     "(config/fully_actuated/, the simulator's fail_joint; make demo "
@@ -549,11 +552,16 @@ def main(argv=None):
         args.cases = ['horizontal']
         args.out = os.path.join(args.out, args.arm)
         overlays = (args.arm,)
+    per_case = {}
     if args.stabilise:
-        # Vertical: the horizontal case's stabilised options are the paper's law for the
-        # paper arm (circles.stabilised_options); the 4-link example has its own overlay.
-        args.cases = ['vertical']
+        # The paper's arm: each case its overlay (circles.stabilised_options: vertical the
+        # hanging start and the damping, horizontal the settle in the rests); the 4-link
+        # example its own overlay, vertical.
+        if args.arm:
+            args.cases = ['vertical']
         args.out = os.path.join(args.out, STABILISED)
+        if not args.arm:
+            per_case = {'horizontal': overlays + (STABILISED_HORIZONTAL,)}
         overlays += (os.path.join(args.arm, STABILISED) if args.arm else STABILISED,)
     node_args = None
     series = args.circles != 1 or args.rest != 0.0
@@ -645,7 +653,8 @@ def main(argv=None):
             collector = Collector(node)
             try:
                 run = run_graph(case, args.seed, n_ticks, dt_ns, collector, executor, out,
-                                log_dir, record=record_bags, overlays=overlays,
+                                log_dir, record=record_bags,
+                                overlays=per_case.get(case, overlays),
                                 passive_joint=passive_joint, node_args=node_args)
             except RuntimeError as exc:
                 say('error: %s: %s' % (case, exc))
@@ -688,7 +697,8 @@ def main(argv=None):
                 runs.append(run)
                 continue
             if args.stabilise or series:
-                offs, trace = stabilised_offline(case, args.seed, settings, overlays, args.arm,
+                offs, trace = stabilised_offline(case, args.seed, settings,
+                                                 per_case.get(case, overlays), args.arm,
                                                  args.circles, args.rest, args.stabilise)
                 graph_circles = per_circle(arrays, n_circle, n_rest, args.circles)
                 for c, off in enumerate(offs):

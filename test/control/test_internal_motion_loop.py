@@ -188,6 +188,42 @@ def test_start_pose_hanging_is_refused_without_gravity_or_a_reachable_point():
         sim_q0(SIM_STAB, case='vertical', start_pose='upright')
 
 
+STAB_H = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'),
+                            os.path.join(ROOT, 'config', 'stabilised_horizontal',
+                                         'controller.yaml'))
+
+
+def test_the_horizontal_overlay_is_the_offline_runners_settle_options():
+    from freejoint_core.circles import HORIZONTAL_SETTLE
+    cfg = SCHEMA.config(dict(STAB_H))
+    assert cfg.values['free_link_damping'] is True
+    assert {'mode': cfg.values['free_link_mode'], 'delta_max': cfg.values['free_link_delta_max'],
+            'settle_window': cfg.values['free_link_settle_window']} == HORIZONTAL_SETTLE
+    with pytest.raises(FreejointValueError, match='free_link_mode'):
+        SCHEMA.config(dict(STAB_H, free_link_mode='sometimes'))
+
+
+def test_the_loop_settling_the_horizontal_free_link_commands_what_the_offline_run_does():
+    # Horizontal, seed 0, the paper's start, one circle and a 1-s rest: the offline circles
+    # runner with the horizontal stabilised options (HORIZONTAL_SETTLE) and the loop with
+    # config/stabilised_horizontal/controller.yaml: every command equal, the shift too.
+    opts = stabilised_options('horizontal')
+    gains = Gains(tau_limit=tuple(FILE['effort_limits']), theta_max=tuple(FILE['theta_max']))
+    (rec,), trace = run_circles('horizontal', 'robust', 0, circles=1, hold=1.0, gains=gains,
+                                record_trace=True, **opts)
+    assert rec['diverged_at_s'] is None
+    loop = make(STAB_H, case='horizontal')
+    q0 = sim_q0((os.path.join(ROOT, 'config', 'sim.yaml'),), case='horizontal')
+    cmds, states = drive(loop, 'horizontal', 0, TRAJ.duration + 1.0, q0=q0)
+    assert np.array_equal(cmds, trace['tau'])
+    assert np.array_equal(states[:, -2:], trace['delta'])
+    n = int(round(TRAJ.duration / DT))
+    shift = np.hypot(states[:, -2], states[:, -1])
+    assert np.all(shift[:n] == 0.0)                    # tracking: the paper's law
+    assert 5e-3 < shift[n:].max() <= 0.03 * (1 + 1e-12)   # the rest: centimetres
+    assert shift[-1] < 1e-4                            # back before the next task
+
+
 def _demo():
     """Return tools/demo.py as a module."""
     return load_source(os.path.join(ROOT, 'tools', 'demo.py'), 'freejoint_demo')

@@ -230,6 +230,67 @@ def test_modulation_offset_stays_within_its_bound_for_any_link_motion():
     assert 0.95 * 0.002 < worst <= 0.002
 
 
+def test_settle_mode_drives_only_in_the_first_window_of_a_rest_within_its_bound():
+    # Horizontal: no quasi-static angle at rest, drive = k2 * rate along u3perp, saturated
+    # at k3 * delta_max = 9 * 0.03 = 0.27 m/s^2; hanging pose, u3perp = (1, 0).
+    params = table1('horizontal').scaled(0.7)
+    mod = FreeLinkModulation(params, mode='settle', delta_max=0.03, settle_window=0.005)
+    assert mod.a_max == pytest.approx(0.27) and mod.delta_max == pytest.approx(0.03)
+    q = hanging_pose(table1('vertical'), (0.2, 0.0))
+    moving = ((0.2, 0.0), (0.1, 0.0), (0.0, 0.0))
+    resting = ((0.2, 0.0), (0.0, 0.0), (0.0, 0.0))
+    # tracking: no drive (and delta 0 stays 0)
+    _, _, a = mod.step(q, [0.0, 0.0, 1.0], *moving, 1e-3)
+    assert np.array_equal(a, [0.0, 0.0])
+    # resting: 1 rad/s -> 0.2 m/s^2 (below the saturation); 3 rad/s -> 0.27 (saturated)
+    _, _, a = mod.step(q, [0.0, 0.0, 1.0], *resting, 1e-3)
+    assert a[0] == pytest.approx(0.2, abs=1e-12) and a[1] == pytest.approx(0.0, abs=1e-12)
+    accel, expected = [], []
+    for k in range(6):
+        x, u = mod.delta[0], mod.delta_dot[0]
+        accel.append(mod.step(q, [0.0, 0.0, 3.0], *resting, 1e-3)[2][0])
+        # 4 more resting ticks in the 5-ms window: saturated drive, filter (9, 6); then
+        # the window is over: no drive, the return gains (400, 40) pull back
+        expected.append(0.27 - 9.0 * x - 6.0 * u if k < 4 else -400.0 * x - 40.0 * u)
+    assert accel == pytest.approx(expected, rel=1e-12)
+    assert accel[3] > 0.2 and accel[4] < 0.0
+    x, u = mod.delta[0], mod.delta_dot[0]
+    _, _, a = mod.step(q, [0.0, 0.0, 3.0], *resting, 1e-3)
+    assert a[0] == pytest.approx(-400.0 * x - 40.0 * u, rel=1e-12)
+
+
+def test_settle_mode_shift_stays_within_its_bound_without_clipping_and_returns():
+    # A link turning 3 rad/s forever: 0.6 s of drive leaves |delta| <= 3 cm by the filter
+    # alone (critically damped: no overshoot of its DC gain), 0.4 s later under 0.1 mm.
+    params = table1('horizontal').scaled(0.7)
+    mod = FreeLinkModulation(params, mode='settle', delta_max=0.03)
+    q = [0.3, 1.5, 2.0]
+    rest = ((0.2, 0.0), (0.0, 0.0), (0.0, 0.0))
+    worst = 0.0
+    for k in range(1000):
+        th = 3.0 * k * 1e-3           # the link's angle turning: u3perp turns with it
+        mod.step([q[0], q[1], q[2] + th], [0.0, 0.0, 3.0], *rest, 1e-3)
+        worst = max(worst, float(np.linalg.norm(mod.delta)))
+        if k == 599:
+            at_end = float(np.linalg.norm(mod.delta))
+    assert 1e-3 < at_end and worst <= 0.03
+    assert float(np.linalg.norm(mod.delta)) < 1e-4
+    with pytest.raises(FreejointValueError, match='^settle_window:'):
+        FreeLinkModulation(params, mode='settle', settle_window=0.0)
+
+
+def test_the_horizontal_stabilised_options_settle_the_free_rotor_in_the_rests():
+    from freejoint_core.circles import HORIZONTAL_SETTLE, run_circles, stabilised_options
+    assert stabilised_options('horizontal') == {'stabilise': HORIZONTAL_SETTLE}
+    records, _ = run_circles('horizontal', 'robust', 0, circles=2, rest=1.0,
+                             **stabilised_options('horizontal'))
+    paper, _ = run_circles('horizontal', 'robust', 0, circles=2, rest=1.0)
+    # circle 1 is the paper's (no rest before it); the rest after it slows the link
+    assert records[0]['max_mm'] == paper[0]['max_mm']
+    assert abs(records[1]['free_rate_dps']) != abs(paper[1]['free_rate_dps'])
+    assert all(r['max_mm'] <= 1.7 for r in records)
+
+
 def test_modulation_rejects_bad_options_naming_them():
     params = table1('vertical')
     with pytest.raises(FreejointValueError, match='^gains:'):

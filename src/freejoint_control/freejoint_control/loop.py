@@ -149,7 +149,9 @@ class ControlLoop:
             values = cfg.values
             self.law = FreeLinkDampedLaw(self.law, values['free_link_delta_max'],
                                          k2_rest=values['free_link_rest_damping'],
-                                         rest_after=values['free_link_rest_after'])
+                                         rest_after=values['free_link_rest_after'],
+                                         mode=values['free_link_mode'],
+                                         settle_window=values['free_link_settle_window'])
         # Joint failures (issue 23, freejoint_control/failures.py): None when off.
         self.failures = None if cfg.values['joint_failures'] == 'off' else \
             failures.FailureMonitor(cfg, self.law, self.log)

@@ -21,7 +21,7 @@ from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR
 from freejoint_common.schema import LoopConfig, NOMINAL_SCALE, one_of, Param
 from freejoint_common.schema import SCHEDULING, Schema, unique_names
 from freejoint_core.arm import ArmModel, ArmParams
-from freejoint_core.circles import MODULATION
+from freejoint_core.circles import HORIZONTAL_SETTLE, MODULATION
 from freejoint_core.control import Gains, H_FORMS
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.failure import DEFAULT_K_O, DEFAULT_MARGIN, DEFAULT_TICKS
@@ -132,6 +132,16 @@ FREE_LINK_PARAMS = (
           'rest [s] of the setpoint after which free_link_rest_damping applies (rests '
           'between tasks shorter than this keep the tracking gain)', (0.0, 3600.0),
           read_only=True),
+    Param('free_link_mode', 'always',
+          "'always': the damping acts while tracking and at rest (the vertical arm); "
+          "'settle': only in the first free_link_settle_window s of each rest of the "
+          'setpoint, the shift bounded by free_link_delta_max without clipping, then back '
+          'to 0 before the next task (the horizontal arm, whose free link is a free rotor: '
+          'freejoint_core.circles.HORIZONTAL_SETTLE, docs/internal-motion.md)',
+          validator=one_of(('always', 'settle')), read_only=True),
+    Param('free_link_settle_window', HORIZONTAL_SETTLE['settle_window'],
+          "seconds of each rest in which free_link_mode 'settle' drives the shift (the rest "
+          'between tasks must be about 0.4 s longer)', (1e-3, 3600.0), read_only=True),
 )
 
 PARAMS = (
