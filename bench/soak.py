@@ -440,9 +440,14 @@ def rest_at_q0(client):
     client.spin_until(lambda: False, 0.2)     # the reset step and the hold settle
 
 
-STABILISED_CASES = ('vertical',)
-"""Cases ``--stabilise`` changes: config/stabilised/ (issue 22: the free link starts hanging,
-its damping on); horizontal, the paper's law (``freejoint_core.circles.stabilised_options``)."""
+STABILISED_OVERLAYS = {'vertical': 'stabilised', 'horizontal': 'stabilised_horizontal'}
+"""The overlay of ``--stabilise`` per case (issue 22, ``freejoint_core.circles.
+stabilised_options``): vertical config/stabilised/ (the free link starts hanging, its
+damping on); horizontal config/stabilised_horizontal/ (the free rotor slowed in the first
+0.6 s of each rest, the shift back by 1 s: back to back, the circles 1 s apart)."""
+STABILISED_REST = 1.0
+"""[s] Between the circles of ``--back-to-back --stabilise`` (the horizontal settle needs
+its 0.6-s window and the shift's 0.4-s return; the paper's soak: 0.5 s)."""
 
 
 def overlay_overrides(schema, path):
@@ -458,12 +463,11 @@ def overlay_overrides(schema, path):
 
 def stabilised_overrides(case):
     """Return the (simulator, controller) ``-p`` items of ``--stabilise`` for ``case``."""
-    if case not in STABILISED_CASES:
-        return [], []
     from freejoint_control.params import SCHEMA as CONTROLLER
     from freejoint_sim.params import SCHEMA as SIM
-    overlay = os.path.join(ROOT, 'config', 'stabilised')
-    return (overlay_overrides(SIM, os.path.join(overlay, 'sim.yaml')),
+    overlay = os.path.join(ROOT, 'config', STABILISED_OVERLAYS[case])
+    sim = os.path.join(overlay, 'sim.yaml')
+    return (overlay_overrides(SIM, sim) if os.path.exists(sim) else [],
             overlay_overrides(CONTROLLER, os.path.join(overlay, 'controller.yaml')))
 
 
@@ -558,8 +562,11 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
         if fail_at is not None:
             loop = FailAt(s.client, fail_at)
         else:
+            plan = bench_graph.ros_params('planner.yaml')
+            period = float(plan['duration']) + (STABILISED_REST if stabilise else 0.5)
             loop = bench_graph.CircleLoop(
-                s.client, before=None if back_to_back else (lambda: rest_at_q0(s.client)))
+                s.client, plan, period,
+                before=None if back_to_back else (lambda: rest_at_q0(s.client)))
         start = time.monotonic()
         s.wait(seconds, loop)
         end = time.monotonic()
@@ -705,7 +712,9 @@ def parse(argv):
                     'rest_at_q0)')
     ap.add_argument('--stabilise', action='store_true',
                     help='internal-motion stabilisation (issue 22): vertical, the free link '
-                    'starts hanging and the controller damps it (config/stabilised/)')
+                    'starts hanging and the controller damps it (config/stabilised/); '
+                    'horizontal, the free link slowed in the rests '
+                    '(config/stabilised_horizontal/); back to back the circles 1 s apart')
     ap.add_argument('--fully-actuated', action='store_true',
                     help='the paper arm with all joints driven and joint failure detection on '
                     "(config/fully_actuated/, issue 23): each run counts the controller's "
