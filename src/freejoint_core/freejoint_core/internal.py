@@ -334,6 +334,19 @@ SETTLE_RETURN_GAINS = (400.0, 40.0)
 critically damped at 20 rad/s, a 3-cm shift is back under 0.1 mm 0.4 s later."""
 
 
+def _floats(x, n, name):
+    """Return ``x`` as ``n`` finite Python floats (a list), or raise as ``check_vector``."""
+    try:
+        out = [float(v) for v in x]
+    except (TypeError, ValueError):
+        out = None
+    if out is None or len(out) != n or not math.isfinite(math.fsum(out)):
+        # not a plain finite sequence: check_vector raises naming what is wrong (or, for a
+        # sum that overflowed alone, returns the same floats)
+        return check_vector(x, n, name).tolist()
+    return out
+
+
 class FreeLinkModulation:
     """
     Damping of the free link's zero dynamics by a bounded modulation of the task reference.
@@ -494,11 +507,11 @@ class FreeLinkModulation:
 
         """
         n = self.params.n
-        q = check_vector(q, n, 'q').tolist()
-        qd = check_vector(qd, n, 'qd').tolist()
-        px, py = check_vector(p_d, 2, 'p_d').tolist()
-        vx, vy = check_vector(pd_d, 2, 'pd_d').tolist()
-        ax, ay = check_vector(pdd_d, 2, 'pdd_d').tolist()
+        q = _floats(q, n, 'q')
+        qd = _floats(qd, n, 'qd')
+        px, py = _floats(p_d, 2, 'p_d')
+        vx, vy = _floats(pd_d, 2, 'pd_d')
+        ax, ay = _floats(pdd_d, 2, 'pdd_d')
         dt = float(dt)
         if not (math.isfinite(dt) and dt > 0.0):
             raise FreejointValueError(f'dt: must be finite and > 0, got {dt}')
