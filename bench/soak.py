@@ -387,19 +387,27 @@ def moving_setpoints(bag_path, stamps):
     Returns
     -------
     numpy.ndarray of bool, (n,)
-        True where the setpoint of that stamp has a nonzero velocity or acceleration;
-        False at rest and where no setpoint of the stamp was recorded.
+        True where the setpoint the controller paired with that stamp (the newest stamped
+        at most half a period after it) has a nonzero velocity or acceleration; False at
+        rest and before the first setpoint.
 
     """
     import numpy as np
     from freejoint_tools.bagfile import open_bag
     bag = open_bag(bag_path)
-    moving = set()
+    by_stamp = {}
     if SETPOINT.absolute in bag.topics:
         for _, msg in bag.decode(SETPOINT.absolute):
-            if any(msg.velocity) or any(msg.acceleration):
-                moving.add(stamp_ns(msg))
-    return np.array([int(k) in moving for k in stamps], dtype=bool)
+            by_stamp[stamp_ns(msg)] = bool(any(msg.velocity) or any(msg.acceleration))
+    if not by_stamp:
+        return np.zeros(len(stamps), dtype=bool)
+    # the controller's pairing rule (as plant_ticks): the newest setpoint stamped at most
+    # half a period after the state
+    sp_stamps = np.array(sorted(by_stamp), dtype=np.int64)
+    flags = np.array([by_stamp[k] for k in sp_stamps], dtype=bool)
+    half = int(np.median(np.diff(sp_stamps)) // 2) if len(sp_stamps) > 1 else 0
+    i = np.searchsorted(sp_stamps, np.asarray(stamps, dtype=np.int64) + half, side='right') - 1
+    return np.where(i >= 0, flags[np.maximum(i, 0)], False)
 
 
 def diagnostics_diverged(bag_path):
