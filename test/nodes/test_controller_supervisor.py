@@ -34,9 +34,13 @@ CI run's active controller, whose guard found the loop short of its margins on t
 machine, never released the brakes within 60 s."""
 CHILDREN = {'controller_node', 'controller_node_spare'}
 """The supervisor's two node names (a new spare takes the one that is free)."""
-TAKEOVER_WALL_S = 1.0
-"""Bound on the wall time from the kill to the next command at the simulator's topic
-(measured 0.03 s when the spare is ready; generous for a loaded test machine)."""
+TAKEOVER_WALL_S = 5.0
+"""Bound on the wall time from the kill to the next command this process receives: that the
+spare took over and commands flow again, not how fast. This process's receipt lags the
+simulator's on a loaded machine (a clean-clone CI run: 1.6 s here while the simulator's
+drive watchdog, 50 ms, never engaged: its commands had resumed within 50 ms). How fast a
+spare catches the arm is tested in one process (test/control/test_takeover.py) and measured
+by ``bench/scenarios.py controller_restart``."""
 
 
 def _args(config, *overrides):
