@@ -13,7 +13,7 @@ XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 help:
 	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
 	@echo '              ARM=four_link: the shipped 4-link example instead (config/four_link)'
-	@echo '              STABILISE=1: the vertical case, internal motion stabilised (issue 22)'
+	@echo '              STABILISE=1: internal motion stabilised, both cases (issue 22)'
 	@echo '              FAIL=joint3@2.5: all joints driven, joint 3 fails at 2.5 s (issue 23)'
 	@echo '              CIRCLES=N REST=S: N revolutions back to back, S s rest between (issue 22)'
 	@echo 'make test     run every test (core math, nodes, interfaces, linters), JOBS (nproc + 1)'
