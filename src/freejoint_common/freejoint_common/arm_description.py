@@ -60,7 +60,9 @@ ARM_SPECS = (
          'joint along a single fixed end-effector joint; sensor and camera branches are not '
          'the chain)', read_only=True),
     Spec('gravity', list(NO_GRAVITY),
-         'gravity [m/s^2] in the base frame of the URDF, its in-plane part along -y; '
+         'gravity [m/s^2] in the base frame of the URDF, any direction (the task frame '
+         'turns to put its in-plane part along -y, joint 1 then carries a zero-angle '
+         'offset: freejoint_core.urdf); '
          '[0, 0, 0] = the vector of case (horizontal: 0 0 -9.81, vertical: 0 -9.81 0)'),
 )
 """The arm parameters, the same entries in every node that needs the arm."""
