@@ -566,7 +566,8 @@ def _parse(argv):
     ap.add_argument('--stabilise', action='store_true',
                     help='with --circles: internal-motion stabilisation on (vertical paper '
                     'arm: hanging start + free-link damping by a bounded reference '
-                    'modulation; r > m: null-space damping)')
+                    'modulation; horizontal paper arm: the free link slowed in the first '
+                    '0.6 s of each rest; r > m: null-space damping)')
     ap.add_argument('--delta-max', type=float, default=None, metavar='M',
                     help="with --stabilise: bound of the modulation's task deviation (m)")
     ap.add_argument('--arm', choices=('paper', 'four_link'), default='paper',
