@@ -349,17 +349,11 @@ def plant_ticks(bag_path, joints=('joint1', 'joint2')):
     log_ns = np.array([lt for lt, _ in ee], dtype=np.int64)
     stamps = np.array([stamp_ns(m) for _, m in ee], dtype=np.int64)
     p = np.array([(m.point.x, m.point.y) for _, m in ee])
-    by_stamp = {}
-    if SETPOINT.absolute in bag.topics:
-        for _, msg in bag.decode(SETPOINT.absolute):
-            by_stamp[stamp_ns(msg)] = (msg.position[0], msg.position[1])
+    setpoints, i = paired_setpoints(bag, stamps)
     pd = np.full_like(p, np.nan)
-    if by_stamp:
-        sp_stamps = np.array(sorted(by_stamp), dtype=np.int64)
-        sp = np.array([by_stamp[k] for k in sp_stamps])
-        half = int(np.median(np.diff(sp_stamps)) // 2) if len(sp_stamps) > 1 else 0
-        i = np.searchsorted(sp_stamps, stamps + half, side='right') - 1
-        ok = i >= 0
+    ok = i >= 0
+    if setpoints:
+        sp = np.array([(m.position[0], m.position[1]) for m in setpoints])
         pd[ok] = sp[i[ok]]
     effort = np.full((len(ee), len(joints)), np.nan)
     index = {k: j for j, k in enumerate(stamps.tolist())}
@@ -394,20 +388,46 @@ def moving_setpoints(bag_path, stamps):
     """
     import numpy as np
     from freejoint_tools.bagfile import open_bag
-    bag = open_bag(bag_path)
+    setpoints, i = paired_setpoints(open_bag(bag_path), stamps)
+    if not setpoints:
+        return np.zeros(len(stamps), dtype=bool)
+    flags = np.array([bool(any(m.velocity) or any(m.acceleration)) for m in setpoints])
+    return np.where(i >= 0, flags[np.maximum(i, 0)], False)
+
+
+def paired_setpoints(bag, stamps):
+    """
+    Return the bag's setpoints and, per state stamp, the index of the one the controller paired.
+
+    The controller's rule: the newest setpoint stamped at most half a period after the state.
+
+    Parameters
+    ----------
+    bag : freejoint_tools.bagfile bag
+        An open bag (its ``SETPOINT`` topic; none: no setpoint).
+    stamps : array_like of int, (n,)
+        State stamps [ns].
+
+    Returns
+    -------
+    setpoints : list of CartesianSetpoint
+        One per stamp (the last recorded), in stamp order.
+    index : numpy.ndarray of int, (n,)
+        Into ``setpoints``; -1 before the first setpoint (and everywhere without one).
+
+    """
+    import numpy as np
     by_stamp = {}
     if SETPOINT.absolute in bag.topics:
         for _, msg in bag.decode(SETPOINT.absolute):
-            by_stamp[stamp_ns(msg)] = bool(any(msg.velocity) or any(msg.acceleration))
+            by_stamp[stamp_ns(msg)] = msg
+    stamps = np.asarray(stamps, dtype=np.int64)
     if not by_stamp:
-        return np.zeros(len(stamps), dtype=bool)
-    # the controller's pairing rule (as plant_ticks): the newest setpoint stamped at most
-    # half a period after the state
+        return [], np.full(len(stamps), -1, dtype=np.int64)
     sp_stamps = np.array(sorted(by_stamp), dtype=np.int64)
-    flags = np.array([by_stamp[k] for k in sp_stamps], dtype=bool)
     half = int(np.median(np.diff(sp_stamps)) // 2) if len(sp_stamps) > 1 else 0
-    i = np.searchsorted(sp_stamps, np.asarray(stamps, dtype=np.int64) + half, side='right') - 1
-    return np.where(i >= 0, flags[np.maximum(i, 0)], False)
+    index = np.searchsorted(sp_stamps, stamps + half, side='right') - 1
+    return [by_stamp[k] for k in sp_stamps.tolist()], index
 
 
 def diagnostics_diverged(bag_path):
