@@ -386,10 +386,10 @@ def arm_offline(arm, case, seed, n_ticks):
                    label=case, seed=seed, n_ticks=n_ticks)
 
 
-def stabilised_offline(case, seed, settings, overlays=(STABILISED,), arm=None, circles=1,
-                       rest=0.0, stabilise=True):
+def circles_offline(case, seed, settings, overlays=(STABILISED,), arm=None, circles=1,
+                    rest=0.0, stabilise=True):
     """
-    Return the offline circles runner's records and trace with the stabilised options.
+    Return the offline circles runner's records and trace (the stabilised options, or none).
 
     ``circles`` revolutions with ``rest`` s between them (one by default), the graph's
     settings (``offline_settings``), the options of
@@ -697,9 +697,9 @@ def main(argv=None):
                 runs.append(run)
                 continue
             if args.stabilise or series:
-                offs, trace = stabilised_offline(case, args.seed, settings,
-                                                 per_case.get(case, overlays), args.arm,
-                                                 args.circles, args.rest, args.stabilise)
+                offs, trace = circles_offline(case, args.seed, settings,
+                                              per_case.get(case, overlays), args.arm,
+                                              args.circles, args.rest, args.stabilise)
                 graph_circles = per_circle(arrays, n_circle, n_rest, args.circles)
                 for c, off in enumerate(offs):
                     swing = '' if off['swing_deg'] is None else \
