@@ -143,6 +143,19 @@ def same_record():
 
 
 @pytest.fixture
+def recorder_drained(ros_node):
+    """
+    Give the test a wait (quiet s, timeout s) for a steady ``/recorder/status`` count.
+
+    Call it once the graph is silent (the simulator holds at ``max_steps``); it returns
+    ``(count or None, wall s)`` (``ServiceCalls.recorder_drained``).
+    """
+    from freejoint_tools.harness import ServiceCalls
+    calls = ServiceCalls(ros_node)
+    return calls.recorder_drained
+
+
+@pytest.fixture
 def start_circle(ros_node):
     """
     Give the test a function of ``pause`` that starts a run the README's manual way.
@@ -151,15 +164,10 @@ def start_circle(ros_node):
     seconds (the publishers' side of the match can lag the recorder's), then the paper's
     horizontal circle through ``/freejoint_planner/plan_circle``, which must be accepted.
     """
-    import rclpy
     from freejoint_tools.harness import ServiceCalls
 
-    class Spin:
-        def spin_once(self, timeout_sec):
-            rclpy.spin_once(ros_node, timeout_sec=timeout_sec)
-
     def start(pause):
-        calls = ServiceCalls(ros_node, Spin())
+        calls = ServiceCalls(ros_node)
         ready, message = calls.recorder_ready(60.0)
         assert ready, 'the recorder did not match every graph topic: %s' % message
         calls.spin_until(lambda: False, pause)

@@ -15,10 +15,13 @@ CONFIG = os.path.join(ROOT, 'config')
 TICKS = 400
 SETTLE = 1.0
 """Wall seconds between the recorder's readiness and the start of the run."""
+HOLD_AFTER = 60
+"""Ticks the simulator runs past TICKS before it holds (``max_steps``)."""
 
 
 def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, tmp_path,
-                                                         same_record, start_circle):
+                                                         same_record, start_circle,
+                                                         recorder_drained):
     import rclpy
     from freejoint_common.contract import CONTROLLER_STATE, JOINT_STATES, profile
 
@@ -38,20 +41,24 @@ def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, 
         '-p', 'custom_data:=[case=horizontal, variant=robust, seed=0, max_ticks=%d]' % TICKS])
     wait(lambda: 'recording into' in procs.log(recorder), 30.0, 'the recorder')
     nodes = []
+    extra = {'planner_node': ['-p', 'autostart:=false'],
+             'sim_node': ['-p', 'max_steps:=%d' % (TICKS + HOLD_AFTER)]}
     for pkg, exe, conf in (('freejoint_planner', 'planner_node', 'planner.yaml'),
                            ('freejoint_sim', 'sim_node', 'sim.yaml'),
                            ('freejoint_control', 'controller_node', 'controller.yaml')):
         nodes.append(procs.start_node(pkg, exe, exe, [
-            '--ros-args', '--params-file', os.path.join(CONFIG, conf),
-            '-p', 'autostart:=false'] if exe == 'planner_node' else [
-            '--ros-args', '--params-file', os.path.join(CONFIG, conf)]))
+            '--ros-args', '--params-file', os.path.join(CONFIG, conf)] + extra.get(exe, [])))
 
     # The recorder's readers have matched every publisher; the publishers' side of the match
     # (what makes a volatile writer send to it) can lag by tens of ms: let it settle.
     start_circle(SETTLE)
-    wait(lambda: len(live['states']) > TICKS + 50, 120.0,
+    wait(lambda: len(live['states']) > TICKS + HOLD_AFTER // 2, 120.0,
          'the graph to run %d ticks (sim: %s)' % (TICKS, procs.log(nodes[1])[-500:]),
          spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.01))
+    # The simulator holds at max_steps: once the recorder's count is steady it has taken
+    # every message (a node stopped earlier takes its unacknowledged samples with it).
+    count, _ = recorder_drained(1.0, 60.0)
+    assert count is not None, 'the recorder did not answer ~/status'
     for proc in reversed(nodes):
         procs.stop(proc)
     assert procs.stop(recorder) == 0
