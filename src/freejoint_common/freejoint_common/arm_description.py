@@ -36,6 +36,9 @@ PAPER_PASSIVE = ['joint3']
 """Passive joint of the paper's arm: the default of ``passive_joints``."""
 PACKAGE_SCHEME = 'package://'
 """Prefix of a path in a ROS package's share directory (``package://<pkg>/<path>``)."""
+ROBOT_DATA_PACKAGE = 'example-robot-data'
+"""The package of the spatial example arms (ROS ``ros-jazzy-example-robot-data``, PyPI
+``example-robot-data``: ``package://example-robot-data/robots/<arm>/urdf/<file>.urdf``)."""
 NO_GRAVITY = [0.0, 0.0, 0.0]
 """Default of ``gravity``: take the vector of ``case``."""
 
@@ -59,11 +62,20 @@ ARM_SPECS = (
          "kinematics_interface's tip; '' = the chain's last link (past the last revolute "
          'joint along a single fixed end-effector joint; sensor and camera branches are not '
          'the chain)', read_only=True),
+    Spec('task_dim', 2,
+         'task dimension m: 2 = a planar arm (x, y in the plane of its joint axes; the '
+         'paper), 3 = a spatial arm (the tip position in the base frame, any serial URDF on '
+         'Pinocchio: freejoint_core.spatial_model; needs robot_description or '
+         'description_file and tip_link)', (2, 3), read_only=True),
+    Spec('base_link', '',
+         'spatial arms (task_dim 3): the link the chain starts from, fixed in the world, as '
+         "kinematics_interface's base; '' = the URDF's root link", read_only=True),
     Spec('gravity', list(NO_GRAVITY),
          'gravity [m/s^2] in the base frame of the URDF, any direction (the task frame '
          'turns to put its in-plane part along -y, joint 1 then carries a zero-angle '
          'offset: freejoint_core.urdf); '
-         '[0, 0, 0] = the vector of case (horizontal: 0 0 -9.81, vertical: 0 -9.81 0)'),
+         '[0, 0, 0] = the vector of case (horizontal: 0 0 -9.81, vertical: 0 -9.81 0); a '
+         'spatial arm (task_dim 3): [0, 0, 0] = 0 0 -9.81'),
 )
 """The arm parameters, the same entries in every node that needs the arm."""
 
@@ -75,8 +87,9 @@ class NodeArm:
 
     Attributes
     ----------
-    params : ArmParams
-        The real parameters (``table1(case)`` for the default arm).
+    params : ArmParams or SpatialArm
+        The real parameters (``table1(case)`` for the default arm); a spatial arm's
+        ``SpatialArm`` (``n``, ``r``, ``active``, ``passive`` as ``ArmParams``).
     joint_names : tuple of str, (n,)
         All joints, base to tip (the order of the model).
     active_names : tuple of str, (r,)
@@ -85,6 +98,8 @@ class NodeArm:
         The parsed description; None for the default arm (no URDF parsed).
     source : str
         What the arm was taken from, for the start-up line.
+    spatial : SpatialArm or None
+        The real spatial arm (``task_dim`` 3), None for a planar one.
 
     """
 
@@ -93,6 +108,29 @@ class NodeArm:
     active_names: tuple
     urdf_arm: object
     source: str
+    spatial: object = None
+
+    @property
+    def task_dim(self):
+        """Return the task dimension m (2: planar; 3: spatial, the tip position)."""
+        return self.spatial.m if self.spatial is not None else 2
+
+    def nominal(self, scale):
+        """
+        Return the nominal model at ``scale`` (masses, inertias, COM levers times it).
+
+        ``ArmParams.scaled`` of a planar arm, ``SpatialArm.nominal`` of a spatial one (the
+        last few kept: a parameter change that leaves them builds no model again).
+        """
+        if self.spatial is None:
+            return self.params.scaled(scale)
+        key = (id(self.spatial), float(scale))
+        model = _NOMINALS.get(key)
+        if model is None:
+            model = _NOMINALS[key] = self.spatial.nominal(scale)
+            while len(_NOMINALS) > _KEEP:
+                _NOMINALS.pop(next(iter(_NOMINALS)))
+        return model
 
     @property
     def joint_offsets(self):
@@ -184,6 +222,8 @@ _KEEP = 8
 """How many distinct arms :func:`resolve_arm` keeps."""
 _RESOLVED = collections.OrderedDict()
 """``{arm key: NodeArm}``, least recently used first."""
+_NOMINALS = {}
+"""``{(id of a spatial arm, scale): nominal SpatialArm}`` (``NodeArm.nominal``)."""
 
 
 def _arm_key(values):
@@ -195,7 +235,9 @@ def _arm_key(values):
     path = values['description_file'] or ''
     prefixes = os.environ.get('AMENT_PREFIX_PATH', '') if path else ''
     return (frozen(values['case']), frozen(values['robot_description']), frozen(path),
-            frozen(values['passive_joints']), frozen(values['gravity']), prefixes)
+            frozen(values['passive_joints']), frozen(values['gravity']), prefixes,
+            frozen(values.get('tip_link', '')), frozen(values.get('task_dim', 2)),
+            frozen(values.get('base_link', '')))
 
 
 def _resolve(values):
@@ -230,6 +272,12 @@ def _resolve(values):
     passive = list(values['passive_joints'] or ())
     given, gravity = _gravity(values['gravity'], case)
     tip = values.get('tip_link') or ''
+    task_dim = values.get('task_dim', 2)
+    if task_dim == 3:
+        return _resolve_spatial(text, path, passive, given, values.get('base_link') or '', tip)
+    if task_dim != 2 or isinstance(task_dim, bool):
+        raise FreejointValueError(
+            f'task_dim: expected 2 (a planar arm) or 3 (a spatial arm), got {task_dim!r}')
     if not text and not path and passive == PAPER_PASSIVE and given is None and not tip:
         params = table1(case)
         return NodeArm(params=params, joint_names=PAPER_JOINTS,
@@ -254,6 +302,36 @@ def _resolve(values):
                        source, list(arm.passive_joints), ' '.join('%g' % g for g in gravity)))
 
 
+def _resolve_spatial(text, path, passive, gravity, base, tip):
+    """Return the ``NodeArm`` of a spatial arm (``task_dim`` 3; see ``_resolve``)."""
+    from freejoint_core.spatial_model import GRAVITY, root_link, SpatialArm
+    if not text and not path:
+        raise FreejointValueError(
+            'task_dim: 3 (a spatial arm) needs robot_description or description_file')
+    if not tip:
+        raise FreejointValueError(
+            'tip_link: a spatial arm (task_dim 3) needs the link of its task point')
+    if path:
+        source = f'description_file {path}'
+        file = package_path(path)
+        try:
+            with open(file, encoding='utf-8') as fh:
+                text = fh.read()
+        except OSError as exc:
+            raise FreejointValueError(
+                f'description_file: cannot read {file} ({exc.strerror})') from None
+    else:
+        source = 'robot_description'
+    base = base or root_link(text)
+    grav = tuple(gravity) if gravity is not None else GRAVITY
+    arm = SpatialArm(text, base, tip, passive, 3, 1.0, grav)
+    active = tuple(arm.joint_names[i] for i in arm.active)
+    return NodeArm(params=arm, joint_names=arm.joint_names, active_names=active,
+                   urdf_arm=None, spatial=arm, source='%s (spatial, %s -> %s), passive %s, '
+                   'gravity (%s)' % (source, base, tip, list(passive),
+                                     ' '.join('%g' % g for g in grav)))
+
+
 def package_path(path):
     """
     Return the file a ``description_file`` names (``package://<pkg>/<path>`` resolved).
@@ -261,7 +339,8 @@ def package_path(path):
     ``package://<pkg>/<path>`` (the ROS URDF convention) is ``share/<pkg>/<path>`` of the
     first prefix of ``AMENT_PREFIX_PATH`` that has it; the shipped descriptions
     (``package://freejoint_description/urdf/<name>.urdf``) are also found in the source
-    tree (the PyPI install). Any other path is returned as given.
+    tree and ``package://example-robot-data/...`` in the PyPI wheel's share directory (the
+    PyPI install). Any other path is returned as given.
 
     Raises
     ------
@@ -279,6 +358,11 @@ def package_path(path):
     name = os.path.basename(rest)[:-len('.urdf')]
     if pkg == 'freejoint_description' and rest == 'urdf/%s.urdf' % name and name in SHIPPED:
         return shipped_urdf_path(name)
+    if pkg == ROBOT_DATA_PACKAGE:       # the PyPI wheel's share directory (a cmeel prefix)
+        from freejoint_core.spatial_model import robot_data_dir
+        candidate = os.path.join(os.path.dirname(robot_data_dir()), rest)
+        if os.path.isfile(candidate):
+            return candidate
     raise FreejointValueError(
         f'description_file: {path} not found (share/{pkg}/{rest} of no prefix of '
         f'AMENT_PREFIX_PATH)')

@@ -219,6 +219,15 @@ def make_law(name, nominal, gains, model=None):
 register_law(RobustLaw.name, RobustLaw)
 
 
+def _spatial_law(nominal, gains, model=None):
+    """Build ``freejoint_core.spatial_law.SpatialControlLaw`` (imported on first use)."""
+    from freejoint_core.spatial_law import SpatialControlLaw
+    return SpatialControlLaw(nominal, gains, model)
+
+
+register_law('spatial', _spatial_law)
+
+
 class FreeLinkDampedLaw(ControlLaw):
     """
     A law whose reference passes through the free link's damping first (issue 22, r = m).

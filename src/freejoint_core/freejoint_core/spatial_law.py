@@ -48,10 +48,11 @@ from dataclasses import dataclass
 import math
 from typing import NamedTuple
 
-from freejoint_core.control import _vector, Gains, STATUS_NEAR_SINGULAR, STATUS_OK
-from freejoint_core.control import STATUS_TORQUE_LIMITED
+from freejoint_core.control import _vector, ControlOutput, Gains, STATUS_NEAR_SINGULAR
+from freejoint_core.control import STATUS_OK, STATUS_TORQUE_LIMITED
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
+from freejoint_core.laws import ControlLaw, INF
 from freejoint_core.spatial_model import SpatialArm
 import numpy as np
 import pinocchio as pin
@@ -229,13 +230,38 @@ class SpatialLaw:
         ns.check(nominal.r)
         self.model, self.gains, self.nullspace = nominal, gains, ns
         self.reach = arm_reach(nominal)
-        self._lam = np.array(gains.Lambda)
-        self._kd = np.array(gains.K) + self._lam
-        self._kp = np.array(gains.K) * self._lam
+        self.stiffness = 1.0
+        self._scale_gains()
         self._limit = nominal.effort[list(nominal.active)]
         self._dt = None
         self._coef = None
         self.reset()
+
+    def _scale_gains(self):
+        """Set the loop gains of ``gains`` with K and Lambda times ``stiffness``."""
+        k = np.array(self.gains.K) * self.stiffness
+        self._lam = np.array(self.gains.Lambda) * self.stiffness
+        self._kd = k + self._lam
+        self._kp = k * self._lam
+
+    def set_stiffness(self, scale):
+        """
+        Scale K and Lambda by ``scale`` from the next step (1: the gains as given).
+
+        As ``control.RobustController.set_stiffness``: the step then equals a law built
+        with ``K * scale`` and ``Lambda * scale``.
+
+        Raises
+        ------
+        FreejointValueError
+            If ``scale`` is not finite and > 0.
+
+        """
+        value = float(scale)
+        if not (math.isfinite(value) and value > 0.0):
+            raise FreejointValueError(f'scale: must be finite and > 0, got {scale!r}')
+        self.stiffness = value
+        self._scale_gains()
 
     def reset(self):
         """Set theta back to ``gains.theta0``."""
@@ -418,3 +444,123 @@ def gravity_carrying_free_joint(arm, q, tol=1e-6, max_iter=60):
     return None, (f'free joint {names} must carry gravity: no rest posture within the joint '
                   f'limits holds the tip at {np.round(p0, 3).tolist()} m (closest: tip off by '
                   f'{1e3 * best[1]:.3g} mm, gravity torque {best[2]:.3g} N m)')
+
+
+class SpatialControlLaw(ControlLaw):
+    """
+    :class:`SpatialLaw` behind the control-law seam (``freejoint_core.laws``, ``'spatial'``).
+
+    The controller's loop steps it as any law: ``step(q, qd, p_d, pd_d, pdd_d, dt)`` with
+    m-sized setpoints (m = 3: the tip position; m = 6 needs an orientation setpoint, which
+    the seam does not carry: refused).  The inverse is the inertia-weighted one with the
+    dynamically consistent projector (the pseudo-inverse diverges on spatial arms,
+    issue 25); ``set_nullspace_kd`` sets the null-space damping (``nullspace_kd``).
+
+    State: ``theta_hat[0..4]`` (after the tick's update), ``rho_hat`` (used in the tick)
+    and ``kappa`` (the scale-free conditioning of the tick, :func:`task_conditioning`);
+    the output's ``det`` is ``kappa`` too (the planar law's ``|det(Da Da^T)|`` has no
+    scale-free meaning in 3-D).
+
+    Parameters
+    ----------
+    nominal : SpatialArm
+        The nominal model (m = 3).
+    gains : SpatialGains, optional
+        Default ``SpatialGains(task_dim=nominal.m)``.
+    model : None
+        Not used (the nominal model is the model); accepted for the registry's signature.
+
+    """
+
+    name = 'spatial'
+
+    def __init__(self, nominal, gains=None, model=None):
+        if isinstance(nominal, SpatialArm) and nominal.m != 3:
+            raise FreejointValueError(
+                f'nominal: the spatial law takes m = 3 through the controller (a position '
+                f'setpoint), got m = {nominal.m}')
+        self.law = SpatialLaw(nominal, gains, _nullspace(0.0))
+        self._last = None
+        names = tuple('theta_hat[%d]' % i for i in range(5))
+        self.state_names = names + ('rho_hat', 'kappa')
+        self._bounds()
+
+    def _bounds(self):
+        tmax = self.law.gains.theta_max
+        tmax = tmax if tmax is not None else (INF,) * 5
+        self.state_bounds = tuple((0.0, t) for t in tmax) + ((-INF, INF), (0.0, 1.0))
+
+    @property
+    def model(self):
+        """Return the nominal ``SpatialArm``."""
+        return self.law.model
+
+    @property
+    def nominal(self):
+        """Return the nominal ``SpatialArm``."""
+        return self.law.model
+
+    @property
+    def stiffness(self):
+        """Return the hold stiffness scale of the gains."""
+        return self.law.stiffness
+
+    def set_nullspace_kd(self, kd):
+        """Set the null-space damping to ``kd`` [N m s/rad] (the weighted inverse kept)."""
+        ns = _nullspace(kd)
+        ns.check(self.law.model.r)
+        self.law.nullspace = ns
+
+    def step(self, q, qd, p_d, pd_d, pdd_d, dt):
+        """Return one tick of :class:`SpatialLaw` as a ``control.ControlOutput``."""
+        out = self.law.step(q, qd, p_d, pd_d, pdd_d, dt)
+        self._last = out
+        return ControlOutput(out.tau, out.e, out.edot, out.s, out.theta, out.rho,
+                             np.zeros(self.law.model.m), out.kappa, out.p, out.status)
+
+    def reset(self):
+        """Set theta_hat back to ``gains.theta0``."""
+        self.law.reset()
+        self._last = None
+
+    def state_values(self):
+        """Return theta_hat (5, now), rho_hat and kappa of the last step (0 before one)."""
+        out = self._last
+        if out is None:
+            return self.law.theta.tolist() + [0.0, 0.0]
+        return self.law.theta.tolist() + [out.rho, out.kappa]
+
+    def save_state(self):
+        """Return theta_hat (a tuple)."""
+        return tuple(self.law.theta.tolist())
+
+    def restore_state(self, saved):
+        """Put theta_hat back; rho_hat and kappa read 0 until a step."""
+        self.law.theta = np.array(saved, dtype=float)
+        self._last = None
+
+    def set_stiffness(self, scale):
+        """Scale K and Lambda for a hold (``SpatialLaw.set_stiffness``)."""
+        self.law.set_stiffness(scale)
+
+    def set_nominal(self, params, model=None):
+        """Take a new nominal ``SpatialArm`` (theta_hat, stiffness, null space kept)."""
+        old = self.law
+        law = SpatialLaw(params, old.gains, old.nullspace, old.free_damping)
+        law.theta = old.theta.copy()
+        law.set_stiffness(old.stiffness)
+        self.law = law
+
+    def set_gains(self, gains):
+        """Take new gains (theta_hat, stiffness and null space kept)."""
+        old = self.law
+        law = SpatialLaw(old.model, gains, old.nullspace, old.free_damping)
+        law.theta = old.theta.copy()
+        law.set_stiffness(old.stiffness)
+        self.law = law
+        self._bounds()
+
+
+def _nullspace(kd):
+    """Return the spatial law's null-space options: weighted inverse, dynamic projector."""
+    return NullSpace(kd=kd, inverse='weighted', projector='dynamic')

@@ -79,6 +79,36 @@ def robot_data_dir():
                               'tools/requirements.txt)')
 
 
+def root_link(text):
+    """
+    Return the root link of a URDF (the one link that is no joint's child).
+
+    Parameters
+    ----------
+    text : str
+        URDF text.
+
+    Raises
+    ------
+    FreejointValueError
+        ``robot_description: ...`` if the text is not XML or has not exactly one root.
+
+    """
+    import xml.etree.ElementTree as ET
+    try:
+        robot = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise FreejointValueError(f'robot_description: not XML ({exc})') from None
+    links = [el.get('name') for el in robot.findall('link')]
+    children = {el.get('link') for joint in robot.findall('joint')
+                for el in joint.findall('child')}
+    roots = [name for name in links if name not in children]
+    if len(roots) != 1:
+        raise FreejointValueError(
+            f'robot_description: expected one root link, got {roots}; give base_link')
+    return roots[0]
+
+
 class SpatialTerms(NamedTuple):
     """
     Model terms of one state (core joint order, task rows of ``m``).
@@ -218,6 +248,11 @@ class SpatialArm:
         self._zero = np.zeros(self.n)
         self._ia = np.array(self.active, dtype=int)
         self._ip = np.array(self.passive, dtype=int)
+
+    @property
+    def task_dim(self):
+        """Return the task rows m (the name the control loop reads)."""
+        return self.m
 
     def nominal(self, scale):
         """Return the same arm with masses, inertias and COM levers times ``scale``."""

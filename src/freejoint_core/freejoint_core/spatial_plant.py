@@ -1,0 +1,58 @@
+"""
+The simulated spatial arm: Pinocchio's ABA of a URDF chain integrated by RK4 (issue 25).
+
+``SpatialPlant`` is ``freejoint_core.plant.Plant`` for a
+:class:`freejoint_core.spatial_model.SpatialArm` (the real arm: the URDF's masses): the
+same forcing (actuator torque on the active joints and one
+``numpy.random.default_rng(seed).uniform(-dist_bound, dist_bound, n)`` draw, both held
+over the control period), the same classic RK4 at ``dt_sub`` and the same divergence and
+failure handling (``PeriodPlant``), with ``qdd = aba(q, qd, tau)`` of the chain. The free
+joints get the disturbance only. The simulator and the offline runner
+(``freejoint_core.spatial_offline``) integrate the arm with it.
+"""
+
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
+from freejoint_core.spatial_model import SpatialArm
+
+
+class SpatialPlant(Plant):
+    """
+    A spatial arm integrated by RK4 on Pinocchio's ABA, with bounded random disturbances.
+
+    Parameters
+    ----------
+    arm : SpatialArm
+        The real arm (chain, free joints, gravity).
+    dt_sub : float
+        RK4 step [s], > 0; a control period must be an integer multiple of it.
+    dist_bound : float
+        Bound [N m] of the uniform joint disturbance, >= 0 (0: none).
+    seed : int or None
+        Seed of the disturbance draws.
+    q0, qd0 : array_like, (n,), optional
+        Initial angles [rad] and rates [rad/s] (default zeros).
+
+    Attributes
+    ----------
+    params, model : SpatialArm
+        ``arm`` (``n``, ``r``, ``active``; ``fk``, ``jacobian``, limits).
+    q, qd, t, k, last_disturbance, last_effort, failed
+        As :class:`freejoint_core.plant.PeriodPlant`.
+
+    Raises
+    ------
+    FreejointValueError
+        Naming the argument that is bad.
+
+    """
+
+    def __init__(self, arm, dt_sub=DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND, seed=0,
+                 q0=None, qd0=None):
+        if not isinstance(arm, SpatialArm):
+            raise FreejointValueError(f'arm: expected SpatialArm, got {type(arm).__name__}')
+        self.arm = arm
+        self._setup(arm, arm, dt_sub, dist_bound, seed, q0, qd0)
+        self._fast = False
+        self._qdd = arm.forward_dynamics
+        self.reset()
