@@ -18,7 +18,8 @@ from core_timing import per_call_us, print_rows
 from freejoint_core.internal import NullSpace
 from freejoint_core.spatial_law import SpatialLaw, task_conditioning
 from freejoint_core.spatial_model import known_arm
-from freejoint_core.spatial_offline import CASES, rk4_step
+from freejoint_core.spatial_offline import CASES
+from freejoint_core.spatial_plant import SpatialPlant
 import numpy as np
 
 CALLS = 300
@@ -37,7 +38,8 @@ def main():
             kd=20.0, inverse='weighted', projector='dynamic'))
         p_d = arm.fk(q)
         zero3 = np.zeros(3)
-        tau = np.zeros(arm.n)
+        plant = SpatialPlant(arm, 5e-4, 0.5, 0, q)
+        tau = np.zeros(arm.r)
 
         def sample(q=q):
             t = arm.terms(q, np.zeros(arm.n))
@@ -48,7 +50,7 @@ def main():
                 ('terms', lambda: arm.terms(q, qd)),
                 ('terms + decoupling', lambda: arm.decoupling(arm.terms(q, qd))),
                 ('SpatialLaw.step (m = 3)', lambda: law.step(q, qd, p_d, zero3, zero3, 5e-4)),
-                ('plant RK4 step (4 ABA)', lambda: rk4_step(arm, q, qd, tau, 5e-4)),
+                ('plant period of 1 ms (2 RK4 steps, 8 ABA)', lambda: plant.step(tau, 1e-3)),
                 ('kappa per sample (terms + decoupling + kappa)', sample),
                 ('task_conditioning alone', lambda: task_conditioning(da, maa, 1.0))):
             rows.append({'name': f'{case}: {label}', 'value': per_call_us(fun, CALLS),

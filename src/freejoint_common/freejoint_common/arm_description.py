@@ -111,6 +111,11 @@ class NodeArm:
     spatial: object = None
 
     @property
+    def described(self):
+        """Return True for an arm read from a URDF (planar or spatial), False for Table I."""
+        return self.urdf_arm is not None or self.spatial is not None
+
+    @property
     def task_dim(self):
         """Return the task dimension m (2: planar; 3: spatial, the tip position)."""
         return self.spatial.m if self.spatial is not None else 2
@@ -399,7 +404,7 @@ def joint_list(name, value, arm, default, names_of_arm):
 
     """
     names = tuple(value)
-    if arm.urdf_arm is not None and list(names) == list(default):
+    if arm.described and list(names) == list(default):
         return tuple(names_of_arm)
     return names
 

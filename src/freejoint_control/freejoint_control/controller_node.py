@@ -130,7 +130,7 @@ class ControllerNode(Node, Lifecycle):
         arm = resolve_arm(cfg.values)   # its gravity vector, not a case name, when given
         self.get_logger().info(
             'controller ready: %s, nominal scale %g, %s, joints %s, dt %g s, law %s, robust %s'
-            % (arm.source if arm.urdf_arm else cfg.case, cfg.nominal_scale,
+            % (arm.source if arm.described else cfg.case, cfg.nominal_scale,
                'lockstep' if cfg.lockstep else 'real time', list(cfg.joints), cfg.dt, cfg.law,
                cfg.gains.robust)
             + (' (standby: idle until SIGUSR1)' if cfg.standby else ''))

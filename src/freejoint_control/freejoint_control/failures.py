@@ -81,6 +81,9 @@ def install_nullspace(law, cfg):
 
     """
     kd = float(cfg.values.get('nullspace_kd', 0.0))
+    if kd > 0.0 and hasattr(law, 'set_nullspace_kd'):    # the spatial law: its own inverse
+        law.set_nullspace_kd(kd)
+        return
     if kd <= 0.0 or cfg.nominal.r <= M_TASK or not hasattr(law, 'nullspace'):
         return
     law.nullspace = NullSpace(kd=kd)

@@ -251,7 +251,10 @@ PARAMS = (
     SCHEDULING,
     Param('law', 'robust',
           "the control law (freejoint_core.laws registry): 'robust' = the paper's robust law "
-          'with adaptation; another law is one module registering itself '
+          "with adaptation (planar arms); 'spatial' = the same law on a spatial arm "
+          '(task_dim 3: inertia-weighted inverse, null-space damping nullspace_kd, the '
+          "URDF's effort limits); another law is one module registering itself "
+
           '(freejoint_core.laws.register_law) and this value; takes effect at start-up',
           read_only=True, validator=one_of(LAWS)),
     Param('state_publish_rate', 0.0,
@@ -290,7 +293,7 @@ PARAMS = (
 # -- cross-parameter checks ------------------------------------------------------------
 def _nominal(values):
     """Return the nominal model of the arm and ``nominal_scale`` (both valid)."""
-    return resolve_arm(values).params.scaled(values['nominal_scale'])
+    return resolve_arm(values).nominal(values['nominal_scale'])
 
 
 def _check_joints(values):
@@ -372,14 +375,29 @@ def _check_standby(values):
 
 
 def _check_task(values):
-    # The task dimension of the arm's model class, without building the model (every arm
-    # the controller takes is a planar ArmModel: Arm3Model, ArmModel, PinArmModel); build()
-    # sizes the gains by the model it builds.
-    m = ArmModel.task_dim
+    # The task dimension of the arm: 2 for a planar arm (every planar model is an
+    # ArmModel: Arm3Model, ArmModel, PinArmModel), 3 for a spatial one (its SpatialArm).
+    m = resolve_arm(values).task_dim
     for name in TASK_GAINS:
         if len(values[name]) != m:
             return (f"{name}: expected {m} values (the task dimension of the arm's model), "
                     f'got {list(values[name])}')
+    return None
+
+
+def _check_spatial(values):
+    """Refuse a spatial arm without the spatial law or with a planar-only option."""
+    spatial = resolve_arm(values).spatial is not None
+    if spatial != (values['law'] == SPATIAL_LAW):
+        return (f"law: a spatial arm (task_dim 3) runs law '{SPATIAL_LAW}', a planar one "
+                f"another law; got law '{values['law']}' with task_dim {values['task_dim']}")
+    if not spatial:
+        return None
+    for name, planar in (('joint_failures', 'off'), ('delay_compensation', 'off'),
+                         ('free_link_damping', False)):
+        if values[name] != planar:
+            return (f'{name}: planar arms only for now (a spatial arm, task_dim 3, needs '
+                    f'{name}: {planar!r})')
     return None
 
 
@@ -407,7 +425,7 @@ def _check_free_link(values):
 
 CHECKS = (_check_joints, _check_loop_rate, _check_theta0, _check_effort_limits,
           _check_delay_compensation, _check_state_bounds, _check_standby, _check_task,
-          _check_failures, _check_free_link)
+          _check_spatial, _check_failures, _check_free_link)
 
 
 @dataclass(frozen=True)
@@ -443,15 +461,23 @@ TASK_GAINS = ('K', 'Lambda', 'R')
 
 
 def gains(values, tau_limit=None, theta_max=None, task_dim=2):
-    """Return the core's ``Gains`` of a parameter dict (the fields named as the parameters)."""
-    return Gains(**{name: (tuple(values[name]) if isinstance(values[name], list)
-                           else values[name]) for name in GAIN_NAMES},
-                 tau_limit=tau_limit, theta_max=theta_max, task_dim=task_dim)
+    """
+    Return the core's gains of a parameter dict (the fields named as the parameters).
+
+    ``Gains`` for a planar task (``task_dim`` 2), ``SpatialGains`` for a spatial one (3;
+    its effort limits are the model's, ``tau_limit`` is not read).
+    """
+    fields = {name: (tuple(values[name]) if isinstance(values[name], list) else values[name])
+              for name in GAIN_NAMES}
+    if task_dim == 3:
+        from freejoint_core.spatial_law import SpatialGains
+        return SpatialGains(**fields, tau_limit=tau_limit, theta_max=theta_max, task_dim=3)
+    return Gains(**fields, tau_limit=tau_limit, theta_max=theta_max, task_dim=task_dim)
 
 
 def _nominal_model(values):
     """Pinocchio's nominal model of a URDF arm of other than 3 links, else None."""
-    arm = resolve_arm(values).urdf_arm
+    arm = resolve_arm(values).urdf_arm       # None for the paper's arm and a spatial one
     return None if arm is None else nominal_model(arm, values['nominal_scale'])
 
 
@@ -463,20 +489,28 @@ def build(values):
     limits = _floats('effort_limits', values['effort_limits'])
     dt = float(values['control_period'])
     model = _nominal_model(values)
+    arm = resolve_arm(values)
+    if arm.spatial is not None:
+        from freejoint_core.spatial_law import arm_reach
+        reach, task_dim = arm_reach(nominal), arm.task_dim
+    else:
+        reach = float(sum(nominal.lengths))
+        task_dim = (model if model is not None else ArmModel).task_dim
     return Config(
         values=dict(values), nominal=nominal,
         gains=gains(values, tuple(limits[joints.index(name)] for name in active_names),
-                    _floats('theta_max', values['theta_max']),
-                    (model if model is not None else ArmModel).task_dim),
+                    _floats('theta_max', values['theta_max']), task_dim),
         joint_names=joint_names, joints=joints,
         cmd_index=tuple(active_names.index(name) for name in joints), dt=dt,
         dt_ns=round(dt * 1e9), lockstep=bool(values['lockstep']), effort_limits=limits,
         position_lower=_floats('joint_position_lower', values['joint_position_lower']),
         position_upper=_floats('joint_position_upper', values['joint_position_upper']),
         velocity_limit=_floats('joint_velocity_limit', values['joint_velocity_limit']),
-        reach=float(sum(nominal.lengths)), nominal_model=model,
-        joint_offsets=tuple(resolve_arm(values).joint_offsets))
+        reach=reach, nominal_model=model, joint_offsets=tuple(arm.joint_offsets))
 
+
+SPATIAL_LAW = 'spatial'
+"""The law of a spatial arm (``freejoint_core.spatial_law.SpatialControlLaw``)."""
 
 SCHEMA = Schema(PARAMS, CHECKS, build)
 SPECS = SCHEMA.params

@@ -11,12 +11,19 @@ horizontal direction across the base-to-tip line and the vertical), starting and
 at the start point: a quintic time law over ``t_move`` (5 s), then a hold of ``t_hold``
 (10 s).  Task m = 3 (tip position).
 
-Plant: the URDF's Pinocchio model (real masses), ABA integrated by RK4 at the control
-period ``dt`` (0.5 ms), torque and one disturbance draw ``uniform(-0.5, 0.5)`` N m per
-joint (free joints included; seeded) held over the period.  Law:
-:class:`freejoint_core.spatial_law.SpatialLaw` on the 70 % nominal model (masses,
-inertias and COM levers), weighted inverse, dynamically consistent projector, null-space
-damping ``kd`` and free-joint damping ``kf``, URDF effort limits.
+Plant: :class:`freejoint_core.spatial_plant.SpatialPlant`, the URDF's Pinocchio model
+(real masses), ABA integrated by RK4 at ``dt_sub`` (0.5 ms), torque and one disturbance
+draw ``uniform(-0.5, 0.5)`` N m per joint (free joints included; seeded) held over the
+control period ``dt`` (1 ms), as the simulator node integrates it.  Law:
+:class:`freejoint_core.spatial_law.SpatialControlLaw` (the controller's law ``spatial``)
+on the 70 % nominal model (masses, inertias and COM levers), weighted inverse,
+dynamically consistent projector, null-space damping ``kd``, URDF effort limits; called
+as the controller's loop calls it in lockstep (the measured state of tick k, the setpoint
+of tick k, ``dt``).  With ``inverse='pseudo'`` or ``kf > 0`` the bare
+:class:`freejoint_core.spatial_law.SpatialLaw` (the study's options).
+
+:func:`run_twin` is the same run for any arm, law and start posture: the offline runner
+of the lockstep graph (``make demo ARM=ur5``), whose trace it returns too.
 
 Reported per run: rms and max tip error over the whole run [mm], the largest
 ``|tau_i| / effort_i`` and ``|qd_i| / velocity_i`` (URDF limits; the active joints and,
@@ -32,8 +39,10 @@ import time
 
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
-from freejoint_core.spatial_law import gravity_carrying_free_joint, SpatialGains, SpatialLaw
+from freejoint_core.spatial_law import gravity_carrying_free_joint, SpatialControlLaw
+from freejoint_core.spatial_law import SpatialGains, SpatialLaw
 from freejoint_core.spatial_model import known_arm
+from freejoint_core.spatial_plant import SpatialPlant
 import numpy as np
 
 #: case -> (arm, free joint, planned start posture [rad])
@@ -44,7 +53,8 @@ CASES = {
 RADIUS = 0.1
 T_MOVE = 5.0
 T_HOLD = 10.0
-DT = 5e-4
+DT = 1e-3
+DT_SUB = 5e-4
 NOMINAL = 0.7
 DIST = 0.5
 KD = 20.0
@@ -94,28 +104,8 @@ def circle(p0, radius, t, t_move):
     return pos, dpos * sd, ddpos * sd * sd + dpos * sdd
 
 
-def rk4_step(arm, q, qd, tau, dt):
-    """
-    One RK4 step of ``arm``'s ABA with ``tau`` (n,) [N m] held over ``dt`` [s].
-
-    Returns
-    -------
-    (numpy.ndarray, numpy.ndarray), each (n,)
-        Angles [rad] and rates [rad/s] after ``dt``.
-
-    """
-    def f(x, v):
-        return v, arm.forward_dynamics(x, v, tau)
-    k1 = f(q, qd)
-    k2 = f(q + 0.5 * dt * k1[0], qd + 0.5 * dt * k1[1])
-    k3 = f(q + 0.5 * dt * k2[0], qd + 0.5 * dt * k2[1])
-    k4 = f(q + dt * k3[0], qd + dt * k3[1])
-    return (q + dt / 6.0 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0]),
-            qd + dt / 6.0 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1]))
-
-
 def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL,
-             dist=DIST, kd=KD, kf=KF, inverse='weighted', t_stop=None):
+             dist=DIST, kd=KD, kf=KF, inverse='weighted', t_stop=None, dt_sub=DT_SUB):
     """
     One closed-loop run (module notes).
 
@@ -139,6 +129,8 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
         Right inverse (and projector) of the law.
     t_stop : float, optional
         End the run early at this time [s] (tests).
+    dt_sub : float
+        RK4 step of the plant [s]; ``dt`` an integer multiple of it.
 
     Returns
     -------
@@ -155,50 +147,118 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
         raise FreejointValueError(f'case: expected one of {sorted(CASES)}, got {case!r}')
     name, free, q_plan = CASES[case]
     real = known_arm(name, [free])
-    q, why = gravity_carrying_free_joint(real.nominal(nominal), np.array(q_plan))
-    if q is None:
+    q0, why = start_posture(real.nominal(nominal), q_plan)
+    if q0 is None:
         raise FreejointValueError(why)
-    qd = np.zeros(real.n)
-    proj = 'dynamic' if inverse == 'weighted' else 'kinematic'
-    law = SpatialLaw(real.nominal(nominal), SpatialGains(task_dim=3),
-                     NullSpace(kd=kd, inverse=inverse, projector=proj), free_damping=kf)
-    rng = np.random.default_rng(seed)
-    p0 = real.fk(q)
+    if inverse == 'weighted' and kf == 0.0:
+        law = SpatialControlLaw(real.nominal(nominal), SpatialGains(task_dim=3))
+        law.set_nullspace_kd(kd)
+    else:
+        proj = 'dynamic' if inverse == 'weighted' else 'kinematic'
+        law = SpatialLaw(real.nominal(nominal), SpatialGains(task_dim=3),
+                         NullSpace(kd=kd, inverse=inverse, projector=proj), free_damping=kf)
+    out = run_twin(real, q0, law, seed, t_move=t_move, t_hold=t_hold, dt=dt, dt_sub=dt_sub,
+                   dist=dist, t_stop=t_stop)
+    out.pop('trace')
+    return dict({'case': case, 'seed': seed, 'inverse': inverse, 'kd': kd, 'kf': kf}, **out)
+
+
+def start_posture(nominal, q_plan):
+    """
+    Return the start posture near ``q_plan`` (``gravity_carrying_free_joint``) and why not.
+
+    Parameters
+    ----------
+    nominal : SpatialArm
+        The nominal model (the planner's).
+    q_plan : sequence of float, (n,)
+        Planned start posture [rad].
+
+    Returns
+    -------
+    (numpy.ndarray (n,) or None, str)
+        The rest posture (None: refused) and the one-line reason of a refusal.
+
+    """
+    return gravity_carrying_free_joint(nominal, np.array(q_plan, dtype=float))
+
+
+def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub=DT_SUB,
+             dist=DIST, radius=RADIUS, t_stop=None):
+    """
+    One run of the lockstep graph, offline: plant, setpoints and law as the nodes run them.
+
+    Tick k: the state ``(q_k, qd_k)`` (lists, as the controller reads a JointState), the
+    setpoint ``circle(p0, radius, k dt, t_move)`` (``p0`` the tip at ``q0``), ``law.step``
+    with ``dt``, then the plant steps one period with the torque.
+
+    Parameters
+    ----------
+    real : SpatialArm
+        The real arm (the plant's).
+    q0 : array_like, (n,)
+        Start posture [rad], at rest.
+    law : SpatialControlLaw or SpatialLaw
+        The controller's law (its nominal model inside).
+    seed : int
+        Disturbance seed.
+    t_move, t_hold, dt, dt_sub, dist, radius : float
+        Circle and hold durations [s], control period and RK4 step [s], disturbance bound
+        [N m], circle radius [m].
+    t_stop : float, optional
+        End the run early at this time [s].
+
+    Returns
+    -------
+    dict
+        ``rms_mm``, ``max_mm``, ``hold_last_s_max_mm``, ``tau_ratio``, ``vel_ratio``,
+        ``vel_ratio_free``, ``diverged``, ``tick_us`` (module notes), and ``trace``:
+        ``{'p', 'p_d', 'q': (K, 3 / 3 / n) arrays, 'tau': (K, r)}`` of ticks 0..K-1.
+
+    """
+    plant = SpatialPlant(real, dt_sub, dist, seed, q0)
+    p0 = real.fk(np.asarray(q0, dtype=float))
     steps = int(round(((t_move + t_hold) if t_stop is None else t_stop) / dt))
     last = int(round(1.0 / dt))
-    act = list(real.active)
+    act, free = list(real.active), list(real.passive)
     err = np.empty(steps)
+    trace = {'p': np.empty((steps, 3)), 'p_d': np.empty((steps, 3)),
+             'q': np.empty((steps, real.n)), 'tau': np.empty((steps, real.r))}
     tau_ratio = vel_ratio = vel_free = 0.0
     diverged = False
-    tau_full = np.zeros(real.n)
     t_law = 0.0
+    limit = real.effort[act]
+    k = 0
     for k in range(steps):
-        t = k * dt
-        p_d, v_d, a_d = circle(p0, RADIUS, t, t_move)
+        q, qd = plant.q, plant.qd
+        p_d, v_d, a_d = circle(p0, radius, k * dt, t_move)
         c0 = time.perf_counter()
-        out = law.step(q, qd, p_d, v_d, a_d, dt)
+        out = law.step(q.tolist(), qd.tolist(), p_d.tolist(), v_d.tolist(), a_d.tolist(), dt)
         t_law += time.perf_counter() - c0
         err[k] = np.linalg.norm(out.e)
-        tau_full[:] = 0.0
-        tau_full[act] = out.tau
-        tau_ratio = max(tau_ratio, float(np.max(np.abs(out.tau) / real.effort[act])))
-        d = rng.uniform(-dist, dist, real.n) if dist > 0.0 else 0.0
-        q, qd = rk4_step(real, q, qd, tau_full + d, dt)
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))) or err[k] > 1.0:
+        trace['p'][k], trace['p_d'][k], trace['q'][k], trace['tau'][k] = out.p, p_d, q, out.tau
+        tau_ratio = max(tau_ratio, float(np.max(np.abs(out.tau) / limit)))
+        try:
+            plant.step(out.tau, dt)
+        except FreejointValueError:
             diverged = True
-            err = err[:k + 1]
+        q, qd = plant.q, plant.qd
+        if diverged or err[k] > 1.0:
+            diverged = True
             break
         vel = np.abs(qd) / real.velocity
         vel_ratio = max(vel_ratio, float(np.max(vel[act])))
-        vel_free = max(vel_free, float(np.max(vel[list(real.passive)])))
+        vel_free = max(vel_free, float(np.max(vel[free]))) if free else 0.0
+    n = k + 1
+    err = err[:n]
     return {
-        'case': case, 'seed': seed, 'inverse': inverse, 'kd': kd, 'kf': kf,
         'rms_mm': 1e3 * float(np.sqrt(np.mean(err ** 2))),
         'max_mm': 1e3 * float(np.max(err)),
         'hold_last_s_max_mm': 1e3 * float(np.max(err[-last:])),
         'tau_ratio': tau_ratio, 'vel_ratio': vel_ratio, 'vel_ratio_free': vel_free,
         'diverged': diverged,
-        'tick_us': 1e6 * t_law / len(err),
+        'tick_us': 1e6 * t_law / n,
+        'trace': {key: val[:n] for key, val in trace.items()},
     }
 
 

@@ -1,0 +1,90 @@
+"""The controller's loop runs a spatial arm (issue 25): lockstep ticks equal the offline twin."""
+import os
+
+from freejoint_control.failures import install_nullspace
+from freejoint_control.loop import ControlLoop
+from freejoint_control.params import SCHEMA
+from freejoint_core.laws import make_law
+from freejoint_core.spatial_law import SpatialControlLaw, SpatialGains
+from freejoint_core.spatial_offline import CASES, circle, run_twin, start_posture
+from freejoint_core.spatial_plant import SpatialPlant
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+DT_NS = 1_000_000
+TICKS = 300
+
+
+def _values(arm, **given):
+    values = dict(SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml')))
+    values.update(SCHEMA.yaml_values(os.path.join(ROOT, 'config', arm, 'controller.yaml')))
+    values.update(given)
+    return values
+
+
+def _law(cfg):
+    law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
+    install_nullspace(law, cfg)
+    return law
+
+
+@pytest.mark.parametrize('arm, case', [('ur5', 'ur5_wrist2'), ('panda', 'panda_j7')])
+def test_the_shipped_spatial_config_gives_the_offline_runners_law(arm, case):
+    cfg = SCHEMA.config(_values(arm))
+    law = _law(cfg)
+    assert isinstance(law, SpatialControlLaw) and cfg.gains.task_dim == 3
+    assert law.law.nullspace.kd == 20.0
+    assert law.law.nullspace.inverse == 'weighted'
+    # the offline runner's (spatial_offline.run_case): SpatialGains(task_dim=3), kd 20
+    offline = SpatialControlLaw(cfg.nominal, SpatialGains(task_dim=3))
+    offline.set_nullspace_kd(20.0)
+    q = np.array(CASES[case][2]) + 0.05
+    qd = np.linspace(-0.3, 0.3, cfg.nominal.n)
+    p_d = cfg.nominal.fk(q) + 0.01
+    a = law.step(q, qd, p_d, [0.1, 0.0, 0.0], [0.0, 0.2, 0.0], 1e-3)
+    b = offline.step(q, qd, p_d, [0.1, 0.0, 0.0], [0.0, 0.2, 0.0], 1e-3)
+    assert a.tau.tolist() == b.tau.tolist()
+    assert law.state_values() == offline.state_values()
+
+
+def test_lockstep_ticks_of_the_loop_on_a_ur5_equal_the_offline_twin_exactly():
+    cfg = SCHEMA.config(_values('ur5'))
+    arm = cfg.nominal
+    real = arm.nominal(1.0)
+    q0, why = start_posture(arm, CASES['ur5_wrist2'][2])
+    assert q0 is not None, why
+    twin = run_twin(real, q0, _law(cfg), 3, t_stop=TICKS * 1e-3)
+    loop = ControlLoop(cfg, lambda *line: None)
+    plant = SpatialPlant(real, 5e-4, 0.5, 3, q0)
+    p0 = real.fk(q0)
+    names = list(reversed(cfg.joint_names))        # any order: the loop maps by name
+    for k in range(TICKS):
+        ns = k * DT_NS
+        q, qd = plant.q.tolist(), plant.qd.tolist()
+        assert loop.on_state(ns, names, q[::-1], qd[::-1], ns, 0.0) is None   # waits
+        p, v, a = circle(p0, 0.1, k * 1e-3, 5.0)
+        res = loop.on_setpoint(ns, p.tolist() + v.tolist() + a.tolist(), ns, 0.0)
+        assert res is not None and res.status == 0, (k, res and res.message)
+        assert res.effort == [float(t) for t in twin['trace']['tau'][k][list(
+            cfg.cmd_index)]]
+        assert list(res.position) == twin['trace']['p'][k].tolist()
+        effort = [0.0] * cfg.nominal.r
+        for name, value in zip(cfg.joints, res.effort):
+            effort[cfg.nominal.active.index(cfg.joint_names.index(name))] = value
+        plant.step(effort, 1e-3)
+    assert len(res.law_state_values) == len(res.law_state_names) == 7
+    assert res.law_state_names[-1] == 'kappa' and 0.0 < res.law_state_values[-1] <= 1.0
+    assert 1e3 * max(np.linalg.norm(twin['trace']['p'] - twin['trace']['p_d'], axis=1)) < 3.0
+
+
+def test_a_spatial_arm_refuses_the_planar_law_and_planar_only_options():
+    assert SCHEMA.reason(_values('ur5', law='robust')).startswith(
+        "law: a spatial arm (task_dim 3) runs law 'spatial'")
+    assert SCHEMA.reason(_values('ur5', joint_failures='detect')).startswith(
+        'joint_failures: planar arms only for now')
+    assert SCHEMA.reason(_values('ur5', K=[100.0, 100.0])) == (
+        "K: expected 3 values (the task dimension of the arm's model), got [100.0, 100.0]")
+    planar = dict(SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml')))
+    assert SCHEMA.reason(dict(planar, law='spatial')).startswith(
+        "law: a spatial arm (task_dim 3) runs law 'spatial', a planar one another law")
