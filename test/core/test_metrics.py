@@ -145,3 +145,17 @@ def test_table_and_writer_reject_malformed_records(tmp_path):
         metrics.write_records(tmp_path / 'm.json', _record())
     with pytest.raises(FreejointValueError, match='^records:'):
         metrics.write_records(tmp_path / 'm.json', [_record(rms_mm=float('nan'))])
+
+
+def test_a_spatial_tip_gives_the_error_norm_over_its_three_coordinates():
+    # errors (3, 4, 12) mm and (0, 0, 0): norms 13 mm and 0 (hand-derived)
+    p = [[0.003, 0.004, 0.012], [0.1, 0.2, 0.3]]
+    p_d = [[0.0, 0.0, 0.0], [0.1, 0.2, 0.3]]
+    rec = metrics.compute_record('ur5_wrist2', 'spatial', 0, [0.0, 0.001], p, p_d,
+                                 np.ones((2, 5)), np.zeros(5), [0.0, 0.1], [0.5, 0.6])
+    assert rec['max_mm'] == pytest.approx(13.0, abs=1e-12)
+    assert rec['final_mm'] == 0.0
+    assert rec['rms_mm'] == pytest.approx(13.0 / np.sqrt(2.0), abs=1e-12)
+    with pytest.raises(FreejointValueError, match=r'^p_d: expected shape \(2, 2\) or \(2, 3\)'):
+        metrics.compute_record('ur5_wrist2', 'spatial', 0, [0.0, 0.001], p, np.zeros((2, 2)),
+                               np.ones((2, 5)), np.zeros(5), [0.0, 0.1], [0.5, 0.6])

@@ -71,8 +71,9 @@ def compute_record(case, variant, seed, t, p, p_d, tau, theta, q_passive, det,
         Disturbance seed.
     t : array_like, shape (N,)
         Tick times (s), N >= 1, non-decreasing.
-    p, p_d : array_like, shape (N, 2)
-        Measured and desired end-effector position (m).
+    p, p_d : array_like, shape (N, m)
+        Measured and desired end-effector position (m); m = 2 (a planar arm) or 3 (the
+        tip of a spatial arm).
     tau : array_like, shape (N, r)
         Active joint torques (N m).
     theta : array_like, shape (5,) or (N, 5)
@@ -80,7 +81,8 @@ def compute_record(case, variant, seed, t, p, p_d, tau, theta, q_passive, det,
     q_passive : array_like, shape (N,) or (N, 1)
         Passive joint angle (rad).
     det : array_like, shape (N,)
-        ``|det(Da Da^T)|`` of the nominal model per tick.
+        ``|det(Da Da^T)|`` of the nominal model per tick (a spatial arm: the law's
+        scale-free ``kappa``).
     diverged_at_s : float or None
         Time (s) the run was stopped at, or None if it completed.
     source : str
@@ -110,9 +112,11 @@ def compute_record(case, variant, seed, t, p, p_d, tau, theta, q_passive, det,
         raise FreejointValueError('t: tick times must be non-decreasing')
     p = _array('p', p, (2,))
     p_d = _array('p_d', p_d, (2,))
+    m = p.shape[1]
     for name, arr in (('p', p), ('p_d', p_d)):
-        if arr.shape != (n, 2):
-            raise FreejointValueError(f'{name}: expected shape ({n}, 2), got {arr.shape}')
+        if arr.shape != (n, m) or m not in (2, 3):
+            raise FreejointValueError(f'{name}: expected shape ({n}, 2) or ({n}, 3), the '
+                                      f'same for p and p_d, got {arr.shape}')
     tau = _array('tau', tau, (2,))
     if tau.shape[0] != n or tau.shape[1] < 1:
         raise FreejointValueError(f'tau: expected shape ({n}, r), got {tau.shape}')
@@ -136,7 +140,10 @@ def compute_record(case, variant, seed, t, p, p_d, tau, theta, q_passive, det,
                 f'diverged_at_s: expected a float or None, got {diverged_at_s!r}') from None
         if not math.isfinite(diverged_at_s):
             raise FreejointValueError(f'diverged_at_s: must be finite, got {diverged_at_s}')
-    err_mm = 1000.0 * np.hypot(p[:, 0] - p_d[:, 0], p[:, 1] - p_d[:, 1])
+    if m == 2:
+        err_mm = 1000.0 * np.hypot(p[:, 0] - p_d[:, 0], p[:, 1] - p_d[:, 1])
+    else:
+        err_mm = 1000.0 * np.linalg.norm(p - p_d, axis=1)
     q3_deg = np.degrees(qp)
     return {
         'case': case,
