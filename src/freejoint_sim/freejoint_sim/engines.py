@@ -3,9 +3,13 @@ The simulator's plant engines (parameter ``engine``), built from its configurati
 
 * ``rk4``: classic RK4 at ``dt_sub`` (``freejoint_core.plant.Plant``): the closed-form
   3-link kernel for the paper's arm and any 3-link arm, Pinocchio's ABA
-  (``freejoint_core.pin_plant.PinPlant``) for URDF arms of other lengths of chain;
+  (``freejoint_core.pin_plant.PinPlant``) for URDF arms of other lengths of chain, and
+  ``freejoint_core.spatial_plant.SpatialPlant`` (Pinocchio's ABA of the URDF chain) for a
+  spatial arm (``task_dim`` 3), the plant of the offline runner
+  ``freejoint_core.spatial_offline``;
 * ``mujoco``: MuJoCo's RK4 on the URDF (``freejoint_core.mujoco_plant.MujocoPlant``; the
-  shipped ``paper_arm.urdf`` for the default arm).
+  shipped ``paper_arm.urdf`` for the default arm); planar arms only (``params.build``
+  refuses it for a spatial arm, naming ``engine``).
 
 Every engine holds the torque and one disturbance draw per control period with the same
 seeded draws, so the engines differ only by their integration of the same equations:
@@ -15,6 +19,7 @@ closed loop over the paper's circle, MuJoCo = RK4 to 1e-6 mm in both cases
 """
 
 from freejoint_core.plant import Plant
+from freejoint_core.spatial_plant import SpatialPlant
 from freejoint_core.urdf_offline import make_plant as urdf_plant
 
 
@@ -38,6 +43,9 @@ def make_plant(cfg):
         If the description cannot be built by the engine (naming ``arm``).
 
     """
+    if cfg.arm.spatial is not None:
+        return SpatialPlant(cfg.arm.spatial, cfg.dt_sub, dist_bound=cfg.dist_bound,
+                            seed=cfg.seed, q0=cfg.q0)
     if cfg.engine == 'rk4' and cfg.arm.urdf_arm is None:
         return Plant(cfg.params, cfg.dt_sub, dist_bound=cfg.dist_bound, seed=cfg.seed,
                      q0=cfg.q0)

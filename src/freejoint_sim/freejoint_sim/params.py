@@ -5,7 +5,8 @@ Parameters of the simulator node: its schema (no ROS types).
 validator), the cross-parameter checks (the step grid: dt_sub, publish_rate, clock_rate;
 the joints of the arm; the initial state) and :func:`build` of the :class:`Config` the
 node reads (real arm, initial state by the active joints' inverse kinematics
-``ArmModel.ik``, branch +1, command mapping). The arm entries are
+``ArmModel.ik``, branch +1, command mapping; a spatial arm, ``task_dim`` 3: its
+``initial_joint_positions`` within the URDF's position limits). The arm entries are
 ``freejoint_common.arm_description.ARM_SPECS``, the ones the controller and the planner
 share are ``freejoint_common.schema``'s; the paper's defaults are the core's
 (``DEFAULT_DT_SUB``, ``DEFAULT_DIST_BOUND``, ``DEFAULT_Q3_0_DEG``). ``SPECS`` /
@@ -70,8 +71,9 @@ PARAMS = (
     ARM_SPECS,
     Param('engine', 'rk4',
           "plant: 'rk4' (classic RK4 at dt_sub: the closed-form 3-link model, Pinocchio's "
-          "ABA for other URDF arms) or 'mujoco' (MuJoCo's RK4 on the URDF, "
-          'freejoint_core.mujoco_plant); takes effect on reset', validator=one_of(ENGINES)),
+          'ABA for other URDF arms and for a spatial arm, freejoint_core.spatial_plant) or '
+          "'mujoco' (MuJoCo's RK4 on the URDF, freejoint_core.mujoco_plant; planar arms "
+          'only); takes effect on reset', validator=one_of(ENGINES)),
     Param('mode', 'lockstep',
           "'lockstep': own /clock, advance one control period per command; 'realtime': "
           'step on the wall clock and apply the latest command', read_only=True,
@@ -103,10 +105,11 @@ PARAMS = (
           validator=_seed),
     Param('initial_position', [0.2, 0.0],
           'initial end-effector position [m] (x, y); with initial_passive_deg gives q(0) by '
-          'inverse kinematics (branch +1), at rest; takes effect on reset',
+          'inverse kinematics (branch +1), at rest; planar arms only; takes effect on reset',
           validator=_initial_position),
     Param('initial_passive_deg', DEFAULT_Q3_0_DEG,
-          'initial passive joint angle [deg], within one turn; takes effect on reset',
+          'initial passive joint angle [deg], within one turn; planar arms only; takes '
+          'effect on reset',
           (-MAX_PASSIVE_DEG, MAX_PASSIVE_DEG),
           validator=_within(-MAX_PASSIVE_DEG, MAX_PASSIVE_DEG,
                             f'must be within one turn, [-{MAX_PASSIVE_DEG:g}, '
@@ -114,7 +117,8 @@ PARAMS = (
     Param('initial_joint_positions', '',
           "q(0) [rad], every joint base to tip, as space-separated numbers (e.g. '0 1.0 1.4 "
           "2.2'), instead of initial_position and initial_passive_deg (which need an arm "
-          "with one passive and two active joints); '' = those; takes effect on reset"),
+          "with one passive and two active joints); '' = those; a spatial arm (task_dim 3) "
+          "needs them, within the URDF's position limits; takes effect on reset"),
     Param('start_pose', 'paper',
           "'paper': q(0) as initial_position and initial_passive_deg (or "
           "initial_joint_positions) give it; 'hanging': the free link at rest under gravity "
@@ -122,7 +126,8 @@ PARAMS = (
           'end effector at initial_position (freejoint_core.internal.hanging_pose); for '
           'another arm, the static equilibrium of its free joints nearest '
           'initial_joint_positions, the end effector where those put it '
-          '(freejoint_core.internal.equilibrium_pose); needs gravity; takes effect on reset',
+          '(freejoint_core.internal.equilibrium_pose); needs gravity; planar arms only; '
+          'takes effect on reset',
           validator=one_of(START_POSES)),
     Param('command_timeout', 0.5,
           'wall time [s] without a command after which zero effort is applied (and a '
@@ -313,6 +318,45 @@ def _hanging(values, params, guess):
                                   f'{exc}') from None
 
 
+PLANAR_ONLY = ('initial_position', 'initial_passive_deg', 'start_pose')
+"""The parameters of a planar arm's initial state: refused for a spatial arm unless left at
+their defaults."""
+
+
+def _spatial_start(values, arm):
+    """
+    Return q(0) of a spatial arm (``task_dim`` 3), or raise naming the parameter.
+
+    ``initial_joint_positions`` (n angles, base to tip) is required and each angle must lie
+    within its joint's URDF position limits; the planar initial-state parameters
+    (``PLANAR_ONLY``) must be at their defaults; the only engine is ``rk4``
+    (``freejoint_core.spatial_plant.SpatialPlant``).
+    """
+    spatial = arm.spatial
+    if values['engine'] != 'rk4':
+        raise FreejointValueError(
+            f"engine: {values['engine']!r} has no plant of a spatial arm (task_dim 3); "
+            "'rk4' integrates it (Pinocchio's ABA, freejoint_core.spatial_plant)")
+    for name in PLANAR_ONLY:
+        given, default = values[name], SCHEMA[name].default
+        if (list(given) != list(default) if isinstance(default, list)
+                else given != default):
+            raise FreejointValueError(
+                f'{name}: planar arms only (task_dim 2), got {given!r} for a '
+                'spatial arm; it starts at initial_joint_positions')
+    q0 = _initial_joints(values['initial_joint_positions'], spatial)
+    if q0 is None:
+        raise FreejointValueError(
+            f'initial_joint_positions: a spatial arm (task_dim 3) starts at its {spatial.n} '
+            f'joint angles [rad] {list(spatial.joint_names)}, got none')
+    for name, q, lo, hi in zip(spatial.joint_names, q0, spatial.lower, spatial.upper):
+        if not lo <= q <= hi:
+            raise FreejointValueError(
+                f'initial_joint_positions: {name} = {q!r} rad is outside its URDF limits '
+                f'[{float(lo)!r}, {float(hi)!r}] rad')
+    return q0
+
+
 def build(values):
     """
     Return the :class:`Config` of a complete, valid parameter dict.
@@ -324,6 +368,21 @@ def build(values):
     joint_names, joints = _joints(values, arm)
     active_names = [joint_names[i] for i in params.active]
     dt = float(values['control_period'])
+    if arm.spatial is not None:
+        q0 = _spatial_start(values, arm)
+    else:
+        q0 = _planar_start(values, arm)
+    return Config(values=dict(values), params=params, arm=arm,
+                  q0=tuple(float(v) for v in q0), joint_names=joint_names, joints=joints,
+                  cmd_to_active=tuple(active_names.index(name) for name in joints),
+                  lockstep=values['mode'] == 'lockstep', dt=dt, dt_ns=round(dt * 1e9),
+                  publish_every=_publish_every(values['publish_rate'], dt),
+                  clock_every=_clock_every(values['clock_rate'], dt))
+
+
+def _planar_start(values, arm):
+    """Return q(0) of a planar arm (Table I or URDF), or raise naming the parameter."""
+    params = arm.params
     passive = float(values['initial_passive_deg'])
     q0 = _initial_joints(values['initial_joint_positions'], params)
     if q0 is not None:
@@ -345,12 +404,7 @@ def build(values):
             raise FreejointValueError(
                 f'initial_position: unreachable with initial_passive_deg = '
                 f'{values["initial_passive_deg"]}: {exc}') from None
-    return Config(values=dict(values), params=params, arm=arm,
-                  q0=tuple(float(v) for v in q0), joint_names=joint_names, joints=joints,
-                  cmd_to_active=tuple(active_names.index(name) for name in joints),
-                  lockstep=values['mode'] == 'lockstep', dt=dt, dt_ns=round(dt * 1e9),
-                  publish_every=_publish_every(values['publish_rate'], dt),
-                  clock_every=_clock_every(values['clock_rate'], dt))
+    return q0
 
 
 SCHEMA = Schema(PARAMS, CHECKS, build)

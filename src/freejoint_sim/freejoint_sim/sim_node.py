@@ -1,9 +1,10 @@
 """
-Simulator node: the planar arm with a free joint (freejoint_core.plant.Plant) in ROS 2.
+Simulator node: an arm with a free joint (freejoint_core.plant.Plant) in ROS 2.
 
 Publishes ``joint_states`` (sensor_msgs/JointState: every joint, the passive one included;
 position, velocity and the actuator effort applied over the last step) and ``ee_position``
-(geometry_msgs/PointStamped, from the core model's forward kinematics); takes the active
+(geometry_msgs/PointStamped, from the core model's forward kinematics: x, y of a planar
+arm, z 0; x, y, z of a spatial arm's tip in its base frame); takes the active
 joint efforts on ``effort_controller/commands`` (std_msgs/Float64MultiArray in the order of
 parameter ``joints``, what ros2_control's JointGroupEffortController takes; remap it to
 ``/<controller>/commands``).  ``~/reset`` (std_srvs/Trigger) puts the arm back at its
@@ -15,7 +16,10 @@ ERROR with the reason at once when the plant diverges.  Joint failures (issue 23
 ``freejoint_sim.failure_injection``): parameter ``fail_joint`` (``joint3@2.5``) and
 ``~/fail_joint`` (freejoint_msgs/FailJoint) make a joint's actuator and brake fail; its
 effort then reads 0, the log and ``/diagnostics`` say when, and with ``report_failures``
-a notice goes out on ``joint_failures``.
+a notice goes out on ``joint_failures``.  A spatial arm (``task_dim`` 3: a serial URDF
+chain on Pinocchio, ``freejoint_core.spatial_plant.SpatialPlant``) is the same node with its
+n chain joints in ``joint_states``, its r active joints' efforts in the command and its
+URDF text on ``robot_description``.
 
 Modes (docs/GRAPH.md):
 
@@ -88,6 +92,7 @@ class SimNode(Node, Lifecycle):
         cfg = self.config = self._params.config
         self._plant = make_plant(cfg)
         self._fk = self._plant.model.fk
+        self._spatial = cfg.arm.spatial is not None   # ee_position x, y, z (else x, y)
         self._injector = self._make_injector(cfg)
         self._fail_requests = []
         self._install(cfg)
@@ -169,7 +174,8 @@ class SimNode(Node, Lifecycle):
         self.get_logger().info(
             'simulator ready: %s arm, %s, dt %g s (%s %g s), disturbance %g N m seed %d, '
             'q0 = [%s] rad, command timeout %g s' % (
-                cfg.arm.source if cfg.arm.urdf_arm else cfg.case,
+                cfg.arm.source if cfg.arm.urdf_arm or cfg.arm.spatial is not None
+                else cfg.case,
                 'lockstep' if cfg.lockstep else 'real time', cfg.dt,
                 'MuJoCo RK4' if cfg.engine == 'mujoco' else 'RK4', cfg.dt_sub, cfg.dist_bound,
                 cfg.seed, ', '.join('%.6f' % v for v in cfg.arm.to_joints(cfg.q0)),
@@ -187,7 +193,7 @@ class SimNode(Node, Lifecycle):
     def _publish_description(self, arm):
         """Publish the arm's URDF on /robot_description (latched, as robot_state_publisher)."""
         try:
-            text = arm.description().urdf
+            text = arm.spatial.urdf if arm.spatial is not None else arm.description().urdf
         except FreejointValueError as exc:
             self.get_logger().warn('no %s: %s' % (ROBOT_DESCRIPTION.name, exc))
             return
@@ -433,11 +439,15 @@ class SimNode(Node, Lifecycle):
         if self._observer is not None:
             self._observer.state_published(self._k, t_ns)
         self._pub_js.publish(js)
-        px, py = self._fk(q).tolist()
         ee = self._ee
         ee.header.stamp = stamp
-        ee.point.x = px
-        ee.point.y = py
+        if self._spatial:
+            point = ee.point
+            point.x, point.y, point.z = self._fk(q).tolist()
+        else:
+            px, py = self._fk(q).tolist()
+            ee.point.x = px
+            ee.point.y = py
         self._pub_ee.publish(ee)
         now = _monotonic()
         self._waiting_since = now
