@@ -271,3 +271,21 @@ def test_joint_failures_are_read_from_the_simulators_diagnostics_and_the_control
     assert failure_lines('x', [{'joint': 'joint3', 'failed_s': None, 'detected_s': 9.0,
                                 'by': 'notice'}], t, error) == [
         'x: joint3 failed at (not recorded), detected at 9.000 s by notice']
+
+
+def test_a_spatial_path_is_drawn_in_the_plane_of_its_circle():
+    import numpy as np
+
+    from freejoint_tools.plots import _drawn, path_plane
+    # a 0.1-m circle in the plane x = 0.5 (y, z), centre (0.5, 0.1, 0.4)
+    a = np.linspace(0.0, 2.0 * np.pi, 73)[:-1]
+    p_d = np.column_stack((np.full(72, 0.5), 0.1 + 0.1 * np.cos(a), 0.4 + 0.1 * np.sin(a)))
+    origin, u, v, labels = path_plane(p_d)
+    assert origin == pytest.approx([0.5, 0.1, 0.4], abs=1e-12)
+    assert abs(u[0]) < 1e-12 and abs(v[0]) < 1e-12 and abs(u @ v) < 1e-12
+    drawn = _drawn(p_d, (origin, u, v, labels))
+    assert np.hypot(*drawn.T) == pytest.approx(np.full(72, 0.1), abs=1e-12)   # the radius
+    assert labels[0].startswith('u [m]')
+    # a planar path keeps its own x, y
+    origin, u, v, labels = path_plane(p_d[:, :2])
+    assert (u.tolist(), v.tolist(), labels) == ([1.0, 0.0], [0.0, 1.0], ('x [m]', 'y [m]'))

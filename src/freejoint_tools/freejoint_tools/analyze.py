@@ -322,7 +322,8 @@ def bag_arm(bag, store, states, joint_states, info):
     -------
     dict
         ``joints`` (all, base to tip), ``passive`` (names), ``params`` (ArmParams of the
-        real arm: the recorded ``/robot_description``, else Table I of the case),
+        real arm: the recorded ``/robot_description``, else Table I of the case; None for
+        a spatial arm, whose ControllerState positions have 3 values),
         ``name`` (the URDF's robot name, or 'Table I'), ``source`` (where it came from),
         ``notes`` (warnings).
 
@@ -348,6 +349,9 @@ def bag_arm(bag, store, states, joint_states, info):
                     'name': 'Table I' if paper else urdf.name or 'URDF arm',
                     'source': 'the recorded %s' % ROBOT_DESCRIPTION.absolute, 'notes': notes}
         except FreejointValueError as exc:
+            spatial = _spatial_arm(text, names, passive, states)
+            if spatial is not None:
+                return spatial
             notes.append('%s: the recorded %s is not an arm the analysis models (%s); '
                          'Fig. 2 shows the Table I arm' % (bag.path, texts[0], exc))
     params = table1(case)
@@ -355,6 +359,25 @@ def bag_arm(bag, store, states, joint_states, info):
     return {'joints': joints, 'passive': passive or [DEFAULT_PASSIVE], 'params': params,
             'name': 'Table I', 'source': 'Table I (no %s in the bag)'
             % ROBOT_DESCRIPTION.absolute if not texts else 'Table I', 'notes': notes}
+
+
+def _spatial_arm(text, names, passive, states):
+    """
+    Return the arm of a spatial run (``task_dim`` 3: 3-value positions), else None.
+
+    Its figures draw the tip in the plane of its path and no joint-space map (``params``
+    None); the URDF's robot name names it.
+    """
+    import xml.etree.ElementTree as ET
+    if not states or len(states[0].position) != 3:
+        return None
+    try:
+        name = ET.fromstring(text).get('name') or 'URDF arm'
+    except ET.ParseError:
+        return None
+    return {'joints': list(names), 'passive': list(passive), 'params': None,
+            'name': name, 'source': 'the recorded %s (spatial)' % ROBOT_DESCRIPTION.absolute,
+            'notes': []}
 
 
 def time_origin(t):
@@ -455,7 +478,7 @@ def main(argv=None):
     print(format_table(records, theta=opts.theta))
     import numpy as np
     for trace in traces:
-        error = np.hypot(*(trace['p'] - trace['p_d']).T)
+        error = np.linalg.norm(trace['p'] - trace['p_d'], axis=1)
         for line in failure_lines(trace['name'], trace['failures'], trace['t'] + trace['t0'],
                                   error):
             print('failure: %s' % line)

@@ -82,8 +82,32 @@ def run_figure_name(trace):
         'run_%s.png' % trace['name'])
 
 
+def path_plane(p_d):
+    """
+    Return the plane a tip path is drawn in: ``(origin (m,), u (m,), v (m,), labels)``.
+
+    A planar arm's (m = 2): its own x, y. A spatial arm's (m = 3): the plane of the
+    desired path's two largest principal directions (the circle's plane), through its
+    mean, ``u`` with a non-negative largest entry.
+    """
+    p_d = np.asarray(p_d, dtype=float)
+    if p_d.shape[1] == 2:
+        return np.zeros(2), np.array([1.0, 0.0]), np.array([0.0, 1.0]), ('x [m]', 'y [m]')
+    origin = p_d.mean(axis=0)
+    _, _, vt = np.linalg.svd(p_d - origin, full_matrices=False)
+    u, v = (w if w[np.argmax(np.abs(w))] >= 0.0 else -w for w in vt[:2])
+    return origin, u, v, ('u [m] (in the plane of the path)', 'v [m]')
+
+
+def _drawn(p, plane):
+    """Return the coordinates (N, 2) of points ``p`` (N, m) in a ``path_plane``."""
+    origin, u, v, _ = plane
+    d = np.asarray(p, dtype=float) - origin
+    return np.column_stack((d @ u, d @ v))
+
+
 def figure_run(trace, path):
-    """Write Fig. 3/4 of one run to ``path``."""
+    """Write Fig. 3/4 of one run to ``path`` (a spatial arm: its path in the path's plane)."""
     t = trace['t']
     tlabel = _time_label(trace)
     p, p_d = trace['p'], trace['p_d']
@@ -91,17 +115,20 @@ def figure_run(trace, path):
     fig = Figure(figsize=(12.0, 6.6))
     axes = fig.subplots(2, 3)
     ax = axes[0, 0]
+    plane = path_plane(p_d)
+    if p.shape[1] != 2:
+        p, p_d = _drawn(p, plane), _drawn(p_d, plane)
     ax.plot(p_d[:, 0], p_d[:, 1], 'k--', lw=1.2, label='desired')
     ax.plot(p[:, 0], p[:, 1], 'C3', lw=1.0, label='actual')
     ax.plot(p_d[0, 0], p_d[0, 1], 'ko', ms=4)
     ax.set_aspect('equal', adjustable='datalim')
-    ax.set_xlabel('x [m]')
-    ax.set_ylabel('y [m]')
+    ax.set_xlabel(plane[3][0])
+    ax.set_ylabel(plane[3][1])
     ax.set_title('(a) end-effector path')
     ax.legend(loc='upper right', fontsize=8)
     ax = axes[0, 1]
-    ax.plot(t, err_mm[:, 0], label='$e_x$')
-    ax.plot(t, err_mm[:, 1], label='$e_y$')
+    for i, name in enumerate('xyz'[:err_mm.shape[1]]):
+        ax.plot(t, err_mm[:, i], label='$e_%s$' % name)
     ax.set_xlabel(tlabel)
     ax.set_ylabel('error [mm]')
     ax.set_title('(b) tracking errors')
@@ -127,7 +154,8 @@ def figure_run(trace, path):
     ax.set_title(r'(e) adaptive estimates $\hat\theta$')
     ax.legend(fontsize=7, ncol=2)
     ax = axes[1, 2]
-    norm = np.hypot(err_mm[:, 0], err_mm[:, 1])
+    norm = np.hypot(err_mm[:, 0], err_mm[:, 1]) if err_mm.shape[1] == 2 else \
+        np.linalg.norm(err_mm, axis=1)
     ax.semilogy(t, np.maximum(norm, 1e-6), 'C4')
     ax.set_xlabel(tlabel)
     ax.set_ylabel(r'$\|p - p_d\|$ [mm]')
@@ -274,20 +302,24 @@ def figure_compare(traces, path):
     """Write the runs side by side (paths, error norm, passive angle, torques) to ``path``."""
     fig = Figure(figsize=(14.0, 4.4))
     ax_p, ax_e, ax_q, ax_t = fig.subplots(1, 4)
+    plane = path_plane(traces[0]['p_d'])
     for i, tr in enumerate(traces):
         color = 'C%d' % (i % 10)
         label = _label(tr)
+        p, p_d = tr['p'], tr['p_d']
+        if p.shape[1] != 2:
+            p, p_d = _drawn(p, plane), _drawn(p_d, plane)
         if i == 0:
-            ax_p.plot(tr['p_d'][:, 0], tr['p_d'][:, 1], 'k--', lw=1.0, label='desired')
-        ax_p.plot(tr['p'][:, 0], tr['p'][:, 1], color=color, lw=0.9, label=label)
-        err = 1000.0 * np.hypot(*(tr['p'] - tr['p_d']).T)
+            ax_p.plot(p_d[:, 0], p_d[:, 1], 'k--', lw=1.0, label='desired')
+        ax_p.plot(p[:, 0], p[:, 1], color=color, lw=0.9, label=label)
+        err = 1000.0 * np.linalg.norm(tr['p'] - tr['p_d'], axis=1)
         ax_e.semilogy(tr['t'], np.maximum(err, 1e-6), color=color, lw=0.9, label=label)
         ax_q.plot(tr['t'], np.degrees(tr['q_passive']), color=color, lw=0.9, label=label)
         ax_t.plot(tr['t'], np.max(np.abs(tr['tau']), axis=1), color=color, lw=0.8,
                   label=label)
     ax_p.set_aspect('equal', adjustable='datalim')
-    ax_p.set_xlabel('x [m]')
-    ax_p.set_ylabel('y [m]')
+    ax_p.set_xlabel(plane[3][0])
+    ax_p.set_ylabel(plane[3][1])
     ax_p.set_title('path')
     ax_e.set_xlabel(_time_label(traces[0]))
     ax_e.set_ylabel(r'$\|p - p_d\|$ [mm]')
@@ -327,7 +359,7 @@ def write_figures(traces, bag_paths, figures_dir=None):
     for trace, bag in zip(traces, bag_paths):
         out_dir = figures_dir or bag
         written.append(figure_run(trace, os.path.join(out_dir, run_figure_name(trace))))
-    if traces:
+    if traces and traces[0]['p'].shape[1] == 2:     # the planar arm's joint-space map
         written.append(figure2(traces[0], os.path.join(common, 'fig2_singularity.png')))
     if len(traces) > 1:
         written.append(figure_compare(traces, os.path.join(common, 'compare.png')))
