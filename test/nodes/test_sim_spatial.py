@@ -4,7 +4,8 @@ The simulator node on a spatial arm (issue 25) in its own process, driven by thi
 Started on config/sim.yaml with the UR5 overlay (config/ur5/sim.yaml: wrist_2 free) in
 lockstep, it publishes the six chain joints at the offline runner's start posture, at rest,
 the URDF it simulates on /robot_description and the tip in 3-D on ee_position; each state
-after a command is ``SpatialPlant`` stepped here with the same efforts, bit for bit.
+after a command is ``SpatialPlant`` stepped here with the same efforts, bit for bit (engine
+``mujoco``: to round-off, 1e-12).
 """
 import math
 import os
@@ -33,19 +34,29 @@ def _controller(ros_node, wait):
     return helpers.Controller(ros_node, wait)
 
 
+def _same(got, want, engine):
+    """Assert a published list equals the plant's: exactly (rk4), to 1e-12 (mujoco)."""
+    if engine == 'rk4':
+        assert list(got) == want.tolist()
+    else:
+        np.testing.assert_allclose(list(got), want, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize('engine', ['rk4', 'mujoco'])
 def test_sim_on_the_ur5_config_starts_at_the_runners_posture_and_steps_spatial_plant(
-        procs, ros_node, wait):
+        engine, procs, ros_node, wait):
     import rclpy
     from freejoint_common.contract import ROBOT_DESCRIPTION
     sim = procs.start_node('freejoint_sim', 'sim_node', 'sim', [
         '--ros-args', '--params-file', os.path.join(CONFIG, 'sim.yaml'),
-        '--params-file', os.path.join(CONFIG, 'ur5', 'sim.yaml')])
+        '--params-file', os.path.join(CONFIG, 'ur5', 'sim.yaml'), '-p', 'engine:=' + engine])
     texts = []
     ros_node.create_subscription(ROBOT_DESCRIPTION.msg_type, ROBOT_DESCRIPTION.name,
                                  lambda m: texts.append(m.data), ROBOT_DESCRIPTION.qos)
     ctl = _controller(ros_node, wait)
     ctl.connect(sim, procs)
     assert 'ur5_robot.urdf (spatial, base_link -> tool0)' in procs.log(sim)
+    assert ('(MuJoCo RK4 ' if engine == 'mujoco' else '(RK4 ') in procs.log(sim)
 
     # The offline runner's start posture, computed here (not read from the config).
     name, free, q_plan = CASES['ur5_wrist2']
@@ -73,9 +84,9 @@ def test_sim_on_the_ur5_config_starts_at_the_runners_posture_and_steps_spatial_p
         ctl.command(tau, k)
         msg = ctl.state(k + 1)
         plant.step(tau, DT)
-        assert list(msg.position) == plant.q.tolist()
-        assert list(msg.velocity) == plant.qd.tolist()
+        _same(msg.position, plant.q, engine)
+        _same(msg.velocity, plant.qd, engine)
         assert list(msg.effort) == tau[:4] + [0.0] + tau[4:]
         ee = ctl.ee[(k + 1) * 1_000_000]
-        assert [ee.point.x, ee.point.y, ee.point.z] == arm.fk(plant.q).tolist()
+        _same([ee.point.x, ee.point.y, ee.point.z], arm.fk(plant.q), engine)
     assert procs.stop(sim) == 0

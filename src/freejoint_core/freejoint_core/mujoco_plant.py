@@ -17,6 +17,12 @@ The model is MuJoCo's own URDF import of ``UrdfArm.urdf`` with:
   equations are eq. (1) exactly, ``M qdd + C qd + G = B tau_a + d``;
 * joints addressed by the URDF names, in the core's order.
 
+A spatial arm (``freejoint_core.spatial_model.SpatialArm``: a serial chain of a URDF, the
+tip in 3-D) is :class:`SpatialMujocoPlant`, the same with MuJoCo's import of the arm's
+URDF with its visual and collision elements left out (no meshes loaded) and every movable
+joint off the chain made fixed at 0, as ``SpatialArm`` locks it (the Panda's fingers);
+gravity ``SpatialArm.gravity``.
+
 A step that MuJoCo flags as diverged (its bad qpos / qvel / qacc warnings: it
 then resets its state) or that ends non-finite raises ``PlantDivergedError`` and
 the plant keeps its last finite state, as ``Plant`` does.  MuJoCo's warnings are
@@ -59,7 +65,13 @@ def build_mj_model(arm, dt_sub=DEFAULT_DT_SUB):
     except ValueError as exc:
         msg = ' '.join(str(exc).split())
         raise FreejointValueError(f'arm: MuJoCo cannot load the URDF ({msg})') from None
-    model.opt.gravity[:] = arm.gravity_vector
+    _exact(model, arm.gravity_vector, dt_sub)
+    return (model, *_addresses(model, arm.joint_names))
+
+
+def _exact(model, gravity, dt_sub):
+    """Set a model up to integrate eq. (1) exactly: RK4 at ``dt_sub``, nothing else."""
+    model.opt.gravity[:] = gravity
     model.opt.timestep = dt_sub
     model.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
     model.opt.disableflags |= (mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
@@ -68,8 +80,12 @@ def build_mj_model(arm, dt_sub=DEFAULT_DT_SUB):
     model.dof_frictionloss[:] = 0.0
     model.dof_armature[:] = 0.0
     model.jnt_stiffness[:] = 0.0
+
+
+def _addresses(model, joint_names):
+    """Return the ``qpos`` and ``qvel`` addresses of the joints (core order), or raise."""
     qpos_adr, dof_adr = [], []
-    for name in arm.joint_names:
+    for name in joint_names:
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
         if jid < 0:
             raise FreejointValueError(f'arm: MuJoCo has no joint {name!r} after the import')
@@ -77,10 +93,78 @@ def build_mj_model(arm, dt_sub=DEFAULT_DT_SUB):
             raise FreejointValueError(f'arm: MuJoCo joint {name!r} is not a hinge')
         qpos_adr.append(int(model.jnt_qposadr[jid]))
         dof_adr.append(int(model.jnt_dofadr[jid]))
-    if model.nv != arm.params.n:
+    if model.nv != len(joint_names):
         raise FreejointValueError(
-            f'arm: MuJoCo model has nv = {model.nv}, expected {arm.params.n} joints')
-    return model, np.array(qpos_adr), np.array(dof_adr)
+            f'arm: MuJoCo model has nv = {model.nv}, expected {len(joint_names)} joints')
+    return np.array(qpos_adr), np.array(dof_adr)
+
+
+def spatial_urdf(arm):
+    """
+    Return the URDF text MuJoCo imports for a spatial arm (module notes).
+
+    Parameters
+    ----------
+    arm : freejoint_core.spatial_model.SpatialArm
+        The arm (``urdf``, ``joint_names``).
+
+    Returns
+    -------
+    str
+        The arm's URDF without visual and collision elements, every movable joint off the
+        chain fixed at 0.
+
+    Raises
+    ------
+    FreejointValueError
+        ``arm: ...`` if a joint off the chain cannot sit at 0 (its limits exclude it:
+        ``SpatialArm`` locks it at the nearer limit, which a fixed joint cannot be).
+
+    """
+    import xml.etree.ElementTree as ET
+    robot = ET.fromstring(arm.urdf)
+    for link in robot.findall('link'):
+        for tag in ('visual', 'collision'):
+            for element in link.findall(tag):
+                link.remove(element)
+    for joint in robot.findall('joint'):
+        if joint.get('type') in ('fixed', None) or joint.get('name') in arm.joint_names:
+            continue
+        limit = joint.find('limit')
+        if joint.get('type') != 'continuous' and limit is not None and not (
+                float(limit.get('lower', 0.0)) <= 0.0 <= float(limit.get('upper', 0.0))):
+            raise FreejointValueError(
+                f"arm: joint {joint.get('name')!r} off the chain is locked at a limit, not at "
+                '0: MuJoCo cannot fix it there')
+        joint.set('type', 'fixed')
+    return ET.tostring(robot, encoding='unicode')
+
+
+def build_spatial_mj_model(arm, dt_sub=DEFAULT_DT_SUB):
+    """
+    Build the MuJoCo model of a spatial arm's chain, set up to integrate its dynamics exactly.
+
+    Parameters
+    ----------
+    arm : freejoint_core.spatial_model.SpatialArm
+        The arm (URDF, chain, gravity).
+    dt_sub : float
+        RK4 step [s], > 0.
+
+    Returns
+    -------
+    model, qpos_adr, dof_adr
+        As :func:`build_mj_model`.
+
+    """
+    dt_sub = positive('dt_sub', dt_sub)
+    try:
+        model = mujoco.MjModel.from_xml_string(spatial_urdf(arm))
+    except ValueError as exc:
+        msg = ' '.join(str(exc).split())
+        raise FreejointValueError(f'arm: MuJoCo cannot load the URDF ({msg})') from None
+    _exact(model, arm.gravity, dt_sub)
+    return (model, *_addresses(model, arm.joint_names))
 
 
 class MujocoPlant(PeriodPlant):
@@ -138,6 +222,10 @@ class MujocoPlant(PeriodPlant):
                 warning[i].number = 0
         return count
 
+    def stop(self):
+        """Zero every joint velocity: the arm stops where it is (brakes engaged)."""
+        self.mj_data.qvel[:] = 0.0
+
     @property
     def q(self):
         """Return the joint angles [rad] (the core's: the URDF's plus the offsets), copy (n,)."""
@@ -166,3 +254,43 @@ class MujocoPlant(PeriodPlant):
             return None
         data.qpos[:], data.qvel[:] = q_before, qd_before
         return 'MuJoCo: ' + (' '.join(' '.join(messages).split()) or 'non-finite state')
+
+
+class SpatialMujocoPlant(MujocoPlant):
+    """
+    A spatial arm simulated by MuJoCo, with bounded random joint disturbances.
+
+    ``freejoint_core.spatial_plant.SpatialPlant`` with MuJoCo's RK4 on its own import of
+    the URDF instead of RK4 on Pinocchio's ABA (module notes).
+
+    Parameters
+    ----------
+    arm : freejoint_core.spatial_model.SpatialArm
+        The real arm (URDF, chain, free joints, gravity).
+    dt_sub : float
+        MuJoCo RK4 step [s], > 0.
+    dist_bound, seed, q0, qd0
+        As :class:`freejoint_core.plant.Plant`.
+
+    Attributes
+    ----------
+    params, model : SpatialArm
+        ``arm`` (``n``, ``r``, ``active``; ``fk`` of the tip), as ``SpatialPlant``.
+    mj_model, mj_data, q, qd, t, k, last_disturbance
+        As :class:`MujocoPlant`.
+
+    """
+
+    def __init__(self, arm, dt_sub=DEFAULT_DT_SUB, dist_bound=0.5, seed=0, q0=None, qd0=None):
+        from freejoint_core.spatial_model import SpatialArm
+        if not isinstance(arm, SpatialArm):
+            raise FreejointValueError(f'arm: expected SpatialArm, got {type(arm).__name__}')
+        self.mj_model, self._qadr, self._vadr = build_spatial_mj_model(arm, dt_sub)
+        self._offsets = None
+        self.mj_data = mujoco.MjData(self.mj_model)
+        self.arm = arm
+        self._bad = [int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
+                                      mujoco.mjtWarning.mjWARN_BADQVEL,
+                                      mujoco.mjtWarning.mjWARN_BADQACC)]
+        self._setup(arm, arm, float(self.mj_model.opt.timestep), dist_bound, seed, q0, qd0)
+        self.reset()

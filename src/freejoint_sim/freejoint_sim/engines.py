@@ -8,8 +8,8 @@ The simulator's plant engines (parameter ``engine``), built from its configurati
   spatial arm (``task_dim`` 3), the plant of the offline runner
   ``freejoint_core.spatial_offline``;
 * ``mujoco``: MuJoCo's RK4 on the URDF (``freejoint_core.mujoco_plant.MujocoPlant``; the
-  shipped ``paper_arm.urdf`` for the default arm); planar arms only (``params.build``
-  refuses it for a spatial arm, naming ``engine``).
+  shipped ``paper_arm.urdf`` for the default arm; ``SpatialMujocoPlant`` for a spatial arm,
+  equal to ``SpatialPlant`` to round-off, ``src/freejoint_sim/test/test_spatial_arm.py``).
 
 Every engine holds the torque and one disturbance draw per control period with the same
 seeded draws, so the engines differ only by their integration of the same equations:
@@ -19,7 +19,6 @@ closed loop over the paper's circle, MuJoCo = RK4 to 1e-6 mm in both cases
 """
 
 from freejoint_core.plant import Plant
-from freejoint_core.spatial_plant import SpatialPlant
 from freejoint_core.urdf_offline import make_plant as urdf_plant
 
 
@@ -44,6 +43,11 @@ def make_plant(cfg):
 
     """
     if cfg.arm.spatial is not None:
+        # Pinocchio and MuJoCo imported for a spatial arm only
+        if cfg.engine == 'mujoco':
+            from freejoint_core.mujoco_plant import SpatialMujocoPlant as SpatialPlant
+        else:
+            from freejoint_core.spatial_plant import SpatialPlant
         return SpatialPlant(cfg.arm.spatial, cfg.dt_sub, dist_bound=cfg.dist_bound,
                             seed=cfg.seed, q0=cfg.q0)
     if cfg.engine == 'rk4' and cfg.arm.urdf_arm is None:

@@ -72,8 +72,8 @@ PARAMS = (
     Param('engine', 'rk4',
           "plant: 'rk4' (classic RK4 at dt_sub: the closed-form 3-link model, Pinocchio's "
           'ABA for other URDF arms and for a spatial arm, freejoint_core.spatial_plant) or '
-          "'mujoco' (MuJoCo's RK4 on the URDF, freejoint_core.mujoco_plant; planar arms "
-          'only); takes effect on reset', validator=one_of(ENGINES)),
+          "'mujoco' (MuJoCo's RK4 on the URDF, freejoint_core.mujoco_plant); takes effect on "
+          'reset', validator=one_of(ENGINES)),
     Param('mode', 'lockstep',
           "'lockstep': own /clock, advance one control period per command; 'realtime': "
           'step on the wall clock and apply the latest command', read_only=True,
@@ -329,14 +329,9 @@ def _spatial_start(values, arm):
 
     ``initial_joint_positions`` (n angles, base to tip) is required and each angle must lie
     within its joint's URDF position limits; the planar initial-state parameters
-    (``PLANAR_ONLY``) must be at their defaults; the only engine is ``rk4``
-    (``freejoint_core.spatial_plant.SpatialPlant``).
+    (``PLANAR_ONLY``) must be at their defaults.
     """
     spatial = arm.spatial
-    if values['engine'] != 'rk4':
-        raise FreejointValueError(
-            f"engine: {values['engine']!r} has no plant of a spatial arm (task_dim 3); "
-            "'rk4' integrates it (Pinocchio's ABA, freejoint_core.spatial_plant)")
     for name in PLANAR_ONLY:
         given, default = values[name], SCHEMA[name].default
         if (list(given) != list(default) if isinstance(default, list)
