@@ -14,15 +14,26 @@ from geometry_msgs.msg import Point
 import numpy as np
 from visualization_msgs.msg import Marker
 
+from .stream import SpatialSetpoint
+
 
 def setpoint_msg(sp, frame_id):
-    """Return the ``freejoint_msgs/CartesianSetpoint`` of a ``stream.Setpoint`` (planar: m = 2)."""
+    """
+    Return the ``freejoint_msgs/CartesianSetpoint`` of a stream setpoint.
+
+    ``stream.Setpoint``: planar, m = 2; ``stream.SpatialSetpoint``: spatial, m = 3.
+    """
     msg = SETPOINT.msg_type()
     stamp_from_ns(sp.stamp_ns, msg.header.stamp)
     msg.header.frame_id = frame_id
-    msg.position = array.array('d', (sp.px, sp.py))
-    msg.velocity = array.array('d', (sp.vx, sp.vy))
-    msg.acceleration = array.array('d', (sp.ax, sp.ay))
+    if type(sp) is SpatialSetpoint:
+        msg.position = array.array('d', sp.position)
+        msg.velocity = array.array('d', sp.velocity)
+        msg.acceleration = array.array('d', sp.acceleration)
+    else:
+        msg.position = array.array('d', (sp.px, sp.py))
+        msg.velocity = array.array('d', (sp.vx, sp.vy))
+        msg.acceleration = array.array('d', (sp.ax, sp.ay))
     msg.plan_id = sp.plan_id
     msg.plan_time = sp.plan_time
     msg.final = sp.final
@@ -69,7 +80,7 @@ def occupancy_grid(grid, extent, cell, frame_id, stamp_ns):
 
 def path_marker(points, frame_id, stamp_ns, plan_id=0, width=0.005):
     """
-    Return a ``visualization_msgs/Marker`` LINE_STRIP through ``points`` (m, (N, 2)).
+    Return a ``visualization_msgs/Marker`` LINE_STRIP through ``points`` (m, (N, 2) or (N, 3)).
 
     Namespace ``planned_path``, id 0 (each new plan replaces the previous line), green,
     line width ``width`` (m), no lifetime (stays until replaced).
@@ -85,5 +96,9 @@ def path_marker(points, frame_id, stamp_ns, plan_id=0, width=0.005):
     msg.scale.x = float(width)
     msg.color.r, msg.color.g, msg.color.b, msg.color.a = 0.1, 0.8, 0.2, 1.0
     msg.text = f'plan {int(plan_id)}'
-    msg.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in np.asarray(points)]
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim == 2 and pts.shape[1] == 3:     # a spatial plan
+        msg.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in pts]
+    else:
+        msg.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in pts]
     return msg

@@ -8,7 +8,8 @@ dict. ``case``, ``nominal_scale`` and ``control_period`` are the entries the con
 (and the simulator) share (``freejoint_common.schema``), the arm the entries of
 ``freejoint_common.arm_description``; the configured circle's defaults are the core's
 ``CircleQuintic`` (the paper's circle). :func:`validate` checks some values alone (a
-``~/plan_circle`` request).
+``~/plan_circle`` request). A spatial arm (``task_dim`` 3) takes ``radius``,
+``duration`` and ``start_delay`` of the circle; :data:`PLANAR_ONLY` stay at their defaults.
 """
 
 import inspect
@@ -143,7 +144,25 @@ def _check_rest(values):
     return None
 
 
-SCHEMA = Schema(PARAMS, (_check_rest,))
+PLANAR_ONLY = ('centre', 'start_angle', 'direction', 'circles', 'rest')
+"""Circle parameters a spatial arm's plan does not take (its circle starts at the tip)."""
+
+
+def _check_spatial(values):
+    """Refuse planar-only circle parameters away from their defaults for a spatial arm."""
+    if values.get('task_dim', 2) != 3:
+        return None
+    for name in PLANAR_ONLY:
+        value = values[name]
+        if (list(value) if isinstance(value, (list, tuple)) else value) != DEFAULTS[name]:
+            return (f'{name}: does not apply to a spatial arm (task_dim 3: one revolution '
+                    'of the circle from the tip, in the vertical plane facing the robot, '
+                    f'freejoint_planner.spatial_planning); leave it at {DEFAULTS[name]!r}, '
+                    f'got {values[name]!r}')
+    return None
+
+
+SCHEMA = Schema(PARAMS, (_check_rest, _check_spatial))
 SPECS = SCHEMA.params
 DEFAULTS = SCHEMA.defaults()
 LOOKAHEAD_MAX = SCHEMA['lookahead'].bounds[1]

@@ -65,6 +65,27 @@ and the passive joints of its arm.
 Refusals name the usable region (``SingularityModel.usable``). Every circle is
 held to the arm's reach and to ``max_speed`` / ``max_acceleration``. ``lookahead`` is checked
 against the clock spacing rule at run time.
+
+A spatial arm (``task_dim`` 3, ``NodeArm.spatial``; issue 25) takes another branch, the
+planar one untouched: its plan is the offline runner's circle
+(``spatial_planning.SpatialCircle``: ``freejoint_core.spatial_offline.circle(p0, radius, t,
+duration)``) from the tip ``p0`` of the arm's joint state, in the vertical plane facing the
+robot, streamed with 3 values per vector (in lockstep the configured plan starts at tick 0,
+so tick k carries ``circle(p0, radius, k dt, duration)``). ``radius``, ``duration`` and
+``start_delay`` apply; ``centre``, ``start_angle``, ``direction``, ``circles`` and ``rest``
+do not (refused away from their defaults, ``params.PLANAR_ONLY``). A plan from rest (the
+configured one, or any after ROS time went back) is checked when it starts, from the
+newest joint state (it waits for one): speed and acceleration bounds, reach, a free joint
+that must carry gravity, and the nominal closed loop (``spatial_planning.nominal_loop``:
+kappa, the active joints' URDF limits, tracking; about 0.6 s of CPU, during which the node
+does nothing else), refused with one line in the log (nothing streams). A plan asked for
+by ``~/plan_circle`` (``radius``, ``duration``, ``execute``; ``centre``, ``start_angle``
+and ``direction`` must be ``[0, 0]``, 0, 1; ``margin`` is the reach margin [m]), or by a
+change of ``radius`` / ``duration`` once the stream has published, is checked at once from
+the newest joint state and starts where the running plan rests, at its start or its end
+point: there is no 3-D transition, so one asked for while the running circle moves is
+refused, saying until when. The singularity map (``semi_singular_map``), the settle gate and the assessment of
+a reported joint failure are planar: none is used (a failure refuses every later plan).
 """
 
 from dataclasses import replace
@@ -83,6 +104,7 @@ from freejoint_core.arm import table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
 from freejoint_core.trajectory import CircleQuintic, RepeatedCircle
+import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
@@ -94,6 +116,8 @@ from .planning import assess_failure, circle_bounds, compute_model, describe_joi
 from .planning import end_effector, grid_bound, grid_extent, join_from_arm, joint_state
 from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle, planner_status, READY, SETTLING
 from .planning import prepare_transition, settle_gate_refusal, swing_deg
+from .spatial_planning import check_spatial_plan, describe as describe_spatial
+from .spatial_planning import spatial_bounds, SpatialRequest, start_point
 from .stream import Plan, SetpointStream
 
 NODE_NAME = 'freejoint_planner'
@@ -120,6 +144,8 @@ class PlannerNode(Node, Lifecycle):
         # The arm (robot_description / description_file, passive_joints, gravity): its
         # nominal model is the map's; read-only but gravity, which the map does not hold.
         arm = resolve_arm(self._cfg)
+        self._node_arm = arm
+        self._spatial = arm.spatial     # a spatial arm (task_dim 3), None: planar
         self._arm = None if arm.urdf_arm is None else arm.params
         self._passive = None            # the passive set after reported failures (None: none)
         self._failure_refusal = ''      # why no plan is accepted since a failure ('' : none)
@@ -142,18 +168,22 @@ class PlannerNode(Node, Lifecycle):
         self._born = time.monotonic()
         self._sim = self.get_parameter('use_sim_time').value
         own_clock(self)     # one /clock delivery: _on_clock sets the ROS clock
-        self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS),
-                                    arm=self._map_arm(self._cfg))
-        reason = (grid_bound(self._model.region.reach, self._cfg['grid_resolution'])
-                  or circle_bounds(make_circle(self._cfg), self._model,
-                                   self._cfg['max_speed'], self._cfg['max_acceleration']))
-        if not reason and self._cfg['settle_swing_deg'] > 0.0:
-            reason = settle_gate_refusal(self._model.nominal)
-        if reason:
-            raise FreejointValueError(reason)
-        self.get_logger().info(
-            f'singularity map computed in {self._model.seconds * 1e3:.0f} ms: '
-            f'{self._model.describe()}; {self._model.usable()}; arm: {self._arm_source}')
+        if self._spatial is not None:
+            self._model = None
+            self._init_spatial()
+        else:
+            self._model = compute_model(*(self._cfg[k] for k in MAP_KEYS),
+                                        arm=self._map_arm(self._cfg))
+            reason = (grid_bound(self._model.region.reach, self._cfg['grid_resolution'])
+                      or circle_bounds(make_circle(self._cfg), self._model,
+                                       self._cfg['max_speed'], self._cfg['max_acceleration']))
+            if not reason and self._cfg['settle_swing_deg'] > 0.0:
+                reason = settle_gate_refusal(self._model.nominal)
+            if reason:
+                raise FreejointValueError(reason)
+            self.get_logger().info(
+                f'singularity map computed in {self._model.seconds * 1e3:.0f} ms: '
+                f'{self._model.describe()}; {self._model.usable()}; arm: {self._arm_source}')
         # QoS overridable (qos_overrides./setpoint.publisher.<history|depth|reliability>).
         self._setpoint_pub = self.create_publisher(SETPOINT.msg_type, SETPOINT.name,
                                                    overridable(SETPOINT.qos),
@@ -169,7 +199,11 @@ class PlannerNode(Node, Lifecycle):
         self._spacing_logged = 0
         self._late_logged = 0
         self._publish_map()
-        if self._cfg['autostart']:
+        if self._cfg['autostart'] and self._spatial is not None:
+            # from rest: the circle starts at the tip of the first joint state (_join)
+            self._execute_spatial(self._cfg['radius'], self._cfg['duration'],
+                                  self._cfg['start_delay'], 'configured')
+        elif self._cfg['autostart']:
             circle = make_circle(self._cfg)
             reason, margin, choice, tick = self._admit(circle, self._model, self._cfg)
             if not reason:
@@ -211,6 +245,8 @@ class PlannerNode(Node, Lifecycle):
                     f'/clock must be out when the first arrives); >= {2 * n - 1} rides out a '
                     'lost /clock')
         changed = {k for k in new if new[k] != self._cfg[k]}
+        if self._spatial is not None:
+            return self._check_change_spatial(sim, changed, new)
         model = self._model
         if changed & set(MAP_KEYS):
             model = compute_model(*(new[k] for k in MAP_KEYS), arm=self._map_arm(new))
@@ -257,6 +293,15 @@ class PlannerNode(Node, Lifecycle):
         if 'lookahead' in changed:
             self.destroy_timer(self._timer)
             self._timer = self._make_timer()
+        if self._spatial is not None:
+            self._apply_spatial(changed, admitted)
+        else:
+            self._apply_planar(changed, new, model, circle, admitted)
+        if sim != self._sim:
+            self._switch_time_source(sim)
+
+    def _apply_planar(self, changed, new, model, circle, admitted):
+        """Take an accepted change of a planar arm's parameters: map, configured circle."""
         if model is not self._model or changed & {'grid_resolution', 'frame_id'}:
             self._model = model
             self._publish_map()
@@ -265,8 +310,6 @@ class PlannerNode(Node, Lifecycle):
             self._execute(circle, new['start_delay'], margin, 'configured', choice, tick)
         elif 'frame_id' in changed and self._stream.plan is not None:
             self._publish_marker(self._stream.plan)
-        if sim != self._sim:
-            self._switch_time_source(sim)
 
     def _map_arm(self, cfg):
         """Return the real arm of the map: the configured one, failed joints free."""
@@ -290,6 +333,9 @@ class PlannerNode(Node, Lifecycle):
 
     def _take_failures(self):
         """Assess the failures reported since the last plan (executor): set, refusal, map."""
+        if self._spatial is not None:
+            self._take_failures_spatial()
+            return
         cfg = self._cfg
         self._take_arm_state()
         got = self._arm_state
@@ -314,14 +360,17 @@ class PlannerNode(Node, Lifecycle):
 
     def _on_diagnostics_timer(self):
         """Every second: the planner's state (``planning.planner_status``) and its plan."""
-        settling = self._settling() if self._cfg['settle_swing_deg'] > 0.0 else None
+        settling = (self._settling() if self._cfg['settle_swing_deg'] > 0.0
+                    and self._spatial is None else None)
         state, message = planner_status(self._failure_refusal, self._failures_pending,
                                         settling)
         plan = self._stream.plan
         self._diagnostics.publish(
             {READY: OK, SETTLING: WARN}.get(state, ERROR), message,
             (('state', state), ('plan', plan.plan_id if plan is not None else 'none'),
-             ('passive joints', [self._joint_names[i] for i in self._model.nominal.passive])))
+             ('passive joints', [self._joint_names[i] for i in (
+                 self._model.nominal.passive if self._spatial is None
+                 else self._spatial.passive)])))
 
     def _make_timer(self):
         """
@@ -424,6 +473,8 @@ class PlannerNode(Node, Lifecycle):
 
     def _on_plan_circle(self, request, response):
         """Check a requested circle; if accepted and ``execute``, start it now."""
+        if self._spatial is not None:
+            return self._plan_circle_spatial(request, response)
         try:
             problem = validate({'centre': list(request.centre), 'radius': request.radius,
                                 'duration': request.duration,
@@ -461,11 +512,204 @@ class PlannerNode(Node, Lifecycle):
                                    f'margin {margin:.4f} m (not executed)')
         return response
 
+    # ---- spatial arms (issue 25) ----------------------------------------------------
+    def _init_spatial(self):
+        """Check a spatial arm's configured circle and say what does not apply to it."""
+        cfg = self._cfg
+        reason = spatial_bounds(cfg['radius'], cfg['duration'], cfg['max_speed'],
+                                cfg['max_acceleration'])
+        if reason:
+            raise FreejointValueError(reason)
+        self.get_logger().info(
+            f'spatial arm (task_dim 3): {self._arm_source}; plans: '
+            f"{describe_spatial(cfg['radius'], cfg['duration'])} in the vertical plane facing "
+            'the robot (freejoint_core.spatial_offline.circle), checked along the nominal '
+            'closed loop (kappa, reach, URDF limits) and for free joints that must carry '
+            'gravity; the planar singularity map (semi_singular_map, resolution_deg, eps_d, '
+            'singular_cells, grid_resolution) and the settle gate do not apply')
+        if cfg['settle_swing_deg'] > 0.0:
+            self.get_logger().warning(
+                f"settle_swing_deg {cfg['settle_swing_deg']:g} ignored: the settle gate is "
+                "for a planar arm's free last link")
+
+    def _check_change_spatial(self, sim, changed, new):
+        """Check a valid parameter change of a spatial arm's planner (``_check``)."""
+        reason = spatial_bounds(new['radius'], new['duration'], new['max_speed'],
+                                new['max_acceleration'])
+        what = describe_spatial(new['radius'], new['duration'])
+        if reason and changed & set(CIRCLE_KEYS):
+            return f'circle refused, the running plan goes on: {what}: {reason}'
+        if reason:
+            return (f"{', '.join(sorted(changed))}: the configured circle would exceed the "
+                    f'bounds: {reason}')
+        admitted = None
+        if changed & set(CIRCLE_KEYS) and new['autostart']:
+            reason, verdict = self._admit_spatial(new['radius'], new['duration'], new)
+            if reason:
+                return f'circle refused, the running plan goes on: {what}: {reason}'
+            admitted = (verdict,)
+        self._pending = (sim, changed, None, None, admitted)
+        return None
+
+    def _apply_spatial(self, changed, admitted):
+        """Take an accepted change of a spatial arm's parameters: the configured circle."""
+        cfg = self._cfg
+        if admitted is not None:
+            self._execute_spatial(cfg['radius'], cfg['duration'], cfg['start_delay'],
+                                  'configured', admitted[0])
+        elif 'frame_id' in changed and self._stream.plan is not None:
+            self._publish_marker(self._stream.plan)
+
+    def _take_failures_spatial(self):
+        """Take reported failures of a spatial arm: plans refused from then on (no assessment)."""
+        pending, self._failures_pending = self._failures_pending, []
+        names = list(self._joint_names)
+        for name in pending:
+            if name not in names:
+                note = f'joint failure notice for {name!r} ignored: not a joint of {names}'
+            elif names.index(name) in self._spatial.passive:
+                note = f'{name} failed: it is free in the planned arm already'
+            else:
+                note = (f'{name} failed: a changed passive set of a spatial arm is not '
+                        'assessed (planar arms only): no plan can be checked')
+                self._failure_refusal = self._failure_refusal or note
+                note += '; no plan is accepted from now on, the running one goes on'
+            self.get_logger().warning(note)
+
+    def _spatial_state(self):
+        """Return the arm's ``(q, qd)`` (model order) from the newest joint state, or None."""
+        self._take_arm_state()
+        got = self._arm_state
+        if got is None:
+            return None
+        return joint_state(self._joint_names, got.name, got.position, got.velocity)
+
+    def _admit_spatial(self, radius, duration, cfg, now=False):
+        """
+        Check a spatial plan (``spatial_planning``); ``(reason, verdict)``.
+
+        ``verdict`` None with no reason: a plan from rest, checked when it starts
+        (:meth:`_join_spatial`, from the arm's posture then); ``now``: check it from the
+        newest joint state at once even so (``~/plan_circle``).
+        """
+        if self._failures_pending:
+            self._take_failures()
+        if self._failure_refusal:
+            return self._failure_refusal, None
+        reason = spatial_bounds(radius, duration, cfg['max_speed'], cfg['max_acceleration'])
+        if reason:
+            return reason, None
+        p0, reason = start_point(self._stream)
+        if reason:
+            return reason, None
+        if p0 is None and not now:
+            return '', None
+        state = self._spatial_state()
+        if state is None:
+            return (f'no joint state with the positions and velocities of '
+                    f"{list(self._joint_names)} yet: a spatial plan is checked from the arm's "
+                    'posture'), None
+        verdict = self._check_spatial_plan(radius, duration, cfg, state, p0)
+        return verdict.reason, verdict
+
+    def _check_spatial_plan(self, radius, duration, cfg, state, p0=None):
+        """Return ``check_spatial_plan`` from ``state``; ``p0`` None: the tip of the real arm."""
+        q, qd = state
+        if p0 is None:          # the tip as the offline runner takes it (the real arm's fk)
+            p0 = self._spatial.fk(np.asarray(q, dtype=float))
+        return check_spatial_plan(self._node_arm.nominal(cfg['nominal_scale']), q, qd, radius,
+                                  duration, cfg['max_speed'], cfg['max_acceleration'], p0=p0)
+
+    def _execute_spatial(self, radius, duration, start_delay, source, verdict=None):
+        """Replace the running plan by a spatial circle (``verdict`` None: from the tip)."""
+        self._last_plan_id += 1
+        traj = SpatialRequest(radius, duration) if verdict is None else verdict.circle
+        plan = Plan(self._last_plan_id, traj, round(float(start_delay) * 1e9),
+                    joined=verdict is not None)
+        self._stream.start(plan)
+        self._publish_marker(plan)
+        if verdict is None:
+            what = describe_spatial(radius, duration)
+            how = "from rest: checked when it starts, from the arm's posture then"
+        else:
+            what = describe_spatial(radius, duration, verdict.circle.p0)
+            how = verdict.describe()
+        self.get_logger().info(f'plan {plan.plan_id} ({source}) accepted: {what}, start '
+                               f'delay {float(start_delay):g} s; {how}')
+        return plan.plan_id
+
+    def _join_spatial(self, plan):
+        """Check a spatial plan from rest from the arm's posture and start it; True: hold."""
+        state = self._spatial_state()
+        if state is None:
+            if self._waits_logged != plan.plan_id:
+                self._waits_logged = plan.plan_id
+                self.get_logger().info(
+                    f"plan {plan.plan_id}: waiting for the arm's posture: no joint state with "
+                    f'the positions and velocities of {list(self._joint_names)} yet (the '
+                    'circle starts at the tip)')
+            return True
+        traj = plan.trajectory
+        verdict = self._check_spatial_plan(traj.radius, traj.duration, self._cfg, state)
+        p0 = None if verdict.circle is None else verdict.circle.p0
+        if verdict.reason:
+            self._stream.plan = None
+            self.get_logger().error(
+                f'plan {plan.plan_id} refused at its start, nothing streams: '
+                f'{describe_spatial(traj.radius, traj.duration, p0)}: {verdict.reason}')
+            return True
+        plan.trajectory = verdict.circle
+        plan.joined = True
+        self._publish_marker(plan)
+        self.get_logger().info(
+            f'plan {plan.plan_id} from rest: {describe_spatial(traj.radius, traj.duration, p0)} '
+            f'(the tip of the newest joint state); {verdict.describe()}')
+        return False
+
+    def _plan_circle_spatial(self, request, response):
+        """``~/plan_circle`` of a spatial arm: radius, duration, execute (module notes)."""
+        centre = [float(v) for v in request.centre]
+        problem = validate({'radius': request.radius, 'duration': request.duration})
+        if not problem and (centre != [0.0, 0.0] or request.start_angle != 0.0
+                            or int(request.direction) != 1):
+            problem = ('centre, start_angle, direction: do not apply to a spatial arm (its '
+                       'circle starts at the tip, in the vertical plane facing the robot): '
+                       f'send [0, 0], 0, 1; got {centre}, {request.start_angle:g}, '
+                       f'{int(request.direction)}')
+        what = describe_spatial(request.radius, request.duration)
+        response.plan_id = 0
+        if problem:
+            response.accepted = False
+            response.reason = f'bad request: {problem}'
+            response.margin = math.nan
+            self.get_logger().error(f'plan_circle: {response.reason}',
+                                    throttle_duration_sec=1.0)
+            return response
+        reason, verdict = self._admit_spatial(request.radius, request.duration, self._cfg,
+                                              now=True)
+        response.accepted = not reason
+        response.margin = float(verdict.margin) if verdict is not None else math.nan
+        if verdict is not None and verdict.circle is not None:
+            what = describe_spatial(request.radius, request.duration, verdict.circle.p0)
+        if reason:
+            response.reason = f'{what} refused: {reason}'
+            self.get_logger().warning(f'plan_circle: {response.reason}',
+                                      throttle_duration_sec=1.0)
+        elif request.execute:
+            response.plan_id = self._execute_spatial(request.radius, request.duration, 0.0,
+                                                     'plan_circle', verdict)
+        else:
+            self.get_logger().info(f'plan_circle: {what} accepted (not executed): '
+                                   f'{verdict.describe()}')
+        return response
+
     # ---- publishing -------------------------------------------------------------------
     def _now_ns(self):
         return self.get_clock().now().nanoseconds
 
     def _publish_map(self):
+        if self._spatial is not None:
+            return          # planar only (the map is over the plane of the joint axes)
         cell = float(self._cfg['grid_resolution'])
         extent = grid_extent(self._model.region.reach, cell)
         grid = self._model.region.to_grid(extent, cell)
@@ -473,6 +717,8 @@ class PlannerNode(Node, Lifecycle):
                                              self._now_ns()))
 
     def _publish_marker(self, plan):
+        if isinstance(plan.trajectory, SpatialRequest):
+            return          # its start point (the tip) is not known yet
         self._marker_pub.publish(path_marker(plan.trajectory.points(MARKER_POINTS),
                                              self._cfg['frame_id'], self._now_ns(),
                                              plan.plan_id))
@@ -530,6 +776,8 @@ class PlannerNode(Node, Lifecycle):
 
     def _join(self, plan):
         """Decide how a plan from rest starts (``planning.join_from_arm``); True: hold."""
+        if self._spatial is not None:
+            return self._join_spatial(plan)
         position = self._arm_position()
         wait = None
         if position is None and not self._arm_note:
@@ -571,6 +819,8 @@ class PlannerNode(Node, Lifecycle):
             # stale, and the running plan joins from rest again
             self._arm_xy = None
             self._arm_note = ''
+            if self._spatial is not None:
+                self._arm_state = None      # a spatial plan starts at the tip of a new state
             stream.advance(now_ns, hold=True)
         plan = stream.plan
         hold = (plan is not None and plan.start_tick is None and not plan.joined

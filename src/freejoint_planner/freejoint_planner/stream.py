@@ -17,6 +17,9 @@ A plan starts at the first trigger after it was accepted, on the first tick at o
 the previous plan). With no plan at all nothing is published and the stream only follows
 the clock. If ROS time goes backwards (a simulator reset, a looped bag) the stream starts
 over on the new time base and the running plan starts again (without its transition).
+A spatial plan (a trajectory with ``task_dim`` 3: ``spatial_planning.SpatialCircle``)
+streams :class:`SpatialSetpoint` (3 values per vector) by the same rules, without
+transitions.
 
 Transitions (no step in the reference). A plan accepted once the stream has published a
 tick on its time base may carry a transition (``freejoint_core.trajectory.
@@ -99,6 +102,18 @@ class Setpoint(NamedTuple):
     vy: float
     ax: float
     ay: float
+    plan_id: int
+    plan_time: float
+    final: bool
+
+
+class SpatialSetpoint(NamedTuple):
+    """One setpoint of a spatial plan (task_dim 3): 3 values per vector."""
+
+    stamp_ns: int
+    position: tuple
+    velocity: tuple
+    acceleration: tuple
     plan_id: int
     plan_time: float
     final: bool
@@ -336,6 +351,10 @@ class SetpointStream:
             return Setpoint(k * self.dt_ns, px, py, vx, vy, ax, ay, plan.plan_id,
                             (k_plan * self.dt_ns) * 1e-9, False)
         t = k_plan * self.dt
+        if getattr(traj, 'task_dim', 2) == 3:       # a spatial plan: 3 values per vector
+            v = traj.sample_tuple(t)
+            return SpatialSetpoint(k * self.dt_ns, v[:3], v[3:6], v[6:], plan.plan_id,
+                                   (k_plan * self.dt_ns) * 1e-9, t > traj.duration)
         px, py, vx, vy, ax, ay = traj.sample_tuple(t)
         return Setpoint(k * self.dt_ns, px, py, vx, vy, ax, ay, plan.plan_id,
                         (k_plan * self.dt_ns) * 1e-9, t > traj.duration)

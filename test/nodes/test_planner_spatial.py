@@ -1,0 +1,104 @@
+"""
+The planner node on a spatial arm (issue 25) in its own process, driven by this test.
+
+Started on config/planner.yaml with the UR5 overlay (config/ur5/planner.yaml: wrist_2 free)
+in sim time, fed the joint state of the offline runner's start posture as the lockstep
+simulator publishes it (with ``/clock`` = 0, said again until answered), it checks the
+circle from that posture and streams ``spatial_offline.circle(p0, 0.1, k dt, 5)`` from the
+tip ``p0``, 3 values per vector, tick k at k dt, bit for bit.
+"""
+import os
+
+from freejoint_core.spatial_law import gravity_carrying_free_joint
+from freejoint_core.spatial_model import known_arm
+from freejoint_core.spatial_offline import CASES, circle
+from freejoint_tools.harness import load_source
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CONFIG = os.path.join(ROOT, 'config')
+MS = 1_000_000  # ns
+DT = 0.001
+UR5_JOINTS = ['shoulder_pan_joint', 'shoulder_lift_joint', 'elbow_joint', 'wrist_1_joint',
+              'wrist_2_joint', 'wrist_3_joint']
+
+
+def _helpers():
+    """Return test_planner_node.py (its ClockDriver and service helpers)."""
+    return load_source(os.path.join(os.path.dirname(__file__), 'test_planner_node.py'),
+                       'planner_node_test_helpers')
+
+
+def test_the_planner_on_the_ur5_config_streams_the_offline_runners_circle_from_the_tip(
+        procs, ros_node, wait):
+    from freejoint_common.contract import JOINT_STATES, stamp_from_ns
+    from freejoint_msgs.srv import PlanCircle
+    helpers = _helpers()
+    proc = procs.start_node('freejoint_planner', 'planner_node', 'planner', [
+        '--ros-args', '--params-file', os.path.join(CONFIG, 'planner.yaml'),
+        '--params-file', os.path.join(CONFIG, 'ur5', 'planner.yaml')])
+    client = helpers._wait_ready(ros_node, procs, proc, wait)
+    log = procs.log(proc)
+    assert 'spatial arm (task_dim 3)' in log and 'ur5_robot.urdf (spatial' in log
+    assert 'singularity map computed' not in log
+    clock = helpers.ClockDriver(ros_node)
+    pub = ros_node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, JOINT_STATES.qos)
+    wait(lambda: clock.matched() and pub.get_subscription_count() >= 1, 30.0,
+         'the planner matching /clock, setpoint and joint_states',
+         spin=lambda: helpers._spin(ros_node, 0.05))
+
+    # The offline runner's start posture (config/ur5/sim.yaml's), computed here.
+    name, free, q_plan = CASES['ur5_wrist2']
+    arm = known_arm(name, [free])
+    q0, why = gravity_carrying_free_joint(arm.nominal(0.7), np.array(q_plan))
+    assert q0 is not None, why
+    p0 = arm.fk(q0)
+    state = JOINT_STATES.msg_type(name=UR5_JOINTS, position=q0.tolist(), velocity=[0.0] * 6,
+                                  effort=[0.0] * 6)
+    stamp_from_ns(0, state.header.stamp)
+
+    def lockstep_start():
+        # the simulator's step 0: /clock 0 and the state of tick 0, again until answered
+        pub.publish(state)
+        helpers._spin(ros_node, 0.02)
+        clock.publish(0)
+        helpers._spin(ros_node, 0.05)
+
+    wait(lambda: clock.last_stamp() == 20 * MS, 60.0,
+         'the setpoints of ticks 0-20 after /clock 0 (log: %s)' % procs.log(proc),
+         spin=lockstep_start)
+    for now in list(range(MS, 10 * MS, MS)) + list(range(10 * MS, 300 * MS, 10 * MS)):
+        clock.step(now, wait, '(log: %s)' % procs.log(proc))
+    got = clock.got
+    assert helpers._stamps(got) == [k * MS for k in range(len(got))]
+    assert len(got) == 290 + 20 + 1
+    for k, msg in enumerate(got):
+        pos, vel, acc = circle(p0, 0.1, k * DT, 5.0)
+        assert (msg.position.tolist(), msg.velocity.tolist(), msg.acceleration.tolist()) == (
+            pos.tolist(), vel.tolist(), acc.tolist()), 'tick %d' % k
+        assert (msg.plan_id, msg.plan_time, msg.final) == (1, (k * MS) * 1e-9, False)
+        assert msg.header.frame_id == 'base_link'
+    log = procs.log(proc)
+    assert 'plan 1 from rest: spatial circle radius 0.1 m duration 5 s from [' in log
+    assert 'nominal closed loop: 3001 steps of 2 ms in ' in log
+
+    # ~/plan_circle: radius, duration, execute; the planar centre refused; no new circle
+    # while the running one moves (no 3-D transition)
+    answer = helpers._call(ros_node, client, PlanCircle.Request(
+        centre=[0.1, 0.0], radius=0.1, duration=5.0, start_angle=0.0, direction=1,
+        execute=False), 'plan_circle')
+    assert not answer.accepted and answer.reason.startswith(
+        'bad request: centre, start_angle, direction: do not apply to a spatial arm'), \
+        answer.reason
+    answer = helpers._call(ros_node, client, PlanCircle.Request(
+        centre=[0.0, 0.0], radius=0.05, duration=4.0, start_angle=0.0, direction=1,
+        execute=True), 'plan_circle', timeout=30.0)
+    assert not answer.accepted and answer.plan_id == 0
+    assert answer.reason.endswith('refused: the running plan 1 moves until t = 5.000 s (ROS '
+                                  'time): a spatial plan starts from rest (no 3-D '
+                                  'transition); ask again once it holds its end point'), \
+        answer.reason
+    assert procs.stop(proc) == 0
