@@ -37,14 +37,15 @@ def test_the_planner_on_the_ur5_config_streams_the_offline_runners_circle_from_t
     from freejoint_common.contract import JOINT_STATES, stamp_from_ns
     from freejoint_msgs.srv import PlanCircle
     helpers = _helpers()
+    # lookahead 100: /clock jumps of up to 100 ticks below (the clock spacing rule)
     proc = procs.start_node('freejoint_planner', 'planner_node', 'planner', [
         '--ros-args', '--params-file', os.path.join(CONFIG, 'planner.yaml'),
-        '--params-file', os.path.join(CONFIG, 'ur5', 'planner.yaml')])
+        '--params-file', os.path.join(CONFIG, 'ur5', 'planner.yaml'), '-p', 'lookahead:=100'])
     client = helpers._wait_ready(ros_node, procs, proc, wait)
     log = procs.log(proc)
     assert 'spatial arm (task_dim 3)' in log and 'ur5_robot.urdf (spatial' in log
     assert 'singularity map computed' not in log
-    clock = helpers.ClockDriver(ros_node)
+    clock = helpers.ClockDriver(ros_node, lookahead=100)
     pub = ros_node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, JOINT_STATES.qos)
     wait(lambda: clock.matched() and pub.get_subscription_count() >= 1, 30.0,
          'the planner matching /clock, setpoint and joint_states',
@@ -67,38 +68,58 @@ def test_the_planner_on_the_ur5_config_streams_the_offline_runners_circle_from_t
         clock.publish(0)
         helpers._spin(ros_node, 0.05)
 
-    wait(lambda: clock.last_stamp() == 20 * MS, 60.0,
-         'the setpoints of ticks 0-20 after /clock 0 (log: %s)' % procs.log(proc),
+    wait(lambda: clock.last_stamp() == 100 * MS, 60.0,
+         'the setpoints of ticks 0-100 after /clock 0 (log: %s)' % procs.log(proc),
          spin=lockstep_start)
     for now in list(range(MS, 10 * MS, MS)) + list(range(10 * MS, 300 * MS, 10 * MS)):
         clock.step(now, wait, '(log: %s)' % procs.log(proc))
-    got = clock.got
-    assert helpers._stamps(got) == [k * MS for k in range(len(got))]
-    assert len(got) == 290 + 20 + 1
-    for k, msg in enumerate(got):
-        pos, vel, acc = circle(p0, 0.1, k * DT, 5.0)
-        assert (msg.position.tolist(), msg.velocity.tolist(), msg.acceleration.tolist()) == (
-            pos.tolist(), vel.tolist(), acc.tolist()), 'tick %d' % k
-        assert (msg.plan_id, msg.plan_time, msg.final) == (1, (k * MS) * 1e-9, False)
-        assert msg.header.frame_id == 'base_link'
     log = procs.log(proc)
     assert 'plan 1 from rest: spatial circle radius 0.1 m duration 5 s from [' in log
     assert 'nominal closed loop: 3001 steps of 2 ms in ' in log
 
     # ~/plan_circle: radius, duration, execute; the planar centre refused; no new circle
-    # while the running one moves (no 3-D transition)
+    # while the running one moves (no 3-D transition), nor a change of radius
     answer = helpers._call(ros_node, client, PlanCircle.Request(
         centre=[0.1, 0.0], radius=0.1, duration=5.0, start_angle=0.0, direction=1,
         execute=False), 'plan_circle')
     assert not answer.accepted and answer.reason.startswith(
         'bad request: centre, start_angle, direction: do not apply to a spatial arm'), \
         answer.reason
-    answer = helpers._call(ros_node, client, PlanCircle.Request(
-        centre=[0.0, 0.0], radius=0.05, duration=4.0, start_angle=0.0, direction=1,
-        execute=True), 'plan_circle', timeout=30.0)
+    moving = ('the running plan 1 moves until t = 5.000 s (ROS time): a spatial plan starts '
+              'from rest (no 3-D transition); ask again once it holds its end point')
+    request = PlanCircle.Request(centre=[0.0, 0.0], radius=0.05, duration=4.0,
+                                 start_angle=0.0, direction=1, execute=True)
+    answer = helpers._call(ros_node, client, request, 'plan_circle', timeout=30.0)
     assert not answer.accepted and answer.plan_id == 0
-    assert answer.reason.endswith('refused: the running plan 1 moves until t = 5.000 s (ROS '
-                                  'time): a spatial plan starts from rest (no 3-D '
-                                  'transition); ask again once it holds its end point'), \
-        answer.reason
+    assert answer.reason.endswith('refused: ' + moving), answer.reason
+    result = helpers._set(helpers._param_client(ros_node), 'radius', 0.08)
+    assert not result.successful and result.reason.endswith(moving), result.reason
+
+    # Through the end of the circle, then a new one from where it rests.
+    for now in range(300 * MS, 5_300 * MS, 100 * MS):
+        clock.step(now, wait, '(log: %s)' % procs.log(proc))
+    got = clock.got
+    assert helpers._stamps(got) == [k * MS for k in range(len(got))]
+    assert len(got) == 5_200 + 100 + 1
+    for k, msg in enumerate(got):
+        pos, vel, acc = circle(p0, 0.1, k * DT, 5.0)
+        assert (msg.position.tolist(), msg.velocity.tolist(), msg.acceleration.tolist()) == (
+            pos.tolist(), vel.tolist(), acc.tolist()), 'tick %d' % k
+        assert (msg.plan_id, msg.plan_time, msg.final) == (1, (k * MS) * 1e-9, k * DT > 5.0)
+        assert msg.header.frame_id == 'base_link'
+    held = circle(p0, 0.1, 5.0, 5.0)[0]
+    answer = helpers._call(ros_node, client, request, 'plan_circle', timeout=30.0)
+    assert answer.accepted and answer.plan_id == 2, answer.reason
+    assert 0.5 < answer.margin < 0.6                      # the reach margin [m]
+    k1 = len(got)                                         # its first tick: the next one
+    for now in range(5_300 * MS, 5_600 * MS, 100 * MS):
+        clock.step(now, wait, '(log: %s)' % procs.log(proc))
+    for k in range(k1, len(got)):
+        pos, vel, acc = circle(held, 0.05, (k - k1) * DT, 4.0)
+        msg = got[k]
+        assert (msg.position.tolist(), msg.velocity.tolist(), msg.acceleration.tolist()) == (
+            pos.tolist(), vel.tolist(), acc.tolist()), 'tick %d' % k
+        assert (msg.plan_id, msg.plan_time) == (2, ((k - k1) * MS) * 1e-9)
+    # no step: the new circle starts on the point the first one holds
+    assert np.linalg.norm(np.array(got[k1].position) - got[k1 - 1].position) < 1e-15
     assert procs.stop(proc) == 0

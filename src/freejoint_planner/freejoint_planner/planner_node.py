@@ -84,8 +84,9 @@ and ``direction`` must be ``[0, 0]``, 0, 1; ``margin`` is the reach margin [m]),
 change of ``radius`` / ``duration`` once the stream has published, is checked at once from
 the newest joint state and starts where the running plan rests, at its start or its end
 point: there is no 3-D transition, so one asked for while the running circle moves is
-refused, saying until when. The singularity map (``semi_singular_map``), the settle gate and the assessment of
-a reported joint failure are planar: none is used (a failure refuses every later plan).
+refused, saying until when. The singularity map (``semi_singular_map``), the settle gate
+and the assessment of a reported joint failure are planar: none is used (a failure refuses
+every later plan).
 """
 
 from dataclasses import replace
