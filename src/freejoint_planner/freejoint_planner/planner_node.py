@@ -77,16 +77,16 @@ do not (refused away from their defaults, ``params.PLANAR_ONLY``). A plan from r
 configured one, or any after ROS time went back) is checked when it starts, from the
 newest joint state (it waits for one): speed and acceleration bounds, reach, a free joint
 that must carry gravity, and the nominal closed loop (``spatial_planning.nominal_loop``:
-kappa, the active joints' URDF limits, tracking; about 0.6 s of CPU, during which the node
-does nothing else), refused with one line in the log (nothing streams). A plan asked for
-by ``~/plan_circle`` (``radius``, ``duration``, ``execute``; ``centre``, ``start_angle``
-and ``direction`` must be ``[0, 0]``, 0, 1; ``margin`` is the reach margin [m]), or by a
-change of ``radius`` / ``duration`` once the stream has published, is checked at once from
-the newest joint state and starts where the running plan rests, at its start or its end
-point: there is no 3-D transition, so one asked for while the running circle moves is
-refused, saying until when. The singularity map (``semi_singular_map``), the settle gate
-and the assessment of a reported joint failure are planar: none is used (a failure refuses
-every later plan).
+kappa, the active joints' URDF limits, tracking; 0.6-1.1 s of CPU for the example arms,
+during which the node does nothing else), refused with one line in the log (nothing
+streams). A plan asked for by ``~/plan_circle`` (``radius``, ``duration``, ``execute``;
+``centre``, ``start_angle`` and ``direction`` must be ``[0, 0]``, 0, 1; ``margin`` is the
+reach margin [m]), or by a change of ``radius`` / ``duration`` once the stream has
+published, is checked at once from the newest joint state and starts where the running
+plan rests, at its start or its end point: there is no 3-D transition, so one asked for
+while the running circle moves is refused, saying until when. The singularity map
+(``semi_singular_map``), the settle gate and the assessment of a reported joint failure
+are planar: none is used (a failure refuses every later plan).
 """
 
 from dataclasses import replace
