@@ -123,3 +123,67 @@ def test_the_planner_on_the_ur5_config_streams_the_offline_runners_circle_from_t
     # no step: the new circle starts on the point the first one holds
     assert np.linalg.norm(np.array(got[k1].position) - got[k1 - 1].position) < 1e-15
     assert procs.stop(proc) == 0
+
+
+def test_a_plan_circle_before_any_joint_state_starts_from_the_tip_of_the_first_one(
+        procs, ros_node, wait):
+    # As make demo starts a run: autostart false, ~/plan_circle with the planner's own
+    # values once the graph is up, possibly before the planner holds a joint state
+    from freejoint_common.contract import JOINT_STATES, stamp_from_ns
+    from freejoint_msgs.srv import PlanCircle
+    helpers = _helpers()
+    proc = procs.start_node('freejoint_planner', 'planner_node', 'planner', [
+        '--ros-args', '--params-file', os.path.join(CONFIG, 'planner.yaml'),
+        '--params-file', os.path.join(CONFIG, 'ur5', 'planner.yaml'),
+        '-p', 'autostart:=false'])
+    client = helpers._wait_ready(ros_node, procs, proc, wait)
+    request = PlanCircle.Request(centre=[0.0, 0.0], radius=0.1, duration=5.0,
+                                 start_angle=0.0, direction=1, execute=False)
+    answer = helpers._call(ros_node, client, request, 'plan_circle')
+    assert not answer.accepted and 'refused: no joint state with the positions and ' \
+        'velocities of ' in answer.reason, answer.reason
+    request.execute = True
+    answer = helpers._call(ros_node, client, request, 'plan_circle')
+    assert answer.accepted and answer.plan_id == 1 and answer.reason == ''
+    assert "from rest: checked when it starts, from the arm's posture then" in procs.log(proc)
+
+    clock = helpers.ClockDriver(ros_node)
+    pub = ros_node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, JOINT_STATES.qos)
+    wait(lambda: clock.matched() and pub.get_subscription_count() >= 1, 30.0,
+         'the planner matching /clock, setpoint and joint_states',
+         spin=lambda: helpers._spin(ros_node, 0.05))
+    # /clock without a joint state: the plan waits for the arm's posture, nothing streams
+
+    def said_waiting():
+        clock.publish(0)
+        helpers._spin(ros_node, 0.05)
+        return "plan 1: waiting for the arm's posture: no joint state" in procs.log(proc)
+
+    wait(said_waiting, 30.0, 'the planner waiting for a joint state (log: %s)'
+         % procs.log(proc), spin=lambda: helpers._spin(ros_node, 0.05))
+    assert clock.got == []
+    q0 = np.array([0.0, -1.2, 1.6, -1.97, -1.5708, 0.0])   # config/ur5/sim.yaml
+    p0 = known_arm('ur5', ['wrist_2_joint']).fk(q0)
+    state = JOINT_STATES.msg_type(name=UR5_JOINTS, position=q0.tolist(), velocity=[0.0] * 6)
+    stamp_from_ns(0, state.header.stamp)
+
+    def lockstep_start():
+        pub.publish(state)
+        helpers._spin(ros_node, 0.02)
+        clock.publish(0)
+        helpers._spin(ros_node, 0.05)
+
+    wait(lambda: clock.last_stamp() == 20 * MS, 60.0,
+         'the setpoints of ticks 0-20 (log: %s)' % procs.log(proc), spin=lockstep_start)
+    for now in range(10 * MS, 100 * MS, 10 * MS):
+        clock.step(now, wait, '(log: %s)' % procs.log(proc))
+    got = clock.got
+    assert helpers._stamps(got) == [k * MS for k in range(90 + 20 + 1)]
+    for k, msg in enumerate(got):
+        pos, vel, acc = circle(p0, 0.1, k * DT, 5.0)
+        assert (msg.position.tolist(), msg.velocity.tolist(), msg.acceleration.tolist()) == (
+            pos.tolist(), vel.tolist(), acc.tolist()), 'tick %d' % k
+        assert msg.plan_id == 1
+    assert 'plan 1 from rest: spatial circle radius 0.1 m duration 5 s from [' in \
+        procs.log(proc)
+    assert procs.stop(proc) == 0

@@ -81,10 +81,11 @@ kappa, the active joints' URDF limits, tracking; 0.6-1.1 s of CPU for the exampl
 during which the node does nothing else), refused with one line in the log (nothing
 streams). A plan asked for by ``~/plan_circle`` (``radius``, ``duration``, ``execute``;
 ``centre``, ``start_angle`` and ``direction`` must be ``[0, 0]``, 0, 1; ``margin`` is the
-reach margin [m]), or by a change of ``radius`` / ``duration`` once the stream has
-published, is checked at once from the newest joint state and starts where the running
-plan rests, at its start or its end point: there is no 3-D transition, so one asked for
-while the running circle moves is refused, saying until when. The singularity map
+reach margin [m]; with no joint state yet, an executed one is checked when it starts), or
+by a change of ``radius`` / ``duration`` once the stream has published, is checked at once
+from the newest joint state and starts where the running plan rests, at its start or its
+end point: there is no 3-D transition, so one asked for while the running circle moves is
+refused, saying until when. The singularity map
 (``semi_singular_map``), the settle gate and the assessment of a reported joint failure
 are planar: none is used (a failure refuses every later plan).
 """
@@ -585,13 +586,14 @@ class PlannerNode(Node, Lifecycle):
             return None
         return joint_state(self._joint_names, got.name, got.position, got.velocity)
 
-    def _admit_spatial(self, radius, duration, cfg, now=False):
+    def _admit_spatial(self, radius, duration, cfg, now=False, later=True):
         """
         Check a spatial plan (``spatial_planning``); ``(reason, verdict)``.
 
         ``verdict`` None with no reason: a plan from rest, checked when it starts
         (:meth:`_join_spatial`, from the arm's posture then); ``now``: check it from the
-        newest joint state at once even so (``~/plan_circle``).
+        newest joint state at once even so (``~/plan_circle``), or, with no joint state yet,
+        leave it to its start (``later``) or refuse it (a check without execution).
         """
         if self._failures_pending:
             self._take_failures()
@@ -606,6 +608,8 @@ class PlannerNode(Node, Lifecycle):
         if p0 is None and not now:
             return '', None
         state = self._spatial_state()
+        if state is None and p0 is None and later:
+            return '', None
         if state is None:
             return (f'no joint state with the positions and velocities of '
                     f"{list(self._joint_names)} yet: a spatial plan is checked from the arm's "
@@ -687,7 +691,7 @@ class PlannerNode(Node, Lifecycle):
                                     throttle_duration_sec=1.0)
             return response
         reason, verdict = self._admit_spatial(request.radius, request.duration, self._cfg,
-                                              now=True)
+                                              now=True, later=request.execute)
         response.accepted = not reason
         response.margin = float(verdict.margin) if verdict is not None else math.nan
         if verdict is not None and verdict.circle is not None:
@@ -696,7 +700,7 @@ class PlannerNode(Node, Lifecycle):
             response.reason = f'{what} refused: {reason}'
             self.get_logger().warning(f'plan_circle: {response.reason}',
                                       throttle_duration_sec=1.0)
-        elif request.execute:
+        elif request.execute:       # verdict None: from rest, no joint state yet
             response.plan_id = self._execute_spatial(request.radius, request.duration, 0.0,
                                                      'plan_circle', verdict)
         else:
