@@ -13,6 +13,8 @@ XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 help:
 	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
 	@echo '              ARM=four_link: the shipped 4-link example instead (config/four_link)'
+	@echo '              ARM=ur5 / ARM=panda: a spatial arm with a free wrist joint, a 3-D'
+	@echo '              circle then a 10-s hold (config/ur5, config/panda; issue 25)'
 	@echo '              STABILISE=1: internal motion stabilised, both cases (issue 22)'
 	@echo '              FAIL=joint3@2.5: all joints driven, joint 3 fails at 2.5 s (issue 23)'
 	@echo '              CIRCLES=N REST=S: N revolutions back to back, S s rest between (issue 22)'

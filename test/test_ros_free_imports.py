@@ -24,6 +24,9 @@ ROS_FREE = (
     'freejoint_core.internal',
     'freejoint_core.failure',
     'freejoint_core.spatial_law',
+    'freejoint_core.spatial_plant',
+    'freejoint_core.spatial_offline',
+    'freejoint_planner.spatial_planning',
 )
 """Modules that must import without rclpy (the nodes' schemas and what they build on)."""
 

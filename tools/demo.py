@@ -25,6 +25,12 @@ the horizontal case), recorded and analysed, beside its offline runner
 With ``--stabilise`` too (``make demo ARM=four_link STABILISE=1``) it runs the example in
 the vertical plane with ``config/four_link/stabilised/`` on top (its hanging equilibrium,
 null-space damping, twice the paper's task gains) beside the offline circles runner.
+``--arm ur5`` / ``--arm panda`` (``make demo ARM=ur5``, issue 25) run a spatial arm from
+example-robot-data's URDF (``config/<arm>/``: UR5 with wrist_2 free, Panda with joint 7
+free, task_dim 3): the tip's 0.1-m circle in the vertical plane facing the robot, then a
+10-s hold, beside the offline twin (``freejoint_core.spatial_offline.run_twin`` with the
+graph's parameter files); the tip compared tick by tick (1e-9 m), the 3-mm bound, the
+efforts and joint speeds against the URDF's limits.
 ``--fail joint3@2.5`` (``make demo FAIL=joint3@2.5``, issue 23) runs the paper's arm with
 all three joints driven (``config/fully_actuated/``) whose joint 3 loses its actuator and
 brake at 2.5 s (the simulator's ``fail_joint``): the controller detects it (momentum
@@ -56,7 +62,11 @@ SETTLE = 1.0
 DRAIN_QUIET = 0.5
 """Wall seconds the recorder's count must stay unchanged before the nodes are stopped."""
 FIGURES = os.path.join(ROOT, 'docs', 'figures')
-ARMS = {'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0}}
+ARMS = {'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0},
+        'ur5': {'passive_joint': 'wrist_2_joint', 'bound_mm': 3.0, 'spatial': 'ur5_wrist2',
+                'hold_s': 10.0},
+        'panda': {'passive_joint': 'panda_joint7', 'bound_mm': 3.0, 'spatial': 'panda_j7',
+                  'hold_s': 10.0}}
 STABILISED = 'stabilised'
 STABILISED_HORIZONTAL = 'stabilised_horizontal'
 """The horizontal case's overlay of ``--stabilise`` (the free link settled in the rests)."""
@@ -66,7 +76,9 @@ FAILURE_BOUND_MM = {'horizontal': 1.7, 'vertical': 5.5}
 """The paper's single-circle bounds, which a run with a joint failing keeps (issue 23)."""
 """The overlay of ``--stabilise``: config/stabilised/ (issue 22), the vertical case."""
 """The shipped examples of ``--arm``: parameter overlay ``config/<name>/``, the passive joint
-recorded, the stated tracking bound (horizontal; test/core/test_four_link_example.py)."""
+recorded, the stated tracking bound (horizontal; test/core/test_four_link_example.py); a
+spatial arm (issue 25) also its case of ``freejoint_core.spatial_offline`` and the hold
+after the circle [s]."""
 """Where the figures of the two paper cases go (shown in the README)."""
 
 
@@ -189,7 +201,7 @@ class Collector:
         return [deserialize_message(raw, kind) for raw in self.raw[topic]]
 
 
-def ee_trajectory(points, dt_ns, n_ticks):
+def ee_trajectory(points, dt_ns, n_ticks, dims=2):
     """
     Return the end-effector positions of ticks 0..n_ticks-1 from ee_position messages.
 
@@ -201,10 +213,12 @@ def ee_trajectory(points, dt_ns, n_ticks):
         Control period (ns).
     n_ticks : int
         Number of ticks wanted.
+    dims : {2, 3}
+        2: (x, y) of a planar arm; 3: (x, y, z) of a spatial arm's tip.
 
     Returns
     -------
-    numpy.ndarray, (n_ticks, 2)
+    numpy.ndarray, (n_ticks, dims)
 
     Raises
     ------
@@ -217,13 +231,13 @@ def ee_trajectory(points, dt_ns, n_ticks):
     first = {}
     for msg in points:
         first.setdefault(to_ns(msg.header.stamp), msg)
-    out = np.empty((n_ticks, 2))
+    out = np.empty((n_ticks, dims))
     for k in range(n_ticks):
         msg = first.get(k * dt_ns)
         if msg is None:
             raise ValueError('ee_position: no message for tick %d (t = %.3f s)'
                              % (k, k * dt_ns * 1e-9))
-        out[k] = msg.point.x, msg.point.y
+        out[k] = (msg.point.x, msg.point.y, msg.point.z)[:dims]
     return out
 
 
@@ -245,7 +259,7 @@ def _args(node_args, node):
 
 def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
               record=True, progress=say, overlays=(), passive_joint=PASSIVE_JOINT,
-              node_args=None):
+              node_args=None, recorded_as=None):
     """
     Run one case through the graph in lockstep until tick n_ticks - 1 was published.
 
@@ -254,6 +268,8 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
     follow each node's parameter file, in order, where there is one; () for the paper's arm.
     ``passive_joint``: the one the recorder's metadata names.  ``node_args``: ``{'sim' |
     'controller' | 'planner': ['name:=value', ...]}``, parameters set last.
+    ``recorded_as``: ``(case, variant)`` the bag's run information names (default
+    ``(case, 'robust')``; a spatial arm: its ``spatial_offline`` case, 'spatial').
 
     All nodes are started (recorder if installed, simulator, controller, planner with
     ``autostart: false``); once the recorder (``~/status``) and this process have matched
@@ -280,8 +296,8 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
     try:
         if record and os.path.exists(rec_exe):
             bag = os.path.join(out_dir, case)
-            info = 'case=%s, variant=robust, seed=%d, passive_joint=%s, max_ticks=%d' % (
-                case, seed, passive_joint, n_ticks)
+            info = 'case=%s, variant=%s, seed=%d, passive_joint=%s, max_ticks=%d' % (
+                *(recorded_as or (case, 'robust')), seed, passive_joint, n_ticks)
             graph.start('recorder', [rec_exe, '--ros-args', '-p', 'output:=' + bag,
                                      '-p', 'topics:=[]', '-p', 'overwrite:=true',
                                      '-p', 'use_sim_time:=true',
@@ -361,7 +377,8 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
             'sim_log': graph.procs['sim_node'].log_path}
 
 
-def graph_record(collector, case, seed, n_ticks, passive_joint=PASSIVE_JOINT):
+def graph_record(collector, case, seed, n_ticks, passive_joint=PASSIVE_JOINT,
+                 variant='robust'):
     """Return the graph's record of the collected run (source 'graph') and its arrays."""
     from freejoint_common.records import arrays_from_messages
     from freejoint_core.metrics import compute_record
@@ -372,18 +389,63 @@ def graph_record(collector, case, seed, n_ticks, passive_joint=PASSIVE_JOINT):
     if got != n_ticks:
         raise RuntimeError('only %d of %d ticks have both a ControllerState and a JointState'
                            % (got, n_ticks))
-    record = compute_record(case, 'robust', seed, source='graph', **arrays)
+    record = compute_record(case, variant, seed, source='graph', **arrays)
     return record, arrays
 
 
 def arm_offline(arm, case, seed, n_ticks):
     """Return the offline runner's record and trace of a shipped example arm (``ARMS``)."""
+    if 'spatial' in ARMS[arm]:
+        return spatial_offline(arm, seed, n_ticks)
     from freejoint_core.trajectory import CircleQuintic
     from freejoint_core.urdf import four_link_arm, FOUR_LINK_CIRCLE, FOUR_LINK_Q0
     from freejoint_core.urdf_offline import run_arm
     assert arm == 'four_link', arm
     return run_arm(four_link_arm(case), CircleQuintic(**FOUR_LINK_CIRCLE), FOUR_LINK_Q0,
                    label=case, seed=seed, n_ticks=n_ticks)
+
+
+def spatial_offline(arm, seed, n_ticks):
+    """
+    Return the offline twin's record and trace of a spatial example arm (issue 25).
+
+    Everything is taken from the graph's parameter files (``config/*.yaml`` and
+    ``config/<arm>/*.yaml``): the real arm and its start posture, dt_sub, the disturbance
+    (the simulator's), the law built as the controller builds it (its schema's config,
+    ``make_law``, ``install_nullspace``), the circle's radius and duration (the planner's);
+    ``freejoint_core.spatial_offline.run_twin`` runs it for ``n_ticks``.
+    """
+    from freejoint_control.failures import install_nullspace
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_core.laws import make_law
+    from freejoint_core.metrics import compute_record
+    from freejoint_core.spatial_offline import run_twin
+    from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_sim.params import SCHEMA as SIM
+    import numpy as np
+    overlays = (arm,)
+    sim = SIM.from_yaml(os.path.join(CONFIG, 'sim.yaml'), *_overlay_files(overlays, 'sim'))
+    ctl = CONTROLLER.from_yaml(os.path.join(CONFIG, 'controller.yaml'),
+                               *_overlay_files(overlays, 'controller'))
+    plan = PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'),
+                               *_overlay_files(overlays, 'planner'))
+    law = make_law(ctl.law, ctl.nominal, ctl.gains, model=ctl.nominal_model)
+    install_nullspace(law, ctl)
+    dt = sim.dt
+    duration = float(plan['duration'])
+    out = run_twin(sim.arm.spatial, sim.q0, law, seed, t_move=duration,
+                   t_hold=n_ticks * dt - duration, dt=dt, dt_sub=sim.dt_sub,
+                   dist=sim.dist_bound, radius=float(plan['radius']))
+    trace = out['trace']
+    n = len(trace['p'])
+    passive = sim.arm.spatial.passive[0]
+    record = compute_record(ARMS[arm]['spatial'], 'spatial', seed,
+                            np.arange(n) * dt, trace['p'], trace['p_d'], trace['tau'],
+                            trace['theta'], trace['q'][:, passive], trace['kappa'],
+                            diverged_at_s=n * dt if out['diverged'] else None)
+    record.update({key: out[key] for key in ('tau_ratio', 'vel_ratio', 'vel_ratio_free',
+                                             'hold_last_s_max_mm')})
+    return record, trace
 
 
 def circles_offline(case, seed, settings, overlays=(STABILISED,), arm=None, circles=1,
@@ -547,8 +609,13 @@ def main(argv=None):
     t_start = time.monotonic()
     overlays = ()
     if args.arm:
-        # The example alone is the horizontal case: with the free base pivot under gravity
-        # the paper's law does not stabilise it (offline: diverges within 0.2 s).
+        # The 4-link example alone is the horizontal case: with the free base pivot under
+        # gravity the paper's law does not stabilise it (offline: diverges within 0.2 s). A
+        # spatial arm has its own gravity (-z of its base); its case is not read.
+        if 'spatial' in ARMS[args.arm] and (args.stabilise or args.fail):
+            say('error: --arm %s runs the spatial example alone (not with --stabilise or '
+                '--fail)' % args.arm)
+            return 2
         args.cases = ['horizontal']
         args.out = os.path.join(args.out, args.arm)
         overlays = (args.arm,)
@@ -616,6 +683,9 @@ def main(argv=None):
             % (args.rest, settings['dt']))
         return 2
     n_ticks = args.circles * n_circle + (args.circles - 1) * n_rest
+    spatial = args.arm and 'spatial' in ARMS[args.arm]
+    if spatial:         # the circle, then the hold (the planner's duration is 5 s as the paper's)
+        n_ticks += int(round(ARMS[args.arm]['hold_s'] / settings['dt']))
     out = os.path.abspath(args.out)
     log_dir = os.path.join(out, 'logs')
     os.makedirs(out, exist_ok=True)
@@ -655,7 +725,9 @@ def main(argv=None):
                 run = run_graph(case, args.seed, n_ticks, dt_ns, collector, executor, out,
                                 log_dir, record=record_bags,
                                 overlays=per_case.get(case, overlays),
-                                passive_joint=passive_joint, node_args=node_args)
+                                passive_joint=passive_joint, node_args=node_args,
+                                recorded_as=(ARMS[args.arm]['spatial'], 'spatial')
+                                if spatial else None)
             except RuntimeError as exc:
                 say('error: %s: %s' % (case, exc))
                 failed = True
@@ -669,8 +741,9 @@ def main(argv=None):
             if stop_line:
                 say('  ' + stop_line[-1].split(']: ')[-1].strip())
             try:
-                record, arrays = graph_record(collector, case, args.seed, n_ticks,
-                                              passive_joint)
+                record, arrays = graph_record(
+                    collector, ARMS[args.arm]['spatial'] if spatial else case, args.seed,
+                    n_ticks, passive_joint, 'spatial' if spatial else 'robust')
             except (RuntimeError, ValueError) as exc:
                 say('error: %s: %s' % (case, exc))
                 failed = True
@@ -716,6 +789,16 @@ def main(argv=None):
             elif args.arm:
                 off, trace = arm_offline(args.arm, case, args.seed, n_ticks)
                 bound = ARMS[args.arm]['bound_mm']
+                if spatial:
+                    say('  offline twin: max %.3f mm (last second of the hold %.3f mm), '
+                        "peak |effort| %.2f of the URDF's limits, active joint speeds %.2f "
+                        'of them, the free joint %.2f%s' % (
+                            off['max_mm'], off['hold_last_s_max_mm'], off['tau_ratio'],
+                            off['vel_ratio'], off['vel_ratio_free'],
+                            '' if off['diverged_at_s'] is None else
+                            ', DIVERGED at %.3f s' % off['diverged_at_s']))
+                    failed = failed or off['diverged_at_s'] is not None or \
+                        off['tau_ratio'] > 1.0 or off['vel_ratio'] > 1.0
                 say('  %s example, %s: max tracking error %.3f mm (stated bound %g mm)%s'
                     % (args.arm, case, record['max_mm'], bound,
                        '' if record['max_mm'] <= bound else '  NOT MET'))
@@ -723,7 +806,8 @@ def main(argv=None):
             else:
                 off, trace = run_case(case, 'robust', args.seed, record_trace=True,
                                       **settings)
-            ee = ee_trajectory(collector.messages('ee_position'), dt_ns, n_ticks)
+            ee = ee_trajectory(collector.messages('ee_position'), dt_ns, n_ticks,
+                               3 if spatial else 2)
             dev = float(np.max(np.abs(ee - trace['p'])))
             verdict = '' if dev <= 1e-9 else '  (NOT within 1e-9 m)'
             say('  end-effector trajectory, graph vs offline runner: max |difference| = '

@@ -38,7 +38,7 @@ def test_the_shipped_spatial_config_gives_the_offline_runners_law(arm, case):
     assert law.law.nullspace.inverse == 'weighted'
     # the offline runner's (spatial_offline.run_case): SpatialGains(task_dim=3), kd 20
     offline = SpatialControlLaw(cfg.nominal, SpatialGains(task_dim=3))
-    offline.set_nullspace_kd(20.0)
+    offline.set_nullspace_gains(20.0, 10.0)
     q = np.array(CASES[case][2]) + 0.05
     qd = np.linspace(-0.3, 0.3, cfg.nominal.n)
     p_d = cfg.nominal.fk(q) + 0.01

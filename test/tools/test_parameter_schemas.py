@@ -36,7 +36,7 @@ NODE_MODULES = {
     'freejoint_tools/freejoint_tools/player.py': PLAYER,
 }
 CONFIGS = {'sim.yaml': SIM, 'controller.yaml': CONTROLLER, 'planner.yaml': PLANNER}
-OVERLAYS = ('four_link', 'fully_actuated', 'stabilised')
+OVERLAYS = ('four_link', 'fully_actuated', 'stabilised', 'ur5', 'panda')
 """The overlay folders of config/ (a node's file in each, where the overlay needs one)."""
 # What only the generic loader (node_tools.NodeParameters) may call.
 LOADER_ONLY = ('declare_parameter', 'declare_parameters', 'add_on_set_parameters_callback',

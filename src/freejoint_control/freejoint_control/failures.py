@@ -81,8 +81,10 @@ def install_nullspace(law, cfg):
 
     """
     kd = float(cfg.values.get('nullspace_kd', 0.0))
-    if kd > 0.0 and hasattr(law, 'set_nullspace_kd'):    # the spatial law: its own inverse
-        law.set_nullspace_kd(kd)
+    if hasattr(law, 'set_nullspace_gains'):     # the spatial law: its own inverse, a posture
+        kp = float(cfg.values.get('nullspace_kp', 0.0))
+        if kd > 0.0 or kp > 0.0:
+            law.set_nullspace_gains(kd, kp)
         return
     if kd <= 0.0 or cfg.nominal.r <= M_TASK or not hasattr(law, 'nullspace'):
         return

@@ -112,6 +112,12 @@ FAILURE_PARAMS = (
           'null-space damping [N m s/rad] of the active joint rates when more joints are '
           'driven than the task has (r > 2, freejoint_core.internal.NullSpace); 0 = none '
           "(the paper's law exactly)", (0.0, 1e4), read_only=True),
+    Param('nullspace_kp', 0.0,
+          "null-space posture stiffness [N m/rad] of the spatial law (law 'spatial'): the "
+          "active joints are pulled to their angles at the law's first tick after start-up "
+          'or ~/reset, through the null space (the task untouched), so that they do not '
+          'drift over a long hold; 0 = none. Planar laws: must be 0', (0.0, 1e4),
+          read_only=True),
 )
 
 # The free link's damping (issue 22, r = m; freejoint_core.laws.FreeLinkDampedLaw).
@@ -392,6 +398,9 @@ def _check_spatial(values):
         return (f"law: a spatial arm (task_dim 3) runs law '{SPATIAL_LAW}', a planar one "
                 f"another law; got law '{values['law']}' with task_dim {values['task_dim']}")
     if not spatial:
+        if values['nullspace_kp'] != 0.0:
+            return ("nullspace_kp: the posture term is the spatial law's (task_dim 3); a "
+                    'planar arm takes 0')
         return None
     for name, planar in (('joint_failures', 'off'), ('delay_compensation', 'off'),
                          ('free_link_damping', False)):

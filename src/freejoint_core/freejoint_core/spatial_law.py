@@ -52,7 +52,7 @@ from freejoint_core.control import _vector, ControlOutput, Gains, STATUS_NEAR_SI
 from freejoint_core.control import STATUS_OK, STATUS_TORQUE_LIMITED
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
-from freejoint_core.laws import ControlLaw, INF
+from freejoint_core.law_base import ControlLaw, INF
 from freejoint_core.spatial_model import SpatialArm
 import numpy as np
 import pinocchio as pin
@@ -454,7 +454,10 @@ class SpatialControlLaw(ControlLaw):
     m-sized setpoints (m = 3: the tip position; m = 6 needs an orientation setpoint, which
     the seam does not carry: refused).  The inverse is the inertia-weighted one with the
     dynamically consistent projector (the pseudo-inverse diverges on spatial arms,
-    issue 25); ``set_nullspace_kd`` sets the null-space damping (``nullspace_kd``).
+    issue 25); ``set_nullspace_gains`` sets the null-space damping ``kd`` and posture
+    stiffness ``kp`` (``nullspace_kd``, ``nullspace_kp``): the posture is the active
+    joints' angles at the first step after construction or :meth:`reset` (where the task
+    began), so that the redundant joints do not drift over a long hold.
 
     State: ``theta_hat[0..4]`` (after the tick's update), ``rho_hat`` (used in the tick)
     and ``kappa`` (the scale-free conditioning of the tick, :func:`task_conditioning`);
@@ -481,6 +484,8 @@ class SpatialControlLaw(ControlLaw):
                 f'setpoint), got m = {nominal.m}')
         self.law = SpatialLaw(nominal, gains, _nullspace(0.0))
         self._last = None
+        self._kd = self._kp = 0.0
+        self._posture = None
         names = tuple('theta_hat[%d]' % i for i in range(5))
         self.state_names = names + ('rho_hat', 'kappa')
         self._bounds()
@@ -505,23 +510,41 @@ class SpatialControlLaw(ControlLaw):
         """Return the hold stiffness scale of the gains."""
         return self.law.stiffness
 
-    def set_nullspace_kd(self, kd):
-        """Set the null-space damping to ``kd`` [N m s/rad] (the weighted inverse kept)."""
-        ns = _nullspace(kd)
+    def set_nullspace_gains(self, kd, kp=0.0):
+        """
+        Set the null-space damping ``kd`` [N m s/rad] and posture stiffness ``kp`` [N m/rad].
+
+        The weighted inverse and dynamic projector are kept; with ``kp`` > 0 the posture is
+        taken at the next step (the active joints' angles then).
+        """
+        ns = _nullspace(kd, kp, (0.0,) * self.law.model.r if kp else None)
         ns.check(self.law.model.r)
-        self.law.nullspace = ns
+        self._kd, self._kp = kd, kp
+        self._posture = None
+        self.law.nullspace = _nullspace(kd)
+
+    @property
+    def posture(self):
+        """Return the angles (r,) [rad] the null space pulls to (None: not yet, or kp 0)."""
+        return self._posture
 
     def step(self, q, qd, p_d, pd_d, pdd_d, dt):
         """Return one tick of :class:`SpatialLaw` as a ``control.ControlOutput``."""
+        if self._kp and self._posture is None:
+            self._posture = tuple(float(q[i]) for i in self.law.model.active)
+            self.law.nullspace = _nullspace(self._kd, self._kp, self._posture)
         out = self.law.step(q, qd, p_d, pd_d, pdd_d, dt)
         self._last = out
         return ControlOutput(out.tau, out.e, out.edot, out.s, out.theta, out.rho,
                              np.zeros(self.law.model.m), out.kappa, out.p, out.status)
 
     def reset(self):
-        """Set theta_hat back to ``gains.theta0``."""
+        """Set theta_hat back to ``gains.theta0``; the posture is taken again next step."""
         self.law.reset()
         self._last = None
+        if self._posture is not None:
+            self._posture = None
+            self.law.nullspace = _nullspace(self._kd)
 
     def state_values(self):
         """Return theta_hat (5, now), rho_hat and kappa of the last step (0 before one)."""
@@ -561,6 +584,7 @@ class SpatialControlLaw(ControlLaw):
         self._bounds()
 
 
-def _nullspace(kd):
+def _nullspace(kd, kp=0.0, posture=None):
     """Return the spatial law's null-space options: weighted inverse, dynamic projector."""
-    return NullSpace(kd=kd, inverse='weighted', projector='dynamic')
+    return NullSpace(kd=kd, kp=kp if posture is not None else 0.0, posture=posture,
+                     inverse='weighted', projector='dynamic')

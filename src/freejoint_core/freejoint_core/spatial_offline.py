@@ -17,7 +17,9 @@ draw ``uniform(-0.5, 0.5)`` N m per joint (free joints included; seeded) held ov
 control period ``dt`` (1 ms), as the simulator node integrates it.  Law:
 :class:`freejoint_core.spatial_law.SpatialControlLaw` (the controller's law ``spatial``)
 on the 70 % nominal model (masses, inertias and COM levers), weighted inverse,
-dynamically consistent projector, null-space damping ``kd``, URDF effort limits; called
+dynamically consistent projector, null-space damping ``kd`` and posture stiffness ``kp``
+towards the start posture (the redundant joints would drift otherwise: the Panda's joint
+6 past its URDF limit in the hold), URDF effort limits; called
 as the controller's loop calls it in lockstep (the measured state of tick k, the setpoint
 of tick k, ``dt``).  With ``inverse='pseudo'`` or ``kf > 0`` the bare
 :class:`freejoint_core.spatial_law.SpatialLaw` (the study's options).
@@ -58,6 +60,7 @@ DT_SUB = 5e-4
 NOMINAL = 0.7
 DIST = 0.5
 KD = 20.0
+KP = 10.0
 KF = 0.0
 
 
@@ -105,7 +108,8 @@ def circle(p0, radius, t, t_move):
 
 
 def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL,
-             dist=DIST, kd=KD, kf=KF, inverse='weighted', t_stop=None, dt_sub=DT_SUB):
+             dist=DIST, kd=KD, kf=KF, inverse='weighted', t_stop=None, dt_sub=DT_SUB,
+             kp=KP):
     """
     One closed-loop run (module notes).
 
@@ -131,6 +135,9 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
         End the run early at this time [s] (tests).
     dt_sub : float
         RK4 step of the plant [s]; ``dt`` an integer multiple of it.
+    kp : float
+        Null-space posture stiffness [N m/rad] towards the start posture (the controller's
+        ``nullspace_kp``; the weighted law without ``kf`` only).
 
     Returns
     -------
@@ -152,7 +159,7 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
         raise FreejointValueError(why)
     if inverse == 'weighted' and kf == 0.0:
         law = SpatialControlLaw(real.nominal(nominal), SpatialGains(task_dim=3))
-        law.set_nullspace_kd(kd)
+        law.set_nullspace_gains(kd, kp)
     else:
         proj = 'dynamic' if inverse == 'weighted' else 'kinematic'
         law = SpatialLaw(real.nominal(nominal), SpatialGains(task_dim=3),
@@ -160,7 +167,8 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
     out = run_twin(real, q0, law, seed, t_move=t_move, t_hold=t_hold, dt=dt, dt_sub=dt_sub,
                    dist=dist, t_stop=t_stop)
     out.pop('trace')
-    return dict({'case': case, 'seed': seed, 'inverse': inverse, 'kd': kd, 'kf': kf}, **out)
+    return dict({'case': case, 'seed': seed, 'inverse': inverse, 'kd': kd, 'kp': kp, 'kf': kf},
+                **out)
 
 
 def start_posture(nominal, q_plan):
@@ -213,7 +221,9 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
     dict
         ``rms_mm``, ``max_mm``, ``hold_last_s_max_mm``, ``tau_ratio``, ``vel_ratio``,
         ``vel_ratio_free``, ``diverged``, ``tick_us`` (module notes), and ``trace``:
-        ``{'p', 'p_d', 'q': (K, 3 / 3 / n) arrays, 'tau': (K, r)}`` of ticks 0..K-1.
+        ``{'p', 'p_d', 'q': (K, 3 / 3 / n) arrays, 'tau': (K, r), 'kappa': (K,),
+        'theta': (K, 5)}`` of ticks 0..K-1 (``kappa`` the law's conditioning, ``theta``
+        its estimate after the tick).
 
     """
     plant = SpatialPlant(real, dt_sub, dist, seed, q0)
@@ -223,7 +233,8 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
     act, free = list(real.active), list(real.passive)
     err = np.empty(steps)
     trace = {'p': np.empty((steps, 3)), 'p_d': np.empty((steps, 3)),
-             'q': np.empty((steps, real.n)), 'tau': np.empty((steps, real.r))}
+             'q': np.empty((steps, real.n)), 'tau': np.empty((steps, real.r)),
+             'kappa': np.empty(steps), 'theta': np.empty((steps, 5))}
     tau_ratio = vel_ratio = vel_free = 0.0
     diverged = False
     t_law = 0.0
@@ -237,6 +248,8 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
         t_law += time.perf_counter() - c0
         err[k] = np.linalg.norm(out.e)
         trace['p'][k], trace['p_d'][k], trace['q'][k], trace['tau'][k] = out.p, p_d, q, out.tau
+        trace['kappa'][k] = out.kappa if hasattr(out, 'kappa') else out.det
+        trace['theta'][k] = out.theta
         tau_ratio = max(tau_ratio, float(np.max(np.abs(out.tau) / limit)))
         try:
             plant.step(out.tau, dt)
@@ -271,14 +284,14 @@ def main(argv=None):
     ap.add_argument('--t-move', type=float, default=T_MOVE)
     ap.add_argument('--t-hold', type=float, default=T_HOLD)
     ap.add_argument('--kd', type=float, default=KD)
+    ap.add_argument('--kp', type=float, default=KP)
     ap.add_argument('--kf', type=float, default=KF)
     ap.add_argument('--inverse', choices=('weighted', 'pseudo'), default='weighted')
     args = ap.parse_args(argv)
     for case in args.case or sorted(CASES):
         for seed in range(args.seeds):
             rec = run_case(case, seed, t_move=args.t_move, t_hold=args.t_hold, kd=args.kd,
-                           kf=args.kf,
-                           inverse=args.inverse)
+                           kp=args.kp, kf=args.kf, inverse=args.inverse)
             print(json.dumps({k: round(v, 4) if isinstance(v, float) else v
                               for k, v in rec.items()}), flush=True)
     return 0

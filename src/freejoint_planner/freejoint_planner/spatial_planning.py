@@ -56,7 +56,7 @@ from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
 from freejoint_core.spatial_law import arm_reach, gravity_carrying_free_joint, SpatialGains
 from freejoint_core.spatial_law import SpatialLaw
-from freejoint_core.spatial_offline import circle, KD
+from freejoint_core.spatial_offline import circle, KD, KP
 from freejoint_core.spatial_plant import SpatialPlant
 from freejoint_core.trajectory import circle_peaks, CircleQuintic
 import numpy as np
@@ -266,7 +266,7 @@ class LoopCheck:
 
 
 def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=KD,
-                 gains=None):
+                 gains=None, kp=KP):
     """
     Run the nominal closed loop of a plan and judge it (module notes).
 
@@ -286,6 +286,9 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
         Null-space damping [N m s/rad].
     gains : SpatialGains, optional
         Default ``SpatialGains()`` (its ``kappa_min`` the threshold).
+    kp : float
+        Null-space posture stiffness [N m/rad] towards the active joints' angles of ``q``
+        (the controller's ``nullspace_kp``: its posture is where the task began).
 
     Returns
     -------
@@ -294,7 +297,10 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
     """
     t0 = time.perf_counter()
     gains = SpatialGains() if gains is None else gains
-    nullspace = NullSpace(kd=kd, inverse='weighted', projector='dynamic')
+    posture = tuple(float(np.asarray(q, dtype=float)[i]) for i in nominal.active) if kp \
+        else None
+    nullspace = NullSpace(kd=kd, kp=kp if kp else 0.0, posture=posture, inverse='weighted',
+                          projector='dynamic')
     law = SpatialLaw(nominal, gains, nullspace)
     plant = SpatialPlant(nominal, period, 0.0, 0, q, qd)
     steps = int(math.floor((path.duration + hold) / period + 1e-9)) + 1

@@ -98,7 +98,7 @@ def test_the_first_setpoints_equal_the_offline_twins_desired_path(arms):
     # runner) records the setpoint it feeds the law at each tick.
     node_arm, nominal, q0 = arms['ur5']
     law = SpatialControlLaw(node_arm.nominal(0.7), SpatialGains(task_dim=3))
-    law.set_nullspace_kd(20.0)
+    law.set_nullspace_gains(20.0, 10.0)
     twin = run_twin(node_arm.spatial, q0, law, 0, t_stop=0.03)['trace']['p_d']
     stream = SetpointStream(DT, 20)
     stream.start(Plan(1, SpatialCircle(node_arm.spatial.fk(q0), 0.1, 5.0)))
@@ -184,13 +184,18 @@ def test_a_path_from_a_singular_posture_is_refused_at_its_start():
 
 
 def test_a_path_through_a_singular_posture_is_refused_where_it_passes():
-    # From q3 = -0.1 (elbow nearly straight) the circle leads the loop through the
-    # stretched posture of the previous test: kappa falls below 1e-3 after 0.3 s
+    # From q3 = -0.1 (elbow nearly straight) the circle leads the loop without the posture
+    # term (kp 0) through the stretched posture of the previous test: kappa falls below
+    # 1e-3 after 0.3 s. The shipped law's posture term (kp 10) holds the elbow bent: the
+    # tip then cannot follow, and the plan is refused for that (before the singularity)
     nominal = known_arm('ur5', ['wrist_2_joint']).nominal(0.7)
     q = np.array([0.0, -2.0, -0.1, -math.pi / 2, 0.0, 0.0])
+    loop = nominal_loop(nominal, q, np.zeros(6), SpatialCircle(nominal.fk(q), 0.1, 5.0),
+                        kp=0.0)
+    assert loop.reason.startswith('the nominal closed loop passes a singular posture')
+    assert loop.kappa_min < 1e-3 and loop.t_kappa_min > 0.1
     verdict = check_spatial_plan(nominal, q, np.zeros(6), 0.1, 5.0, *BOUNDS)
-    assert verdict.reason.startswith('the nominal closed loop passes a singular posture')
-    assert verdict.loop.kappa_min < 1e-3 and verdict.loop.t_kappa_min > 0.1
+    assert verdict.reason.startswith('the nominal closed loop cannot follow the path')
 
 
 def test_a_circle_beyond_the_reach_is_refused_before_the_loop(arms):
@@ -223,16 +228,20 @@ def test_a_circle_the_stretched_arm_cannot_follow_is_refused_by_the_loop():
 
 
 def test_a_path_that_takes_an_active_joint_past_its_urdf_limit_is_refused_naming_it():
-    # The Panda's elbow (joint 4, upper limit -0.0698 rad) at -0.47 rad: the circle
-    # straightens it (to +0.43 rad with the limits lifted)
+    # The Panda's elbow (joint 4, upper limit -0.0698 rad) at -0.47 rad: without the
+    # posture term (kp 0) the circle straightens it (to +0.43 rad with the limits lifted);
+    # the shipped law's posture term (kp 10) keeps it bent and the tip falls behind instead
     nominal = known_arm('panda', ['panda_joint7']).nominal(0.7)
     q, why = gravity_carrying_free_joint(nominal, np.array([0.0, 0.3, 0.0, -0.12, 0.0, 0.5,
                                                             0.785]))
     assert q is not None, why
+    loop = nominal_loop(nominal, q, np.zeros(7), SpatialCircle(nominal.fk(q), 0.1, 5.0),
+                        kp=0.0)
+    assert loop.reason.startswith('the nominal closed loop takes the active joint '
+                                  'panda_joint4 to ')
+    assert 'outside its URDF limits [-3.0718, -0.0698] rad' in loop.reason
     verdict = check_spatial_plan(nominal, q, np.zeros(7), 0.1, 5.0, *BOUNDS)
-    assert verdict.reason.startswith('the nominal closed loop takes the active joint '
-                                     'panda_joint4 to ')
-    assert 'outside its URDF limits [-3.0718, -0.0698] rad' in verdict.reason
+    assert verdict.reason.startswith('the nominal closed loop cannot follow the path')
 
 
 def test_the_speed_and_acceleration_bounds_are_the_planar_circles_naming_duration():
