@@ -10,6 +10,10 @@ The node graph on another engine and on another arm (issue 13), in lockstep.
   (``freejoint_core.urdf_offline.run_arm``) to 1e-9 m per tick and tracks within the
   example's stated bound (``test/core/test_four_link_example.py``; recorded and analysed:
   ``make demo ARM=four_link``).
+* The spatial examples (``config/ur5``, ``config/panda``; issue 25): the graph equals the
+  offline twin (``freejoint_core.spatial_offline.run_twin`` on the same parameter files)
+  to 1e-9 per tick on the tip, the setpoint, the commands, the law's state and the free
+  joint (``make demo ARM=ur5`` / ``ARM=panda`` runs the whole 15 s, recorded and analysed).
 """
 import os
 import time
@@ -196,3 +200,45 @@ def test_urdf_arm_in_its_own_frames_tracks_a_circle_in_lockstep_as_offline(
     assert np.max(np.abs(run.ee(n) - trace['p'])) <= 1e-9
     err_mm = 1e3 * np.hypot(*(arrays['p'] - arrays['p_d']).T)
     assert err_mm.max() <= URDF_ARM_BOUND_MM, err_mm.max()
+
+
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize('arm', ['ur5', 'panda'])
+def test_spatial_arm_graph_equals_its_offline_twin_tick_by_tick(procs, ros_node, wait, arm):
+    # make demo ARM=ur5 / ARM=panda in short (issue 25): the three nodes on config/<arm>/,
+    # the planner's autostart from the first joint state, against
+    # spatial_offline.run_twin on the same parameter files (tools/demo.py spatial_offline)
+    overlay = os.path.join(ROOT, 'config', arm)
+    run = graph.Run(procs, ros_node, wait)
+    for node in ('sim', 'controller'):
+        run.start(node, args=['--params-file', os.path.join(overlay, node + '.yaml')])
+    run.matched()
+    settle = time.monotonic() + 1.0          # as the 4-link test: the writers' side of the
+    while time.monotonic() < settle:         # match can lag this process's readers
+        run.spin()
+    run.start('planner', args=['--params-file', os.path.join(overlay, 'planner.yaml')])
+    n = 1500   # 1.5 s of the circle: its fastest part starts at 2.5 s, the first 1.5 s
+    #            already turn the Panda's free joint 7 and load every active joint
+    run.ticks(n, timeout=500.0)
+    assert run.stop() == {'sim': 0, 'controller': 0, 'planner': 0}
+    passive = graph.demo.ARMS[arm]['passive_joint']
+    arrays = arrays_from_messages(run.collector.messages('controller_state'),
+                                  run.collector.messages('joint_states'), passive,
+                                  max_ticks=n)
+    assert len(arrays['t']) == n, {t: len(v) for t, v in run.collector.raw.items()}
+    record, trace = graph.demo.spatial_offline(arm, 0, n)
+    assert record['diverged_at_s'] is None
+    for key, other in (('p', 'p'), ('p_d', 'p_d'), ('tau', 'tau'), ('theta', 'theta'),
+                       ('det', 'kappa')):
+        assert np.max(np.abs(arrays[key] - trace[other])) <= 1e-9, key
+    q_free = trace['q'][:, list(_chain(arm)).index(passive)]
+    assert np.max(np.abs(arrays['q_passive'] - q_free)) <= 1e-9
+    assert np.max(np.abs(run.ee(n, 3) - trace['p'])) <= 1e-9
+    assert 1e3 * np.max(np.linalg.norm(arrays['p'] - arrays['p_d'], axis=1)) <= 3.0
+
+
+def _chain(arm):
+    """Return the chain joints of a spatial example (its config, resolved as the nodes do)."""
+    from freejoint_sim.params import SCHEMA as SIM
+    return SIM.from_yaml(os.path.join(ROOT, 'config', 'sim.yaml'),
+                         os.path.join(ROOT, 'config', arm, 'sim.yaml')).arm.joint_names

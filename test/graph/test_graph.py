@@ -113,8 +113,8 @@ class Run:
                                     self.collector.messages('joint_states'), 'joint3',
                                     max_ticks=n)
 
-    def ee(self, n):
-        return demo.ee_trajectory(self.collector.messages('ee_position'), DT_NS, n)
+    def ee(self, n, dims=2):
+        return demo.ee_trajectory(self.collector.messages('ee_position'), DT_NS, n, dims)
 
 
 def _offline(case):
