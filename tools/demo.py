@@ -444,7 +444,7 @@ def spatial_offline(arm, seed, n_ticks):
                             trace['theta'], trace['q'][:, passive], trace['kappa'],
                             diverged_at_s=n * dt if out['diverged'] else None)
     record.update({key: out[key] for key in ('tau_ratio', 'vel_ratio', 'vel_ratio_free',
-                                             'hold_last_s_max_mm')})
+                                             'hold_last_s_max_mm', 'active_outside_limits')})
     return record, trace
 
 
@@ -792,13 +792,16 @@ def main(argv=None):
                 if spatial:
                     say('  offline twin: max %.3f mm (last second of the hold %.3f mm), '
                         "peak |effort| %.2f of the URDF's limits, active joint speeds %.2f "
-                        'of them, the free joint %.2f%s' % (
+                        'of them, the free joint %.2f; active joints %s%s' % (
                             off['max_mm'], off['hold_last_s_max_mm'], off['tau_ratio'],
                             off['vel_ratio'], off['vel_ratio_free'],
+                            'within their position limits' if not off['active_outside_limits']
+                            else 'OUTSIDE their limits: %s' % off['active_outside_limits'],
                             '' if off['diverged_at_s'] is None else
                             ', DIVERGED at %.3f s' % off['diverged_at_s']))
                     failed = failed or off['diverged_at_s'] is not None or \
-                        off['tau_ratio'] > 1.0 or off['vel_ratio'] > 1.0
+                        off['tau_ratio'] > 1.0 or off['vel_ratio'] > 1.0 or \
+                        bool(off['active_outside_limits'])
                 say('  %s example, %s: max tracking error %.3f mm (stated bound %g mm)%s'
                     % (args.arm, case, record['max_mm'], bound,
                        '' if record['max_mm'] <= bound else '  NOT MET'))

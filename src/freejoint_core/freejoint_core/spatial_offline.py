@@ -220,7 +220,9 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
     -------
     dict
         ``rms_mm``, ``max_mm``, ``hold_last_s_max_mm``, ``tau_ratio``, ``vel_ratio``,
-        ``vel_ratio_free``, ``diverged``, ``tick_us`` (module notes), and ``trace``:
+        ``vel_ratio_free``, ``diverged``, ``tick_us`` (module notes),
+        ``active_outside_limits`` (the active joints that left their URDF position limits,
+        names), and ``trace``:
         ``{'p', 'p_d', 'q': (K, 3 / 3 / n) arrays, 'tau': (K, r), 'kappa': (K,),
         'theta': (K, 5)}`` of ticks 0..K-1 (``kappa`` the law's conditioning, ``theta``
         its estimate after the tick).
@@ -264,12 +266,15 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
         vel_free = max(vel_free, float(np.max(vel[free]))) if free else 0.0
     n = k + 1
     err = err[:n]
+    q_act = trace['q'][:n][:, act]
+    outside = [real.joint_names[j] for i, j in enumerate(act)
+               if np.any(q_act[:, i] < real.lower[j]) or np.any(q_act[:, i] > real.upper[j])]
     return {
         'rms_mm': 1e3 * float(np.sqrt(np.mean(err ** 2))),
         'max_mm': 1e3 * float(np.max(err)),
         'hold_last_s_max_mm': 1e3 * float(np.max(err[-last:])),
         'tau_ratio': tau_ratio, 'vel_ratio': vel_ratio, 'vel_ratio_free': vel_free,
-        'diverged': diverged,
+        'active_outside_limits': outside, 'diverged': diverged,
         'tick_us': 1e6 * t_law / n,
         'trace': {key: val[:n] for key, val in trace.items()},
     }
