@@ -17,6 +17,8 @@ import subprocess
 import threading
 import time
 
+from freejoint_core.kinematic_tree import quat_mul, quat_rotate
+import numpy as np
 import pytest
 
 pytestmark = pytest.mark.ros
@@ -292,3 +294,164 @@ def test_viewer_bad_start_up_parameter_is_one_line_and_exit_2(override, named, p
     assert 'Traceback' not in log
     fatal = [line for line in log.splitlines() if 'FATAL' in line]
     assert len(fatal) == 1 and 'bad parameter: %s' % named in fatal[0], log
+
+
+def _decoder(channel):
+    """Return a function decoding the channel's protobuf messages (from its advertised schema)."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+    assert channel['encoding'] == 'protobuf', channel
+    files = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(channel['schema']))
+    pool = descriptor_pool.DescriptorPool()
+    for proto in files.file:
+        pool.Add(proto)
+    cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(channel['schemaName']))
+    return cls.FromString
+
+
+UR5_MESHES = 'package://example-robot-data/robots/ur_description/meshes/ur5/'
+
+
+def test_foxglove_client_sees_a_spatial_arm_with_its_meshes_frames_and_paths(
+        procs, wait, ws_client_dir, ros_node, tmp_path):
+    """
+    The UR5 (a copy of its URDF: the forearm's visual mesh gone, the base's named by path).
+
+    The viewer against synthetic joint states, tip positions and setpoints published by
+    the test (the spatial graph's topics; its running is the graph tests' business).
+    """
+    from freejoint_common.contract import EE_POSITION, JOINT_STATES, SETPOINT
+    from freejoint_common.contract import stamp_from_ns
+    from freejoint_core.spatial_model import known_arm, robot_data_dir
+    from freejoint_msgs.msg import CartesianSetpoint
+    from freejoint_tools.view_arm import FILES_PACKAGE, SpatialTree
+    from geometry_msgs.msg import PointStamped
+    from sensor_msgs.msg import JointState
+    import xml.etree.ElementTree as ET
+    with open(os.path.join(robot_data_dir(), 'ur_description/urdf/ur5_robot.urdf')) as f:
+        original = f.read()
+    share = os.path.dirname(robot_data_dir())
+    base_dae = os.path.join(robot_data_dir(), 'ur_description/meshes/ur5/visual/base.dae')
+    text = original.replace(UR5_MESHES + 'visual/forearm.dae', UR5_MESHES + 'visual/gone.dae')
+    text = text.replace(UR5_MESHES + 'visual/base.dae', base_dae)
+    urdf = tmp_path / 'ur5_copy.urdf'
+    urdf.write_text(text)
+    viewer = procs.start_node('freejoint_tools', 'viewer', 'viewer', [
+        '--ros-args', '-p', 'port:=0', '-p', 'description_file:=%s' % urdf])
+    wait(lambda: 'viewer ready' in procs.log(viewer) or viewer.poll() is not None, 60.0,
+         'the viewer to start')
+    log = procs.log(viewer)
+    port = int(re.search(r'ws://127\.0\.0\.1:(\d+)', log).group(1))
+    assert 'spatial arm: frames by Pinocchio' in log, log
+    warnings = [line for line in log.splitlines() if 'not found' in line]
+    assert len(warnings) == 1 and 'WARN' in warnings[0], log
+    assert 'gone.dae of link forearm_link' in warnings[0]
+
+    arm = known_arm('ur5')
+    q = [0.3, -1.2, 1.6, -1.97, -1.5708, 0.7]
+    pubs = {name: ros_node.create_publisher(topic.msg_type, topic.name, topic.qos)
+            for name, topic in (('js', JOINT_STATES), ('ee', EE_POSITION), ('sp', SETPOINT))}
+    published = {'tip': [], 'setpoint': []}
+
+    def publish(k):
+        """Publish tick k: the posture q, a tip point and a setpoint 5 mm apart per tick."""
+        stamp = stamp_from_ns(k * 1_000_000)
+        point = (0.5, 0.1 + 0.005 * k, 0.3)
+        setpoint = (0.5, 0.1 + 0.005 * k, 0.31)
+        js = JointState(name=list(arm.joint_names), position=q)
+        js.header.stamp = stamp
+        pubs['js'].publish(js)
+        ee = PointStamped()
+        ee.header.stamp, ee.header.frame_id = stamp, 'base_link'
+        ee.point.x, ee.point.y, ee.point.z = point
+        pubs['ee'].publish(ee)
+        sp = CartesianSetpoint(position=list(setpoint), velocity=[0.0] * 3,
+                               acceleration=[0.0] * 3, plan_id=1)
+        sp.header.stamp, sp.header.frame_id = stamp, 'base_link'
+        pubs['sp'].publish(sp)
+        published['tip'].append(point)
+        published['setpoint'].append(setpoint)
+
+    client = Client(ws_client_dir, 'ws://127.0.0.1:%d' % port)
+    try:
+        info = client.wait(lambda e: e['event'] == 'serverInfo', 30.0, 'serverInfo')
+        assert 'assets' in info['capabilities']
+        channels = {}
+        while not {'/tf', '/robot_description', '/viewer/paths'} <= set(channels):
+            event = client.wait(lambda e: e['event'] == 'advertise', 30.0, 'channels')
+            channels.update({c['topic']: c for c in event['channels']})
+        assert channels['/viewer/paths']['schemaName'] == 'foxglove.SceneUpdate'
+
+        # The URDF served: the gone visual mesh replaced by the forearm's collision mesh,
+        # the base's path renamed to a package URI of the viewer's.
+        client.send(op='subscribe', topics=['/robot_description'], count=1)
+        event = client.wait(lambda e: e['event'] == 'message'
+                            and e['topic'] == '/robot_description', 30.0, 'the URDF')
+        served = _cdr('std_msgs/msg/String', base64.b64decode(event['data'])).data
+        links = {link.get('name'): link for link in ET.fromstring(served).findall('link')}
+        forearm = [m.get('filename') for m in links['forearm_link'].iter('mesh')]
+        assert forearm == [UR5_MESHES + 'collision/forearm.stl'] * 2
+        renamed = 'package://%s%s' % (FILES_PACKAGE, base_dae)
+        assert links['base_link'].find('visual/geometry/mesh').get('filename') == renamed
+
+        # Every mesh URI of it fetched over the connection (Foxglove's fetchAsset): the file.
+        uris = sorted({m.get('filename') for m in ET.fromstring(served).iter('mesh')})
+        assert len(uris) == 13      # 7 links x (visual, collision), the forearm's one twice
+        asked = uris + ['package://example-robot-data/robots/ur_description/urdf/ur5_robot.urdf']
+        for i, uri in enumerate(asked):
+            client.send(op='fetchAsset', uri=uri, requestId=i)
+        for i, uri in enumerate(asked):
+            answer = client.wait(lambda e: e['event'] == 'fetchAssetResponse'
+                                 and e['requestId'] == i, 30.0, 'asset %s' % uri)
+            if uri.endswith('.urdf'):   # not a mesh of the URDF: not served
+                assert answer['status'] == 1, answer
+                continue
+            path = base_dae if uri == renamed else os.path.join(
+                share, uri[len('package://example-robot-data/'):])
+            with open(path, 'rb') as f:
+                assert answer['status'] == 0 and base64.b64decode(answer['data']) == f.read()
+
+        # /tf and the paths from the published topics.
+        decode_paths = _decoder(channels['/viewer/paths'])
+        client.send(op='subscribe', topics=['/tf', '/viewer/paths'], count=1000)
+        frames, paths, k = None, None, 0
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline and not (
+                frames and paths and all(len(e.lines) and len(e.lines[0].points) >= 5
+                                         for e in paths.entities)):
+            publish(k)
+            k += 1
+            try:
+                event = client.events.get(timeout=0.02)
+            except queue.Empty:
+                continue
+            if event['event'] != 'message':
+                continue
+            if event['topic'] == '/tf':
+                frames = decode_frame_transforms(base64.b64decode(event['data']))
+            elif event['topic'] == '/viewer/paths':
+                paths = decode_paths(base64.b64decode(event['data']))
+        assert frames and paths, 'no /tf or /viewer/paths within 60 s (%d ticks)' % k
+    finally:
+        client.close()
+
+    # /tf: one transform per URDF joint = the arm's frames at q; composed from the root,
+    # tool0 lands where the arm model puts the tip.
+    expected = SpatialTree(original).transforms(dict(zip(arm.joint_names, q)))
+    assert [(p, c) for p, c, _, _, _ in frames] == [(p, c) for p, c, _, _ in expected]
+    poses = {'world': (np.zeros(3), (0.0, 0.0, 0.0, 1.0))}
+    for (parent, child, xyz, rot, _), (_, _, xyz2, rot2) in zip(frames, expected):
+        assert xyz == pytest.approx(xyz2, abs=1e-15) and rot == pytest.approx(rot2, abs=1e-15)
+        p_pos, p_rot = poses[parent]
+        poses[child] = (p_pos + quat_rotate(p_rot, xyz), quat_mul(p_rot, rot))
+    assert poses['tool0'][0] == pytest.approx(arm.placement(np.array(q))[0], abs=1e-12)
+
+    # The paths: one line each in base_link, the published points in their order.
+    by_id = {e.id: e for e in paths.entities}
+    assert set(by_id) == {'tip_path', 'setpoint_path'}
+    for name in ('tip', 'setpoint'):
+        entity = by_id[name + '_path']
+        assert entity.frame_id == 'base_link' and len(entity.lines) == 1
+        got = [(p.x, p.y, p.z) for p in entity.lines[0].points]
+        at = published[name].index(got[0])
+        assert got == published[name][at:at + len(got)]
+    assert procs.stop(viewer) == 0

@@ -7,15 +7,26 @@ What a Foxglove client (the app, or any client of Foxglove's WebSocket protocol)
   ``/diagnostics``) as raw CDR with the ``ros2msg`` schema the recorder writes to its bags
   (``freejoint_tools.typedefs``);
 * ``/tf``: the arm's link frames as ``foxglove.FrameTransforms``, computed from
-  ``joint_states`` with the URDF's kinematic tree (``freejoint_core.kinematic_tree``), one
-  transform per URDF joint, parent and child named as the URDF's links; at most
+  ``joint_states`` with the URDF's kinematic tree (``freejoint_core.kinematic_tree``; a
+  spatial arm - a URDF the planar model does not read, e.g. the UR5 or the Panda - with
+  Pinocchio's forward kinematics of the whole tree, joints missing from the joint states
+  at their locked value: ``freejoint_tools.view_arm``), one transform per URDF joint,
+  parent and child named as the URDF's links; at most
   ``tf_rate`` per second, stamped with the time the viewer received the joint state (the
   clock of Foxglove's live view, as the other messages' log times: a lockstep run's sim
   time starts at 0 again with the next run, and older frames would stay ahead of it);
 * ``/robot_description``: the URDF text (``std_msgs/msg/String``), for the 3D panel's URDF
   layer: the graph's own ``/robot_description`` (the simulator's, transient local) once it
   arrives, so that the graph has one source of the arm; ``description_file`` instead if
-  given; the shipped ``paper_arm.urdf`` until then;
+  given (``package://`` resolved); the shipped ``paper_arm.urdf`` until then. Its meshes
+  are served over the same connection (the protocol's assets capability: Foxglove fetches
+  ``package://`` URIs from the server it is connected to); meshes named by file path are
+  renamed ``package://freejoint_viewer/<path>``, a missing one is drawn as the link's
+  collision geometry or as lines between its joint frames, with one warning
+  (``view_arm.serve_description``);
+* ``/viewer/paths`` (a spatial arm only): the tip's path (``ee_position``) and the
+  setpoints' (``setpoint``) as ``foxglove.SceneUpdate`` lines in 3-D, at most
+  ``1 / PATH_PERIOD`` per second, started again when sim time restarts;
 * the parameters of every node of the graph, as ``<node>.<parameter>``
   (``/controller_node.K``), read and set through rclpy's ``AsyncParameterClient``; a
   refused set is answered with the unchanged value and a warning status naming the
@@ -41,8 +52,9 @@ import sys
 import threading
 import time
 
-from freejoint_common.contract import PLANNED_PATH, profile, ROBOT_DESCRIPTION
-from freejoint_common.contract import SEMI_SINGULAR_MAP, stamp_from_ns
+from freejoint_common.arm_description import package_path
+from freejoint_common.contract import EE_POSITION, PLANNED_PATH, profile, ROBOT_DESCRIPTION
+from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINT, stamp_from_ns, to_ns
 from freejoint_common.node_tools import declare
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
@@ -60,8 +72,13 @@ from .params import VIEWER
 from .recorder import _is_hidden, GRAPH_TOPICS
 from .resend import first_answer, Wakeup
 from .typedefs import DefinitionError, Definitions, message_class
+from .view_arm import link_frames, serve_description, Trail
 
 TF_TOPIC = '/tf'
+PATHS_TOPIC = '/viewer/paths'
+PATH_PERIOD = 0.1
+"""Seconds between updates of the paths of a spatial arm (``/viewer/paths``)."""
+PATH_COLOURS = {'tip': (1.0, 0.45, 0.0, 1.0), 'setpoint': (0.1, 0.6, 1.0, 1.0)}
 RESEND = 0.5
 """Seconds before a parameter request still unanswered is sent again (see ``_await``)."""
 DESCRIPTION_TOPIC = ROBOT_DESCRIPTION.name
@@ -167,13 +184,17 @@ class Viewer(Node, Lifecycle):
         super().__init__('viewer', **kwargs)
         self.values = declare(self, SPECS)
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        path = self.values['description_file'] or shipped_urdf_path('paper_arm')
+        path = package_path(self.values['description_file'] or shipped_urdf_path('paper_arm'))
         try:
             with open(path, encoding='utf-8') as fh:
-                self.urdf = fh.read()
+                text = fh.read()
         except OSError as exc:
             raise FreejointValueError('description_file: cannot read %r (%s)' % (path, exc))
-        self.tree = KinematicTree(self.urdf)
+        self._server = None
+        self._paths = None       # the SceneUpdate channel of a spatial arm's paths
+        self._paths_dirty = False
+        self._trails = {name: Trail() for name in PATH_COLOURS}
+        self._take(text, os.path.dirname(os.path.abspath(path)))
         self.defs = Definitions()
         self._tasks = queue.SimpleQueue()
         self._wake = self.create_guard_condition(self._run_tasks)
@@ -196,26 +217,63 @@ class Viewer(Node, Lifecycle):
             self.create_subscription(ROBOT_DESCRIPTION.msg_type, ROBOT_DESCRIPTION.name,
                                      self._on_description, ROBOT_DESCRIPTION.qos)
         self.get_logger().info(
-            'viewer ready: ws://%s:%d (Foxglove: open connection, Foxglove WebSocket); URDF %s'
-            % (self.values['host'], self._server.port, path))
+            'viewer ready: ws://%s:%d (Foxglove: open connection, Foxglove WebSocket); URDF %s%s'
+            % (self.values['host'], self._server.port, path, self._describe_spatial()))
+
+    def _take(self, text, base_dir):
+        """
+        Make ``text`` the arm of /tf, of the URDF channel and of the assets served.
+
+        Raises FreejointValueError (``robot_description: ...``) if it is no URDF the viewer
+        can draw; the arm shown so far stays.
+        """
+        tree = link_frames(text)
+        served = serve_description(text, base_dir)
+        self.source, self.urdf, self.tree, self._served = text, served.text, tree, served
+        if served.note:
+            self._status_warning('%s: %s' % (ROBOT_DESCRIPTION.name, served.note))
+        if self.spatial:
+            for trail in self._trails.values():
+                trail.clear()
+            if self._paths is None:
+                from foxglove.channels import SceneUpdateChannel
+                self._paths = SceneUpdateChannel(PATHS_TOPIC)
+                self.create_timer(PATH_PERIOD, self._flush_paths)
+            self._paths_dirty = True
+
+    @property
+    def spatial(self):
+        """Return True if the arm shown is a spatial one (its frames from Pinocchio)."""
+        return not isinstance(self.tree, KinematicTree)
+
+    def _describe_spatial(self):
+        if not self.spatial:
+            return ''
+        return ' (spatial arm: frames by Pinocchio, %d mesh files served, paths on %s)' % (
+            len(self._served.assets), PATHS_TOPIC)
 
     def _on_description(self, msg):
         """Take the graph's /robot_description as the arm of /tf and of the URDF channel."""
-        if msg.data == self.urdf:
+        if msg.data == self.source:
             return
         try:
-            tree = KinematicTree(msg.data)
+            self._take(msg.data, None)
         except FreejointValueError as exc:
             self.get_logger().warn('%s not taken: %s' % (ROBOT_DESCRIPTION.name, exc))
             return
-        self.urdf, self.tree = msg.data, tree
-        self.get_logger().info('URDF from %s (%d characters)'
-                               % (ROBOT_DESCRIPTION.name, len(msg.data)))
+        self.get_logger().info('URDF from %s (%d characters)%s'
+                               % (ROBOT_DESCRIPTION.name, len(msg.data),
+                                  self._describe_spatial()))
         with self._lock:
             watched = DESCRIPTION_TOPIC in self._subscribed
         if watched:
-            self._channels[DESCRIPTION_TOPIC][0].log(serialize_message(msg),
-                                                     log_time=time.time_ns())
+            self._channels[DESCRIPTION_TOPIC][0].log(
+                serialize_message(ROBOT_DESCRIPTION.msg_type(data=self.urdf)),
+                log_time=time.time_ns())
+
+    def _asset(self, uri):
+        """Server callback (fetchAsset): the bytes of a mesh of the URDF served, else None."""
+        return self._served.asset(uri)
 
     # -- parameters of the viewer itself ------------------------------------------------
     def _on_set_parameters(self, params):
@@ -291,7 +349,8 @@ class Viewer(Node, Lifecycle):
             return foxglove.start_server(
                 name='freejoint viewer', host=self.values['host'], port=self.values['port'],
                 capabilities=[Capability.Parameters, Capability.Services],
-                supported_encodings=['cdr'], services=services, server_listener=self)
+                supported_encodings=['cdr'], services=services, server_listener=self,
+                asset_handler=self._asset)
         except Exception as exc:  # address in use, bad host
             raise FreejointValueError('port: cannot serve on %s:%d (%s)'
                                       % (self.values['host'], self.values['port'], exc))
@@ -328,6 +387,8 @@ class Viewer(Node, Lifecycle):
         """Server callback: a client subscribed to ``channel``."""
         with self._lock:
             self._subscribed[channel.topic] = self._subscribed.get(channel.topic, 0) + 1
+        if channel.topic == PATHS_TOPIC:
+            self._paths_dirty = True     # the new client gets the paths so far
         self._submit(self._update_subscriptions, channel.topic)
 
     def on_unsubscribe(self, client, channel):
@@ -343,11 +404,18 @@ class Viewer(Node, Lifecycle):
     def _wanted(self):
         with self._lock:
             topics = set(self._subscribed)
-        wanted = {t for t in topics if t not in (TF_TOPIC, DESCRIPTION_TOPIC)}
+        wanted = {t for t in topics if t not in (TF_TOPIC, DESCRIPTION_TOPIC, PATHS_TOPIC)}
         js = self.resolve_topic_name(self.values['joint_states_topic'])
         if TF_TOPIC in topics:
             wanted.add(js)
+        if PATHS_TOPIC in topics:
+            wanted |= set(self._path_sources())
         return wanted
+
+    def _path_sources(self):
+        """Return ``{ROS topic: (trail name, message class)}`` of the paths."""
+        return {self.resolve_topic_name(EE_POSITION.name): ('tip', EE_POSITION.msg_type),
+                self.resolve_topic_name(SETPOINT.name): ('setpoint', SETPOINT.msg_type)}
 
     def _update_subscriptions(self, new_topic):
         wanted = self._wanted()
@@ -370,6 +438,7 @@ class Viewer(Node, Lifecycle):
     def _forwarder(self, topic):
         channel = self._channels[topic][0]
         js = topic == self.resolve_topic_name(self.values['joint_states_topic'])
+        trail, msg_class = self._path_sources().get(topic, (None, None))
         from sensor_msgs.msg import JointState
 
         def forward(raw):
@@ -380,7 +449,47 @@ class Viewer(Node, Lifecycle):
                     now * 1e-9 - self._tf_last >= self._tf_period:
                 self._tf_last = now * 1e-9
                 self._send_tf(deserialize_message(raw, JointState), now)
+            if trail is not None and self._paths is not None and \
+                    PATHS_TOPIC in self._subscribed:
+                self._add_to_path(trail, deserialize_message(raw, msg_class))
         return forward
+
+    def _add_to_path(self, name, msg):
+        """Add a tip position (PointStamped) or a setpoint (CartesianSetpoint) to its path."""
+        if name == 'tip':
+            point = (msg.point.x, msg.point.y, msg.point.z)
+        else:
+            point = tuple(msg.position)
+        if self._trails[name].add(to_ns(msg.header.stamp), point, msg.header.frame_id):
+            self._paths_dirty = True
+
+    def _flush_paths(self):
+        """Send the paths if they changed (timer, every PATH_PERIOD s)."""
+        if not self._paths_dirty or self._paths is None or PATHS_TOPIC not in self._subscribed:
+            return
+        self._paths_dirty = False
+        from foxglove.messages import Color, Duration, LinePrimitive, LinePrimitiveLineType
+        from foxglove.messages import Point3, Pose, Quaternion, SceneEntity, SceneUpdate
+        from foxglove.messages import Vector3
+        from foxglove.schemas import Timestamp
+        now = time.time_ns()
+        stamp = stamp_from_ns(now)
+        stamp = Timestamp(stamp.sec, stamp.nanosec)
+        entities = []
+        for name, trail in self._trails.items():
+            lines = []
+            if len(trail.points) >= 2:
+                r, g, b, a = PATH_COLOURS[name]
+                lines.append(LinePrimitive(
+                    type=LinePrimitiveLineType.LineStrip,
+                    pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.0),
+                              orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+                    thickness=3.0, scale_invariant=True, color=Color(r=r, g=g, b=b, a=a),
+                    points=[Point3(x=x, y=y, z=z) for x, y, z in trail.points]))
+            entities.append(SceneEntity(
+                timestamp=stamp, frame_id=trail.frame_id or self.tree.root, id=name + '_path',
+                lifetime=Duration(sec=0, nsec=0), frame_locked=True, lines=lines))
+        self._paths.log(SceneUpdate(entities=entities), log_time=now)
 
     def _send_tf(self, msg, now):
         from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Vector3
@@ -518,7 +627,8 @@ class Viewer(Node, Lifecycle):
     def _status_warning(self, text):
         from foxglove import StatusLevel
         self.get_logger().warn(text)
-        self._server.publish_status(text, StatusLevel.Warning)
+        if self._server is not None:
+            self._server.publish_status(text, StatusLevel.Warning)
 
     # -- services --------------------------------------------------------------------------
     def _service_handler(self, name, srvtype):

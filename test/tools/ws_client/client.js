@@ -7,10 +7,12 @@
 //           {"op": "setParameters", "parameters": [{"name", "value", "type"?}], "id": "..."}
 //           {"op": "subscribeParameterUpdates", "names": [...]}
 //           {"op": "callService", "service": "/name", "callId": N, "data": "<base64 CDR>"}
+//           {"op": "fetchAsset", "uri": "package://...", "requestId": N}
 //           {"op": "close"}
 // Events:   open, serverInfo, advertise (topic, schemaName, encoding, schemaEncoding,
 //           schema), advertiseServices, message (topic, data base64), parameterValues,
-//           status, serviceCallResponse (data base64), serviceCallFailure, error, close.
+//           status, serviceCallResponse (data base64), serviceCallFailure,
+//           fetchAssetResponse (requestId, status 0 = found, data base64 / error), error, close.
 "use strict";
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
 const WebSocket = require("ws");
@@ -54,6 +56,9 @@ client.on("parameterValues", (p) => out({ event: "parameterValues", id: p.id,
   parameters: p.parameters }));
 client.on("serviceCallResponse", (r) => out({ event: "serviceCallResponse", callId: r.callId,
   encoding: r.encoding, data: b64(r.data) }));
+client.on("fetchAssetResponse", (r) => out({ event: "fetchAssetResponse",
+  requestId: r.requestId, status: r.status, error: r.error,
+  data: r.status === 0 ? b64(r.data) : undefined }));
 client.on("serviceCallFailure", (f) => out({ event: "serviceCallFailure", callId: f.callId,
   message: f.message }));
 
@@ -77,6 +82,8 @@ readline.createInterface({ input: process.stdin }).on("line", (line) => {
     if (!s) { out({ event: "error", message: "no service " + cmd.service }); return; }
     client.sendServiceCallRequest({ serviceId: s.id, callId: cmd.callId, encoding: "cdr",
       data: new Uint8Array(Buffer.from(cmd.data, "base64")) });
+  } else if (cmd.op === "fetchAsset") {
+    client.fetchAsset(cmd.uri, cmd.requestId);
   } else if (cmd.op === "close") {
     client.close();
   }
