@@ -17,7 +17,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 MODULES = ['core_law_plant', 'core_delay', 'core_map_offline', 'core_singularity_nlink',
-           'core_urdf', 'tools_recorder', 'graph', 'echo', 'viewer']
+           'core_urdf', 'core_spatial_map', 'tools_recorder', 'graph', 'echo', 'viewer']
 
 
 def meets(value, target):

@@ -696,31 +696,61 @@ def _ray_task(camp, rows, threads):
     return run_chunk(camp, rows)
 
 
-def _run_ray(camp, rows, todo, out_dir, address, bar):
+def ray_tasks(address, fn, shared, jobs, on_result, retries=5):
+    """
+    Run ``fn(shared, *args)`` as one Ray task per job; hand each result to the driver.
+
+    The Ray plumbing of campaigns, shared with ``freejoint_tools.spatial_map``: one CPU a
+    task, a task whose worker dies retried (``retries`` times; an exception raised by
+    ``fn`` is not retried, it ends the call), ``shared`` put in the object store once.
+
+    Parameters
+    ----------
+    address : str
+        Ray cluster address (``HOST:PORT`` or ``auto``; ``local`` starts Ray in this
+        process).  Ray is shut down on return.
+    fn : callable
+        A module-level function (the workers import it by name).
+    shared : object
+        First argument of every task (picklable).
+    jobs : iterable of (key, tuple)
+        A key for the driver and the task's other arguments.
+    on_result : callable
+        ``on_result(key, result)``, called in this process as each task finishes (in
+        the order they finish).
+    retries : int
+        Retries of a task whose worker died.
+
+    """
     import ray
     if address == 'local':
         ray.init(include_dashboard=False, log_to_driver=False, configure_logging=False)
     else:
         ray.init(address=address, log_to_driver=False, configure_logging=False)
     try:
-        task = ray.remote(num_cpus=1, max_retries=5, retry_exceptions=False)(_ray_task)
-        camp_ref = ray.put(camp)
-        pending = {}
-        for i, lo, hi in todo:
-            ref = task.remote(camp_ref, _slice(rows, lo, hi), 1)
-            pending[ref] = (i, hi - lo)
+        task = ray.remote(num_cpus=1, max_retries=retries, retry_exceptions=False)(fn)
+        shared_ref = ray.put(shared)
+        pending = {task.remote(shared_ref, *args): key for key, args in jobs}
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)
             for ref in ready:
-                i, count = pending.pop(ref)
-                path = _chunk_path(out_dir, i)
-                if os.path.exists(path):   # never written twice
-                    continue
-                _write_parquet(_table(ray.get(ref)), path)
-                if bar:
-                    bar.update(count)
+                on_result(pending.pop(ref), ray.get(ref))
     finally:
         ray.shutdown()
+
+
+def _run_ray(camp, rows, todo, out_dir, address, bar):
+    def write(key, result):
+        i, count = key
+        path = _chunk_path(out_dir, i)
+        if os.path.exists(path):   # never written twice
+            return
+        _write_parquet(_table(result), path)
+        if bar:
+            bar.update(count)
+
+    ray_tasks(address, _ray_task, camp,
+              [((i, hi - lo), (_slice(rows, lo, hi), 1)) for i, lo, hi in todo], write)
 
 
 # -- the report -------------------------------------------------------------------------
