@@ -27,6 +27,7 @@ ROS_FREE = (
     'freejoint_core.spatial_plant',
     'freejoint_core.spatial_offline',
     'freejoint_planner.spatial_planning',
+    'freejoint_tools.view_arm',
 )
 """Modules that must import without rclpy (the nodes' schemas and what they build on)."""
 

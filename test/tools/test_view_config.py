@@ -134,3 +134,66 @@ def test_viewer_requirement_is_the_pin_of_the_pypi_install():
     with open(os.path.join(ROOT, 'tools', 'requirements.txt')) as f:
         pins = [line.strip() for line in f if line.startswith('foxglove-sdk==')]
     assert pins == [FOXGLOVE_SDK]
+
+
+SPATIAL_ARMS = ('ur5', 'panda')
+
+
+def _spatial(arm):
+    """Return (layout configById, the arm's SpatialArm, its URDF text) of a shipped example."""
+    from freejoint_common.arm_description import package_path
+    from freejoint_core.spatial_model import SpatialArm
+    with open(os.path.join(ROOT, 'config', 'foxglove_layout_%s.json' % arm)) as f:
+        layout = json.load(f)
+    with open(os.path.join(ROOT, 'config', arm, 'sim.yaml')) as f:
+        values = yaml.safe_load(f)['/**']['ros__parameters']
+    with open(package_path(values['description_file']), encoding='utf-8') as f:
+        text = f.read()
+    model = SpatialArm(text, values['base_link'], values['tip_link'], values['passive_joints'])
+    return layout, model, text
+
+
+@pytest.mark.parametrize('arm', SPATIAL_ARMS)
+def test_spatial_layout_plots_its_arms_task_rows_active_torques_and_free_joint(arm):
+    layout, model, _ = _spatial(arm)
+    panels = _leaves(layout['layout'])
+    assert sorted(panels) == sorted(layout['configById'])
+    cfg = layout['configById']
+    for panel, conf in cfg.items():
+        for p in conf.get('paths', ()):
+            topic, field, index = _PATH.match(p['value']).groups()
+            assert field in message_class(SERVED[topic]).get_fields_and_field_types(), p
+    values = {name: [p['value'] for p in cfg[name]['paths']]
+              for name in ('Plot!error', 'Plot!torques', 'Plot!passive')}
+    assert values['Plot!error'] == ['/controller_state.error[%d]' % i for i in range(3)]
+    assert values['Plot!torques'] == ['/controller_state.effort[%d]' % i
+                                      for i in range(model.r)]
+    (free,) = model.passive
+    assert values['Plot!passive'] == ['/joint_states.position[%d]' % free,
+                                      '/joint_states.velocity[%d]' % free]
+    assert model.joint_names[free] in cfg['Plot!passive']['title']
+
+
+@pytest.mark.parametrize('arm', SPATIAL_ARMS)
+def test_spatial_layout_3d_panel_shows_the_urdf_frames_and_paths_in_perspective(arm):
+    from freejoint_tools.viewer import PATHS_TOPIC
+    layout, _, text = _spatial(arm)
+    cfg = layout['configById']['3D!arm']
+    urdf_layers = [v for v in cfg['layers'].values() if v['layerId'] == 'foxglove.Urdf']
+    assert urdf_layers and urdf_layers[0]['topic'] == DESCRIPTION_TOPIC
+    assert cfg['followTf'] == KinematicTree(text).root
+    assert cfg['cameraState']['perspective'] is True
+    assert {TF_TOPIC, PATHS_TOPIC, '/planned_path', '/ee_position'} <= set(cfg['topics'])
+    assert '/semi_singular_map' not in cfg['topics']     # planar arms only
+
+
+@pytest.mark.parametrize('arm', SPATIAL_ARMS)
+def test_spatial_layout_plan_request_keeps_the_planar_only_fields_at_their_defaults(arm):
+    from freejoint_msgs.srv import PlanCircle
+    layout, _, _ = _spatial(arm)
+    request = json.loads(layout['configById']['CallService!plan']['requestPayload'])
+    assert set(request) == set(PlanCircle.Request.get_fields_and_field_types())
+    PlanCircle.Request(**request)
+    assert (request['centre'], request['start_angle'], request['direction']) == ([0.0, 0.0],
+                                                                                 0.0, 1)
+    assert request['radius'] == 0.1 and request['execute'] is True
