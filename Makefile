@@ -14,7 +14,8 @@ help:
 	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
 	@echo '              ARM=four_link: the shipped 4-link example instead (config/four_link)'
 	@echo '              ARM=ur5 / ARM=panda: a spatial arm with a free wrist joint, a 3-D'
-	@echo '              circle then a 10-s hold (config/ur5, config/panda; issue 25)'
+	@echo '              circle then a 10-s hold (config/ur5, config/panda; issue 25);'
+	@echo '              PLANE="0 0 1": the circle in the plane of that normal'
 	@echo '              STABILISE=1: internal motion stabilised, both cases (issue 22)'
 	@echo '              FAIL=joint3@2.5: all joints driven, joint 3 fails at 2.5 s (issue 23)'
 	@echo '              CIRCLES=N REST=S: N revolutions back to back, S s rest between (issue 22)'
@@ -36,7 +37,7 @@ setup:
 	@bash tools/setup.sh
 
 demo: setup
-	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise) $(if $(FAIL),--fail $(FAIL)) $(if $(CIRCLES),--circles $(CIRCLES)) $(if $(REST),--rest $(REST))
+	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise) $(if $(FAIL),--fail $(FAIL)) $(if $(CIRCLES),--circles $(CIRCLES)) $(if $(REST),--rest $(REST)) $(if $(PLANE),--plane-normal $(PLANE))
 
 test: setup
 	@$(ENV) python -m pytest -c pytest.ini $(XDIST)

@@ -393,10 +393,10 @@ def graph_record(collector, case, seed, n_ticks, passive_joint=PASSIVE_JOINT,
     return record, arrays
 
 
-def arm_offline(arm, case, seed, n_ticks):
+def arm_offline(arm, case, seed, n_ticks, normal=None):
     """Return the offline runner's record and trace of a shipped example arm (``ARMS``)."""
     if 'spatial' in ARMS[arm]:
-        return spatial_offline(arm, seed, n_ticks)
+        return spatial_offline(arm, seed, n_ticks, normal)
     from freejoint_core.trajectory import CircleQuintic
     from freejoint_core.urdf import four_link_arm, FOUR_LINK_CIRCLE, FOUR_LINK_Q0
     from freejoint_core.urdf_offline import run_arm
@@ -405,7 +405,7 @@ def arm_offline(arm, case, seed, n_ticks):
                    label=case, seed=seed, n_ticks=n_ticks)
 
 
-def spatial_offline(arm, seed, n_ticks):
+def spatial_offline(arm, seed, n_ticks, normal=None):
     """
     Return the offline twin's record and trace of a spatial example arm (issue 25).
 
@@ -413,7 +413,9 @@ def spatial_offline(arm, seed, n_ticks):
     ``config/<arm>/*.yaml``): the real arm and its start posture, dt_sub, the disturbance
     (the simulator's), the law built as the controller builds it (its schema's config,
     ``make_law``, ``install_nullspace``), the circle's radius and duration (the planner's);
-    ``freejoint_core.spatial_offline.run_twin`` runs it for ``n_ticks``.
+    ``freejoint_core.spatial_offline.run_twin`` runs it for ``n_ticks``. ``normal``: the
+    circle plane's normal given to the planner on the command line (``--plane-normal``),
+    else the planner's file's ``plane_normal``.
     """
     from freejoint_control.failures import install_nullspace
     from freejoint_control.params import SCHEMA as CONTROLLER
@@ -421,6 +423,7 @@ def spatial_offline(arm, seed, n_ticks):
     from freejoint_core.metrics import compute_record
     from freejoint_core.spatial_offline import run_twin
     from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_planner.spatial_planning import plane_normal
     from freejoint_sim.params import SCHEMA as SIM
     import numpy as np
     overlays = (arm,)
@@ -435,7 +438,8 @@ def spatial_offline(arm, seed, n_ticks):
     duration = float(plan['duration'])
     out = run_twin(sim.arm.spatial, sim.q0, law, seed, t_move=duration,
                    t_hold=n_ticks * dt - duration, dt=dt, dt_sub=sim.dt_sub,
-                   dist=sim.dist_bound, radius=float(plan['radius']))
+                   dist=sim.dist_bound, radius=float(plan['radius']),
+                   normal=plane_normal(plan['plane_normal'] if normal is None else normal))
     trace = out['trace']
     n = len(trace['p'])
     passive = sim.arm.spatial.passive[0]
@@ -597,6 +601,9 @@ def _parse(argv):
     ap.add_argument('--rest', type=float, default=0.0, metavar='S',
                     help="rest (s) between the revolutions (the planner's rest; make demo "
                     'REST=S)')
+    ap.add_argument('--plane-normal', type=float, nargs=3, metavar=('X', 'Y', 'Z'),
+                    help="a spatial arm's circle in the plane of this normal (base frame; "
+                    "the planner's plane_normal; make demo ARM=ur5 PLANE='0 0 1')")
     ap.add_argument('--view', action='store_true',
                     help='also start the viewer (Foxglove WebSocket on ws://127.0.0.1:8765, '
                     'layout config/foxglove_layout.json; make demo VIEW=1)')
@@ -631,6 +638,12 @@ def main(argv=None):
             per_case = {'horizontal': overlays + (STABILISED_HORIZONTAL,)}
         overlays += (os.path.join(args.arm, STABILISED) if args.arm else STABILISED,)
     node_args = None
+    if args.plane_normal is not None:
+        if not (args.arm and 'spatial' in ARMS[args.arm]):
+            say('error: --plane-normal turns the circle of a spatial arm (--arm ur5, panda)')
+            return 2
+        node_args = {'planner': ['plane_normal:=[%s]' % ', '.join(
+            repr(v) for v in args.plane_normal)]}
     series = args.circles != 1 or args.rest != 0.0
     if series:
         if args.arm or args.fail or args.circles < 1 or args.rest < 0.0:
@@ -787,7 +800,8 @@ def main(argv=None):
                     say('  offline circles runner: diverged at %s s' % off['diverged_at_s'])
                 say('  graph: rms %.4f mm, max %.4f mm' % (record['rms_mm'], record['max_mm']))
             elif args.arm:
-                off, trace = arm_offline(args.arm, case, args.seed, n_ticks)
+                off, trace = arm_offline(args.arm, case, args.seed, n_ticks,
+                                         args.plane_normal)
                 bound = ARMS[args.arm]['bound_mm']
                 if spatial:
                     say('  offline twin: max %.3f mm (last second of the hold %.3f mm), '
@@ -803,7 +817,7 @@ def main(argv=None):
                         off['tau_ratio'] > 1.0 or off['vel_ratio'] > 1.0 or \
                         bool(off['active_outside_limits'])
                 say('  %s example, %s: max tracking error %.3f mm (stated bound %g mm)%s'
-                    % (args.arm, case, record['max_mm'], bound,
+                    % (args.arm, ARMS[args.arm].get('spatial', case), record['max_mm'], bound,
                        '' if record['max_mm'] <= bound else '  NOT MET'))
                 failed = failed or record['max_mm'] > bound
             else:

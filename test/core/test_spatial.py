@@ -8,7 +8,7 @@ from freejoint_core.internal import NullSpace
 from freejoint_core.spatial_law import gravity_carrying_free_joint, SpatialGains, SpatialLaw
 from freejoint_core.spatial_law import task_conditioning
 from freejoint_core.spatial_model import known_arm
-from freejoint_core.spatial_offline import CASES, circle, run_case
+from freejoint_core.spatial_offline import CASES, circle, circle_axes, run_case
 import mujoco
 import numpy as np
 import pinocchio as pin
@@ -236,3 +236,41 @@ def test_a_seeded_run_repeats_exactly_and_another_seed_differs():
         return {k: v for k, v in rec.items() if k != 'tick_us'}
     assert metrics(3) == metrics(3)
     assert metrics(3) != metrics(4)
+
+
+def test_the_default_planes_own_normal_gives_the_default_circle():
+    # p0 = (0.5, 0.2, 0.3): across the base-to-tip line (-0.2, 0.5, 0)/|.|, e1 = -that,
+    # e2 = z; the plane's normal e1 x e2 = (-0.5, -0.2, 0)/|.|, towards the base
+    # (hand-derived)
+    p0 = np.array([0.5, 0.2, 0.3])
+    e1, e2 = circle_axes(p0)
+    assert e1 == pytest.approx(np.array([0.2, -0.5, 0.0]) / np.hypot(0.2, 0.5), abs=1e-15)
+    assert e2.tolist() == [0.0, 0.0, 1.0]
+    n = np.array([-0.5, -0.2, 0.0])
+    f1, f2 = circle_axes(p0, 3.0 * n)                 # any length
+    assert f1 == pytest.approx(e1, abs=1e-15) and f2 == pytest.approx(e2, abs=1e-15)
+    for t in (0.0, 1.3, 2.5, 4.9, 6.0):
+        for got, want in zip(circle(p0, 0.1, t, 5.0, n), circle(p0, 0.1, t, 5.0)):
+            assert got == pytest.approx(want, abs=1e-15)
+
+
+def test_a_circle_in_a_horizontal_plane_keeps_its_height_and_radius():
+    p0 = np.array([0.5, 0.2, 0.3])
+    e1, e2 = circle_axes(p0, (0.0, 0.0, 2.0))
+    assert e1 == pytest.approx(np.array([0.2, -0.5, 0.0]) / np.hypot(0.2, 0.5), abs=1e-15)
+    assert e2 == pytest.approx(np.cross([0.0, 0.0, 1.0], e1), abs=1e-15)
+    centre = p0 - 0.1 * e1
+    assert circle(p0, 0.1, 0.0, 5.0, (0, 0, 1))[0] == pytest.approx(p0, abs=1e-15)
+    for t in np.linspace(0.0, 5.0, 11):
+        pos, vel, acc = circle(p0, 0.1, t, 5.0, (0, 0, 1))
+        assert pos[2] == pytest.approx(0.3, abs=1e-15) and vel[2] == acc[2] == 0.0
+        assert np.linalg.norm(pos - centre) == pytest.approx(0.1, abs=1e-14)
+    # a normal along the default e1 (in the default plane's x direction): e1 from z
+    f1, f2 = circle_axes(p0, e1)
+    assert f1 == pytest.approx([0.0, 0.0, 1.0], abs=1e-15)
+
+
+@pytest.mark.parametrize('normal', [(0.0, 0.0, 0.0), (1.0, float('nan'), 0.0), (1.0, 0.0)])
+def test_a_bad_plane_normal_is_refused_naming_it(normal):
+    with pytest.raises(FreejointValueError, match='^normal: expected 3 finite numbers'):
+        circle_axes(np.array([0.5, 0.2, 0.3]), normal)

@@ -71,7 +71,41 @@ def quintic(tau):
             60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau))
 
 
-def circle(p0, radius, t, t_move):
+def circle_axes(p0, normal=None):
+    """
+    Return the in-plane axes ``(e1, e2)`` of the circle from ``p0`` (each (3,), unit).
+
+    The circle starts at ``p0`` (its centre is ``p0 - radius e1``) and first moves along
+    ``e2``. Default (``normal`` None): the vertical plane facing
+    the robot, ``e1`` the horizontal direction across the base-to-tip line (towards -x of
+    it), ``e2 = z``. With ``normal`` (3,): the plane through ``p0`` normal to it, ``e1`` the
+    default's ``e1`` projected onto it (``z``'s when that vanishes), ``e2 = n x e1``
+    (counter-clockwise about ``n``); the default plane's own normal gives the default axes.
+
+    Raises
+    ------
+    FreejointValueError
+        ``normal`` not 3 finite numbers of non-zero length.
+
+    """
+    across = np.array([-p0[1], p0[0], 0.0])
+    across = across / np.linalg.norm(across)
+    if normal is None:
+        return -across, np.array([0.0, 0.0, 1.0])
+    n = np.asarray(normal, dtype=float)
+    if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+        raise FreejointValueError(f'normal: expected 3 finite numbers, not all 0, got '
+                                  f'{normal!r}')
+    n = n / np.linalg.norm(n)
+    for guess in (-across, np.array([0.0, 0.0, 1.0])):
+        e1 = guess - (guess @ n) * n
+        if np.linalg.norm(e1) > 1e-6:
+            break
+    e1 = e1 / np.linalg.norm(e1)
+    return e1, np.cross(n, e1)
+
+
+def circle(p0, radius, t, t_move, normal=None):
     """
     Setpoint of the circle at ``t`` (module notes).
 
@@ -85,6 +119,9 @@ def circle(p0, radius, t, t_move):
         Time [s].
     t_move : float
         Duration of the circle [s].
+    normal : array_like, (3,), optional
+        Normal of the circle's plane (:func:`circle_axes`); default the vertical plane
+        facing the robot.
 
     Returns
     -------
@@ -92,9 +129,7 @@ def circle(p0, radius, t, t_move):
         Position [m], velocity [m/s], acceleration [m/s^2].
 
     """
-    across = np.array([-p0[1], p0[0], 0.0])
-    across = across / np.linalg.norm(across)
-    e1, e2 = -across, np.array([0.0, 0.0, 1.0])
+    e1, e2 = circle_axes(p0, normal)
     centre = p0 - radius * e1
     s, sd, sdd = quintic(t / t_move) if t < t_move else (1.0, 0.0, 0.0)
     sd, sdd = sd / t_move, sdd / t_move ** 2
@@ -192,7 +227,7 @@ def start_posture(nominal, q_plan):
 
 
 def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub=DT_SUB,
-             dist=DIST, radius=RADIUS, t_stop=None):
+             dist=DIST, radius=RADIUS, t_stop=None, normal=None):
     """
     One run of the lockstep graph, offline: plant, setpoints and law as the nodes run them.
 
@@ -215,6 +250,9 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
         [N m], circle radius [m].
     t_stop : float, optional
         End the run early at this time [s].
+    normal : array_like, (3,), optional
+        Normal of the circle's plane (:func:`circle_axes`; the planner's
+        ``plane_normal``); default the vertical plane facing the robot.
 
     Returns
     -------
@@ -244,7 +282,7 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
     k = 0
     for k in range(steps):
         q, qd = plant.q, plant.qd
-        p_d, v_d, a_d = circle(p0, radius, k * dt, t_move)
+        p_d, v_d, a_d = circle(p0, radius, k * dt, t_move, normal)
         c0 = time.perf_counter()
         out = law.step(q.tolist(), qd.tolist(), p_d.tolist(), v_d.tolist(), a_d.tolist(), dt)
         t_law += time.perf_counter() - c0

@@ -27,9 +27,20 @@ _CIRCLE = {name: p.default for name, p in
 
 # Parameters of the configured circle; an accepted change of any of them re-checks it.
 CIRCLE_KEYS = ('centre', 'radius', 'duration', 'start_angle', 'direction', 'start_delay',
-               'circles', 'rest')
+               'circles', 'rest', 'plane_normal')
 # Parameters of the singularity map; an accepted change of any of them recomputes it.
 MAP_KEYS = ('case', 'nominal_scale', 'resolution_deg', 'eps_d', 'singular_cells')
+
+
+def _normal(value):
+    """Refuse a plane normal that is not 3 finite numbers ([0, 0, 0]: the default plane)."""
+    try:
+        vec = [float(v) for v in value]
+    except (TypeError, ValueError):
+        return f'expected 3 numbers, got {value!r}'
+    if len(vec) != 3 or not all(math.isfinite(v) for v in vec):
+        return f'expected 3 finite numbers, got {value!r}'
+    return None
 
 
 def _even_steps(value):
@@ -95,6 +106,12 @@ PARAMS = (
           'either way.', (-2.0 * math.pi, 2.0 * math.pi)),
     Param('direction', _CIRCLE['direction'], '+1 counter-clockwise, -1 clockwise.',
           (-1, 1, 2), validator=_direction),
+    Param('plane_normal', [0.0, 0.0, 0.0],
+          "Spatial arms (task_dim 3): normal of the circle's plane in the base frame (3 "
+          'values; the circle starts at the tip, its centre one radius away along the '
+          "plane's first axis: freejoint_core.spatial_offline.circle_axes); [0, 0, 0] = the "
+          'vertical plane facing the robot. Planar arms: leave it at [0, 0, 0].',
+          validator=_normal),
     Param('circles', 1,
           'Revolutions of every plan, back to back (issue 22): each but the last followed by '
           "rest; the stream is the offline circles runner's (freejoint_core.trajectory."
@@ -149,8 +166,12 @@ PLANAR_ONLY = ('centre', 'start_angle', 'direction', 'circles', 'rest')
 
 
 def _check_spatial(values):
-    """Refuse planar-only circle parameters away from their defaults for a spatial arm."""
+    """Refuse planar-only circle parameters for a spatial arm, and the converse."""
     if values.get('task_dim', 2) != 3:
+        if list(values['plane_normal']) != DEFAULTS['plane_normal']:
+            return (f"plane_normal: a spatial arm's (task_dim 3); a planar arm's circle lies "
+                    f"in its plane: leave it at {DEFAULTS['plane_normal']!r}, got "
+                    f"{list(values['plane_normal'])!r}")
         return None
     for name in PLANAR_ONLY:
         value = values[name]

@@ -623,12 +623,14 @@ class PlannerNode(Node, Lifecycle):
         if p0 is None:          # the tip as the offline runner takes it (the real arm's fk)
             p0 = self._spatial.fk(np.asarray(q, dtype=float))
         return check_spatial_plan(self._node_arm.nominal(cfg['nominal_scale']), q, qd, radius,
-                                  duration, cfg['max_speed'], cfg['max_acceleration'], p0=p0)
+                                  duration, cfg['max_speed'], cfg['max_acceleration'], p0=p0,
+                                  normal=cfg['plane_normal'])
 
     def _execute_spatial(self, radius, duration, start_delay, source, verdict=None):
         """Replace the running plan by a spatial circle (``verdict`` None: from the tip)."""
         self._last_plan_id += 1
-        traj = SpatialRequest(radius, duration) if verdict is None else verdict.circle
+        traj = SpatialRequest(radius, duration, self._cfg['plane_normal']) if verdict is None \
+            else verdict.circle
         plan = Plan(self._last_plan_id, traj, round(float(start_delay) * 1e9),
                     joined=verdict is not None)
         self._stream.start(plan)

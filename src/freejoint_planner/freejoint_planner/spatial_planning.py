@@ -56,7 +56,7 @@ from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
 from freejoint_core.spatial_law import arm_reach, gravity_carrying_free_joint, SpatialGains
 from freejoint_core.spatial_law import SpatialLaw
-from freejoint_core.spatial_offline import circle, KD, KP
+from freejoint_core.spatial_offline import circle, circle_axes, KD, KP
 from freejoint_core.spatial_plant import SpatialPlant
 from freejoint_core.trajectory import circle_peaks, CircleQuintic
 import numpy as np
@@ -97,7 +97,7 @@ class SpatialCircle:
 
     task_dim = 3
 
-    def __init__(self, p0, radius, duration):
+    def __init__(self, p0, radius, duration, normal=None):
         p = np.array(p0, dtype=float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             raise FreejointValueError(f'p0: expected 3 finite numbers [m], got {p0!r}')
@@ -112,6 +112,8 @@ class SpatialCircle:
                                           f'{value!r}')
         p.setflags(write=False)
         self._p0, self._radius, self._duration = p, float(radius), float(duration)
+        self._normal = plane_normal(normal)
+        circle_axes(p, self._normal)        # refuses a bad normal now, naming it
 
     @property
     def p0(self):
@@ -135,7 +137,8 @@ class SpatialCircle:
         ``spatial_offline.circle(p0, radius, t, duration)``; before the start (``t < 0``:
         a start delay) its value at ``t = 0`` (the start point, at rest).
         """
-        return circle(self._p0, self._radius, t if t > 0.0 else 0.0, self._duration)
+        return circle(self._p0, self._radius, t if t > 0.0 else 0.0, self._duration,
+                      self._normal)
 
     def sample_tuple(self, t):
         """Return ``(px, py, pz, vx, vy, vz, ax, ay, az)`` at ``t`` [s] (floats)."""
@@ -149,6 +152,19 @@ class SpatialCircle:
     def __repr__(self):
         return (f'SpatialCircle(p0={self._p0.tolist()}, radius={self._radius!r}, '
                 f'duration={self._duration!r})')
+
+
+def plane_normal(value):
+    """
+    Return the plane normal of a ``plane_normal`` value: None for the default plane.
+
+    None or ``[0, 0, 0]`` (the parameter's default): the vertical plane facing the robot;
+    else a tuple of 3 floats (checked by ``spatial_offline.circle_axes``).
+    """
+    if value is None:
+        return None
+    vec = tuple(float(v) for v in value)
+    return None if vec == (0.0, 0.0, 0.0) else vec
 
 
 def describe(radius, duration, p0=None):
@@ -389,7 +405,7 @@ class SpatialVerdict:
 
 
 def check_spatial_plan(nominal, q, qd, radius, duration, max_speed, max_acceleration,
-                       p0=None, reach=None):
+                       p0=None, reach=None, normal=None):
     """
     Check a spatial plan from the arm's state (module notes); the first refusal wins.
 
@@ -408,6 +424,9 @@ def check_spatial_plan(nominal, q, qd, radius, duration, max_speed, max_accelera
         finished one starts where that one holds.
     reach : float, optional
         ``arm_reach(nominal)`` if known [m].
+    normal : array_like, (3,), optional
+        Normal of the circle's plane (the ``plane_normal`` parameter; None or zeros: the
+        vertical plane facing the robot).
 
     Returns
     -------
@@ -420,7 +439,7 @@ def check_spatial_plan(nominal, q, qd, radius, duration, max_speed, max_accelera
     q = np.asarray(q, dtype=float)
     qd = np.asarray(qd, dtype=float)
     try:
-        path = SpatialCircle(nominal.fk(q) if p0 is None else p0, radius, duration)
+        path = SpatialCircle(nominal.fk(q) if p0 is None else p0, radius, duration, normal)
     except FreejointValueError as exc:
         return SpatialVerdict(str(exc))
     reason, margin = reach_refusal(nominal, path, reach)
@@ -446,12 +465,13 @@ class SpatialRequest:
 
     task_dim = 3
 
-    def __init__(self, radius, duration):
+    def __init__(self, radius, duration, normal=None):
         self.radius, self.duration = float(radius), float(duration)
+        self.normal = plane_normal(normal)
 
     def at(self, p0):
         """Return the :class:`SpatialCircle` from ``p0`` [m], (3,)."""
-        return SpatialCircle(p0, self.radius, self.duration)
+        return SpatialCircle(p0, self.radius, self.duration, self.normal)
 
     def __repr__(self):
         return f'SpatialRequest(radius={self.radius!r}, duration={self.duration!r})'

@@ -317,6 +317,25 @@ def test_planar_only_circle_parameters_are_refused_for_a_spatial_arm_naming_them
     assert SCHEMA.reason(planar) is None
 
 
+def test_a_plane_normal_turns_the_circle_and_belongs_to_spatial_arms():
+    # the circle of a plane_normal is spatial_offline.circle with that normal, from rest
+    assert SCHEMA.reason(_values('ur5', plane_normal=[0.0, 0.0, 1.0])) is None
+    assert SCHEMA.reason(_values('ur5', plane_normal=[0.0, 1.0])).startswith(
+        'plane_normal: expected 3 finite numbers')
+    planar = SCHEMA.yaml_values(os.path.join(CONFIG, 'planner.yaml'))
+    assert SCHEMA.reason(dict(planar, plane_normal=[0.0, 0.0, 1.0])).startswith(
+        "plane_normal: a spatial arm's (task_dim 3)")
+    p0 = (0.5, 0.1, 0.3)
+    path = SpatialRequest(0.1, 5.0, [0.0, 0.0, 1.0]).at(p0)
+    for t in (0.0, 1.0, 2.5, 5.0, 7.0):
+        assert path.sample_tuple(t) == tuple(np.concatenate(circle(
+            np.array(p0), 0.1, t, 5.0, (0.0, 0.0, 1.0))).tolist())
+        assert path.sample(t)[0][2] == pytest.approx(0.3, abs=1e-15)    # horizontal plane
+    assert SpatialRequest(0.1, 5.0, [0.0, 0.0, 0.0]).normal is None       # the default plane
+    with pytest.raises(ValueError, match='^normal: expected 3 finite numbers, not all 0'):
+        SpatialCircle(p0, 0.1, 5.0, (0.0, 0.0, 1e-12))
+
+
 def test_the_spatial_plan_and_the_stream_import_in_a_python_without_ros():
     from freejoint_tools.harness import load_source
     check = load_source(os.path.join(ROOT, 'test', 'test_ros_free_imports.py'),
