@@ -445,13 +445,14 @@ def test_foxglove_client_sees_a_spatial_arm_with_its_meshes_frames_and_paths(
         poses[child] = (p_pos + quat_rotate(p_rot, xyz), quat_mul(p_rot, rot))
     assert poses['tool0'][0] == pytest.approx(arm.placement(np.array(q))[0], abs=1e-12)
 
-    # The paths: one line each in base_link, the published points in their order.
+    # The paths: one line each in base_link, published points in their order (best effort:
+    # those before the viewer's subscription matched are not in it).
     by_id = {e.id: e for e in paths.entities}
     assert set(by_id) == {'tip_path', 'setpoint_path'}
     for name in ('tip', 'setpoint'):
         entity = by_id[name + '_path']
         assert entity.frame_id == 'base_link' and len(entity.lines) == 1
         got = [(p.x, p.y, p.z) for p in entity.lines[0].points]
-        at = published[name].index(got[0])
-        assert got == published[name][at:at + len(got)]
+        at = [published[name].index(point) for point in got]
+        assert len(got) >= 5 and at == sorted(set(at))
     assert procs.stop(viewer) == 0
