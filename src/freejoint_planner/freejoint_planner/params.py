@@ -177,7 +177,7 @@ def _check_spatial(values):
         value = values[name]
         if (list(value) if isinstance(value, (list, tuple)) else value) != DEFAULTS[name]:
             return (f'{name}: does not apply to a spatial arm (task_dim 3: one revolution '
-                    'of the circle from the tip, in the vertical plane facing the robot, '
+                    'of the circle from the tip, in the plane of plane_normal, '
                     f'freejoint_planner.spatial_planning); leave it at {DEFAULTS[name]!r}, '
                     f'got {values[name]!r}')
     return None

@@ -69,10 +69,10 @@ against the clock spacing rule at run time.
 A spatial arm (``task_dim`` 3, ``NodeArm.spatial``; issue 25) takes another branch, the
 planar one untouched: its plan is the offline runner's circle
 (``spatial_planning.SpatialCircle``: ``freejoint_core.spatial_offline.circle(p0, radius, t,
-duration)``) from the tip ``p0`` of the arm's joint state, in the vertical plane facing the
-robot, streamed with 3 values per vector (in lockstep the configured plan starts at tick 0,
-so tick k carries ``circle(p0, radius, k dt, duration)``). ``radius``, ``duration`` and
-``start_delay`` apply; ``centre``, ``start_angle``, ``direction``, ``circles`` and ``rest``
+duration, normal)``) from the tip ``p0`` of the arm's joint state, in the vertical plane
+facing the robot or the plane of ``plane_normal``, streamed with 3 values per vector (in
+lockstep the configured plan starts at tick 0, so tick k carries ``circle(p0, radius, k dt,
+duration, normal)``). ``radius``, ``duration``, ``plane_normal`` and ``start_delay`` apply; ``centre``, ``start_angle``, ``direction``, ``circles`` and ``rest``
 do not (refused away from their defaults, ``params.PLANAR_ONLY``). A plan from rest (the
 configured one, or any after ROS time went back) is checked when it starts, from the
 newest joint state (it waits for one): speed and acceleration bounds, reach, a free joint
@@ -118,7 +118,7 @@ from .planning import assess_failure, circle_bounds, compute_model, describe_joi
 from .planning import end_effector, grid_bound, grid_extent, join_from_arm, joint_state
 from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle, planner_status, READY, SETTLING
 from .planning import prepare_transition, settle_gate_refusal, swing_deg
-from .spatial_planning import check_spatial_plan, describe as describe_spatial
+from .spatial_planning import check_spatial_plan, describe as describe_spatial, plane_normal
 from .spatial_planning import spatial_bounds, SpatialRequest, start_point
 from .stream import Plan, SetpointStream
 
@@ -524,8 +524,10 @@ class PlannerNode(Node, Lifecycle):
             raise FreejointValueError(reason)
         self.get_logger().info(
             f'spatial arm (task_dim 3): {self._arm_source}; plans: '
-            f"{describe_spatial(cfg['radius'], cfg['duration'])} in the vertical plane facing "
-            'the robot (freejoint_core.spatial_offline.circle), checked along the nominal '
+            f"{describe_spatial(cfg['radius'], cfg['duration'])} in "
+            + ('the vertical plane facing the robot' if plane_normal(cfg['plane_normal']) is None
+               else 'the plane normal to %s' % list(cfg['plane_normal']))
+            + ' (freejoint_core.spatial_offline.circle), checked along the nominal '
             'closed loop (kappa, reach, URDF limits) and for free joints that must carry '
             'gravity; the planar singularity map (semi_singular_map, resolution_deg, eps_d, '
             'singular_cells, grid_resolution) and the settle gate do not apply')
@@ -680,7 +682,7 @@ class PlannerNode(Node, Lifecycle):
         if not problem and (centre != [0.0, 0.0] or request.start_angle != 0.0
                             or int(request.direction) != 1):
             problem = ('centre, start_angle, direction: do not apply to a spatial arm (its '
-                       'circle starts at the tip, in the vertical plane facing the robot): '
+                       'circle starts at the tip, in the plane of plane_normal): '
                        f'send [0, 0], 0, 1; got {centre}, {request.start_angle:g}, '
                        f'{int(request.direction)}')
         what = describe_spatial(request.radius, request.duration)

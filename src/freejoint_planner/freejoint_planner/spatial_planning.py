@@ -4,7 +4,8 @@ Spatial plans (issue 25): the offline runner's 3-D circle and its plan-time chec
 A spatial arm (``NodeArm.spatial``, task_dim 3) gets one kind of plan: the circle of
 ``freejoint_core.spatial_offline.circle(p0, radius, t, duration)`` from the tip's start
 point ``p0``, in the vertical plane facing the robot (spanned by the horizontal direction
-across the base-to-tip line and the vertical), quintic over ``duration``, then held
+across the base-to-tip line and the vertical) or the plane normal to the parameter
+``plane_normal`` (``spatial_offline.circle_axes``), quintic over ``duration``, then held
 (:class:`SpatialCircle`; its setpoints are that function's values at ``t = k dt``, not a
 formula of this module). The planar ``centre``, ``start_angle`` and ``direction`` do not
 apply: the circle starts at the tip.
