@@ -72,8 +72,9 @@ planar one untouched: its plan is the offline runner's circle
 duration, normal)``) from the tip ``p0`` of the arm's joint state, in the vertical plane
 facing the robot or the plane of ``plane_normal``, streamed with 3 values per vector (in
 lockstep the configured plan starts at tick 0, so tick k carries ``circle(p0, radius, k dt,
-duration, normal)``). ``radius``, ``duration``, ``plane_normal`` and ``start_delay`` apply; ``centre``, ``start_angle``, ``direction``, ``circles`` and ``rest``
-do not (refused away from their defaults, ``params.PLANAR_ONLY``). A plan from rest (the
+duration, normal)``). ``radius``, ``duration``, ``plane_normal`` and ``start_delay``
+apply; ``centre``, ``start_angle``, ``direction``, ``circles`` and ``rest`` do not (refused
+away from their defaults, ``params.PLANAR_ONLY``). A plan from rest (the
 configured one, or any after ROS time went back) is checked when it starts, from the
 newest joint state (it waits for one): speed and acceleration bounds, reach, a free joint
 that must carry gravity, and the nominal closed loop (``spatial_planning.nominal_loop``:
