@@ -606,7 +606,8 @@ def _parse(argv):
                     "the planner's plane_normal; make demo ARM=ur5 PLANE='0 0 1')")
     ap.add_argument('--view', action='store_true',
                     help='also start the viewer (Foxglove WebSocket on ws://127.0.0.1:8765, '
-                    'layout config/foxglove_layout.json; make demo VIEW=1)')
+                    'layout config/foxglove_layout.json, with --arm ur5 / panda '
+                    'config/foxglove_layout_<arm>.json; make demo VIEW=1)')
     return ap.parse_args(argv)
 
 
