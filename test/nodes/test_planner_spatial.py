@@ -187,3 +187,42 @@ def test_a_plan_circle_before_any_joint_state_starts_from_the_tip_of_the_first_o
     assert 'plan 1 from rest: spatial circle radius 0.1 m duration 5 s from [' in \
         procs.log(proc)
     assert procs.stop(proc) == 0
+
+
+@pytest.mark.parametrize('arm, free, case', [('ur5', 'elbow_joint', 'ur5_wrist2'),
+                                             ('panda', 'panda_joint4', 'panda_j7')])
+def test_a_free_joint_that_must_carry_gravity_is_refused_at_plan_time_in_one_line(
+        procs, ros_node, wait, arm, free, case):
+    # The example's configuration with another joint free: the configured plan (from rest)
+    # is checked at the first joint state and refused with the reason, nothing streams
+    from freejoint_common.contract import JOINT_STATES, stamp_from_ns
+    helpers = _helpers()
+    proc = procs.start_node('freejoint_planner', 'planner_node', 'planner', [
+        '--ros-args', '--params-file', os.path.join(CONFIG, 'planner.yaml'),
+        '--params-file', os.path.join(CONFIG, arm, 'planner.yaml'),
+        '-p', 'passive_joints:=[%s]' % free])
+    helpers._wait_ready(ros_node, procs, proc, wait)
+    clock = helpers.ClockDriver(ros_node)
+    pub = ros_node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, JOINT_STATES.qos)
+    wait(lambda: clock.matched() and pub.get_subscription_count() >= 1, 30.0,
+         'the planner matching /clock, setpoint and joint_states',
+         spin=lambda: helpers._spin(ros_node, 0.05))
+    chain = known_arm(CASES[case][0]).joint_names
+    state = JOINT_STATES.msg_type(name=list(chain), position=list(CASES[case][2]),
+                                  velocity=[0.0] * len(chain), effort=[0.0] * len(chain))
+    stamp_from_ns(0, state.header.stamp)
+
+    def lockstep_start():
+        pub.publish(state)
+        helpers._spin(ros_node, 0.02)
+        clock.publish(0)
+        helpers._spin(ros_node, 0.05)
+
+    refusal = f'free joint {free} must carry gravity'
+    wait(lambda: refusal in procs.log(proc), 60.0,
+         'the refusal (log: %s)' % procs.log(proc), spin=lockstep_start)
+    lines = [line for line in procs.log(proc).splitlines() if refusal in line]
+    assert len(lines) == 1, lines
+    assert f'free joint {free} must carry gravity: no rest posture within the joint limits ' \
+           'holds the tip at [' in lines[0]
+    assert clock.last_stamp() is None            # no setpoint streamed
