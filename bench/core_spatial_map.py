@@ -18,8 +18,9 @@ Each figure is measured ``--repeats`` times (default 3) and printed with the wor
 load average (``os.getloadavg``) around it: the machine is shared.
 
 Usage: ``python bench/core_spatial_map.py [--samples 1000000] [--repeats 3] [--ray]
-[--workers 2] [--quick]`` in the workspace (``. tools/env.sh``); ``make bench BENCH=core_spatial_map``
-runs ``run()``: the per-sample costs and a 10^5-sample UR5 map, once.
+[--workers 2] [--arm panda] [--quick]`` in the workspace (``. tools/env.sh``);
+``make bench BENCH=core_spatial_map`` (or ``--quick``) runs ``run()``: the per-sample costs
+and a 10^5-sample UR5 map, once.
 """
 
 import argparse
@@ -83,8 +84,8 @@ def run():
         fast, law = per_sample_us(spec)
         rows.append({'name': f'spatial map {name}: per sample (map path)', 'value': fast,
                      'unit': 'us', 'target': None})
-        rows.append({'name': f'spatial map {name}: per sample (law path: terms, decoupling, '
-                     'kappa)', 'value': law, 'unit': 'us', 'target': None})
+        rows.append({'name': f'spatial map {name}: per sample (law path, per tick)',
+                     'value': law, 'unit': 'us', 'target': None})
     spec = sm.known_spec('ur5', ['wrist_2_joint'], samples=100000, chunk=CHUNK)
     _, wall, _, _, _ = timed(lambda: sm.compute_map(spec))
     rows.append({'name': 'spatial map ur5: 10^5 samples in process', 'value': wall,
