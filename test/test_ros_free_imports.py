@@ -26,6 +26,7 @@ ROS_FREE = (
     'freejoint_core.spatial_law',
     'freejoint_core.spatial_plant',
     'freejoint_core.spatial_offline',
+    'freejoint_core.spatial_map',
     'freejoint_planner.spatial_planning',
     'freejoint_tools.view_arm',
 )
