@@ -88,3 +88,36 @@ def test_a_spatial_arm_refuses_the_planar_law_and_planar_only_options():
     planar = dict(SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml')))
     assert SCHEMA.reason(dict(planar, law='spatial')).startswith(
         "law: a spatial arm (task_dim 3) runs law 'spatial', a planar one another law")
+
+
+def test_the_posture_is_where_the_task_began_and_is_taken_again_after_a_reset():
+    cfg = SCHEMA.config(_values('ur5'))
+    law = _law(cfg)
+    act = list(cfg.nominal.active)
+    q0 = np.array(CASES['ur5_wrist2'][2])
+    q1 = q0 + 0.02
+    assert law.posture is None                          # nullspace_kp 10: taken at a step
+    p_d = cfg.nominal.fk(q0)
+    law.step(q0, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
+    assert law.posture == tuple(q0[act].tolist())
+    assert law.law.nullspace.kp == 10.0 and law.law.nullspace.posture == law.posture
+    law.step(q1, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
+    assert law.posture == tuple(q0[act].tolist())       # kept while the task runs
+    saved = law.save_state()
+    law.step(q1, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
+    law.restore_state(saved)
+    assert law.save_state() == saved and law.state_values()[5:] == [0.0, 0.0]
+    law.reset()
+    assert law.posture is None and law.law.nullspace.kp == 0.0
+    out = law.step(q1, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
+    assert law.posture == tuple(q1[act].tolist())
+    # at its own posture and at rest the posture term is 0: the tick of a law without it
+    free = _law(SCHEMA.config(_values('ur5', nullspace_kp=0.0)))
+    ref = free.step(q1, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
+    assert free.posture is None and out.tau.tolist() == ref.tau.tolist()
+
+
+def test_a_planar_arm_takes_no_posture_stiffness():
+    planar = dict(SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml')))
+    assert SCHEMA.reason(dict(planar, nullspace_kp=1.0)).startswith(
+        "nullspace_kp: the posture term is the spatial law's (task_dim 3)")
