@@ -132,3 +132,42 @@ def test_the_cache_keeps_a_bounded_number_of_arms(counted):
     for g in range(arm_description._KEEP + 3):
         arm_description.resolve_arm(dict(values, gravity=[0.0, -1.0 - g, 0.0]))
     assert len(arm_description._RESOLVED) == arm_description._KEEP
+
+
+UR5 = 'package://example-robot-data/robots/ur_description/urdf/ur5_robot.urdf'
+
+
+def _spatial(**given):
+    values = dict(control_params.SCHEMA.defaults(), task_dim=3, description_file=UR5,
+                  base_link='base_link', tip_link='tool0', passive_joints=['wrist_2_joint'])
+    values.update(given)
+    return values
+
+
+def test_a_spatial_arm_is_resolved_once_and_its_nominal_model_built_once_per_scale(counted):
+    first = arm_description.resolve_arm(_spatial())
+    assert arm_description.resolve_arm(_spatial()) is first
+    assert first.task_dim == 3 and first.described and first.urdf_arm is None
+    assert first.joint_names[4] == 'wrist_2_joint' and first.spatial.passive == (4,)
+    assert first.nominal(0.7) is first.nominal(0.7)
+    assert first.nominal(0.7) is not first.nominal(0.5)
+    assert first.nominal(0.7).scale == 0.7 and first.spatial.scale == 1.0
+    # another tip is another arm
+    other = arm_description.resolve_arm(_spatial(tip_link='wrist_3_link'))
+    assert other is not first and other.spatial.tip_link == 'wrist_3_link'
+
+
+@pytest.mark.parametrize('given, reason', [
+    ({'tip_link': ''}, '^tip_link: a spatial arm'),
+    ({'description_file': ''}, '^task_dim: 3 .* needs robot_description or description_file'),
+    ({'task_dim': 4}, '^task_dim: expected 2 .* or 3'),
+    ({'passive_joints': ['joint9']}, "^passive_joints: 'joint9' is not a joint of the chain"),
+    ({'passive_joints': ['shoulder_pan_joint', 'elbow_joint', 'wrist_2_joint', 'wrist_3_joint']},
+     '^passive_joints: 2 active joints cannot drive m = 3'),
+    ({'base_link': 'nowhere'}, "^base_link: the URDF has no link 'nowhere'"),
+    ({'description_file': 'package://example-robot-data/robots/none.urdf'},
+     '^description_file: .*not found'),
+])
+def test_a_bad_spatial_arm_is_refused_naming_the_parameter(given, reason):
+    with pytest.raises(FreejointValueError, match=reason):
+        arm_description.resolve_arm(_spatial(**given))

@@ -130,12 +130,12 @@ class NodeArm:
         if self.spatial is None:
             return self.params.scaled(scale)
         key = (id(self.spatial), float(scale))
-        model = _NOMINALS.get(key)
-        if model is None:
-            model = _NOMINALS[key] = self.spatial.nominal(scale)
+        entry = _NOMINALS.get(key)      # holds the arm: its id is not reused while kept
+        if entry is None:
+            entry = _NOMINALS[key] = (self.spatial, self.spatial.nominal(scale))
             while len(_NOMINALS) > _KEEP:
                 _NOMINALS.pop(next(iter(_NOMINALS)))
-        return model
+        return entry[1]
 
     @property
     def joint_offsets(self):
@@ -228,7 +228,7 @@ _KEEP = 8
 _RESOLVED = collections.OrderedDict()
 """``{arm key: NodeArm}``, least recently used first."""
 _NOMINALS = {}
-"""``{(id of a spatial arm, scale): nominal SpatialArm}`` (``NodeArm.nominal``)."""
+"""``{(id of a spatial arm, scale): (the arm, its nominal SpatialArm)}`` (``NodeArm.nominal``)."""
 
 
 def _arm_key(values):
@@ -329,7 +329,13 @@ def _resolve_spatial(text, path, passive, gravity, base, tip):
         source = 'robot_description'
     base = base or root_link(text)
     grav = tuple(gravity) if gravity is not None else GRAVITY
-    arm = SpatialArm(text, base, tip, passive, 3, 1.0, grav)
+    try:
+        arm = SpatialArm(text, base, tip, passive, 3, 1.0, grav)
+    except FreejointValueError as exc:      # name the node's parameter, not the argument
+        what, _, why = str(exc).partition(': ')
+        name = {'passive': 'passive_joints', 'urdf': 'description_file' if path else
+                'robot_description'}.get(what, what)
+        raise FreejointValueError(f'{name}: {why}') from None
     active = tuple(arm.joint_names[i] for i in arm.active)
     return NodeArm(params=arm, joint_names=arm.joint_names, active_names=active,
                    urdf_arm=None, spatial=arm, source='%s (spatial, %s -> %s), passive %s, '
