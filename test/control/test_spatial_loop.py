@@ -4,6 +4,7 @@ import os
 from freejoint_control.failures import install_nullspace
 from freejoint_control.loop import ControlLoop
 from freejoint_control.params import SCHEMA
+from freejoint_core.control import STATUS_TORQUE_LIMITED
 from freejoint_core.laws import make_law
 from freejoint_core.spatial_law import SpatialControlLaw, SpatialGains
 from freejoint_core.spatial_offline import CASES, circle, run_twin, start_posture
@@ -121,3 +122,15 @@ def test_a_planar_arm_takes_no_posture_stiffness():
     planar = dict(SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml')))
     assert SCHEMA.reason(dict(planar, nullspace_kp=1.0)).startswith(
         "nullspace_kp: the posture term is the spatial law's (task_dim 3)")
+
+
+def test_effort_limits_below_the_urdfs_clip_the_spatial_laws_torque():
+    # the UR5's shoulder at 10 N m (URDF: 150): a 2-cm step of the setpoint asks more
+    cfg = SCHEMA.config(_values('ur5', effort_limits=[150.0, 10.0, 150.0, 28.0, 28.0]))
+    law = _law(cfg)
+    q0 = np.array(CASES['ur5_wrist2'][2])
+    out = law.step(q0, np.zeros(6), cfg.nominal.fk(q0) + 0.02, [0.0] * 3, [0.0] * 3, 1e-3)
+    assert abs(out.tau[1]) == 10.0 and out.status & STATUS_TORQUE_LIMITED
+    urdf = _law(SCHEMA.config(_values('ur5')))
+    ref = urdf.step(q0, np.zeros(6), cfg.nominal.fk(q0) + 0.02, [0.0] * 3, [0.0] * 3, 1e-3)
+    assert abs(ref.tau[1]) > 10.0

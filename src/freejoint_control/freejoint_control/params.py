@@ -28,6 +28,8 @@ from freejoint_core.failure import DEFAULT_K_O, DEFAULT_MARGIN, DEFAULT_TICKS
 from freejoint_core.laws import LAWS
 from freejoint_core.urdf_offline import nominal_model
 
+SPATIAL_LAW = 'spatial'
+"""The law of a spatial arm (``freejoint_core.spatial_law.SpatialControlLaw``)."""
 ON_STALE = ('hold', 'zero')
 DELAY_COMPENSATION = ('off', 'predict')
 FAILURE_MODES = ('off', 'notice', 'detect')
@@ -258,9 +260,9 @@ PARAMS = (
     Param('law', 'robust',
           "the control law (freejoint_core.laws registry): 'robust' = the paper's robust law "
           "with adaptation (planar arms); 'spatial' = the same law on a spatial arm "
-          '(task_dim 3: inertia-weighted inverse, null-space damping nullspace_kd, the '
-          "URDF's effort limits); another law is one module registering itself "
-
+          '(task_dim 3: inertia-weighted inverse, null-space damping nullspace_kd and '
+          "posture nullspace_kp, efforts within the URDF's limits and effort_limits); "
+          'another law is one module registering itself '
           '(freejoint_core.laws.register_law) and this value; takes effect at start-up',
           read_only=True, validator=one_of(LAWS)),
     Param('state_publish_rate', 0.0,
@@ -442,8 +444,9 @@ class Config(LoopConfig):
     """
     Validated controller configuration: what is derived from several parameters.
 
-    Besides the loop's fields (:class:`LoopConfig`): the nominal model, the gains, the
-    command order, the limits and the arm's joint offsets (added to the measured angles:
+    Besides the loop's fields (:class:`LoopConfig`): the nominal model (``ArmParams``; a
+    spatial arm's ``SpatialArm``), the gains, the command order, the limits and the arm's
+    joint offsets (added to the measured angles:
     ``NodeArm.joint_offsets``, model order). Every other parameter is ``config.<name>``
     as validated.
     """
@@ -474,7 +477,7 @@ def gains(values, tau_limit=None, theta_max=None, task_dim=2):
     Return the core's gains of a parameter dict (the fields named as the parameters).
 
     ``Gains`` for a planar task (``task_dim`` 2), ``SpatialGains`` for a spatial one (3;
-    its effort limits are the model's, ``tau_limit`` is not read).
+    its torque within the smaller of the URDF's limits and ``tau_limit``).
     """
     fields = {name: (tuple(values[name]) if isinstance(values[name], list) else values[name])
               for name in GAIN_NAMES}
@@ -517,9 +520,6 @@ def build(values):
         velocity_limit=_floats('joint_velocity_limit', values['joint_velocity_limit']),
         reach=reach, nominal_model=model, joint_offsets=tuple(arm.joint_offsets))
 
-
-SPATIAL_LAW = 'spatial'
-"""The law of a spatial arm (``freejoint_core.spatial_law.SpatialControlLaw``)."""
 
 SCHEMA = Schema(PARAMS, CHECKS, build)
 SPECS = SCHEMA.params

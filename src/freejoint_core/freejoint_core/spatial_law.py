@@ -68,8 +68,9 @@ class SpatialGains(Gains):
     Gains of the spatial law: :class:`control.Gains` with ``task_dim`` m in {3, 6}.
 
     The task-space diagonals (K, Lambda, R) are sized by m, the rest as ``Gains``; the
-    planar ``det_threshold`` is replaced by ``kappa_min`` and ``tau_limit`` is not read (the
-    effort limits are the model's).
+    planar ``det_threshold`` is replaced by ``kappa_min``; the torque is clipped to the
+    model's (URDF) effort limits, or to ``tau_limit`` (r values, active joints in model
+    order) where that is smaller.
 
     Attributes
     ----------
@@ -233,6 +234,8 @@ class SpatialLaw:
         self.stiffness = 1.0
         self._scale_gains()
         self._limit = nominal.effort[list(nominal.active)]
+        if gains.tau_limit is not None:     # the smaller of the URDF's and the given limits
+            self._limit = np.minimum(self._limit, np.asarray(gains.tau_limit, dtype=float))
         self._dt = None
         self._coef = None
         self.reset()
