@@ -68,6 +68,7 @@ from freejoint_core.errors import FreejointValueError, PlantDivergedError
 from freejoint_core.guards import divergence_reason
 from freejoint_sim.engines import make_plant
 from freejoint_sim.failure_injection import Injector, parse_fail_joint
+from freejoint_sim.limits import LimitWatch
 from freejoint_sim.params import SCHEMA
 from freejoint_sim.timing import StepTiming
 from rclpy.clock import Clock, ClockType
@@ -93,6 +94,7 @@ class SimNode(Node, Lifecycle):
         self._plant = make_plant(cfg)
         self._fk = self._plant.model.fk
         self._spatial = cfg.arm.spatial is not None   # ee_position x, y, z (else x, y)
+        self._limits = self._make_limits(cfg)
         self._injector = self._make_injector(cfg)
         self._fail_requests = []
         self._install(cfg)
@@ -241,6 +243,7 @@ class SimNode(Node, Lifecycle):
         self._plant = make_plant(cfg)
         self._fk = self._plant.model.fk
         self._injector = self._make_injector(cfg)
+        self._limits = self._make_limits(cfg)
         self._applied = [0.0] * cfg.params.n
         self._diverged = None
         self._take_state()
@@ -406,6 +409,10 @@ class SimNode(Node, Lifecycle):
                           % (self._k, reason))
             return False
         self._q = q
+        if self._limits is not None:
+            for line in self._limits.observe(plant.t, q_list, qd_list):
+                self.get_logger().warning(line + ' (the plant has no end stops: a real arm '
+                                          'would be stopped)')
         # published as the joints measure them (the URDF's angles: the arm's offsets off)
         self._q_list = q_list if not self.config.arm.joint_offsets else list(
             self.config.arm.to_joints(q_list))
@@ -612,6 +619,8 @@ class SimNode(Node, Lifecycle):
             ok = 'holding at max_steps'
         else:
             ok = 'running'
+        if self._limits is not None and self._limits.passed:
+            warnings.append('joints past their URDF limits: ' + self._limits.summary())
         if self._injector.taken:
             warnings.append('joint failure injected: ' + ', '.join(
                 '%s at t = %.3f s (%s)' % taken for taken in self._injector.taken))
@@ -639,10 +648,20 @@ class SimNode(Node, Lifecycle):
 
     def report(self):
         """One line for the end of the run: steps, timeouts, refusals, brakes, divergences."""
+        past = self._limits.summary() if self._limits is not None else ''
         return 'simulator stopped at step %d (t = %.3f s): %d command timeouts, %d refused ' \
-            'commands, %d divergences, %d brake engagements' % (
+            'commands, %d divergences, %d brake engagements%s' % (
                 self._k, self._t_ns * 1e-9, self._timeouts, self._refused,
-                self._divergences, self._brake_engagements)
+                self._divergences, self._brake_engagements,
+                '; past their URDF limits: ' + past if past else '')
+
+    @staticmethod
+    def _make_limits(cfg):
+        """Return the URDF limits' watch of a spatial arm (None: a planar arm)."""
+        arm = cfg.arm.spatial
+        if arm is None:
+            return None
+        return LimitWatch(arm.joint_names, arm.lower, arm.upper, arm.velocity)
 
     @property
     def executor_kind(self):
