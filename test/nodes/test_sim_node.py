@@ -91,6 +91,28 @@ class Controller:
         msg.data = [float(v) for v in data]
         self.pub.publish(msg)
 
+    def step(self, data, k, what='the state', timeout=15.0, resend=1.0):
+        """
+        Command step k (labelled) and return the state of step k + 1.
+
+        The command goes out again every ``resend`` s until that state arrives: the
+        simulator drops a command labelled with another step, so a repeat is harmless, and
+        a first command published before the simulator's reader matched this writer (the
+        writer's side matches first) is not lost.
+        """
+        ns = (k + 1) * DT_NS
+        last = [float('-inf')]
+
+        def arrived():
+            if ns in self.states and ns in self.ee:
+                return True
+            if time.monotonic() - last[0] >= resend:
+                last[0] = time.monotonic()
+                self.command(data, k)
+            return False
+        self.wait(arrived, timeout, '%s of step %d' % (what, k + 1), spin=self.spin)
+        return self.states[ns]
+
     def state(self, k, what='the state', timeout=15.0):
         ns = k * DT_NS
         self.wait(lambda: ns in self.states and ns in self.ee, timeout,
@@ -137,8 +159,7 @@ def test_params_file_loads_and_lockstep_steps_are_the_plant(procs, ros_node, wai
     wait(lambda: 0 in ctl.clock, 10.0, '/clock at step 0', spin=ctl.spin)
     for k in range(30):
         tau = (3.0 * math.sin(0.3 * k), -2.0 * math.cos(0.2 * k))
-        ctl.command(tau, k)
-        msg = ctl.state(k + 1)
+        msg = ctl.step(tau, k)
         plant.step(tau, DT)
         _same(msg, plant, tau)
         ee = ctl.ee[(k + 1) * DT_NS]
@@ -163,8 +184,7 @@ def test_clock_goes_out_on_the_multiples_of_the_clock_period_and_at_max_steps(
     assert set(ctl.clock) == {0}
     plant = _plant()
     for k in range(30):
-        ctl.command([1.0, -0.5], k)
-        msg = ctl.state(k + 1)                 # the state every step, stamped t_k
+        msg = ctl.step([1.0, -0.5], k)         # the state every step, stamped t_k
         plant.step((1.0, -0.5), DT)
         _same(msg, plant, (1.0, -0.5))
     wait(lambda: 30 * DT_NS in ctl.clock, 10.0, '/clock at max_steps', spin=ctl.spin)
@@ -211,8 +231,7 @@ def test_lockstep_without_command_times_out_to_zero_effort_and_warns(procs, ros_
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
     plant = _plant()
-    ctl.command([2.0, -1.0], 0)
-    ctl.state(1)
+    ctl.step([2.0, -1.0], 0)
     plant.step((2.0, -1.0), DT)
     # No command for steps 1 and 2: each is integrated with zero effort after the timeout.
     msg = ctl.state(3, 'the state after two timeouts')
@@ -233,8 +252,7 @@ def test_lockstep_holds_at_max_steps_ignoring_commands_and_timeouts(
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
     for k in range(3):
-        ctl.command([1.0, -1.0], k)
-        ctl.state(k + 1)
+        ctl.step([1.0, -1.0], k)
     # Step 3 is the last: a command for it is ignored and no timeout steps on.
     ctl.command([1.0, -1.0], 3)
     wait(lambda: 'reached max_steps = 3 (t = 0.003 s): holding' in procs.log(proc), 10.0,
@@ -275,8 +293,7 @@ def test_a_diverged_plant_publishes_its_last_sane_state_reports_error_until_rese
     proc = _start(procs, '-p', 'dist_bound:=0.0')
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
-    ctl.command([1.0, -1.0], 0)
-    before = ctl.state(1)
+    before = ctl.step([1.0, -1.0], 0)
     ctl.command([1e306, -1e306], 1)     # finite, so accepted; RK4 cannot resolve it
     held = ctl.state(2, 'the state after the diverging step')
     # ERROR at once (not only at the next 1 Hz status), with the reason
@@ -288,8 +305,7 @@ def test_a_diverged_plant_publishes_its_last_sane_state_reports_error_until_rese
     assert values['diverged'] == 'true' and values['divergences'] == '1'
     # Commands go on being answered, the plant is not integrated further.
     for k in (2, 3):
-        ctl.command([1.0, 1.0], k)
-        msg = ctl.state(k + 1, 'a state after the divergence')
+        msg = ctl.step([1.0, 1.0], k, 'a state after the divergence')
         assert list(msg.position) == list(before.position) == list(held.position)
         assert list(msg.velocity) == list(before.velocity)
         assert all(math.isfinite(v) for v in (*msg.position, *msg.velocity))
@@ -320,8 +336,7 @@ def test_a_joint_faster_than_divergence_speed_counts_as_a_diverged_plant(
     last_sane = ctl.state(0)
     while True:     # a strong constant torque: some joint passes 2 rad/s within 0.1 s
         assert k < 100, 'no joint passed 2 rad/s'
-        ctl.command([20.0, -20.0], k)
-        msg = ctl.state(k + 1)
+        msg = ctl.step([20.0, -20.0], k)
         plant.step((20.0, -20.0), DT)
         k += 1
         if max(abs(v) for v in plant.qd) > 2.0:
@@ -341,8 +356,7 @@ def test_reset_service_puts_the_arm_back_at_rest_and_time_runs_on(procs, ros_nod
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
     for k in range(3):
-        ctl.command([4.0, 4.0], k)
-        ctl.state(k + 1)
+        ctl.step([4.0, 4.0], k)
     assert 'from step 4 on' in _call_reset(ros_node)
     ctl.command([4.0, 4.0], 3)
     plant = _plant()

@@ -81,8 +81,7 @@ def test_sim_on_the_ur5_config_starts_at_the_runners_posture_and_steps_spatial_p
     plant = SpatialPlant(arm, 0.0005, dist_bound=0.5, seed=0, q0=q0)
     for k in range(10):
         tau = [3.0 * math.sin(0.3 * k + i) for i in range(5)]
-        ctl.command(tau, k)
-        msg = ctl.state(k + 1)
+        msg = ctl.step(tau, k)              # resent until answered (test_sim_node)
         plant.step(tau, DT)
         _same(msg.position, plant.q, engine)
         _same(msg.velocity, plant.qd, engine)
