@@ -147,6 +147,7 @@ def test_lockstep_graph_over_two_network_namespaces_equals_the_offline_runner(
     bag_path = str(tmp_path / 'netns')
     recorder = hosts.node('b', 'freejoint_tools', 'recorder', 'recorder',
                           '-p', 'output:=%s' % bag_path, '-p', 'topics:=[]',
+                          '-p', 'exclude:=[/rosout, /parameter_events, /diagnostics]',
                           '-p', 'use_sim_time:=true', '-p',
                           'custom_data:=[case=horizontal, variant=robust, seed=0, '
                           'max_ticks=%d]' % TICKS)
