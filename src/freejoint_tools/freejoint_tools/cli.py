@@ -566,9 +566,9 @@ def _waits(parser, spin=False):
     parser.add_argument('--service-timeout', type=float, default=10.0, metavar='N',
                         help='wait N s for each answer (default %(default)s)')
     if spin:
-        parser.add_argument('--spin-time', type=float, default=2.0, metavar='N',
+        parser.add_argument('--spin-time', type=float, default=0.5, metavar='N',
                             help='discover for N s before listing, then until nothing new '
-                            'came for 1.5 s (default %(default)s)')
+                            "came for 1.5 s (default %(default)s, ros2cli's)")
 
 
 def _campaign(args):
