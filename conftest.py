@@ -31,7 +31,11 @@ SLOW_MODULES = {
     'test/core/test_mujoco_plant.py': 'MuJoCo open- and closed-loop runs over the circle',
     'test/core/test_urdf_offline.py': 'the offline runner on URDF arms, both engines',
     'test/core/test_pin_plant.py': 'Pinocchio plant runs against the RK4 plant',
+    'test/core/test_batch.py': 'batched closed-loop runs against their scalar runs',
+    'src/freejoint_planner/test/test_spatial_planning.py':
+        "the spatial planner's nominal closed-loop checks over whole circles",
     'test/tools/test_analyze.py': 'the analysis and its plots in subprocesses',
+    'test/tools/test_old_layout.py': 'the analysis of old-layout bags in subprocesses',
     'test/tools/test_reindex.py': 'the reindex tool in subprocesses',
     'test/workspace/test_setup_errors.py': 'tools/setup.sh in subprocesses',
 }
