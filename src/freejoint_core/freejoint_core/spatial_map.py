@@ -35,8 +35,8 @@ placement comes with it), then over the whole chunk at once ``Da = (J M^-1)[:, a
 The same quantity as the law's (eigenvalues of ``A``), from its square root: round-off
 about ``eps / kappa`` relative instead of ``eps / kappa^2`` (tested against the law's
 ``terms`` + ``decoupling`` + ``task_conditioning`` to 1e-9 where ``kappa >= 1e-3``).
-Cost: 9-16 us a sample (UR5, Panda) against 65-100 us through the law's per-tick path
-(docs/performance.md, "Spatial arms: singularity map").
+Cost per sample, against the law's per-tick path: docs/performance.md, "Spatial arms:
+singularity map".
 """
 
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait

@@ -28,21 +28,13 @@ Plan-time checks (:func:`check_spatial_plan`), each refusing with one line sayin
   position limits, where the tip strays more than :data:`TRACK_BOUND` from the path (out
   of reach, or a singular posture the loop cannot pass) or where the loop diverges.
 
-The check period (measured 2026-11-27 on this 2-core machine, load average about 1, the
-example circles of 5 s and 1 s of hold): at 2 ms (one RK4 step per period, 3001 steps)
-the loop costs 0.64-1.1 s (UR5 and Panda), at the control period, 1 ms, 1.7-2.1 s; the
-smallest kappa of the 2-ms loop is within 0.5 % of the 1-ms loop's and the paths of the
-joints that move the tip within 0.03 rad (``test_spatial_planning``; the UR5's wrist_3,
-on the tip's axis, drifts by 1.5 rad at 2 ms: it moves neither the tip nor kappa); at
-4-5 ms the Panda's loop leaves the 1-ms one (joint 1 by 0.9 rad) and at 10 ms both
-diverge. The nominal loop predicts what the real arm does no better than that anyway:
-along the circle the offline runner (70 % model, real plant) departs from it by up to
-0.4 rad (the UR5's wrist_1). The hold is
-checked for :data:`CHECK_HOLD` only: the internal motion drifts on through the hold
-(nominal loop: the UR5's wrist_1 by 1.6 rad in 10 s), and the real arm (70 % model,
-disturbance) departs from any nominal prediction there by more than the check could
-resolve (the Panda's joint 6 reaches 4.1 rad, beyond its 3.75-rad limit, in the offline
-runner's hold, seed 0, but 3.65 rad in the nominal loop).
+The check period :data:`CHECK_PERIOD` (2 ms, one RK4 step a period) is the coarsest
+whose loop stays with the 1-ms loop on kappa and on the joints that move the tip
+(``test_spatial_planning``); its cost and the comparison are in docs/spatial.md
+("Planner"). The hold is checked for :data:`CHECK_HOLD` only: over a long hold the real
+arm (70 % model, disturbance) departs from any nominal prediction by more than the check
+could resolve; the controller's posture term (``nullspace_kp``) is what keeps the
+redundant joints near the start there.
 
 Free joints are not held to their URDF position limits (no torque can hold them; the
 Panda's joint 7 turns 4.4 rad in the nominal loop of its circle): their range is reported
