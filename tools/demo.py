@@ -412,14 +412,13 @@ def spatial_offline(arm, seed, n_ticks, normal=None):
     Everything is taken from the graph's parameter files (``config/*.yaml`` and
     ``config/<arm>/*.yaml``): the real arm and its start posture, dt_sub, the disturbance
     (the simulator's), the law built as the controller builds it (its schema's config,
-    ``make_law``, ``install_nullspace``), the circle's radius and duration (the planner's);
+    ``freejoint_control.loop.config_law``), the circle's radius and duration (the planner's);
     ``freejoint_core.spatial_offline.run_twin`` runs it for ``n_ticks``. ``normal``: the
     circle plane's normal given to the planner on the command line (``--plane-normal``),
     else the planner's file's ``plane_normal``.
     """
-    from freejoint_control.failures import install_nullspace
+    from freejoint_control.loop import config_law
     from freejoint_control.params import SCHEMA as CONTROLLER
-    from freejoint_core.laws import make_law
     from freejoint_core.metrics import compute_record
     from freejoint_core.spatial_offline import run_twin
     from freejoint_planner.params import SCHEMA as PLANNER
@@ -432,8 +431,7 @@ def spatial_offline(arm, seed, n_ticks, normal=None):
                                *_overlay_files(overlays, 'controller'))
     plan = PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'),
                                *_overlay_files(overlays, 'planner'))
-    law = make_law(ctl.law, ctl.nominal, ctl.gains, model=ctl.nominal_model)
-    install_nullspace(law, ctl)
+    law = config_law(ctl)
     dt = sim.dt
     duration = float(plan['duration'])
     out = run_twin(sim.arm.spatial, sim.q0, law, seed, t_move=duration,

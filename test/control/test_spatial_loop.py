@@ -1,11 +1,9 @@
 """The controller's loop runs a spatial arm (issue 25): lockstep ticks equal the offline twin."""
 import os
 
-from freejoint_control.failures import install_nullspace
-from freejoint_control.loop import ControlLoop
+from freejoint_control.loop import config_law, ControlLoop
 from freejoint_control.params import SCHEMA
 from freejoint_core.control import STATUS_TORQUE_LIMITED
-from freejoint_core.laws import make_law
 from freejoint_core.spatial_law import SpatialControlLaw, SpatialGains
 from freejoint_core.spatial_offline import CASES, circle, run_twin, start_posture
 from freejoint_core.spatial_plant import SpatialPlant
@@ -24,16 +22,10 @@ def _values(arm, **given):
     return values
 
 
-def _law(cfg):
-    law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
-    install_nullspace(law, cfg)
-    return law
-
-
 @pytest.mark.parametrize('arm, case', [('ur5', 'ur5_wrist2'), ('panda', 'panda_j7')])
 def test_the_shipped_spatial_config_gives_the_offline_runners_law(arm, case):
     cfg = SCHEMA.config(_values(arm))
-    law = _law(cfg)
+    law = config_law(cfg)
     assert isinstance(law, SpatialControlLaw) and cfg.gains.task_dim == 3
     assert law.law.nullspace.kd == 20.0
     assert law.law.nullspace.inverse == 'weighted'
@@ -55,7 +47,7 @@ def test_lockstep_ticks_of_the_loop_on_a_ur5_equal_the_offline_twin_exactly():
     real = arm.nominal(1.0)
     q0, why = start_posture(arm, CASES['ur5_wrist2'][2])
     assert q0 is not None, why
-    twin = run_twin(real, q0, _law(cfg), 3, t_stop=TICKS * 1e-3)
+    twin = run_twin(real, q0, config_law(cfg), 3, t_stop=TICKS * 1e-3)
     loop = ControlLoop(cfg, lambda *line: None)
     plant = SpatialPlant(real, 5e-4, 0.5, 3, q0)
     p0 = real.fk(q0)
@@ -93,7 +85,7 @@ def test_a_spatial_arm_refuses_the_planar_law_and_planar_only_options():
 
 def test_the_posture_is_where_the_task_began_and_is_taken_again_after_a_reset():
     cfg = SCHEMA.config(_values('ur5'))
-    law = _law(cfg)
+    law = config_law(cfg)
     act = list(cfg.nominal.active)
     q0 = np.array(CASES['ur5_wrist2'][2])
     q1 = q0 + 0.02
@@ -113,7 +105,7 @@ def test_the_posture_is_where_the_task_began_and_is_taken_again_after_a_reset():
     out = law.step(q1, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
     assert law.posture == tuple(q1[act].tolist())
     # at its own posture and at rest the posture term is 0: the tick of a law without it
-    free = _law(SCHEMA.config(_values('ur5', nullspace_kp=0.0)))
+    free = config_law(SCHEMA.config(_values('ur5', nullspace_kp=0.0)))
     ref = free.step(q1, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
     assert free.posture is None and out.tau.tolist() == ref.tau.tolist()
 
@@ -127,10 +119,10 @@ def test_a_planar_arm_takes_no_posture_stiffness():
 def test_effort_limits_below_the_urdfs_clip_the_spatial_laws_torque():
     # the UR5's shoulder at 10 N m (URDF: 150): a 2-cm step of the setpoint asks more
     cfg = SCHEMA.config(_values('ur5', effort_limits=[150.0, 10.0, 150.0, 28.0, 28.0]))
-    law = _law(cfg)
+    law = config_law(cfg)
     q0 = np.array(CASES['ur5_wrist2'][2])
     out = law.step(q0, np.zeros(6), cfg.nominal.fk(q0) + 0.02, [0.0] * 3, [0.0] * 3, 1e-3)
     assert abs(out.tau[1]) == 10.0 and out.status & STATUS_TORQUE_LIMITED
-    urdf = _law(SCHEMA.config(_values('ur5')))
+    urdf = config_law(SCHEMA.config(_values('ur5')))
     ref = urdf.step(q0, np.zeros(6), cfg.nominal.fk(q0) + 0.02, [0.0] * 3, [0.0] * 3, 1e-3)
     assert abs(ref.tau[1]) > 10.0

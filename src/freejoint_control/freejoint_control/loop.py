@@ -127,6 +127,30 @@ class Result:
         self.latency_ns = 0
 
 
+def config_law(cfg):
+    """
+    Return the law a controller configuration names, with its null-space terms.
+
+    ``make_law`` of ``cfg.law`` on the nominal model and gains, then
+    ``failures.install_nullspace`` (``nullspace_kd``, ``nullspace_kp``): the law the loop
+    steps (before the free link's damping wraps it) and the one an offline twin of the
+    graph must run.
+
+    Parameters
+    ----------
+    cfg : freejoint_control.params.Config
+        The controller's configuration (``law``, ``nominal``, ``gains``, the null space).
+
+    Returns
+    -------
+    freejoint_core.laws.ControlLaw
+
+    """
+    law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
+    failures.install_nullspace(law, cfg)
+    return law
+
+
 class ControlLoop:
     """
     The controller's decisions between samples and commands (module docstring).
@@ -143,8 +167,7 @@ class ControlLoop:
     def __init__(self, config, log=None):
         cfg = config
         self.log = log or _no_log
-        self.law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
-        failures.install_nullspace(self.law, cfg)
+        self.law = config_law(cfg)
         if cfg.values['free_link_damping']:     # issue 22: the reference damps the free link
             values = cfg.values
             self.law = FreeLinkDampedLaw(self.law, values['free_link_delta_max'],

@@ -212,6 +212,22 @@ class ControlOutput(NamedTuple):
     status: int
 
 
+def stiffness_scale(scale):
+    """
+    Return a hold stiffness scale as a float (``set_stiffness`` of the laws).
+
+    Raises
+    ------
+    FreejointValueError
+        If ``scale`` is not finite and > 0.
+
+    """
+    value = float(scale)
+    if not (math.isfinite(value) and value > 0.0):
+        raise FreejointValueError(f'scale: must be finite and > 0, got {scale!r}')
+    return value
+
+
 def _bad(name, value, n):
     shape = np.shape(value) if not isinstance(value, (str, bytes)) else '?'
     return FreejointValueError(
@@ -396,10 +412,7 @@ class RobustController:
             If ``scale`` is not finite and > 0.
 
         """
-        value = float(scale)
-        if not (math.isfinite(value) and value > 0.0):
-            raise FreejointValueError(f'scale: must be finite and > 0, got {scale!r}')
-        self.stiffness = value
+        self.stiffness = stiffness_scale(scale)
         self._scale_gains()
 
     def _scale_gains(self):

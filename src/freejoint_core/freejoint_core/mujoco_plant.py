@@ -194,16 +194,22 @@ class MujocoPlant(PeriodPlant):
     """
 
     def __init__(self, arm, dt_sub=DEFAULT_DT_SUB, dist_bound=0.5, seed=0, q0=None, qd0=None):
-        self.mj_model, self._qadr, self._vadr = build_mj_model(arm, dt_sub)
         # the core's angles are MuJoCo's (the URDF's) plus the arm's offsets
-        self._offsets = np.array(arm.joint_offsets) if arm.joint_offsets else None
+        self._start(arm, build_mj_model(arm, dt_sub),
+                    np.array(arm.joint_offsets) if arm.joint_offsets else None,
+                    arm.params, make_model(arm.params), dist_bound, seed, q0, qd0)
+
+    def _start(self, arm, built, offsets, params, model, dist_bound, seed, q0, qd0):
+        """Take the MuJoCo model ``built`` (model, qpos and qvel addresses) and reset."""
+        self.mj_model, self._qadr, self._vadr = built
+        self._offsets = offsets
         self.mj_data = mujoco.MjData(self.mj_model)
         self.arm = arm
         self._bad = [int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
                                       mujoco.mjtWarning.mjWARN_BADQVEL,
                                       mujoco.mjtWarning.mjWARN_BADQACC)]
-        self._setup(arm.params, make_model(arm.params), float(self.mj_model.opt.timestep),
-                    dist_bound, seed, q0, qd0)
+        self._setup(params, model, float(self.mj_model.opt.timestep), dist_bound, seed, q0,
+                    qd0)
         self.reset()
 
     def _set_state(self, q0, qd0):
@@ -285,12 +291,5 @@ class SpatialMujocoPlant(MujocoPlant):
         from freejoint_core.spatial_model import SpatialArm
         if not isinstance(arm, SpatialArm):
             raise FreejointValueError(f'arm: expected SpatialArm, got {type(arm).__name__}')
-        self.mj_model, self._qadr, self._vadr = build_spatial_mj_model(arm, dt_sub)
-        self._offsets = None
-        self.mj_data = mujoco.MjData(self.mj_model)
-        self.arm = arm
-        self._bad = [int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
-                                      mujoco.mjtWarning.mjWARN_BADQVEL,
-                                      mujoco.mjtWarning.mjWARN_BADQACC)]
-        self._setup(arm, arm, float(self.mj_model.opt.timestep), dist_bound, seed, q0, qd0)
-        self.reset()
+        self._start(arm, build_spatial_mj_model(arm, dt_sub), None, arm, arm, dist_bound,
+                    seed, q0, qd0)

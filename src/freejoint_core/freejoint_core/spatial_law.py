@@ -49,7 +49,7 @@ import math
 from typing import NamedTuple
 
 from freejoint_core.control import _vector, ControlOutput, Gains, STATUS_NEAR_SINGULAR
-from freejoint_core.control import STATUS_OK, STATUS_TORQUE_LIMITED
+from freejoint_core.control import STATUS_OK, STATUS_TORQUE_LIMITED, stiffness_scale
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
 from freejoint_core.law_base import ControlLaw, INF
@@ -260,10 +260,7 @@ class SpatialLaw:
             If ``scale`` is not finite and > 0.
 
         """
-        value = float(scale)
-        if not (math.isfinite(value) and value > 0.0):
-            raise FreejointValueError(f'scale: must be finite and > 0, got {scale!r}')
-        self.stiffness = value
+        self.stiffness = stiffness_scale(scale)
         self._scale_gains()
 
     def reset(self):
@@ -571,20 +568,20 @@ class SpatialControlLaw(ControlLaw):
 
     def set_nominal(self, params, model=None):
         """Take a new nominal ``SpatialArm`` (theta_hat, stiffness, null space kept)."""
-        old = self.law
-        law = SpatialLaw(params, old.gains, old.nullspace, old.free_damping)
-        law.theta = old.theta.copy()
-        law.set_stiffness(old.stiffness)
-        self.law = law
+        self._rebuild(params, self.law.gains)
 
     def set_gains(self, gains):
         """Take new gains (theta_hat, stiffness and null space kept)."""
+        self._rebuild(self.law.model, gains)
+        self._bounds()
+
+    def _rebuild(self, nominal, gains):
+        """Replace the law by one of ``nominal`` and ``gains`` with the old one's state."""
         old = self.law
-        law = SpatialLaw(old.model, gains, old.nullspace, old.free_damping)
+        law = SpatialLaw(nominal, gains, old.nullspace, old.free_damping)
         law.theta = old.theta.copy()
         law.set_stiffness(old.stiffness)
         self.law = law
-        self._bounds()
 
 
 def _nullspace(kd, kp=0.0, posture=None):
