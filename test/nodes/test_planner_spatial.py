@@ -32,6 +32,28 @@ def _helpers():
                        'planner_node_test_helpers')
 
 
+def _driver(ros_node, wait, helpers, **clock_args):
+    """Return ``(ClockDriver, joint_states publisher)`` once the planner matches both."""
+    from freejoint_common.contract import JOINT_STATES
+    clock = helpers.ClockDriver(ros_node, **clock_args)
+    pub = ros_node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, JOINT_STATES.qos)
+    wait(lambda: clock.matched() and pub.get_subscription_count() >= 1, 30.0,
+         'the planner matching /clock, setpoint and joint_states',
+         spin=lambda: helpers._spin(ros_node, 0.05))
+    return clock, pub
+
+
+def _step_zero(ros_node, helpers, clock, pub, state):
+    """Return the lockstep simulator's step 0 as a spin: the state of tick 0, /clock 0."""
+    def publish():
+        # said again until answered, as the simulator does until its first command
+        pub.publish(state)
+        helpers._spin(ros_node, 0.02)
+        clock.publish(0)
+        helpers._spin(ros_node, 0.05)
+    return publish
+
+
 def test_the_planner_on_the_ur5_config_streams_the_offline_runners_circle_from_the_tip(
         procs, ros_node, wait):
     from freejoint_common.contract import JOINT_STATES, stamp_from_ns
@@ -45,11 +67,7 @@ def test_the_planner_on_the_ur5_config_streams_the_offline_runners_circle_from_t
     log = procs.log(proc)
     assert 'spatial arm (task_dim 3)' in log and 'ur5_robot.urdf (spatial' in log
     assert 'singularity map computed' not in log
-    clock = helpers.ClockDriver(ros_node, lookahead=100)
-    pub = ros_node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, JOINT_STATES.qos)
-    wait(lambda: clock.matched() and pub.get_subscription_count() >= 1, 30.0,
-         'the planner matching /clock, setpoint and joint_states',
-         spin=lambda: helpers._spin(ros_node, 0.05))
+    clock, pub = _driver(ros_node, wait, helpers, lookahead=100)
 
     # The offline runner's start posture (config/ur5/sim.yaml's), computed here.
     name, free, q_plan = CASES['ur5_wrist2']
@@ -61,13 +79,7 @@ def test_the_planner_on_the_ur5_config_streams_the_offline_runners_circle_from_t
                                   effort=[0.0] * 6)
     stamp_from_ns(0, state.header.stamp)
 
-    def lockstep_start():
-        # the simulator's step 0: /clock 0 and the state of tick 0, again until answered
-        pub.publish(state)
-        helpers._spin(ros_node, 0.02)
-        clock.publish(0)
-        helpers._spin(ros_node, 0.05)
-
+    lockstep_start = _step_zero(ros_node, helpers, clock, pub, state)
     wait(lambda: clock.last_stamp() == 100 * MS, 60.0,
          'the setpoints of ticks 0-100 after /clock 0 (log: %s)' % procs.log(proc),
          spin=lockstep_start)
@@ -147,11 +159,7 @@ def test_a_plan_circle_before_any_joint_state_starts_from_the_tip_of_the_first_o
     assert answer.accepted and answer.plan_id == 1 and answer.reason == ''
     assert "from rest: checked when it starts, from the arm's posture then" in procs.log(proc)
 
-    clock = helpers.ClockDriver(ros_node)
-    pub = ros_node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, JOINT_STATES.qos)
-    wait(lambda: clock.matched() and pub.get_subscription_count() >= 1, 30.0,
-         'the planner matching /clock, setpoint and joint_states',
-         spin=lambda: helpers._spin(ros_node, 0.05))
+    clock, pub = _driver(ros_node, wait, helpers)
     # /clock without a joint state: the plan waits for the arm's posture, nothing streams
 
     def said_waiting():
@@ -167,12 +175,7 @@ def test_a_plan_circle_before_any_joint_state_starts_from_the_tip_of_the_first_o
     state = JOINT_STATES.msg_type(name=UR5_JOINTS, position=q0.tolist(), velocity=[0.0] * 6)
     stamp_from_ns(0, state.header.stamp)
 
-    def lockstep_start():
-        pub.publish(state)
-        helpers._spin(ros_node, 0.02)
-        clock.publish(0)
-        helpers._spin(ros_node, 0.05)
-
+    lockstep_start = _step_zero(ros_node, helpers, clock, pub, state)
     wait(lambda: clock.last_stamp() == 20 * MS, 60.0,
          'the setpoints of ticks 0-20 (log: %s)' % procs.log(proc), spin=lockstep_start)
     for now in range(10 * MS, 100 * MS, 10 * MS):
@@ -202,22 +205,13 @@ def test_a_free_joint_that_must_carry_gravity_is_refused_at_plan_time_in_one_lin
         '--params-file', os.path.join(CONFIG, arm, 'planner.yaml'),
         '-p', 'passive_joints:=[%s]' % free])
     helpers._wait_ready(ros_node, procs, proc, wait)
-    clock = helpers.ClockDriver(ros_node)
-    pub = ros_node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, JOINT_STATES.qos)
-    wait(lambda: clock.matched() and pub.get_subscription_count() >= 1, 30.0,
-         'the planner matching /clock, setpoint and joint_states',
-         spin=lambda: helpers._spin(ros_node, 0.05))
+    clock, pub = _driver(ros_node, wait, helpers)
     chain = known_arm(CASES[case][0]).joint_names
     state = JOINT_STATES.msg_type(name=list(chain), position=list(CASES[case][2]),
                                   velocity=[0.0] * len(chain), effort=[0.0] * len(chain))
     stamp_from_ns(0, state.header.stamp)
 
-    def lockstep_start():
-        pub.publish(state)
-        helpers._spin(ros_node, 0.02)
-        clock.publish(0)
-        helpers._spin(ros_node, 0.05)
-
+    lockstep_start = _step_zero(ros_node, helpers, clock, pub, state)
     refusal = f'free joint {free} must carry gravity'
     wait(lambda: refusal in procs.log(proc), 60.0,
          'the refusal (log: %s)' % procs.log(proc), spin=lockstep_start)
