@@ -411,9 +411,10 @@ def spatial_offline(arm, seed, n_ticks, normal=None):
 
     Everything is taken from the graph's parameter files (``config/*.yaml`` and
     ``config/<arm>/*.yaml``): the real arm and its start posture, dt_sub, the disturbance
-    (the simulator's), the law built as the controller builds it (its schema's config,
-    ``freejoint_control.loop.config_law``), the circle's radius and duration (the planner's);
-    ``freejoint_core.spatial_offline.run_twin`` runs it for ``n_ticks``. ``normal``: the
+    and the free joint's damping (the simulator's), the law built as the controller builds
+    it (its schema's config, ``freejoint_control.loop.config_law``), the circle's radius and
+    duration (the planner's); ``freejoint_core.spatial_offline.run_twin`` runs it for
+    ``n_ticks``. ``normal``: the
     circle plane's normal given to the planner on the command line (``--plane-normal``),
     else the planner's file's ``plane_normal``.
     """
@@ -437,6 +438,7 @@ def spatial_offline(arm, seed, n_ticks, normal=None):
     out = run_twin(sim.arm.spatial, sim.q0, law, seed, t_move=duration,
                    t_hold=n_ticks * dt - duration, dt=dt, dt_sub=sim.dt_sub,
                    dist=sim.dist_bound, radius=float(plan['radius']),
+                   passive_damping=sim.passive_damping,
                    normal=plane_normal(plan['plane_normal'] if normal is None else normal))
     trace = out['trace']
     n = len(trace['p'])
@@ -446,7 +448,8 @@ def spatial_offline(arm, seed, n_ticks, normal=None):
                             trace['theta'], trace['q'][:, passive], trace['kappa'],
                             diverged_at_s=n * dt if out['diverged'] else None)
     record.update({key: out[key] for key in ('tau_ratio', 'vel_ratio', 'vel_ratio_free',
-                                             'hold_last_s_max_mm', 'active_outside_limits')})
+                                             'hold_last_s_max_mm', 'active_outside_limits',
+                                             'free_outside_limits')})
     return record, trace
 
 
@@ -803,18 +806,19 @@ def main(argv=None):
                                          args.plane_normal)
                 bound = ARMS[args.arm]['bound_mm']
                 if spatial:
+                    outside = off['active_outside_limits'] + off['free_outside_limits']
                     say('  offline twin: max %.3f mm (last second of the hold %.3f mm), '
                         "peak |effort| %.2f of the URDF's limits, active joint speeds %.2f "
-                        'of them, the free joint %.2f; active joints %s%s' % (
+                        'of them, the free joint %.2f; joints %s%s' % (
                             off['max_mm'], off['hold_last_s_max_mm'], off['tau_ratio'],
                             off['vel_ratio'], off['vel_ratio_free'],
-                            'within their position limits' if not off['active_outside_limits']
-                            else 'OUTSIDE their limits: %s' % off['active_outside_limits'],
+                            'within their position limits' if not outside
+                            else 'OUTSIDE their limits: %s' % outside,
                             '' if off['diverged_at_s'] is None else
                             ', DIVERGED at %.3f s' % off['diverged_at_s']))
                     failed = failed or off['diverged_at_s'] is not None or \
                         off['tau_ratio'] > 1.0 or off['vel_ratio'] > 1.0 or \
-                        bool(off['active_outside_limits'])
+                        off['vel_ratio_free'] > 1.0 or bool(outside)
                 say('  %s example, %s: max tracking error %.3f mm (stated bound %g mm)%s'
                     % (args.arm, ARMS[args.arm].get('spatial', case), record['max_mm'], bound,
                        '' if record['max_mm'] <= bound else '  NOT MET'))

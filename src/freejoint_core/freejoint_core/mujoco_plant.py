@@ -277,6 +277,9 @@ class SpatialMujocoPlant(MujocoPlant):
         MuJoCo RK4 step [s], > 0.
     dist_bound, seed, q0, qd0
         As :class:`freejoint_core.plant.Plant`.
+    passive_damping : float
+        As :class:`freejoint_core.spatial_plant.SpatialPlant` (MuJoCo's ``dof_damping`` of
+        the free joints).
 
     Attributes
     ----------
@@ -287,9 +290,14 @@ class SpatialMujocoPlant(MujocoPlant):
 
     """
 
-    def __init__(self, arm, dt_sub=DEFAULT_DT_SUB, dist_bound=0.5, seed=0, q0=None, qd0=None):
+    def __init__(self, arm, dt_sub=DEFAULT_DT_SUB, dist_bound=0.5, seed=0, q0=None, qd0=None,
+                 passive_damping=0.0):
         from freejoint_core.spatial_model import SpatialArm
+        from freejoint_core.spatial_plant import passive_damping_vector
         if not isinstance(arm, SpatialArm):
             raise FreejointValueError(f'arm: expected SpatialArm, got {type(arm).__name__}')
-        self._start(arm, build_spatial_mj_model(arm, dt_sub), None, arm, arm, dist_bound,
-                    seed, q0, qd0)
+        self.damping = passive_damping_vector(arm, passive_damping)
+        built = build_spatial_mj_model(arm, dt_sub)
+        # MuJoCo's RK4 takes joint damping explicitly at every stage, as SpatialPlant does
+        built[0].dof_damping[built[2]] = self.damping
+        self._start(arm, built, None, arm, arm, dist_bound, seed, q0, qd0)

@@ -144,7 +144,7 @@ def circle(p0, radius, t, t_move, normal=None):
 
 def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL,
              dist=DIST, kd=KD, kf=KF, inverse='weighted', t_stop=None, dt_sub=DT_SUB,
-             kp=KP):
+             kp=KP, passive_damping=0.0):
     """
     One closed-loop run (module notes).
 
@@ -173,6 +173,9 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
     kp : float
         Null-space posture stiffness [N m/rad] towards the start posture (the controller's
         ``nullspace_kp``; the weighted law without ``kf`` only).
+    passive_damping : float
+        Viscous damping [N m s/rad] of the free joint's drivetrain in the plant
+        (:func:`run_twin`).
 
     Returns
     -------
@@ -200,9 +203,10 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
         law = SpatialLaw(real.nominal(nominal), SpatialGains(task_dim=3),
                          NullSpace(kd=kd, inverse=inverse, projector=proj), free_damping=kf)
     out = run_twin(real, q0, law, seed, t_move=t_move, t_hold=t_hold, dt=dt, dt_sub=dt_sub,
-                   dist=dist, t_stop=t_stop)
+                   dist=dist, t_stop=t_stop, passive_damping=passive_damping)
     out.pop('trace')
-    return dict({'case': case, 'seed': seed, 'inverse': inverse, 'kd': kd, 'kp': kp, 'kf': kf},
+    return dict({'case': case, 'seed': seed, 'inverse': inverse, 'kd': kd, 'kp': kp, 'kf': kf,
+                 'passive_damping': passive_damping},
                 **out)
 
 
@@ -227,7 +231,7 @@ def start_posture(nominal, q_plan):
 
 
 def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub=DT_SUB,
-             dist=DIST, radius=RADIUS, t_stop=None, normal=None):
+             dist=DIST, radius=RADIUS, t_stop=None, normal=None, passive_damping=0.0):
     """
     One run of the lockstep graph, offline: plant, setpoints and law as the nodes run them.
 
@@ -253,20 +257,23 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
     normal : array_like, (3,), optional
         Normal of the circle's plane (:func:`circle_axes`; the planner's
         ``plane_normal``); default the vertical plane facing the robot.
+    passive_damping : float
+        Viscous damping [N m s/rad] of the free joints' drivetrain in the plant (the
+        simulator's ``passive_damping``; the law is not told).
 
     Returns
     -------
     dict
         ``rms_mm``, ``max_mm``, ``hold_last_s_max_mm``, ``tau_ratio``, ``vel_ratio``,
         ``vel_ratio_free``, ``diverged``, ``tick_us`` (module notes),
-        ``active_outside_limits`` (the active joints that left their URDF position limits,
-        names), and ``trace``:
+        ``active_outside_limits`` and ``free_outside_limits`` (the active, the free joints
+        that left their URDF position limits, names), and ``trace``:
         ``{'p', 'p_d', 'q': (K, 3 / 3 / n) arrays, 'tau': (K, r), 'kappa': (K,),
         'theta': (K, 5)}`` of ticks 0..K-1 (``kappa`` the law's conditioning, ``theta``
         its estimate after the tick).
 
     """
-    plant = SpatialPlant(real, dt_sub, dist, seed, q0)
+    plant = SpatialPlant(real, dt_sub, dist, seed, q0, passive_damping=passive_damping)
     p0 = real.fk(np.asarray(q0, dtype=float))
     steps = int(round(((t_move + t_hold) if t_stop is None else t_stop) / dt))
     last = int(round(1.0 / dt))
@@ -307,12 +314,17 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
     q_act = trace['q'][:n][:, act]
     outside = [real.joint_names[j] for i, j in enumerate(act)
                if np.any(q_act[:, i] < real.lower[j]) or np.any(q_act[:, i] > real.upper[j])]
+    q_free = trace['q'][:n][:, free]
+    free_outside = [real.joint_names[j] for i, j in enumerate(free)
+                    if np.any(q_free[:, i] < real.lower[j])
+                    or np.any(q_free[:, i] > real.upper[j])]
     return {
         'rms_mm': 1e3 * float(np.sqrt(np.mean(err ** 2))),
         'max_mm': 1e3 * float(np.max(err)),
         'hold_last_s_max_mm': 1e3 * float(np.max(err[-last:])),
         'tau_ratio': tau_ratio, 'vel_ratio': vel_ratio, 'vel_ratio_free': vel_free,
-        'active_outside_limits': outside, 'diverged': diverged,
+        'active_outside_limits': outside, 'free_outside_limits': free_outside,
+        'diverged': diverged,
         'tick_us': 1e6 * t_law / n,
         'trace': {key: val[:n] for key, val in trace.items()},
     }
@@ -330,11 +342,15 @@ def main(argv=None):
     ap.add_argument('--kp', type=float, default=KP)
     ap.add_argument('--kf', type=float, default=KF)
     ap.add_argument('--inverse', choices=('weighted', 'pseudo'), default='weighted')
+    ap.add_argument('--passive-damping', type=float, default=0.0, metavar='B',
+                    help="viscous damping [N m s/rad] of the free joint's drivetrain in the "
+                         "plant (the simulator's passive_damping; default 0: frictionless)")
     args = ap.parse_args(argv)
     for case in args.case or sorted(CASES):
         for seed in range(args.seeds):
             rec = run_case(case, seed, t_move=args.t_move, t_hold=args.t_hold, kd=args.kd,
-                           kp=args.kp, kf=args.kf, inverse=args.inverse)
+                           kp=args.kp, kf=args.kf, inverse=args.inverse,
+                           passive_damping=args.passive_damping)
             print(json.dumps({k: round(v, 4) if isinstance(v, float) else v
                               for k, v in rec.items()}), flush=True)
     return 0

@@ -29,7 +29,8 @@ def make_plant(cfg):
     Parameters
     ----------
     cfg : freejoint_sim.params.Config
-        ``arm``, ``engine``, ``dt_sub``, ``dist_bound``, ``seed``, ``q0``.
+        ``arm``, ``engine``, ``dt_sub``, ``dist_bound``, ``seed``, ``q0``,
+        ``passive_damping`` (a spatial arm's).
 
     Returns
     -------
@@ -49,7 +50,7 @@ def make_plant(cfg):
         else:
             from freejoint_core.spatial_plant import SpatialPlant
         return SpatialPlant(cfg.arm.spatial, cfg.dt_sub, dist_bound=cfg.dist_bound,
-                            seed=cfg.seed, q0=cfg.q0)
+                            seed=cfg.seed, q0=cfg.q0, passive_damping=cfg.passive_damping)
     if cfg.engine == 'rk4' and cfg.arm.urdf_arm is None:
         return Plant(cfg.params, cfg.dt_sub, dist_bound=cfg.dist_bound, seed=cfg.seed,
                      q0=cfg.q0)

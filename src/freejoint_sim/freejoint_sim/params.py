@@ -42,6 +42,9 @@ MAX_PASSIVE_DEG = 360.0
 MAX_DIVERGENCE_SPEED = 1e5
 """Upper bound [rad/s] of ``divergence_speed``."""
 MAX_TIMING_STEPS = 10_000_000
+MAX_PASSIVE_DAMPING = 100.0
+"""Upper bound [N m s/rad] of ``passive_damping``: 100 times the 1 N m s/rad MuJoCo
+Menagerie gives every joint of its Franka Panda."""
 
 
 def _within(lo, hi, text):
@@ -101,6 +104,14 @@ PARAMS = (
                             f'must be in [0, {MAX_DIST_BOUND:g}] N m (the paper: '
                             f'{DEFAULT_DIST_BOUND:g}; the horizontal case peaks near 11 N m '
                             'of actuator torque), got {value}')),
+    Param('passive_damping', 0.0,
+          "viscous damping [N m s/rad] of each free joint's drivetrain (a failed joint's "
+          'gearbox and motor still turn with it; the controller is not told: to its law a '
+          "disturbance); 0 = the paper's frictionless free joint; spatial arms (task_dim 3) "
+          'only; takes effect on reset', (0.0, MAX_PASSIVE_DAMPING),
+          validator=_within(0.0, MAX_PASSIVE_DAMPING,
+                            f'must be in [0, {MAX_PASSIVE_DAMPING:g}] N m s/rad, got '
+                            '{value}')),
     Param('seed', 0, 'seed of the disturbance generator (>= 0); takes effect on reset',
           validator=_seed),
     Param('initial_position', [0.2, 0.0],
@@ -366,6 +377,11 @@ def build(values):
     if arm.spatial is not None:
         q0 = _spatial_start(values, arm)
     else:
+        if values['passive_damping'] != 0.0:
+            raise FreejointValueError(
+                'passive_damping: spatial arms only (task_dim 3), got '
+                f"{values['passive_damping']!r} N m s/rad for a planar arm (its plants "
+                "integrate the paper's frictionless free joint)")
         q0 = _planar_start(values, arm)
     return Config(values=dict(values), params=params, arm=arm,
                   q0=tuple(float(v) for v in q0), joint_names=joint_names, joints=joints,

@@ -175,12 +175,14 @@ class SimNode(Node, Lifecycle):
                                                daemon=True)
         self.get_logger().info(
             'simulator ready: %s arm, %s, dt %g s (%s %g s), disturbance %g N m seed %d, '
-            'q0 = [%s] rad, command timeout %g s' % (
+            '%sq0 = [%s] rad, command timeout %g s' % (
                 cfg.arm.source if cfg.arm.urdf_arm or cfg.arm.spatial is not None
                 else cfg.case,
                 'lockstep' if cfg.lockstep else 'real time', cfg.dt,
                 'MuJoCo RK4' if cfg.engine == 'mujoco' else 'RK4', cfg.dt_sub, cfg.dist_bound,
-                cfg.seed, ', '.join('%.6f' % v for v in cfg.arm.to_joints(cfg.q0)),
+                cfg.seed, 'free-joint damping %g N m s/rad, ' % cfg.passive_damping
+                if cfg.passive_damping else '',
+                ', '.join('%.6f' % v for v in cfg.arm.to_joints(cfg.q0)),
                 cfg.command_timeout))
         if cfg.lockstep:
             self._publish_state()

@@ -123,8 +123,10 @@ def test_the_configured_plant_is_spatial_plant_stepped_by_hand_bit_for_bit(arm, 
     cfg = SCHEMA.config(_values(arm, seed=3))
     plant = make_plant(cfg)
     name, free, _ = CASES[case]
+    # the Panda's free flange keeps its drivetrain's damping (config/panda/sim.yaml)
+    assert cfg.passive_damping == {'ur5': 0.0, 'panda': 1.0}[arm]
     by_hand = SpatialPlant(known_arm(name, [free]), 0.0005, dist_bound=0.5, seed=3,
-                           q0=_start_posture(case))
+                           q0=_start_posture(case), passive_damping=cfg.passive_damping)
     assert plant.q.tolist() == by_hand.q.tolist() and plant.qd.tolist() == [0.0] * cfg.params.n
     for k in range(40):
         tau = _torques(k, cfg.params.r)
@@ -149,7 +151,8 @@ def test_engine_mujoco_is_spatial_plant_to_round_off(arm, case):
     assert type(plant).__name__ == 'SpatialMujocoPlant'
     name, free, _ = CASES[case]
     real = known_arm(name, [free])
-    by_hand = SpatialPlant(real, 0.0005, dist_bound=0.5, seed=0, q0=_start_posture(case))
+    by_hand = SpatialPlant(real, 0.0005, dist_bound=0.5, seed=0, q0=_start_posture(case),
+                           passive_damping=cfg.passive_damping)
     active = list(real.active)
     for k in range(300):
         tau = real.gravity_torque(by_hand.q)[active] + 0.5 * np.sin(0.01 * k + np.arange(
@@ -204,3 +207,18 @@ def test_the_divergence_check_names_any_of_the_n_joints():
     assert divergence_reason(q, [0.0] * 6, 1000.0) is None
     assert divergence_reason(q[:5] + [math.nan], [0.0] * 6, 1000.0).startswith(
         'joint 5: non-finite state')
+
+
+def test_a_planar_arm_refuses_passive_damping_naming_it():
+    values = SCHEMA.yaml_values(os.path.join(CONFIG, 'sim.yaml'))
+    values['passive_damping'] = 1.0
+    with pytest.raises(FreejointValueError, match=r'^passive_damping: spatial arms only '
+                                                  r'\(task_dim 3\), got 1.0 N m s/rad'):
+        SCHEMA.config(values)
+    values['passive_damping'] = 0.0
+    assert SCHEMA.config(values).passive_damping == 0.0
+
+
+def test_a_negative_passive_damping_is_refused_by_the_schema():
+    assert SCHEMA['passive_damping'].reason(-1.0) == (
+        'passive_damping: must be in [0, 100] N m s/rad, got -1.0')
