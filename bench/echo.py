@@ -10,14 +10,18 @@ every wait bounded, every process stopped whatever happens:
   once on the ``single_threaded`` one, each driven in lockstep by this process: state k
   is published once the answer to k - 1 came, ``TICKS`` times after a warm-up; the echo
   process's CPU seconds (``/proc/<pid>/stat``) over the measured ticks, per tick;
-* the graph in lockstep, a process per node, the recorder on: ``bench/graph.py``'s
+* the graph in lockstep, a process per node, the recorder on and off: ``bench/graph.py``'s
   lockstep run (the 5-s horizontal case), its ``sim_node`` and ``controller_node`` CPU
   per tick (the graph benchmark's own run when ``make bench`` ran it just before).
 
 Rows: the CPU figures per tick and the ratios controller / echo and simulator / echo,
 the echo on the controller's executor (what the node costs per tick beyond what any rclpy
-node answering a state with a command on that executor costs). Benchmarks assert
-nothing. Usage: ``. tools/env.sh && python bench/echo.py``, or ``make bench BENCH=echo``.
+node answering a state with a command on that executor costs). The target applies to the
+run without the recorder, whose controller sends its command to one reader, as the echo
+does (with the recorder on: the command to two readers, every ``ControllerState`` to
+one).
+Benchmarks assert nothing. Usage: ``. tools/env.sh && python bench/echo.py``, or
+``make bench BENCH=echo``.
 """
 
 import os
@@ -125,21 +129,22 @@ def echo_cpu_per_tick(executor, ticks=TICKS):
         procs.stop_all(order=('echo_node',))
 
 
-def graph_cpu_per_tick():
+def graph_cpu_per_tick(record=True):
     """
     Return ``{node: CPU per lockstep tick [us]}`` of sim_node and controller_node.
 
-    From the graph benchmark's lockstep run (a process per node) if this process ran one
-    (``make bench``: ``graph`` runs before ``echo``), else from a run of its own.
+    From the graph benchmark's lockstep run (a process per node, the recorder on if
+    ``record``) if this process ran one (``make bench``: ``graph`` runs before ``echo``),
+    else from a run of its own.
     """
-    rows = graph_bench.LOCKSTEP_ROWS.get('separate')
+    rows = graph_bench.LOCKSTEP_ROWS.get(('separate', record))
     if rows is None:
         env = graph_bench._env(0)
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
         os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
         client = graph_bench.Client()
         try:
-            rows = graph_bench.lockstep(client, env, 'separate')
+            rows = graph_bench.lockstep(client, env, 'separate', record=record)
         finally:
             client.close()
     found = {}
@@ -156,29 +161,37 @@ def run():
     echo = echo_cpu_per_tick(kind)
     other = 'single_threaded' if kind == 'events' else 'events'
     echo_other = echo_cpu_per_tick(other)
-    nodes = graph_cpu_per_tick()
-    ctl, sim = nodes.get('controller_node'), nodes.get('sim_node')
-
-    def ratio(value):
-        return None if value is None or not echo else value / echo
-
-    graph_bench.say('CPU per lockstep tick: echo (%s) %.1f us, controller %s us, simulator %s us'
-                    % (kind, echo, '%.1f' % ctl if ctl is not None else 'n/a',
-                       '%.1f' % sim if sim is not None else 'n/a'))
-    return [
+    rows = [
         {'name': 'lockstep: rclpy echo node CPU per tick (%s)' % kind, 'value': echo,
          'unit': 'us'},
         {'name': 'lockstep: rclpy echo node CPU per tick (%s)' % other,
          'value': echo_other, 'unit': 'us'},
-        {'name': 'lockstep: controller_node CPU per tick (beside the echo)', 'value': ctl,
-         'unit': 'us'},
-        {'name': 'lockstep: sim_node CPU per tick (beside the echo)', 'value': sim,
-         'unit': 'us'},
-        {'name': 'lockstep: controller / echo (%s) CPU per tick' % kind,
-         'value': ratio(ctl), 'unit': 'x', 'target': '<= 1.5'},
-        {'name': 'lockstep: simulator / echo (%s) CPU per tick' % kind, 'value': ratio(sim),
-         'unit': 'x'},
     ]
+
+    def ratio(value):
+        return None if value is None or not echo else value / echo
+
+    # Recorder on (as make demo runs): the command goes to two readers (simulator,
+    # recorder) and every ControllerState to the recorder. Off: the command to the
+    # simulator alone, as the echo's to this process.
+    for record, tag, target in ((True, 'recorder on', None), (False, 'recorder off', '<= 1.5')):
+        nodes = graph_cpu_per_tick(record)
+        ctl, sim = nodes.get('controller_node'), nodes.get('sim_node')
+        graph_bench.say('CPU per lockstep tick, %s: echo (%s) %.1f us, controller %s us, '
+                        'simulator %s us' % (tag, kind, echo,
+                                             '%.1f' % ctl if ctl is not None else 'n/a',
+                                             '%.1f' % sim if sim is not None else 'n/a'))
+        rows += [
+            {'name': 'lockstep, %s: controller_node CPU per tick' % tag, 'value': ctl,
+             'unit': 'us'},
+            {'name': 'lockstep, %s: sim_node CPU per tick' % tag, 'value': sim,
+             'unit': 'us'},
+            {'name': 'lockstep, %s: controller / echo (%s) CPU per tick' % (tag, kind),
+             'value': ratio(ctl), 'unit': 'x', 'target': target},
+            {'name': 'lockstep, %s: simulator / echo (%s) CPU per tick' % (tag, kind),
+             'value': ratio(sim), 'unit': 'x'},
+        ]
+    return rows
 
 
 def main():

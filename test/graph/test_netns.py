@@ -19,6 +19,7 @@ import shutil
 import subprocess
 import sys
 
+from freejoint_common.contract import NEVER_QUIET_TOPICS
 from freejoint_common.records import arrays_from_messages, stamp_ns
 from freejoint_core.offline import run_case
 from freejoint_tools.harness import load_source
@@ -147,7 +148,7 @@ def test_lockstep_graph_over_two_network_namespaces_equals_the_offline_runner(
     bag_path = str(tmp_path / 'netns')
     recorder = hosts.node('b', 'freejoint_tools', 'recorder', 'recorder',
                           '-p', 'output:=%s' % bag_path, '-p', 'topics:=[]',
-                          '-p', 'exclude:=[/rosout, /parameter_events, /diagnostics]',
+                          '-p', 'exclude:=[%s]' % ', '.join(NEVER_QUIET_TOPICS),
                           '-p', 'use_sim_time:=true', '-p',
                           'custom_data:=[case=horizontal, variant=robust, seed=0, '
                           'max_ticks=%d]' % TICKS)

@@ -6,6 +6,7 @@ every graph topic has a matched publisher, as a launcher that must lose nothing 
 """
 import os
 
+from freejoint_common.contract import NEVER_QUIET_TOPICS
 import pytest
 
 pytestmark = pytest.mark.ros
@@ -17,9 +18,6 @@ SETTLE = 1.0
 """Wall seconds between the recorder's readiness and the start of the run."""
 HOLD_AFTER = 60
 """Ticks the simulator runs past TICKS before it holds (``max_steps``)."""
-PERIODIC = ('/rosout', '/parameter_events', '/diagnostics')
-"""Topics every node publishes on its own timers: not recorded here, so that the recorder's
-count goes quiet once the simulator holds (its drain wait)."""
 
 
 def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, tmp_path,
@@ -40,7 +38,7 @@ def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, 
     bag_path = str(tmp_path / 'horizontal')
     recorder = procs.start_node('freejoint_tools', 'recorder', 'recorder', [
         '--ros-args', '-p', 'output:=%s' % bag_path, '-p', 'topics:=[]',
-        '-p', 'exclude:=[%s]' % ', '.join(PERIODIC),
+        '-p', 'exclude:=[%s]' % ', '.join(NEVER_QUIET_TOPICS),
         '-p', 'use_sim_time:=true',
         '-p', 'custom_data:=[case=horizontal, variant=robust, seed=0, max_ticks=%d]' % TICKS])
     wait(lambda: 'recording into' in procs.log(recorder), 30.0, 'the recorder')

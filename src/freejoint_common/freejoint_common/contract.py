@@ -149,6 +149,10 @@ ROBOT_DESCRIPTION = Topic('/robot_description', String, LATCHED_QOS)
 GRAPH_TOPICS = (CLOCK, JOINT_STATES, EE_POSITION, COMMANDS, CONTROLLER_STATE, SETPOINT,
                 SEMI_SINGULAR_MAP, PLANNED_PATH)
 """The run's topics a recorder subscribes to from its start (docs/GRAPH.md, Recording)."""
+NEVER_QUIET_TOPICS = ('/rosout', '/parameter_events', DIAGNOSTICS.name)
+"""Topics every running node publishes on its own (its log, parameter events, its 1-Hz
+diagnostics): a recorder whose drain is awaited once the lockstep simulator holds at
+``max_steps`` (its received count must go quiet) is started with these excluded."""
 
 RESET = Service('~/reset', Trigger)
 """Simulator and controller: back to the initial state."""
