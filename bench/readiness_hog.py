@@ -17,16 +17,52 @@ import argparse
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import tempfile
 import time
 
-from freejoint_common.contract import DIAGNOSTICS, EE_POSITION
+from freejoint_common.contract import DIAGNOSTICS, EE_POSITION, to_ns
 from freejoint_tools.harness import node_cmd, Processes
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HOG = 'import numpy as n; a=n.random.rand(400,400); [a@a for _ in iter(int,1)]'
+
+
+LOG_STAMP = re.compile(r'^\[\w+\] \[(\d+)\.(\d+)\] \[controller_node\]: (.*)$')
+
+
+def guard_phase(log, at_ns):
+    """
+    Say where the stamp ``at_ns`` [ns, system time] falls among the guard's transitions.
+
+    The controller's log lines (``[LEVEL] [sec.nsec] [controller_node]: text``) that start
+    tracking ('real-time loop ready') or stop it ('real-time loop not ready: N of M states
+    answered so far' at once, or a judged window) are read with their stamps; the answer
+    names the phase and the seconds since its transition, e.g. 'tracking 2 (0.31 s after
+    it started)'.
+    """
+    events = []
+    for line in log.splitlines():
+        found = LOG_STAMP.match(line)
+        if not found:
+            continue
+        ns = int(found.group(1)) * 1_000_000_000 + int(found.group(2).ljust(9, '0')[:9])
+        text = found.group(3)
+        if text.startswith('real-time loop ready'):
+            events.append((ns, 'tracking'))
+        elif text.startswith('real-time loop not ready') and 'waiting for' not in text:
+            events.append((ns, 'braking'))
+    phase, since, count = 'before any release', None, {'tracking': 0, 'braking': 0}
+    for ns, kind in events:
+        if ns > at_ns:
+            break
+        if kind != phase.split(' ')[0]:
+            count[kind] += 1
+            phase, since = '%s %d' % (kind, count[kind]), ns
+    return phase if since is None else '%s (%.2f s after it started)' % (
+        phase, (at_ns - since) * 1e-9)
 
 
 def one_run(case, duration, hogs, extra, log_dir, tag, sim_extra=()):
@@ -39,8 +75,9 @@ def one_run(case, duration, hogs, extra, log_dir, tag, sim_extra=()):
     node = Node('readiness_hog_watch')
     ee = []
     statuses = []
-    node.create_subscription(EE_POSITION.msg_type, EE_POSITION.name,
-                             lambda m: ee.append((m.point.x, m.point.y)), EE_POSITION.qos)
+    node.create_subscription(
+        EE_POSITION.msg_type, EE_POSITION.name,
+        lambda m: ee.append((m.point.x, m.point.y, to_ns(m.header.stamp))), EE_POSITION.qos)
 
     def on_diag(msg):
         for st in msg.status:
@@ -68,16 +105,19 @@ def one_run(case, duration, hogs, extra, log_dir, tag, sim_extra=()):
         rclpy.shutdown()
     sim_log = procs.log('sim')
     ctl_log = procs.log('controller')
-    excursion = None
+    excursion = at_ns = None
     if ee:
-        x0, y0 = ee[0]
-        excursion = 1000.0 * max(math.hypot(x - x0, y - y0) for x, y in ee)
+        x0, y0, _ = ee[0]
+        # the first sample at the largest excursion (a braked arm repeats it)
+        excursion, at_ns = max(((1000.0 * math.hypot(x - x0, y - y0), ns) for x, y, ns in ee),
+                               key=lambda item: (item[0], -item[1]))
     stop_line = [ln for ln in ctl_log.splitlines() if 'controller stopped' in ln]
     return {
         'case': case, 'hogs': hogs, 'duration_s': duration, 'extra': list(extra),
         'sim_extra': list(sim_extra),
         'load_before': [round(v, 2) for v in load0], 'load_after': [round(v, 2) for v in load1],
         'ee_samples': len(ee), 'excursion_max_mm': excursion,
+        'excursion_when': guard_phase(ctl_log, at_ns) if at_ns is not None else '',
         'sim_diverged': 'plant diverged' in sim_log,
         'brake_engagements': sim_log.count('brakes engaged at step'),
         'not_ready_lines': ctl_log.count('real-time loop not ready'),

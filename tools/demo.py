@@ -414,9 +414,8 @@ def spatial_offline(arm, seed, n_ticks, normal=None):
     and the free joint's damping (the simulator's), the law built as the controller builds
     it (its schema's config, ``freejoint_control.loop.config_law``), the circle's radius and
     duration (the planner's); ``freejoint_core.spatial_offline.run_twin`` runs it for
-    ``n_ticks``. ``normal``: the
-    circle plane's normal given to the planner on the command line (``--plane-normal``),
-    else the planner's file's ``plane_normal``.
+    ``n_ticks``. ``normal``: the circle plane's normal given to the planner on the command
+    line (``--plane-normal``), else the planner's file's ``plane_normal``.
     """
     from freejoint_control.loop import config_law
     from freejoint_control.params import SCHEMA as CONTROLLER
