@@ -19,8 +19,7 @@ the echo on the controller's executor (what the node costs per tick beyond what 
 node answering a state with a command on that executor costs). The target applies to the
 run without the recorder, whose controller sends its command to one reader, as the echo
 does (with the recorder on: the command to two readers, every ``ControllerState`` to
-one).
-Benchmarks assert nothing. Usage: ``. tools/env.sh && python bench/echo.py``, or
+one). Benchmarks assert nothing. Usage: ``. tools/env.sh && python bench/echo.py``, or
 ``make bench BENCH=echo``.
 """
 

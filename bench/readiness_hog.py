@@ -5,9 +5,11 @@ Starts the simulator (``mode: realtime``) and the controller (``lockstep: false`
 the default scheduler (no thread_priority), with ``--hogs`` numpy matrix loops beside them
 (each a process multiplying 400 x 400 matrices without end), sends no plan, and watches
 ``ee_position`` and ``/diagnostics`` for ``--duration`` s.  Prints one JSON line per run:
-the largest end-effector excursion from its first sample [mm], whether the simulator
-diverged, the controller's readiness trips and states not answered, its ERROR statuses, the
-simulator's brake engagements and the load average.  Used for docs/real-time.md::
+the largest end-effector excursion from its first sample [mm] and where in the guard's
+transitions it happened (:func:`guard_phase`), whether the simulator diverged, the
+controller's readiness trips and states not answered, its ERROR statuses, the simulator's
+brake engagements and the load average.  ``-s brake_timeout:=0.01`` and the like go to
+the simulator, ``-p`` to the controller.  Used for docs/real-time.md::
 
     . tools/env.sh && python bench/readiness_hog.py --case vertical --runs 3
 
