@@ -25,7 +25,7 @@ import sys
 import tempfile
 import time
 
-from freejoint_common.contract import DIAGNOSTICS, EE_POSITION, to_ns
+from freejoint_common.contract import DIAGNOSTICS, EE_POSITION, NS_PER_S, to_ns
 from freejoint_tools.harness import node_cmd, Processes
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -50,7 +50,7 @@ def guard_phase(log, at_ns):
         found = LOG_STAMP.match(line)
         if not found:
             continue
-        ns = int(found.group(1)) * 1_000_000_000 + int(found.group(2).ljust(9, '0')[:9])
+        ns = int(found.group(1)) * NS_PER_S + int(found.group(2).ljust(9, '0')[:9])
         text = found.group(3)
         if text.startswith('real-time loop ready'):
             events.append((ns, 'tracking'))
