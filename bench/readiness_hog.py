@@ -56,15 +56,16 @@ def guard_phase(log, at_ns):
             events.append((ns, 'tracking'))
         elif text.startswith('real-time loop not ready') and 'waiting for' not in text:
             events.append((ns, 'braking'))
-    phase, since, count = 'before any release', None, {'tracking': 0, 'braking': 0}
+    current, since, count = None, None, {'tracking': 0, 'braking': 0}
     for ns, kind in events:
         if ns > at_ns:
             break
-        if kind != phase.split(' ')[0]:
+        if kind != current:         # a repeated line of the same phase starts nothing
             count[kind] += 1
-            phase, since = '%s %d' % (kind, count[kind]), ns
-    return phase if since is None else '%s (%.2f s after it started)' % (
-        phase, (at_ns - since) * 1e-9)
+            current, since = kind, ns
+    if current is None:
+        return 'before any release'
+    return '%s %d (%.2f s after it started)' % (current, count[current], (at_ns - since) * 1e-9)
 
 
 def one_run(case, duration, hogs, extra, log_dir, tag, sim_extra=()):

@@ -311,19 +311,18 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
         vel_free = max(vel_free, float(np.max(vel[free]))) if free else 0.0
     n = k + 1
     err = err[:n]
-    q_act = trace['q'][:n][:, act]
-    outside = [real.joint_names[j] for i, j in enumerate(act)
-               if np.any(q_act[:, i] < real.lower[j]) or np.any(q_act[:, i] > real.upper[j])]
-    q_free = trace['q'][:n][:, free]
-    free_outside = [real.joint_names[j] for i, j in enumerate(free)
-                    if np.any(q_free[:, i] < real.lower[j])
-                    or np.any(q_free[:, i] > real.upper[j])]
+    q_run = trace['q'][:n]
+
+    def outside(joints):
+        """Names of ``joints`` that left their URDF position limits in the run."""
+        return [real.joint_names[j] for j in joints
+                if np.any(q_run[:, j] < real.lower[j]) or np.any(q_run[:, j] > real.upper[j])]
     return {
         'rms_mm': 1e3 * float(np.sqrt(np.mean(err ** 2))),
         'max_mm': 1e3 * float(np.max(err)),
         'hold_last_s_max_mm': 1e3 * float(np.max(err[-last:])),
         'tau_ratio': tau_ratio, 'vel_ratio': vel_ratio, 'vel_ratio_free': vel_free,
-        'active_outside_limits': outside, 'free_outside_limits': free_outside,
+        'active_outside_limits': outside(act), 'free_outside_limits': outside(free),
         'diverged': diverged,
         'tick_us': 1e6 * t_law / n,
         'trace': {key: val[:n] for key, val in trace.items()},

@@ -98,10 +98,8 @@ class LimitWatch:
     def summary(self):
         """Return the joints past a limit in one line ('' : none), with their extremes."""
         parts = []
-        for name in self.names:
+        for name, (lo, hi, vmax) in self.extremes.items():
             kinds = [kind for kind in ('position', 'speed') if (name, kind) in self.passed]
-            if kinds:
-                lo, hi, vmax = self._range[self.names.index(name)]
-                parts.append(f'{name} ({", ".join(kinds)}: {lo:.3f}..{hi:.3f} rad, '
-                             f'{vmax:.3f} rad/s)')
+            parts.append(f'{name} ({", ".join(kinds)}: {lo:.3f}..{hi:.3f} rad, '
+                         f'{vmax:.3f} rad/s)')
         return '; '.join(parts)
