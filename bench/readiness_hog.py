@@ -123,6 +123,7 @@ def one_run(case, duration, hogs, extra, log_dir, tag, sim_extra=()):
         'excursion_when': guard_phase(ctl_log, at_ns) if at_ns is not None else '',
         'sim_diverged': 'plant diverged' in sim_log,
         'brake_engagements': sim_log.count('brakes engaged at step'),
+        'brakes_asked': sim_log.count('the controller asked (brake_request)'),
         'not_ready_lines': ctl_log.count('real-time loop not ready'),
         'ready_again_lines': ctl_log.count('real-time loop ready again'),
         'implausible_lines': ctl_log.count('implausible state'),

@@ -226,6 +226,66 @@ def test_the_hold_action_holds_with_the_reason_in_the_message():
     assert loop.holds == 2 and loop.withheld == 0     # at start (not judged yet), at 200 ms
 
 
+def test_stopping_at_rest_asks_the_driver_to_brake_now_once_per_stop_saying_why():
+    loop, logs = make()
+    # The start (not ready until its good windows; the setpoint at rest) asked once.
+    assert loop.take_brake_request().startswith('real-time loop not judged yet: waiting for')
+    assert loop.take_brake_request() is None
+    feed(loop, range(200), 2_500_000)
+    assert feed(loop, [200], 2_500_000) == [None]
+    assert loop.take_brake_request() == (
+        'real-time loop not ready: mean state->command delay 3 ms > the 2 ms the law '
+        'tolerates over 0.1 s while the setpoint rests: brake now')
+    # Not again while it stays stopped.
+    assert feed(loop, range(201, 700), 0) == [None] * 499
+    assert loop.take_brake_request() is None
+    # Ready again at 700 ms (tracking, nothing asked), then stopped again: asked again.
+    assert feed(loop, range(700, 800), 0)[0] is not None
+    assert loop.take_brake_request() is None
+    feed(loop, range(800, 900), 2_500_000)
+    assert feed(loop, [900], 2_500_000) == [None]
+    assert loop.take_brake_request().endswith('while the setpoint rests: brake now')
+    assert loop.brake_requests == 3
+    values = dict(loop.diagnostics(1.0, loop.counters(), False, ('-', '-'), '/joint_states',
+                                   None)[3])
+    assert values['brake requests (at rest)'] == 3
+    assert loop.report().endswith('readiness guard: 2 trips, 1101 states not answered, 3 '
+                                  'brake requests')
+
+
+def moving(loop, ks, age_ns):
+    """Feed as :func:`feed`, each state after a setpoint moving along x at 0.1 m/s."""
+    answers = []
+    for k in ks:
+        ns = (k + 500) * DT_NS
+        loop.on_setpoint(ns, (0.2 + 1e-4 * k, 0.0, 0.1, 0.0, 0.0, 0.0), 0, k * 1e-3)
+        answers.append(loop.on_state(ns, NAMES, list(Q0), list(QD0), ns + age_ns,
+                                     100.0 + k * 1e-3))
+    return answers
+
+
+def test_stopping_while_the_setpoint_moves_leaves_the_brakes_to_the_drivers_watchdog():
+    loop, _ = make()
+    loop.take_brake_request()
+    assert None not in moving(loop, range(100), 300_000)
+    assert None not in moving(loop, range(100, 200), 2_500_000)
+    assert moving(loop, [200], 2_500_000) == [None]
+    assert moving(loop, range(201, 300), 0) == [None] * 99
+    assert loop.take_brake_request() is None and loop.brake_requests == 1
+    # The setpoint comes to rest while the loop is still stopped: asked then.
+    assert feed(loop, [300], 0, target=(0.23, 0.0)) == [None]
+    assert loop.take_brake_request().endswith('while the setpoint rests: brake now')
+
+
+@pytest.mark.parametrize('given', [{'readiness_brake_request': False},
+                                   {'readiness_action': 'hold'}])
+def test_without_brake_requests_or_with_the_hold_action_nothing_is_asked(given):
+    loop, _ = make(**given)
+    feed(loop, range(201), 2_500_000)
+    assert not loop._readiness.ready
+    assert loop.take_brake_request() is None and loop.brake_requests == 0
+
+
 def test_lockstep_never_trips_whatever_the_rate_and_the_clock():
     loop, logs = make(lockstep=True, max_state_age=0.1)
     assert loop._readiness is None

@@ -469,6 +469,40 @@ class Diagnostics:
         return found[-1] if found else None
 
 
+def test_a_loop_not_ready_at_rest_asks_the_driver_to_brake_once_on_brake_request(
+        procs, ros_node, wait):
+    from freejoint_common.contract import BRAKE_REQUEST
+    # Real time with the guard on (it starts not judged: no command) and no plan.
+    proc = _start(procs, '-p', 'lockstep:=false', '-p', 'max_state_age:=0.0')
+    diag = Diagnostics(ros_node)
+    drv = Driver(ros_node, wait)
+    asked = []
+    ros_node.create_subscription(BRAKE_REQUEST.msg_type, BRAKE_REQUEST.name,
+                                 lambda msg: asked.append(msg.data), BRAKE_REQUEST.qos)
+    drv.connect(proc, procs)
+    wait(lambda: ros_node.count_publishers(BRAKE_REQUEST.name) >= 1, 15.0,
+         'the brake_request publisher', spin=drv.spin)
+    k = 0
+
+    def stepping():
+        nonlocal k
+        drv.joint_state(k, Q0, (0.0, 0.0, 0.0))
+        k += 1
+        drv.spin()
+
+    wait(lambda: asked, 15.0, 'a brake request', spin=stepping)
+    assert asked[0] == ('real-time loop not judged yet: waiting for 5 good windows of 0.2 s '
+                        'while the setpoint rests: brake now')
+    # Once per stop, however many states it leaves unanswered; never a command.
+    target = k + 20
+    wait(lambda: diag.statuses and int(diag.statuses[-1][2].get(
+        'states not answered (brake)', 0)) >= target, 15.0, '20 more states withheld',
+        spin=stepping)
+    assert len(asked) == 1 and not drv.commands
+    assert diag.statuses[-1][2]['brake requests (at rest)'] == '1'
+    assert procs.stop(proc) == 0
+
+
 def test_diagnostics_say_holding_with_warn_without_setpoints_and_ok_while_tracking(
         procs, ros_node, wait):
     import time

@@ -7,6 +7,7 @@ missing command.
 """
 import math
 import os
+import re
 import time
 
 from freejoint_core.arm import table1
@@ -552,6 +553,53 @@ def test_realtime_no_command_for_brake_timeout_stops_the_arm_where_it_is_until_t
     assert log.count('brakes released at step') >= 2
     assert procs.stop(proc) == 0
     assert 'brake engagements' in procs.log(proc)
+
+
+def test_realtime_a_brake_request_stops_the_arm_at_once_without_the_watchdog_until_the_next(
+        procs, ros_node, wait):
+    from freejoint_common.contract import BRAKE_REQUEST
+    # brake_timeout 0: no watchdog, so every engagement is the request's.
+    proc = _realtime(procs, '-p', 'case:=vertical', '-p', 'publish_rate:=100.0',
+                     '-p', 'brake_timeout:=0.0')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    brake = ros_node.create_publisher(BRAKE_REQUEST.msg_type, BRAKE_REQUEST.name,
+                                      BRAKE_REQUEST.qos)
+    wait(lambda: brake.get_subscription_count() >= 1, 15.0, 'the brake request matched',
+         spin=ctl.spin)
+    q0 = initial_state(table1('vertical')).tolist()
+
+    def commanding():           # zero effort: released, the arm falls under gravity
+        ctl.command([0.0, 0.0])
+        ctl.spin()
+
+    wait(lambda: ctl.arrivals[-1].position.tolist() != q0, 15.0, 'the arm released',
+         spin=commanding)
+
+    def asking():               # no more commands (the arm falls on): only the request brakes
+        if 'brakes engaged at step' not in procs.log(proc):
+            brake.publish(BRAKE_REQUEST.msg_type(data='test: stop here'))
+        ctl.spin()
+
+    wait(lambda: 'the controller asked (brake_request): test: stop here: brakes engaged at '
+         'step' in procs.log(proc), 15.0, 'the requested brakes', spin=asking)
+    # Held where it is: no command since the request, the arm does not move.
+    wait(lambda: len(ctl.arrivals) >= 10 and all(
+        list(m.velocity) == [0.0] * 3 and m.position.tolist() ==
+        ctl.arrivals[-1].position.tolist() for m in ctl.arrivals[-10:]), 10.0,
+        '0.1 s of braked states', spin=ctl.spin)
+    held = ctl.arrivals[-1].position.tolist()
+    wait(lambda: ctl.diagnostics and 'brakes engaged (asked on brake_request)' in
+         ctl.diagnostics[-1][1], 5.0, 'the brakes in the status', spin=ctl.spin)
+    values = ctl.diagnostics[-1][2]
+    assert values['brakes'] == 'engaged'
+    assert int(values['brake engagements (asked)']) >= 1
+    assert values['brake engagements (no command)'] == '0'
+    # The next command releases them, as after the watchdog.
+    wait(lambda: ctl.arrivals[-1].position.tolist() != held, 15.0, 'released again',
+         spin=commanding)
+    assert procs.stop(proc) == 0
+    assert re.search(r'[1-9]\d* brake engagements \([1-9]\d* asked\)', procs.log(proc))
 
 
 def test_realtime_without_start_braked_the_vertical_arm_falls_from_the_first_step(

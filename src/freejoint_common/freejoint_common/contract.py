@@ -170,6 +170,13 @@ JOINT_FAILURES = Topic('joint_failures', String, FAILURE_NOTICE_QOS)
 FAIL_JOINT = Service('~/fail_joint', FailJoint)
 """Simulator: make a joint's actuator and brake fail from the next step."""
 
+# -- brakes on request (issue 21) ------------------------------------------------------------
+BRAKE_REQUEST = Topic('brake_request', String, profile(10))
+"""Controller -> driver: engage the brakes now, where the arm is (``data``: why); reliable,
+volatile (a request is for the arm now, never for a driver started later), depth 10. The
+driver releases them at its next accepted command, as after its command watchdog
+(the simulator's ``brake_timeout``), which stays the fallback of a driver without it."""
+
 # -- stamps ---------------------------------------------------------------------------------
 NS_PER_S = 1_000_000_000
 

@@ -24,7 +24,8 @@ measured motion, the torque ramped from zero.
 With ``joint_failures`` not ``off`` it subscribes ``joint_failures`` (std_msgs/String, a
 driver's or operator's notice), passes the JointState's efforts to the loop's failure
 monitor (``freejoint_control.failures``, docs/failures.md) and publishes the joints it
-detects failed there.
+detects failed there. When its readiness guard stops the loop while the setpoint rests it
+asks the driver to brake at once on ``brake_request`` (std_msgs/String: why).
 
 """
 
@@ -32,8 +33,8 @@ import signal
 import time
 
 from freejoint_common.arm_description import resolve_arm
-from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, JOINT_STATES
-from freejoint_common.contract import JOINT_FAILURES
+from freejoint_common.contract import BRAKE_REQUEST, COMMANDS, CONTROLLER_STATE
+from freejoint_common.contract import JOINT_FAILURES, JOINT_STATES
 from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_label
 from freejoint_common.contract import STANDBY_SETPOINT_QOS, to_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
@@ -104,6 +105,8 @@ class ControllerNode(Node, Lifecycle):
         self._pub_state = self.create_publisher(CONTROLLER_STATE.msg_type, CONTROLLER_STATE.name,
                                                 overridable(CONTROLLER_STATE.qos),
                                                 qos_overriding_options=QOS_OVERRIDES)
+        self._pub_brake = self.create_publisher(BRAKE_REQUEST.msg_type, BRAKE_REQUEST.name,
+                                                BRAKE_REQUEST.qos)
         self._sp_sub = self.create_subscription(
             SETPOINT.msg_type, SETPOINT.name, self._on_setpoint,
             overridable(STANDBY_SETPOINT_QOS if cfg.standby else SETPOINT.qos),
@@ -231,6 +234,9 @@ class ControllerNode(Node, Lifecycle):
                             msg.effort)
         if res is not None:
             self._publish(res)
+        elif loop.brake_request is not None:    # the guard stopped the loop at rest
+            why = loop.take_brake_request()
+            self._pub_brake.publish(BRAKE_REQUEST.msg_type(data=why))
         if self._pub_failure is not None:
             for name in loop.failures.announcements():
                 self._pub_failure.publish(JOINT_FAILURES.msg_type(data=name))

@@ -189,6 +189,9 @@ class ControlLoop:
         self._withholding = False       # not ready, 'brake': no command sent
         self._said_ns = None            # stamp of the last 'not ready' line
         self.withheld = 0               # states not answered by the readiness guard
+        self.brake_request = None       # why the driver is asked to brake now (the node sends)
+        self._brake_asked = False       # asked during this not-ready spell
+        self.brake_requests = 0
         self._install(cfg)
         self.result = Result(m)
         self.result.law_state_names = tuple(self.law.state_names)
@@ -272,6 +275,7 @@ class ControlLoop:
         key = (cfg.dt_ns, max_delay, cfg.readiness_min_answer_rate, cfg.readiness_window,
                cfg.readiness_recover_windows)
         self._guard_brakes = cfg.readiness_action == 'brake'
+        self._ask_brakes = self._guard_brakes and cfg.readiness_brake_request
         if key == self._readiness_key:
             return
         old = self._readiness
@@ -549,11 +553,31 @@ class ControlLoop:
             self._said_ns = ns
             self.log(ERROR, 'readiness', '%s: no command sent, the driver brakes the arm'
                      % self._readiness.reason)
+        if self._ask_brakes and not self._brake_asked and self._setpoint_rests(ns):
+            # At rest nothing is lost by stopping now; the driver's watchdog would first
+            # apply the last command open loop for its brake_timeout. Moving, the loop
+            # rides through a short stall and the watchdog brakes a long one.
+            self._brake_asked = True
+            self.brake_requests += 1
+            self.brake_request = ('%s while the setpoint rests: brake now'
+                                  % self._readiness.reason)
         return None
+
+    def _setpoint_rests(self, ns):
+        """Return True when no fresh setpoint moves at ``ns`` (none, stale, or v = a = 0)."""
+        found = self._realtime_setpoint(ns)
+        return found is None or not any(found[1][self.task_dim:])
+
+    def take_brake_request(self):
+        """Return the brake request to send (why), once, or None."""
+        why = self.brake_request
+        self.brake_request = None
+        return why
 
     def _resume_after_brake(self):
         """Ready again after withholding: start over from where the braked arm is."""
         self._withholding = False
+        self._brake_asked = False
         self.shaper.reset()             # hold at fk(q), or blend to the setpoint from it
         self.last_ns = -1               # dt of the first tick: one control period
         self._prev_cmd = list(self._zero)   # the braked arm got zero: ramp from it
@@ -1016,7 +1040,8 @@ class ControlLoop:
                  else '%.3g' % (guard.last_delay * 1e3)),
                 ('window answered [%]', '-' if guard.last_rate is None
                  else '%.0f' % (guard.last_rate * 100.0)),
-                ('states not answered (brake)', self.withheld))
+                ('states not answered (brake)', self.withheld),
+                ('brake requests (at rest)', self.brake_requests))
         return errors, warnings, ok, values
 
     def report(self):
@@ -1027,8 +1052,8 @@ class ControlLoop:
                 % (self.ticks, self.zero_answers, self.holds, self.refused_states,
                    self.refused_setpoints, self.faults, self.old_states,
                    '' if self._readiness is None else
-                   ', readiness guard: %d trips, %d states not answered'
-                   % (self._readiness.trips, self.withheld)))
+                   ', readiness guard: %d trips, %d states not answered, %d brake requests'
+                   % (self._readiness.trips, self.withheld, self.brake_requests)))
 
 
 def _status_message(status, det, cfg, hold_reason, shaper):

@@ -279,6 +279,12 @@ PARAMS = (
           "brakes the arm where it is: the simulator's brake_timeout), 'hold' = hold the "
           'end effector with the law (the law still runs on late states)',
           validator=one_of(READINESS_ACTIONS)),
+    Param('readiness_brake_request', True,
+          "with readiness_action 'brake': when the loop stops while the setpoint rests (no "
+          'plan, or its newest setpoint has zero velocity and acceleration), also ask the '
+          'driver to brake now (brake_request) instead of leaving it to its command '
+          "watchdog, which first applies the last command open loop (the simulator's "
+          'brake_timeout); moving, only the watchdog brakes (short stalls ridden through)'),
     Param('readiness_max_delay', 0.0,
           'tolerated mean effective delay [s] (state age when taken, in whole control '
           'periods, plus the one period to the next step); 0 = the delay margin measured '

@@ -57,8 +57,9 @@ import threading
 import time
 
 from builtin_interfaces.msg import Time
-from freejoint_common.contract import CLOCK, COMMANDS, EE_POSITION, JOINT_STATES, label_stamp
-from freejoint_common.contract import FAIL_JOINT, JOINT_FAILURES, RESET, ROBOT_DESCRIPTION
+from freejoint_common.contract import BRAKE_REQUEST, CLOCK, COMMANDS, EE_POSITION
+from freejoint_common.contract import FAIL_JOINT, JOINT_FAILURES, JOINT_STATES, label_stamp
+from freejoint_common.contract import RESET, ROBOT_DESCRIPTION
 from freejoint_common.contract import stamp_from_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
@@ -124,6 +125,8 @@ class SimNode(Node, Lifecycle):
         self._braked_since = _monotonic()
         self._brake_reason = ''
         self._brake_engagements = 0
+        self._brake_asked = None       # real time: why the controller asked to brake now
+        self._brakes_asked = 0
         self._rt_origin_ns = 0         # real time: system time [ns] of step 0 on the grid
         self._take_state()
         self._diag_window = (_monotonic(), 0, 0, 0, 0)
@@ -156,6 +159,9 @@ class SimNode(Node, Lifecycle):
                                  self._on_command, overridable(COMMANDS.qos),
                                  qos_overriding_options=QOS_OVERRIDES)
         self.create_service(RESET.srv_type, RESET.name, self._on_reset)
+        if not cfg.lockstep:    # a drive that brakes when told (the watchdog stays)
+            self.create_subscription(BRAKE_REQUEST.msg_type, BRAKE_REQUEST.name,
+                                     self._on_brake_request, BRAKE_REQUEST.qos)
         # Joint failures (issue 23): ~/fail_joint, the notices a driver would publish.
         self.create_service(FAIL_JOINT.srv_type, FAIL_JOINT.name, self._on_fail_joint)
         self._pub_failures = (self.create_publisher(JOINT_FAILURES.msg_type,
@@ -530,6 +536,11 @@ class SimNode(Node, Lifecycle):
                 self._observer.steps_dropped(due - 1)
             due = 1
         latest = self._latest
+        asked = self._brake_asked
+        if asked is not None:
+            self._brake_asked = None
+            if not self._braked and self._diverged is None:
+                self._engage_brakes(now, asked)
         if self._braked:
             if latest is not None and latest[3] and latest[1] >= self._braked_since:
                 self._braked = False
@@ -557,19 +568,33 @@ class SimNode(Node, Lifecycle):
                     self._observer.command_applied(self._k, latest[2])
             self._advance(tau)
 
-    def _engage_brakes(self, now):
-        """Drive watchdog: no command for brake_timeout, the arm stops and is held."""
+    def _engage_brakes(self, now, asked=None):
+        """
+        Stop the arm where it is and hold it until the next accepted command.
+
+        ``asked``: the controller's reason on brake_request; None: the drive watchdog (no
+        command for brake_timeout).
+        """
         self._plant.stop()
         self._take_state()
         self._braked = True
         self._braked_since = now
-        self._brake_engagements += 1
-        self._brake_reason = 'no command for %g s' % self._brake_timeout
+        if asked is None:
+            self._brake_engagements += 1
+            self._brake_reason = 'no command for %g s' % self._brake_timeout
+            why = 'no command on %s for %g s' % (self._cmd_topic(), self._brake_timeout)
+        else:
+            self._brakes_asked += 1
+            self._brake_reason = 'asked on %s' % BRAKE_REQUEST.name
+            why = 'the controller asked (%s): %s' % (BRAKE_REQUEST.name, asked)
         self.get_logger().warn(
-            'no command on %s for %g s: brakes engaged at step %d (t = %.3f s), the arm '
-            'is held where it is until the next command' % (
-                self._cmd_topic(), self._brake_timeout, self._k, self._t_ns * 1e-9))
+            '%s: brakes engaged at step %d (t = %.3f s), the arm is held where it is until '
+            'the next command' % (why, self._k, self._t_ns * 1e-9))
         self._publish_diagnostics(update=False)
+
+    def _on_brake_request(self, msg):
+        """brake_request: engage the brakes at the next step (the stepping thread does)."""
+        self._brake_asked = msg.data or 'no reason given'
 
     def _cmd_topic(self):
         return self.resolve_topic_name('effort_controller/commands')
@@ -643,6 +668,7 @@ class SimNode(Node, Lifecycle):
             ('dropped steps', self._dropped),
             ('brakes', 'engaged' if self._braked else 'released'),
             ('brake engagements (no command)', self._brake_engagements),
+            ('brake engagements (asked)', self._brakes_asked),
             ('divergences', self._divergences),
             ('diverged', 'true' if self._diverged is not None else 'false'),
             ('failed joints', ', '.join('%s at %.3f s' % taken[:2]
@@ -652,9 +678,10 @@ class SimNode(Node, Lifecycle):
         """One line for the end of the run: steps, timeouts, refusals, brakes, divergences."""
         past = self._limits.summary() if self._limits is not None else ''
         return 'simulator stopped at step %d (t = %.3f s): %d command timeouts, %d refused ' \
-            'commands, %d divergences, %d brake engagements%s' % (
+            'commands, %d divergences, %d brake engagements (%d asked)%s' % (
                 self._k, self._t_ns * 1e-9, self._timeouts, self._refused,
-                self._divergences, self._brake_engagements,
+                self._divergences, self._brake_engagements + self._brakes_asked,
+                self._brakes_asked,
                 '; past their URDF limits: ' + past if past else '')
 
     @staticmethod
