@@ -560,7 +560,7 @@ def _run(args):
 
 # -- command line -------------------------------------------------------------------------
 def _waits(parser, spin=False):
-    parser.add_argument('--timeout', type=float, default=5.0, metavar='N',
+    parser.add_argument('--timeout', type=float, default=10.0, metavar='N',
                         help='wait N s for the node or service to be discovered '
                              '(default %(default)s)')
     parser.add_argument('--service-timeout', type=float, default=10.0, metavar='N',
