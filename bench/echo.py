@@ -12,7 +12,9 @@ every wait bounded, every process stopped whatever happens:
   process's CPU seconds (``/proc/<pid>/stat``) over the measured ticks, per tick;
 * the graph in lockstep, a process per node, the recorder on and off: ``bench/graph.py``'s
   lockstep run (the 5-s horizontal case), its ``sim_node`` and ``controller_node`` CPU
-  per tick (the graph benchmark's own run when ``make bench`` ran it just before).
+  per tick (the graph benchmark's own run when ``make bench`` ran it just before); and
+  once more without the recorder, the controller's ``ControllerState`` thinned to 100 Hz
+  (``THINNED``: what its instrumentation costs).
 
 Rows: the CPU figures per tick and the ratios controller / echo and simulator / echo,
 the echo on the controller's executor (what the node costs per tick beyond what any rclpy
@@ -35,6 +37,8 @@ TICKS = graph_bench.LOCKSTEP_TICKS
 WARMUP = 100
 ECHO_DOMAIN_INDEX = 7
 """``graph._env`` index of the echo run (the graph's runs take 0..6)."""
+THINNED = ('state_publish_rate:=100.0',)
+"""The controller's overrides of the third graph run: its instrumentation thinned."""
 TICK_TIMEOUT = 10.0
 """Seconds a state may wait for its answer before the run is given up."""
 
@@ -128,22 +132,23 @@ def echo_cpu_per_tick(executor, ticks=TICKS):
         procs.stop_all(order=('echo_node',))
 
 
-def graph_cpu_per_tick(record=True):
+def graph_cpu_per_tick(record=True, ctl_overrides=()):
     """
     Return ``{node: CPU per lockstep tick [us]}`` of sim_node and controller_node.
 
     From the graph benchmark's lockstep run (a process per node, the recorder on if
     ``record``) if this process ran one (``make bench``: ``graph`` runs before ``echo``),
-    else from a run of its own.
+    else from a run of its own (with the controller's ``ctl_overrides``, always its own).
     """
-    rows = graph_bench.LOCKSTEP_ROWS.get(('separate', record))
+    rows = None if ctl_overrides else graph_bench.LOCKSTEP_ROWS.get(('separate', record))
     if rows is None:
         env = graph_bench._env(0)
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
         os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
         client = graph_bench.Client()
         try:
-            rows = graph_bench.lockstep(client, env, 'separate', record=record)
+            rows = graph_bench.lockstep(client, env, 'separate', record=record,
+                                        ctl_overrides=ctl_overrides)
         finally:
             client.close()
     found = {}
@@ -173,8 +178,10 @@ def run():
     # Recorder on (as make demo runs): the command goes to two readers (simulator,
     # recorder) and every ControllerState to the recorder. Off: the command to the
     # simulator alone, as the echo's to this process.
-    for record, tag, target in ((True, 'recorder on', None), (False, 'recorder off', '<= 1.5')):
-        nodes = graph_cpu_per_tick(record)
+    for record, tag, target, extra in (
+            (True, 'recorder on', None, ()), (False, 'recorder off', '<= 1.5', ()),
+            (False, 'recorder off, controller_state 100 Hz', None, THINNED)):
+        nodes = graph_cpu_per_tick(record, extra)
         ctl, sim = nodes.get('controller_node'), nodes.get('sim_node')
         graph_bench.say('CPU per lockstep tick, %s: echo (%s) %.1f us, controller %s us, '
                         'simulator %s us' % (tag, kind, echo,

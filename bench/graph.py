@@ -344,12 +344,19 @@ def wait_ready(client, record):
         client.spin_until(lambda: False, 1.0)
 
 
-def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True):
-    """Run the 5-s case in lockstep, the recorder on if ``record``; return the rows."""
+def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True,
+             ctl_overrides=()):
+    """
+    Run the 5-s case in lockstep, the recorder on if ``record``; return the rows.
+
+    ``ctl_overrides``: the controller's ``name:=value`` overrides (none: as make demo).
+    """
     import numpy as np
     from freejoint_tools.bagfile import open_bag
     tag = 'lockstep' + LAYOUTS[layout]
-    run_dir = os.path.join(OUT, 'lockstep_' + layout + ('' if record else '_no_recorder'))
+    run_dir = os.path.join(OUT, 'lockstep_' + layout + ('' if record else '_no_recorder')
+                           + ('_' + '_'.join(ctl_overrides) if ctl_overrides else '')).replace(
+                               ':=', '_')
     shutil.rmtree(run_dir, ignore_errors=True)
     timing_path = os.path.join(run_dir, 'timing.npz')
     bag = os.path.join(run_dir, 'bag') if record else None
@@ -361,9 +368,10 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True):
         start_graph(graph, layout, bag,
                     ['timing_file:=' + timing_path, 'timing_steps:=%d' % (ticks + 1),
                      'max_steps:=%d' % ticks],
-                    [], [], ['use_sim_time:=true',
-                             # the drain wait below needs a count that goes quiet
-                             'exclude:=[%s]' % ', '.join(NEVER_QUIET_TOPICS)],
+                    list(ctl_overrides), [],
+                    ['use_sim_time:=true',
+                     # the drain wait below needs a count that goes quiet
+                     'exclude:=[%s]' % ', '.join(NEVER_QUIET_TOPICS)],
                     'case=%s, variant=robust, seed=%d, max_ticks=%d' % (CASE, SEED, ticks))
         wait_ready(client, record)
         answer = client.plan_circle(ros_params('planner.yaml'))
@@ -415,7 +423,8 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True):
     rows += _node_rows(tag, cpu0, cpu1, hwm, ticks + 100)
     rows.append({'name': '%s: load average (1 min) at the end' % tag, 'value': load1,
                  'unit': '', 'target': None})
-    LOCKSTEP_ROWS[(layout, record)] = rows
+    if not ctl_overrides:
+        LOCKSTEP_ROWS[(layout, record)] = rows
     return rows
 
 

@@ -8,7 +8,8 @@ the default scheduler (no thread_priority), with ``--hogs`` numpy matrix loops b
 the largest end-effector excursion from its first sample [mm] and where in the guard's
 transitions it happened (:func:`guard_phase`), whether the simulator diverged, the
 controller's readiness trips and states not answered, its ERROR statuses, the simulator's
-brake engagements and the load average.  ``-s brake_timeout:=0.01`` and the like go to
+brake engagements (and of them those the controller asked for on ``brake_request``) and
+the load average.  ``-s brake_timeout:=0.01`` and the like go to
 the simulator, ``-p`` to the controller.  Used for docs/real-time.md::
 
     . tools/env.sh && python bench/readiness_hog.py --case vertical --runs 3
