@@ -87,3 +87,29 @@ def pytest_collection_modifyitems(config, items):
         rel = os.path.relpath(str(item.path), ROOT).replace(os.sep, '/')
         if rel in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(autouse=True)
+def _lint_cache(request, monkeypatch):
+    """
+    With ``FREEJOINT_LINT_CACHE`` set (``make test-fast``): linters skip files found clean.
+
+    Replaces, in a ``linter`` test's module, ament_flake8's ``main_with_errors`` and
+    ament_pep257's ``main`` by the caching calls of ``test/lint_cache.py``.
+    """
+    folder = os.environ.get('FREEJOINT_LINT_CACHE')
+    if not folder or request.node.get_closest_marker('linter') is None:
+        return
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        'freejoint_lint_cache', os.path.join(ROOT, 'test', 'lint_cache.py'))
+    cache = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cache)
+    from ament_flake8.main import main_with_errors
+    from ament_pep257.main import main as pep257_main
+    module = request.module
+    for name, value in list(vars(module).items()):
+        if value is main_with_errors:
+            monkeypatch.setattr(module, name, cache.cached_flake8(value, folder))
+        elif value is pep257_main:
+            monkeypatch.setattr(module, name, cache.cached_pep257(value, folder))
