@@ -254,11 +254,11 @@ def test_stopping_at_rest_asks_the_driver_to_brake_now_once_per_stop_saying_why(
 
 
 def moving(loop, ks, age_ns):
-    """Feed as :func:`feed`, each state after a setpoint moving along x at 0.1 m/s."""
+    """Feed as :func:`feed`, each state after a setpoint moving along x at 0.01 m/s."""
     answers = []
     for k in ks:
         ns = (k + 500) * DT_NS
-        loop.on_setpoint(ns, (0.2 + 1e-4 * k, 0.0, 0.1, 0.0, 0.0, 0.0), 0, k * 1e-3)
+        loop.on_setpoint(ns, (0.2 + 1e-5 * k, 0.0, 0.01, 0.0, 0.0, 0.0), 0, k * 1e-3)
         answers.append(loop.on_state(ns, NAMES, list(Q0), list(QD0), ns + age_ns,
                                      100.0 + k * 1e-3))
     return answers
@@ -284,6 +284,46 @@ def test_without_brake_requests_or_with_the_hold_action_nothing_is_asked(given):
     feed(loop, range(201), 2_500_000)
     assert not loop._readiness.ready
     assert loop.take_brake_request() is None and loop.brake_requests == 0
+
+
+def _sagged(loop, drop=0.06):
+    """Return the state's joints with joint 1 turned by -drop, and its end effector's offset."""
+    q = (Q0[0] - drop, Q0[1], Q0[2])
+    model = loop.law.model
+    return q, float(np.linalg.norm(model.fk(q) - model.fk(Q0)))
+
+
+def test_a_tracking_error_past_readiness_max_error_stops_a_ready_loop_braking_at_rest():
+    loop, logs = make()
+    loop.take_brake_request()
+    assert None not in feed(loop, range(10), 0)          # holding at (0.2, 0)
+    q, offset = _sagged(loop)
+    assert 0.010 < offset < 0.013
+    ns = 510 * DT_NS
+    loop.on_setpoint(ns, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 0.01)
+    # Every window on time, but the arm is 12 mm from where it is held: no command.
+    assert loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.01) is None
+    reason = ('real-time loop not ready: tracking error %.3g mm > the 10 mm of '
+              'readiness_max_error (the law does not hold the arm on this loop)'
+              % (offset * 1e3))
+    assert loop.take_brake_request() == reason + ' while the setpoint rests: brake now'
+    assert [text for level, kind, text in logs if level == ERROR][-1] == (
+        reason + ': no command sent, the driver brakes the arm')
+    assert loop._readiness.trips == 1 and not loop._readiness.ready
+    # Back in place, it tracks again only after its good windows (0.5 s).
+    answers = feed(loop, range(11, 711), 0)
+    assert answers[:400] == [None] * 400 and answers[-1] is not None
+
+
+def test_readiness_max_error_0_leaves_a_drifting_arm_to_the_law():
+    loop, _ = make(readiness_max_error=0.0)
+    loop.take_brake_request()
+    feed(loop, range(10), 0)
+    q, _ = _sagged(loop)
+    ns = 510 * DT_NS
+    loop.on_setpoint(ns, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 0.01)
+    assert loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.01) is not None
+    assert loop._readiness.ready and loop.take_brake_request() is None
 
 
 def test_lockstep_never_trips_whatever_the_rate_and_the_clock():

@@ -276,6 +276,7 @@ class ControlLoop:
                cfg.readiness_recover_windows)
         self._guard_brakes = cfg.readiness_action == 'brake'
         self._ask_brakes = self._guard_brakes and cfg.readiness_brake_request
+        self._max_error = cfg.readiness_max_error
         if key == self._readiness_key:
             return
         old = self._readiness
@@ -847,7 +848,23 @@ class ControlLoop:
         self._last_sp = p_ref
         self._last_det = out.det
         self.ticks += 1
+        guard = self._readiness
+        if guard is not None and self._max_error and guard.ready:
+            error = math.hypot(*out.e)
+            if error > self._max_error:
+                return self._following_error(ns, error, guard)
         return res
+
+    def _following_error(self, ns, error, guard):
+        """Real time: the arm does not follow; stop tracking as a bad window would."""
+        if guard.trip('real-time loop not ready: tracking error %.3g mm > the %.3g mm of '
+                      'readiness_max_error (the law does not hold the arm on this loop)'
+                      % (error * 1e3, self._max_error * 1e3)):
+            self._readiness_changed(1)
+            self._said_ns = ns
+        if self._guard_brakes:
+            return self._withhold(ns)
+        return self.result
 
     def _effort_of(self, n):
         """Return the state's efforts in model order (n), or None (none or not finite)."""

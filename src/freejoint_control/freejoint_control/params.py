@@ -298,6 +298,13 @@ PARAMS = (
           'window stops tracking (at once when it already missed more states than the rate '
           'allows: with 0.2 s and 0.8, a stall over 40 ms, near where the driver brakes '
           'anyway); shorter stalls are within what the law rides out', (0.002, 60.0)),
+    Param('readiness_max_error', 0.01,
+          'real time: a tracking error [m] above this while the loop is judged ready stops '
+          'tracking as a bad window does (readiness_action, the reason said; the recovery '
+          'windows again): a loop late and lossy enough to destabilise the law within '
+          'the delay and answer-rate bounds, a following-error stop as drives have; 0 = '
+          'off. Above every real-time run that met its bound (vertical 5.5 mm)',
+          (0.0, 10.0)),
     Param('readiness_recover_windows', 5,
           'consecutive good windows after which a not-ready loop tracks again (hysteresis)',
           (1, 100000)),

@@ -200,6 +200,15 @@ class ReadinessGuard:
                         self.min_rate * 100.0))
         return change
 
+    def trip(self, reason):
+        """
+        Make the loop not ready for ``reason`` (a check outside the windows failed).
+
+        As a bad window: the recovery count restarts. Returns 1 if it just became not
+        ready, else 0 (as :meth:`observe`).
+        """
+        return self._not_ready(reason)
+
     def _not_ready(self, reason):
         """Note a bad window; return 1 if the loop just became not ready, else 0."""
         self._good = 0
