@@ -5,9 +5,9 @@ The clean results of the ament linters per file, for ``make test-fast``'s edit-r
 root conftest then gives every ``linter`` test, in place of ``ament_flake8``'s
 ``main_with_errors`` and ``ament_pep257``'s ``main``, a call that lints only the files not
 found clean before: a file is skipped when a mark of its path, its bytes and the linter
-(its configuration file, the versions of the linter packages and their plugins) exists,
-and marks are written for the files linted when the linter found them all clean. A
-changed file, a changed configuration or a new plugin version is linted again; files
+(its configuration file, the versions of Python, the linter packages and their plugins)
+exists, and marks are written for the files linted when the linter found them all clean.
+A changed file, a changed configuration or a new plugin version is linted again; files
 linted with a finding get no mark, so the finding fails every run until mended. Without
 the variable (``make test``, CI, a package's ``colcon test``) every file is linted every
 time.
@@ -17,6 +17,7 @@ import functools
 import hashlib
 import importlib.metadata
 import os
+import sys
 
 ENV = 'FREEJOINT_LINT_CACHE'
 """The environment variable naming the cache folder (unset or empty: no cache)."""
@@ -35,15 +36,15 @@ def linter_key(tool):
     """
     Return the text that keys the marks of ``tool`` ('flake8' or 'pep257').
 
-    The versions of the linter distributions and of every flake8 plugin, and for flake8
-    the contents of ament_flake8's configuration file.
+    The Python version, the versions of the linter distributions and of every flake8
+    plugin, and for flake8 the contents of ament_flake8's configuration file.
     """
     versions = sorted('%s=%s' % (dist.metadata['Name'], dist.version)
                       for dist in importlib.metadata.distributions()
                       if dist.metadata['Name'] and (
                           dist.metadata['Name'] in LINTER_PACKAGES
                           or dist.metadata['Name'].lower().startswith('flake8')))
-    parts = [tool] + versions
+    parts = [tool, 'python=' + sys.version.split()[0]] + versions
     if tool == 'flake8':
         import ament_flake8
         config = os.path.join(os.path.dirname(ament_flake8.__file__), 'configuration',

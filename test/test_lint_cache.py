@@ -104,7 +104,7 @@ def test_options_are_passed_on_uncached(tree):
 
 def test_the_key_names_the_installed_flake8_and_its_configuration():
     key = lint_cache.linter_key('flake8')
-    assert key.startswith('flake8\n') and '\nflake8=' in key
+    assert key.startswith('flake8\npython=3.') and '\nflake8=' in key
     assert any(line.startswith('flake8-quotes=') or line.startswith('flake8_quotes=')
                for line in key.splitlines())
     assert lint_cache.linter_key('pep257') != key
