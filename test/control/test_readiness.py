@@ -48,16 +48,18 @@ def make(warm=True, **given):
     return loop, logs
 
 
-def feed(loop, ks, age_ns, target=(0.2, 0.0)):
+def feed(loop, ks, age_ns, target=(0.2, 0.0), setpoint=None):
     """
     Feed the states of ticks ``ks`` (stamp k + 500 ms), each ``age_ns`` old; return Results.
 
-    Each state after a setpoint at rest at ``target`` of the same stamp.
+    Each state after a setpoint of the same stamp: ``setpoint(k)`` (position, velocity,
+    acceleration), by default at rest at ``target``.
     """
     answers = []
     for k in ks:
         ns = (k + 500) * DT_NS
-        loop.on_setpoint(ns, tuple(target) + (0.0, 0.0, 0.0, 0.0), 0, k * 1e-3)
+        values = tuple(target) + (0.0, 0.0, 0.0, 0.0) if setpoint is None else setpoint(k)
+        loop.on_setpoint(ns, values, 0, k * 1e-3)
         res = loop.on_state(ns, NAMES, list(Q0), list(QD0), ns + age_ns, 100.0 + k * 1e-3)
         answers.append(None if res is None else (res.status, res.message, list(res.effort)))
     return answers
@@ -253,24 +255,18 @@ def test_stopping_at_rest_asks_the_driver_to_brake_now_once_per_stop_saying_why(
                                   'brake requests')
 
 
-def moving(loop, ks, age_ns):
-    """Feed as :func:`feed`, each state after a setpoint moving along x at 0.01 m/s."""
-    answers = []
-    for k in ks:
-        ns = (k + 500) * DT_NS
-        loop.on_setpoint(ns, (0.2 + 1e-5 * k, 0.0, 0.01, 0.0, 0.0, 0.0), 0, k * 1e-3)
-        answers.append(loop.on_state(ns, NAMES, list(Q0), list(QD0), ns + age_ns,
-                                     100.0 + k * 1e-3))
-    return answers
+def moving(k):
+    """Return the setpoint of tick k moving along x at 0.01 m/s (for :func:`feed`)."""
+    return (0.2 + 1e-5 * k, 0.0, 0.01, 0.0, 0.0, 0.0)
 
 
 def test_stopping_while_the_setpoint_moves_leaves_the_brakes_to_the_drivers_watchdog():
     loop, _ = make()
     loop.take_brake_request()
-    assert None not in moving(loop, range(100), 300_000)
-    assert None not in moving(loop, range(100, 200), 2_500_000)
-    assert moving(loop, [200], 2_500_000) == [None]
-    assert moving(loop, range(201, 300), 0) == [None] * 99
+    assert None not in feed(loop, range(100), 300_000, setpoint=moving)
+    assert None not in feed(loop, range(100, 200), 2_500_000, setpoint=moving)
+    assert feed(loop, [200], 2_500_000, setpoint=moving) == [None]
+    assert feed(loop, range(201, 300), 0, setpoint=moving) == [None] * 99
     assert loop.take_brake_request() is None and loop.brake_requests == 1
     # The setpoint comes to rest while the loop is still stopped: asked then.
     assert feed(loop, [300], 0, target=(0.23, 0.0)) == [None]

@@ -120,6 +120,21 @@ class Controller:
                   '%s of step %d' % (what, k), spin=self.spin)
         return self.states[ns]
 
+    def release(self, held, what='the arm released'):
+        """Command zero effort until the arm leaves ``held`` (released, it falls)."""
+        def commanding():
+            self.command([0.0, 0.0])
+            self.spin()
+        self.wait(lambda: self.arrivals[-1].position.tolist() != held, 15.0, what,
+                  spin=commanding)
+
+    def held_still(self, n=10):
+        """Return whether the last ``n`` states stand at one position, at rest (braked)."""
+        last = self.arrivals[-n:]
+        return len(last) >= n and all(
+            list(m.velocity) == [0.0] * 3 and m.position.tolist() == last[0].position.tolist()
+            for m in last)
+
     def connect(self, proc, procs):
         self.wait(lambda: self.pub.get_subscription_count() > 0 and self.states,
                   30.0, 'the simulator (log: %s)' % proc.log_path, spin=self.spin)
@@ -485,13 +500,7 @@ def test_realtime_holds_the_arm_at_q0_until_the_first_command_then_releases_it(
     assert ctl.diagnostics[-1][2]['brakes'] == 'engaged'
     assert 'brakes engaged: the arm is held at q0 until the first command' in \
         procs.log(proc)
-
-    def commanding():           # zero effort: released, the arm falls under gravity
-        ctl.command([0.0, 0.0])
-        ctl.spin()
-
-    wait(lambda: ctl.arrivals[-1].position.tolist() != q0, 15.0, 'the arm released',
-         spin=commanding)
+    ctl.release(q0)             # zero effort: released, the arm falls under gravity
     assert 'brakes released at step' in procs.log(proc)
     assert procs.stop(proc) == 0
 
@@ -503,13 +512,7 @@ def test_realtime_no_command_for_brake_timeout_stops_the_arm_where_it_is_until_t
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
     q0 = initial_state(table1('vertical')).tolist()
-
-    def commanding():           # zero effort: released, the arm falls under gravity
-        ctl.command([0.0, 0.0])
-        ctl.spin()
-
-    wait(lambda: ctl.arrivals[-1].position.tolist() != q0, 15.0, 'the arm released',
-         spin=commanding)
+    ctl.release(q0)             # zero effort: released, the arm falls under gravity
     # The controller goes silent: within brake_timeout the watchdog stops the arm where it
     # is (velocity zero, no integration) and holds it there.
     wait(lambda: 'brakes engaged at step' in procs.log(proc), 15.0, 'the watchdog',
@@ -526,10 +529,7 @@ def test_realtime_no_command_for_brake_timeout_stops_the_arm_where_it_is_until_t
     def settled():
         log = procs.log(proc)
         paired = log.count('brakes released at step') == log.count('brakes engaged at step')
-        last = ctl.arrivals[-10:]
-        still = all(list(m.velocity) == [0.0] * 3 and m.position.tolist() ==
-                    last[0].position.tolist() for m in last)
-        return paired and still and len(ctl.arrivals) >= n + 20
+        return paired and ctl.held_still() and len(ctl.arrivals) >= n + 20
 
     wait(settled, 10.0, '0.2 s more states, every release re-braked', spin=ctl.spin)
     log = procs.log(proc)
@@ -547,8 +547,7 @@ def test_realtime_no_command_for_brake_timeout_stops_the_arm_where_it_is_until_t
     assert level == WARN and values['brakes'] == 'engaged'
     assert int(values['brake engagements (no command)']) >= 1
     # The next command releases them: the arm moves on from where it was held.
-    wait(lambda: ctl.arrivals[-1].position.tolist() != held, 15.0, 'released again',
-         spin=commanding)
+    ctl.release(held, 'released again')
     log = procs.log(proc)
     assert log.count('brakes released at step') >= 2
     assert procs.stop(proc) == 0
@@ -567,14 +566,7 @@ def test_realtime_a_brake_request_stops_the_arm_at_once_without_the_watchdog_unt
                                       BRAKE_REQUEST.qos)
     wait(lambda: brake.get_subscription_count() >= 1, 15.0, 'the brake request matched',
          spin=ctl.spin)
-    q0 = initial_state(table1('vertical')).tolist()
-
-    def commanding():           # zero effort: released, the arm falls under gravity
-        ctl.command([0.0, 0.0])
-        ctl.spin()
-
-    wait(lambda: ctl.arrivals[-1].position.tolist() != q0, 15.0, 'the arm released',
-         spin=commanding)
+    ctl.release(initial_state(table1('vertical')).tolist())
 
     def asking():               # no more commands (the arm falls on): only the request brakes
         if 'brakes engaged at step' not in procs.log(proc):
@@ -584,10 +576,7 @@ def test_realtime_a_brake_request_stops_the_arm_at_once_without_the_watchdog_unt
     wait(lambda: 'the controller asked (brake_request): test: stop here: brakes engaged at '
          'step' in procs.log(proc), 15.0, 'the requested brakes', spin=asking)
     # Held where it is: no command since the request, the arm does not move.
-    wait(lambda: len(ctl.arrivals) >= 10 and all(
-        list(m.velocity) == [0.0] * 3 and m.position.tolist() ==
-        ctl.arrivals[-1].position.tolist() for m in ctl.arrivals[-10:]), 10.0,
-        '0.1 s of braked states', spin=ctl.spin)
+    wait(ctl.held_still, 10.0, '0.1 s of braked states', spin=ctl.spin)
     held = ctl.arrivals[-1].position.tolist()
     wait(lambda: ctl.diagnostics and 'brakes engaged (asked on brake_request)' in
          ctl.diagnostics[-1][1], 5.0, 'the brakes in the status', spin=ctl.spin)
@@ -596,8 +585,7 @@ def test_realtime_a_brake_request_stops_the_arm_at_once_without_the_watchdog_unt
     assert int(values['brake engagements (asked)']) >= 1
     assert values['brake engagements (no command)'] == '0'
     # The next command releases them, as after the watchdog.
-    wait(lambda: ctl.arrivals[-1].position.tolist() != held, 15.0, 'released again',
-         spin=commanding)
+    ctl.release(held, 'released again')
     assert procs.stop(proc) == 0
     assert re.search(r'[1-9]\d* brake engagements \([1-9]\d* asked\)', procs.log(proc))
 
