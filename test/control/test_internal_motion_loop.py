@@ -148,6 +148,10 @@ def test_a_restored_snapshot_repeats_the_step_modulation_included():
     law.restore_state(saved)
     assert np.array_equal(law.step(q, qd, sp[0:2], sp[2:4], sp[4:6], DT).tau, first)
     assert law.state_values() == after
+    law.step(q, qd, sp[0:2], sp[2:4], sp[4:6], DT)
+    before = law.state_values()
+    law.restart_motion()                # the arm was braked: the shift, not theta_hat
+    assert before[-2:] != [0.0, 0.0] and law.state_values() == before[:-2] + [0.0, 0.0]
     law.reset()
     assert law.state_values()[-2:] == [0.0, 0.0]
 
@@ -271,3 +275,54 @@ def test_the_four_link_stabilised_overlay_is_the_offline_runner_s_stabilised_opt
     assert ctl.values['nullspace_kd'] == NULLSPACE_KD
     assert ctl.gains.K == (FOUR_LINK_TASK_GAINS['K'],) * 2
     assert ctl.gains.Lambda == (FOUR_LINK_TASK_GAINS['Lambda'],) * 2
+
+
+def test_tracking_resumed_after_a_readiness_brake_starts_the_free_links_shift_from_zero():
+    # Real time, vertical, damping on: the loop tracks the circle on the plant, a window of
+    # late states trips the guard, the driver brakes the arm (frozen, at rest) until the
+    # recovery windows pass. The shift from before the stop described a motion the brake
+    # ended: kept, it put the reference up to free_link_delta_max (10 mm) off the braked
+    # arm at the first resumed tick, and that tracking error tripped the guard again
+    # (readiness_max_error 10 mm; seen in the back-to-back soak). Resumed, the shift starts
+    # from 0 and the arm follows the blend from where it stopped; theta_hat is kept.
+    window = 100
+    loop = make(STAB, case='vertical', lockstep=False, max_state_age=0.0,
+                stale_timeout=2.0, readiness_window=window * DT)
+    plant = Plant(table1('vertical'), DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND, seed=0,
+                  q0=sim_q0(SIM_STAB, case='vertical'))
+    k = 0
+
+    def tick(age_ns):
+        """Answer state k (``age_ns`` old when taken); no answer: the arm braked."""
+        nonlocal k
+        ns = (k + 1) * DT_NS
+        t = k * DT
+        loop.on_setpoint(ns, TRAJ.sample_tuple(max(0.0, t - 0.5)), 0, 100.0 + t)
+        res = loop.on_state(ns, NAMES, plant.q.tolist(), plant.qd.tolist(), ns + age_ns,
+                            100.0 + t)
+        k += 1
+        if res is None:
+            plant.qd[:] = 0.0               # the brakes hold every joint where it is
+        else:
+            plant.step(res.effort, DT)
+        return res
+
+    assert [tick(0) for _ in range(5 * window)] == [None] * (5 * window)   # not ready yet
+    errors = [math.hypot(*tick(300_000).error) for _ in range(2000)]      # the circle
+    assert max(errors) < 5e-3
+    shift = loop.law.state_values()[-2:]
+    assert math.hypot(*shift) > 5e-4        # the damping acts: a shift to forget
+    while loop._readiness.ready:            # a window of states 3 ms old (> 2 ms)
+        tick(3_000_000)
+    theta = loop.law.state_values()[:5]
+    braked = 0
+    while tick(0) is None:                  # braked through the recovery windows
+        braked += 1
+    assert loop._readiness.ready and window * 4 < braked < window * 6
+    first = loop.result
+    assert math.hypot(*first.error) < 1e-5, first.error     # kept: 0.19 mm here
+    # theta_hat kept: one step's adaptation from where the stop left it, not theta0's 0
+    assert max(theta) > 5e-4 and np.allclose(loop.law.state_values()[:5], theta, rtol=0.0,
+                                             atol=5e-5)
+    errors = [math.hypot(*tick(300_000).error) for _ in range(1000)]
+    assert loop._readiness.trips == 1 and max(errors) < 5e-3, max(errors)

@@ -1,31 +1,19 @@
 """
 Controller node: the controller loop of ``freejoint_control.loop`` as a ROS 2 node.
 
-Subscribes ``joint_states`` (sensor_msgs/JointState, joints matched by name, any order,
-extra joints ignored) and ``setpoint`` (freejoint_msgs/CartesianSetpoint); per state it
-publishes the active joint efforts on ``effort_controller/commands``
-(std_msgs/Float64MultiArray in the order of parameter ``joints``, the topic of
-ros2_control's JointGroupEffortController) and a ``controller_state``
-(freejoint_msgs/ControllerState; every ``1 / state_publish_rate`` s of state stamps with
-a rate, and whenever the status changes). What to answer - pairing, hold / resume,
-guards, the law (parameter ``law``), limits, faults - is :class:`ControlLoop`'s; this node
-converts messages, reads the clocks, publishes, offers ``~/reset`` (std_srvs/Trigger:
-the law's state back to its start, hold / blend forgotten) and publishes the loop's status
-on ``/diagnostics`` once a second (docs/GRAPH.md: lockstep protocol, staleness, hold,
-limits, parameters). The QoS of its topics can be overridden at start-up with ros2's
-``qos_overrides.<topic>.<publisher|subscription>.<history|depth|reliability>`` parameters.
-With ``standby: true`` (real time) it is a hot spare (``controller_supervisor``): built and
-discovered, setpoints taken, not subscribed to joint_states, nothing published
-(``/diagnostics`` says STANDBY) until SIGUSR1; it tells the supervisor it is ready once
-its commands and setpoints are matched as the graph lists them and the setpoint stream has
-caught up (then it idles at SCHED_FIFO 1, before at the default scheduler); the signal
-subscribes it and the first state activates it, its reference starting from the arm's
-measured motion, the torque ramped from zero.
-With ``joint_failures`` not ``off`` it subscribes ``joint_failures`` (std_msgs/String, a
-driver's or operator's notice), passes the JointState's efforts to the loop's failure
-monitor (``freejoint_control.failures``, docs/failures.md) and publishes the joints it
-detects failed there. When its readiness guard stops the loop while the setpoint rests it
-asks the driver to brake at once on ``brake_request`` (std_msgs/String: why).
+Subscribes ``joint_states`` (joints matched by name) and ``setpoint``; per state it
+publishes the active joint efforts on ``effort_controller/commands`` (the order of
+parameter ``joints``: ros2_control's JointGroupEffortController) and a ``controller_state``
+(thinned by ``state_publish_rate``, and whenever the status changes). What to answer -
+pairing, hold / resume, guards, the law (``law``), limits, faults - is
+:class:`ControlLoop`'s; this node converts messages, reads the clocks, publishes, offers
+``~/reset`` and the loop's status on ``/diagnostics`` (docs/GRAPH.md). QoS overridable
+with ros2's ``qos_overrides.<topic>.<publisher|subscription>.<policy>`` parameters.
+``standby: true`` (real time): a hot spare of ``controller_supervisor``, idle and not
+subscribed to joint_states until SIGUSR1, then active from the arm's measured motion.
+``joint_failures`` not ``off``: notices on ``joint_failures`` in, the failure monitor's
+detections out there (docs/failures.md). A readiness stop while the setpoint rests asks
+the driver to brake on ``brake_request`` (std_msgs/String: why).
 
 """
 
@@ -251,8 +239,7 @@ class ControllerNode(Node, Lifecycle):
     def _on_setpoint(self, msg):
         if self._activation_requested and self._loop.standby:
             self._on_activation_requested()
-        stamp = msg.header.stamp
-        ns = to_ns(stamp)
+        ns = to_ns(msg.header.stamp)
         p = msg.position
         v = msg.velocity
         a = msg.acceleration

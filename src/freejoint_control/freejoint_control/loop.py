@@ -583,6 +583,8 @@ class ControlLoop:
         self.last_ns = -1               # dt of the first tick: one control period
         self._prev_cmd = list(self._zero)   # the braked arm got zero: ramp from it
         self._rate_armed = True
+        self.law.restart_motion()       # e.g. the free link's shift: its swing was stopped
+        self._good_state = self.law.save_state()
         if self._predictor is not None:
             self._predictor.reset()
 

@@ -58,6 +58,14 @@ class ControlLaw:
     def reset(self):
         """Start the law's internal state afresh."""
 
+    def restart_motion(self):
+        """
+        Forget what describes the motion before a stop (the arm braked, now released).
+
+        The adaptation is kept (what :meth:`reset` would start afresh); a law without
+        such state (this base, the paper's) does nothing.
+        """
+
     def state_values(self):
         """Return the law's internal state after the last step, list of float."""
         return []

@@ -218,6 +218,16 @@ class FreeLinkDampedLaw(ControlLaw):
         self.law.reset()
         self.modulation.reset()
 
+    def restart_motion(self):
+        """
+        Start the shift from 0 (the arm was braked); the wrapped law restarts too.
+
+        The shift and its rate damped a swing the brake ended; kept, they would put the
+        reference up to ``delta_max`` off the braked arm at the first tick after it.
+        """
+        self.law.restart_motion()
+        self.modulation.reset()
+
     def state_values(self):
         """Return the wrapped law's state and the shift ``delta`` (2) [m]."""
         return list(self.law.state_values()) + self.modulation.delta.tolist()
