@@ -91,8 +91,13 @@ class ClockDriver:
         from freejoint_common.contract import to_ns
         return to_ns(self.got[-1].header.stamp)
 
-    def step(self, now_ns, wait, what=''):
-        """Publish /clock = now and wait for the setpoints due (up to now + lookahead)."""
+    def step(self, now_ns, wait, what='', beyond=True):
+        """
+        Publish /clock = now and wait for the setpoints due (up to now + lookahead).
+
+        ``beyond``: then spin 10 ms more and assert that nothing beyond them came (the
+        lookahead); False for a test about the stream's values, not its lead.
+        """
         due = (now_ns + self.lookahead * MS) // MS * MS
 
         def spin():
@@ -104,6 +109,8 @@ class ClockDriver:
         self.publish(now_ns)
         wait(lambda: self.last_stamp() is not None and self.last_stamp() >= due, 10.0,
              'setpoint %d ns after /clock %d ns %s' % (due, now_ns, what), spin=spin)
+        if not beyond:
+            return
         for _ in range(2):                 # anything published beyond `due` shows up now
             _spin(self.node, 0.005)
         assert self.last_stamp() == due, 'published beyond now + lookahead: %d > %d' % (
@@ -401,8 +408,10 @@ def test_plan_circle_every_1_3_s_while_circles_run_never_steps_the_setpoint_and_
     answers = []
     period = 1300                                     # ticks between requests: 1.3 s
     end = period * (len(requests) + 1) + 5200         # room for the last circle to start
-    for now in range(0, end, 10):                     # /clock every 10 ticks (100 Hz)
-        clock.step(now * MS, wait, '(log: %s)' % procs.log(proc))
+    # /clock every LOOKAHEAD ticks (the planner always as far ahead as it may be, as when
+    # the simulator steps it each tick); the lead itself: the tests above
+    for now in range(0, end, LOOKAHEAD):
+        clock.step(now * MS, wait, '(log: %s)' % procs.log(proc), beyond=False)
         i = now // period - 1
         if now % period == 0 and 0 <= i < len(requests):
             centre, angle, direction = requests[i]
