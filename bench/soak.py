@@ -23,7 +23,11 @@ Per run, from its bag (``controller_state``) and the simulator's per-step timing
 * worst state age: the largest ``state_age`` of ``controller_state`` (the state's age when
   the command went out; every ``*age*`` field is kept in the JSON) and the largest
   state->command latency of the simulator's timing file;
-* the largest |effort| per joint.
+* the largest |effort| per joint;
+* the machine's lateness beside the run (``bench/wakeup_probe.py``: a SCHED_FIFO 99
+  thread per CPU sleeping 1 ms): its latest wake-up [ms late] (column ``wake``) and the
+  count of wake-ups over 10 ms late (``>10``), the latest 20 with their Unix times in the
+  JSON. A stall there stalls every node, whatever its priority.
 
 The bound per case is 1.5 x the offline runner's worst max error over seeds 0-9 (3 x with
 hogs), computed here from ``freejoint_core.offline``; each run prints met / NOT met. The
@@ -53,6 +57,7 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
+import wakeup_probe  # noqa: E402, I100 - bench/wakeup_probe.py, the machine's lateness
 from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION  # noqa: E402, I100
 from freejoint_common.contract import JOINT_STATES, SETPOINT, to_ns  # noqa: E402
 from freejoint_common.scheduling import rt_budget  # noqa: E402
@@ -624,13 +629,20 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
             loop = bench_graph.CircleLoop(
                 s.client, plan, period,
                 before=None if back_to_back else (lambda: rest_at_q0(s.client)))
-        start = time.monotonic()
-        s.wait(seconds, loop)
-        end = time.monotonic()
+        # The machine's own lateness beside the run: a SCHED_FIFO 99 probe per CPU
+        # (a stall there stalls every node; columns 'wake' and '>10').
+        with wakeup_probe.Probes() as probes:
+            start = time.monotonic()
+            s.wait(seconds, loop)
+            end = time.monotonic()
+            wake = probes.stop()
     if fully_actuated:
         row['failure_lines'] = controller_detections(s.graph)
         row['detections'] = len(row['failure_lines'])
         row['injected_wall_s'] = injected_at(s.graph)
+    if wake is not None:
+        row['wake_max_ms'], row['wake_late'] = wake['worst_ms'], wake['late']
+        row['wake_priority'], row['wake_listed'] = wake['priority'], wake['listed'][:20]
     row['back_to_back'] = back_to_back
     row['stabilised'] = stabilise
     row['exit_codes'] = s.codes
@@ -712,9 +724,10 @@ COLUMNS = (('case', '%-10s'), ('run', '%3s'), ('rms_mm', '%7.3f'), ('max_mm', '%
            ('bound_mm', '%6.2f'), ('stale', '%6d'), ('longest_stale', '%5d'),
            ('holds', '%6d'), ('diverged', '%5s'), ('latency_max_ms', '%7.2f'),
            ('state_age_max_ms', '%7.2f'),
-           ('plans', '%3d'), ('load_after', '%5.2f'), ('met', '%4s'))
+           ('plans', '%3d'), ('load_after', '%5.2f'), ('wake_max_ms', '%6.1f'),
+           ('wake_late', '%4d'), ('met', '%4s'))
 HEADER = ('case', 'run', 'rms mm', 'max mm', 'bound', 'stale', 'run', 'holds', 'div',
-          'lat ms', 'age ms', 'pl', 'load', 'met')
+          'lat ms', 'age ms', 'pl', 'load', 'wake', '>10', 'met')
 
 
 def format_row(row):
@@ -756,6 +769,7 @@ def worst_of(rows):
             'diverged_runs': sum(1 for r in done if r['diverged']),
             'latency_max_ms': max((r['latency_max_ms'] or 0.0) for r in done),
             'state_age_max_ms': max((r.get('state_age_max_ms') or 0.0) for r in done),
+            'wake_max_ms': max((r.get('wake_max_ms') or 0.0) for r in done),
             'bound_mm': done[0]['bound_mm'],
             'met_runs': sum(1 for r in rows if r.get('met')),
             'all_met': all(r.get('met') for r in rows)}
@@ -863,11 +877,12 @@ def main(argv=None):
         if worst.get('completed'):
             print('%-10s worst of %d: max %.3f mm (bound %.3f), rms %.3f mm, stale %d '
                   '(longest run %d), holds %d, diverged runs %d, latency max %.2f ms, '
-                  'state age max %.2f ms: %d/%d runs met'
+                  'state age max %.2f ms, machine wake-up late %.1f ms: %d/%d runs met'
                   % (case, worst['completed'], worst['max_mm'], worst['bound_mm'],
                      worst['rms_mm'], worst['stale'], worst['longest_stale'], worst['holds'],
                      worst['diverged_runs'], worst['latency_max_ms'],
-                     worst['state_age_max_ms'], worst['met_runs'], worst['runs']))
+                     worst['state_age_max_ms'], worst['wake_max_ms'], worst['met_runs'],
+                     worst['runs']))
         else:
             print('%-10s no run completed' % case)
     with open(args.out, 'w') as f:
