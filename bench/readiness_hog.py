@@ -8,9 +8,11 @@ the default scheduler (no thread_priority), with ``--hogs`` numpy matrix loops b
 the largest end-effector excursion from its first sample [mm] and where in the guard's
 transitions it happened (:func:`guard_phase`), whether the simulator diverged, the
 controller's readiness trips and states not answered, its ERROR statuses, the simulator's
-brake engagements (and of them those the controller asked for on ``brake_request``) and
-the load average.  ``-s brake_timeout:=0.01`` and the like go to
-the simulator, ``-p`` to the controller.  Used for docs/real-time.md::
+brake engagements (and of them those the controller asked for on ``brake_request``), the
+load average and the machine's own lateness beside the run (``bench/wakeup_probe.py``: its
+latest wake-up, those over 10 ms, the latest in the second before the largest
+excursion).  ``-s brake_timeout:=0.01`` and the like go to the simulator, ``-p`` to the
+controller.  Used for docs/real-time.md::
 
     . tools/env.sh && python bench/readiness_hog.py --case vertical --runs 3
 
@@ -28,6 +30,7 @@ import time
 
 from freejoint_common.contract import DIAGNOSTICS, EE_POSITION, NS_PER_S, to_ns
 from freejoint_tools.harness import node_cmd, Processes
+import wakeup_probe  # bench/wakeup_probe.py (this script's folder is on sys.path)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HOG = 'import numpy as n; a=n.random.rand(400,400); [a@a for _ in iter(int,1)]'
@@ -97,8 +100,10 @@ def one_run(case, duration, hogs, extra, log_dir, tag, sim_extra=()):
                                            os.path.join(ROOT, 'config', 'controller.yaml'),
                                            ['case:=' + case, 'lockstep:=false'] + list(extra)))
         end = time.monotonic() + duration
-        while time.monotonic() < end and not procs.exited():
-            rclpy.spin_once(node, timeout_sec=0.1)
+        with wakeup_probe.Probes() as probes:   # the machine's own lateness beside it
+            while time.monotonic() < end and not procs.exited():
+                rclpy.spin_once(node, timeout_sec=0.1)
+            wake = probes.stop()
         load1 = os.getloadavg()
     finally:
         for p in hog_procs:
@@ -116,6 +121,11 @@ def one_run(case, duration, hogs, extra, log_dir, tag, sim_extra=()):
         excursion, at_ns = max(((1000.0 * math.hypot(x - x0, y - y0), ns) for x, y, ns in ee),
                                key=lambda item: (item[0], -item[1]))
     stop_line = [ln for ln in ctl_log.splitlines() if 'controller stopped' in ln]
+    near = None
+    if wake is not None and at_ns is not None:
+        # the machine's latest wake-up in the second before the largest excursion
+        before = [ms for unix, ms, _cpu in wake['listed'] if 0.0 <= at_ns * 1e-9 - unix <= 1.0]
+        near = max(before, default=0.0)
     return {
         'case': case, 'hogs': hogs, 'duration_s': duration, 'extra': list(extra),
         'sim_extra': list(sim_extra),
@@ -131,6 +141,9 @@ def one_run(case, duration, hogs, extra, log_dir, tag, sim_extra=()):
         'error_statuses': len(statuses),
         'first_error_status': statuses[0] if statuses else '',
         'controller_report': stop_line[-1].split('controller stopped: ')[-1] if stop_line else '',
+        'machine_wake_max_ms': None if wake is None else wake['worst_ms'],
+        'machine_wakes_over_10ms': None if wake is None else wake['late'],
+        'machine_late_ms_in_the_second_before': near,
         'log_dir': log_dir}
 
 
