@@ -144,6 +144,7 @@ def one_run(case, duration, hogs, extra, log_dir, tag, sim_extra=()):
         'machine_wake_max_ms': None if wake is None else wake['worst_ms'],
         'machine_wakes_over_10ms': None if wake is None else wake['late'],
         'machine_late_ms_in_the_second_before': near,
+        'machine_probe_failure': probes.failure,
         'log_dir': log_dir}
 
 

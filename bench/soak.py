@@ -643,6 +643,9 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
     if wake is not None:
         row['wake_max_ms'], row['wake_late'] = wake['worst_ms'], wake['late']
         row['wake_priority'], row['wake_listed'] = wake['priority'], wake['listed'][:20]
+    else:
+        row['wake_failure'] = probes.failure
+        say('%s run %d: no figures from the machine probe (%s)' % (case, run, probes.failure))
     row['back_to_back'] = back_to_back
     row['stabilised'] = stabilise
     row['exit_codes'] = s.codes

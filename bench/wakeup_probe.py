@@ -23,6 +23,7 @@ prints (and writes) per CPU: wake-ups, the latest one [ms late], the count and t
 import argparse
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -131,18 +132,21 @@ class Probes:
 
     ``with Probes() as p: ...; result = p.stop()``: each is stopped (SIGINT, bounded
     waits, SIGKILL last) on leaving whatever happened; :meth:`stop` returns the merged
-    summary (or None when a probe wrote nothing).
+    summary, or None when a probe wrote nothing (``failure`` then says which and its last
+    error line).
     """
 
     def __init__(self, priority=99, cpus=None, seconds=0.0):
         self.dir = tempfile.mkdtemp(prefix='wakeup_probe_')
         self.procs = []
+        self.failure = ''
         for cpu in sorted(os.sched_getaffinity(0) if cpus is None else cpus):
             out = os.path.join(self.dir, 'cpu%d.json' % cpu)
-            proc = subprocess.Popen(
-                [sys.executable, os.path.abspath(__file__), '--cpu', str(cpu),
-                 '--priority', str(priority), '--seconds', str(seconds), '--out', out],
-                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+            with open(out + '.err', 'w') as err:
+                proc = subprocess.Popen(
+                    [sys.executable, os.path.abspath(__file__), '--cpu', str(cpu),
+                     '--priority', str(priority), '--seconds', str(seconds), '--out', out],
+                    stdout=subprocess.DEVNULL, stderr=err, start_new_session=True)
             self.procs.append((proc, out))
 
     def __enter__(self):
@@ -168,7 +172,12 @@ class Probes:
                     results.append(json.load(fh))
             except (OSError, ValueError):
                 results.append(None)
+                with open(out + '.err') as fh:
+                    lines = fh.read().strip().splitlines()
+                self.failure = '%s: exit %s, %s' % (os.path.basename(out), proc.returncode,
+                                                    lines[-1] if lines else 'no output')
         done, self.procs = (results and None not in results), []
+        shutil.rmtree(self.dir, ignore_errors=True)
         return merge(results) if done else None
 
 

@@ -408,8 +408,8 @@ def test_plan_circle_every_1_3_s_while_circles_run_never_steps_the_setpoint_and_
     answers = []
     period = 1300                                     # ticks between requests: 1.3 s
     end = period * (len(requests) + 1) + 5200         # room for the last circle to start
-    # /clock every LOOKAHEAD ticks (the planner always as far ahead as it may be, as when
-    # the simulator steps it each tick); the lead itself: the tests above
+    # /clock every LOOKAHEAD ticks: each step lets the planner publish its next LOOKAHEAD
+    # setpoints (the simulator's /clock comes every 10); its lead over /clock: the tests above
     for now in range(0, end, LOOKAHEAD):
         clock.step(now * MS, wait, '(log: %s)' % procs.log(proc), beyond=False)
         i = now // period - 1

@@ -57,3 +57,13 @@ def test_the_probe_runs_a_process_per_cpu_and_prints_its_summary(tmp_path):
     assert got == json.loads(out.read_text())
     assert got['cpus'] == sorted(os.sched_getaffinity(0)) and got['priority'] == 0
     assert got['wakeups'] > 10 * len(got['cpus'])   # ~300 a CPU; a slow machine fewer
+
+
+def test_a_probe_that_cannot_run_gives_no_figures_and_says_why():
+    probes = probe.Probes(priority=0, cpus=[4095], seconds=0.1)    # no such CPU here
+    for proc, _ in probes.procs:
+        proc.wait(30.0)
+    assert probes.stop() is None
+    assert probes.failure.startswith('cpu4095.json: exit 1, '), probes.failure
+    assert 'OSError' in probes.failure and 'Invalid argument' in probes.failure, probes.failure
+    assert not os.path.exists(probes.dir)
