@@ -25,7 +25,6 @@ import json
 import os
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -130,24 +129,25 @@ class Probes:
     """
     A probe process per CPU (``python wakeup_probe.py --cpu K ...``) for a run.
 
-    ``with Probes() as p: ...; result = p.stop()``: each is stopped (SIGINT, bounded
-    waits, SIGKILL last) on leaving whatever happened; :meth:`stop` returns the merged
-    summary, or None when a probe wrote nothing (``failure`` then says which and its last
-    error line).
+    ``with Probes() as p: ...; result = p.stop()``: each is stopped (the harness's
+    SIGINT, bounded wait, SIGKILL) on leaving whatever happened; :meth:`stop` returns the
+    merged summary, or None when a probe wrote nothing (``failure`` then says which and
+    the last line it printed).
     """
 
     def __init__(self, priority=99, cpus=None, seconds=0.0):
+        # Imported here: the probe processes themselves need none of it.
+        from freejoint_tools.harness import Processes
         self.dir = tempfile.mkdtemp(prefix='wakeup_probe_')
-        self.procs = []
+        self.procs = Processes(self.dir, stop_timeout=5.0)
+        self.outs = {}
         self.failure = ''
         for cpu in sorted(os.sched_getaffinity(0) if cpus is None else cpus):
-            out = os.path.join(self.dir, 'cpu%d.json' % cpu)
-            with open(out + '.err', 'w') as err:
-                proc = subprocess.Popen(
-                    [sys.executable, os.path.abspath(__file__), '--cpu', str(cpu),
-                     '--priority', str(priority), '--seconds', str(seconds), '--out', out],
-                    stdout=subprocess.DEVNULL, stderr=err, start_new_session=True)
-            self.procs.append((proc, out))
+            name = 'cpu%d' % cpu
+            self.outs[name] = os.path.join(self.dir, name + '.json')
+            self.procs.start_script(os.path.abspath(__file__), name, [
+                '--cpu', str(cpu), '--priority', str(priority), '--seconds', str(seconds),
+                '--out', self.outs[name]])
 
     def __enter__(self):
         return self
@@ -157,28 +157,22 @@ class Probes:
 
     def stop(self):
         """Stop every probe; return the merged summary (None if one is missing)."""
-        for proc, _ in self.procs:
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
+        if not self.outs:
+            return None
+        codes = self.procs.stop_all()
         results = []
-        for proc, out in self.procs:
-            try:
-                proc.wait(5.0)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(5.0)
+        for name, out in self.outs.items():
             try:
                 with open(out) as fh:
                     results.append(json.load(fh))
             except (OSError, ValueError):
                 results.append(None)
-                with open(out + '.err') as fh:
-                    lines = fh.read().strip().splitlines()
-                self.failure = '%s: exit %s, %s' % (os.path.basename(out), proc.returncode,
-                                                    lines[-1] if lines else 'no output')
-        done, self.procs = (results and None not in results), []
+                self.failure = '%s: exit %s, %s' % (
+                    os.path.basename(out), codes.get(name),
+                    self.procs.tail(name, 1).strip() or 'no output')
+        self.outs = {}
         shutil.rmtree(self.dir, ignore_errors=True)
-        return merge(results) if done else None
+        return None if None in results else merge(results)
 
 
 def merge(results):
@@ -206,10 +200,10 @@ def main(argv=None):
     if args.cpu is not None:
         _probe(args.cpu, args.priority, args.seconds, args.out or os.devnull)
         return 0
+    signal.signal(signal.SIGTERM, signal.default_int_handler)     # as SIGINT: stop, print
     probes = Probes(args.priority, seconds=args.seconds)
-    signal.signal(signal.SIGTERM, lambda *_: probes.stop())
     try:
-        for proc, _ in list(probes.procs):
+        for proc in probes.procs.started:
             proc.wait()
     except KeyboardInterrupt:
         pass

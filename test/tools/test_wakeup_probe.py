@@ -61,7 +61,7 @@ def test_the_probe_runs_a_process_per_cpu_and_prints_its_summary(tmp_path):
 
 def test_a_probe_that_cannot_run_gives_no_figures_and_says_why():
     probes = probe.Probes(priority=0, cpus=[4095], seconds=0.1)    # no such CPU here
-    for proc, _ in probes.procs:
+    for proc in probes.procs.started:
         proc.wait(30.0)
     assert probes.stop() is None
     assert probes.failure.startswith('cpu4095.json: exit 1, '), probes.failure
