@@ -322,6 +322,54 @@ def test_readiness_max_error_0_leaves_a_drifting_arm_to_the_law():
     assert loop._readiness.ready and loop.take_brake_request() is None
 
 
+def states(loop, ks, q=Q0):
+    """Feed ticks ``ks``' states at ``q``, on time, no setpoint; return each reference or None."""
+    refs = []
+    for k in ks:
+        ns = (k + 500) * DT_NS
+        res = loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.0 + k * 1e-3)
+        refs.append(None if res is None else tuple(res.position_desired))
+    return refs
+
+
+def test_a_hold_without_setpoints_stops_at_readiness_max_hold_error_and_resumes_at_its_own_place():
+    loop, logs = make(warm=False)
+    assert states(loop, range(-500, 0)) == [None] * 500      # its good windows, braked
+    assert states(loop, [0])[0] is not None                     # ready: holds (no plan)
+    assert loop.shaper.hold_position == pytest.approx((0.2, 0.0), abs=1e-5)
+    loop.take_brake_request()
+    q, offset = _sagged(loop, drop=0.02)
+    assert 0.003 < offset < 0.005                  # under readiness_max_error's 10 mm
+    assert states(loop, [1], q) == [None]
+    reason = ('real-time loop not ready: tracking error %.3g mm > the 3 mm of '
+              'readiness_max_hold_error while holding (the law does not hold the arm on '
+              'this loop)' % (offset * 1e3))
+    assert loop.take_brake_request() == reason + ' while the setpoint rests: brake now'
+    # Braked where it drifted to; after its good windows the hold resumes at its own
+    # position, the reference starting at the braked arm (no step, no second trip).
+    answers = states(loop, range(2, 602), q)
+    first = answers.index(next(a for a in answers if a is not None))
+    assert first >= 400 and None not in answers[first:]     # >= 4 of the 5 windows braked
+    braked = loop.law.model.fk(q)
+    assert answers[first] == pytest.approx(tuple(braked), abs=1e-12)
+    assert loop.shaper.hold_position == pytest.approx((0.2, 0.0), abs=1e-5)
+    later = states(loop, range(602, 652), q)[-1]
+    toward = np.linalg.norm(np.subtract(later, braked))
+    assert 0.0 < toward < np.linalg.norm(np.subtract((0.2, 0.0), braked))
+    assert loop._readiness.trips == 1
+
+
+def test_with_a_setpoint_the_hold_bound_does_not_apply():
+    loop, _ = make()
+    loop.take_brake_request()
+    feed(loop, range(10), 0)
+    q, offset = _sagged(loop, drop=0.02)
+    ns = 510 * DT_NS
+    loop.on_setpoint(ns, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 0.01)
+    assert loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.01) is not None
+    assert loop._readiness.ready
+
+
 def test_lockstep_never_trips_whatever_the_rate_and_the_clock():
     loop, logs = make(lockstep=True, max_state_age=0.1)
     assert loop._readiness is None

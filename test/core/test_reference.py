@@ -35,6 +35,29 @@ def test_hold_freezes_the_position_at_its_onset_with_zero_velocity():
     assert sh.mode == MODE_HOLD and sh.hold_position == (0.1, 0.2)
 
 
+def test_a_hold_returned_to_blends_from_the_braked_arm_back_to_its_own_position():
+    sh = ReferenceShaper(0.5)
+    sh.hold((0.1, 0.2))
+    sh.return_to(sh.hold_position)                    # stopped; the arm braked 3 mm off
+    first = sh.hold((0.103, 0.2), 4.0)
+    assert first == (0.103, 0.2, 0.0, 0.0, 0.0, 0.0)   # from where the arm is, at rest
+    assert sh.hold_position == (0.1, 0.2)
+    mid = sh.hold(None, 4.25)                          # half way: the quintic's midpoint
+    assert mid[0] == pytest.approx(0.1015, abs=1e-12) and mid[1] == 0.2
+    assert mid[2] == pytest.approx(-1.875 * 0.003 / 0.5, abs=1e-12)   # its peak speed
+    assert sh.hold(None, 4.5) == (0.1, 0.2, 0.0, 0.0, 0.0, 0.0)
+    assert sh.hold((0.5, 0.5), 9.0) == (0.1, 0.2, 0.0, 0.0, 0.0, 0.0)
+    # Without return_to a hold starts where the arm is; a track forgets the target.
+    sh.reset()
+    assert sh.hold((0.103, 0.2), 4.0)[0] == 0.103
+    sh.return_to((0.1, 0.2))
+    sh.track(5.0, (0.3, 0.0, 0.0, 0.0, 0.0, 0.0), (0.103, 0.2))
+    sh.hold((0.2, 0.2), 6.0)
+    assert sh.hold(None, 7.0)[0] == 0.2 and sh.hold_position == (0.2, 0.2)
+    with pytest.raises(FreejointValueError, match=r'^target: expected 2 finite values'):
+        sh.return_to((0.1, math.nan))
+
+
 def test_resume_blends_from_the_hold_to_the_stream_without_a_step():
     traj = CircleQuintic()
     dt = 1e-3

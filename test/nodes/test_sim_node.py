@@ -541,8 +541,9 @@ def test_realtime_no_command_for_brake_timeout_stops_the_arm_where_it_is_until_t
     for msg in braked:
         assert msg.position.tolist() == held
         assert list(msg.velocity) == [0.0, 0.0, 0.0]
-    wait(lambda: ctl.diagnostics and 'brakes engaged (no command for 0.05 s)' in
-         ctl.diagnostics[-1][1], 5.0, 'the brakes in the status', spin=ctl.spin)
+    # Each release command found the arm at rest (braked): brake_timeout_at_rest's wait.
+    wait(lambda: ctl.diagnostics and 'brakes engaged (no command for 0.01 s, the arm at '
+         'rest)' in ctl.diagnostics[-1][1], 5.0, 'the brakes in the status', spin=ctl.spin)
     level, _, values = ctl.diagnostics[-1]
     assert level == WARN and values['brakes'] == 'engaged'
     assert int(values['brake engagements (no command)']) >= 1

@@ -191,6 +191,7 @@ class ControlLoop:
         self.withheld = 0               # states not answered by the readiness guard
         self.brake_request = None       # why the driver is asked to brake now (the node sends)
         self._brake_asked = False       # asked during this not-ready spell
+        self._kept_hold = None          # the hold's position when the guard stopped it
         self.brake_requests = 0
         self._install(cfg)
         self.result = Result(m)
@@ -277,6 +278,7 @@ class ControlLoop:
         self._guard_brakes = cfg.readiness_action == 'brake'
         self._ask_brakes = self._guard_brakes and cfg.readiness_brake_request
         self._max_error = cfg.readiness_max_error
+        self._max_hold_error = cfg.readiness_max_hold_error or cfg.readiness_max_error
         if key == self._readiness_key:
             return
         old = self._readiness
@@ -318,6 +320,7 @@ class ControlLoop:
         self.law.reset()
         self._good_state = self.law.save_state()
         self.shaper.reset()
+        self._kept_hold = None
         self._rate_armed = self._prev_cmd is not None
         if self._predictor is not None:
             self._predictor.reset()
@@ -545,6 +548,8 @@ class ControlLoop:
 
     def _withhold(self, ns):
         """Not ready, 'brake': answer nothing (the driver's command watchdog brakes)."""
+        if not self._withholding:
+            self._kept_hold = self.shaper.hold_position     # None unless holding
         self._withholding = True
         self.withheld += 1
         self.pending = None
@@ -579,7 +584,13 @@ class ControlLoop:
         """Ready again after withholding: start over from where the braked arm is."""
         self._withholding = False
         self._brake_asked = False
-        self.shaper.reset()             # hold at fk(q), or blend to the setpoint from it
+        kept, self._kept_hold = self._kept_hold, None
+        if kept is None:
+            self.shaper.reset()         # hold at fk(q), or blend to the setpoint from it
+        else:
+            # A hold stopped (e.g. a drift past readiness_max_hold_error): back to its own
+            # position from where the arm was braked, so that stops do not add up.
+            self.shaper.return_to(kept)
         self.last_ns = -1               # dt of the first tick: one control period
         self._prev_cmd = list(self._zero)   # the braked arm got zero: ramp from it
         self._rate_armed = True
@@ -737,10 +748,10 @@ class ControlLoop:
         if sp is None:
             self._late = False
             if shaper.mode != MODE_HOLD:
-                ref = shaper.hold(law.model.fk(q).tolist())
+                ref = shaper.hold(law.model.fk(q).tolist(), ns * 1e-9)
                 self._rate_armed = self._prev_cmd is not None
             else:
-                ref = shaper.hold(None)
+                ref = shaper.hold(None, ns * 1e-9)
             status |= STATUS_HOLDING
             if late:
                 status |= STATUS_SETPOINT_LATE
@@ -851,17 +862,22 @@ class ControlLoop:
         self._last_det = out.det
         self.ticks += 1
         guard = self._readiness
-        if guard is not None and self._max_error and guard.ready:
-            error = math.hypot(*out.e)
-            if error > self._max_error:
-                return self._following_error(ns, error, guard)
+        if guard is not None and guard.ready:
+            holding = sp is None
+            limit = self._max_hold_error if holding else self._max_error
+            if limit:
+                error = math.hypot(*out.e)
+                if error > limit:
+                    return self._following_error(ns, error, guard, limit, holding)
         return res
 
-    def _following_error(self, ns, error, guard):
+    def _following_error(self, ns, error, guard, limit, holding):
         """Real time: the arm does not follow; stop tracking as a bad window would."""
         if guard.trip('real-time loop not ready: tracking error %.3g mm > the %.3g mm of '
-                      'readiness_max_error (the law does not hold the arm on this loop)'
-                      % (error * 1e3, self._max_error * 1e3)):
+                      '%s (the law does not hold the arm on this loop)'
+                      % (error * 1e3, limit * 1e3, 'readiness_max_hold_error while holding'
+                         if holding and self.config.readiness_max_hold_error
+                         else 'readiness_max_error')):
             self._readiness_changed(1)
             self._said_ns = ns
         if self._guard_brakes:

@@ -13,6 +13,8 @@ A real arm must not go limp when its setpoints stop, nor jump when they come bac
   acceleration and decays to zero over ``resume_time`` along a quintic (C2): the
   reference's position, velocity and acceleration stay continuous (:func:`quintic_offset`);
 - **stream**: the setpoint itself;
+- **return to a hold** (:meth:`ReferenceShaper.return_to`): a hold interrupted by a stop
+  of the loop (the arm braked where it had drifted) blends back to its own position;
 - **start from the measured motion** (:meth:`ReferenceShaper.start_from`): a controller
   taking over a moving arm blends from the end effector's measured position and velocity.
 
@@ -156,6 +158,8 @@ class ReferenceShaper:
         self._t0 = 0.0
         self._off0 = None
         self._start = None       # (p, v, 0) given by start_from
+        self._target = None      # (m,) the next hold's position, given by return_to
+        self._hold_blend = None  # (t0, offset (m,), duration) of a hold returning to it
 
     def start_from(self, p, v):
         """
@@ -184,6 +188,37 @@ class ReferenceShaper:
                 f'p, v: expected {m} finite values each, got {list(p)!r}, {list(v)!r}')
         self.reset()
         self._start = tuple(vals) + (0.0,) * m
+
+    def return_to(self, target):
+        """
+        Forget the hold and any blend as :meth:`reset` does, but hold ``target`` next.
+
+        A hold interrupted (the arm braked where it drifted to) resumes at its own position
+        rather than where the arm now is: the next :meth:`hold` blends from the measured
+        position to ``target`` (rest to rest, the blend's usual duration for that offset)
+        and then holds it, so stops do not add up. A :meth:`track` first forgets it.
+
+        Parameters
+        ----------
+        target : sequence of float, (m,)
+            The hold position [m].
+
+        """
+        vals = [float(x) for x in target]
+        if len(vals) != self.m or not all(map(_isfinite, vals)):
+            raise FreejointValueError(f'target: expected {self.m} finite values, got '
+                                      f'{list(target)!r}')
+        self.reset()
+        self._target = tuple(vals)
+
+    def _duration(self, d):
+        """Return a blend's duration [s] for a position offset of norm ``d`` [m]."""
+        duration = self.resume_time
+        if self.max_velocity is not None:
+            duration = max(duration, 1.875 * d / self.max_velocity)
+        if self.max_acceleration is not None:
+            duration = max(duration, math.sqrt(5.7735 * d / self.max_acceleration))
+        return duration
 
     @property
     def hold_position(self):
@@ -221,25 +256,56 @@ class ReferenceShaper:
         p = self.progress
         return 1.0 + (scale - 1.0) * (1.0 - p * p * p * (10.0 - 15.0 * p + 6.0 * p * p))
 
-    def hold(self, p_now):
+    def hold(self, p_now, t=None):
         """
         Return the hold reference; the hold starts (frozen at ``p_now``) if not holding.
+
+        After :meth:`return_to` the hold is at its target instead, reached by a blend from
+        ``p_now`` that starts at ``t``.
 
         Parameters
         ----------
         p_now : tuple of float, (m,)
             Measured end-effector position [m] (used only at the onset of the hold).
+        t : float, optional
+            Time of the tick [s] (only differences are used); needed after
+            :meth:`return_to` (without it the hold starts at ``p_now``).
 
         Returns
         -------
         tuple of float, (3 m,)
-            ``(p, 0, 0)``: position [m], velocity [m/s], acceleration [m/s^2].
+            ``(p, 0, 0)``: position [m], velocity [m/s], acceleration [m/s^2]; while
+            returning to a target, its blend.
 
         """
+        m = self.m
         if self.mode != MODE_HOLD:
             self.mode = MODE_HOLD
             self._start = None
-            self._hold = tuple([float(x) for x in p_now[0:self.m]])
+            target, self._target = self._target, None
+            here = tuple([float(x) for x in p_now[0:m]])
+            if target is None or t is None:
+                self._hold = here
+            else:
+                self._hold = target
+                off = tuple([here[i] - target[i] for i in range(m)])
+                self._hold_blend = (t, off, self._duration(math.hypot(*off)))
+        blend = self._hold_blend
+        if blend is not None:
+            t0, off, duration = blend
+            tau = t - t0 if t is not None else duration
+            if tau < duration:
+                hold = self._hold
+                pos, vel, acc = [], [], []
+                for i in range(m):
+                    d, v, a = quintic_offset(off[i], 0.0, 0.0, duration, tau)
+                    pos.append(hold[i] + d)
+                    vel.append(v)
+                    acc.append(a)
+                ref = tuple(pos + vel + acc)
+                self._last = ref
+                return ref
+            self._hold_blend = None
         ref = self._hold + self._zero3
         self._last = ref
         return ref
@@ -271,6 +337,7 @@ class ReferenceShaper:
         if mode == MODE_STREAM:
             self._last = sp
             return sp, False
+        self._target = self._hold_blend = None
         if mode == MODE_NONE:
             start, self._start = self._start, None
             if start is not None:
@@ -291,13 +358,7 @@ class ReferenceShaper:
             self._off0 = tuple(last[i] - sp[i] for i in range(3 * self.m))
             self._t0 = t
             self.mode = MODE_BLEND
-            d = math.hypot(*self._off0[0:self.m])
-            duration = self.resume_time
-            if self.max_velocity is not None:
-                duration = max(duration, 1.875 * d / self.max_velocity)
-            if self.max_acceleration is not None:
-                duration = max(duration, math.sqrt(5.7735 * d / self.max_acceleration))
-            self.blend_duration = duration
+            self.blend_duration = self._duration(math.hypot(*self._off0[0:self.m]))
         tau = t - self._t0
         duration = self.blend_duration
         if tau >= duration:

@@ -154,6 +154,17 @@ PARAMS = (
           'included) and is held until the next accepted command; 0 = never (the last '
           'command is applied until command_timeout, then zero effort)', (0.0, 3600.0),
           validator=_within(0.0, 3600.0, 'must be in [0, 3600] s (0 = never), got {value}')),
+    Param('brake_timeout_at_rest', 0.01,
+          "real time: the watchdog's wait [s] after a command that found the arm at rest "
+          '(every joint slower than rest_speed): the last command of a held arm drives it '
+          'open loop for nothing, so the brakes come sooner than brake_timeout (at most it); '
+          '0 = brake_timeout', (0.0, 3600.0),
+          validator=_within(0.0, 3600.0, 'must be in [0, 3600] s (0 = brake_timeout), got '
+                            '{value}')),
+    Param('rest_speed', 0.05,
+          'real time: the arm is at rest for the watchdog when every joint (the passive '
+          'ones included) is slower than this [rad/s]', (1e-6, 100.0),
+          validator=_within(1e-6, 100.0, 'must be in [1e-6, 100] rad/s, got {value}')),
     Param('divergence_speed', 1000.0,
           'a joint speed above this [rad/s] (or a non-finite state, or an angle beyond 1e6 '
           'rad) is a diverged plant: the simulator stops integrating, publishes its last '

@@ -38,7 +38,9 @@ Modes (docs/GRAPH.md):
   age, not as a wrong time.  With ``start_braked`` (default) the arm is held at q(0) at
   rest until the first accepted command (brakes engaged; states still published), and
   again after ``~/reset``; once running, no command for ``brake_timeout`` engages the
-  brakes where the arm is (a drive watchdog) until the next accepted command.
+  brakes where the arm is (a drive watchdog) until the next accepted command;
+  ``brake_timeout_at_rest`` after a command that found the arm at rest
+  (``freejoint_sim.watchdog``).
 
 A diverged plant (non-finite, or a joint faster than ``divergence_speed``, or an angle
 beyond ``freejoint_core.guards.MAX_ANGLE``) is not integrated further: the simulator
@@ -72,6 +74,7 @@ from freejoint_sim.failure_injection import Injector, parse_fail_joint
 from freejoint_sim.limits import LimitWatch
 from freejoint_sim.params import SCHEMA
 from freejoint_sim.timing import StepTiming
+from freejoint_sim.watchdog import DriveWatchdog
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
@@ -115,7 +118,8 @@ class SimNode(Node, Lifecycle):
         self._waiting_since = _monotonic()
         self._last_publish = 0.0
         self._reset_pending = False
-        self._latest = None            # real time: (tau, receipt, step answered, accepted)
+        self._latest = None            # real time: (tau, receipt, step answered, accepted,
+        #                                             the watchdog's wait after it)
         self._cmd_timed_out = False
         self._throttle = Throttle(1.0)
         self._dropped = 0
@@ -217,7 +221,8 @@ class SimNode(Node, Lifecycle):
         self._dt = cfg.dt
         self._dt_ns = cfg.dt_ns
         self._timeout = cfg.command_timeout
-        self._brake_timeout = 0.0 if cfg.lockstep else cfg.brake_timeout
+        self._watchdog = DriveWatchdog(0.0 if cfg.lockstep else cfg.brake_timeout,
+                                       cfg.brake_timeout_at_rest, cfg.rest_speed)
         self._every = cfg.publish_every
         self._clock_every = cfg.clock_every
         self._lockstep = cfg.lockstep
@@ -338,7 +343,8 @@ class SimNode(Node, Lifecycle):
             answered = -1
             if self._observer is not None:
                 answered = self._observer.command_received(ns, self._k, now)
-            self._latest = (self._zero if tau is None else tau, now, answered, tau is not None)
+            self._latest = (self._zero if tau is None else tau, now, answered, tau is not None,
+                            self._watchdog.wait_after(self._qd_list))
             if self._cmd_timed_out:
                 self._cmd_timed_out = False
                 self.get_logger().info('commands are back')
@@ -547,9 +553,9 @@ class SimNode(Node, Lifecycle):
                 self._brake_reason = ''
                 self.get_logger().info('brakes released at step %d (t = %.3f s): first '
                                        'command' % (self._k, self._t_ns * 1e-9))
-        elif (latest is not None and self._brake_timeout > 0.0
-              and now - latest[1] > self._brake_timeout and self._diverged is None):
-            self._engage_brakes(now)
+        elif (latest is not None and self._watchdog.expired(now, latest[1], latest[4])
+              and self._diverged is None):
+            self._engage_brakes(now, waited=latest[4])
         for _ in range(due):
             latest = self._latest
             if latest is None:
@@ -568,12 +574,13 @@ class SimNode(Node, Lifecycle):
                     self._observer.command_applied(self._k, latest[2])
             self._advance(tau)
 
-    def _engage_brakes(self, now, asked=None):
+    def _engage_brakes(self, now, asked=None, waited=0.0):
         """
         Stop the arm where it is and hold it until the next accepted command.
 
         ``asked``: the controller's reason on brake_request; None: the drive watchdog (no
-        command for brake_timeout).
+        command for ``waited`` s: brake_timeout, or brake_timeout_at_rest after a command
+        that found the arm at rest).
         """
         self._plant.stop()
         self._take_state()
@@ -581,8 +588,9 @@ class SimNode(Node, Lifecycle):
         self._braked_since = now
         if asked is None:
             self._brake_engagements += 1
-            self._brake_reason = 'no command for %g s' % self._brake_timeout
-            why = 'no command on %s for %g s' % (self._cmd_topic(), self._brake_timeout)
+            rest = ', the arm at rest' if waited < self._watchdog.brake_timeout else ''
+            self._brake_reason = 'no command for %g s%s' % (waited, rest)
+            why = 'no command on %s for %g s%s' % (self._cmd_topic(), waited, rest)
         else:
             self._brakes_asked += 1
             self._brake_reason = 'asked on %s' % BRAKE_REQUEST.name

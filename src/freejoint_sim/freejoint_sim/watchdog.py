@@ -1,0 +1,82 @@
+"""
+The simulated drive's command watchdog (real time; no ROS types).
+
+A drive brakes when its controller falls silent. How long it waits is a trade
+(docs/real-time.md): while the arm moves, a short stall of the controller is best ridden
+through on the last command (braking a moving arm stops it while the task moves on); at
+rest the last command drives the arm open loop for nothing, and a vertical arm held by a
+command computed before the stall (e.g. still ramping up from the brakes) sags for the
+whole wait. So :class:`DriveWatchdog` waits ``brake_timeout`` after a command that found
+the arm moving and ``rest_timeout`` after one that found it at rest: every joint
+(the passive ones included) slower than ``rest_speed``, as a drive's standstill monitor
+judges it.
+"""
+
+import math
+
+from freejoint_core.errors import FreejointValueError
+
+
+class DriveWatchdog:
+    """
+    When no command for too long engages the brakes.
+
+    Parameters
+    ----------
+    brake_timeout : float
+        Wait [s] after a command that found the arm moving; 0 = never brake.
+    rest_timeout : float
+        Wait [s] after a command that found the arm at rest; 0 = ``brake_timeout``.
+    rest_speed : float
+        At rest: every joint speed below this [rad/s], > 0.
+
+    Raises
+    ------
+    FreejointValueError
+        A negative or non-finite wait, a rest speed not > 0 (the argument named).
+
+    """
+
+    def __init__(self, brake_timeout, rest_timeout=0.0, rest_speed=0.05):
+        for name, value in (('brake_timeout', brake_timeout), ('rest_timeout', rest_timeout)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise FreejointValueError(f'{name}: expected a finite wait >= 0 s, got {value!r}')
+        if not (math.isfinite(rest_speed) and rest_speed > 0.0):
+            raise FreejointValueError(f'rest_speed: expected > 0 rad/s, got {rest_speed!r}')
+        self.brake_timeout = float(brake_timeout)
+        self.rest_timeout = (min(float(rest_timeout), self.brake_timeout) if rest_timeout > 0.0
+                             else self.brake_timeout)
+        self.rest_speed = float(rest_speed)
+
+    def wait_after(self, qd):
+        """
+        Return the wait [s] a command taken now starts (0: never brake).
+
+        Parameters
+        ----------
+        qd : sequence of float, (n,)
+            Joint speeds [rad/s] of the arm when the command is taken (every joint).
+
+        """
+        if self.brake_timeout <= 0.0:
+            return 0.0
+        limit = self.rest_speed
+        for v in qd:
+            if not -limit < v < limit:
+                return self.brake_timeout
+        return self.rest_timeout
+
+    @staticmethod
+    def expired(now, receipt, wait):
+        """
+        Return True when the wait after the command received at ``receipt`` is over.
+
+        Parameters
+        ----------
+        now, receipt : float
+            Monotonic times [s].
+        wait : float
+            The command's wait (:meth:`wait_after`); 0 never expires.
+
+        """
+        return wait > 0.0 and now - receipt > wait

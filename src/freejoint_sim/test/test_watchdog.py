@@ -1,0 +1,39 @@
+"""The simulated drive's command watchdog (freejoint_sim.watchdog, issue 21)."""
+from freejoint_core.errors import FreejointValueError
+from freejoint_sim.params import SCHEMA
+from freejoint_sim.watchdog import DriveWatchdog
+import pytest
+
+
+def test_a_command_that_finds_the_arm_at_rest_brakes_after_the_shorter_wait():
+    dog = DriveWatchdog(0.05, 0.01, 0.05)
+    rest = dog.wait_after([0.0, -0.049, 0.049])
+    assert rest == 0.01
+    assert not dog.expired(1.0099, 1.0, rest) and dog.expired(1.0101, 1.0, rest)
+
+
+def test_one_joint_moving_passive_or_not_keeps_the_moving_wait():
+    dog = DriveWatchdog(0.05, 0.01, 0.05)
+    for qd in ([0.05, 0.0, 0.0], [0.0, 0.0, -0.3], [2.0, 1.0, 0.0]):
+        wait = dog.wait_after(qd)
+        assert wait == 0.05, qd
+        assert not dog.expired(1.04, 1.0, wait) and dog.expired(1.051, 1.0, wait)
+
+
+def test_no_watchdog_never_brakes_and_the_rest_wait_is_at_most_the_moving_one():
+    never = DriveWatchdog(0.0, 0.01, 0.05)
+    assert never.wait_after([0.0, 0.0]) == 0.0 and not never.expired(1e6, 0.0, 0.0)
+    assert DriveWatchdog(0.05, 0.0).wait_after([0.0]) == 0.05      # 0: brake_timeout
+    assert DriveWatchdog(0.02, 0.5).wait_after([0.0]) == 0.02      # never above it
+
+
+def test_the_defaults_are_the_schemas_and_bad_values_are_refused_naming_them():
+    d = SCHEMA.defaults()
+    dog = DriveWatchdog(d['brake_timeout'], d['brake_timeout_at_rest'], d['rest_speed'])
+    assert (dog.brake_timeout, dog.rest_timeout, dog.rest_speed) == (0.05, 0.01, 0.05)
+    with pytest.raises(FreejointValueError, match='^rest_timeout: expected a finite wait'):
+        DriveWatchdog(0.05, -1.0)
+    with pytest.raises(FreejointValueError, match='^brake_timeout: expected a finite wait'):
+        DriveWatchdog(float('nan'))
+    with pytest.raises(FreejointValueError, match='^rest_speed: expected > 0 rad/s'):
+        DriveWatchdog(0.05, 0.01, 0.0)
