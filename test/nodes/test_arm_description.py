@@ -75,11 +75,39 @@ def _run(pkg, exe, args):
     return done.returncode, done.stdout + done.stderr
 
 
+def _refused_at_start_up(node, values):
+    """Raise what ``node`` refuses ``values`` with at start-up (its schema, the arm)."""
+    from freejoint_common.arm_description import resolve_arm
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_sim.params import SCHEMA as SIM
+    if node == 'planner':       # the planner node resolves the arm from its values
+        resolve_arm(PLANNER.values(values))
+    else:
+        schema = SIM if node == 'sim' else CONTROLLER
+        schema.config(schema.values(values))
+
+
 @pytest.mark.parametrize('node', sorted(NODES))
 @pytest.mark.parametrize('case, edit, passive, param, reason', REFUSALS,
                          ids=[row[0] for row in REFUSALS])
-def test_an_arm_the_core_cannot_model_ends_the_node_with_one_line_naming_it_and_exit_2(
+def test_an_arm_the_core_cannot_model_is_refused_by_each_node_naming_the_parameter(
         node, case, edit, passive, param, reason, tmp_path):
+    from freejoint_core.errors import FreejointValueError
+    path = tmp_path / ('%s.urdf' % case)
+    path.write_text(_four_link(edit))
+    names = [name.strip() for name in passive.strip('[]').split(',')]
+    with pytest.raises(FreejointValueError,
+                       match=r'^%s: .*%s' % (param, re.escape(reason))):
+        _refused_at_start_up(node, {'description_file': str(path), 'passive_joints': names})
+
+
+@pytest.mark.parametrize('node, row', [('sim', 0), ('controller', 3), ('planner', 5)])
+def test_an_arm_the_core_cannot_model_ends_the_node_with_one_line_naming_it_and_exit_2(
+        node, row, tmp_path):
+    # What only the process shows (one refusal per node; each node's refusal of every
+    # arm: the test above): one FATAL line, no traceback, exit status 2.
+    case, edit, passive, param, reason = REFUSALS[row]
     path = tmp_path / ('%s.urdf' % case)
     path.write_text(_four_link(edit))
     code, out = _run(*NODES[node], ['-p', 'description_file:=%s' % path,

@@ -503,11 +503,11 @@ def test_a_loop_not_ready_at_rest_asks_the_driver_to_brake_once_on_brake_request
     assert procs.stop(proc) == 0
 
 
-def test_diagnostics_say_holding_with_warn_without_setpoints_and_ok_while_tracking(
+def test_the_node_publishes_its_loops_diagnostics_no_state_then_holding_then_silent(
         procs, ros_node, wait):
     import time
-    ok, warn, error = 0, 1, 2
-    proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS, '-p', 'resume_time:=0.05')
+    warn, error = 1, 2
+    proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS)
     diag = Diagnostics(ros_node)
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
@@ -516,8 +516,6 @@ def test_diagnostics_say_holding_with_warn_without_setpoints_and_ok_while_tracki
          'ERROR: no joint_states yet', spin=drv.spin)
     drv.offset_ns = time.time_ns()
     q, qd = Q0, (0.0, 0.0, 0.0)
-    base = RobustController(table1('horizontal').scaled(0.7)).model.fk(q).tolist()
-    rest = (base[0], base[1], 0.0, 0.0, 0.0, 0.0)     # a setpoint where the arm is, at rest
     k = 0
 
     def run_until(found, what, values_of, timeout=30.0):
@@ -543,19 +541,9 @@ def test_diagnostics_say_holding_with_warn_without_setpoints_and_ok_while_tracki
     assert int(values['holds']) >= 1 and values['stale setpoint periods'] == '0', values
     assert float(values['answer rate [Hz]']) > 0.0 and values['latency max [ms]'] != '-'
     assert int(values['status']) & STATUS_HOLDING
-    # Setpoints where the arm is: tracking, OK (after the blend and the first period).
-    level, message, values = run_until(
-        lambda: diag.find(ok, 'tracking'), 'OK: tracking', lambda j: rest)
-    assert values['status'] == '0' and values['law faults'] == '0', values
-    assert values['mode'] == 'realtime' and float(values['answer rate [Hz]']) > 0.0
-    # The stream stops: held again, a stale setpoint period.
-    level, message, values = run_until(
-        lambda: diag.find(warn, 'stale setpoint'), 'WARN: stale setpoint',
-        lambda j: None)
-    # (A stall of this test beyond stale_timeout while it streamed adds a hold and a stale
-    # period - a CI run with a CPU hog beside it counted 2; the exact counting is
-    # test/control/test_loop.py's, in one process.)
-    assert int(values['stale setpoint periods']) >= 1 and int(values['holds']) >= 2, values
+    # Tracking, a stale stream and their counts: the loop's diagnostics in one process
+    # (test/control/test_loop.py::test_diagnostics_say_holding_then_tracking_then_stale_then_
+    # no_state); here, that the node publishes them and its own silence check.
     # No more states: ERROR, zero effort.
     wait(lambda: diag.find(error, 'no joint_states for'), 10.0, 'ERROR: no joint_states',
          spin=drv.spin)
