@@ -333,7 +333,7 @@ def states(loop, ks, q=Q0):
 
 
 def test_a_hold_without_setpoints_stops_at_readiness_max_hold_error_and_resumes_at_its_own_place():
-    loop, logs = make(warm=False)
+    loop, logs = make(warm=False, readiness_max_hold_error=0.003)
     assert states(loop, range(-500, 0)) == [None] * 500      # its good windows, braked
     assert states(loop, [0])[0] is not None                     # ready: holds (no plan)
     assert loop.shaper.hold_position == pytest.approx((0.2, 0.0), abs=1e-5)
@@ -359,8 +359,17 @@ def test_a_hold_without_setpoints_stops_at_readiness_max_hold_error_and_resumes_
     assert loop._readiness.trips == 1
 
 
+def test_by_default_a_hold_stops_at_readiness_max_error():
+    loop, _ = make(warm=False)
+    states(loop, range(-500, 1))
+    q, offset = _sagged(loop, drop=0.02)
+    assert states(loop, [1], q)[0] is not None and loop._readiness.ready     # 4 mm: held
+    q, offset = _sagged(loop, drop=0.06)
+    assert offset > 0.010 and states(loop, [2], q) == [None]                 # 12 mm: stop
+
+
 def test_with_a_setpoint_the_hold_bound_does_not_apply():
-    loop, _ = make()
+    loop, _ = make(readiness_max_hold_error=0.003)
     loop.take_brake_request()
     feed(loop, range(10), 0)
     q, offset = _sagged(loop, drop=0.02)

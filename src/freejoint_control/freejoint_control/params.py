@@ -305,12 +305,12 @@ PARAMS = (
           'the delay and answer-rate bounds, a following-error stop as drives have; 0 = '
           'off. Above every real-time run that met its bound (vertical 5.5 mm)',
           (0.0, 10.0)),
-    Param('readiness_max_hold_error', 0.003,
+    Param('readiness_max_hold_error', 0.0,
           "real time: the following-error stop's bound [m] while the end effector is held "
-          'with no setpoint (none yet, or the stream stale), instead of readiness_max_error: '
-          "a hold's error is its own (about 1 mm as the brakes release), so a slow drift "
-          'stops here; the hold then resumes at its own position, not where the arm was '
-          'braked. 0 = readiness_max_error', (0.0, 10.0)),
+          'with no setpoint (none yet, or the stream stale), instead of readiness_max_error '
+          "(0, the default: readiness_max_error). A vertical hold's own error is about 1 mm, "
+          'so e.g. 0.003 stops a slow drift early; beside CPU hogs it also stopped '
+          'horizontal holds, whose error reached 3 mm (docs/real-time.md)', (0.0, 10.0)),
     Param('readiness_recover_windows', 5,
           'consecutive good windows after which a not-ready loop tracks again (hysteresis)',
           (1, 100000)),
