@@ -6,7 +6,9 @@ The sections "On a full ROS 2 Jazzy install" and "Without ROS installed (ROS 2 f
 after the Jazzy section, as it continues it) and "Bring your own arm" (docs/own-arm.md; its
 ``my_arm.urdf``: a copy of the shipped paper arm's URDF) are read, their ```bash blocks
 split into commands, and each is run in order in a scratch directory (``config/`` linked
-in), under ``. tools/env.sh``:
+in, its ``sim.yaml`` with ``max_steps`` added: a lockstep graph started by hand steps on
+after its circle as fast as it can, docs/hand_run.md, and would spend the suite's CPU for
+the rest of the test; the lines are what is tested), under ``. tools/env.sh``:
 
 - a node's start (``ros2 run <pkg> <exe> ...``, ``fj run ...`` or the bare executable) is
   started in the background and must come up (its parameter services answer); a block
@@ -52,6 +54,8 @@ COVERED = {
 }
 """Line prefix -> the test of what it needs (a rosdep key, the install layout, the bag)."""
 NODE_NICE = 10
+MAX_STEPS = 6000
+"""The scratch ``config/sim.yaml``'s ``max_steps``: a 5-s circle and 1 s (docs/hand_run.md)."""
 """Niceness of the nodes the lines start (what the test measures are the lines)."""
 JAZZY = '## On a full ROS 2 Jazzy install'
 PYPI = '## Without ROS installed (ROS 2 from PyPI)'
@@ -87,8 +91,18 @@ class Runner:
     """Run README lines in a scratch directory under tools/env.sh; keep started nodes."""
 
     def __init__(self, cwd):
+        import yaml
         self.cwd = cwd
-        os.symlink(os.path.join(ROOT, 'config'), os.path.join(cwd, 'config'))
+        config = os.path.join(cwd, 'config')
+        os.mkdir(config)
+        for name in os.listdir(os.path.join(ROOT, 'config')):
+            if name != 'sim.yaml':
+                os.symlink(os.path.join(ROOT, 'config', name), os.path.join(config, name))
+        with open(os.path.join(ROOT, 'config', 'sim.yaml')) as f:
+            sim = yaml.safe_load(f)
+        sim['/**']['ros__parameters']['max_steps'] = MAX_STEPS
+        with open(os.path.join(config, 'sim.yaml'), 'w') as f:
+            yaml.safe_dump(sim, f)
         self.nodes = []
         self.ran = []
 
