@@ -255,3 +255,22 @@ def test_a_failed_joint_on_the_mujoco_plant_moves_as_its_torque_zeroed():
         zeroed.step([tau[0], 0.0 if k >= 20 else tau[1]], DT)
     assert failing.q.tolist() == zeroed.q.tolist()
     assert failing.last_effort == (tau[0], 0.0, 0.0)
+
+
+def test_damping_the_freed_link_in_the_rests_slows_its_revolutions_and_leaves_the_circle():
+    # Vertical, joint 3 fails at 2.5 s: after the circle (5 s) the paper's law holds the end
+    # effector while the freed link revolves about it (its angle q1 + q2 + q3 sweeps
+    # 285 deg in the 12th second). The damping in the rests (a shift of the setpoint of at
+    # most 3 cm, bounded by its filter alone) slows it; the circle is the law's alone.
+    runs = {}
+    for name, opts in (('law', None), ('damped', {'mode': 'rest', 'delta_max': 0.03,
+                                                  'sat': 0.27})):
+        rec, tr = run_failure_case('vertical', 0, [(2, 2.5)], duration=12.0,
+                                   record_trace=True, free_link_damping=opts)
+        t = tr['t']
+        sweep = np.ptp(np.degrees(tr['q'][t >= 11.0].sum(axis=1)))
+        rest_mm = 1e3 * np.linalg.norm(tr['e'][t >= 5.0], axis=1).max()
+        runs[name] = (rec['max_mm'], sweep, rest_mm, rec['diverged_at_s'])
+    assert runs['law'][1] > 250.0 and runs['damped'][1] < 0.7 * runs['law'][1], runs
+    assert runs['damped'][0] == runs['law'][0] < 5.5, runs        # the circle: unchanged
+    assert runs['damped'][2] < 5.5 and runs['damped'][3] is None, runs

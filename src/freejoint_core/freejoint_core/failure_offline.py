@@ -46,7 +46,7 @@ from .control import Gains, RobustController
 from .errors import FreejointValueError
 from .failure import (DEFAULT_K_O, DEFAULT_MARGIN, DEFAULT_TICKS, least_harm_torque,
                       Reconfigurer, TRACKING)
-from .internal import NullSpace
+from .internal import FreeLinkModulation, NullSpace
 from .offline import DEFAULT_DT, initial_state
 from .plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
 from .trajectory import CircleQuintic
@@ -92,7 +92,7 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
                      nullspace_kd=DEFAULT_NULLSPACE_KD, k_o=DEFAULT_K_O,
                      margin=DEFAULT_MARGIN, ticks=DEFAULT_TICKS, detect=True, assess=None,
                      diverge_m=0.5, diverge_qd=1000.0, record_trace=False,
-                     internal_check=True):
+                     internal_check=True, free_link_damping=None):
     """
     Run one failure scenario and return its record (and trace).
 
@@ -129,6 +129,11 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
     internal_check : bool
         False: the verdict checks only r and ``det`` at the pose, not the internal motion
         (to see what the law does with a passive set the check would refuse).
+    free_link_damping : dict, optional
+        ``freejoint_core.internal.FreeLinkModulation`` options: once a failure leaves the
+        last joint alone free (r = m), the setpoint passes through that link's damping
+        (from the switch on, its shift from 0). None (default): the paper's law alone.
+        Not in the controller yet (docs/failures.md, "Where the vertical misses were").
 
     Returns
     -------
@@ -167,6 +172,7 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
     hold_q = None
     diverged = None
     tau_last = [0.0] * n
+    modulation = None
     t_first = fail[0][1] if fail else math.inf
     err = np.full(n_ticks, np.nan)
     peak = [0.0] * n
@@ -203,13 +209,20 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
                 if sw.nominal.r <= 2:
                     ctrl.nullspace = None
                 ctrl.set_nominal(sw.nominal)
+                last_free = sw.nominal.passive == (sw.nominal.n - 1,)
+                modulation = FreeLinkModulation(sw.nominal, **free_link_damping) \
+                    if free_link_damping is not None and last_free else None
             elif verdict_at is None:
                 verdict_at = round(t, 9)
                 hold_q = q.copy()
         full = [0.0] * n
         if rec.verdict == TRACKING:
             try:
-                out = ctrl.step(q, qd, (px, py), (vx, vy), (ax, ay), dt)
+                if modulation is None:
+                    out = ctrl.step(q, qd, (px, py), (vx, vy), (ax, ay), dt)
+                else:
+                    out = ctrl.step(q, qd, *modulation.step(q, qd, (px, py), (vx, vy),
+                                                            (ax, ay), dt), dt)
             except (ArithmeticError, ValueError, np.linalg.LinAlgError):
                 diverged = t
                 break
