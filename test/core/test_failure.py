@@ -274,3 +274,6 @@ def test_damping_the_freed_link_in_the_rests_slows_its_revolutions_and_leaves_th
     assert runs['law'][1] > 250.0 and runs['damped'][1] < 0.7 * runs['law'][1], runs
     assert runs['damped'][0] == runs['law'][0] < 5.5, runs        # the circle: unchanged
     assert runs['damped'][2] < 5.5 and runs['damped'][3] is None, runs
+    with pytest.raises(FreejointValueError, match=r'^free_link_damping: .*unexpected keyword'):
+        run_failure_case('vertical', 0, [(2, 2.5)], duration=0.01,
+                         free_link_damping={'delta': 0.03})

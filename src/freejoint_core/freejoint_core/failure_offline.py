@@ -154,6 +154,12 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
     if actuated == 'all':
         real = dataclasses.replace(real, passive=())
     nominal = real.scaled(nominal_scale)
+    if free_link_damping is not None:
+        try:        # checked now, on the arm with its last joint free, not at the failure
+            FreeLinkModulation(dataclasses.replace(nominal, passive=(nominal.n - 1,)),
+                               **dict(free_link_damping))
+        except (TypeError, ValueError) as exc:
+            raise FreejointValueError(f'free_link_damping: {exc}') from None
     ns = NullSpace(kd=nullspace_kd) if actuated == 'all' else None
     ctrl = RobustController(nominal, Gains(), nullspace=ns)
     plant = Plant(real, dt_sub, dist_bound=dist_bound, seed=seed, q0=q0)
