@@ -54,9 +54,9 @@ COVERED = {
 }
 """Line prefix -> the test of what it needs (a rosdep key, the install layout, the bag)."""
 NODE_NICE = 10
+"""Niceness of the nodes the lines start (what the test measures are the lines)."""
 MAX_STEPS = 6000
 """The scratch ``config/sim.yaml``'s ``max_steps``: a 5-s circle and 1 s (docs/hand_run.md)."""
-"""Niceness of the nodes the lines start (what the test measures are the lines)."""
 JAZZY = '## On a full ROS 2 Jazzy install'
 PYPI = '## Without ROS installed (ROS 2 from PyPI)'
 OWN_ARM = '## Bring your own arm'
