@@ -159,7 +159,7 @@ class ReferenceShaper:
         self._off0 = None
         self._start = None       # (p, v, 0) given by start_from
         self._target = None      # (m,) the next hold's position, given by return_to
-        self._hold_blend = None  # (t0, offset (m,), duration) of a hold returning to it
+        self._hold_blend = None  # (t0, offset (3 m,), duration) of a hold returning to it
 
     def start_from(self, p, v):
         """
@@ -289,20 +289,13 @@ class ReferenceShaper:
             else:
                 self._hold = target
                 off = tuple([here[i] - target[i] for i in range(m)])
-                self._hold_blend = (t, off, self._duration(math.hypot(*off)))
+                self._hold_blend = (t, off + self._zero3, self._duration(math.hypot(*off)))
         blend = self._hold_blend
         if blend is not None:
             t0, off, duration = blend
             tau = t - t0 if t is not None else duration
             if tau < duration:
-                hold = self._hold
-                pos, vel, acc = [], [], []
-                for i in range(m):
-                    d, v, a = quintic_offset(off[i], 0.0, 0.0, duration, tau)
-                    pos.append(hold[i] + d)
-                    vel.append(v)
-                    acc.append(a)
-                ref = tuple(pos + vel + acc)
+                ref = _offset_reference(self._hold + self._zero3, off, duration, tau)
                 self._last = ref
                 return ref
             self._hold_blend = None
@@ -373,15 +366,37 @@ class ReferenceShaper:
             dy, vy, ay = quintic_offset(o[1], o[3], o[5], duration, tau)
             ref = (sp[0] + dx, sp[1] + dy, sp[2] + vx, sp[3] + vy, sp[4] + ax, sp[5] + ay)
         else:
-            pos, vel, acc = [], [], []
-            for i in range(m):
-                d, v, a = quintic_offset(o[i], o[m + i], o[2 * m + i], duration, tau)
-                pos.append(sp[i] + d)
-                vel.append(sp[m + i] + v)
-                acc.append(sp[2 * m + i] + a)
-            ref = tuple(pos + vel + acc)
+            ref = _offset_reference(sp, o, duration, tau)
         self._last = ref
         return ref, True
+
+
+def _offset_reference(base, off0, duration, t):
+    """
+    Return ``base`` plus the quintic offset (:func:`quintic_offset`) per task axis at ``t``.
+
+    Parameters
+    ----------
+    base : tuple of float, (3 m,)
+        Reference the offset decays to: position, velocity, acceleration.
+    off0 : tuple of float, (3 m,)
+        The offset's start, laid out as ``base``.
+    duration, t : float
+        The blend's duration and the time into it [s].
+
+    Returns
+    -------
+    tuple of float, (3 m,)
+
+    """
+    m = len(base) // 3
+    pos, vel, acc = [], [], []
+    for i in range(m):
+        d, v, a = quintic_offset(off0[i], off0[m + i], off0[2 * m + i], duration, t)
+        pos.append(base[i] + d)
+        vel.append(base[m + i] + v)
+        acc.append(base[2 * m + i] + a)
+    return tuple(pos + vel + acc)
 
 
 def extrapolate(sp, h):
