@@ -142,6 +142,20 @@ def _arm_params(tmp_path, name):
     return str(path), str(urdf)
 
 
+def _runner(urdf, name, n):
+    """Return (arm, record, trace) of the offline runner on the arm's circle, ``n`` ticks."""
+    from freejoint_core.internal import hanging_pose
+    from freejoint_core.trajectory import CircleQuintic
+    from freejoint_core.urdf import load_urdf
+    from freejoint_core.urdf_offline import run_arm
+    spec = URDF_ARMS[name]
+    arm = load_urdf(urdf, [spec['passive']], spec['gravity'], spec['tip'])
+    circle = CircleQuintic(centre=spec['centre'], radius=spec['radius'])
+    q0 = hanging_pose(arm.params, (spec['centre'][0] + spec['radius'], spec['centre'][1]))
+    record, trace = run_arm(arm, circle, q0, n_ticks=n)
+    return arm, record, trace
+
+
 def _only(path, node):
     """Return ``--params-file`` arguments of the node's entries of a shared file."""
     import yaml
@@ -162,10 +176,6 @@ def _only(path, node):
 @pytest.mark.parametrize('name', sorted(URDF_ARMS))
 def test_urdf_arm_in_its_own_frames_tracks_a_circle_in_lockstep_as_offline(
         procs, ros_node, wait, tmp_path, name):
-    from freejoint_core.internal import hanging_pose
-    from freejoint_core.trajectory import CircleQuintic
-    from freejoint_core.urdf import load_urdf
-    from freejoint_core.urdf_offline import run_arm
     spec = URDF_ARMS[name]
     params, urdf = _arm_params(tmp_path, name)
     run = graph.Run(procs, ros_node, wait)
@@ -180,15 +190,12 @@ def test_urdf_arm_in_its_own_frames_tracks_a_circle_in_lockstep_as_offline(
     n = 1500   # graph = runner per tick; the runner's whole circle: the test below
     run.ticks(n, timeout=500.0)
     assert run.stop() == {'sim': 0, 'controller': 0, 'planner': 0}
-    arm = load_urdf(urdf, [spec['passive']], spec['gravity'], spec['tip'])
-    names = arm.joint_names
     arrays = arrays_from_messages(run.collector.messages('controller_state'),
                                   run.collector.messages('joint_states'), spec['passive'],
                                   max_ticks=n)
     assert len(arrays['t']) == n, {t: len(v) for t, v in run.collector.raw.items()}
-    circle = CircleQuintic(centre=spec['centre'], radius=spec['radius'])
-    q0 = hanging_pose(arm.params, (spec['centre'][0] + spec['radius'], spec['centre'][1]))
-    record, trace = run_arm(arm, circle, q0, n_ticks=n)
+    arm, record, trace = _runner(urdf, name, n)
+    names = arm.joint_names
     assert record['diverged_at_s'] is None
     for key in ('p', 'p_d', 'tau', 'theta', 'det'):
         assert np.max(np.abs(arrays[key] - trace[key])) <= 1e-9, key
@@ -209,16 +216,8 @@ def test_urdf_arm_in_its_own_frames_tracks_its_whole_circle_offline_within_the_b
         tmp_path, name):
     # What the graph above runs for 1.5 s (graph = this runner per tick), over the whole
     # 5-s circle, in one process.
-    from freejoint_core.internal import hanging_pose
-    from freejoint_core.trajectory import CircleQuintic
-    from freejoint_core.urdf import load_urdf
-    from freejoint_core.urdf_offline import run_arm
-    spec = URDF_ARMS[name]
     _, urdf = _arm_params(tmp_path, name)
-    arm = load_urdf(urdf, [spec['passive']], spec['gravity'], spec['tip'])
-    circle = CircleQuintic(centre=spec['centre'], radius=spec['radius'])
-    q0 = hanging_pose(arm.params, (spec['centre'][0] + spec['radius'], spec['centre'][1]))
-    record, trace = run_arm(arm, circle, q0, n_ticks=5000)
+    _, record, trace = _runner(urdf, name, 5000)
     assert record['diverged_at_s'] is None and len(trace['p']) == 5000
     err_mm = 1e3 * np.hypot(*(trace['p'] - trace['p_d']).T)
     assert 1.0 < err_mm.max() <= URDF_ARM_BOUND_MM, err_mm.max()
