@@ -282,6 +282,54 @@ def test_without_brake_requests_or_with_the_hold_action_nothing_is_asked(given):
     assert loop.take_brake_request() is None and loop.brake_requests == 0
 
 
+def test_a_resting_setpoint_asks_the_driver_for_the_short_watchdog_a_moving_one_for_its_own():
+    loop, _ = make()
+    # Not ready (the warm-up, braked): nothing sent, nothing asked.
+    assert loop.take_drive_wait() is None
+    assert feed(loop, [0], 0)[0] is not None                  # ready, holding (0.2, 0)
+    assert loop.take_drive_wait() == loop.config.hold_brake_timeout == 0.01
+    feed(loop, range(1, 50), 0)
+    assert loop.take_drive_wait() is None                     # sent once, on the change
+    feed(loop, [50], 0, setpoint=moving)
+    assert loop.take_drive_wait() == 0.0                      # moving: the driver's own
+    feed(loop, range(51, 100), 0, setpoint=moving)
+    assert loop.take_drive_wait() is None
+    feed(loop, [100], 0, target=(0.2005, 0.0))                # at rest again
+    assert loop.take_drive_wait() == 0.01
+    feed(loop, range(101, 150), 0, setpoint=moving)
+    assert loop.take_drive_wait() == 0.0
+    # The moving stream stops: carried forward for carry_forward_time (20 ms), then held.
+    states(loop, range(150, 170))
+    assert loop.take_drive_wait() is None
+    states(loop, range(170, 175))
+    assert loop.take_drive_wait() == 0.01
+
+
+def test_no_setpoint_at_all_is_a_hold_and_a_changed_hold_brake_timeout_is_sent_next_tick():
+    loop, _ = make(warm=False)
+    states(loop, range(-500, 1))                               # ready at 0, no setpoint
+    assert loop.take_drive_wait() == 0.01
+    old = loop.config
+    loop.apply(old, SCHEMA.config(dict(old.values, hold_brake_timeout=0.02)))
+    assert loop.take_drive_wait() is None                     # taken at the next tick
+    states(loop, [1])
+    assert loop.take_drive_wait() == 0.02
+
+
+def test_hold_brake_timeout_0_asks_for_no_shorter_wait_once_and_lockstep_never_asks():
+    loop, _ = make(hold_brake_timeout=0.0)
+    feed(loop, [0], 0)
+    assert loop.take_drive_wait() == 0.0        # clears a request a previous controller left
+    feed(loop, range(1, 20), 0)
+    feed(loop, range(20, 40), 0, setpoint=moving)
+    assert loop.take_drive_wait() is None
+    lockstep = ControlLoop(SCHEMA.config(dict(FILE, case='vertical')), lambda *a: None)
+    for k in range(20):
+        lockstep.on_setpoint(k * DT_NS, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, k * 1e-3)
+        assert lockstep.on_state(k * DT_NS, NAMES, list(Q0), list(QD0), 0, k * 1e-3)
+    assert lockstep.take_drive_wait() is None and lockstep.drive_wait is None
+
+
 def _sagged(loop, drop=0.06):
     """Return the state's joints with joint 1 turned by -drop, and its end effector's offset."""
     q = (Q0[0] - drop, Q0[1], Q0[2])

@@ -506,9 +506,13 @@ def test_a_loop_not_ready_at_rest_asks_the_driver_to_brake_once_on_brake_request
 def test_the_node_publishes_its_loops_diagnostics_no_state_then_holding_then_silent(
         procs, ros_node, wait):
     import time
+    from freejoint_common.contract import BRAKE_TIMEOUT_REQUEST
     warn, error = 1, 2
     proc = _start(procs, '-p', 'lockstep:=false', *OLD_STAMPS)
     diag = Diagnostics(ros_node)
+    asked = []     # holding (no setpoint): the driver asked for the short watchdog, once
+    ros_node.create_subscription(BRAKE_TIMEOUT_REQUEST.msg_type, BRAKE_TIMEOUT_REQUEST.name,
+                                 lambda msg: asked.append(msg.data), BRAKE_TIMEOUT_REQUEST.qos)
     drv = Driver(ros_node, wait)
     drv.connect(proc, procs)
     # No state yet: the arm is not controlled.
@@ -541,6 +545,8 @@ def test_the_node_publishes_its_loops_diagnostics_no_state_then_holding_then_sil
     assert int(values['holds']) >= 1 and values['stale setpoint periods'] == '0', values
     assert float(values['answer rate [Hz]']) > 0.0 and values['latency max [ms]'] != '-'
     assert int(values['status']) & STATUS_HOLDING
+    wait(lambda: asked, 5.0, 'the brake_timeout_request', spin=drv.spin)
+    assert asked == [0.01]
     # Tracking, a stale stream and their counts: the loop's diagnostics in one process
     # (test/control/test_loop.py::test_diagnostics_say_holding_then_tracking_then_stale_then_
     # no_state); here, that the node publishes them and its own silence check.

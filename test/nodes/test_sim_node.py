@@ -594,6 +594,32 @@ def test_realtime_a_brake_request_stops_the_arm_at_once_without_the_watchdog_unt
     assert re.search(r'[1-9]\d* brake engagements \([1-9]\d* asked\)', procs.log(proc))
 
 
+def test_realtime_the_controllers_shorter_watchdog_request_brakes_sooner_and_a_bad_one_is_named(
+        procs, ros_node, wait):
+    from freejoint_common.contract import BRAKE_TIMEOUT_REQUEST
+    # The drive's own waits 5 s: an engagement within them is the request's.
+    proc = _realtime(procs, '-p', 'case:=vertical', '-p', 'publish_rate:=100.0',
+                     '-p', 'brake_timeout:=5.0', '-p', 'brake_timeout_at_rest:=5.0')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    ask = ros_node.create_publisher(BRAKE_TIMEOUT_REQUEST.msg_type, BRAKE_TIMEOUT_REQUEST.name,
+                                    BRAKE_TIMEOUT_REQUEST.qos)
+    ask.publish(BRAKE_TIMEOUT_REQUEST.msg_type(data=0.02))     # latched: no matching wait
+    wait(lambda: 'the controller asks for the brakes after 0.02 s without a command' in
+         procs.log(proc), 15.0, 'the request taken', spin=ctl.spin)
+    ask.publish(BRAKE_TIMEOUT_REQUEST.msg_type(data=float('nan')))
+    wait(lambda: 'brake_timeout_request: expected a finite wait >= 0 s (0: none), got nan: '
+         'ignored, the last good request (0.02 s) kept' in procs.log(proc), 15.0,
+         'the bad request named', spin=ctl.spin)
+    ctl.release(initial_state(table1('vertical')).tolist())    # then silence: it falls
+    wait(lambda: 'no command on effort_controller/commands for 0.02 s, as the controller '
+         'asked while its setpoint rests (brake_timeout_request): brakes engaged at step'
+         in procs.log(proc).replace('/effort_controller', 'effort_controller'), 15.0,
+         'the brakes after the requested wait', spin=ctl.spin)
+    wait(ctl.held_still, 10.0, '0.1 s of braked states', spin=ctl.spin)
+    assert procs.stop(proc) == 0
+
+
 def test_realtime_without_start_braked_the_vertical_arm_falls_from_the_first_step(
         procs, ros_node, wait):
     proc = _realtime(procs, '-p', 'case:=vertical', '-p', 'publish_rate:=100.0',

@@ -33,7 +33,7 @@ from nav_msgs.msg import OccupancyGrid
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, String
+from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
@@ -176,6 +176,13 @@ BRAKE_REQUEST = Topic('brake_request', String, profile(10))
 volatile (a request is for the arm now, never for a driver started later), depth 10. The
 driver releases them at its next accepted command, as after its command watchdog
 (the simulator's ``brake_timeout``), which stays the fallback of a driver without it."""
+BRAKE_TIMEOUT_REQUEST = Topic('brake_timeout_request', Float64, profile(1, latched=True))
+"""Controller -> driver (real time): from now on, brake after ``data`` s without a command
+when that is shorter than the driver's own wait (``data`` 0: no request, the driver's own).
+The controller asks for its ``hold_brake_timeout`` while its setpoint rests (a held arm
+gains nothing from riding a stall on its last command) and 0 while it moves; sent when that
+changes. Reliable, transient local, depth 1 (a driver started later learns the current
+request). A driver without it keeps its own watchdog."""
 
 # -- stamps ---------------------------------------------------------------------------------
 NS_PER_S = 1_000_000_000

@@ -13,7 +13,8 @@ with ros2's ``qos_overrides.<topic>.<publisher|subscription>.<policy>`` paramete
 subscribed to joint_states until SIGUSR1, then active from the arm's measured motion.
 ``joint_failures`` not ``off``: notices on ``joint_failures`` in, the failure monitor's
 detections out there (docs/failures.md). A readiness stop while the setpoint rests asks
-the driver to brake on ``brake_request`` (std_msgs/String: why).
+the driver to brake on ``brake_request`` (std_msgs/String: why); a resting setpoint, for
+a shorter drive watchdog on ``brake_timeout_request`` (real time).
 
 """
 
@@ -21,8 +22,8 @@ import signal
 import time
 
 from freejoint_common.arm_description import resolve_arm
-from freejoint_common.contract import BRAKE_REQUEST, COMMANDS, CONTROLLER_STATE
-from freejoint_common.contract import JOINT_FAILURES, JOINT_STATES
+from freejoint_common.contract import BRAKE_REQUEST, BRAKE_TIMEOUT_REQUEST, COMMANDS
+from freejoint_common.contract import CONTROLLER_STATE, JOINT_FAILURES, JOINT_STATES
 from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_label
 from freejoint_common.contract import STANDBY_SETPOINT_QOS, to_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
@@ -95,6 +96,8 @@ class ControllerNode(Node, Lifecycle):
                                                 qos_overriding_options=QOS_OVERRIDES)
         self._pub_brake = self.create_publisher(BRAKE_REQUEST.msg_type, BRAKE_REQUEST.name,
                                                 BRAKE_REQUEST.qos)
+        self._pub_wait = None if cfg.lockstep else self.create_publisher(
+            BRAKE_TIMEOUT_REQUEST.msg_type, BRAKE_TIMEOUT_REQUEST.name, BRAKE_TIMEOUT_REQUEST.qos)
         self._sp_sub = self.create_subscription(
             SETPOINT.msg_type, SETPOINT.name, self._on_setpoint,
             overridable(STANDBY_SETPOINT_QOS if cfg.standby else SETPOINT.qos),
@@ -220,6 +223,8 @@ class ControllerNode(Node, Lifecycle):
                             msg.position, msg.velocity,
                             0 if self._lockstep else self._now_ns(), _monotonic(),
                             msg.effort)
+        if loop.drive_wait_request is not None and self._pub_wait is not None:
+            self._pub_wait.publish(BRAKE_TIMEOUT_REQUEST.msg_type(data=loop.take_drive_wait()))
         if res is not None:
             self._publish(res)
         elif loop.brake_request is not None:    # the guard stopped the loop at rest

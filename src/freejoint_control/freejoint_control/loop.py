@@ -193,6 +193,8 @@ class ControlLoop:
         self._brake_asked = False       # asked during this not-ready spell
         self._kept_hold = None          # the hold's position when the guard stopped it
         self.brake_requests = 0
+        self.drive_wait = None          # the brake_timeout_request sent last [s] (None: none)
+        self.drive_wait_request = None  # the one to send now (the node sends), or None
         self._install(cfg)
         self.result = Result(m)
         self.result.law_state_names = tuple(self.law.state_names)
@@ -258,6 +260,7 @@ class ControlLoop:
         self._sp_bounds = (cfg.reach, cfg.setpoint_max_velocity, cfg.setpoint_max_acceleration)
         self._state_bounds = (cfg.position_lower, cfg.position_upper, cfg.velocity_limit)
         self._offsets = cfg.joint_offsets
+        self._hold_wait = cfg.hold_brake_timeout
         if cfg.delay_compensation == 'predict':
             if self._predictor is None or self._predictor.params != cfg.nominal:
                 self._predictor = StatePredictor(cfg.nominal, cfg.dt)
@@ -522,13 +525,36 @@ class ControlLoop:
             self.pending = None
             return self._tick(ns, q, qd, ns, sp, now_ns)
         if guard is not None and not guard.ready:
+            self._ask_drive_wait(True)
             return self._readiness_hold(ns, q, qd, now_ns, guard)
         found = self._realtime_setpoint(ns)
         if found is None:
+            self._ask_drive_wait(True)
             return self._no_setpoint(ns, q, qd, now_ns)
-        if ns - found[0] > self._carry_ns and self.hold_on_stale:
-            return self._no_setpoint(ns, q, qd, now_ns, (ns - found[0]) * 1e-9)
+        if ns - found[0] > self._carry_ns:
+            self._ask_drive_wait(True)
+            if self.hold_on_stale:
+                return self._no_setpoint(ns, q, qd, now_ns, (ns - found[0]) * 1e-9)
+        else:
+            self._ask_drive_wait(not any(found[1][self.task_dim:]))
         return self._tick(ns, q, qd, found[0], found[1], now_ns)
+
+    def _ask_drive_wait(self, rests):
+        """
+        Note the driver's wait to ask for (real time): ``hold_brake_timeout`` at rest, else 0.
+
+        ``rests``: this tick's setpoint rests (none, stale, or zero velocity and
+        acceleration). Sets ``drive_wait_request`` when it differs from the one sent.
+        """
+        wait = self._hold_wait if rests else 0.0
+        if wait != self.drive_wait:
+            self.drive_wait = self.drive_wait_request = wait
+
+    def take_drive_wait(self):
+        """Return the driver's wait to send now [s] (brake_timeout_request), once, or None."""
+        wait = self.drive_wait_request
+        self.drive_wait_request = None
+        return wait
 
     # -- readiness guard (real time) ---------------------------------------------------
     def _readiness_changed(self, change):

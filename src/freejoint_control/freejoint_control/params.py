@@ -285,6 +285,15 @@ PARAMS = (
           'driver to brake now (brake_request) instead of leaving it to its command '
           "watchdog, which first applies the last command open loop (the simulator's "
           'brake_timeout); moving, only the watchdog brakes (short stalls ridden through)'),
+    Param('hold_brake_timeout', 0.01,
+          'real time: while the setpoint rests (no plan, a stale stream, or the newest '
+          'setpoint with zero velocity and acceleration), ask the driver on '
+          'brake_timeout_request to brake after this long [s] without a command when that '
+          "is shorter than its own watchdog (the simulator's brake_timeout, 0.05 s); "
+          'while the setpoint moves, ask for no shorter wait (short stalls ridden through '
+          'on the last command). A held arm, its free link swinging included, gains '
+          'nothing from a stall ridden open loop (docs/real-time.md); 0 = never ask',
+          (0.0, 10.0)),
     Param('readiness_max_delay', 0.0,
           'tolerated mean effective delay [s] (state age when taken, in whole control '
           'periods, plus the one period to the next step); 0 = the delay margin measured '

@@ -39,8 +39,8 @@ Modes (docs/GRAPH.md):
   rest until the first accepted command (brakes engaged; states still published), and
   again after ``~/reset``; once running, no command for ``brake_timeout`` engages the
   brakes where the arm is (a drive watchdog) until the next accepted command;
-  ``brake_timeout_at_rest`` after a command that found the arm at rest
-  (``freejoint_sim.watchdog``).
+  ``brake_timeout_at_rest`` after a command that found the arm at rest, or the
+  controller's ``brake_timeout_request`` when shorter (``freejoint_sim.watchdog``).
 
 A diverged plant (non-finite, or a joint faster than ``divergence_speed``, or an angle
 beyond ``freejoint_core.guards.MAX_ANGLE``) is not integrated further: the simulator
@@ -59,7 +59,8 @@ import threading
 import time
 
 from builtin_interfaces.msg import Time
-from freejoint_common.contract import BRAKE_REQUEST, CLOCK, COMMANDS, EE_POSITION
+from freejoint_common.contract import BRAKE_REQUEST, BRAKE_TIMEOUT_REQUEST, CLOCK, COMMANDS
+from freejoint_common.contract import EE_POSITION
 from freejoint_common.contract import FAIL_JOINT, JOINT_FAILURES, JOINT_STATES, label_stamp
 from freejoint_common.contract import RESET, ROBOT_DESCRIPTION
 from freejoint_common.contract import stamp_from_ns
@@ -119,7 +120,8 @@ class SimNode(Node, Lifecycle):
         self._last_publish = 0.0
         self._reset_pending = False
         self._latest = None            # real time: (tau, receipt, step answered, accepted,
-        #                                             the watchdog's wait after it)
+        #                                             the watchdog's wait after it, and why)
+        self._requested_wait = 0.0     # real time: the controller's brake_timeout_request
         self._cmd_timed_out = False
         self._throttle = Throttle(1.0)
         self._dropped = 0
@@ -166,6 +168,8 @@ class SimNode(Node, Lifecycle):
         if not cfg.lockstep:    # a drive that brakes when told (the watchdog stays)
             self.create_subscription(BRAKE_REQUEST.msg_type, BRAKE_REQUEST.name,
                                      self._on_brake_request, BRAKE_REQUEST.qos)
+            self.create_subscription(BRAKE_TIMEOUT_REQUEST.msg_type, BRAKE_TIMEOUT_REQUEST.name,
+                                     self._on_brake_timeout_request, BRAKE_TIMEOUT_REQUEST.qos)
         # Joint failures (issue 23): ~/fail_joint, the notices a driver would publish.
         self.create_service(FAIL_JOINT.srv_type, FAIL_JOINT.name, self._on_fail_joint)
         self._pub_failures = (self.create_publisher(JOINT_FAILURES.msg_type,
@@ -344,7 +348,7 @@ class SimNode(Node, Lifecycle):
             if self._observer is not None:
                 answered = self._observer.command_received(ns, self._k, now)
             self._latest = (self._zero if tau is None else tau, now, answered, tau is not None,
-                            self._watchdog.wait_after(self._qd_list))
+                            *self._watchdog.judge(self._qd_list, self._requested_wait))
             if self._cmd_timed_out:
                 self._cmd_timed_out = False
                 self.get_logger().info('commands are back')
@@ -555,7 +559,7 @@ class SimNode(Node, Lifecycle):
                                        'command' % (self._k, self._t_ns * 1e-9))
         elif (latest is not None and self._watchdog.expired(now, latest[1], latest[4])
               and self._diverged is None):
-            self._engage_brakes(now, waited=latest[4])
+            self._engage_brakes(now, waited=latest[4], why=latest[5])
         for _ in range(due):
             latest = self._latest
             if latest is None:
@@ -574,13 +578,14 @@ class SimNode(Node, Lifecycle):
                     self._observer.command_applied(self._k, latest[2])
             self._advance(tau)
 
-    def _engage_brakes(self, now, asked=None, waited=0.0):
+    def _engage_brakes(self, now, asked=None, waited=0.0, why='moving'):
         """
         Stop the arm where it is and hold it until the next accepted command.
 
         ``asked``: the controller's reason on brake_request; None: the drive watchdog (no
-        command for ``waited`` s: brake_timeout, or brake_timeout_at_rest after a command
-        that found the arm at rest).
+        command for ``waited`` s: brake_timeout, brake_timeout_at_rest after a command
+        that found the arm at rest, or the controller's brake_timeout_request: ``why`` of
+        ``DriveWatchdog.judge``).
         """
         self._plant.stop()
         self._take_state()
@@ -588,7 +593,9 @@ class SimNode(Node, Lifecycle):
         self._braked_since = now
         if asked is None:
             self._brake_engagements += 1
-            rest = ', the arm at rest' if waited < self._watchdog.brake_timeout else ''
+            rest = {'at rest': ', the arm at rest',
+                    'asked': ', as the controller asked while its setpoint rests (%s)'
+                    % BRAKE_TIMEOUT_REQUEST.name}.get(why, '')
             self._brake_reason = 'no command for %g s%s' % (waited, rest)
             why = 'no command on %s for %g s%s' % (self._cmd_topic(), waited, rest)
         else:
@@ -599,6 +606,24 @@ class SimNode(Node, Lifecycle):
             '%s: brakes engaged at step %d (t = %.3f s), the arm is held where it is until '
             'the next command' % (why, self._k, self._t_ns * 1e-9))
         self._publish_diagnostics(update=False)
+
+    def _on_brake_timeout_request(self, msg):
+        """brake_timeout_request: the wait the commands taken from now on may shorten to."""
+        try:
+            wait = DriveWatchdog.check_request(msg.data)
+        except FreejointValueError as exc:
+            self._throttle(self.get_logger().error, 'brake_timeout_request',
+                           '%s: ignored, the last good request (%g s) kept' % (
+                               exc, self._requested_wait))
+            return
+        if wait != self._requested_wait:
+            self._requested_wait = wait
+            self.get_logger().info(
+                'the controller asks for the brakes after %g s without a command while its '
+                'setpoint rests (%s); the drive waits the shorter of it and its own' % (
+                    wait, BRAKE_TIMEOUT_REQUEST.name) if wait > 0.0 else
+                "the controller asks for no shorter wait (%s): the drive's own watchdog"
+                % BRAKE_TIMEOUT_REQUEST.name)
 
     def _on_brake_request(self, msg):
         """brake_request: engage the brakes at the next step (the stepping thread does)."""

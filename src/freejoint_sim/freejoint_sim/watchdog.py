@@ -10,6 +10,12 @@ whole wait. So :class:`DriveWatchdog` waits ``brake_timeout`` after a command th
 the arm moving and ``rest_timeout`` after one that found it at rest: every joint
 (the passive ones included) slower than ``rest_speed``, as a drive's standstill monitor
 judges it.
+
+The controller knows more than the drive: whether its setpoint rests (no task moving). It
+may ask for a shorter wait (the contract's ``brake_timeout_request``): a held arm, the free
+link swinging under it included, gains nothing from a stall ridden on its last command.
+:meth:`DriveWatchdog.judge` takes that request; it can only shorten the wait, never turn
+a disabled watchdog on or lengthen it.
 """
 
 import math
@@ -48,7 +54,7 @@ class DriveWatchdog:
                              else self.brake_timeout)
         self.rest_speed = float(rest_speed)
 
-    def wait_after(self, qd):
+    def wait_after(self, qd, requested=0.0):
         """
         Return the wait [s] a command taken now starts (0: never brake).
 
@@ -56,15 +62,63 @@ class DriveWatchdog:
         ----------
         qd : sequence of float, (n,)
             Joint speeds [rad/s] of the arm when the command is taken (every joint).
+        requested : float
+            The controller's requested wait [s] (:meth:`judge`); 0: none.
+
+        """
+        return self.judge(qd, requested)[0]
+
+    def judge(self, qd, requested=0.0):
+        """
+        Return ``(wait, why)`` for a command taken now.
+
+        Parameters
+        ----------
+        qd : sequence of float, (n,)
+            Joint speeds [rad/s] of the arm when the command is taken (every joint).
+        requested : float
+            The wait [s] the controller asked for (``brake_timeout_request``), > 0, or 0:
+            none. A request shorter than the judged wait replaces it.
+
+        Returns
+        -------
+        tuple of (float, str)
+            The wait [s] (0: never brake) and why: ``'moving'``, ``'at rest'`` or
+            ``'asked'`` (the controller's request was the shortest).
 
         """
         if self.brake_timeout <= 0.0:
-            return 0.0
+            return 0.0, 'moving'
+        wait, why = self.rest_timeout, 'at rest'
         limit = self.rest_speed
         for v in qd:
             if not -limit < v < limit:
-                return self.brake_timeout
-        return self.rest_timeout
+                wait, why = self.brake_timeout, 'moving'
+                break
+        if 0.0 < requested < wait:
+            return requested, 'asked'
+        return wait, why
+
+    @staticmethod
+    def check_request(value):
+        """
+        Return a requested wait [s] as a float, or raise naming what was wrong.
+
+        Raises
+        ------
+        FreejointValueError
+            Not a finite number >= 0.
+
+        """
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise FreejointValueError(
+                f'brake_timeout_request: expected a number of seconds, got {value!r}') from None
+        if not (math.isfinite(value) and value >= 0.0):
+            raise FreejointValueError(
+                f'brake_timeout_request: expected a finite wait >= 0 s (0: none), got {value!r}')
+        return value
 
     @staticmethod
     def expired(now, receipt, wait):

@@ -37,3 +37,25 @@ def test_the_defaults_are_the_schemas_and_bad_values_are_refused_naming_them():
         DriveWatchdog(float('nan'))
     with pytest.raises(FreejointValueError, match='^rest_speed: expected > 0 rad/s'):
         DriveWatchdog(0.05, 0.01, 0.0)
+
+
+def test_the_controllers_request_shortens_the_wait_and_says_so_but_never_lengthens_it():
+    dog = DriveWatchdog(0.05, 0.01, 0.05)
+    moving, rest = [0.0, 0.0, 2.0], [0.0, 0.0, 0.0]
+    assert dog.judge(moving) == (0.05, 'moving')
+    assert dog.judge(rest) == (0.01, 'at rest')
+    assert dog.judge(moving, 0.02) == (0.02, 'asked')          # the free link swinging
+    assert dog.wait_after(moving, 0.02) == 0.02
+    assert dog.judge(rest, 0.02) == (0.01, 'at rest')          # its own is shorter
+    assert dog.judge(moving, 0.5) == (0.05, 'moving')          # never longer
+    assert dog.judge(moving, 0.0) == (0.05, 'moving')          # 0: no request
+    # A watchdog turned off stays off: a request does not make the drive brake.
+    assert DriveWatchdog(0.0, 0.01).judge(moving, 0.01) == (0.0, 'moving')
+
+
+def test_a_request_that_is_not_a_finite_wait_is_refused_naming_the_topic():
+    assert DriveWatchdog.check_request(0.01) == 0.01
+    assert DriveWatchdog.check_request(0) == 0.0
+    for bad in (float('nan'), float('inf'), -0.01, 'soon', None):
+        with pytest.raises(FreejointValueError, match='^brake_timeout_request: expected'):
+            DriveWatchdog.check_request(bad)
