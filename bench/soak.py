@@ -535,15 +535,25 @@ def stabilised_overrides(case):
             overlay_overrides(CONTROLLER, os.path.join(overlay, 'controller.yaml')))
 
 
-def fully_actuated_overrides():
-    """Return the (simulator, controller, planner) ``-p`` items of config/fully_actuated/."""
+def fully_actuated_overrides(damped=False):
+    """
+    Return the (simulator, controller, planner) ``-p`` items of config/fully_actuated/.
+
+    ``damped`` (``--fully-actuated --stabilise``): the controller's also take
+    config/fully_actuated/free_link_damping.yaml (the link a failure frees, damped in
+    the rests).
+    """
     from freejoint_control.params import SCHEMA as CONTROLLER
     from freejoint_planner.params import SCHEMA as PLANNER
     from freejoint_sim.params import SCHEMA as SIM
     overlay = os.path.join(ROOT, 'config', 'fully_actuated')
-    return tuple(overlay_overrides(schema, os.path.join(overlay, node + '.yaml'))
-                 for schema, node in ((SIM, 'sim'), (CONTROLLER, 'controller'),
-                                      (PLANNER, 'planner')))
+    sim, ctl, planner = (overlay_overrides(schema, os.path.join(overlay, node + '.yaml'))
+                         for schema, node in ((SIM, 'sim'), (CONTROLLER, 'controller'),
+                                              (PLANNER, 'planner')))
+    if damped:
+        ctl = ctl + overlay_overrides(CONTROLLER, os.path.join(overlay,
+                                                               'free_link_damping.yaml'))
+    return sim, ctl, planner
 
 
 FAIL_JOINT = 'joint3'
@@ -611,11 +621,11 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
              fully_actuated=False, fail_at=None):
     """Make one run of ``case``; return its row (dict)."""
     name = '%s_%d' % (case, run)
-    sim, ctl = stabilised_overrides(case) if stabilise else ([], [])
     planner = []
     if fully_actuated:
-        more = fully_actuated_overrides()
-        sim, ctl, planner = sim + more[0], ctl + more[1], more[2]
+        sim, ctl, planner = fully_actuated_overrides(stabilise)
+    else:
+        sim, ctl = stabilised_overrides(case) if stabilise else ([], [])
     bound, factor, worst = bound_of(case, hogs)
     row = {'case': case, 'run': run, 'seconds': seconds, 'bound_mm': bound,
            'bound_factor': factor, 'offline_worst_max_mm': worst}
@@ -802,7 +812,9 @@ def parse(argv):
                     help='internal-motion stabilisation (issue 22): vertical, the free link '
                     'starts hanging and the controller damps it (config/stabilised/); '
                     'horizontal, the free link slowed in the rests '
-                    '(config/stabilised_horizontal/); back to back the circles 1 s apart')
+                    '(config/stabilised_horizontal/); back to back the circles 1 s apart; '
+                    'with --fully-actuated the link a failure frees, damped in the rests '
+                    '(config/fully_actuated/free_link_damping.yaml)')
     ap.add_argument('--fully-actuated', action='store_true',
                     help='the paper arm with all joints driven and joint failure detection on '
                     "(config/fully_actuated/, issue 23): each run counts the controller's "

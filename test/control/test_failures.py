@@ -16,7 +16,8 @@ from freejoint_core.arm import NOMINAL_SCALE, table1
 from freejoint_core.control import Gains, RobustController
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.failure import CANNOT_TRACK, TRACKING
-from freejoint_core.failure_offline import run_failure_case
+from freejoint_core.failure_offline import FAILURE_FREE_LINK_DAMPING, run_failure_case
+from freejoint_core.laws import FreeLinkDampedLaw
 from freejoint_core.offline import initial_state
 from freejoint_core.plant import DEFAULT_DT_SUB, Plant
 from freejoint_core.trajectory import CircleQuintic
@@ -152,6 +153,38 @@ def test_joint3_failure_is_found_by_the_residual_the_law_switches_as_offline_bit
     assert rec['detected_at_s'] == [round(event['t'], 9)]
     assert np.array_equal(out['cmd'], trace['tau'])
     assert np.array_equal(out['q'], trace['q'])
+
+
+DAMPED = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'),
+                            os.path.join(ROOT, 'config', 'fully_actuated', 'controller.yaml'),
+                            os.path.join(ROOT, 'config', 'fully_actuated',
+                                         'free_link_damping.yaml'))
+
+
+def test_the_freed_link_is_damped_in_the_rest_after_the_failure_as_offline_bit_for_bit():
+    # The overlay is the offline option: mode, bound and drive (k2 as tracking, at once).
+    assert (DAMPED['free_link_mode'], DAMPED['free_link_delta_max'],
+            DAMPED['free_link_drive_max']) == tuple(FAILURE_FREE_LINK_DAMPING[k] for k in (
+                'mode', 'delta_max', 'sat'))
+    assert DAMPED['free_link_rest_damping'] == 0.2 and DAMPED['free_link_rest_after'] == 0.0
+    loop, _ = make(DAMPED, case='vertical', failure_use_effort=False)
+    assert isinstance(loop.law, FreeLinkDampedLaw) and loop.law.modulation is None
+    # Joint 3 fails at 2.5 s; the circle ends at 5 s, then 1 s of rest.
+    out = run(loop, 'vertical', 6.0, fail=[(2, 2.5)])
+    (event,) = loop.failures.events
+    assert event['passive'] == ['joint3'] and loop.law.modulation is not None
+    assert np.any(loop.law.modulation.delta != 0.0)           # it acted in the rest
+    rec, trace = run_failure_case('vertical', 0, [(2, 2.5)], duration=6.0, record_trace=True,
+                                  free_link_damping=FAILURE_FREE_LINK_DAMPING)
+    assert rec['detected_at_s'] == [round(event['t'], 9)]
+    assert np.array_equal(out['cmd'], trace['tau'])
+    assert np.array_equal(out['q'], trace['q'])
+    # ... and not the undamped arm's rest (the same circle up to its end).
+    plain, plain_trace = run_failure_case('vertical', 0, [(2, 2.5)], duration=6.0,
+                                          record_trace=True)
+    k_end = int(round(TRAJ.duration / DT))
+    assert np.array_equal(out['cmd'][:k_end], plain_trace['tau'][:k_end])
+    assert not np.array_equal(out['cmd'][k_end + 1:], plain_trace['tau'][k_end + 1:])
 
 
 def test_a_notice_switches_the_law_at_the_next_tick():

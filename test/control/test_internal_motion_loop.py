@@ -100,11 +100,17 @@ def test_damping_on_wraps_the_law_and_reports_the_shift_in_its_state():
     assert loop.law.state_bounds[-1] == pytest.approx((-0.00404, 0.00404))
 
 
-def test_damping_is_refused_for_an_arm_with_another_free_joint_and_with_failures():
+def test_damping_is_refused_for_an_arm_with_another_free_joint_or_none_without_failures():
     with pytest.raises(FreejointValueError, match='free_link_damping: needs the arm'):
         SCHEMA.config(dict(FOUR, free_link_damping=True))
-    with pytest.raises(FreejointValueError, match='free_link_damping: not with joint_failures'):
-        SCHEMA.config(dict(FILE, free_link_damping=True, joint_failures='notice'))
+    # Every joint driven: only with joint_failures (it waits for the last joint to fail).
+    full = dict(FILE, passive_joints=[], joints=['joint1', 'joint2', 'joint3'],
+                effort_limits=[300.0, 200.0, 200.0])
+    with pytest.raises(FreejointValueError, match='free_link_damping: needs the arm whose '
+                       r'last joint alone is free \(r = m = 2\), or with joint_failures a '
+                       r'fully actuated arm of 3 joints; got passive joints \[\] of 3'):
+        SCHEMA.config(dict(full, free_link_damping=True))
+    SCHEMA.config(dict(full, free_link_damping=True, joint_failures='notice'))
     with pytest.raises(FreejointValueError, match='free_link_delta_max'):
         SCHEMA.config(dict(FILE, free_link_damping=True, free_link_delta_max=0.0))
 

@@ -174,7 +174,8 @@ class ControlLoop:
                                          k2_rest=values['free_link_rest_damping'],
                                          rest_after=values['free_link_rest_after'],
                                          mode=values['free_link_mode'],
-                                         settle_window=values['free_link_settle_window'])
+                                         settle_window=values['free_link_settle_window'],
+                                         sat=values['free_link_drive_max'])
         # Joint failures (issue 23, freejoint_control/failures.py): None when off.
         self.failures = None if cfg.values['joint_failures'] == 'off' else \
             failures.FailureMonitor(cfg, self.law, self.log)

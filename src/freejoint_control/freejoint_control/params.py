@@ -127,7 +127,9 @@ FREE_LINK_PARAMS = (
     Param('free_link_damping', False,
           "true: the reference passes through the free link's damping before the law "
           '(freejoint_core.internal.FreeLinkModulation: a bounded shift of the setpoint, '
-          'docs/internal-motion.md), for the arm whose last joint is free (r = m); '
+          'docs/internal-motion.md), for the arm whose last joint is free (r = m), or, '
+          'with joint_failures, for the fully actuated 3-joint arm once a failure leaves its '
+          'last joint alone free (off until then); '
           "false: the paper's law exactly", read_only=True),
     Param('free_link_delta_max', MODULATION['delta_max'],
           "bound [m] of the free link damping's shift of the reference (the task deviation "
@@ -145,8 +147,16 @@ FREE_LINK_PARAMS = (
           "'settle': only in the first free_link_settle_window s of each rest of the "
           'setpoint, the shift bounded by free_link_delta_max without clipping, then back '
           'to 0 before the next task (the horizontal arm, whose free link is a free rotor: '
-          'freejoint_core.circles.HORIZONTAL_SETTLE, docs/internal-motion.md)',
-          validator=one_of(('always', 'settle')), read_only=True),
+          'freejoint_core.circles.HORIZONTAL_SETTLE, docs/internal-motion.md); '
+          "'rest': only while the setpoint rests (a link freed by a joint failure, damped "
+          'in the rests after its task: config/fully_actuated/free_link_damping.yaml, '
+          'docs/failures.md)',
+          validator=one_of(('always', 'settle', 'rest')), read_only=True),
+    Param('free_link_drive_max', 4.0,
+          "saturation [m/s^2] of the free link damping's drive (the shift's acceleration "
+          "input); in mode 'settle' k3 free_link_delta_max instead. Set to k3 "
+          'free_link_delta_max (k3 = 9 /s^2) the filter alone bounds the shift, which is '
+          'never clipped', (1e-6, 100.0), read_only=True),
     Param('free_link_settle_window', HORIZONTAL_SETTLE['settle_window'],
           "seconds of each rest in which free_link_mode 'settle' drives the shift (the rest "
           'between tasks must be about 0.4 s longer)', (1e-3, 3600.0), read_only=True),
@@ -452,14 +462,14 @@ def _check_free_link(values):
     if not values['free_link_damping']:
         return None
     nominal = _nominal(values)
-    if nominal.passive != (nominal.n - 1,) or nominal.r != ArmModel.task_dim:
-        return (f'free_link_damping: needs the arm whose last joint alone is free (r = m = '
-                f'{ArmModel.task_dim}), got passive joints {list(nominal.passive)} of '
-                f'{nominal.n}')
-    if values['joint_failures'] != 'off':
-        return ('free_link_damping: not with joint_failures (a failure changes the free '
-                "joints); set joint_failures: 'off'")
-    return None
+    m = ArmModel.task_dim
+    if nominal.passive == (nominal.n - 1,) and nominal.r == m:
+        return None
+    if values['joint_failures'] != 'off' and nominal.passive == () and nominal.n == m + 1:
+        return None     # on once a failure leaves the last joint alone free
+    return (f'free_link_damping: needs the arm whose last joint alone is free (r = m = {m}), '
+            f'or with joint_failures a fully actuated arm of {m + 1} joints; got passive '
+            f'joints {list(nominal.passive)} of {nominal.n}')
 
 
 CHECKS = (_check_joints, _check_loop_rate, _check_theta0, _check_effort_limits,

@@ -58,6 +58,11 @@ DEFAULT_NULLSPACE_KD = 3.0
 """Null-space damping [N m s/rad] of the fully actuated arm (issue 22's option)."""
 HOLD_S = 5.0
 """Hold after the circle [s]."""
+FAILURE_FREE_LINK_DAMPING = {'mode': 'rest', 'delta_max': 0.03, 'sat': 0.27}
+"""``free_link_damping`` of :func:`run_failure_case` measured for the paper's arm with
+joint 3 failing (docs/failures.md): ``FreeLinkModulation`` in the rests only, its shift
+bounded by the filter (``sat`` = k3 ``delta_max``), never clipped. The controller's
+config/fully_actuated/free_link_damping.yaml gives the same numbers."""
 
 
 def parse_fail(spec):
@@ -133,7 +138,8 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
         ``freejoint_core.internal.FreeLinkModulation`` options: once a failure leaves the
         last joint alone free (r = m), the setpoint passes through that link's damping
         (from the switch on, its shift from 0). None (default): the paper's law alone.
-        Not in the controller yet (docs/failures.md, "Where the vertical misses were").
+        :data:`FAILURE_FREE_LINK_DAMPING` is the option measured (the controller's
+        config/fully_actuated/free_link_damping.yaml; docs/failures.md).
 
     Returns
     -------

@@ -25,6 +25,8 @@ reference passes through the free link's damping first (the controller's paramet
 
 """
 
+from dataclasses import replace
+
 from freejoint_core.control import RobustController
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import FreeLinkModulation
@@ -165,32 +167,55 @@ class FreeLinkDampedLaw(ControlLaw):
     :class:`freejoint_core.internal.FreeLinkModulation` (the bounded shift ``delta`` of the
     reference, ``|delta| <= delta_max``) and the wrapped law tracks the modulated one: what
     ``freejoint_core.circles.run_circles`` computes with ``stabilise``.  Everything else
-    is the wrapped law's; its state gains ``free_link_delta[0..1]`` (the shift [m] after
-    the step), saved and restored with the law's.
+    is the wrapped law's (``gains`` and ``nullspace`` read and set through); its state
+    gains ``free_link_delta[0..1]`` (the shift [m] after the step), saved and restored
+    with the law's.
+
+    While the wrapped law's nominal arm does not have its last joint alone free (a fully
+    actuated arm before a joint fails, issue 23) the modulation is off: the wrapped law's
+    step exactly, the shift 0.  :meth:`set_nominal` with such an arm (the failure
+    monitor's switch) turns it on, its shift from 0, as
+    ``freejoint_core.failure_offline.run_failure_case`` with ``free_link_damping`` does.
 
     Parameters
     ----------
     law : ControlLaw
-        The wrapped law (its nominal arm with the last joint free, r = m = 2).
+        The wrapped law: its nominal arm with the last joint alone free (r = m = 2), or
+        one a joint failure can bring there.
     delta_max : float
         Bound of the reference's shift [m], > 0.
     **options
         Further keywords of ``FreeLinkModulation`` (its defaults otherwise).
+
+    Raises
+    ------
+    FreejointValueError
+        Options ``FreeLinkModulation`` refuses (checked on the arm with its last joint
+        free, whichever arm the wrapped law has now).
 
     """
 
     def __init__(self, law, delta_max, **options):
         self.law = law
         self._options = dict(options, delta_max=delta_max)
-        self.modulation = FreeLinkModulation(law.nominal, **self._options)
+        nominal = law.nominal
+        last_free = replace(nominal, passive=(nominal.n - 1,))
+        self._bound = FreeLinkModulation(last_free, **self._options).delta_max
+        self.modulation = self._modulation_for(nominal)
         self.name = law.name
         self.state_names = tuple(law.state_names) + ('free_link_delta[0]',
                                                      'free_link_delta[1]')
 
+    def _modulation_for(self, nominal):
+        """Return the modulation of ``nominal`` (None unless its last joint alone is free)."""
+        if nominal.passive != (nominal.n - 1,) or nominal.r != 2:
+            return None
+        return FreeLinkModulation(nominal, **self._options)
+
     @property
     def state_bounds(self):
         """Return the wrapped law's bounds and the shift's (its disc, 1 % slack)."""
-        d = 1.01 * self.modulation.delta_max
+        d = 1.01 * self._bound
         return tuple(self.law.state_bounds) + ((-d, d), (-d, d))
 
     @property
@@ -204,19 +229,36 @@ class FreeLinkDampedLaw(ControlLaw):
         return self.law.nominal
 
     @property
+    def gains(self):
+        """Return the wrapped law's gains."""
+        return self.law.gains
+
+    @property
+    def nullspace(self):
+        """Return the wrapped law's null-space option (None: none, or a law without one)."""
+        return getattr(self.law, 'nullspace', None)
+
+    @nullspace.setter
+    def nullspace(self, value):
+        self.law.nullspace = value
+
+    @property
     def stiffness(self):
         """Return the wrapped law's hold stiffness scale."""
         return self.law.stiffness
 
     def step(self, q, qd, p_d, pd_d, pdd_d, dt):
         """Modulate the setpoint (``FreeLinkModulation.step``), then step the wrapped law."""
+        if self.modulation is None:
+            return self.law.step(q, qd, p_d, pd_d, pdd_d, dt)
         p_m, pd_m, pdd_m = self.modulation.step(q, qd, p_d, pd_d, pdd_d, dt)
         return self.law.step(q, qd, p_m, pd_m, pdd_m, dt)
 
     def reset(self):
         """Reset the wrapped law and the modulation (``delta`` = 0)."""
         self.law.reset()
-        self.modulation.reset()
+        if self.modulation is not None:
+            self.modulation.reset()
 
     def restart_motion(self):
         """
@@ -226,31 +268,42 @@ class FreeLinkDampedLaw(ControlLaw):
         reference up to ``delta_max`` off the braked arm at the first tick after it.
         """
         self.law.restart_motion()
-        self.modulation.reset()
+        if self.modulation is not None:
+            self.modulation.reset()
 
     def state_values(self):
-        """Return the wrapped law's state and the shift ``delta`` (2) [m]."""
-        return list(self.law.state_values()) + self.modulation.delta.tolist()
+        """Return the wrapped law's state and the shift ``delta`` (2) [m] (0 while off)."""
+        delta = [0.0, 0.0] if self.modulation is None else self.modulation.delta.tolist()
+        return list(self.law.state_values()) + delta
 
     def save_state(self):
-        """Return the wrapped law's snapshot and the modulation's."""
-        return (self.law.save_state(), self.modulation.snapshot())
+        """Return the wrapped law's snapshot and the modulation's (None while off)."""
+        return (self.law.save_state(),
+                None if self.modulation is None else self.modulation.snapshot())
 
     def restore_state(self, saved):
-        """Put both snapshots back."""
+        """Put both snapshots back (the modulation's where it is on now and was then)."""
         self.law.restore_state(saved[0])
-        self.modulation.restore(saved[1])
+        if self.modulation is not None and saved[1] is not None:
+            self.modulation.restore(saved[1])
 
     def set_stiffness(self, scale):
         """Scale the wrapped law's gains for a hold."""
         self.law.set_stiffness(scale)
 
     def set_nominal(self, params, model=None):
-        """Give the wrapped law and the modulation a new nominal arm (the shift kept)."""
-        saved = self.modulation.snapshot()
-        modulation = FreeLinkModulation(params, **self._options)
+        """
+        Give the wrapped law and the modulation a new nominal arm.
+
+        The shift is kept while the modulation stays on; it starts from 0 when this turns
+        it on (a failure left the last joint alone free), and is dropped when this turns
+        it off.
+        """
+        saved = None if self.modulation is None else self.modulation.snapshot()
+        modulation = self._modulation_for(params)
         self.law.set_nominal(params, model)
-        modulation.restore(saved)
+        if modulation is not None and saved is not None:
+            modulation.restore(saved)
         self.modulation = modulation
 
     def set_gains(self, gains):
