@@ -13,6 +13,11 @@ angles (joint_states) between the graph and the offline runner, and the tracking
 
     . tools/env.sh && python bench/failure_graph.py [--cases vertical horizontal]
         [--fail joint3@2.5] [--seeds 0-9] [--duration 2.7] [--no-effort]
+        [--free-link-damping]
+
+``--free-link-damping``: the controller also takes
+config/fully_actuated/free_link_damping.yaml (the freed link damped in the rests), the
+offline runner ``FAILURE_FREE_LINK_DAMPING`` (give a ``--duration`` past the circle's 5 s).
 
 Exit 1 if a difference is above 1e-9 (the lockstep graph must equal the offline run to
 round-off).
@@ -43,6 +48,9 @@ def main(argv=None):
                     help="the controller ignores joint_states' effort (residual only)")
     ap.add_argument('--duration', type=float, default=2.7,
                     help='simulated time [s] per case (default 2.7)')
+    ap.add_argument('--free-link-damping', action='store_true',
+                    help='the freed link damped in the rests '
+                    '(config/fully_actuated/free_link_damping.yaml)')
     args = ap.parse_args(argv)
     os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -56,6 +64,16 @@ def main(argv=None):
     node_args = {'sim': ['fail_joint:=' + args.fail]}
     if args.no_effort:
         node_args['controller'] = ['failure_use_effort:=false']
+    damping = None
+    if args.free_link_damping:
+        from freejoint_core.failure_offline import FAILURE_FREE_LINK_DAMPING as damping
+        import yaml
+        with open(os.path.join(ROOT, 'config', 'fully_actuated',
+                               'free_link_damping.yaml')) as fh:
+            given = yaml.safe_load(fh)['/**']['ros__parameters']
+        node_args.setdefault('controller', []).extend(
+            '%s:=%s' % (name, str(value).lower() if isinstance(value, bool) else value)
+            for name, value in given.items())
     rclpy.init()
     node = rclpy.create_node('failure_graph')
     executor = EventsExecutor()
@@ -73,7 +91,8 @@ def main(argv=None):
                                  overlays=(demo.FULLY_ACTUATED,), node_args=node_args)
             try:
                 cmp = demo.failure_comparison(collector, case, seed, args.fail, n_ticks, dt_ns,
-                                              run['logs'], effort=not args.no_effort)
+                                              run['logs'], effort=not args.no_effort,
+                                              free_link_damping=damping)
             except RuntimeError as exc:
                 print('%s seed %d: %s; logs in %s' % (case, seed, exc, logs))
                 failed = True

@@ -515,7 +515,8 @@ def per_circle(arrays, n_circle, n_rest, circles):
     return out
 
 
-def failure_comparison(collector, case, seed, fail, n_ticks, dt_ns, logs, effort=True):
+def failure_comparison(collector, case, seed, fail, n_ticks, dt_ns, logs, effort=True,
+                       free_link_damping=None):
     """
     Compare a lockstep run whose joint failed with the offline failure runner's.
 
@@ -531,6 +532,9 @@ def failure_comparison(collector, case, seed, fail, n_ticks, dt_ns, logs, effort
         The run's node logs (the controller's and the planner's lines are read).
     effort : bool
         The controller compared its commands with joint_states' effort.
+    free_link_damping : dict, optional
+        The offline runner's option of the same name (the controller's
+        config/fully_actuated/free_link_damping.yaml).
 
     Returns
     -------
@@ -557,7 +561,8 @@ def failure_comparison(collector, case, seed, fail, n_ticks, dt_ns, logs, effort
     ticks = np.rint(arrays['t'] * 1e9 / dt_ns).astype(int)
     q = np.column_stack(list(joint_positions(joint_states, arrays['t']).values()))
     rec, trace = run_failure_case(case, seed, failing, duration=n_ticks * dt_ns * 1e-9,
-                                  record_trace=True, effort=effort)
+                                  record_trace=True, effort=effort,
+                                  free_link_damping=free_link_damping)
 
     def log_text(who):
         with open([p for p in logs if who in os.path.basename(p)][0]) as fh:

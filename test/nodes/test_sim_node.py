@@ -611,6 +611,8 @@ def test_realtime_the_controllers_shorter_watchdog_request_brakes_sooner_and_a_b
     wait(lambda: 'brake_timeout_request: expected a finite wait >= 0 s (0: none), got nan: '
          'ignored, the last good request (0.02 s) kept' in procs.log(proc), 15.0,
          'the bad request named', spin=ctl.spin)
+    wait(lambda: ctl.diagnostics and ctl.diagnostics[-1][2]['brake wait asked [s]'] == '0.02',
+         5.0, 'the request in the status', spin=ctl.spin)
     ctl.release(initial_state(table1('vertical')).tolist())    # then silence: it falls
     wait(lambda: 'no command on effort_controller/commands for 0.02 s, as the controller '
          'asked while its setpoint rests (brake_timeout_request): brakes engaged at step'

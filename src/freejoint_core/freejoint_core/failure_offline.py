@@ -61,8 +61,10 @@ HOLD_S = 5.0
 FAILURE_FREE_LINK_DAMPING = {'mode': 'rest', 'delta_max': 0.03, 'sat': 0.27}
 """``free_link_damping`` of :func:`run_failure_case` measured for the paper's arm with
 joint 3 failing (docs/failures.md): ``FreeLinkModulation`` in the rests only, its shift
-bounded by the filter (``sat`` = k3 ``delta_max``), never clipped. The controller's
-config/fully_actuated/free_link_damping.yaml gives the same numbers."""
+bounded by the filter (``sat`` = k3 ``delta_max``), never clipped. Vertical: the freed
+link stops revolving; horizontal it does not (a free rotor) and only the rest's error
+grows. The controller's config/fully_actuated/free_link_damping.yaml gives the same
+numbers."""
 
 
 def parse_fail(spec):

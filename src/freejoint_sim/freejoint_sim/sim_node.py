@@ -702,6 +702,8 @@ class SimNode(Node, Lifecycle):
             ('brakes', 'engaged' if self._braked else 'released'),
             ('brake engagements (no command)', self._brake_engagements),
             ('brake engagements (asked)', self._brakes_asked),
+            ('brake wait asked [s]', '%g' % self._requested_wait if self._requested_wait
+             else 'none'),
             ('divergences', self._divergences),
             ('diverged', 'true' if self._diverged is not None else 'false'),
             ('failed joints', ', '.join('%s at %.3f s' % taken[:2]
