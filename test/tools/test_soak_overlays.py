@@ -1,0 +1,26 @@
+"""bench/soak.py: the parameter overlays a run is given (no process started)."""
+import os
+
+from freejoint_core.failure_offline import FAILURE_FREE_LINK_DAMPING
+from freejoint_tools.harness import load_source
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+soak = load_source(os.path.join(ROOT, 'bench', 'soak.py'), 'soak')
+
+
+def _given(items):
+    return dict(item.split(':=', 1) for item in items)
+
+
+def test_fully_actuated_with_stabilise_adds_the_freed_links_damping_to_the_controller_only():
+    sim, ctl, planner = soak.fully_actuated_overrides()
+    assert _given(ctl)['joint_failures'] == 'detect' and 'free_link_damping' not in _given(ctl)
+    d_sim, d_ctl, d_planner = soak.fully_actuated_overrides(damped=True)
+    assert (d_sim, d_planner) == (sim, planner)
+    added = _given(d_ctl[len(ctl):])
+    assert d_ctl[:len(ctl)] == ctl
+    assert added['free_link_damping'] == 'true' and added['free_link_mode'] == 'rest'
+    assert (float(added['free_link_delta_max']), float(added['free_link_drive_max'])) == (
+        FAILURE_FREE_LINK_DAMPING['delta_max'], FAILURE_FREE_LINK_DAMPING['sat'])
+    assert (float(added['free_link_rest_damping']), float(added['free_link_rest_after'])) == (
+        0.2, 0.0)       # the offline option's k2 (0.2) from the start of each rest
