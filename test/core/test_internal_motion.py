@@ -205,7 +205,7 @@ def test_the_rest_gain_applies_only_once_the_setpoint_has_rested_rest_after():
 
     def drive(moving=False):
         saved = mod.snapshot()
-        mod.restore(((0.0, 0.0), (0.0, 0.0), None, saved[3]))
+        mod.restore(((0.0, 0.0), (0.0, 0.0), None) + saved[3:])
         v = (1e-9, 0.0) if moving else (0.0, 0.0)
         return mod.step(q, [0.0, 0.0, 2.0], (0.2, 0.0), v, (0.0, 0.0), 1e-3)[2][0]
 
@@ -266,6 +266,7 @@ def test_settle_mode_shift_stays_within_its_bound_without_clipping_and_returns()
     mod = FreeLinkModulation(params, mode='settle', delta_max=0.03)
     q = [0.3, 1.5, 2.0]
     rest = ((0.2, 0.0), (0.0, 0.0), (0.0, 0.0))
+    mod.step(q, [0.0, 0.0, 3.0], (0.2, 0.0), (0.1, 0.0), (0.0, 0.0), 1e-3)   # a task's tick
     worst = 0.0
     for k in range(1000):
         th = 3.0 * k * 1e-3           # the link's angle turning: u3perp turns with it
@@ -277,6 +278,28 @@ def test_settle_mode_shift_stays_within_its_bound_without_clipping_and_returns()
     assert float(np.linalg.norm(mod.delta)) < 1e-4
     with pytest.raises(FreejointValueError, match='^settle_window:'):
         FreeLinkModulation(params, mode='settle', settle_window=0.0)
+
+
+def test_settle_mode_leaves_a_rest_before_any_task_alone_then_settles_the_rest_after_one():
+    # A held start point (the planner's, before the first plan) with the rotor turning:
+    # nothing to settle - driven, the shift would start the first task off its path.
+    params = table1('horizontal').scaled(0.7)
+    mod = FreeLinkModulation(params, mode='settle', delta_max=0.03)
+    q = [0.3, 1.5, 2.0]
+    rest = ((0.2, 0.0), (0.0, 0.0), (0.0, 0.0))
+    for _ in range(300):
+        p, v, a = mod.step(q, [0.0, 0.0, 3.0], *rest, 1e-3)
+        assert (tuple(p), tuple(v), tuple(a)) == ((0.2, 0.0), (0.0, 0.0), (0.0, 0.0))
+    mod.step(q, [0.0, 0.0, 3.0], (0.2, 0.0), (0.1, 0.0), (0.0, 0.0), 1e-3)    # a task
+    mod.step(q, [0.0, 0.0, 3.0], *rest, 1e-3)
+    assert np.linalg.norm(mod.delta_dot) > 0.0                  # its rest is settled
+    saved = mod.snapshot()
+    mod.reset()                                                 # e.g. after a brake
+    mod.step(q, [0.0, 0.0, 3.0], *rest, 1e-3)
+    assert np.array_equal(mod.delta, [0.0, 0.0])
+    mod.restore(saved)
+    mod.step(q, [0.0, 0.0, 3.0], *rest, 1e-3)
+    assert np.linalg.norm(mod.delta) > 0.0
 
 
 def test_the_horizontal_stabilised_options_settle_the_free_rotor_in_the_rests():

@@ -145,8 +145,9 @@ FREE_LINK_PARAMS = (
     Param('free_link_mode', 'always',
           "'always': the damping acts while tracking and at rest (the vertical arm); "
           "'settle': only in the first free_link_settle_window s of each rest of the "
-          'setpoint, the shift bounded by free_link_delta_max without clipping, then back '
-          'to 0 before the next task (the horizontal arm, whose free link is a free rotor: '
+          'setpoint after a task (not in a rest before the first), the shift bounded by '
+          'free_link_delta_max without clipping, then back to 0 before the next task (the '
+          'horizontal arm, whose free link is a free rotor: '
           'freejoint_core.circles.HORIZONTAL_SETTLE, docs/internal-motion.md); '
           "'rest': only while the setpoint rests (a link freed by a joint failure, damped "
           'in the rests after its task: config/fully_actuated/free_link_damping.yaml, '

@@ -324,9 +324,9 @@ MODULATION = {'delta_max': 0.01, 'k2_rest': 1.0, 'rest_after': 1.5}
 
 HORIZONTAL_SETTLE = {'mode': 'settle', 'delta_max': 0.03, 'settle_window': 0.6}
 """``FreeLinkModulation`` options of the horizontal paper arm (``stabilised_options``): in
-the first 0.6 s of each rest the free rotor is slowed by a shift of the end effector of
-at most 3 cm (drive ``k2`` 0.2 m/s, saturated at ``k3 * 0.03`` = 0.27 m/s^2), then the
-shift returns to 0 (``internal.SETTLE_RETURN_GAINS``). 30 circles with 1-s rests, seeds
+the first 0.6 s of each rest after a circle the free rotor is slowed by a shift of the end
+effector of at most 3 cm (drive ``k2`` 0.2 m/s, saturated at ``k3 * 0.03`` = 0.27 m/s^2),
+then the shift returns to 0 (``internal.SETTLE_RETURN_GAINS``). 30 circles with 1-s rests, seeds
 0-9: none lost, max 0.83-1.13 mm (the paper's law loses seed 0 in circle 18); a 2-cm
 bound that clipped the shift lost the arm (docs/internal-motion.md)."""
 
@@ -339,7 +339,7 @@ def stabilised_options(case, arm='paper', actuated='paper', delta_max=None):
       link damped through the bounded reference modulation (always on);
     * paper arm, joint 3 free, horizontal: no restoring force, the free link a free rotor
       that millimetres of end-effector motion cannot slow: the paper's law while tracking,
-      and in the first 0.6 s of each rest a shift of at most 3 cm that slows it
+      and in the first 0.6 s of each rest after a task a shift of at most 3 cm that slows it
       (``HORIZONTAL_SETTLE``, ``mode='settle'``);
     * r > m (every joint driven, or the 4-link arm): null-space damping
       ``kd = NULLSPACE_KD``; the 4-link arm starts at its hanging equilibrium, with the

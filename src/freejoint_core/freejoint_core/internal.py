@@ -392,7 +392,10 @@ class FreeLinkModulation:
         ``sigma = 1`` always, or only while the setpoint's velocity and acceleration are
         0, or (``settle``: the horizontal arm, whose free link is a free rotor that only a
         centimetre-scale motion of the end effector can slow) only during the first
-        ``settle_window`` s of each rest of the setpoint, after which the drive is off and
+        ``settle_window`` s of each rest of the setpoint that follows a task (a setpoint
+        that moved since the last :meth:`reset`: a rest before any task, e.g. a held start
+        point, has nothing to settle and would only start that task off its path), after
+        which the drive is off and
         the filter's gains are :data:`SETTLE_RETURN_GAINS` (the shift goes back to 0
         before the next task; a rest shorter than the window plus ~0.4 s starts the task
         with the shift left; a longer rest has the shift back at 0 whenever the next task
@@ -461,11 +464,12 @@ class FreeLinkModulation:
         self.reset()
 
     def reset(self):
-        """Zero ``delta`` and its rate; forget the last quasi-static angle and the rest."""
+        """Zero ``delta`` and its rate; forget the last quasi-static angle, the rest, a task."""
         self._delta = (0.0, 0.0)
         self._delta_dot = (0.0, 0.0)
         self._th_qs = None
         self._rested = 0.0
+        self._moved = False
 
     def quasi_static_angle(self, pdd_d):
         """
@@ -523,7 +527,7 @@ class FreeLinkModulation:
         settle = self.mode == 'settle'
         drive = self.mode == 'always' or resting
         if settle:
-            drive = resting and self._rested < self.settle_window
+            drive = resting and self._moved and self._rested < self.settle_window
             if not drive:
                 k3, k4 = SETTLE_RETURN_GAINS
         if resting:
@@ -532,6 +536,7 @@ class FreeLinkModulation:
             self._rested += dt
         else:
             self._rested = 0.0
+            self._moved = True
         if th_qs is None:
             w = k2 * thd
             self._th_qs = None
@@ -571,12 +576,12 @@ class FreeLinkModulation:
         return out
 
     def snapshot(self):
-        """Return the modulation's state (``delta``, its rate, the last angle, the rest)."""
-        return (self._delta, self._delta_dot, self._th_qs, self._rested)
+        """Return the modulation's state (``delta``, its rate, the last angle, the rest, moved)."""
+        return (self._delta, self._delta_dot, self._th_qs, self._rested, self._moved)
 
     def restore(self, saved):
         """Put back a :meth:`snapshot`."""
-        self._delta, self._delta_dot, self._th_qs, self._rested = saved
+        self._delta, self._delta_dot, self._th_qs, self._rested, self._moved = saved
 
     @property
     def delta(self):
