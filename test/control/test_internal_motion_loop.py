@@ -332,3 +332,33 @@ def test_tracking_resumed_after_a_readiness_brake_starts_the_free_links_shift_fr
                                              atol=5e-5)
     errors = [math.hypot(*tick(300_000).error) for _ in range(1000)]
     assert loop._readiness.trips == 1 and max(errors) < 5e-3, max(errors)
+
+
+def test_real_time_the_horizontal_settle_leaves_the_held_start_alone_despite_the_resume_blend():
+    # Real time, the rotor turning 1 rad/s under an end effector held 0.3 mm off the start
+    # point: the loop's start blend moves the reference there (a fraction of a millimetre,
+    # no task), so the settle must not drive; before SETTLE_AFTER_TRAVEL it did (the
+    # soak's first circles 1.2-1.8 mm off their path). After a task's 2 cm, a rest is settled.
+    horizontal = SCHEMA.yaml_values(
+        os.path.join(ROOT, 'config', 'controller.yaml'),
+        os.path.join(ROOT, 'config', 'stabilised_horizontal', 'controller.yaml'))
+    loop = make(horizontal, case='horizontal', lockstep=False, readiness_guard=False,
+                max_state_age=0.0)
+    q = [-1.369438, 1.691679, 2.094395 + 0.0006]      # the start, joint 3 turned 0.3 mm
+    held = ArmModel(table1('horizontal')).fk(q)
+    assert 2e-4 < math.hypot(held[0] - 0.2, held[1]) < 4e-4
+    start = (0.2, 0.0, 0.0, 0.0, 0.0, 0.0)
+    for k in range(1500):
+        ns = k * DT_NS
+        loop.on_setpoint(ns, start, 0, k * DT)
+        res = loop.on_state(ns, NAMES, q, [0.0, 0.0, 1.0], ns, 100.0 + k * DT)
+        assert res.law_state_values[-2:] == [0.0, 0.0], k
+    for k in range(1500, 1600):     # a task: 2 cm along x in 0.1 s, then a rest
+        ns = k * DT_NS
+        loop.on_setpoint(ns, (0.2 + 2e-4 * (k - 1499), 0.0, 0.2, 0.0, 0.0, 0.0), 0, k * DT)
+        loop.on_state(ns, NAMES, q, [0.0, 0.0, 1.0], ns, 100.0 + k * DT)
+    for k in range(1600, 1650):
+        ns = k * DT_NS
+        loop.on_setpoint(ns, (0.22, 0.0, 0.0, 0.0, 0.0, 0.0), 0, k * DT)
+        res = loop.on_state(ns, NAMES, q, [0.0, 0.0, 1.0], ns, 100.0 + k * DT)
+    assert np.linalg.norm(res.law_state_values[-2:]) > 0.0

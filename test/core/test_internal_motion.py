@@ -237,7 +237,7 @@ def test_settle_mode_drives_only_in_the_first_window_of_a_rest_within_its_bound(
     mod = FreeLinkModulation(params, mode='settle', delta_max=0.03, settle_window=0.005)
     assert mod.a_max == pytest.approx(0.27) and mod.delta_max == pytest.approx(0.03)
     q = hanging_pose(table1('vertical'), (0.2, 0.0))
-    moving = ((0.2, 0.0), (0.1, 0.0), (0.0, 0.0))
+    moving = ((0.2, 0.0), (20.0, 0.0), (0.0, 0.0))      # one tick: 2 cm, a task (> 1 cm)
     resting = ((0.2, 0.0), (0.0, 0.0), (0.0, 0.0))
     # tracking: no drive (and delta 0 stays 0)
     _, _, a = mod.step(q, [0.0, 0.0, 1.0], *moving, 1e-3)
@@ -266,7 +266,7 @@ def test_settle_mode_shift_stays_within_its_bound_without_clipping_and_returns()
     mod = FreeLinkModulation(params, mode='settle', delta_max=0.03)
     q = [0.3, 1.5, 2.0]
     rest = ((0.2, 0.0), (0.0, 0.0), (0.0, 0.0))
-    mod.step(q, [0.0, 0.0, 3.0], (0.2, 0.0), (0.1, 0.0), (0.0, 0.0), 1e-3)   # a task's tick
+    mod.step(q, [0.0, 0.0, 3.0], (0.2, 0.0), (20.0, 0.0), (0.0, 0.0), 1e-3)  # a task: 2 cm
     worst = 0.0
     for k in range(1000):
         th = 3.0 * k * 1e-3           # the link's angle turning: u3perp turns with it
@@ -290,7 +290,12 @@ def test_settle_mode_leaves_a_rest_before_any_task_alone_then_settles_the_rest_a
     for _ in range(300):
         p, v, a = mod.step(q, [0.0, 0.0, 3.0], *rest, 1e-3)
         assert (tuple(p), tuple(v), tuple(a)) == ((0.2, 0.0), (0.0, 0.0), (0.0, 0.0))
-    mod.step(q, [0.0, 0.0, 3.0], (0.2, 0.0), (0.1, 0.0), (0.0, 0.0), 1e-3)    # a task
+    # A resume blend's sub-millimetre motion (0.1 mm) is not a task: still nothing.
+    for _ in range(10):
+        mod.step(q, [0.0, 0.0, 3.0], (0.2, 0.0), (0.01, 0.0), (0.0, 0.0), 1e-3)
+    for _ in range(5):
+        assert np.array_equal(mod.step(q, [0.0, 0.0, 3.0], *rest, 1e-3)[2], [0.0, 0.0])
+    mod.step(q, [0.0, 0.0, 3.0], (0.2, 0.0), (10.0, 0.0), (0.0, 0.0), 1e-3)   # a task: 1 cm
     mod.step(q, [0.0, 0.0, 3.0], *rest, 1e-3)
     assert np.linalg.norm(mod.delta_dot) > 0.0                  # its rest is settled
     saved = mod.snapshot()

@@ -329,6 +329,11 @@ def hanging_pose(params, p, branch=1):
 
 
 MODES = ('always', 'rest', 'settle')
+SETTLE_AFTER_TRAVEL = 0.01
+"""[m] Path the reference must have travelled (since the last reset) before a rest is
+settled in ``settle`` mode: a task's motion, not a hold's resume blend (measured in real
+time: a blend of under a millimetre before the first circle let the settle drive for
+0.6 s and start that circle 1.2-1.8 mm off its path)."""
 SETTLE_RETURN_GAINS = (400.0, 40.0)
 """``(k3, k4)`` [1/s^2, 1/s] of the ``settle`` mode's return once its window is over:
 critically damped at 20 rad/s, a 3-cm shift is back under 0.1 mm 0.4 s later."""
@@ -392,10 +397,11 @@ class FreeLinkModulation:
         ``sigma = 1`` always, or only while the setpoint's velocity and acceleration are
         0, or (``settle``: the horizontal arm, whose free link is a free rotor that only a
         centimetre-scale motion of the end effector can slow) only during the first
-        ``settle_window`` s of each rest of the setpoint that follows a task (a setpoint
-        that moved since the last :meth:`reset`: a rest before any task, e.g. a held start
-        point, has nothing to settle and would only start that task off its path), after
-        which the drive is off and
+        ``settle_window`` s of each rest of the setpoint that follows a task (a reference
+        that travelled more than :data:`SETTLE_AFTER_TRAVEL` since the last :meth:`reset`:
+        a rest before any task, e.g. a held start point that the control loop's resume
+        blend moved by a fraction of a millimetre, has nothing to settle and would only
+        start that task off its path), after which the drive is off and
         the filter's gains are :data:`SETTLE_RETURN_GAINS` (the shift goes back to 0
         before the next task; a rest shorter than the window plus ~0.4 s starts the task
         with the shift left; a longer rest has the shift back at 0 whenever the next task
@@ -469,7 +475,7 @@ class FreeLinkModulation:
         self._delta_dot = (0.0, 0.0)
         self._th_qs = None
         self._rested = 0.0
-        self._moved = False
+        self._travel = 0.0
 
     def quasi_static_angle(self, pdd_d):
         """
@@ -527,7 +533,8 @@ class FreeLinkModulation:
         settle = self.mode == 'settle'
         drive = self.mode == 'always' or resting
         if settle:
-            drive = resting and self._moved and self._rested < self.settle_window
+            drive = (resting and self._travel > SETTLE_AFTER_TRAVEL
+                     and self._rested < self.settle_window)
             if not drive:
                 k3, k4 = SETTLE_RETURN_GAINS
         if resting:
@@ -536,7 +543,8 @@ class FreeLinkModulation:
             self._rested += dt
         else:
             self._rested = 0.0
-            self._moved = True
+            if self._travel <= SETTLE_AFTER_TRAVEL:
+                self._travel += math.hypot(vx, vy) * dt
         if th_qs is None:
             w = k2 * thd
             self._th_qs = None
@@ -576,12 +584,12 @@ class FreeLinkModulation:
         return out
 
     def snapshot(self):
-        """Return the modulation's state (``delta``, its rate, the last angle, the rest, moved)."""
-        return (self._delta, self._delta_dot, self._th_qs, self._rested, self._moved)
+        """Return the modulation's state (``delta``, its rate, the last angle, rest, travel)."""
+        return (self._delta, self._delta_dot, self._th_qs, self._rested, self._travel)
 
     def restore(self, saved):
         """Put back a :meth:`snapshot`."""
-        self._delta, self._delta_dot, self._th_qs, self._rested, self._moved = saved
+        self._delta, self._delta_dot, self._th_qs, self._rested, self._travel = saved
 
     @property
     def delta(self):
