@@ -121,9 +121,12 @@ class Runner:
         proc.log = log
         self.nodes.append(proc)
         # its parameter services answer (a get returns at the first answer; a list would
-        # wait for discovery to settle: 3.5 s or more a node)
+        # wait for discovery to settle: 3.5 s or more a node). The answer may come late
+        # too: a planner computes its map before it answers (beside a numpy hog and the
+        # other workers, the niced four-link planner took over fj's default 10 s)
         up = subprocess.run([FJ, 'param', 'get', NODE_NAMES[exe], 'use_sim_time',
-                             '--timeout', '60'], capture_output=True, text=True, timeout=180)
+                             '--timeout', '60', '--service-timeout', '60'],
+                            capture_output=True, text=True, timeout=180)
         assert up.returncode == 0 and proc.poll() is None, (
             '%r did not come up: %s\n%s' % (line, up.stderr, self.log(proc)))
 

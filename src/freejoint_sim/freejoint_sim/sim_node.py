@@ -559,7 +559,7 @@ class SimNode(Node, Lifecycle):
                                        'command' % (self._k, self._t_ns * 1e-9))
         elif (latest is not None and self._watchdog.expired(now, latest[1], latest[4])
               and self._diverged is None):
-            self._engage_brakes(now, waited=latest[4], why=latest[5])
+            self._engage_brakes(now, waited=latest[4], wait_kind=latest[5])
         for _ in range(due):
             latest = self._latest
             if latest is None:
@@ -578,14 +578,14 @@ class SimNode(Node, Lifecycle):
                     self._observer.command_applied(self._k, latest[2])
             self._advance(tau)
 
-    def _engage_brakes(self, now, asked=None, waited=0.0, why='moving'):
+    def _engage_brakes(self, now, asked=None, waited=0.0, wait_kind='moving'):
         """
         Stop the arm where it is and hold it until the next accepted command.
 
         ``asked``: the controller's reason on brake_request; None: the drive watchdog (no
         command for ``waited`` s: brake_timeout, brake_timeout_at_rest after a command
-        that found the arm at rest, or the controller's brake_timeout_request: ``why`` of
-        ``DriveWatchdog.judge``).
+        that found the arm at rest, or the controller's brake_timeout_request: ``wait_kind``,
+        the reason of ``DriveWatchdog.judge``).
         """
         self._plant.stop()
         self._take_state()
@@ -595,7 +595,7 @@ class SimNode(Node, Lifecycle):
             self._brake_engagements += 1
             rest = {'at rest': ', the arm at rest',
                     'asked': ', as the controller asked while its setpoint rests (%s)'
-                    % BRAKE_TIMEOUT_REQUEST.name}.get(why, '')
+                    % BRAKE_TIMEOUT_REQUEST.name}.get(wait_kind, '')
             self._brake_reason = 'no command for %g s%s' % (waited, rest)
             why = 'no command on %s for %g s%s' % (self._cmd_topic(), waited, rest)
         else:
