@@ -66,14 +66,10 @@ def main(argv=None):
         node_args['controller'] = ['failure_use_effort:=false']
     damping = None
     if args.free_link_damping:
+        from freejoint_control.params import SCHEMA
         from freejoint_core.failure_offline import FAILURE_FREE_LINK_DAMPING as damping
-        import yaml
-        with open(os.path.join(ROOT, 'config', 'fully_actuated',
-                               'free_link_damping.yaml')) as fh:
-            given = yaml.safe_load(fh)['/**']['ros__parameters']
-        node_args.setdefault('controller', []).extend(
-            '%s:=%s' % (name, str(value).lower() if isinstance(value, bool) else value)
-            for name, value in given.items())
+        node_args.setdefault('controller', []).extend(SCHEMA.overrides(os.path.join(
+            ROOT, 'config', 'fully_actuated', 'free_link_damping.yaml')))
     rclpy.init()
     node = rclpy.create_node('failure_graph')
     executor = EventsExecutor()

@@ -514,25 +514,14 @@ STABILISED_REST = 1.0
 its 0.6-s window and the shift's 0.4-s return; the paper's soak: 0.5 s)."""
 
 
-def overlay_overrides(schema, path):
-    """Return the ``-p`` items (``name:=value``) of what a parameter overlay file sets."""
-    defaults = schema.defaults()
-    items = []
-    for name, value in schema.yaml_values(path).items():
-        if value != defaults[name]:
-            text = ('true' if value else 'false') if isinstance(value, bool) else str(value)
-            items.append('%s:=%s' % (name, text))
-    return items
-
-
 def stabilised_overrides(case):
     """Return the (simulator, controller) ``-p`` items of ``--stabilise`` for ``case``."""
     from freejoint_control.params import SCHEMA as CONTROLLER
     from freejoint_sim.params import SCHEMA as SIM
     overlay = os.path.join(ROOT, 'config', STABILISED_OVERLAYS[case])
     sim = os.path.join(overlay, 'sim.yaml')
-    return (overlay_overrides(SIM, sim) if os.path.exists(sim) else [],
-            overlay_overrides(CONTROLLER, os.path.join(overlay, 'controller.yaml')))
+    return (SIM.overrides(sim) if os.path.exists(sim) else [],
+            CONTROLLER.overrides(os.path.join(overlay, 'controller.yaml')))
 
 
 def fully_actuated_overrides(damped=False):
@@ -547,12 +536,11 @@ def fully_actuated_overrides(damped=False):
     from freejoint_planner.params import SCHEMA as PLANNER
     from freejoint_sim.params import SCHEMA as SIM
     overlay = os.path.join(ROOT, 'config', 'fully_actuated')
-    sim, ctl, planner = (overlay_overrides(schema, os.path.join(overlay, node + '.yaml'))
+    sim, ctl, planner = (schema.overrides(os.path.join(overlay, node + '.yaml'))
                          for schema, node in ((SIM, 'sim'), (CONTROLLER, 'controller'),
                                               (PLANNER, 'planner')))
     if damped:
-        ctl = ctl + overlay_overrides(CONTROLLER, os.path.join(overlay,
-                                                               'free_link_damping.yaml'))
+        ctl = ctl + CONTROLLER.overrides(os.path.join(overlay, 'free_link_damping.yaml'))
     return sim, ctl, planner
 
 

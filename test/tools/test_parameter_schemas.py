@@ -197,3 +197,12 @@ def test_every_name_of_a_params_file_is_a_schema_entry_and_the_file_builds(name)
         unknown = sorted(set(given) - {p.name for p in CONFIGS[name]} - {'use_sim_time'})
         assert unknown == [], (path, unknown)
     CONFIGS[name].from_yaml(os.path.join(ROOT, 'config', name))
+
+
+def test_a_files_overrides_are_what_it_sets_apart_from_the_defaults_as_ros2_p_items(tmp_path):
+    path = tmp_path / 'overlay.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    free_link_damping: true\n'
+                    '    free_link_delta_max: 0.03\n    lockstep: true\n    use_sim_time: true\n')
+    # lockstep true is the default, use_sim_time not a schema entry: neither is given.
+    assert CONTROLLER.overrides(str(path)) == ['free_link_damping:=true',
+                                               'free_link_delta_max:=0.03']

@@ -287,6 +287,22 @@ class Schema:
             values.update({k: v for k, v in given.items() if k in self})
         return values
 
+    def overrides(self, path, node='/**'):
+        """
+        Return the ``-p`` items (``name:=value``) of what a parameter file sets.
+
+        Those of its values (:meth:`yaml_values`) that differ from the defaults, in ros2's
+        ``--ros-args -p`` form (``true`` / ``false`` for booleans): a file's settings
+        given to a node started without it.
+        """
+        defaults = self.defaults()
+        items = []
+        for name, value in self.yaml_values(path, node=node).items():
+            if value != defaults[name]:
+                text = ('true' if value else 'false') if isinstance(value, bool) else str(value)
+                items.append('%s:=%s' % (name, text))
+        return items
+
     def from_yaml(self, *paths, node='/**'):
         """Return the config of ``--params-file`` YAML files (defaults for what they omit)."""
         return self.config(self.yaml_values(*paths, node=node))
