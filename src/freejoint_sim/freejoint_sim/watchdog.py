@@ -54,23 +54,9 @@ class DriveWatchdog:
                              else self.brake_timeout)
         self.rest_speed = float(rest_speed)
 
-    def wait_after(self, qd, requested=0.0):
-        """
-        Return the wait [s] a command taken now starts (0: never brake).
-
-        Parameters
-        ----------
-        qd : sequence of float, (n,)
-            Joint speeds [rad/s] of the arm when the command is taken (every joint).
-        requested : float
-            The controller's requested wait [s] (:meth:`judge`); 0: none.
-
-        """
-        return self.judge(qd, requested)[0]
-
     def judge(self, qd, requested=0.0):
         """
-        Return ``(wait, why)`` for a command taken now.
+        Return ``(wait, why)`` for a command taken now: the wait [s] it starts, and why.
 
         Parameters
         ----------
@@ -130,7 +116,7 @@ class DriveWatchdog:
         now, receipt : float
             Monotonic times [s].
         wait : float
-            The command's wait (:meth:`wait_after`); 0 never expires.
+            The command's wait (:meth:`judge`); 0 never expires.
 
         """
         return wait > 0.0 and now - receipt > wait

@@ -7,7 +7,7 @@ import pytest
 
 def test_a_command_that_finds_the_arm_at_rest_brakes_after_the_shorter_wait():
     dog = DriveWatchdog(0.05, 0.01, 0.05)
-    rest = dog.wait_after([0.0, -0.049, 0.049])
+    rest = dog.judge([0.0, -0.049, 0.049])[0]
     assert rest == 0.01
     assert not dog.expired(1.0099, 1.0, rest) and dog.expired(1.0101, 1.0, rest)
 
@@ -15,16 +15,16 @@ def test_a_command_that_finds_the_arm_at_rest_brakes_after_the_shorter_wait():
 def test_one_joint_moving_passive_or_not_keeps_the_moving_wait():
     dog = DriveWatchdog(0.05, 0.01, 0.05)
     for qd in ([0.05, 0.0, 0.0], [0.0, 0.0, -0.3], [2.0, 1.0, 0.0]):
-        wait = dog.wait_after(qd)
+        wait = dog.judge(qd)[0]
         assert wait == 0.05, qd
         assert not dog.expired(1.04, 1.0, wait) and dog.expired(1.051, 1.0, wait)
 
 
 def test_no_watchdog_never_brakes_and_the_rest_wait_is_at_most_the_moving_one():
     never = DriveWatchdog(0.0, 0.01, 0.05)
-    assert never.wait_after([0.0, 0.0]) == 0.0 and not never.expired(1e6, 0.0, 0.0)
-    assert DriveWatchdog(0.05, 0.0).wait_after([0.0]) == 0.05      # 0: brake_timeout
-    assert DriveWatchdog(0.02, 0.5).wait_after([0.0]) == 0.02      # never above it
+    assert never.judge([0.0, 0.0])[0] == 0.0 and not never.expired(1e6, 0.0, 0.0)
+    assert DriveWatchdog(0.05, 0.0).judge([0.0])[0] == 0.05      # 0: brake_timeout
+    assert DriveWatchdog(0.02, 0.5).judge([0.0])[0] == 0.02      # never above it
 
 
 def test_the_defaults_are_the_schemas_and_bad_values_are_refused_naming_them():
@@ -45,7 +45,6 @@ def test_the_controllers_request_shortens_the_wait_and_says_so_but_never_lengthe
     assert dog.judge(moving) == (0.05, 'moving')
     assert dog.judge(rest) == (0.01, 'at rest')
     assert dog.judge(moving, 0.02) == (0.02, 'asked')          # the free link swinging
-    assert dog.wait_after(moving, 0.02) == 0.02
     assert dog.judge(rest, 0.02) == (0.01, 'at rest')          # its own is shorter
     assert dog.judge(moving, 0.5) == (0.05, 'moving')          # never longer
     assert dog.judge(moving, 0.0) == (0.05, 'moving')          # 0: no request
