@@ -10,19 +10,24 @@ every wait bounded, every process stopped whatever happens:
   once on the ``single_threaded`` one, each driven in lockstep by this process: state k
   is published once the answer to k - 1 came, ``TICKS`` times after a warm-up; the echo
   process's CPU seconds (``/proc/<pid>/stat``) over the measured ticks, per tick;
+* the echo in the controller's place in the graph (``--seat``), the recorder off;
 * the graph in lockstep, a process per node, the recorder on and off: ``bench/graph.py``'s
   lockstep run (the 5-s horizontal case), its ``sim_node`` and ``controller_node`` CPU
   per tick (the graph benchmark's own run when ``make bench`` ran it just before); and
   once more without the recorder, the controller's ``ControllerState`` thinned to 100 Hz
   (``THINNED``: what its instrumentation costs).
 
-Rows: the CPU figures per tick and the ratios controller / echo and simulator / echo,
-the echo on the controller's executor (what the node costs per tick beyond what any rclpy
-node answering a state with a command on that executor costs). The target applies to the
-run without the recorder, whose controller sends its command to one reader, as the echo
-does (with the recorder on: the command to two readers, every ``ControllerState`` to
-one). Benchmarks assert nothing. Usage: ``. tools/env.sh && python bench/echo.py``, or
-``make bench BENCH=echo``.
+Rows: the CPU figures per tick and the ratios controller / echo and simulator / echo. The
+echo is measured twice: driven alone by this process (two processes on the machine), and in
+the controller's place in the same lockstep graph (``seat_cpu_per_tick``: the simulator,
+the planner and the echo with ``--seat``, no recorder). The target compares the controller
+with the echo in its place, which answers the same states from the same simulator beside
+the same processes: on this 2-vCPU VM a wake-up costs a process more CPU when four
+processes take turns than when two do, so the echo driven alone is not what the
+controller's seat costs any node. The target applies to the run without the recorder, whose
+controller sends its command to one reader, as the echo does (with the recorder on: the
+command to two readers, every ``ControllerState`` to one). Benchmarks assert nothing.
+Usage: ``. tools/env.sh && python bench/echo.py``, or ``make bench BENCH=echo``.
 """
 
 import os
@@ -68,11 +73,12 @@ def drive_echo(client, ticks=TICKS, warmup=WARMUP):
                                    lambda msg: answers.append(msg.data[0]), COMMANDS.qos)
     state = JOINT_STATES.msg_type()
     state.name = ['joint1', 'joint2', 'joint3']
-    state.velocity = [0.0, 0.0, 0.0]
     state.effort = [0.0, 0.0, 0.0]
 
+    state.position = [0.0, 0.0, 0.0]
+
     def send(k):
-        state.position = [float(k), 0.0, 0.0]
+        state.velocity = [-float(k), 0.0, 0.0]      # answered with k (minus the velocity)
         pub.publish(state)
 
     def answered(k):
@@ -132,6 +138,31 @@ def echo_cpu_per_tick(executor, ticks=TICKS):
         procs.stop_all(order=('echo_node',))
 
 
+def seat_cpu_per_tick(executor):
+    """
+    Return ``{node: CPU per lockstep tick [us]}`` of the echo node and the simulator.
+
+    The graph's lockstep run without the recorder, the echo node (on ``executor``, with
+    ``--seat``: it takes the setpoints too) in the controller's place: the processes, the
+    traffic and the machine of the controller's run.
+    """
+    env = graph_bench._env(0)
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
+    client = graph_bench.Client()
+    try:
+        seat = ('echo_node', [sys.executable, ECHO_NODE, executor, '--seat'])
+        rows = graph_bench.lockstep(client, env, 'separate', record=False, seat=seat)
+    finally:
+        client.close()
+    found = {}
+    for row in rows:
+        for node in ('sim_node', 'echo_node'):
+            if row['name'] == 'lockstep: %s CPU per tick' % node:
+                found[node] = row['value']
+    return found
+
+
 def graph_cpu_per_tick(record=True, ctl_overrides=()):
     """
     Return ``{node: CPU per lockstep tick [us]}`` of sim_node and controller_node.
@@ -165,39 +196,52 @@ def run():
     echo = echo_cpu_per_tick(kind)
     other = 'single_threaded' if kind == 'events' else 'events'
     echo_other = echo_cpu_per_tick(other)
+    seat = seat_cpu_per_tick(kind)
+    in_seat = seat.get('echo_node')
+    graph_bench.say("CPU per lockstep tick, echo (%s) in the controller's place: echo %s us, "
+                    'simulator %s us' % (kind, _us(in_seat), _us(seat.get('sim_node'))))
     rows = [
-        {'name': 'lockstep: rclpy echo node CPU per tick (%s)' % kind, 'value': echo,
-         'unit': 'us'},
-        {'name': 'lockstep: rclpy echo node CPU per tick (%s)' % other,
+        {'name': 'lockstep: rclpy echo node CPU per tick, driven alone (%s)' % kind,
+         'value': echo, 'unit': 'us'},
+        {'name': 'lockstep: rclpy echo node CPU per tick, driven alone (%s)' % other,
          'value': echo_other, 'unit': 'us'},
+        {'name': "lockstep graph, echo (%s) in the controller's place: echo CPU per tick"
+         % kind, 'value': in_seat, 'unit': 'us'},
+        {'name': "lockstep graph, echo (%s) in the controller's place: sim_node CPU per tick"
+         % kind, 'value': seat.get('sim_node'), 'unit': 'us'},
     ]
 
-    def ratio(value):
-        return None if value is None or not echo else value / echo
+    def ratio(value, base):
+        return None if value is None or not base else value / base
 
     # Recorder on (as make demo runs): the command goes to two readers (simulator,
     # recorder) and every ControllerState to the recorder. Off: the command to the
-    # simulator alone, as the echo's to this process.
+    # simulator alone, as the echo's in its place.
     for record, tag, target, extra in (
             (True, 'recorder on', None, ()), (False, 'recorder off', '<= 1.5', ()),
             (False, 'recorder off, controller_state 100 Hz', None, THINNED)):
         nodes = graph_cpu_per_tick(record, extra)
         ctl, sim = nodes.get('controller_node'), nodes.get('sim_node')
-        graph_bench.say('CPU per lockstep tick, %s: echo (%s) %.1f us, controller %s us, '
-                        'simulator %s us' % (tag, kind, echo,
-                                             '%.1f' % ctl if ctl is not None else 'n/a',
-                                             '%.1f' % sim if sim is not None else 'n/a'))
+        graph_bench.say('CPU per lockstep tick, %s: controller %s us, simulator %s us (echo in '
+                        'its place %s us, driven alone %.1f us)'
+                        % (tag, _us(ctl), _us(sim), _us(in_seat), echo))
         rows += [
             {'name': 'lockstep, %s: controller_node CPU per tick' % tag, 'value': ctl,
              'unit': 'us'},
             {'name': 'lockstep, %s: sim_node CPU per tick' % tag, 'value': sim,
              'unit': 'us'},
-            {'name': 'lockstep, %s: controller / echo (%s) CPU per tick' % (tag, kind),
-             'value': ratio(ctl), 'unit': 'x', 'target': target},
-            {'name': 'lockstep, %s: simulator / echo (%s) CPU per tick' % (tag, kind),
-             'value': ratio(sim), 'unit': 'x'},
+            {'name': 'lockstep, %s: controller / echo in its place (%s)' % (tag, kind),
+             'value': ratio(ctl, in_seat), 'unit': 'x', 'target': target},
+            {'name': 'lockstep, %s: controller / echo driven alone (%s)' % (tag, kind),
+             'value': ratio(ctl, echo), 'unit': 'x'},
+            {'name': "lockstep, %s: simulator / echo in the controller's place (%s)"
+             % (tag, kind), 'value': ratio(sim, in_seat), 'unit': 'x'},
         ]
     return rows
+
+
+def _us(value):
+    return 'n/a' if value is None else '%.1f' % value
 
 
 def main():

@@ -3,22 +3,29 @@ A bare rclpy echo node: JointState in, Float64MultiArray out (the bench's baseli
 
 What any rclpy node answering the simulator's state with a command costs at least: it
 subscribes to ``joint_states`` and publishes on ``effort_controller/commands`` with the
-graph contract's types and QoS (``freejoint_common.contract``), and answers each state
-with the positions of the first two joints, nothing else (no parameters beyond rclpy's,
-no diagnostics, no law). The executor is the one named by the argument (``events``:
-rclpy's ``EventsExecutor``, as ``config/controller.yaml`` runs the controller;
-``single_threaded``: ``SingleThreadedExecutor``), driven by ``spin_once`` as the project's
-runner drives every node, until SIGINT / SIGTERM.
+graph contract's types and QoS (``freejoint_common.contract``), and answers each state with
+minus the velocities of the first two joints (a damper: harmless to a simulated arm),
+labelled with the state's stamp as a lockstep simulator requires (``stamp_label``), nothing
+else (no parameters beyond rclpy's, no diagnostics, no law). The executor is the one named
+by the argument (``events``: rclpy's ``EventsExecutor``, as ``config/controller.yaml`` runs
+the controller; ``single_threaded``: ``SingleThreadedExecutor``), driven by ``spin_once``
+as the project's runner drives every node, until SIGINT / SIGTERM.
 
-Usage: ``python bench/echo_node.py [events | single_threaded]`` (under ``. tools/env.sh``);
-``bench/echo.py`` runs it.
+``--seat`` (in the controller's place in the lockstep graph, ``bench/echo.py``): it also
+subscribes to the planner's ``setpoints`` (the controller's other input; their contents
+unused) and, as the lockstep controller does, answers no state before the first setpoints
+message (then the newest state at once): the simulator steps only once the plan runs.
+
+Usage: ``python bench/echo_node.py [events | single_threaded] [--seat]`` (under
+``. tools/env.sh``); ``bench/echo.py`` runs it.
 """
 
 import signal
 import sys
 
-from freejoint_common.contract import COMMANDS, JOINT_STATES
+from freejoint_common.contract import COMMANDS, JOINT_STATES, SETPOINTS, stamp_label, to_ns
 import rclpy
+from std_msgs.msg import MultiArrayDimension
 
 NODE_NAME = 'echo_node'
 
@@ -36,6 +43,8 @@ def make_executor(kind):
 
 def main(argv):
     """Echo states as commands until SIGINT / SIGTERM."""
+    seat = '--seat' in argv
+    argv = [a for a in argv if a != '--seat']
     kind = argv[0] if argv else 'events'
     stop = []
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -45,11 +54,27 @@ def main(argv):
     node = rclpy.create_node(NODE_NAME)
     pub = node.create_publisher(COMMANDS.msg_type, COMMANDS.name, COMMANDS.qos)
 
+    held = {'setpoints': not seat, 'state': None}
+
     def echo(state):
+        if not held['setpoints']:
+            held['state'] = state
+            return
         out = COMMANDS.msg_type()
-        out.data = list(state.position[:2])
+        out.layout.dim = [MultiArrayDimension(label=stamp_label(to_ns(state.header.stamp)),
+                                              size=2, stride=2)]
+        out.data = [-v for v in state.velocity[:2]]
         pub.publish(out)
 
+    def on_setpoints(_msg):
+        if not held['setpoints']:
+            held['setpoints'] = True
+            if held['state'] is not None:
+                echo(held['state'])
+
+    if seat:
+        node.create_subscription(SETPOINTS.msg_type, SETPOINTS.name, on_setpoints,
+                                 SETPOINTS.qos)
     node.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name, echo, JOINT_STATES.qos)
     executor.add_node(node)
     while not stop:

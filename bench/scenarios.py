@@ -54,7 +54,7 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
-from freejoint_common.contract import EE_POSITION, NS_PER_S, SETPOINT  # noqa: E402, I100
+from freejoint_common.contract import EE_POSITION, NS_PER_S  # noqa: E402, I100
 import soak  # noqa: E402 - bench/soak.py, the session and the bag analysis
 
 RESUMING_BIT = 256
@@ -92,13 +92,13 @@ def setpoint_steps_mm(bag_path, lo_ns, hi_ns, dt_ns):
     """
     Return the largest change between setpoints of consecutive ticks [mm] in the window.
 
-    The ``setpoint`` stream by stamp (the newest message of each stamp counts, as the
+    The ``setpoints`` stream by stamp (the newest setpoint of each stamp counts, as the
     controller takes the newest), consecutive = stamps one control period apart.
     """
     import numpy as np
     from freejoint_tools.bagfile import open_bag
     by_stamp = {}
-    for log_ns, msg in open_bag(bag_path).decode(SETPOINT.absolute):
+    for log_ns, msg in soak.bag_setpoints(open_bag(bag_path)):
         if lo_ns <= log_ns <= hi_ns:
             by_stamp[soak.stamp_ns(msg)] = (msg.position[0], msg.position[1])
     stamps = np.array(sorted(by_stamp), dtype=np.int64)

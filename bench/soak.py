@@ -61,7 +61,7 @@ if HERE not in sys.path:
 import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
 import wakeup_probe  # noqa: E402, I100 - bench/wakeup_probe.py, the machine's lateness
 from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION  # noqa: E402, I100
-from freejoint_common.contract import JOINT_STATES, SETPOINT, to_ns  # noqa: E402
+from freejoint_common.contract import JOINT_STATES, SETPOINTS, to_ns  # noqa: E402
 from freejoint_common.scheduling import rt_budget  # noqa: E402
 
 OUT = os.path.join(ROOT, 'bags', 'soak')
@@ -381,7 +381,7 @@ def moving_setpoints(bag_path, stamps):
     Parameters
     ----------
     bag_path : str
-        The run's bag (its ``SETPOINT`` topic).
+        The run's bag (its ``SETPOINTS`` topic).
     stamps : numpy.ndarray of int, (n,)
         Tick stamps [ns].
 
@@ -402,6 +402,19 @@ def moving_setpoints(bag_path, stamps):
     return np.where(i >= 0, flags[np.maximum(i, 0)], False)
 
 
+def bag_setpoints(bag):
+    """
+    Yield ``(log_ns, setpoint)`` of every setpoint in the bag, in recorded order.
+
+    The elements of the ``SETPOINTS`` batches (freejoint_msgs/CartesianSetpoint each), a
+    batch's log time for each of its setpoints; nothing if the bag has no such topic.
+    """
+    if SETPOINTS.absolute in bag.topics:
+        for log_ns, msg in bag.decode(SETPOINTS.absolute):
+            for sp in msg.setpoints:
+                yield log_ns, sp
+
+
 def paired_setpoints(bag, stamps):
     """
     Return the bag's setpoints and, per state stamp, the index of the one the controller paired.
@@ -411,7 +424,7 @@ def paired_setpoints(bag, stamps):
     Parameters
     ----------
     bag : freejoint_tools.bagfile bag
-        An open bag (its ``SETPOINT`` topic; none: no setpoint).
+        An open bag (its ``SETPOINTS`` topic; none: no setpoint).
     stamps : array_like of int, (n,)
         State stamps [ns].
 
@@ -425,9 +438,8 @@ def paired_setpoints(bag, stamps):
     """
     import numpy as np
     by_stamp = {}
-    if SETPOINT.absolute in bag.topics:
-        for _, msg in bag.decode(SETPOINT.absolute):
-            by_stamp[stamp_ns(msg)] = msg
+    for _, msg in bag_setpoints(bag):
+        by_stamp[stamp_ns(msg)] = msg
     stamps = np.asarray(stamps, dtype=np.int64)
     if not by_stamp:
         return [], np.full(len(stamps), -1, dtype=np.int64)

@@ -28,7 +28,7 @@ import sys
 import tempfile
 import time
 
-from freejoint_common.contract import CLOCK, CONTROLLER_STATE, JOINT_STATES, SETPOINT
+from freejoint_common.contract import CLOCK, CONTROLLER_STATE, JOINT_STATES, SETPOINTS
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RECORDER = os.path.join(ROOT, 'install', 'freejoint_tools', 'lib', 'freejoint_tools',
@@ -36,7 +36,7 @@ RECORDER = os.path.join(ROOT, 'install', 'freejoint_tools', 'lib', 'freejoint_to
 PUBLISHER = os.path.join(ROOT, 'test', 'nodes', 'tools_publisher.py')
 TICK_RATES = (1000, 2000, 4000, 8000)
 SECONDS = 2.0
-TICK_TOPICS = tuple(t.absolute for t in (CLOCK, JOINT_STATES, SETPOINT, CONTROLLER_STATE))
+TICK_TOPICS = tuple(t.absolute for t in (CLOCK, JOINT_STATES, SETPOINTS, CONTROLLER_STATE))
 
 
 def _env():

@@ -148,6 +148,6 @@ def test_graph_md_names_the_contract_module_and_every_contract_topic_and_service
         text = fh.read()
     assert 'freejoint_common/contract.py' in text or 'freejoint_common.contract' in text
     names = _contract_names()
-    assert {'joint_states', '/clock', 'setpoint', '~/reset', '/diagnostics'} <= set(names)
+    assert {'joint_states', '/clock', 'setpoints', '~/reset', '/diagnostics'} <= set(names)
     missing = [name for name in names if '`%s`' % name not in text]
     assert missing == []

@@ -654,11 +654,11 @@ def test_a_second_law_is_one_registration_and_one_parameter_value():
 def test_standby_readiness_waits_for_matching_the_stream_and_settling():
     loop, _ = make(lockstep=False, standby=True)
     assert loop.standby and loop.waiting_for == 'start-up'
-    names = ('/effort_controller/commands', '/setpoint')
+    names = ('/effort_controller/commands', '/setpoints')
     assert loop.standby_waits_for(0, 1, 1, 1, 0.0, 0, names) == (
         '/effort_controller/commands matched by 0 of its 1 subscribers')
     assert loop.standby_waits_for(1, 1, 0, 1, 0.0, 0, names) == (
-        '/setpoint: 0 of its 1 publishers matched')
+        '/setpoints: 0 of its 1 publishers matched')
     assert loop.standby_waits_for(1, 1, 0, 0, 0.0, 0, names) == ''     # no planner
     assert loop.standby_waits_for(1, 1, 1, 1, 10.0, 0, names) == (
         'the setpoint stream matched, no setpoint received yet')

@@ -24,6 +24,15 @@ def _setpoint():
     return msg
 
 
+def _setpoints():
+    from freejoint_msgs.msg import CartesianSetpoints
+    first, second = _setpoint(), _setpoint()
+    second.header.stamp.nanosec = 2_000_000
+    second.plan_time = 3.002
+    second.position = [0.2, -0.099]
+    return CartesianSetpoints(header=first.header, setpoints=[first, second])
+
+
 def _state():
     from freejoint_msgs.msg import ControllerState
     msg = ControllerState()
@@ -44,7 +53,8 @@ def _state():
     return msg
 
 
-@pytest.mark.parametrize('make', [_setpoint, _state], ids=['CartesianSetpoint', 'ControllerState'])
+@pytest.mark.parametrize('make', [_setpoint, _setpoints, _state],
+                         ids=['CartesianSetpoint', 'CartesianSetpoints', 'ControllerState'])
 def test_message_round_trips_through_another_process(make, procs, ros_node, wait):
     import rclpy
     sent = make()

@@ -25,7 +25,7 @@ import subprocess
 import sys
 import time
 
-from freejoint_common.contract import CLOCK, profile, SETPOINT, stamp_from_ns, to_ns
+from freejoint_common.contract import CLOCK, profile, SETPOINTS, stamp_from_ns, to_ns
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_msgs.srv import PlanCircle
 import rclpy
@@ -78,7 +78,11 @@ def main():
         state['last'] = stamp
         state['count'] += 1
 
-    node.create_subscription(SETPOINT.msg_type, SETPOINT.name, on_setpoint, profile(1000))
+    def on_setpoints(msg):
+        for sp in msg.setpoints:
+            on_setpoint(sp)
+
+    node.create_subscription(SETPOINTS.msg_type, SETPOINTS.name, on_setpoints, profile(1000))
     pub = node.create_publisher(CLOCK.msg_type, CLOCK.name, CLOCK.qos)
     summary = {}
     try:

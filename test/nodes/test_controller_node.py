@@ -13,7 +13,7 @@ import os
 import re
 
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, DIAGNOSTICS, JOINT_STATES
-from freejoint_common.contract import profile, SETPOINT, stamp_from_ns, stamp_label, to_ns
+from freejoint_common.contract import profile, SETPOINTS, stamp_from_ns, stamp_label, to_ns
 from freejoint_control.params import SCHEMA
 from freejoint_core.arm import table1
 from freejoint_core.control import Gains, RobustController
@@ -49,14 +49,14 @@ class Driver:
         self.states = {}
         self.commands = {}
         self.pub_js = node.create_publisher(JOINT_STATES.msg_type, JOINT_STATES.name, _qos())
-        self.pub_sp = node.create_publisher(SETPOINT.msg_type, SETPOINT.name, _qos(True))
+        self.pub_sp = node.create_publisher(SETPOINTS.msg_type, SETPOINTS.name, _qos(True))
         self.subs = (
             node.create_subscription(CONTROLLER_STATE.msg_type, CONTROLLER_STATE.name,
                                      self._on_state, _qos()),
             node.create_subscription(COMMANDS.msg_type, COMMANDS.name, self._on_command,
                                      _qos()))
         self.JointState = JOINT_STATES.msg_type
-        self.CartesianSetpoint = SETPOINT.msg_type
+        self.CartesianSetpoints = SETPOINTS.msg_type
 
     def _on_state(self, msg):
         ns = to_ns(msg.header.stamp)
@@ -79,12 +79,13 @@ class Driver:
         stamp_from_ns(self.ns(k), msg.header.stamp)
 
     def setpoint(self, k, values):
-        msg = self.CartesianSetpoint()
+        from freejoint_msgs.msg import CartesianSetpoint
+        msg = CartesianSetpoint()
         self.stamp(msg, k)
         msg.position = list(values[0:2])
         msg.velocity = list(values[2:4])
         msg.acceleration = list(values[4:6])
-        self.pub_sp.publish(msg)
+        self.pub_sp.publish(self.CartesianSetpoints(header=msg.header, setpoints=[msg]))
 
     def setpoints_ahead(self, k, values_of, ahead=5):
         """
@@ -392,6 +393,60 @@ def test_a_setpoint_delivered_before_a_state_is_applied_before_the_state_is_answ
         node.destroy_node()
 
 
+def test_a_batch_of_setpoints_is_applied_element_by_element_and_a_malformed_one_alone_is_refused(
+        ros_node, monkeypatch):
+    """
+    In-process, lockstep, no DDS delivery: the node's ``setpoints`` callback called directly.
+
+    A batch of ticks 0..3 whose tick-2 element has 3 position values (the task has 2):
+    ticks 0, 1 and 3 are taken, tick 2 is refused and counted; state 2 then waits for its
+    setpoint, and a batch carrying it answers the waiting state at once, with the command a
+    separate loop gives for the same inputs.
+    """
+    from rclpy.parameter import Parameter
+    from freejoint_control.controller_node import ControllerNode
+    from freejoint_msgs.msg import CartesianSetpoint, CartesianSetpoints
+    from sensor_msgs.msg import JointState
+    node = ControllerNode(parameter_overrides=[Parameter('case', value='vertical')])
+    try:
+        answers = []
+        monkeypatch.setattr(node._pub_cmd, 'publish', lambda msg: None)
+        monkeypatch.setattr(node._pub_state, 'publish', lambda msg: answers.append(
+            (to_ns(msg.header.stamp), to_ns(msg.setpoint_stamp), list(msg.effort))))
+
+        def element(k, position=None):
+            values = _setpoint(k)
+            msg = CartesianSetpoint(position=list(position or values[0:2]),
+                                    velocity=list(values[2:4]),
+                                    acceleration=list(values[4:6]))
+            stamp_from_ns(k * DT_NS, msg.header.stamp)
+            return msg
+
+        def state(k):
+            msg = JointState(name=NAMES, position=list(Q0), velocity=list(QD0))
+            stamp_from_ns(k * DT_NS, msg.header.stamp)
+            node._on_joint_state(msg)
+
+        batch = [element(0), element(1), element(2, (0.2, 0.0, 0.1)), element(3)]
+        node._on_setpoints(CartesianSetpoints(header=batch[0].header, setpoints=batch))
+        assert node._loop.refused_setpoints == 1
+        for k in (0, 1):
+            state(k)
+        assert [a[:2] for a in answers] == [(0, 0), (DT_NS, DT_NS)]
+        state(2)
+        assert len(answers) == 2, 'state 2 answered without its setpoint'
+        node._on_setpoints(CartesianSetpoints(header=batch[0].header, setpoints=[element(2)]))
+        assert [a[:2] for a in answers[2:]] == [(2 * DT_NS, 2 * DT_NS)]
+        state(3)
+        assert [a[:2] for a in answers[3:]] == [(3 * DT_NS, 3 * DT_NS)]
+        loop = _loop(case='vertical')
+        for k in range(4):
+            loop.on_setpoint(k * DT_NS, _setpoint(k), 0, 0.0)
+            assert answers[k][2] == loop.on_state(k * DT_NS, NAMES, Q0, QD0, 0, 0.0).effort
+    finally:
+        node.destroy_node()
+
+
 JS_RELIABILITY = 'qos_overrides./joint_states.subscription.reliability'
 
 
@@ -409,14 +464,14 @@ def test_a_best_effort_joint_states_driver_drives_the_controller_only_with_the_q
     params = ParameterCalls(ros_node, 'controller_node', timeout=30.0).get_values([
         JS_RELIABILITY, 'qos_overrides./joint_states.subscription.depth',
         'qos_overrides./joint_states.subscription.history',
-        'qos_overrides./setpoint.subscription.reliability',
+        'qos_overrides./setpoints.subscription.reliability',
         'qos_overrides./effort_controller/commands.publisher.reliability',
         'qos_overrides./controller_state.publisher.depth'])
     assert params == {
         JS_RELIABILITY: 'best_effort' if override else 'reliable',
         'qos_overrides./joint_states.subscription.depth': 1,     # real time: newest only
         'qos_overrides./joint_states.subscription.history': 'keep_last',
-        'qos_overrides./setpoint.subscription.reliability': 'reliable',
+        'qos_overrides./setpoints.subscription.reliability': 'reliable',
         'qos_overrides./effort_controller/commands.publisher.reliability': 'reliable',
         'qos_overrides./controller_state.publisher.depth': 1000}
     sensor = ros_node.create_publisher(JointState, 'joint_states', qos_profile_sensor_data)

@@ -144,8 +144,8 @@ def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_b
         with open('/proc/%d/maps' % pid) as f:
             assert '/dev/shm/fastrtps' not in f.read(), 'child %d maps Fast DDS SHM' % pid
     # Both children take the setpoints; only the active one is subscribed to joint_states.
-    g.wait(lambda: g.subscribers('/setpoint') >= CHILDREN,
-           30.0, 'both controllers on /setpoint in the graph', spin=g.spin)
+    g.wait(lambda: g.subscribers('/setpoints') >= CHILDREN,
+           30.0, 'both controllers on /setpoints in the graph', spin=g.spin)
     assert g.subscribers('/joint_states') & CHILDREN == {'controller_node'}
     g.pause(2.0)        # 1 s into the circle
     t_kill = time.monotonic()

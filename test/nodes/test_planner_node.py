@@ -65,16 +65,21 @@ class ClockDriver:
     """Publish `/clock` like the lockstep sim and collect the planner's setpoints."""
 
     def __init__(self, ros_node, lookahead=LOOKAHEAD):
-        from freejoint_common.contract import CLOCK, profile, SETPOINT
+        from freejoint_common.contract import CLOCK, profile, SETPOINTS
         self.node = ros_node
         self.lookahead = lookahead
-        self.got = []
+        self.got = []           # the setpoints, in the order received
+        self.batches = []       # the CartesianSetpoints messages
         self.clock_pub = ros_node.create_publisher(CLOCK.msg_type, CLOCK.name, profile(10))
         # GRAPH.md: reliable, keep-last 1000, transient local (what the controller uses: a
         # match completed on the planner's side only after its first ticks loses nothing)
-        self.sub = ros_node.create_subscription(SETPOINT.msg_type, SETPOINT.name,
-                                                self.got.append, SETPOINT.qos)
+        self.sub = ros_node.create_subscription(SETPOINTS.msg_type, SETPOINTS.name,
+                                                self._on_batch, SETPOINTS.qos)
         self._clock = CLOCK.msg_type
+
+    def _on_batch(self, msg):
+        self.batches.append(msg)
+        self.got.extend(msg.setpoints)
 
     def matched(self):
         _spin(self.node)
@@ -216,6 +221,11 @@ def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_
         clock.step(now, wait, '(log: %s)' % procs.log(proc))
     stamps = _stamps(clock.got)
     assert stamps == [k * MS for k in range(201 + LOOKAHEAD)]
+    # one message per /clock: the first the lookahead's ticks and its own, then 10 each,
+    # stamped with its first setpoint's stamp
+    assert [len(b.setpoints) for b in clock.batches] == [LOOKAHEAD + 1] + [10] * 20
+    assert all(b.header.stamp == b.setpoints[0].header.stamp
+               and b.header.frame_id == 'base_link' for b in clock.batches)
     assert '/clock every 10 ticks (or more): lookahead 20 covers it and one lost /clock' in \
         procs.log(proc)
     assert 'went out only at' not in procs.log(proc)

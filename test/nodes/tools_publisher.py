@@ -2,10 +2,11 @@
 A lockstep-like run without the real nodes: publishes what the graph publishes per tick.
 
 Per control tick k (stamp t_k = k * dt): ``/clock`` (if --clock), ``joint_states``
-(sensor_msgs/JointState, joints joint1..3), ``setpoint`` (freejoint_msgs/CartesianSetpoint,
-transient local) and ``controller_state`` (freejoint_msgs/ControllerState), each reliable
-keep-last 100 (the graph's is 1000, ``freejoint_common.contract.STREAM_DEPTH``: a shallower
-history shows an overrun sooner); before the ticks, once, the latched ``semi_singular_map``
+(sensor_msgs/JointState, joints joint1..3), ``setpoints``
+(freejoint_msgs/CartesianSetpoints of the tick's one setpoint, transient local) and
+``controller_state`` (freejoint_msgs/ControllerState), each reliable keep-last 100 (the
+graph's is 1000, ``freejoint_common.contract.STREAM_DEPTH``: a shallower history shows an
+overrun sooner); before the ticks, once, the latched ``semi_singular_map``
 (nav_msgs/OccupancyGrid) and ``planned_path`` (visualization_msgs/Marker), transient local
 depth 1. Message contents are a pure function of k (:func:`tick_messages`).
 
@@ -29,7 +30,7 @@ import sys
 import time
 
 from freejoint_common.contract import LATCHED_QOS, profile, stamp_from_ns
-from freejoint_msgs.msg import CartesianSetpoint, ControllerState
+from freejoint_msgs.msg import CartesianSetpoint, CartesianSetpoints, ControllerState
 from nav_msgs.msg import OccupancyGrid
 import rclpy
 from rclpy.serialization import serialize_message
@@ -40,11 +41,11 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
 DT_NS = 1_000_000
-TICK_TOPICS = ('/joint_states', '/setpoint', '/controller_state')
+TICK_TOPICS = ('/joint_states', '/setpoints', '/controller_state')
 
 
 def tick_messages(k):
-    """Return ``(JointState, CartesianSetpoint, ControllerState)`` of tick k."""
+    """Return ``(JointState, CartesianSetpoints, ControllerState)`` of tick k."""
     t_ns = k * DT_NS
     js = JointState()
     stamp_from_ns(t_ns, js.header.stamp)
@@ -80,7 +81,7 @@ def tick_messages(k):
     cs.det_dd = 1e-3 + 1e-4 * math.sin(k / 3.0)
     cs.status = k % 2
     cs.message = '' if k % 2 == 0 else 'near singular'
-    return js, sp, cs
+    return js, CartesianSetpoints(header=sp.header, setpoints=[sp]), cs
 
 
 def latched_messages():
@@ -130,7 +131,7 @@ def main():
     parser.add_argument('--subscribers', type=int, default=1)
     parser.add_argument('--summary', default='')
     parser.add_argument('--setpoint-volatile', action='store_true',
-                        help='offer setpoint volatile (not the graph contract)')
+                        help='offer setpoints volatile (not the graph contract)')
     parser.add_argument('--recorder', default='',
                         help="also wait until this recorder node's ~/status answers success")
     opts = parser.parse_args()
@@ -139,14 +140,14 @@ def main():
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('tools_publisher')
     # Depth 100, not the graph's 1000: an overloaded machine overflows this history, which
-    # the recorder must then report (test_recorder). setpoint transient local as the
+    # the recorder must then report (test_recorder). setpoints transient local as the
     # planner offers it (docs/GRAPH.md) unless --setpoint-volatile.
     tick_qos = profile(100)
     setpoint_qos = profile(100, latched=not opts.setpoint_volatile)
     latched = LATCHED_QOS
     pubs = {
         '/joint_states': node.create_publisher(JointState, '/joint_states', tick_qos),
-        '/setpoint': node.create_publisher(CartesianSetpoint, '/setpoint', setpoint_qos),
+        '/setpoints': node.create_publisher(CartesianSetpoints, '/setpoints', setpoint_qos),
         '/controller_state': node.create_publisher(ControllerState, '/controller_state',
                                                    tick_qos),
         '/semi_singular_map': node.create_publisher(OccupancyGrid, '/semi_singular_map',
@@ -188,7 +189,7 @@ def main():
             clock.clock = js.header.stamp
             publish('/clock', clock)
         publish('/joint_states', js)
-        publish('/setpoint', sp)
+        publish('/setpoints', sp)
         publish('/controller_state', cs)
         k += 1
         if opts.rate > 0:

@@ -29,7 +29,7 @@ class BagMaker:
     def __call__(self, path, ticks, custom_data=None, finalise=True, chunk_size=64 * 1024,
                  flush_every=0, compression='none', t0_ns=0, extra=(), joints=None):
         """
-        Write ``ticks`` ticks (joint_states, setpoint, controller_state, /clock) and the map.
+        Write ``ticks`` ticks (joint_states, setpoints, controller_state, /clock) and the map.
 
         ``t0_ns`` > 0: a real-time run's bag instead: every stamp and log time shifted by
         it (system time), no /clock. ``extra``: ``(topic, type, transient local, message)``
@@ -51,7 +51,7 @@ class BagMaker:
         topics = [(name, msgtype, 'transient_local' if latched else 'volatile')
                   for name, msgtype, latched, _ in extra]
         topics += [('/joint_states', 'sensor_msgs/msg/JointState', 'volatile'),
-                   ('/setpoint', 'freejoint_msgs/msg/CartesianSetpoint', 'transient_local'),
+                   ('/setpoints', 'freejoint_msgs/msg/CartesianSetpoints', 'transient_local'),
                    ('/controller_state', 'freejoint_msgs/msg/ControllerState', 'volatile'),
                    ('/semi_singular_map', 'nav_msgs/msg/OccupancyGrid', 'transient_local'),
                    ('/planned_path', 'visualization_msgs/msg/Marker', 'transient_local')]
@@ -87,14 +87,14 @@ class BagMaker:
                 cs.effort = (list(cs.effort) * len(active))[:len(active)]
             t_ns = t0_ns + k * self.module.DT_NS
             if t0_ns:
-                for msg in (js, sp, cs):
+                for msg in (js, sp, sp.setpoints[0], cs):
                     stamp_from_ns(t_ns, msg.header.stamp)
             else:
                 clock = Clock()
                 clock.clock = js.header.stamp
                 put('/clock', t_ns, clock)
             put('/joint_states', t_ns, js)
-            put('/setpoint', t_ns, sp)
+            put('/setpoints', t_ns, sp)
             put('/controller_state', t_ns, cs)
             if flush_every and (k + 1) % flush_every == 0:
                 writer.flush()

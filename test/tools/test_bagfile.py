@@ -4,7 +4,7 @@ import os
 import pytest
 import yaml
 
-TICK_TOPICS = ('/joint_states', '/setpoint', '/controller_state', '/clock')
+TICK_TOPICS = ('/joint_states', '/setpoints', '/controller_state', '/clock')
 
 
 def _read_with_rosbags_only_stored_definitions(path):
@@ -92,9 +92,9 @@ def test_open_bag_reads_topics_messages_and_run_info_in_file_order(tmp_path, mak
         n: len(m) for n, m in written.items()}
     order = [name for name, _, _, _ in bag.messages()]
     assert order[:2] == ['/semi_singular_map', '/planned_path']
-    assert order[2:6] == ['/clock', '/joint_states', '/setpoint', '/controller_state']
-    got = [data for name, _, _, data in bag.messages() if name == '/setpoint']
-    assert got == make_bag.data['/setpoint']
+    assert order[2:6] == ['/clock', '/joint_states', '/setpoints', '/controller_state']
+    got = [data for name, _, _, data in bag.messages() if name == '/setpoints']
+    assert got == make_bag.data['/setpoints']
 
 
 def test_bag_of_a_killed_writer_reads_up_to_its_last_flushed_chunk(tmp_path, make_bag):
@@ -231,7 +231,7 @@ def test_zstd_bag_round_trips_every_message_through_every_reader(tmp_path, make_
     for name, _, _, data in bag.messages():
         own.setdefault(name, []).append(data)
     assert own == sent
-    assert [data for _, _, _, data in bag.messages('/setpoint')] == sent['/setpoint']
+    assert [data for _, _, _, data in bag.messages('/setpoints')] == sent['/setpoints']
     by_plain = [(n, t) for n, t, _, _ in open_bag(plain).messages()]
     assert [(n, t) for n, t, _, _ in bag.messages()] == by_plain
     with open(mcap, 'rb') as fh:

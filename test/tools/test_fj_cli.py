@@ -80,11 +80,11 @@ def test_fj_topic_list_shows_the_graph_topics_with_their_types(graph):
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
     for line in ('/joint_states [sensor_msgs/msg/JointState]',
-                 '/setpoint [freejoint_msgs/msg/CartesianSetpoint]',
+                 '/setpoints [freejoint_msgs/msg/CartesianSetpoints]',
                  '/controller_state [freejoint_msgs/msg/ControllerState]'):
         assert line in lines, done.stdout
     names = fj('topic', 'list', '--spin-time', '4').stdout.splitlines()
-    assert {'/joint_states', '/setpoint', '/controller_state'} <= set(names)
+    assert {'/joint_states', '/setpoints', '/controller_state'} <= set(names)
     assert names == sorted(names) and not any(' ' in n for n in names)
 
 

@@ -3,7 +3,7 @@ import pytest
 
 pytestmark = pytest.mark.ros
 
-TOPICS = ('/joint_states', '/setpoint', '/controller_state', '/semi_singular_map',
+TOPICS = ('/joint_states', '/setpoints', '/controller_state', '/semi_singular_map',
           '/planned_path')
 
 

@@ -13,7 +13,7 @@ pytestmark = pytest.mark.ros
 HERE = os.path.dirname(os.path.abspath(__file__))
 PUBLISHER = os.path.join(HERE, '..', 'nodes', 'tools_publisher.py')
 FLOOD = os.path.join(HERE, '..', 'nodes', 'flood_publisher.py')
-TICK_TOPICS = ('/joint_states', '/setpoint', '/controller_state')
+TICK_TOPICS = ('/joint_states', '/setpoints', '/controller_state')
 # what the recorder's ~/status waits for: the topics the publisher sends per tick
 READY_TOPICS = 'ready_topics:=[/clock, %s]' % ', '.join(TICK_TOPICS)
 
@@ -168,8 +168,8 @@ def test_signal_mid_run_gives_a_finalised_bag_without_gaps(procs, wait, tmp_path
     assert len(stamps) >= 50
     _assert_every_gap_reported(stamps, _log(recorder), '/joint_states')
     assert bag.topics['/controller_state'].count > 100
-    assert bag.topics['/setpoint'].count > 100
-    assert bag.topics['/setpoint'].qos[0]['durability'] == 'volatile'
+    assert bag.topics['/setpoints'].count > 100
+    assert bag.topics['/setpoints'].qos[0]['durability'] == 'volatile'
     assert 'subscribing anew' in _log(recorder)
 
 

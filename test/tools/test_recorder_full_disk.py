@@ -17,7 +17,7 @@ import yaml
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PUBLISHER = os.path.join(HERE, '..', 'nodes', 'tools_publisher.py')
-TICK_TOPICS = ('/clock', '/joint_states', '/setpoint', '/controller_state')
+TICK_TOPICS = ('/clock', '/joint_states', '/setpoints', '/controller_state')
 
 
 @pytest.fixture

@@ -9,7 +9,7 @@ from freejoint_tools.params import RECORDER
 from freejoint_tools.recorder import ready_topic_names, status_answer
 
 GRAPH = ['/joint_states', '/ee_position', '/effort_controller/commands', '/controller_state',
-         '/setpoint', '/semi_singular_map', '/planned_path']
+         '/setpoints', '/semi_singular_map', '/planned_path']
 
 
 def test_the_default_ready_topics_are_the_graph_topics_without_clock():

@@ -1,4 +1,4 @@
-"""bench/soak.py: the parameter overlays a run is given (no process started)."""
+"""bench/soak.py: the parameter overlays a run is given, the setpoints read from a bag."""
 import os
 
 from freejoint_core.failure_offline import FAILURE_FREE_LINK_DAMPING
@@ -24,3 +24,19 @@ def test_fully_actuated_with_stabilise_adds_the_freed_links_damping_to_the_contr
         FAILURE_FREE_LINK_DAMPING['delta_max'], FAILURE_FREE_LINK_DAMPING['sat'])
     assert (float(added['free_link_rest_damping']), float(added['free_link_rest_after'])) == (
         0.2, 0.0)       # the offline option's k2 (0.2) from the start of each rest
+
+
+def test_the_soak_pairs_each_state_with_the_setpoint_of_its_stamp_from_the_batches_of_a_bag(
+        make_bag, publisher_module, tmp_path):
+    from freejoint_tools.bagfile import open_bag
+    path = str(tmp_path / 'run')
+    make_bag(path, 30)
+    dt_ns = publisher_module.DT_NS
+    setpoints, index = soak.paired_setpoints(open_bag(path), [0, dt_ns, 5 * dt_ns + dt_ns // 3,
+                                                              -dt_ns])
+    assert len(setpoints) == 30
+    assert index.tolist() == [0, 1, 5, -1]      # half a period after: the next; before: none
+    for k in (0, 17, 29):
+        sent = publisher_module.tick_messages(k)[1].setpoints[0]
+        assert tuple(setpoints[k].position) == tuple(sent.position)
+        assert soak.stamp_ns(setpoints[k]) == k * dt_ns

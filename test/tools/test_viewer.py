@@ -319,10 +319,10 @@ def test_foxglove_client_sees_a_spatial_arm_with_its_meshes_frames_and_paths(
     The viewer against synthetic joint states, tip positions and setpoints published by
     the test (the spatial graph's topics; its running is the graph tests' business).
     """
-    from freejoint_common.contract import EE_POSITION, JOINT_STATES, SETPOINT
+    from freejoint_common.contract import EE_POSITION, JOINT_STATES, SETPOINTS
     from freejoint_common.contract import stamp_from_ns
     from freejoint_core.spatial_model import known_arm, robot_data_dir
-    from freejoint_msgs.msg import CartesianSetpoint
+    from freejoint_msgs.msg import CartesianSetpoint, CartesianSetpoints
     from freejoint_tools.view_arm import FILES_PACKAGE, SpatialTree
     from geometry_msgs.msg import PointStamped
     from sensor_msgs.msg import JointState
@@ -349,7 +349,7 @@ def test_foxglove_client_sees_a_spatial_arm_with_its_meshes_frames_and_paths(
     arm = known_arm('ur5')
     q = [0.3, -1.2, 1.6, -1.97, -1.5708, 0.7]
     pubs = {name: ros_node.create_publisher(topic.msg_type, topic.name, topic.qos)
-            for name, topic in (('js', JOINT_STATES), ('ee', EE_POSITION), ('sp', SETPOINT))}
+            for name, topic in (('js', JOINT_STATES), ('ee', EE_POSITION), ('sp', SETPOINTS))}
     published = {'tip': [], 'setpoint': []}
 
     def publish(k):
@@ -367,7 +367,7 @@ def test_foxglove_client_sees_a_spatial_arm_with_its_meshes_frames_and_paths(
         sp = CartesianSetpoint(position=list(setpoint), velocity=[0.0] * 3,
                                acceleration=[0.0] * 3, plan_id=1)
         sp.header.stamp, sp.header.frame_id = stamp, 'base_link'
-        pubs['sp'].publish(sp)
+        pubs['sp'].publish(CartesianSetpoints(header=sp.header, setpoints=[sp]))
         published['tip'].append(point)
         published['setpoint'].append(setpoint)
 

@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
-from freejoint_msgs.msg import CartesianSetpoint, ControllerState
+from freejoint_msgs.msg import CartesianSetpoints, ControllerState
 from freejoint_msgs.srv import FailJoint, PlanCircle
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import OccupancyGrid
@@ -76,7 +76,7 @@ STREAM_QOS = profile(STREAM_DEPTH)
 REALTIME_STATE_QOS = profile(1)
 """The controller's ``joint_states`` subscription in real time: the newest state only."""
 SETPOINT_QOS = profile(STREAM_DEPTH, latched=True)
-"""``setpoint``: transient local, so a controller started after the planner still gets the
+"""``setpoints``: transient local, so a controller started after the planner still gets the
 ticks streamed ahead while the simulator waited for its first command."""
 STANDBY_SETPOINT_QOS = profile(STREAM_DEPTH)
 """A hot spare's ``setpoint`` subscription: volatile (matches the transient-local
@@ -140,13 +140,13 @@ JOINT_STATES = Topic('joint_states', JointState, STREAM_QOS)
 EE_POSITION = Topic('ee_position', PointStamped, STREAM_QOS)
 COMMANDS = Topic('effort_controller/commands', Float64MultiArray, STREAM_QOS)
 CONTROLLER_STATE = Topic('controller_state', ControllerState, STREAM_QOS)
-SETPOINT = Topic('setpoint', CartesianSetpoint, SETPOINT_QOS)
+SETPOINTS = Topic('setpoints', CartesianSetpoints, SETPOINT_QOS)
 SEMI_SINGULAR_MAP = Topic('semi_singular_map', OccupancyGrid, LATCHED_QOS)
 PLANNED_PATH = Topic('planned_path', Marker, LATCHED_QOS)
 DIAGNOSTICS = Topic('/diagnostics', DiagnosticArray, DIAGNOSTICS_QOS)
 ROBOT_DESCRIPTION = Topic('/robot_description', String, LATCHED_QOS)
 
-GRAPH_TOPICS = (CLOCK, JOINT_STATES, EE_POSITION, COMMANDS, CONTROLLER_STATE, SETPOINT,
+GRAPH_TOPICS = (CLOCK, JOINT_STATES, EE_POSITION, COMMANDS, CONTROLLER_STATE, SETPOINTS,
                 SEMI_SINGULAR_MAP, PLANNED_PATH)
 """The run's topics a recorder subscribes to from its start (docs/GRAPH.md, Recording)."""
 NEVER_QUIET_TOPICS = ('/rosout', '/parameter_events', DIAGNOSTICS.name)

@@ -65,7 +65,7 @@ def test_graph_topics_are_the_recorded_names_types_and_durabilities():
         ('ee_position', 'geometry_msgs/msg/PointStamped', False),
         ('effort_controller/commands', 'std_msgs/msg/Float64MultiArray', False),
         ('controller_state', 'freejoint_msgs/msg/ControllerState', False),
-        ('setpoint', 'freejoint_msgs/msg/CartesianSetpoint', True),
+        ('setpoints', 'freejoint_msgs/msg/CartesianSetpoints', True),
         ('semi_singular_map', 'nav_msgs/msg/OccupancyGrid', True),
         ('planned_path', 'visualization_msgs/msg/Marker', True),
     ]

@@ -1,7 +1,7 @@
 """
 Controller node: the controller loop of ``freejoint_control.loop`` as a ROS 2 node.
 
-Subscribes ``joint_states`` (joints matched by name) and ``setpoint``; per state it
+Subscribes ``joint_states`` (joints matched by name) and ``setpoints``; per state it
 publishes the active joint efforts on ``effort_controller/commands`` (the order of
 parameter ``joints``: ros2_control's JointGroupEffortController) and a ``controller_state``
 (thinned by ``state_publish_rate``, and whenever the status changes). What to answer -
@@ -24,7 +24,7 @@ import time
 from freejoint_common.arm_description import resolve_arm
 from freejoint_common.contract import BRAKE_REQUEST, BRAKE_TIMEOUT_REQUEST, COMMANDS
 from freejoint_common.contract import CONTROLLER_STATE, JOINT_FAILURES, JOINT_STATES
-from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINT, stamp_label
+from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINTS, stamp_label
 from freejoint_common.contract import STANDBY_SETPOINT_QOS, to_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
@@ -99,8 +99,8 @@ class ControllerNode(Node, Lifecycle):
         self._pub_wait = None if cfg.lockstep else self.create_publisher(
             BRAKE_TIMEOUT_REQUEST.msg_type, BRAKE_TIMEOUT_REQUEST.name, BRAKE_TIMEOUT_REQUEST.qos)
         self._sp_sub = self.create_subscription(
-            SETPOINT.msg_type, SETPOINT.name, self._on_setpoint,
-            overridable(STANDBY_SETPOINT_QOS if cfg.standby else SETPOINT.qos),
+            SETPOINTS.msg_type, SETPOINTS.name, self._on_setpoints,
+            overridable(STANDBY_SETPOINT_QOS if cfg.standby else SETPOINTS.qos),
             qos_overriding_options=QOS_OVERRIDES)
         # After the setpoints (a spare subscribes later too): the single-threaded executor
         # takes what one wait found ready in the order the subscriptions were made, so a
@@ -160,9 +160,9 @@ class ControllerNode(Node, Lifecycle):
         mono = _monotonic()
         waits_for = loop.standby_waits_for(
             self._pub_cmd.get_subscription_count(), self.count_subscribers(COMMANDS.name),
-            self._sp_sub.get_publisher_count(), self.count_publishers(SETPOINT.name),
+            self._sp_sub.get_publisher_count(), self.count_publishers(SETPOINTS.name),
             mono, self._now_ns(), (self.resolve_topic_name(COMMANDS.name),
-                                   self.resolve_topic_name(SETPOINT.name)))
+                                   self.resolve_topic_name(SETPOINTS.name)))
         if not loop.standby_settled(waits_for, mono):
             return
         # Idle at SCHED_FIFO 1 (with a thread_priority above 1): below every real-time
@@ -241,22 +241,26 @@ class ControllerNode(Node, Lifecycle):
             self.get_logger().warn('joint failure notice: %s (taken at the next tick)'
                                    % msg.data)
 
-    def _on_setpoint(self, msg):
+    def _on_setpoints(self, msg):
+        """Take a batch's setpoints in order (lockstep: a waiting state is answered at its own)."""
         if self._activation_requested and self._loop.standby:
             self._on_activation_requested()
-        ns = to_ns(msg.header.stamp)
-        p = msg.position
-        v = msg.velocity
-        a = msg.acceleration
+        loop = self._loop
         m = self._m
-        if len(p) != m or len(v) != m or len(a) != m:
-            self._loop.refuse_setpoint(ns, 'position, velocity, acceleration have %d, %d, %d '
-                                       'values, the task dimension is %d' % (
-                                           len(p), len(v), len(a), m))
-            return
-        res = self._loop.on_setpoint(ns, (*p, *v, *a), 0, _monotonic())
-        if res is not None:
-            self._publish(res)
+        mono = _monotonic()
+        for sp in msg.setpoints:
+            ns = to_ns(sp.header.stamp)
+            p = sp.position
+            v = sp.velocity
+            a = sp.acceleration
+            if len(p) != m or len(v) != m or len(a) != m:
+                loop.refuse_setpoint(ns, 'position, velocity, acceleration have %d, %d, %d '
+                                     'values, the task dimension is %d' % (
+                                         len(p), len(v), len(a), m))
+                continue
+            res = loop.on_setpoint(ns, (*p, *v, *a), 0, mono)
+            if res is not None:
+                self._publish(res)
 
     def _publish(self, res):
         """Publish the command and (rate allowing) the ControllerState of a Result."""

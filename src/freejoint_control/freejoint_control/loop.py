@@ -336,7 +336,7 @@ class ControlLoop:
         self._start_from_motion = True
 
     def standby_waits_for(self, cmd_matched, cmd_listed, sp_matched, sp_listed, mono, now_ns,
-                          names=('commands', 'setpoint')):
+                          names=('commands', 'setpoints')):
         """
         Return what a spare still lacks to take over at once ('' : nothing).
 

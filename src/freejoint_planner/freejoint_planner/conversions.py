@@ -9,7 +9,8 @@ Message conversions of the planner (ROS message types only, no node, no spinning
 
 import array
 
-from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINT, stamp_from_ns
+from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINTS, stamp_from_ns
+from freejoint_msgs.msg import CartesianSetpoint
 from geometry_msgs.msg import Point
 import numpy as np
 from visualization_msgs.msg import Marker
@@ -23,7 +24,7 @@ def setpoint_msg(sp, frame_id):
 
     ``stream.Setpoint``: planar, m = 2; ``stream.SpatialSetpoint``: spatial, m = 3.
     """
-    msg = SETPOINT.msg_type()
+    msg = CartesianSetpoint()
     stamp_from_ns(sp.stamp_ns, msg.header.stamp)
     msg.header.frame_id = frame_id
     if type(sp) is SpatialSetpoint:
@@ -37,6 +38,20 @@ def setpoint_msg(sp, frame_id):
     msg.plan_id = sp.plan_id
     msg.plan_time = sp.plan_time
     msg.final = sp.final
+    return msg
+
+
+def setpoints_msg(setpoints, frame_id):
+    """
+    Return the ``freejoint_msgs/CartesianSetpoints`` of stream setpoints (in stamp order).
+
+    Its header: the first setpoint's stamp (0 when ``setpoints`` is empty), ``frame_id``.
+    """
+    msg = SETPOINTS.msg_type()
+    msg.header.frame_id = frame_id
+    msg.setpoints = [setpoint_msg(sp, frame_id) for sp in setpoints]
+    if setpoints:
+        stamp_from_ns(setpoints[0].stamp_ns, msg.header.stamp)
     return msg
 
 

@@ -10,14 +10,14 @@ reach) and checks circles against it. A circle that enters the semi-singular reg
 leaves the reach is refused with the reason (``~/plan_circle`` answers it; a parameter
 change gets it back from ``ros2 param set``) and never streams: the running plan goes on.
 
-An accepted plan streams ``setpoint`` (freejoint_msgs/CartesianSetpoint) on the control
-grid of the ROS clock as ``docs/GRAPH.md`` lays down: triggered by every ``/clock``
-message in sim time (by a wall timer reading the system clock otherwise, every
-``max(1, lookahead // 2)`` control periods: each firing publishes about half the lookahead
-at once, a tenth of the wake-ups of a 1/control_period timer at the default 20), each
-tick ``t_k = k dt`` with ``t_k <= now + lookahead dt`` published once, in order, carrying
-``CircleQuintic.sample_tuple(k_plan dt)``. The planned path goes out as a LINE_STRIP on
-``planned_path`` (visualization_msgs/Marker, transient local).
+An accepted plan streams ``setpoints`` (freejoint_msgs/CartesianSetpoints: the ticks of a
+firing in one message) on the control grid of the ROS clock as ``docs/GRAPH.md`` lays down:
+triggered by every ``/clock`` message in sim time (by a wall timer reading the system clock
+otherwise, every ``max(1, lookahead // 2)`` control periods: each firing publishes about
+half the lookahead at once, a tenth of the wake-ups of a 1/control_period timer at the
+default 20), each tick ``t_k = k dt`` with ``t_k <= now + lookahead dt`` published once, in
+order, carrying ``CircleQuintic.sample_tuple(k_plan dt)``. The planned path goes out as a
+LINE_STRIP on ``planned_path`` (visualization_msgs/Marker, transient local).
 
 Sim time (``use_sim_time``, the switch every ROS node has): ROS time advances only with
 ``/clock``, which the lockstep simulator may publish every ``N``-th step only (its
@@ -99,7 +99,7 @@ from freejoint_common.arm_description import resolve_arm
 from freejoint_common.clock import own_clock, set_ros_time
 from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, JOINT_FAILURES
 from freejoint_common.contract import JOINT_STATES, PLAN_CIRCLE
-from freejoint_common.contract import PLANNED_PATH, profile, SEMI_SINGULAR_MAP, SETPOINT, to_ns
+from freejoint_common.contract import PLANNED_PATH, profile, SEMI_SINGULAR_MAP, SETPOINTS, to_ns
 from freejoint_common.diagnostics import Diagnostics, ERROR, OK, WARN
 from freejoint_common.node_tools import NodeParameters, overridable, QOS_OVERRIDES
 from freejoint_common.runner import Lifecycle, run
@@ -113,7 +113,7 @@ from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from .conversions import occupancy_grid, path_marker, setpoint_msg
+from .conversions import occupancy_grid, path_marker, setpoints_msg
 from .params import CIRCLE_KEYS, LOOKAHEAD_MAX, MAP_KEYS, SCHEMA, validate
 from .planning import assess_failure, circle_bounds, compute_model, describe_join
 from .planning import end_effector, grid_bound, grid_extent, join_from_arm, joint_state
@@ -187,9 +187,9 @@ class PlannerNode(Node, Lifecycle):
             self.get_logger().info(
                 f'singularity map computed in {self._model.seconds * 1e3:.0f} ms: '
                 f'{self._model.describe()}; {self._model.usable()}; arm: {self._arm_source}')
-        # QoS overridable (qos_overrides./setpoint.publisher.<history|depth|reliability>).
-        self._setpoint_pub = self.create_publisher(SETPOINT.msg_type, SETPOINT.name,
-                                                   overridable(SETPOINT.qos),
+        # QoS overridable (qos_overrides./setpoints.publisher.<history|depth|reliability>).
+        self._setpoint_pub = self.create_publisher(SETPOINTS.msg_type, SETPOINTS.name,
+                                                   overridable(SETPOINTS.qos),
                                                    qos_overriding_options=QOS_OVERRIDES)
         self._map_pub = self.create_publisher(SEMI_SINGULAR_MAP.msg_type, SEMI_SINGULAR_MAP.name,
                                               SEMI_SINGULAR_MAP.qos)
@@ -835,8 +835,9 @@ class PlannerNode(Node, Lifecycle):
         plan = stream.plan
         hold = (plan is not None and plan.start_tick is None and not plan.joined
                 and self._join(plan))
-        for sp in stream.advance(now_ns, hold=hold):
-            publish(setpoint_msg(sp, frame_id))
+        due = stream.advance(now_ns, hold=hold)
+        if due:
+            publish(setpoints_msg(due, frame_id))
         if stream.restarts != self._restarts_logged:
             self._restarts_logged = stream.restarts
             self._spacing_logged = 0

@@ -25,7 +25,7 @@ What a Foxglove client (the app, or any client of Foxglove's WebSocket protocol)
   collision geometry or as lines between its joint frames, with one warning
   (``view_arm.serve_description``);
 * ``/viewer/paths`` (a spatial arm only): the tip's path (``ee_position``) and the
-  setpoints' (``setpoint``) as ``foxglove.SceneUpdate`` lines in 3-D, at most
+  setpoints' (``setpoints``) as ``foxglove.SceneUpdate`` lines in 3-D, at most
   ``1 / PATH_PERIOD`` per second, started again when sim time restarts;
 * the parameters of every node of the graph, as ``<node>.<parameter>``
   (``/controller_node.K``), read and set through rclpy's ``AsyncParameterClient``; a
@@ -54,7 +54,7 @@ import time
 
 from freejoint_common.arm_description import package_path
 from freejoint_common.contract import EE_POSITION, PLANNED_PATH, profile, ROBOT_DESCRIPTION
-from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINT, stamp_from_ns, to_ns
+from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINTS, stamp_from_ns, to_ns
 from freejoint_common.node_tools import declare
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
@@ -415,7 +415,7 @@ class Viewer(Node, Lifecycle):
     def _path_sources(self):
         """Return ``{ROS topic: (trail name, message class)}`` of the paths."""
         return {self.resolve_topic_name(EE_POSITION.name): ('tip', EE_POSITION.msg_type),
-                self.resolve_topic_name(SETPOINT.name): ('setpoint', SETPOINT.msg_type)}
+                self.resolve_topic_name(SETPOINTS.name): ('setpoint', SETPOINTS.msg_type)}
 
     def _update_subscriptions(self, new_topic):
         wanted = self._wanted()
@@ -455,12 +455,17 @@ class Viewer(Node, Lifecycle):
         return forward
 
     def _add_to_path(self, name, msg):
-        """Add a tip position (PointStamped) or a setpoint (CartesianSetpoint) to its path."""
+        """Add a tip position (PointStamped) or setpoints (CartesianSetpoints) to its path."""
+        trail = self._trails[name]
         if name == 'tip':
-            point = (msg.point.x, msg.point.y, msg.point.z)
+            added = trail.add(to_ns(msg.header.stamp), (msg.point.x, msg.point.y, msg.point.z),
+                              msg.header.frame_id)
         else:
-            point = tuple(msg.position)
-        if self._trails[name].add(to_ns(msg.header.stamp), point, msg.header.frame_id):
+            added = False
+            for sp in msg.setpoints:
+                added = trail.add(to_ns(sp.header.stamp), tuple(sp.position),
+                                  sp.header.frame_id) or added
+        if added:
             self._paths_dirty = True
 
     def _flush_paths(self):
