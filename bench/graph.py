@@ -105,6 +105,13 @@ def proc_cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
+def machine_cpu_jiffies():
+    """Return ``(idle, steal)`` jiffies of the whole machine (``/proc/stat``; idle + iowait)."""
+    with open('/proc/stat') as f:
+        fields = f.readline().split()
+    return int(fields[4]) + int(fields[5]), int(fields[8])
+
+
 def proc_vmhwm_mib(pid):
     """Return the peak resident set (VmHWM) of a process in MiB, None if gone."""
     try:
@@ -591,6 +598,7 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS, case=CASE):
                           ['timing_file:=' + timing_path, 'timing_steps:=%d' % steps])
         start = time.monotonic()
         cpu0 = graph.cpu()
+        idle0 = machine_cpu_jiffies()
         while time.monotonic() < start + seconds:
             exited = graph.exited()
             if exited:
@@ -601,6 +609,7 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS, case=CASE):
             time.sleep(0.05)
         end = time.monotonic()
         cpu1 = graph.cpu()
+        idle1 = machine_cpu_jiffies()
         hwm = graph.vmhwm()
     finally:
         codes = graph.stop_all()
@@ -658,8 +667,20 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS, case=CASE):
          'target': '<= %.4g' % bound_rms},
     ]
     rows += _node_rows(tag, cpu0, cpu1, hwm, len(ks), exited)
-    rows.append({'name': '%s: load average (1 min) at the end' % tag, 'value': load1,
-                 'unit': '', 'target': None})
+    hz = os.sysconf('SC_CLK_TCK') * (end - start)
+    used = sum(cpu1[n] - cpu0.get(n, 0.0) for n in cpu1) / (end - start)
+    idle, steal = ((b - a) / hz for a, b in zip(idle0, idle1))
+    say('%s: the graph used %.2f cores; the machine (%d CPUs) was idle %.2f cores, stolen %.2f'
+        % (tag, used, os.cpu_count(), idle, steal))
+    rows += [
+        {'name': '%s: CPU of the graph (every process of it)' % tag, 'value': used,
+         'unit': 'cores', 'target': None},
+        {'name': '%s: CPU idle on the machine' % tag, 'value': idle, 'unit': 'cores',
+         'target': '>= 0.5'},
+        {'name': '%s: CPU stolen by the hypervisor' % tag, 'value': steal, 'unit': 'cores',
+         'target': None},
+        {'name': '%s: load average (1 min) at the end' % tag, 'value': load1, 'unit': '',
+         'target': None}]
     return rows
 
 

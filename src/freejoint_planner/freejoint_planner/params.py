@@ -83,8 +83,8 @@ PARAMS = (
           (0.001, 0.5)),
     FRAME_ID,
     CONTROL_PERIOD,
-    # >= 1: a setpoint must be out before its tick's state (0 races it); <= the keep-last
-    # depth of `setpoint` (1000): more at once could overrun a late reader's history.
+    # >= 1: a setpoint must be out before its tick's state (0 races it); <= 1000 ticks
+    # (1 s at 1 kHz; a firing's ticks go out in one `setpoints` message).
     Param('lookahead', 20,
           'Setpoints published ahead of ROS time (ticks), >= 1. Sim time: with /clock every '
           'N ticks, >= N - 1 (a smaller value is refused once N is known; found too small '
@@ -187,7 +187,7 @@ SCHEMA = Schema(PARAMS, (_check_rest, _check_spatial))
 SPECS = SCHEMA.params
 DEFAULTS = SCHEMA.defaults()
 LOOKAHEAD_MAX = SCHEMA['lookahead'].bounds[1]
-"""Largest ``lookahead`` (ticks): the keep-last depth of ``setpoint``."""
+"""Largest ``lookahead`` (ticks)."""
 
 
 def validate(cfg):
