@@ -100,7 +100,7 @@ def setpoint_steps_mm(bag_path, lo_ns, hi_ns, dt_ns):
     by_stamp = {}
     for log_ns, msg in soak.bag_setpoints(open_bag(bag_path)):
         if lo_ns <= log_ns <= hi_ns:
-            by_stamp[soak.stamp_ns(msg)] = (msg.position[0], msg.position[1])
+            by_stamp[msg.stamp_ns] = (msg.position[0], msg.position[1])
     stamps = np.array(sorted(by_stamp), dtype=np.int64)
     if len(stamps) < 2:
         return None, 0

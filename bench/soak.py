@@ -61,7 +61,8 @@ if HERE not in sys.path:
 import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
 import wakeup_probe  # noqa: E402, I100 - bench/wakeup_probe.py, the machine's lateness
 from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION  # noqa: E402, I100
-from freejoint_common.contract import JOINT_STATES, SETPOINTS, to_ns  # noqa: E402
+from freejoint_common.contract import JOINT_STATES, setpoint_samples  # noqa: E402
+from freejoint_common.contract import SETPOINTS, to_ns  # noqa: E402
 from freejoint_common.scheduling import rt_budget  # noqa: E402
 
 OUT = os.path.join(ROOT, 'bags', 'soak')
@@ -406,12 +407,12 @@ def bag_setpoints(bag):
     """
     Yield ``(log_ns, setpoint)`` of every setpoint in the bag, in recorded order.
 
-    The elements of the ``SETPOINTS`` batches (freejoint_msgs/CartesianSetpoint each), a
+    The setpoints of the ``SETPOINTS`` batches (``contract.SetpointSample`` each), a
     batch's log time for each of its setpoints; nothing if the bag has no such topic.
     """
     if SETPOINTS.absolute in bag.topics:
         for log_ns, msg in bag.decode(SETPOINTS.absolute):
-            for sp in msg.setpoints:
+            for sp in setpoint_samples(msg):
                 yield log_ns, sp
 
 
@@ -430,7 +431,7 @@ def paired_setpoints(bag, stamps):
 
     Returns
     -------
-    setpoints : list of CartesianSetpoint
+    setpoints : list of freejoint_common.contract.SetpointSample
         One per stamp (the last recorded), in stamp order.
     index : numpy.ndarray of int, (n,)
         Into ``setpoints``; -1 before the first setpoint (and everywhere without one).
@@ -438,8 +439,8 @@ def paired_setpoints(bag, stamps):
     """
     import numpy as np
     by_stamp = {}
-    for _, msg in bag_setpoints(bag):
-        by_stamp[stamp_ns(msg)] = msg
+    for _, sp in bag_setpoints(bag):
+        by_stamp[sp.stamp_ns] = sp
     stamps = np.asarray(stamps, dtype=np.int64)
     if not by_stamp:
         return [], np.full(len(stamps), -1, dtype=np.int64)

@@ -4,12 +4,12 @@ A second process for the interface tests: echoes every freejoint_msgs type back.
 Each message received on `/probe/<Type>` is published again on `/probe/<Type>/echo`;
 the `/probe/plan_circle` service answers PlanCircle requests (accepts radius < 1 m).
 """
-from freejoint_msgs.msg import CartesianSetpoint, CartesianSetpoints, ControllerState
+from freejoint_msgs.msg import CartesianSetpoints, ControllerState
 from freejoint_msgs.srv import PlanCircle
 import rclpy
 from standin import spin
 
-TYPES = (CartesianSetpoint, CartesianSetpoints, ControllerState)
+TYPES = (CartesianSetpoints, ControllerState)
 
 
 def main():

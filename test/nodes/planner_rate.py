@@ -25,7 +25,8 @@ import subprocess
 import sys
 import time
 
-from freejoint_common.contract import CLOCK, profile, SETPOINTS, stamp_from_ns, to_ns
+from freejoint_common.contract import CLOCK, profile, setpoint_samples, SETPOINTS
+from freejoint_common.contract import stamp_from_ns
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_msgs.srv import PlanCircle
 import rclpy
@@ -36,10 +37,6 @@ EXE = os.path.join(ROOT, 'install', 'freejoint_planner', 'lib', 'freejoint_plann
                    'planner_node')
 MS = 1_000_000
 LOOKAHEAD = 20
-
-
-def _stamp(msg):
-    return to_ns(msg.header.stamp)
 
 
 def _cpu_s(pid):
@@ -70,7 +67,7 @@ def main():
     state = {'last': -1, 'count': 0, 'p': None, 'step': 0.0}
 
     def on_setpoint(msg):
-        stamp = _stamp(msg)
+        stamp = msg.stamp_ns
         if state['p'] is not None and stamp == state['last'] + MS:
             state['step'] = max(state['step'], math.hypot(msg.position[0] - state['p'][0],
                                                           msg.position[1] - state['p'][1]))
@@ -79,7 +76,7 @@ def main():
         state['count'] += 1
 
     def on_setpoints(msg):
-        for sp in msg.setpoints:
+        for sp in setpoint_samples(msg):
             on_setpoint(sp)
 
     node.create_subscription(SETPOINTS.msg_type, SETPOINTS.name, on_setpoints, profile(1000))

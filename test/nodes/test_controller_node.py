@@ -79,13 +79,11 @@ class Driver:
         stamp_from_ns(self.ns(k), msg.header.stamp)
 
     def setpoint(self, k, values):
-        from freejoint_msgs.msg import CartesianSetpoint
-        msg = CartesianSetpoint()
+        msg = self.CartesianSetpoints(stamps=[self.ns(k)], position=list(values[0:2]),
+                                      velocity=list(values[2:4]),
+                                      acceleration=list(values[4:6]))
         self.stamp(msg, k)
-        msg.position = list(values[0:2])
-        msg.velocity = list(values[2:4])
-        msg.acceleration = list(values[4:6])
-        self.pub_sp.publish(self.CartesianSetpoints(header=msg.header, setpoints=[msg]))
+        self.pub_sp.publish(msg)
 
     def setpoints_ahead(self, k, values_of, ahead=5):
         """
@@ -393,19 +391,20 @@ def test_a_setpoint_delivered_before_a_state_is_applied_before_the_state_is_answ
         node.destroy_node()
 
 
-def test_a_batch_of_setpoints_is_applied_element_by_element_and_a_malformed_one_alone_is_refused(
+def test_a_batch_of_setpoints_is_applied_one_by_one_and_a_refused_one_alone_is_dropped(
         ros_node, monkeypatch):
     """
     In-process, lockstep, no DDS delivery: the node's ``setpoints`` callback called directly.
 
-    A batch of ticks 0..3 whose tick-2 element has 3 position values (the task has 2):
-    ticks 0, 1 and 3 are taken, tick 2 is refused and counted; state 2 then waits for its
-    setpoint, and a batch carrying it answers the waiting state at once, with the command a
-    separate loop gives for the same inputs.
+    A batch of ticks 0..3 whose tick-2 position is not finite: ticks 0, 1 and 3 are taken,
+    tick 2 is refused and counted; state 2 then waits for its setpoint, and a batch carrying
+    it answers the waiting state at once, with the command a separate loop gives for the
+    same inputs. A batch whose arrays do not fit its stamps, or whose vectors are not the
+    task's 2 values, is refused (every stamp counted) and answers nothing.
     """
     from rclpy.parameter import Parameter
     from freejoint_control.controller_node import ControllerNode
-    from freejoint_msgs.msg import CartesianSetpoint, CartesianSetpoints
+    from freejoint_msgs.msg import CartesianSetpoints
     from sensor_msgs.msg import JointState
     node = ControllerNode(parameter_overrides=[Parameter('case', value='vertical')])
     try:
@@ -414,28 +413,33 @@ def test_a_batch_of_setpoints_is_applied_element_by_element_and_a_malformed_one_
         monkeypatch.setattr(node._pub_state, 'publish', lambda msg: answers.append(
             (to_ns(msg.header.stamp), to_ns(msg.setpoint_stamp), list(msg.effort))))
 
-        def element(k, position=None):
-            values = _setpoint(k)
-            msg = CartesianSetpoint(position=list(position or values[0:2]),
-                                    velocity=list(values[2:4]),
-                                    acceleration=list(values[4:6]))
-            stamp_from_ns(k * DT_NS, msg.header.stamp)
-            return msg
+        def batch(ks, bad=(), m=2):
+            values = [_setpoint(k) for k in ks]
+            pos = [v for k, s in zip(ks, values) for v in (
+                (math.nan, 0.0) if k in bad else s[0:2]) + (0.0,) * (m - 2)]
+            return CartesianSetpoints(
+                stamps=[k * DT_NS for k in ks], position=pos,
+                velocity=[v for s in values for v in s[2:4] + (0.0,) * (m - 2)],
+                acceleration=[v for s in values for v in s[4:6] + (0.0,) * (m - 2)])
 
         def state(k):
             msg = JointState(name=NAMES, position=list(Q0), velocity=list(QD0))
             stamp_from_ns(k * DT_NS, msg.header.stamp)
             node._on_joint_state(msg)
 
-        batch = [element(0), element(1), element(2, (0.2, 0.0, 0.1)), element(3)]
-        node._on_setpoints(CartesianSetpoints(header=batch[0].header, setpoints=batch))
+        node._on_setpoints(batch([0, 1, 2, 3], bad=(2,)))
         assert node._loop.refused_setpoints == 1
         for k in (0, 1):
             state(k)
         assert [a[:2] for a in answers] == [(0, 0), (DT_NS, DT_NS)]
         state(2)
         assert len(answers) == 2, 'state 2 answered without its setpoint'
-        node._on_setpoints(CartesianSetpoints(header=batch[0].header, setpoints=[element(2)]))
+        short = batch([2])
+        short.velocity = [0.0]
+        node._on_setpoints(short)
+        node._on_setpoints(batch([2], m=3))
+        assert node._loop.refused_setpoints == 3 and len(answers) == 2
+        node._on_setpoints(batch([2]))
         assert [a[:2] for a in answers[2:]] == [(2 * DT_NS, 2 * DT_NS)]
         state(3)
         assert [a[:2] for a in answers[3:]] == [(3 * DT_NS, 3 * DT_NS)]

@@ -56,9 +56,8 @@ def _set(params, name, value):
 
 
 def _stamps(messages):
-    """Return the header stamps [ns] of ``messages``."""
-    from freejoint_common.contract import to_ns
-    return [to_ns(m.header.stamp) for m in messages]
+    """Return the stamps [ns] of ``messages`` (SetpointSample)."""
+    return [m.stamp_ns for m in messages]
 
 
 class ClockDriver:
@@ -68,7 +67,7 @@ class ClockDriver:
         from freejoint_common.contract import CLOCK, profile, SETPOINTS
         self.node = ros_node
         self.lookahead = lookahead
-        self.got = []           # the setpoints, in the order received
+        self.got = []           # the setpoints (SetpointSample), in the order received
         self.batches = []       # the CartesianSetpoints messages
         self.clock_pub = ros_node.create_publisher(CLOCK.msg_type, CLOCK.name, profile(10))
         # GRAPH.md: reliable, keep-last 1000, transient local (what the controller uses: a
@@ -78,8 +77,9 @@ class ClockDriver:
         self._clock = CLOCK.msg_type
 
     def _on_batch(self, msg):
+        from freejoint_common.contract import setpoint_samples
         self.batches.append(msg)
-        self.got.extend(msg.setpoints)
+        self.got.extend(setpoint_samples(msg))
 
     def matched(self):
         _spin(self.node)
@@ -93,8 +93,7 @@ class ClockDriver:
     def last_stamp(self):
         if not self.got:
             return None
-        from freejoint_common.contract import to_ns
-        return to_ns(self.got[-1].header.stamp)
+        return self.got[-1].stamp_ns
 
     def step(self, now_ns, wait, what='', beyond=True):
         """
@@ -198,8 +197,8 @@ def test_setpoints_in_sim_time_are_the_circle_on_the_grid_each_stamp_once_in_ord
         assert tuple(m.position) + tuple(m.velocity) + tuple(m.acceleration) == \
             circle.sample_tuple(k * DT), 'tick %d' % k
         assert (m.plan_id, m.plan_time, m.final) == (1, (k * MS) * 1e-9, k * DT > 5.0)
-        assert m.header.frame_id == 'base_link'
     assert [m.final for m in clock.got].index(True) == 5001
+    assert {b.header.frame_id for b in clock.batches} == {'base_link'}
 
 
 def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_order_and_a_too_small_lookahead_is_refused_or_raised(  # noqa: E501
@@ -223,9 +222,10 @@ def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_
     assert stamps == [k * MS for k in range(201 + LOOKAHEAD)]
     # one message per /clock: the first the lookahead's ticks and its own, then 10 each,
     # stamped with its first setpoint's stamp
-    assert [len(b.setpoints) for b in clock.batches] == [LOOKAHEAD + 1] + [10] * 20
-    assert all(b.header.stamp == b.setpoints[0].header.stamp
-               and b.header.frame_id == 'base_link' for b in clock.batches)
+    assert [len(b.stamps) for b in clock.batches] == [LOOKAHEAD + 1] + [10] * 20
+    from freejoint_common.contract import to_ns
+    assert all(to_ns(b.header.stamp) == b.stamps[0] and b.header.frame_id == 'base_link'
+               for b in clock.batches)
     assert '/clock every 10 ticks (or more): lookahead 20 covers it and one lost /clock' in \
         procs.log(proc)
     assert 'went out only at' not in procs.log(proc)
@@ -255,7 +255,7 @@ def test_sim_time_takes_clock_once_and_a_sparse_clock_streams_each_tick_once_in_
     clock.publish(230 * MS)
     wait(lambda: clock.last_stamp() == 289 * MS, 10.0, 'the setpoints after /clock 230 ms',
          spin=lambda: _spin(ros_node, 0.02))
-    assert [m.header.stamp.nanosec // MS for m in clock.got] == list(range(221, 290))
+    assert [m.stamp_ns // MS for m in clock.got] == list(range(221, 290))
     wait(lambda: 'lookahead raised to' in procs.log(proc), 10.0, 'the raised lookahead',
          spin=lambda: _spin(ros_node, 0.02))
     log = procs.log(proc)

@@ -30,7 +30,7 @@ import sys
 import time
 
 from freejoint_common.contract import LATCHED_QOS, profile, stamp_from_ns
-from freejoint_msgs.msg import CartesianSetpoint, CartesianSetpoints, ControllerState
+from freejoint_msgs.msg import CartesianSetpoints, ControllerState
 from nav_msgs.msg import OccupancyGrid
 import rclpy
 from rclpy.serialization import serialize_message
@@ -55,14 +55,16 @@ def tick_messages(k):
     js.velocity = [0.01 * k, -0.02 * k, 0.03 * k]
     js.effort = [math.sin(k), math.cos(k), 0.0]
     a = 2.0 * math.pi * (k % 5000) / 5000.0
-    sp = CartesianSetpoint()
+    sp = CartesianSetpoints()
     sp.header.stamp = js.header.stamp
     sp.header.frame_id = 'base_link'
+    sp.stamps = [t_ns]
     sp.position = [0.2 * math.cos(a), 0.2 * math.sin(a)]
     sp.velocity = [-0.2 * math.sin(a), 0.2 * math.cos(a)]
     sp.acceleration = [-0.2 * math.cos(a), -0.2 * math.sin(a)]
-    sp.plan_id = 1
-    sp.plan_time = t_ns * 1e-9
+    sp.plan_id = [1]
+    sp.plan_time = [t_ns * 1e-9]
+    sp.final = [False]
     cs = ControllerState()
     cs.header.stamp = js.header.stamp
     cs.position_desired = sp.position
@@ -81,7 +83,7 @@ def tick_messages(k):
     cs.det_dd = 1e-3 + 1e-4 * math.sin(k / 3.0)
     cs.status = k % 2
     cs.message = '' if k % 2 == 0 else 'near singular'
-    return js, CartesianSetpoints(header=sp.header, setpoints=[sp]), cs
+    return js, sp, cs
 
 
 def latched_messages():

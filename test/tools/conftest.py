@@ -87,8 +87,9 @@ class BagMaker:
                 cs.effort = (list(cs.effort) * len(active))[:len(active)]
             t_ns = t0_ns + k * self.module.DT_NS
             if t0_ns:
-                for msg in (js, sp, sp.setpoints[0], cs):
+                for msg in (js, sp, cs):
                     stamp_from_ns(t_ns, msg.header.stamp)
+                sp.stamps = [t_ns]
             else:
                 clock = Clock()
                 clock.clock = js.header.stamp

@@ -28,6 +28,7 @@ def test_fully_actuated_with_stabilise_adds_the_freed_links_damping_to_the_contr
 
 def test_the_soak_pairs_each_state_with_the_setpoint_of_its_stamp_from_the_batches_of_a_bag(
         make_bag, publisher_module, tmp_path):
+    from freejoint_common.contract import setpoint_samples
     from freejoint_tools.bagfile import open_bag
     path = str(tmp_path / 'run')
     make_bag(path, 30)
@@ -37,6 +38,6 @@ def test_the_soak_pairs_each_state_with_the_setpoint_of_its_stamp_from_the_batch
     assert len(setpoints) == 30
     assert index.tolist() == [0, 1, 5, -1]      # half a period after: the next; before: none
     for k in (0, 17, 29):
-        sent = publisher_module.tick_messages(k)[1].setpoints[0]
+        sent = setpoint_samples(publisher_module.tick_messages(k)[1])[0]
         assert tuple(setpoints[k].position) == tuple(sent.position)
-        assert soak.stamp_ns(setpoints[k]) == k * dt_ns
+        assert setpoints[k].stamp_ns == k * dt_ns

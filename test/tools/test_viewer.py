@@ -322,7 +322,7 @@ def test_foxglove_client_sees_a_spatial_arm_with_its_meshes_frames_and_paths(
     from freejoint_common.contract import EE_POSITION, JOINT_STATES, SETPOINTS
     from freejoint_common.contract import stamp_from_ns
     from freejoint_core.spatial_model import known_arm, robot_data_dir
-    from freejoint_msgs.msg import CartesianSetpoint, CartesianSetpoints
+    from freejoint_msgs.msg import CartesianSetpoints
     from freejoint_tools.view_arm import FILES_PACKAGE, SpatialTree
     from geometry_msgs.msg import PointStamped
     from sensor_msgs.msg import JointState
@@ -364,10 +364,11 @@ def test_foxglove_client_sees_a_spatial_arm_with_its_meshes_frames_and_paths(
         ee.header.stamp, ee.header.frame_id = stamp, 'base_link'
         ee.point.x, ee.point.y, ee.point.z = point
         pubs['ee'].publish(ee)
-        sp = CartesianSetpoint(position=list(setpoint), velocity=[0.0] * 3,
-                               acceleration=[0.0] * 3, plan_id=1)
+        sp = CartesianSetpoints(stamps=[k * 1_000_000], position=list(setpoint),
+                                velocity=[0.0] * 3, acceleration=[0.0] * 3, plan_id=[1],
+                                plan_time=[0.0], final=[False])
         sp.header.stamp, sp.header.frame_id = stamp, 'base_link'
-        pubs['sp'].publish(CartesianSetpoints(header=sp.header, setpoints=[sp]))
+        pubs['sp'].publish(sp)
         published['tip'].append(point)
         published['setpoint'].append(setpoint)
 

@@ -14,7 +14,9 @@ from here:
 * the stamps: :func:`to_ns` and :func:`stamp_from_ns` between ``builtin_interfaces/Time``
   and integer nanoseconds, :func:`clock_ns` of a serialized ``rosgraph_msgs/Clock``;
 * the lockstep label of a command (``stamp_ns=<t_k>``, lockstep item 2):
-  :func:`stamp_label` and :func:`label_stamp`.
+  :func:`stamp_label` and :func:`label_stamp`;
+* the layout of a ``setpoints`` batch (freejoint_msgs/CartesianSetpoints, flat arrays):
+  :func:`setpoint_samples` reads it into :class:`SetpointSample` records.
 
 Names are relative (remappable) unless they start with ``/``.  A profile given to a
 publisher or subscription with ``qos_overriding_options`` must be a copy
@@ -191,6 +193,71 @@ NS_PER_S = 1_000_000_000
 def to_ns(stamp):
     """Return the integer nanoseconds of a ``builtin_interfaces/Time`` (``sec``, ``nanosec``)."""
     return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+class SetpointSample(NamedTuple):
+    """One setpoint of a ``setpoints`` batch (m values per vector)."""
+
+    stamp_ns: int
+    position: tuple
+    velocity: tuple
+    acceleration: tuple
+    plan_id: int
+    plan_time: float
+    final: bool
+
+
+def setpoint_samples(msg):
+    """
+    Return the setpoints of a ``CartesianSetpoints`` batch, in the order sent.
+
+    Parameters
+    ----------
+    msg : freejoint_msgs.msg.CartesianSetpoints
+        ``stamps`` (n), ``position``, ``velocity``, ``acceleration`` (n m each, setpoint
+        after setpoint), ``plan_id``, ``plan_time``, ``final`` (n each, or empty: 0, 0.0,
+        False).
+
+    Returns
+    -------
+    list of SetpointSample
+        n of them, m = len(position) / n values per vector (tuples of float).
+
+    Raises
+    ------
+    ValueError
+        An array whose length does not fit n and m, named.
+
+    """
+    stamps = msg.stamps
+    n = len(stamps)
+    pos, vel, acc = msg.position, msg.velocity, msg.acceleration
+    if n == 0:
+        if len(pos) or len(vel) or len(acc):
+            raise ValueError('setpoints: no stamps but %d position values' % len(pos))
+        return []
+    m, rest = divmod(len(pos), n)
+    if rest or m == 0:
+        raise ValueError('setpoints: position has %d values for %d stamps (n m expected)'
+                         % (len(pos), n))
+    for name, values in (('velocity', vel), ('acceleration', acc)):
+        if len(values) != n * m:
+            raise ValueError('setpoints: %s has %d values, position %d' % (
+                name, len(values), n * m))
+    extra = []
+    for name, values, default in (('plan_id', msg.plan_id, 0),
+                                  ('plan_time', msg.plan_time, 0.0),
+                                  ('final', msg.final, False)):
+        if len(values) not in (0, n):
+            raise ValueError('setpoints: %s has %d values for %d stamps (n or none)'
+                             % (name, len(values), n))
+        extra.append(values if len(values) else [default] * n)
+    ids, times, finals = (list(values) for values in extra)
+    pos, vel, acc = list(pos), list(vel), list(acc)
+    return [SetpointSample(int(stamps[i]), tuple(pos[j:j + m]), tuple(vel[j:j + m]),
+                           tuple(acc[j:j + m]), int(ids[i]), float(times[i]),
+                           bool(finals[i]))
+            for i, j in zip(range(n), range(0, n * m, m))]
 
 
 def stamp_from_ns(ns, stamp=None):

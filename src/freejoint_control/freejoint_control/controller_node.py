@@ -25,7 +25,7 @@ from freejoint_common.arm_description import resolve_arm
 from freejoint_common.contract import BRAKE_REQUEST, BRAKE_TIMEOUT_REQUEST, COMMANDS
 from freejoint_common.contract import CONTROLLER_STATE, JOINT_FAILURES, JOINT_STATES
 from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINTS, stamp_label
-from freejoint_common.contract import STANDBY_SETPOINT_QOS, to_ns
+from freejoint_common.contract import setpoint_samples, STANDBY_SETPOINT_QOS, to_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import Throttle
@@ -43,7 +43,7 @@ _monotonic = time.monotonic
 
 
 class ControllerNode(Node, Lifecycle):
-    """The controller loop between JointState/CartesianSetpoint and effort commands."""
+    """The controller loop between JointState/CartesianSetpoints and effort commands."""
 
     def __init__(self, **kwargs):
         super().__init__('controller_node', **kwargs)
@@ -246,19 +246,21 @@ class ControllerNode(Node, Lifecycle):
         if self._activation_requested and self._loop.standby:
             self._on_activation_requested()
         loop = self._loop
+        try:
+            samples = setpoint_samples(msg)
+        except ValueError as exc:
+            for ns in msg.stamps:
+                loop.refuse_setpoint(int(ns), '%s: the batch refused' % exc)
+            return
         m = self._m
         mono = _monotonic()
-        for sp in msg.setpoints:
-            ns = to_ns(sp.header.stamp)
-            p = sp.position
-            v = sp.velocity
-            a = sp.acceleration
-            if len(p) != m or len(v) != m or len(a) != m:
-                loop.refuse_setpoint(ns, 'position, velocity, acceleration have %d, %d, %d '
-                                     'values, the task dimension is %d' % (
-                                         len(p), len(v), len(a), m))
+        for sp in samples:
+            if len(sp.position) != m:
+                loop.refuse_setpoint(sp.stamp_ns, '%d values per vector, the task dimension is '
+                                     '%d' % (len(sp.position), m))
                 continue
-            res = loop.on_setpoint(ns, (*p, *v, *a), 0, mono)
+            res = loop.on_setpoint(sp.stamp_ns, sp.position + sp.velocity + sp.acceleration, 0,
+                                   mono)
             if res is not None:
                 self._publish(res)
 

@@ -10,7 +10,6 @@ Message conversions of the planner (ROS message types only, no node, no spinning
 import array
 
 from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINTS, stamp_from_ns
-from freejoint_msgs.msg import CartesianSetpoint
 from geometry_msgs.msg import Point
 import numpy as np
 from visualization_msgs.msg import Marker
@@ -18,40 +17,31 @@ from visualization_msgs.msg import Marker
 from .stream import SpatialSetpoint
 
 
-def setpoint_msg(sp, frame_id):
-    """
-    Return the ``freejoint_msgs/CartesianSetpoint`` of a stream setpoint.
-
-    ``stream.Setpoint``: planar, m = 2; ``stream.SpatialSetpoint``: spatial, m = 3.
-    """
-    msg = CartesianSetpoint()
-    stamp_from_ns(sp.stamp_ns, msg.header.stamp)
-    msg.header.frame_id = frame_id
-    if type(sp) is SpatialSetpoint:
-        msg.position = array.array('d', sp.position)
-        msg.velocity = array.array('d', sp.velocity)
-        msg.acceleration = array.array('d', sp.acceleration)
-    else:
-        msg.position = array.array('d', (sp.px, sp.py))
-        msg.velocity = array.array('d', (sp.vx, sp.vy))
-        msg.acceleration = array.array('d', (sp.ax, sp.ay))
-    msg.plan_id = sp.plan_id
-    msg.plan_time = sp.plan_time
-    msg.final = sp.final
-    return msg
-
-
 def setpoints_msg(setpoints, frame_id):
     """
     Return the ``freejoint_msgs/CartesianSetpoints`` of stream setpoints (in stamp order).
 
-    Its header: the first setpoint's stamp (0 when ``setpoints`` is empty), ``frame_id``.
+    ``stream.Setpoint`` (planar, m = 2) or ``stream.SpatialSetpoint`` (m = 3), one kind per
+    batch; its header: the first setpoint's stamp (0 when ``setpoints`` is empty),
+    ``frame_id``. ``freejoint_common.contract.setpoint_samples`` reads it back.
     """
     msg = SETPOINTS.msg_type()
     msg.header.frame_id = frame_id
-    msg.setpoints = [setpoint_msg(sp, frame_id) for sp in setpoints]
-    if setpoints:
-        stamp_from_ns(setpoints[0].stamp_ns, msg.header.stamp)
+    if not setpoints:
+        return msg
+    stamp_from_ns(setpoints[0].stamp_ns, msg.header.stamp)
+    msg.stamps = array.array('q', [sp.stamp_ns for sp in setpoints])
+    if type(setpoints[0]) is SpatialSetpoint:
+        msg.position = array.array('d', [v for sp in setpoints for v in sp.position])
+        msg.velocity = array.array('d', [v for sp in setpoints for v in sp.velocity])
+        msg.acceleration = array.array('d', [v for sp in setpoints for v in sp.acceleration])
+    else:
+        msg.position = array.array('d', [v for sp in setpoints for v in (sp.px, sp.py)])
+        msg.velocity = array.array('d', [v for sp in setpoints for v in (sp.vx, sp.vy)])
+        msg.acceleration = array.array('d', [v for sp in setpoints for v in (sp.ax, sp.ay)])
+    msg.plan_id = array.array('I', [sp.plan_id for sp in setpoints])
+    msg.plan_time = array.array('d', [sp.plan_time for sp in setpoints])
+    msg.final = [bool(sp.final) for sp in setpoints]
     return msg
 
 

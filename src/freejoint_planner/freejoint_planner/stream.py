@@ -93,7 +93,7 @@ def last_tick_due(now_ns, dt_ns, lookahead):
 
 
 class Setpoint(NamedTuple):
-    """One setpoint of the stream: what a ``CartesianSetpoint`` message carries."""
+    """One setpoint of the stream (planar, m = 2): what a ``CartesianSetpoints`` holds per tick."""
 
     stamp_ns: int
     px: float

@@ -1,24 +1,64 @@
-"""The planner's message conversions: setpoint, occupancy grid, path marker, stamps."""
+"""The planner's message conversions: setpoints, occupancy grid, path marker, stamps."""
+from freejoint_common.contract import setpoint_samples, SetpointSample
 from freejoint_core.arm import table1
 from freejoint_core.singularity import det_map, semi_singular
-from freejoint_planner.conversions import occupancy_grid, path_marker, setpoint_msg
+from freejoint_planner.conversions import occupancy_grid, path_marker, setpoints_msg
 from freejoint_planner.planning import grid_extent
-from freejoint_planner.stream import Setpoint
+from freejoint_planner.stream import Setpoint, SpatialSetpoint
 import numpy as np
 import pytest
 
 pytestmark = pytest.mark.ros
 
 
-def test_setpoint_message_carries_every_field():
-    sp = Setpoint(2_000_000_003, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 7, 0.25, True)
-    msg = setpoint_msg(sp, 'base')
+def test_a_batch_carries_every_field_flat_setpoint_after_setpoint_and_reads_back():
+    first = Setpoint(2_000_000_003, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 7, 0.25, True)
+    second = Setpoint(2_001_000_003, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6, 8, -0.5, False)
+    msg = setpoints_msg([first, second], 'base')
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (2, 3)
     assert msg.header.frame_id == 'base'
-    assert msg.position.tolist() == [0.1, 0.2]
-    assert msg.velocity.tolist() == [0.3, 0.4]
-    assert msg.acceleration.tolist() == [0.5, 0.6]
-    assert (msg.plan_id, msg.plan_time, msg.final) == (7, 0.25, True)
+    assert msg.stamps.tolist() == [2_000_000_003, 2_001_000_003]
+    assert msg.position.tolist() == [0.1, 0.2, 1.1, 1.2]
+    assert msg.velocity.tolist() == [0.3, 0.4, 1.3, 1.4]
+    assert msg.acceleration.tolist() == [0.5, 0.6, 1.5, 1.6]
+    assert (msg.plan_id.tolist(), msg.plan_time.tolist(), list(msg.final)) == (
+        [7, 8], [0.25, -0.5], [True, False])
+    assert setpoint_samples(msg) == [
+        SetpointSample(2_000_000_003, (0.1, 0.2), (0.3, 0.4), (0.5, 0.6), 7, 0.25, True),
+        SetpointSample(2_001_000_003, (1.1, 1.2), (1.3, 1.4), (1.5, 1.6), 8, -0.5, False)]
+
+
+def test_a_spatial_batch_has_three_values_per_vector_and_an_empty_one_none():
+    sp = SpatialSetpoint(5, (0.1, 0.2, 0.3), (0.0, 0.0, 0.1), (1.0, 0.0, 0.0), 3, 0.0, False)
+    (back,) = setpoint_samples(setpoints_msg([sp], 'base'))
+    assert back == SetpointSample(*sp)
+    empty = setpoints_msg([], 'base')
+    assert (empty.header.stamp.sec, empty.header.stamp.nanosec, len(empty.stamps)) == (0, 0, 0)
+    assert setpoint_samples(empty) == []
+
+
+@pytest.mark.parametrize('field, values, error', [
+    ('position', [0.1, 0.2, 0.3], 'position has 3 values for 2 stamps'),
+    ('velocity', [0.0] * 3, 'velocity has 3 values, position 4'),
+    ('acceleration', [], 'acceleration has 0 values, position 4'),
+    ('plan_id', [1], 'plan_id has 1 values for 2 stamps (n or none)'),
+    ('final', [True, False, True], 'final has 3 values for 2 stamps')])
+def test_a_batch_whose_arrays_do_not_fit_its_stamps_is_refused_naming_the_array(
+        field, values, error):
+    msg = setpoints_msg([Setpoint(0, *[0.0] * 6, 1, 0.0, False),
+                         Setpoint(1, *[0.0] * 6, 1, 0.0, False)], 'base')
+    setattr(msg, field, values)
+    with pytest.raises(ValueError, match=r'^setpoints: ' + error.replace('(', r'\(').replace(
+            ')', r'\)')):
+        setpoint_samples(msg)
+
+
+def test_a_hand_made_batch_without_plan_fields_reads_as_no_plan():
+    from freejoint_msgs.msg import CartesianSetpoints
+    msg = CartesianSetpoints(stamps=[4], position=[0.2, 0.0], velocity=[0.0, 0.0],
+                             acceleration=[0.0, 0.0])
+    assert setpoint_samples(msg) == [
+        SetpointSample(4, (0.2, 0.0), (0.0, 0.0), (0.0, 0.0), 0, 0.0, False)]
 
 
 def test_occupancy_grid_is_row_major_from_the_bottom_left_corner():

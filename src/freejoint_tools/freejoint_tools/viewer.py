@@ -54,7 +54,8 @@ import time
 
 from freejoint_common.arm_description import package_path
 from freejoint_common.contract import EE_POSITION, PLANNED_PATH, profile, ROBOT_DESCRIPTION
-from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINTS, stamp_from_ns, to_ns
+from freejoint_common.contract import SEMI_SINGULAR_MAP, setpoint_samples, SETPOINTS
+from freejoint_common.contract import stamp_from_ns, to_ns
 from freejoint_common.node_tools import declare
 from freejoint_common.runner import Lifecycle, run
 from freejoint_core.errors import FreejointValueError
@@ -462,9 +463,14 @@ class Viewer(Node, Lifecycle):
                               msg.header.frame_id)
         else:
             added = False
-            for sp in msg.setpoints:
-                added = trail.add(to_ns(sp.header.stamp), tuple(sp.position),
-                                  sp.header.frame_id) or added
+            try:
+                samples = setpoint_samples(msg)
+            except ValueError as exc:
+                self.get_logger().warning('setpoints not drawn: %s' % exc,
+                                          throttle_duration_sec=10.0)
+                samples = ()
+            for sp in samples:
+                added = trail.add(sp.stamp_ns, sp.position, msg.header.frame_id) or added
         if added:
             self._paths_dirty = True
 
