@@ -10,23 +10,21 @@ every wait bounded, every process stopped whatever happens:
   once on the ``single_threaded`` one, each driven in lockstep by this process: state k
   is published once the answer to k - 1 came, ``TICKS`` times after a warm-up; the echo
   process's CPU seconds (``/proc/<pid>/stat``) over the measured ticks, per tick;
-* the echo in the controller's place in the graph (``--seat``), the recorder off;
-* the graph in lockstep, a process per node, the recorder on and off: ``bench/graph.py``'s
-  lockstep run (the 5-s horizontal case), its ``sim_node`` and ``controller_node`` CPU
-  per tick (the graph benchmark's own run when ``make bench`` ran it just before); and
-  once more without the recorder, the controller's ``ControllerState`` thinned to 100 Hz
-  (``THINNED``: what its instrumentation costs).
+* the graph in lockstep without the recorder (``bench/graph.py``'s lockstep run, the 5-s
+  horizontal case, a process per node) with the echo started beside it
+  (``beside_cpu_per_tick``: ``echo_node.py --out echo/commands``, answering every state the
+  simulator publishes, its command taken by this process): the controller's and the
+  echo's CPU per tick over the same ticks at the same time; twice, the controller's
+  ``ControllerState`` every tick (the default) and thinned to 100 Hz (``THINNED``);
+* the graph as ``make demo`` runs it (the recorder on): the controller's and the
+  simulator's CPU per tick (the graph benchmark's own run when ``make bench`` ran it).
 
-Rows: the CPU figures per tick and the ratios controller / echo and simulator / echo. The
-echo is measured twice: driven alone by this process (two processes on the machine), and in
-the controller's place in the same lockstep graph (``seat_cpu_per_tick``: the simulator,
-the planner and the echo with ``--seat``, no recorder). The target compares the controller
-with the echo in its place, which answers the same states from the same simulator beside
-the same processes: on this 2-vCPU VM a wake-up costs a process more CPU when four
-processes take turns than when two do, so the echo driven alone is not what the
-controller's seat costs any node. The target applies to the run without the recorder, whose
-controller sends its command to one reader, as the echo does (with the recorder on: the
-command to two readers, every ``ControllerState`` to one). Benchmarks assert nothing.
+Rows: the CPU figures per tick and the ratios. The target compares the controller with
+the echo beside it: both answer the same states from the same simulator in the same run,
+whose CPU per tick moves from run to run by more than the target's margin on this
+2-vCPU VM (a wake-up costs more when four processes take turns than when two do, and the
+other processes' timing differs run to run), so the echo driven alone or in another run
+is not the comparison. Benchmarks assert nothing.
 Usage: ``. tools/env.sh && python bench/echo.py``, or ``make bench BENCH=echo``.
 """
 
@@ -44,6 +42,8 @@ ECHO_DOMAIN_INDEX = 7
 """``graph._env`` index of the echo run (the graph's runs take 0..6)."""
 THINNED = ('state_publish_rate:=100.0',)
 """The controller's overrides of the third graph run: its instrumentation thinned."""
+BESIDE_TOPIC = 'echo/commands'
+"""Where the echo beside the controller answers (the simulator does not take it)."""
 TICK_TIMEOUT = 10.0
 """Seconds a state may wait for its answer before the run is given up."""
 
@@ -138,26 +138,32 @@ def echo_cpu_per_tick(executor, ticks=TICKS):
         procs.stop_all(order=('echo_node',))
 
 
-def seat_cpu_per_tick(executor):
+def beside_cpu_per_tick(executor, ctl_overrides=()):
     """
-    Return ``{node: CPU per lockstep tick [us]}`` of the echo node and the simulator.
+    Return ``{node: CPU per lockstep tick [us]}`` of the controller and an echo beside it.
 
-    The graph's lockstep run without the recorder, the echo node (on ``executor``, with
-    ``--seat``: it takes the setpoints too) in the controller's place: the processes, the
-    traffic and the machine of the controller's run.
+    One lockstep run of the graph without the recorder and an echo node (on ``executor``)
+    started beside it, answering every state on ``echo/commands`` (taken by this process,
+    one reader as the controller's command has): both measured over the same ticks on the
+    same machine at the same time, what no two runs can be (``ctl_overrides``: the
+    controller's).
     """
+    from freejoint_common.contract import COMMANDS
     env = graph_bench._env(0)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
     client = graph_bench.Client()
     try:
-        seat = ('echo_node', [sys.executable, ECHO_NODE, executor, '--seat'])
-        rows = graph_bench.lockstep(client, env, 'separate', record=False, seat=seat)
+        client.node.create_subscription(COMMANDS.msg_type, BESIDE_TOPIC, lambda _msg: None,
+                                        COMMANDS.qos)
+        beside = ('echo_node', [sys.executable, ECHO_NODE, executor, '--out', BESIDE_TOPIC])
+        rows = graph_bench.lockstep(client, env, 'separate', record=False, beside=beside,
+                                    ctl_overrides=ctl_overrides)
     finally:
         client.close()
     found = {}
     for row in rows:
-        for node in ('sim_node', 'echo_node'):
+        for node in ('controller_node', 'echo_node', 'sim_node'):
             if row['name'] == 'lockstep: %s CPU per tick' % node:
                 found[node] = row['value']
     return found
@@ -196,47 +202,46 @@ def run():
     echo = echo_cpu_per_tick(kind)
     other = 'single_threaded' if kind == 'events' else 'events'
     echo_other = echo_cpu_per_tick(other)
-    seat = seat_cpu_per_tick(kind)
-    in_seat = seat.get('echo_node')
-    graph_bench.say("CPU per lockstep tick, echo (%s) in the controller's place: echo %s us, "
-                    'simulator %s us' % (kind, _us(in_seat), _us(seat.get('sim_node'))))
     rows = [
         {'name': 'lockstep: rclpy echo node CPU per tick, driven alone (%s)' % kind,
          'value': echo, 'unit': 'us'},
         {'name': 'lockstep: rclpy echo node CPU per tick, driven alone (%s)' % other,
          'value': echo_other, 'unit': 'us'},
-        {'name': "lockstep graph, echo (%s) in the controller's place: echo CPU per tick"
-         % kind, 'value': in_seat, 'unit': 'us'},
-        {'name': "lockstep graph, echo (%s) in the controller's place: sim_node CPU per tick"
-         % kind, 'value': seat.get('sim_node'), 'unit': 'us'},
     ]
 
     def ratio(value, base):
         return None if value is None or not base else value / base
 
-    # Recorder on (as make demo runs): the command goes to two readers (simulator,
-    # recorder) and every ControllerState to the recorder. Off: the command to the
-    # simulator alone, as the echo's in its place.
-    for record, tag, target, extra in (
-            (True, 'recorder on', None, ()), (False, 'recorder off', '<= 1.5', ()),
-            (False, 'recorder off, controller_state 100 Hz', None, THINNED)):
-        nodes = graph_cpu_per_tick(record, extra)
-        ctl, sim = nodes.get('controller_node'), nodes.get('sim_node')
-        graph_bench.say('CPU per lockstep tick, %s: controller %s us, simulator %s us (echo in '
-                        'its place %s us, driven alone %.1f us)'
-                        % (tag, _us(ctl), _us(sim), _us(in_seat), echo))
+    # Beside the controller in the same run (the target), its ControllerState every tick
+    # (the default) and thinned to 100 Hz; the recorder off: the controller's command to
+    # one reader, as the echo's.
+    for tag, target, extra in (('', '<= 1.5', ()),
+                               (', controller_state 100 Hz', None, THINNED)):
+        nodes = beside_cpu_per_tick(kind, extra)
+        ctl, near = nodes.get('controller_node'), nodes.get('echo_node')
+        graph_bench.say('CPU per lockstep tick, recorder off%s: controller %s us, an echo '
+                        '(%s) beside it %s us, simulator %s us' % (
+                            tag, _us(ctl), kind, _us(near), _us(nodes.get('sim_node'))))
         rows += [
-            {'name': 'lockstep, %s: controller_node CPU per tick' % tag, 'value': ctl,
-             'unit': 'us'},
-            {'name': 'lockstep, %s: sim_node CPU per tick' % tag, 'value': sim,
-             'unit': 'us'},
-            {'name': 'lockstep, %s: controller / echo in its place (%s)' % (tag, kind),
-             'value': ratio(ctl, in_seat), 'unit': 'x', 'target': target},
-            {'name': 'lockstep, %s: controller / echo driven alone (%s)' % (tag, kind),
-             'value': ratio(ctl, echo), 'unit': 'x'},
-            {'name': "lockstep, %s: simulator / echo in the controller's place (%s)"
-             % (tag, kind), 'value': ratio(sim, in_seat), 'unit': 'x'},
+            {'name': 'lockstep, recorder off%s: controller_node CPU per tick' % tag,
+             'value': ctl, 'unit': 'us'},
+            {'name': 'lockstep, recorder off%s: echo (%s) beside it, CPU per tick'
+             % (tag, kind), 'value': near, 'unit': 'us'},
+            {'name': 'lockstep, recorder off%s: controller / echo beside it' % tag,
+             'value': ratio(ctl, near), 'unit': 'x', 'target': target},
         ]
+    # As make demo runs (the recorder on): the figures of the graph benchmark.
+    nodes = graph_cpu_per_tick(True)
+    ctl, sim = nodes.get('controller_node'), nodes.get('sim_node')
+    graph_bench.say('CPU per lockstep tick, recorder on: controller %s us, simulator %s us'
+                    % (_us(ctl), _us(sim)))
+    rows += [
+        {'name': 'lockstep, recorder on: controller_node CPU per tick', 'value': ctl,
+         'unit': 'us'},
+        {'name': 'lockstep, recorder on: sim_node CPU per tick', 'value': sim, 'unit': 'us'},
+        {'name': 'lockstep, recorder on: controller / echo driven alone (%s)' % kind,
+         'value': ratio(ctl, echo), 'unit': 'x'},
+    ]
     return rows
 
 

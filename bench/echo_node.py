@@ -11,19 +11,17 @@ by the argument (``events``: rclpy's ``EventsExecutor``, as ``config/controller.
 the controller; ``single_threaded``: ``SingleThreadedExecutor``), driven by ``spin_once``
 as the project's runner drives every node, until SIGINT / SIGTERM.
 
-``--seat`` (in the controller's place in the lockstep graph, ``bench/echo.py``): it also
-subscribes to the planner's ``setpoints`` (the controller's other input; their contents
-unused) and, as the lockstep controller does, answers no state before the first setpoints
-message (then the newest state at once): the simulator steps only once the plan runs.
+``--out TOPIC``: its commands on TOPIC instead (``bench/echo.py`` runs it beside the
+controller in the lockstep graph, where the simulator must not take them).
 
-Usage: ``python bench/echo_node.py [events | single_threaded] [--seat]`` (under
-``. tools/env.sh``); ``bench/echo.py`` runs it.
+Usage: ``python bench/echo_node.py [events | single_threaded] [--out TOPIC]``
+(under ``. tools/env.sh``); ``bench/echo.py`` runs it.
 """
 
 import signal
 import sys
 
-from freejoint_common.contract import COMMANDS, JOINT_STATES, SETPOINTS, stamp_label, to_ns
+from freejoint_common.contract import COMMANDS, JOINT_STATES, stamp_label, to_ns
 import rclpy
 from std_msgs.msg import MultiArrayDimension
 
@@ -43,8 +41,11 @@ def make_executor(kind):
 
 def main(argv):
     """Echo states as commands until SIGINT / SIGTERM."""
-    seat = '--seat' in argv
-    argv = [a for a in argv if a != '--seat']
+    out_topic = COMMANDS.name
+    if '--out' in argv:
+        i = argv.index('--out')
+        out_topic = argv[i + 1]
+        del argv[i:i + 2]
     kind = argv[0] if argv else 'events'
     stop = []
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -52,29 +53,15 @@ def main(argv):
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     executor = make_executor(kind)      # after init: an executor takes the default context
     node = rclpy.create_node(NODE_NAME)
-    pub = node.create_publisher(COMMANDS.msg_type, COMMANDS.name, COMMANDS.qos)
-
-    held = {'setpoints': not seat, 'state': None}
+    pub = node.create_publisher(COMMANDS.msg_type, out_topic, COMMANDS.qos)
 
     def echo(state):
-        if not held['setpoints']:
-            held['state'] = state
-            return
         out = COMMANDS.msg_type()
         out.layout.dim = [MultiArrayDimension(label=stamp_label(to_ns(state.header.stamp)),
                                               size=2, stride=2)]
         out.data = [-v for v in state.velocity[:2]]
         pub.publish(out)
 
-    def on_setpoints(_msg):
-        if not held['setpoints']:
-            held['setpoints'] = True
-            if held['state'] is not None:
-                echo(held['state'])
-
-    if seat:
-        node.create_subscription(SETPOINTS.msg_type, SETPOINTS.name, on_setpoints,
-                                 SETPOINTS.qos)
     node.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name, echo, JOINT_STATES.qos)
     executor.add_node(node)
     while not stop:

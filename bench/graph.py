@@ -202,15 +202,15 @@ def start_sim(graph, overrides, case=CASE, priority=None):
 
 
 def start_graph(graph, layout, bag, sim_overrides, ctl_overrides, planner_overrides,
-                rec_overrides, custom, case=CASE, seat=None):
+                rec_overrides, custom, case=CASE, beside=None):
     """
     Start the recorder (unless ``bag`` is None) and the three nodes.
 
     ``layout`` 'separate': a process per node, as ``make demo`` starts them (the simulator
     only if ``sim_overrides`` is not None); 'composed': the three in one process,
     ``ros2 run freejoint_bringup graph`` with the same parameter files and overrides.
-    ``seat``: ``(name, command)`` of a process started in the controller's place
-    ('separate' only; ``bench/echo.py``'s echo node), ``ctl_overrides`` then unused.
+    ``beside``: ``(name, command)`` of a process started after the nodes ('separate' only;
+    ``bench/echo.py``'s echo node).
     """
     if bag is not None:
         graph.start('recorder', [executable('freejoint_tools', 'recorder'), '--ros-args',
@@ -238,13 +238,12 @@ def start_graph(graph, layout, bag, sim_overrides, ctl_overrides, planner_overri
         return
     if sim_overrides is not None:
         start_sim(graph, sim_overrides, case)
-    if seat is not None:
-        graph.start(*seat)
-    else:
-        graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
-                                                'controller.yaml', ctl))
+    graph.start('controller_node', node_cmd('freejoint_control', 'controller_node',
+                                            'controller.yaml', ctl))
     graph.start('planner_node', node_cmd('freejoint_planner', 'planner_node', 'planner.yaml',
                                          planner))
+    if beside is not None:
+        graph.start(*beside)
 
 
 # -- this process's ROS node (services only: nothing on the hot path) --------------------
@@ -357,19 +356,19 @@ def wait_ready(client, record):
 
 
 def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True,
-             ctl_overrides=(), seat=None):
+             ctl_overrides=(), beside=None):
     """
     Run the 5-s case in lockstep, the recorder on if ``record``; return the rows.
 
     ``ctl_overrides``: the controller's ``name:=value`` overrides (none: as make demo);
-    ``seat``: ``(name, command)`` of a process in the controller's place (``start_graph``).
+    ``beside``: ``(name, command)`` of a process started beside the nodes (``start_graph``).
     """
     import numpy as np
     from freejoint_tools.bagfile import open_bag
     tag = 'lockstep' + LAYOUTS[layout]
     run_dir = os.path.join(OUT, 'lockstep_' + layout + ('' if record else '_no_recorder')
                            + ('_' + '_'.join(ctl_overrides) if ctl_overrides else '')
-                           + ('_' + seat[0] if seat else '')).replace(':=', '_')
+                           + ('_beside_' + beside[0] if beside else '')).replace(':=', '_')
     shutil.rmtree(run_dir, ignore_errors=True)
     timing_path = os.path.join(run_dir, 'timing.npz')
     bag = os.path.join(run_dir, 'bag') if record else None
@@ -386,7 +385,7 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True,
                      # the drain wait below needs a count that goes quiet
                      'exclude:=[%s]' % ', '.join(NEVER_QUIET_TOPICS)],
                     'case=%s, variant=robust, seed=%d, max_ticks=%d' % (CASE, SEED, ticks),
-                    seat=seat)
+                    beside=beside)
         wait_ready(client, record)
         answer = client.plan_circle(ros_params('planner.yaml'))
         if answer is None or not answer.accepted:
@@ -437,7 +436,7 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True,
     rows += _node_rows(tag, cpu0, cpu1, hwm, ticks + 100)
     rows.append({'name': '%s: load average (1 min) at the end' % tag, 'value': load1,
                  'unit': '', 'target': None})
-    if not ctl_overrides and seat is None:
+    if not ctl_overrides and beside is None:
         LOCKSTEP_ROWS[(layout, record)] = rows
     return rows
 
