@@ -39,7 +39,8 @@ import signal
 import sys
 import time
 
-from freejoint_common.contract import NEVER_QUIET_TOPICS
+from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, EE_POSITION, JOINT_STATES
+from freejoint_common.contract import NEVER_QUIET_TOPICS, SETPOINTS
 from freejoint_tools.harness import Processes, ServiceCalls
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -61,8 +62,9 @@ process (bringup ``graph``); the control loop - sim and controller - in one proc
 controller_manager's process) with the planner in its own."""
 DRAIN_PAUSE = 1.0
 """Wall seconds between stopping the controller and the rest (the recorder catches up)."""
-RT_READY_BEFORE_SIM = '[effort_controller/commands, controller_state, setpoint]'
-RT_SIM_TOPICS = ('/joint_states', '/ee_position')
+RT_READY_BEFORE_SIM = '[%s]' % ', '.join(t.name for t in (COMMANDS, CONTROLLER_STATE, SETPOINTS))
+"""The recorder's ready_topics while the simulator is not started yet (real time)."""
+RT_SIM_TOPICS = (JOINT_STATES.absolute, EE_POSITION.absolute)
 OFFLINE_SEEDS = range(10)
 PRIORITY = int(os.environ.get('FREEJOINT_BENCH_PRIORITY', '50'))
 """thread_priority of the simulator and the controller (SCHED_FIFO; 0 = default scheduler;
