@@ -434,11 +434,11 @@ def test_a_batch_of_setpoints_is_applied_one_by_one_and_a_refused_one_alone_is_d
         assert [a[:2] for a in answers] == [(0, 0), (DT_NS, DT_NS)]
         state(2)
         assert len(answers) == 2, 'state 2 answered without its setpoint'
-        short = batch([2])
+        short = batch([2, 5])
         short.velocity = [0.0]
-        node._on_setpoints(short)
+        node._on_setpoints(short)           # both its setpoints counted
         node._on_setpoints(batch([2], m=3))
-        assert node._loop.refused_setpoints == 3 and len(answers) == 2
+        assert node._loop.refused_setpoints == 4 and len(answers) == 2
         node._on_setpoints(batch([2]))
         assert [a[:2] for a in answers[2:]] == [(2 * DT_NS, 2 * DT_NS)]
         state(3)

@@ -81,7 +81,7 @@ SETPOINT_QOS = profile(STREAM_DEPTH, latched=True)
 """``setpoints``: transient local, so a controller started after the planner still gets the
 ticks streamed ahead while the simulator waited for its first command."""
 STANDBY_SETPOINT_QOS = profile(STREAM_DEPTH)
-"""A hot spare's ``setpoint`` subscription: volatile (matches the transient-local
+"""A hot spare's ``setpoints`` subscription: volatile (matches the transient-local
 publisher), so a new spare is not sent the planner's history of old ticks (real time takes
 the newest; the planner streams ahead)."""
 LATCHED_QOS = profile(1, latched=True)

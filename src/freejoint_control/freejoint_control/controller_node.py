@@ -249,8 +249,8 @@ class ControllerNode(Node, Lifecycle):
         try:
             samples = setpoint_samples(msg)
         except ValueError as exc:
-            for ns in msg.stamps:
-                loop.refuse_setpoint(int(ns), '%s: the batch refused' % exc)
+            if len(msg.stamps):
+                loop.refuse_setpoint(int(msg.stamps[0]), str(exc), len(msg.stamps))
             return
         m = self._m
         mono = _monotonic()

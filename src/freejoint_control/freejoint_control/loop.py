@@ -724,11 +724,17 @@ class ControlLoop:
                     del setpoints[key]
         return None
 
-    def refuse_setpoint(self, ns, reason):
-        """Drop the setpoint stamped ``ns`` for ``reason``: counted, logged, noted."""
-        self.refused_setpoints += 1
+    def refuse_setpoint(self, ns, reason, count=1):
+        """
+        Drop the setpoint stamped ``ns`` for ``reason``: counted, logged, noted.
+
+        ``count`` > 1: a batch of that many from ``ns`` on, dropped for one reason.
+        """
+        self.refused_setpoints += count
         self._last_sp_refusal = reason
-        self.log(ERROR, 'setpoint', 'setpoint stamped %d ns refused: %s; dropped' % (ns, reason))
+        what = ('setpoint stamped %d ns' % ns if count == 1 else
+                '%d setpoints from the one stamped %d ns' % (count, ns))
+        self.log(ERROR, 'setpoint', '%s refused: %s; dropped' % (what, reason))
 
     def watchdog(self, now_ns, mono):
         """
