@@ -29,14 +29,23 @@ init_port fastrtps_port7000: open_and_lock_file failed``: the shared-memory stat
 process left in /dev/shm, whatever fj does."""
 
 
+PARAM_TIMEOUT = '60'
+"""fj's ``--timeout`` for a ``param`` command that gives none: its 10-s default is too short
+for a node on this machine while the suite's other workers run SCHED_FIFO graphs (CI 70: no
+describe_parameters answer within 10 s from a live controller)."""
+
+
 def fj(*args, timeout=120):
     """
     Run ``fj args...``; return the CompletedProcess (text).
 
-    ``stderr`` is fj's own: Fast DDS's log lines are the middleware's (fj routes them to
-    stderr, test_fj_output_stays_clean_of_what_libraries_write_to_stdout) and are dropped
-    before the checks; ``middleware`` keeps them.
+    A ``param`` command without ``--timeout`` gets ``PARAM_TIMEOUT``. ``stderr`` is fj's own:
+    Fast DDS's log lines are the middleware's (fj routes them to stderr,
+    test_fj_output_stays_clean_of_what_libraries_write_to_stdout) and are dropped before the
+    checks; ``middleware`` keeps them.
     """
+    if args and args[0] == 'param' and '--timeout' not in args:
+        args = (*args, '--timeout', PARAM_TIMEOUT)
     done = subprocess.run([FJ, *args], capture_output=True, text=True, timeout=timeout)
     lines = done.stderr.splitlines(keepends=True)
     done.middleware = ''.join(ln for ln in lines if FAST_DDS_LOG.match(ANSI.sub('', ln)))
