@@ -407,8 +407,8 @@ def bag_setpoints(bag):
     """
     Yield ``(log_ns, setpoint)`` of every setpoint in the bag, in recorded order.
 
-    The setpoints of the ``SETPOINTS`` batches (``contract.SetpointSample`` each), a
-    batch's log time for each of its setpoints; nothing if the bag has no such topic.
+    The setpoints of the ``SETPOINTS`` batches (``freejoint_common.setpoint.SetpointSample``
+    each), a batch's log time for each of its setpoints; nothing if the bag has no such topic.
     """
     if SETPOINTS.absolute in bag.topics:
         for log_ns, msg in bag.decode(SETPOINTS.absolute):
@@ -431,7 +431,7 @@ def paired_setpoints(bag, stamps):
 
     Returns
     -------
-    setpoints : list of freejoint_common.contract.SetpointSample
+    setpoints : list of freejoint_common.setpoint.SetpointSample
         One per stamp (the last recorded), in stamp order.
     index : numpy.ndarray of int, (n,)
         Into ``setpoints``; -1 before the first setpoint (and everywhere without one).

@@ -12,6 +12,8 @@ import textwrap
 
 ROS_FREE = (
     'freejoint_common.schema',
+    'freejoint_common.setpoint',
+    'freejoint_planner.stream',
     'freejoint_common.arm_description',
     'freejoint_control.params',
     'freejoint_sim.params',

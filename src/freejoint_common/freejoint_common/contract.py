@@ -16,7 +16,7 @@ from here:
 * the lockstep label of a command (``stamp_ns=<t_k>``, lockstep item 2):
   :func:`stamp_label` and :func:`label_stamp`;
 * the layout of a ``setpoints`` batch (freejoint_msgs/CartesianSetpoints, flat arrays):
-  :func:`setpoint_samples` reads it into :class:`SetpointSample` records.
+  :func:`setpoint_samples` reads it into ``freejoint_common.setpoint.SetpointSample`` records.
 
 Names are relative (remappable) unless they start with ``/``.  A profile given to a
 publisher or subscription with ``qos_overriding_options`` must be a copy
@@ -28,6 +28,7 @@ from typing import NamedTuple
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
+from freejoint_common.setpoint import SetpointSample
 from freejoint_msgs.msg import CartesianSetpoints, ControllerState
 from freejoint_msgs.srv import FailJoint, PlanCircle
 from geometry_msgs.msg import PointStamped
@@ -193,18 +194,6 @@ NS_PER_S = 1_000_000_000
 def to_ns(stamp):
     """Return the integer nanoseconds of a ``builtin_interfaces/Time`` (``sec``, ``nanosec``)."""
     return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
-
-
-class SetpointSample(NamedTuple):
-    """One setpoint of a ``setpoints`` batch (m values per vector)."""
-
-    stamp_ns: int
-    position: tuple
-    velocity: tuple
-    acceleration: tuple
-    plan_id: int
-    plan_time: float
-    final: bool
 
 
 def setpoint_samples(msg):

@@ -48,6 +48,8 @@ ROS time had passed them (``late``), so the node can warn and name the rule.
 
 from typing import NamedTuple
 
+from freejoint_common.setpoint import SetpointSample
+
 
 def period_ns(dt):
     """
@@ -107,16 +109,9 @@ class Setpoint(NamedTuple):
     final: bool
 
 
-class SpatialSetpoint(NamedTuple):
-    """One setpoint of a spatial plan (task_dim 3): 3 values per vector."""
-
-    stamp_ns: int
-    position: tuple
-    velocity: tuple
-    acceleration: tuple
-    plan_id: int
-    plan_time: float
-    final: bool
+SpatialSetpoint = SetpointSample
+"""One setpoint of a spatial plan (task_dim 3): 3 values per vector (the record a
+``setpoints`` batch is read into, ``freejoint_common.setpoint``)."""
 
 
 class Plan:

@@ -1,5 +1,6 @@
 """The planner's message conversions: setpoints, occupancy grid, path marker, stamps."""
-from freejoint_common.contract import setpoint_samples, SetpointSample
+from freejoint_common.contract import setpoint_samples
+from freejoint_common.setpoint import SetpointSample
 from freejoint_core.arm import table1
 from freejoint_core.singularity import det_map, semi_singular
 from freejoint_planner.conversions import occupancy_grid, path_marker, setpoints_msg
