@@ -138,6 +138,31 @@ def echo_cpu_per_tick(executor, ticks=TICKS):
         procs.stop_all(order=('echo_node',))
 
 
+def _lockstep_run(record, ctl_overrides=(), beside=None, setup=None):
+    """
+    Run ``graph.lockstep`` (a process per node) in its own domain; return its rows.
+
+    ``setup(client)`` runs on the bench's client first (a subscription, say).
+    """
+    env = graph_bench._env(0)
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
+    client = graph_bench.Client()
+    try:
+        if setup is not None:
+            setup(client)
+        return graph_bench.lockstep(client, env, 'separate', record=record,
+                                    ctl_overrides=ctl_overrides, beside=beside)
+    finally:
+        client.close()
+
+
+def _cpu_per_tick(rows, nodes=('controller_node', 'echo_node', 'sim_node')):
+    """Return ``{node: CPU per lockstep tick [us]}`` of those of ``nodes`` the rows have."""
+    names = {'lockstep: %s CPU per tick' % node: node for node in nodes}
+    return {names[row['name']]: row['value'] for row in rows if row['name'] in names}
+
+
 def beside_cpu_per_tick(executor, ctl_overrides=()):
     """
     Return ``{node: CPU per lockstep tick [us]}`` of the controller and an echo beside it.
@@ -149,24 +174,13 @@ def beside_cpu_per_tick(executor, ctl_overrides=()):
     controller's).
     """
     from freejoint_common.contract import COMMANDS
-    env = graph_bench._env(0)
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
-    client = graph_bench.Client()
-    try:
+
+    def take_echo_commands(client):
         client.node.create_subscription(COMMANDS.msg_type, BESIDE_TOPIC, lambda _msg: None,
                                         COMMANDS.qos)
-        beside = ('echo_node', [sys.executable, ECHO_NODE, executor, '--out', BESIDE_TOPIC])
-        rows = graph_bench.lockstep(client, env, 'separate', record=False, beside=beside,
-                                    ctl_overrides=ctl_overrides)
-    finally:
-        client.close()
-    found = {}
-    for row in rows:
-        for node in ('controller_node', 'echo_node', 'sim_node'):
-            if row['name'] == 'lockstep: %s CPU per tick' % node:
-                found[node] = row['value']
-    return found
+
+    beside = ('echo_node', [sys.executable, ECHO_NODE, executor, '--out', BESIDE_TOPIC])
+    return _cpu_per_tick(_lockstep_run(False, ctl_overrides, beside, take_echo_commands))
 
 
 def graph_cpu_per_tick(record=True, ctl_overrides=()):
@@ -179,21 +193,8 @@ def graph_cpu_per_tick(record=True, ctl_overrides=()):
     """
     rows = None if ctl_overrides else graph_bench.LOCKSTEP_ROWS.get(('separate', record))
     if rows is None:
-        env = graph_bench._env(0)
-        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-        os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
-        client = graph_bench.Client()
-        try:
-            rows = graph_bench.lockstep(client, env, 'separate', record=record,
-                                        ctl_overrides=ctl_overrides)
-        finally:
-            client.close()
-    found = {}
-    for row in rows:
-        for node in ('sim_node', 'controller_node'):
-            if row['name'] == 'lockstep: %s CPU per tick' % node:
-                found[node] = row['value']
-    return found
+        rows = _lockstep_run(record, ctl_overrides)
+    return _cpu_per_tick(rows, ('sim_node', 'controller_node'))
 
 
 def run():
