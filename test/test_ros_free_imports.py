@@ -13,6 +13,7 @@ import textwrap
 ROS_FREE = (
     'freejoint_common.schema',
     'freejoint_common.setpoint',
+    'freejoint_common.cdr',
     'freejoint_planner.stream',
     'freejoint_common.arm_description',
     'freejoint_control.params',

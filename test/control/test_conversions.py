@@ -1,14 +1,16 @@
-"""The controller node's message conversions: a loop Result into its messages, in place."""
+"""The controller node's message conversions: serialized state in, command and state out."""
 from freejoint_common.contract import label_stamp
-from freejoint_control.conversions import command_message, controller_state_message
-from freejoint_control.conversions import fill_state
+from freejoint_control.conversions import Messages
 from freejoint_control.loop import Result
+import pytest
 
 
-def test_a_result_fills_the_controller_state_in_place_with_its_stamps():
-    st = controller_state_message(['joint1', 'joint2'], ('theta_hat_1', 'rho_hat'))
-    assert list(st.joint_names) == ['joint1', 'joint2']
-    assert list(st.law_state_names) == ['theta_hat_1', 'rho_hat']
+def _deserialize(data, msg_type):
+    from rclpy.serialization import deserialize_message
+    return deserialize_message(data, msg_type)
+
+
+def _result():
     res = Result(m=3)
     res.stamp_ns = 2_500_000_001
     res.error, res.error_rate, res.sliding = (1.0, 2.0, 3.0), (4.0, 5.0, 6.0), (7.0, 8.0, 9.0)
@@ -18,7 +20,16 @@ def test_a_result_fills_the_controller_state_in_place_with_its_stamps():
     res.det_dd, res.status, res.message = 0.125, 32 | 64, 'holding'
     res.setpoint_ns = 2_499_000_000
     res.setpoint_age, res.dt, res.state_age = 0.001, 0.002, 0.003
-    fill_state(st, res)
+    return res
+
+
+def test_a_result_is_written_as_the_controller_state_rclpy_reads_with_its_stamps():
+    from freejoint_msgs.msg import ControllerState
+    messages = Messages(['joint1', 'joint2'], ('theta_hat_1', 'rho_hat'))
+    res = _result()
+    st = _deserialize(messages.write_controller_state(res), ControllerState)
+    assert list(st.joint_names) == ['joint1', 'joint2']
+    assert list(st.law_state_names) == ['theta_hat_1', 'rho_hat']
     assert (st.header.stamp.sec, st.header.stamp.nanosec) == (2, 500_000_001)
     assert (st.setpoint_stamp.sec, st.setpoint_stamp.nanosec) == (2, 499_000_000)
     assert list(st.error) == [1.0, 2.0, 3.0] and list(st.sliding) == [7.0, 8.0, 9.0]
@@ -27,14 +38,35 @@ def test_a_result_fills_the_controller_state_in_place_with_its_stamps():
     assert list(st.law_state) == [0.5, 0.25] and list(st.effort) == [10.0, -20.0]
     assert (st.det_dd, st.status, st.message) == (0.125, 96, 'holding')
     assert (st.setpoint_age, st.dt, st.state_age) == (0.001, 0.002, 0.003)
+    assert messages.controller_state is not None
     # No stamp answered (-1): the header keeps the last; no setpoint: a zero stamp.
-    res.stamp_ns, res.setpoint_ns = -1, None
-    fill_state(st, res)
+    res.stamp_ns, res.setpoint_ns, res.message = -1, None, ''
+    st = _deserialize(messages.write_controller_state(res), ControllerState)
     assert (st.header.stamp.sec, st.header.stamp.nanosec) == (2, 500_000_001)
     assert (st.setpoint_stamp.sec, st.setpoint_stamp.nanosec) == (0, 0)
+    assert st.message == ''
 
 
-def test_the_command_message_has_one_dimension_sized_by_the_joints():
-    msg = command_message(['joint1', 'joint2'])
-    (dim,) = msg.layout.dim
-    assert label_stamp(msg.layout.dim) == 0 and (dim.size, dim.stride) == (2, 2)
+def test_the_command_has_one_dimension_sized_by_the_joints_labelled_with_the_stamp():
+    from std_msgs.msg import Float64MultiArray
+    messages = Messages(['joint1', 'joint2'], ())
+    first = _deserialize(messages.command, Float64MultiArray)
+    (dim,) = first.layout.dim
+    assert label_stamp(first.layout.dim) == 0 and (dim.size, dim.stride) == (2, 2)
+    data = messages.write_command(7_000_000, [1.5, -2.5])
+    assert messages.command is data
+    cmd = _deserialize(data, Float64MultiArray)
+    assert label_stamp(cmd.layout.dim) == 7_000_000 and list(cmd.data) == [1.5, -2.5]
+
+
+def test_a_joint_state_is_read_from_its_bytes_and_an_unreadable_one_raises_naming_why():
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+    msg = JointState(name=['joint1', 'joint2'], position=[0.5, 1.5], velocity=[-1.0, 2.0])
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 3, 4
+    messages = Messages(['joint1'], ())
+    ns, names, pos, vel, eff = messages.read_state(serialize_message(msg))
+    assert (ns, names, list(pos), list(vel), list(eff)) == (
+        3_000_000_004, ['joint1', 'joint2'], [0.5, 1.5], [-1.0, 2.0], [])
+    with pytest.raises(ValueError, match='joint_states: .*malformed.*rclpy cannot deserialize'):
+        messages.read_state(serialize_message(msg)[:30])

@@ -367,8 +367,9 @@ def test_a_setpoint_delivered_before_a_state_is_applied_before_the_state_is_answ
     try:
         states = []
         monkeypatch.setattr(node._pub_cmd, 'publish', lambda msg: None)
-        monkeypatch.setattr(node._pub_state, 'publish', lambda msg: states.append(
-            (msg.status, msg.message, list(msg.effort), to_ns(msg.setpoint_stamp))))
+        monkeypatch.setattr(node._pub_state, 'publish', lambda data: states.append(
+            (lambda msg: (msg.status, msg.message, list(msg.effort),
+                          to_ns(msg.setpoint_stamp)))(_controller_state(data))))
         drv = Driver(ros_node, wait)
         wait(drv.matched, 30.0, 'the in-process controller to match', spin=drv.spin)
         q, qd = Q0, QD0
@@ -405,13 +406,15 @@ def test_a_batch_of_setpoints_is_applied_one_by_one_and_a_refused_one_alone_is_d
     from rclpy.parameter import Parameter
     from freejoint_control.controller_node import ControllerNode
     from freejoint_msgs.msg import CartesianSetpoints
+    from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
     node = ControllerNode(parameter_overrides=[Parameter('case', value='vertical')])
     try:
         answers = []
         monkeypatch.setattr(node._pub_cmd, 'publish', lambda msg: None)
-        monkeypatch.setattr(node._pub_state, 'publish', lambda msg: answers.append(
-            (to_ns(msg.header.stamp), to_ns(msg.setpoint_stamp), list(msg.effort))))
+        monkeypatch.setattr(node._pub_state, 'publish', lambda data: answers.append(
+            (lambda msg: (to_ns(msg.header.stamp), to_ns(msg.setpoint_stamp),
+                          list(msg.effort)))(_controller_state(data))))
 
         def batch(ks, bad=(), m=2):
             values = [_setpoint(k) for k in ks]
@@ -425,7 +428,7 @@ def test_a_batch_of_setpoints_is_applied_one_by_one_and_a_refused_one_alone_is_d
         def state(k):
             msg = JointState(name=NAMES, position=list(Q0), velocity=list(QD0))
             stamp_from_ns(k * DT_NS, msg.header.stamp)
-            node._on_joint_state(msg)
+            node._on_joint_state(serialize_message(msg))     # taken serialized (raw)
 
         node._on_setpoints(batch([0, 1, 2, 3], bad=(2,)))
         assert node._loop.refused_setpoints == 1
@@ -447,8 +450,18 @@ def test_a_batch_of_setpoints_is_applied_one_by_one_and_a_refused_one_alone_is_d
         for k in range(4):
             loop.on_setpoint(k * DT_NS, _setpoint(k), 0, 0.0)
             assert answers[k][2] == loop.on_state(k * DT_NS, NAMES, Q0, QD0, 0, 0.0).effort
+        # A joint_states message that cannot be read: refused, counted, nothing answered.
+        node._on_joint_state(b'\x00\x01\x00\x00\x01\x02')
+        assert node._loop.refused_states == 1 and len(answers) == 4
     finally:
         node.destroy_node()
+
+
+def _controller_state(data):
+    """Return the ControllerState the node published serialized, deserialized by rclpy."""
+    from freejoint_msgs.msg import ControllerState
+    from rclpy.serialization import deserialize_message
+    return deserialize_message(data, ControllerState)
 
 
 JS_RELIABILITY = 'qos_overrides./joint_states.subscription.reliability'

@@ -24,15 +24,14 @@ import time
 from freejoint_common.arm_description import resolve_arm
 from freejoint_common.contract import BRAKE_REQUEST, BRAKE_TIMEOUT_REQUEST, COMMANDS
 from freejoint_common.contract import CONTROLLER_STATE, JOINT_FAILURES, JOINT_STATES
-from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINTS, stamp_label
-from freejoint_common.contract import setpoint_samples, STANDBY_SETPOINT_QOS, to_ns
+from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINTS
+from freejoint_common.contract import setpoint_samples, STANDBY_SETPOINT_QOS
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
 from freejoint_common.node_tools import Throttle
 from freejoint_common.runner import Lifecycle, run
 from freejoint_common.scheduling import process_scheduling
-from freejoint_control.conversions import command_message, controller_state_message
-from freejoint_control.conversions import fill_state
+from freejoint_control.conversions import Messages
 from freejoint_control.loop import ControlLoop, ERROR, RECEIPT, WARN
 from freejoint_control.params import SCHEMA
 from freejoint_control.supervisor import notify_ready
@@ -55,11 +54,11 @@ class ControllerNode(Node, Lifecycle):
         self._lockstep = cfg.lockstep
         self._set_state_rate(cfg)
 
-        self._cmd = command_message(cfg.joints)
-        self._dim = self._cmd.layout.dim[0]
-        self._state = controller_state_message(cfg.joints, self._loop.result.law_state_names)
+        # Serialized in and out (conversions.Messages): no message object per tick.
+        self._messages = Messages(cfg.joints, self._loop.result.law_state_names)
         self._m = self._loop.task_dim
         self._state_pub_ns = None       # stamp of the last ControllerState published
+        self._state_status = None       # and its status
         self._latency = LatencyWindow()
         self._quiet_sent = False
         # Clock of the state ages: system time (what real-time stamps are on), read without
@@ -152,7 +151,7 @@ class ControllerNode(Node, Lifecycle):
         self._states_sub = self.create_subscription(
             JOINT_STATES.msg_type, JOINT_STATES.name, self._on_joint_state,
             overridable(JOINT_STATES.qos if self.config.lockstep else REALTIME_STATE_QOS),
-            qos_overriding_options=QOS_OVERRIDES)
+            qos_overriding_options=QOS_OVERRIDES, raw=True)
 
     def _check_standby_ready(self):
         """Standby: once nothing was lacking for STANDBY_SETTLE s, tell the supervisor."""
@@ -214,15 +213,18 @@ class ControllerNode(Node, Lifecycle):
         self.get_logger().info('parameters set (effective next tick): ' + changed)
 
     # -- messages --------------------------------------------------------------
-    def _on_joint_state(self, msg):
+    def _on_joint_state(self, data):
+        """Answer a serialized JointState (the loop) and publish what the loop says."""
         loop = self._loop
+        try:
+            ns, names, position, velocity, effort = self._messages.read_state(data)
+        except ValueError as exc:
+            loop.refuse_state_message(str(exc))
+            return
         if loop.standby:
             self._activate()    # the first state after SIGUSR1 (subscribed at the signal)
-        stamp = msg.header.stamp
-        res = loop.on_state(to_ns(stamp), msg.name,
-                            msg.position, msg.velocity,
-                            0 if self._lockstep else self._now_ns(), _monotonic(),
-                            msg.effort)
+        res = loop.on_state(ns, names, position, velocity,
+                            0 if self._lockstep else self._now_ns(), _monotonic(), effort)
         if loop.drive_wait_request is not None and self._pub_wait is not None:
             self._pub_wait.publish(BRAKE_TIMEOUT_REQUEST.msg_type(data=loop.take_drive_wait()))
         if res is not None:
@@ -266,31 +268,29 @@ class ControllerNode(Node, Lifecycle):
 
     def _publish(self, res):
         """Publish the command and (rate allowing) the ControllerState of a Result."""
+        messages = self._messages
         if res.repeated:
             # A repeated state (the sim's start-up republication): the same answer again.
-            self._pub_cmd.publish(self._cmd)
-            self._pub_state.publish(self._state)
+            self._pub_cmd.publish(messages.command)
+            if messages.controller_state is not None:
+                self._pub_state.publish(messages.controller_state)
             return
         ns = res.stamp_ns
-        cmd = self._cmd
-        cmd.data = res.effort
-        self._dim.label = stamp_label(ns)
-        self._pub_cmd.publish(cmd)
+        self._pub_cmd.publish(messages.write_command(ns, res.effort))
         latency = res.latency_ns
         if latency is RECEIPT:
             # Lockstep: the wall time from the state's receipt to its command.
             self._latency.note(int((_monotonic() - self._loop.last_state_wall) * 1e9))
         elif latency is not None:
             self._latency.note(latency)
-        st = self._state
         period = self._state_period_ns
-        if period and self._state_pub_ns is not None and res.status == st.status and (
+        if period and self._state_pub_ns is not None and res.status == self._state_status and (
                 0 <= ns - self._state_pub_ns < period):
             return                      # thinned: state_publish_rate
         if ns >= 0:
             self._state_pub_ns = ns
-        fill_state(st, res)
-        self._pub_state.publish(st)
+        self._state_status = res.status
+        self._pub_state.publish(messages.write_controller_state(res))
 
     def _on_reset(self, request, response):
         """~/reset: restart theta_hat and the hold / blend state (std_srvs/Trigger)."""

@@ -1,67 +1,88 @@
 """
-Message conversions of the controller node (ROS message types only, no node, no spinning).
+Message conversions of the controller node: serialized messages in and out, no node.
 
-The node keeps one command and one ``ControllerState`` message and refills them per answer
-(:func:`command_message`, :func:`controller_state_message`, :func:`fill_state`): no new
-message object on the tick.
+The node takes ``joint_states`` serialized and publishes its command and
+``ControllerState`` serialized (``freejoint_common.cdr``): no message object on the tick,
+which rclpy's conversion of a ``JointState`` in and two messages out would cost more than
+the law (docs/performance.md). A state in an encoding ``cdr`` does not read is
+deserialized by rclpy instead (:meth:`Messages.read_state`).
 """
 
-from array import array
+from freejoint_common.cdr import CdrError, CommandWriter, ControllerStateWriter
+from freejoint_common.cdr import JointStateReader
+from freejoint_common.contract import JOINT_STATES, NS_PER_S, stamp_label, to_ns
 
-from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, stamp_from_ns, stamp_label
-from std_msgs.msg import MultiArrayDimension
 
-
-def command_message(joints):
+class Messages:
     """
-    Return the command message (``std_msgs/Float64MultiArray``) the node refills.
-
-    Its one dimension is labelled with the stamp answered (``stamp_label``, lockstep) and
-    sized by the ``joints`` commanded.
-    """
-    msg = COMMANDS.msg_type()
-    msg.layout.dim = [MultiArrayDimension(label=stamp_label(0), size=len(joints),
-                                          stride=len(joints))]
-    return msg
-
-
-def controller_state_message(joints, law_state_names):
-    """Return the ``ControllerState`` the node refills (joint and law-state names set)."""
-    msg = CONTROLLER_STATE.msg_type()
-    msg.joint_names = list(joints)
-    msg.law_state_names = list(law_state_names)
-    return msg
-
-
-def fill_state(st, res):
-    """
-    Fill the ``ControllerState`` ``st`` from a loop ``Result`` (stamp when ``stamp_ns >= 0``).
+    The controller's messages: a joint state read, a command and a ControllerState written.
 
     Parameters
     ----------
-    st : freejoint_msgs.msg.ControllerState
-        The node's message, refilled.
-    res : freejoint_control.loop.Result
-        The answer (plain values: sequences of float, numbers, a string).
+    joints : sequence of str
+        The joints commanded (the command's order, ``ControllerState.joint_names``).
+    law_state_names : sequence of str
+        ``ControllerState.law_state_names``.
 
     """
-    if res.stamp_ns >= 0:
-        stamp_from_ns(res.stamp_ns, st.header.stamp)
-    st.error = array('d', res.error)
-    st.error_rate = array('d', res.error_rate)
-    st.sliding = array('d', res.sliding)
-    st.law_state = array('d', res.law_state_values)
-    st.effort = res.effort
-    st.det_dd = res.det_dd
-    st.position = array('d', res.position)
-    st.position_desired = array('d', res.position_desired)
-    st.status = res.status
-    st.message = res.message
-    if res.setpoint_ns is None:
-        st.setpoint_stamp.sec = 0
-        st.setpoint_stamp.nanosec = 0
-    else:
-        stamp_from_ns(res.setpoint_ns, st.setpoint_stamp)
-    st.setpoint_age = res.setpoint_age
-    st.dt = res.dt
-    st.state_age = res.state_age
+
+    def __init__(self, joints, law_state_names):
+        self._read = JointStateReader()
+        self._command = CommandWriter(len(joints))
+        self._state = ControllerStateWriter(joints, law_state_names)
+        self._stamp = (0, 0)
+        self._text = ''
+        self._text_bytes = b''
+        self.command = self._command(stamp_label(0), [0.0] * len(joints))
+        """The last command written (bytes)."""
+        self.controller_state = None
+        """The last ControllerState written (bytes), None before the first."""
+
+    def read_state(self, data):
+        """
+        Return ``(stamp_ns, names, position, velocity, effort)`` of a serialized JointState.
+
+        Parameters
+        ----------
+        data : bytes
+            The message as taken (``raw=True``).
+
+        Raises
+        ------
+        ValueError
+            The message cannot be read (the reason names what was wrong).
+
+        """
+        try:
+            return self._read(data)
+        except CdrError as exc:
+            first = exc
+        from rclpy.serialization import deserialize_message
+        try:
+            msg = deserialize_message(data, JOINT_STATES.msg_type)
+        except Exception as exc:    # noqa: B902 - rclpy raises several kinds on bad bytes
+            raise ValueError('%s; rclpy cannot deserialize it either (%s)' % (first, exc)) \
+                from None
+        return (to_ns(msg.header.stamp), list(msg.name), msg.position, msg.velocity,
+                msg.effort)
+
+    def write_command(self, stamp_ns, effort):
+        """Return (and keep as :attr:`command`) the command answering ``stamp_ns``."""
+        self.command = data = self._command(stamp_label(stamp_ns), effort)
+        return data
+
+    def write_controller_state(self, res):
+        """
+        Return (and keep) the ControllerState of a loop ``Result``.
+
+        Stamped with ``res.stamp_ns`` when >= 0, else with the last stamp written; a zero
+        ``setpoint_stamp`` without a setpoint (``res.setpoint_ns`` None).
+        """
+        if res.stamp_ns >= 0:
+            self._stamp = divmod(res.stamp_ns, NS_PER_S)
+        if res.message is not self._text:
+            self._text = res.message
+            self._text_bytes = res.message.encode('utf-8')
+        sec, nanosec = self._stamp
+        self.controller_state = data = self._state(sec, nanosec, res, self._text_bytes)
+        return data

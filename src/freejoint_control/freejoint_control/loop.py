@@ -736,6 +736,17 @@ class ControlLoop:
                 '%d setpoints from the one stamped %d ns' % (count, ns))
         self.log(ERROR, 'setpoint', '%s refused: %s; dropped' % (what, reason))
 
+    def refuse_state_message(self, reason):
+        """
+        Drop a joint state message that cannot be read (no stamp to answer): counted, logged.
+
+        Nothing is answered: lockstep, the simulator waits for its command timeout; real
+        time, the next state is answered (the watchdog holds if none comes).
+        """
+        self.refused_states += 1
+        self.log(ERROR, 'unreadable', 'joint_states message refused: %s; nothing answered, '
+                 'theta_hat kept' % reason)
+
     def watchdog(self, now_ns, mono):
         """
         Wall-clock staleness (the node calls it a few times per stale_timeout).

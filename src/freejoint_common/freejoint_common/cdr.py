@@ -1,0 +1,321 @@
+"""
+The controller's per-tick messages as serialized CDR, read and written without rclpy.
+
+rclpy converts every message it takes into Python objects (a ``JointState`` with its name
+list, a ``Header``, arrays) and every message it publishes back into C structures field by
+field, a ``Float64MultiArray``'s layout and labelled dimension included: per tick that is
+more CPU than the control law (docs/performance.md, "The nodes against a bare rclpy
+echo"). The controller takes ``joint_states`` serialized (``raw=True``) and publishes its
+command and ``ControllerState`` serialized (``Publisher.publish(bytes)``): this module reads
+and writes those bytes with one ``struct`` call per field group, no message object.
+
+The encoding is the one rmw_fastrtps and rmw_cyclonedds use for ROS 2 messages: an
+encapsulation header ``00 01 00 00`` (CDR, little-endian, XCDR1), then the fields in
+declaration order, each primitive aligned to its size counted from the end of that
+header, a sequence or string as a ``uint32`` count then its elements (a string's count
+includes its terminating NUL; an empty sequence adds no alignment). A message in another
+encapsulation (big-endian, XCDR2) is not read here: :class:`JointStateReader` raises
+:class:`CdrError` and the caller falls back to rclpy's ``deserialize_message``. The tests
+compare every function with rclpy's own ``serialize_message`` / ``deserialize_message``.
+"""
+
+import struct
+
+ENCAPSULATION = b'\x00\x01\x00\x00'
+"""CDR, little-endian, XCDR1 (the encapsulation rmw_fastrtps writes for ROS 2 messages)."""
+MAX_SEQUENCE = 4096
+"""Longest array a JointState may carry here (joints); a longer one is refused."""
+
+_U32 = struct.Struct('<I')
+_HEADER = struct.Struct('<iII')     # stamp.sec, stamp.nanosec, frame_id's length
+
+
+class CdrError(ValueError):
+    """A serialized message this module cannot read (short, malformed, other encoding)."""
+
+
+class _Format:
+    """A struct format built field by field, CDR alignment inserted as pad bytes."""
+
+    def __init__(self):
+        self.parts = ['<4s']        # the encapsulation header, then offset 0
+        self.offset = 0
+
+    def primitive(self, code, size, count=1):
+        pad = -self.offset % size
+        if pad:
+            self.parts.append('%dx' % pad)
+        self.parts.append('%d%s' % (count, code))
+        self.offset += pad + size * count
+
+    def sequence(self, count):
+        """Add a float64[] of ``count`` values: its count (an argument), then the values."""
+        self.primitive('I', 4)
+        if count:
+            self.primitive('d', 8, count)
+
+    def string(self, length):
+        """Add a string of ``length`` bytes (UTF-8, no NUL): count, then bytes and NUL."""
+        self.primitive('I', 4)
+        self.parts.append('%ds' % (length + 1))     # struct pads the bytes with the NUL
+        self.offset += length + 1
+
+    def blob(self, data):
+        """Add bytes serialized at a 4-aligned offset (a string sequence): one argument."""
+        pad = -self.offset % 4
+        if pad:
+            self.parts.append('%dx' % pad)
+        self.parts.append('%ds' % len(data))
+        self.offset += pad + len(data)
+
+    def build(self):
+        pad = -self.offset % 4          # the payload a whole number of 4-byte words
+        return struct.Struct(''.join(self.parts) + ('%dx' % pad if pad else ''))
+
+
+def string_sequence(strings):
+    """
+    Return a ``string[]`` serialized from a 4-aligned offset (its count and strings).
+
+    Parameters
+    ----------
+    strings : sequence of str
+        The strings, in order.
+
+    Returns
+    -------
+    bytes
+        The same at any 4-aligned offset: a string needs only 4-byte alignment.
+
+    """
+    out = bytearray(_U32.pack(len(strings)))
+    for i, text in enumerate(strings):
+        data = text.encode('utf-8')
+        out += _U32.pack(len(data) + 1) + data + b'\x00'
+        if i + 1 < len(strings):
+            out += bytes(-len(out) % 4)
+    return bytes(out)
+
+
+def _encoded(text):
+    return text if isinstance(text, bytes) else text.encode('utf-8')
+
+
+class CommandWriter:
+    """
+    Serialize the controller's command, a ``std_msgs/Float64MultiArray``.
+
+    One dimension labelled with the stamp answered (``contract.stamp_label``) and sized by
+    the joints commanded (size and stride ``n``), ``data_offset`` 0, the ``n`` efforts.
+
+    Parameters
+    ----------
+    n : int
+        Number of joints commanded.
+
+    """
+
+    def __init__(self, n):
+        self.n = int(n)
+        self._formats = {}
+
+    def __call__(self, label, effort):
+        """
+        Return the serialized command.
+
+        Parameters
+        ----------
+        label : str or bytes
+            The dimension's label.
+        effort : sequence of float, shape (n,)
+            Efforts [N m] in the order of the joints commanded.
+
+        Returns
+        -------
+        bytes
+
+        """
+        label = _encoded(label)
+        key = len(label)
+        fmt = self._formats.get(key)
+        if fmt is None:
+            f = _Format()
+            f.primitive('I', 4)             # layout.dim: one dimension
+            f.string(key)
+            f.primitive('I', 4, 3)          # size, stride, layout.data_offset
+            f.sequence(self.n)
+            fmt = self._formats[key] = f.build()
+        n = self.n
+        return fmt.pack(ENCAPSULATION, 1, key + 1, label, n, n, 0, n, *effort)
+
+
+class ControllerStateWriter:
+    """
+    Serialize a ``freejoint_msgs/ControllerState`` from a control loop ``Result``.
+
+    The joint and law-state names, fixed per writer, are serialized once; a format per set
+    of array lengths and message length is compiled once and reused.
+
+    Parameters
+    ----------
+    joint_names, law_state_names : sequence of str
+
+    """
+
+    def __init__(self, joint_names, law_state_names):
+        self._joints = string_sequence(joint_names)
+        self._law_names = string_sequence(law_state_names)
+        self._formats = {}
+
+    def __call__(self, sec, nanosec, res, message):
+        """
+        Return the serialized ``ControllerState`` of ``res`` stamped ``sec``, ``nanosec``.
+
+        Parameters
+        ----------
+        sec, nanosec : int
+            ``header.stamp``.
+        res : freejoint_control.loop.Result
+            Its ``error``, ``error_rate``, ``sliding``, ``law_state_values``, ``effort``,
+            ``position``, ``position_desired`` (sequences of float), ``det_dd``,
+            ``status``, ``setpoint_ns`` (None: a zero stamp), ``setpoint_age``, ``dt``,
+            ``state_age``.
+        message : bytes
+            ``res.message`` UTF-8 encoded.
+
+        Returns
+        -------
+        bytes
+
+        """
+        e, ed, s = res.error, res.error_rate, res.sliding
+        law, eff = res.law_state_values, res.effort
+        p, pd = res.position, res.position_desired
+        key = (len(e), len(ed), len(s), len(law), len(eff), len(p), len(pd), len(message))
+        fmt = self._formats.get(key)
+        if fmt is None:
+            fmt = self._formats[key] = self._compile(key)
+        sp = res.setpoint_ns
+        sp_sec, sp_nsec = (0, 0) if sp is None else divmod(sp, 1_000_000_000)
+        return fmt.pack(ENCAPSULATION, sec, nanosec, 1, b'',
+                        key[0], *e, key[1], *ed, key[2], *s, self._law_names,
+                        key[3], *law, key[4], *eff, self._joints, res.det_dd,
+                        key[5], *p, key[6], *pd, res.status, key[7] + 1, message,
+                        res.state_age, sp_sec, sp_nsec, res.setpoint_age, res.dt)
+
+    def _compile(self, key):
+        n_e, n_ed, n_s, n_law, n_eff, n_p, n_pd, n_msg = key
+        f = _Format()
+        f.primitive('i', 4)                 # header.stamp.sec
+        f.primitive('I', 4)                 # header.stamp.nanosec
+        f.string(0)                         # header.frame_id: ''
+        for count in (n_e, n_ed, n_s):      # error, error_rate, sliding
+            f.sequence(count)
+        f.blob(self._law_names)
+        f.sequence(n_law)                   # law_state
+        f.sequence(n_eff)                   # effort
+        f.blob(self._joints)
+        f.primitive('d', 8)                 # det_dd
+        f.sequence(n_p)                     # position
+        f.sequence(n_pd)                    # position_desired
+        f.primitive('H', 2)                 # status
+        f.string(n_msg)                     # message
+        f.primitive('d', 8)                 # state_age
+        f.primitive('i', 4)                 # setpoint_stamp.sec
+        f.primitive('I', 4)                 # setpoint_stamp.nanosec
+        f.primitive('d', 8, 2)              # setpoint_age, dt
+        return f.build()
+
+
+class JointStateReader:
+    """
+    Read a serialized ``sensor_msgs/JointState``: stamp, names, positions, velocities, efforts.
+
+    The name list of the last message is kept: a message naming the same joints (the
+    stream's every message) returns that same list object, compared in place, not decoded.
+    """
+
+    def __init__(self):
+        self._names = []            # the last name list
+        self._encoded = ()          # its strings serialized (count + bytes + NUL), each
+        self._doubles = {}          # struct of n float64 per n
+
+    def __call__(self, buf):
+        """
+        Return ``(stamp_ns, names, position, velocity, effort)`` of the message ``buf``.
+
+        Parameters
+        ----------
+        buf : bytes
+            The serialized message (encapsulation header first).
+
+        Returns
+        -------
+        tuple
+            ``stamp_ns`` (int), ``names`` (list of str), ``position``, ``velocity``,
+            ``effort`` (tuples of float, each as long as the message's array).
+
+        Raises
+        ------
+        CdrError
+            ``buf`` is not a CDR little-endian message, or is short or malformed.
+
+        """
+        if not buf.startswith(ENCAPSULATION):
+            raise CdrError('joint_states: encapsulation %r, not CDR little-endian (XCDR1)'
+                           % bytes(buf[:4]))
+        try:
+            sec, nanosec, length = _HEADER.unpack_from(buf, 4)
+            at = 16 + length                # past frame_id (offsets here count the header)
+            at += -at % 4
+            names, at = self._names_at(buf, at)
+            position, at = self._doubles_at(buf, at)
+            velocity, at = self._doubles_at(buf, at)
+            effort, at = self._doubles_at(buf, at)
+        except struct.error as exc:
+            raise CdrError('joint_states: message short or malformed (%s)' % exc) from None
+        return sec * 1_000_000_000 + nanosec, names, position, velocity, effort
+
+    def _names_at(self, buf, at):
+        (count,) = _U32.unpack_from(buf, at)
+        known = self._encoded
+        if count == len(known):
+            pos = at + 4
+            for item in known:
+                if not buf.startswith(item, pos):
+                    break
+                pos += len(item)
+                pos += -pos % 4
+            else:
+                return self._names, pos
+        if count > MAX_SEQUENCE:
+            raise CdrError('joint_states: %d names (at most %d)' % (count, MAX_SEQUENCE))
+        names, encoded = [], []
+        pos = at + 4
+        for _ in range(count):
+            (length,) = _U32.unpack_from(buf, pos)
+            end = pos + 4 + length
+            if length < 1 or end > len(buf) or buf[end - 1] != 0:
+                raise CdrError('joint_states: a name string is malformed')
+            try:
+                names.append(buf[pos + 4:end - 1].decode('utf-8'))
+            except UnicodeDecodeError:
+                raise CdrError('joint_states: a name is not UTF-8') from None
+            encoded.append(bytes(buf[pos:end]))
+            pos = end + (-end % 4)
+        self._names, self._encoded = names, tuple(encoded)
+        return names, pos
+
+    def _doubles_at(self, buf, at):
+        (count,) = _U32.unpack_from(buf, at)
+        at += 4
+        if not count:
+            return (), at
+        if count > MAX_SEQUENCE:
+            raise CdrError('joint_states: an array of %d values (at most %d)'
+                           % (count, MAX_SEQUENCE))
+        at += -(at - 4) % 8
+        fmt = self._doubles.get(count)
+        if fmt is None:
+            fmt = self._doubles[count] = struct.Struct('<%dd' % count)
+        return fmt.unpack_from(buf, at), at + 8 * count
