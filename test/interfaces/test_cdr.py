@@ -112,6 +112,17 @@ def test_controller_state_written_here_is_the_message_rclpy_reads(m, k, n, messa
     assert (msg.setpoint_age, msg.dt) == (res.setpoint_age, res.dt)
 
 
+def test_controller_state_of_numpy_arrays_is_the_same_message_as_of_lists():
+    import numpy as np
+    res = _Result(2, 8, 2, 'x')
+    write = ControllerStateWriter(['j1', 'j2'], ['x'] * 8)
+    of_lists = write(1, 2, res, b'x')
+    for name in ('error', 'error_rate', 'sliding', 'law_state_values', 'effort', 'position',
+                 'position_desired'):
+        setattr(res, name, np.array(getattr(res, name)))
+    assert write(1, 2, res, b'x') == of_lists
+
+
 def test_controller_state_without_a_setpoint_has_a_zero_setpoint_stamp():
     from freejoint_msgs.msg import ControllerState
     res = _Result(2, 8, 2, setpoint_ns=None)

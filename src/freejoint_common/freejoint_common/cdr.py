@@ -97,6 +97,11 @@ def string_sequence(strings):
     return bytes(out)
 
 
+def _plain(values):
+    """Return ``values`` as a list or tuple (a numpy array's ``tolist()``)."""
+    return values if type(values) in (list, tuple) else values.tolist()
+
+
 def _encoded(text):
     return text if isinstance(text, bytes) else text.encode('utf-8')
 
@@ -179,7 +184,7 @@ class ControllerStateWriter:
             Its ``error``, ``error_rate``, ``sliding``, ``law_state_values``, ``effort``,
             ``position``, ``position_desired`` (sequences of float), ``det_dd``,
             ``status``, ``setpoint_ns`` (None: a zero stamp), ``setpoint_age``, ``dt``,
-            ``state_age``.
+            ``state_age``; the sequences lists, tuples or numpy arrays.
         message : bytes
             ``res.message`` UTF-8 encoded.
 
@@ -188,9 +193,10 @@ class ControllerStateWriter:
         bytes
 
         """
-        e, ed, s = res.error, res.error_rate, res.sliding
-        law, eff = res.law_state_values, res.effort
-        p, pd = res.position, res.position_desired
+        # numpy arrays as lists first: unpacking an array makes a numpy scalar per value
+        e, ed, s = _plain(res.error), _plain(res.error_rate), _plain(res.sliding)
+        law, eff = _plain(res.law_state_values), _plain(res.effort)
+        p, pd = _plain(res.position), _plain(res.position_desired)
         key = (len(e), len(ed), len(s), len(law), len(eff), len(p), len(pd), len(message))
         fmt = self._formats.get(key)
         if fmt is None:
