@@ -12,6 +12,7 @@ import struct
 
 from freejoint_common.cdr import CdrError, CommandWriter, ControllerStateWriter
 from freejoint_common.cdr import JointStateReader, string_sequence
+from freejoint_common.contract import label_stamp, stamp_label
 import pytest
 
 pytestmark = pytest.mark.ros
@@ -40,7 +41,7 @@ def _joint_state(sec, nanosec, names, position, velocity, effort, frame=''):
     return msg
 
 
-@pytest.mark.parametrize('label', ['stamp_ns=0', 'stamp_ns=5000000', 'x', ''])
+@pytest.mark.parametrize('label', [stamp_label(0), stamp_label(5_000_000), 'x', ''])
 @pytest.mark.parametrize('effort', [(1.5, -2.25), (0.0, 1e-300, -7.0), ()])
 def test_command_written_here_is_the_float64_multi_array_rclpy_reads(label, effort):
     from std_msgs.msg import Float64MultiArray
@@ -57,8 +58,8 @@ def test_command_of_a_label_length_seen_before_reuses_its_format_and_stays_exact
     from std_msgs.msg import Float64MultiArray
     write = CommandWriter(2)
     for ns in (1_000_000, 2_000_000, 10_000_000, 3_000_000):
-        msg = _deserialize(write('stamp_ns=%d' % ns, (ns * 1e-9, -1.0)), Float64MultiArray)
-        assert msg.layout.dim[0].label == 'stamp_ns=%d' % ns
+        msg = _deserialize(write(stamp_label(ns), (ns * 1e-9, -1.0)), Float64MultiArray)
+        assert label_stamp(msg.layout.dim) == ns
         assert list(msg.data) == [ns * 1e-9, -1.0]
     assert len(write._formats) == 2         # two label lengths
 
@@ -66,7 +67,7 @@ def test_command_of_a_label_length_seen_before_reuses_its_format_and_stays_exact
 class _Result:
     """A control loop Result's published fields (plain values)."""
 
-    def __init__(self, m, k, n, message='', setpoint_ns=3_002_000_001):
+    def __init__(self, m, k, n, message=''):
         rnd = random.Random(m * 100 + k * 10 + n)
         self.error = [rnd.uniform(-1, 1) for _ in range(m)]
         self.error_rate = [rnd.uniform(-1, 1) for _ in range(m)]
@@ -78,7 +79,6 @@ class _Result:
         self.position_desired = [rnd.uniform(-1, 1) for _ in range(m)]
         self.status = 0x0421
         self.message = message
-        self.setpoint_ns = setpoint_ns
         self.setpoint_age = 0.004
         self.dt = 0.001
         self.state_age = 2.5e-4
@@ -91,7 +91,8 @@ def test_controller_state_written_here_is_the_message_rclpy_reads(m, k, n, messa
     from freejoint_msgs.msg import ControllerState
     law_names = ['theta_hat[%d]' % i for i in range(k)]
     res = _Result(m, k, n, message)
-    data = ControllerStateWriter(joints, law_names)(7, 123, res, message.encode('utf-8'))
+    data = ControllerStateWriter(joints, law_names)((7, 123), (3, 2_000_001), res,
+                                                    message.encode('utf-8'))
     msg = _deserialize(data, ControllerState)
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id) == (
         7, 123, '')
@@ -116,19 +117,11 @@ def test_controller_state_of_numpy_arrays_is_the_same_message_as_of_lists():
     import numpy as np
     res = _Result(2, 8, 2, 'x')
     write = ControllerStateWriter(['j1', 'j2'], ['x'] * 8)
-    of_lists = write(1, 2, res, b'x')
+    of_lists = write((1, 2), (3, 4), res, b'x')
     for name in ('error', 'error_rate', 'sliding', 'law_state_values', 'effort', 'position',
                  'position_desired'):
         setattr(res, name, np.array(getattr(res, name)))
-    assert write(1, 2, res, b'x') == of_lists
-
-
-def test_controller_state_without_a_setpoint_has_a_zero_setpoint_stamp():
-    from freejoint_msgs.msg import ControllerState
-    res = _Result(2, 8, 2, setpoint_ns=None)
-    msg = _deserialize(ControllerStateWriter(['j1', 'j2'], ['x'] * 8)(0, 0, res, b''),
-                       ControllerState)
-    assert (msg.setpoint_stamp.sec, msg.setpoint_stamp.nanosec) == (0, 0)
+    assert write((1, 2), (3, 4), res, b'x') == of_lists
 
 
 def test_string_sequence_is_what_rclpy_writes_for_a_string_array():
@@ -164,8 +157,8 @@ def test_joint_state_rclpy_wrote_is_read_here_field_for_field(names, frame, leng
     rnd = random.Random(len(names) * 7 + len(frame))
     pos, vel, eff = ([rnd.uniform(-3, 3) for _ in range(n)] for n in lengths)
     data = _serialize(_joint_state(12, 345_678_901, names, pos, vel, eff, frame))
-    ns, got_names, got_pos, got_vel, got_eff = JointStateReader()(data)
-    assert ns == 12_345_678_901
+    sec, nanosec, got_names, got_pos, got_vel, got_eff = JointStateReader()(data)
+    assert (sec, nanosec) == (12, 345_678_901)
     assert got_names == names
     assert (list(got_pos), list(got_vel), list(got_eff)) == (pos, vel, eff)
 
@@ -173,18 +166,18 @@ def test_joint_state_rclpy_wrote_is_read_here_field_for_field(names, frame, leng
 def test_joint_state_names_are_decoded_once_and_a_new_name_list_is_read_anew():
     read = JointStateReader()
     names = ['joint1', 'joint2', 'joint3']
-    first = read(_serialize(_joint_state(0, 1, names, (1, 2, 3), (4, 5, 6), ())))[1]
-    again = read(_serialize(_joint_state(0, 2, names, (1, 2, 3), (4, 5, 6), ())))[1]
+    first = read(_serialize(_joint_state(0, 1, names, (1, 2, 3), (4, 5, 6), ())))[2]
+    again = read(_serialize(_joint_state(0, 2, names, (1, 2, 3), (4, 5, 6), ())))[2]
     assert first == names and again is first
     other = ['joint1', 'joint2', 'joint4']
     changed = read(_serialize(_joint_state(0, 3, other, (1, 2, 3), (4, 5, 6), ())))
-    assert changed[1] == other
+    assert changed[2] == other
     shorter = read(_serialize(_joint_state(0, 4, other[:2], (1, 2), (4, 5), ())))
-    assert shorter[1] == other[:2] and shorter[2] == (1.0, 2.0)
+    assert shorter[2] == other[:2] and shorter[3] == (1.0, 2.0)
 
 
 def test_joint_state_keeps_nan_and_infinity_for_the_loop_to_refuse():
-    _, _, pos, vel, _ = JointStateReader()(_serialize(_joint_state(
+    _, _, _, pos, vel, _ = JointStateReader()(_serialize(_joint_state(
         0, 0, ['joint1'], [math.nan], [math.inf], ())))
     assert math.isnan(pos[0]) and vel[0] == math.inf
 

@@ -172,19 +172,18 @@ class ControllerStateWriter:
         self._law_names = string_sequence(law_state_names)
         self._formats = {}
 
-    def __call__(self, sec, nanosec, res, message):
+    def __call__(self, stamp, setpoint_stamp, res, message):
         """
-        Return the serialized ``ControllerState`` of ``res`` stamped ``sec``, ``nanosec``.
+        Return the serialized ``ControllerState`` of ``res``.
 
         Parameters
         ----------
-        sec, nanosec : int
-            ``header.stamp``.
+        stamp, setpoint_stamp : tuple of int
+            ``header.stamp`` and ``setpoint_stamp`` as ``(sec, nanosec)``.
         res : freejoint_control.loop.Result
             Its ``error``, ``error_rate``, ``sliding``, ``law_state_values``, ``effort``,
-            ``position``, ``position_desired`` (sequences of float), ``det_dd``,
-            ``status``, ``setpoint_ns`` (None: a zero stamp), ``setpoint_age``, ``dt``,
-            ``state_age``; the sequences lists, tuples or numpy arrays.
+            ``position``, ``position_desired`` (sequences of float: lists, tuples or numpy
+            arrays), ``det_dd``, ``status``, ``setpoint_age``, ``dt``, ``state_age``.
         message : bytes
             ``res.message`` UTF-8 encoded.
 
@@ -201,8 +200,8 @@ class ControllerStateWriter:
         fmt = self._formats.get(key)
         if fmt is None:
             fmt = self._formats[key] = self._compile(key)
-        sp = res.setpoint_ns
-        sp_sec, sp_nsec = (0, 0) if sp is None else divmod(sp, 1_000_000_000)
+        sec, nanosec = stamp
+        sp_sec, sp_nsec = setpoint_stamp
         return fmt.pack(ENCAPSULATION, sec, nanosec, 1, b'',
                         key[0], *e, key[1], *ed, key[2], *s, self._law_names,
                         key[3], *law, key[4], *eff, self._joints, res.det_dd,
@@ -248,7 +247,7 @@ class JointStateReader:
 
     def __call__(self, buf):
         """
-        Return ``(stamp_ns, names, position, velocity, effort)`` of the message ``buf``.
+        Return ``(sec, nanosec, names, position, velocity, effort)`` of the message ``buf``.
 
         Parameters
         ----------
@@ -258,8 +257,9 @@ class JointStateReader:
         Returns
         -------
         tuple
-            ``stamp_ns`` (int), ``names`` (list of str), ``position``, ``velocity``,
-            ``effort`` (tuples of float, each as long as the message's array).
+            ``sec``, ``nanosec`` (int: ``header.stamp``), ``names`` (list of str),
+            ``position``, ``velocity``, ``effort`` (tuples of float, each as long as the
+            message's array).
 
         Raises
         ------
@@ -280,7 +280,7 @@ class JointStateReader:
             effort, at = self._doubles_at(buf, at)
         except struct.error as exc:
             raise CdrError('joint_states: message short or malformed (%s)' % exc) from None
-        return sec * 1_000_000_000 + nanosec, names, position, velocity, effort
+        return sec, nanosec, names, position, velocity, effort
 
     def _names_at(self, buf, at):
         (count,) = _U32.unpack_from(buf, at)

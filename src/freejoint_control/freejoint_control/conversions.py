@@ -54,7 +54,8 @@ class Messages:
 
         """
         try:
-            return self._read(data)
+            sec, nanosec, names, position, velocity, effort = self._read(data)
+            return sec * NS_PER_S + nanosec, names, position, velocity, effort
         except CdrError as exc:
             first = exc
         from rclpy.serialization import deserialize_message
@@ -83,6 +84,7 @@ class Messages:
         if res.message is not self._text:
             self._text = res.message
             self._text_bytes = res.message.encode('utf-8')
-        sec, nanosec = self._stamp
-        self.controller_state = data = self._state(sec, nanosec, res, self._text_bytes)
+        sp = res.setpoint_ns
+        self.controller_state = data = self._state(
+            self._stamp, (0, 0) if sp is None else divmod(sp, NS_PER_S), res, self._text_bytes)
         return data
