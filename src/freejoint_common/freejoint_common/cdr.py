@@ -1,12 +1,13 @@
 """
-The controller's per-tick messages as serialized CDR, read and written without rclpy.
+The per-tick messages of the controller and the simulator as serialized CDR, without rclpy.
 
 rclpy converts every message it takes into Python objects (a ``JointState`` with its name
 list, a ``Header``, arrays) and every message it publishes back into C structures field by
 field, a ``Float64MultiArray``'s layout and labelled dimension included: per tick that is
 more CPU than the control law (docs/performance.md, "The nodes against a bare rclpy
 echo"). The controller takes ``joint_states`` serialized (``raw=True``) and publishes its
-command and ``ControllerState`` serialized (``Publisher.publish(bytes)``): this module reads
+command and ``ControllerState`` serialized (``Publisher.publish(bytes)``), the simulator the
+other way round (``joint_states`` and ``ee_position`` out, commands in): this module reads
 and writes those bytes with one ``struct`` call per field group, no message object.
 
 The encoding is the one rmw_fastrtps and rmw_cyclonedds use for ROS 2 messages: an
@@ -325,3 +326,142 @@ class JointStateReader:
         if fmt is None:
             fmt = self._doubles[count] = struct.Struct('<%dd' % count)
         return fmt.unpack_from(buf, at), at + 8 * count
+
+
+class JointStateWriter:
+    """
+    Serialize a ``sensor_msgs/JointState`` of fixed joint names and frame.
+
+    Parameters
+    ----------
+    names : sequence of str
+        ``name``.
+    frame_id : str, optional
+        ``header.frame_id``.
+
+    """
+
+    def __init__(self, names, frame_id=''):
+        self._names = string_sequence(names)
+        self._frame = frame_id.encode('utf-8')
+        self._formats = {}
+
+    def __call__(self, sec, nanosec, position, velocity, effort):
+        """
+        Return the serialized JointState.
+
+        Parameters
+        ----------
+        sec, nanosec : int
+            ``header.stamp``.
+        position, velocity, effort : sequence of float
+            The arrays (lists or tuples), each of any length.
+
+        Returns
+        -------
+        bytes
+
+        """
+        key = (len(position), len(velocity), len(effort))
+        fmt = self._formats.get(key)
+        if fmt is None:
+            f = _Format()
+            f.primitive('i', 4)
+            f.primitive('I', 4)
+            f.string(len(self._frame))
+            f.blob(self._names)
+            for count in key:
+                f.sequence(count)
+            fmt = self._formats[key] = f.build()
+        return fmt.pack(ENCAPSULATION, sec, nanosec, len(self._frame) + 1, self._frame,
+                        self._names, key[0], *position, key[1], *velocity, key[2], *effort)
+
+
+class PointStampedWriter:
+    """
+    Serialize a ``geometry_msgs/PointStamped`` in a fixed frame.
+
+    Parameters
+    ----------
+    frame_id : str
+        ``header.frame_id``.
+
+    """
+
+    def __init__(self, frame_id):
+        self._frame = frame_id.encode('utf-8')
+        f = _Format()
+        f.primitive('i', 4)
+        f.primitive('I', 4)
+        f.string(len(self._frame))
+        f.primitive('d', 8, 3)
+        self._format = f.build()
+
+    def __call__(self, sec, nanosec, x, y, z):
+        """Return the serialized PointStamped at ``(x, y, z)`` [m] stamped sec, nanosec."""
+        return self._format.pack(ENCAPSULATION, sec, nanosec, len(self._frame) + 1,
+                                 self._frame, x, y, z)
+
+
+class CommandReader:
+    """Read a serialized ``std_msgs/Float64MultiArray``: its first label and its data."""
+
+    def __init__(self):
+        self._doubles = {}
+
+    def __call__(self, buf):
+        """
+        Return ``(label, data)`` of the message ``buf``.
+
+        Parameters
+        ----------
+        buf : bytes
+            The serialized message (encapsulation header first).
+
+        Returns
+        -------
+        tuple
+            ``label``: the first dimension's label (str), None without a dimension;
+            ``data``: the values (tuple of float).
+
+        Raises
+        ------
+        CdrError
+            ``buf`` is not a CDR little-endian message, or is short or malformed.
+
+        """
+        if not buf.startswith(ENCAPSULATION):
+            raise CdrError('command: encapsulation %r, not CDR little-endian (XCDR1)'
+                           % bytes(buf[:4]))
+        try:
+            (dims,) = _U32.unpack_from(buf, 4)
+            if dims > MAX_SEQUENCE:
+                raise CdrError('command: %d layout dimensions (at most %d)'
+                               % (dims, MAX_SEQUENCE))
+            label = None
+            at = 8
+            for i in range(dims):
+                (length,) = _U32.unpack_from(buf, at)
+                end = at + 4 + length
+                if length < 1 or end > len(buf) or buf[end - 1] != 0:
+                    raise CdrError('command: a dimension label is malformed')
+                if i == 0:
+                    try:
+                        label = buf[at + 4:end - 1].decode('utf-8')
+                    except UnicodeDecodeError:
+                        raise CdrError('command: a label is not UTF-8') from None
+                at = end + (-end % 4) + 8           # then size, stride
+            at += 4                                 # layout.data_offset
+            (count,) = _U32.unpack_from(buf, at)
+            at += 4
+            if not count:
+                return label, ()
+            if count > MAX_SEQUENCE:
+                raise CdrError('command: %d values (at most %d)' % (count, MAX_SEQUENCE))
+            at += -(at - 4) % 8
+            fmt = self._doubles.get(count)
+            if fmt is None:
+                fmt = self._doubles[count] = struct.Struct('<%dd' % count)
+            return label, fmt.unpack_from(buf, at)
+        except struct.error as exc:
+            raise CdrError('command: message short or malformed (%s)' % exc) from None

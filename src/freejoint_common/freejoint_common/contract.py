@@ -14,7 +14,9 @@ from here:
 * the stamps: :func:`to_ns` and :func:`stamp_from_ns` between ``builtin_interfaces/Time``
   and integer nanoseconds, :func:`clock_ns` of a serialized ``rosgraph_msgs/Clock``;
 * the lockstep label of a command (``stamp_ns=<t_k>``, lockstep item 2):
-  :func:`stamp_label` and :func:`label_stamp`;
+  :func:`stamp_label`, :func:`label_stamp` and :func:`label_to_stamp`;
+* a message taken serialized: :func:`read_serialized` (``freejoint_common.cdr``, else
+  rclpy's deserialization);
 * the layout of a ``setpoints`` batch (freejoint_msgs/CartesianSetpoints, flat arrays):
   :func:`setpoint_samples` reads it into ``freejoint_common.setpoint.SetpointSample`` records.
 
@@ -299,12 +301,49 @@ def label_stamp(dims):
     None without a dimension, without the ``stamp_ns=`` prefix, or with a value that is
     not an integer: a third-party command (taken as the answer to the current step).
     """
-    if not dims:
-        return None
-    label = dims[0].label
-    if not label.startswith(LABEL_PREFIX):
+    return label_to_stamp(dims[0].label if dims else None)
+
+
+def label_to_stamp(label):
+    """Return the stamp [ns] of a command's first label (``stamp_ns=<ns>``), or None."""
+    if label is None or not label.startswith(LABEL_PREFIX):
         return None
     try:
         return int(label[len(LABEL_PREFIX):])
     except ValueError:
         return None
+
+
+def read_serialized(data, read, msg_type, fields):
+    """
+    Read a serialized message: ``read(data)``, else rclpy's deserialization.
+
+    Parameters
+    ----------
+    data : bytes
+        The message as taken (``raw=True``).
+    read : callable
+        A reader of ``freejoint_common.cdr`` (raises ``CdrError`` on what it cannot read).
+    msg_type : type
+        The message class, for ``rclpy.serialization.deserialize_message``.
+    fields : callable
+        ``fields(msg)``: the deserialized message as ``read`` would have returned it.
+
+    Raises
+    ------
+    ValueError
+        Neither can read it; the reason names both failures.
+
+    """
+    from freejoint_common.cdr import CdrError
+    try:
+        return read(data)
+    except CdrError as exc:
+        first = exc
+    from rclpy.serialization import deserialize_message
+    try:
+        msg = deserialize_message(data, msg_type)
+    except Exception as exc:    # noqa: B902 - rclpy raises several kinds on bad bytes
+        raise ValueError('%s; rclpy cannot deserialize it either (%s)' % (first, exc)) \
+            from None
+    return fields(msg)

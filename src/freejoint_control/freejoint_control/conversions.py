@@ -8,9 +8,13 @@ the law (docs/performance.md). A state in an encoding ``cdr`` does not read is
 deserialized by rclpy instead (:meth:`Messages.read_state`).
 """
 
-from freejoint_common.cdr import CdrError, CommandWriter, ControllerStateWriter
-from freejoint_common.cdr import JointStateReader
-from freejoint_common.contract import JOINT_STATES, NS_PER_S, stamp_label, to_ns
+from freejoint_common.cdr import CommandWriter, ControllerStateWriter, JointStateReader
+from freejoint_common.contract import JOINT_STATES, NS_PER_S, read_serialized, stamp_label
+
+
+def _joint_state_fields(msg):
+    stamp = msg.header.stamp
+    return stamp.sec, stamp.nanosec, list(msg.name), msg.position, msg.velocity, msg.effort
 
 
 class Messages:
@@ -53,19 +57,9 @@ class Messages:
             The message cannot be read (the reason names what was wrong).
 
         """
-        try:
-            sec, nanosec, names, position, velocity, effort = self._read(data)
-            return sec * NS_PER_S + nanosec, names, position, velocity, effort
-        except CdrError as exc:
-            first = exc
-        from rclpy.serialization import deserialize_message
-        try:
-            msg = deserialize_message(data, JOINT_STATES.msg_type)
-        except Exception as exc:    # noqa: B902 - rclpy raises several kinds on bad bytes
-            raise ValueError('%s; rclpy cannot deserialize it either (%s)' % (first, exc)) \
-                from None
-        return (to_ns(msg.header.stamp), list(msg.name), msg.position, msg.velocity,
-                msg.effort)
+        sec, nanosec, names, position, velocity, effort = read_serialized(
+            data, self._read, JOINT_STATES.msg_type, _joint_state_fields)
+        return sec * NS_PER_S + nanosec, names, position, velocity, effort
 
     def write_command(self, stamp_ns, effort):
         """Return (and keep as :attr:`command`) the command answering ``stamp_ns``."""

@@ -59,10 +59,11 @@ import threading
 import time
 
 from builtin_interfaces.msg import Time
+from freejoint_common.cdr import CommandReader, JointStateWriter, PointStampedWriter
 from freejoint_common.contract import BRAKE_REQUEST, BRAKE_TIMEOUT_REQUEST, CLOCK, COMMANDS
 from freejoint_common.contract import EE_POSITION
-from freejoint_common.contract import FAIL_JOINT, JOINT_FAILURES, JOINT_STATES, label_stamp
-from freejoint_common.contract import RESET, ROBOT_DESCRIPTION
+from freejoint_common.contract import FAIL_JOINT, JOINT_FAILURES, JOINT_STATES
+from freejoint_common.contract import label_to_stamp, read_serialized, RESET, ROBOT_DESCRIPTION
 from freejoint_common.contract import stamp_from_ns
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message
 from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_OVERRIDES
@@ -87,6 +88,11 @@ MAX_CATCH_UP = 20
 _isfinite = math.isfinite
 _monotonic = time.monotonic
 _time_ns = time.time_ns
+
+
+def _command_fields(msg):
+    dims = msg.layout.dim
+    return (dims[0].label if dims else None), msg.data
 
 
 class SimNode(Node, Lifecycle):
@@ -144,11 +150,11 @@ class SimNode(Node, Lifecycle):
                                      'lockstep' if self._lockstep else 'realtime', self._dt,
                                      self.get_logger().info) if cfg.timing_file else None)
 
-        self._js = JOINT_STATES.msg_type()
-        self._js.name = list(cfg.joint_names)
-        self._js.header.frame_id = ''
-        self._ee = EE_POSITION.msg_type()
-        self._ee.header.frame_id = cfg.frame_id
+        # joint_states and ee_position written serialized, commands read serialized
+        # (freejoint_common.cdr): no message object per step.
+        self._write_js = JointStateWriter(cfg.joint_names)
+        self._write_ee = PointStampedWriter(cfg.frame_id)
+        self._read_command = CommandReader()
         self._clock_msg = CLOCK.msg_type()
         self._stamp = Time()
 
@@ -163,7 +169,7 @@ class SimNode(Node, Lifecycle):
                            if cfg.lockstep else None)
         self.create_subscription(COMMANDS.msg_type, COMMANDS.name,
                                  self._on_command, overridable(COMMANDS.qos),
-                                 qos_overriding_options=QOS_OVERRIDES)
+                                 qos_overriding_options=QOS_OVERRIDES, raw=True)
         self.create_service(RESET.srv_type, RESET.name, self._on_reset)
         if not cfg.lockstep:    # a drive that brakes when told (the watchdog stays)
             self.create_subscription(BRAKE_REQUEST.msg_type, BRAKE_REQUEST.name,
@@ -238,7 +244,7 @@ class SimNode(Node, Lifecycle):
     def _apply(self, old, cfg, params):
         """Take a validated parameter change (the set-parameters callback's last step)."""
         self._install(cfg)
-        self._ee.header.frame_id = cfg.frame_id
+        self._write_ee = PointStampedWriter(cfg.frame_id)
         self.get_logger().info('parameters set: %s (arm, disturbance, dt_sub and initial '
                                'state take effect on ~/reset)'
                                % ', '.join('%s=%s' % (p.name, plain(p.value)) for p in params))
@@ -312,9 +318,8 @@ class SimNode(Node, Lifecycle):
             self._publish_diagnostics(update=False)
 
     # -- commands --------------------------------------------------------------
-    def _command_effort(self, msg):
-        """Active efforts in model order from a command, or None (refused, logged)."""
-        data = msg.data
+    def _command_effort(self, data):
+        """Active efforts in model order from a command's data, or None (refused, logged)."""
         if len(data) != self._r:
             kind = 'length'
             problem = 'expected %d efforts for %s, got %d' % (
@@ -327,7 +332,7 @@ class SimNode(Node, Lifecycle):
                     break
             else:
                 if self._identity:
-                    return data.tolist()
+                    return list(data)
                 tau = [0.0] * self._r
                 for j, i in enumerate(self._cmd_map):
                     tau[i] = data[j]
@@ -337,11 +342,19 @@ class SimNode(Node, Lifecycle):
                        'command refused: %s; zero effort applied' % problem)
         return None
 
-    def _on_command(self, msg):
+    def _on_command(self, raw):
         now = _monotonic()
+        try:
+            label, data = read_serialized(raw, self._read_command, COMMANDS.msg_type,
+                                          _command_fields)
+        except ValueError as exc:
+            self._refused += 1
+            self._throttle(self.get_logger().error, 'unreadable',
+                           'command refused: %s; not applied' % exc)
+            return
+        ns = label_to_stamp(label)     # None: no label, the current step's answer
         if not self._lockstep:
-            tau = self._command_effort(msg)
-            ns = label_stamp(msg.layout.dim)
+            tau = self._command_effort(data)
             if ns is not None:   # the age of the state it answers (its grid time) at receipt
                 self._note_latency(_time_ns() - ns)
             answered = -1
@@ -355,12 +368,11 @@ class SimNode(Node, Lifecycle):
             return
         if self._holding():
             return
-        ns = label_stamp(msg.layout.dim)   # None: no label, the current step's answer
         if ns is not None and ns != self._t_ns:
             self.get_logger().debug('dropped a command for stamp %d ns at step %d '
                                     '(t = %d ns)' % (ns, self._k, self._t_ns))
             return
-        tau = self._command_effort(msg)
+        tau = self._command_effort(data)
         self._note_latency(int((now - self._last_publish) * 1e9))
         if self._observer is not None:
             self._observer.command_answered(self._k, now)
@@ -455,25 +467,16 @@ class SimNode(Node, Lifecycle):
             if k % self._clock_every == 0 or k == self._max_steps:
                 self._clock_msg.clock = stamp
                 self._pub_clock.publish(self._clock_msg)
-        q = self._q
-        js = self._js
-        js.header.stamp = stamp
-        js.position = self._q_list
-        js.velocity = self._qd_list
-        js.effort = self._applied
+        sec, nanosec = stamp.sec, stamp.nanosec
+        js = self._write_js(sec, nanosec, self._q_list, self._qd_list, self._applied)
         if self._observer is not None:
             self._observer.state_published(self._k, t_ns)
         self._pub_js.publish(js)
-        ee = self._ee
-        ee.header.stamp = stamp
         if self._spatial:
-            point = ee.point
-            point.x, point.y, point.z = self._fk(q).tolist()
+            x, y, z = self._fk(self._q).tolist()
         else:
-            px, py = self._fk(q).tolist()
-            ee.point.x = px
-            ee.point.y = py
-        self._pub_ee.publish(ee)
+            (x, y), z = self._fk(self._q).tolist(), 0.0
+        self._pub_ee.publish(self._write_ee(sec, nanosec, x, y, z))
         now = _monotonic()
         self._waiting_since = now
         self._last_publish = now
