@@ -15,9 +15,10 @@ encapsulation header ``00 01 00 00`` (CDR, little-endian, XCDR1), then the field
 declaration order, each primitive aligned to its size counted from the end of that
 header, a sequence or string as a ``uint32`` count then its elements (a string's count
 includes its terminating NUL; an empty sequence adds no alignment). A message in another
-encapsulation (big-endian, XCDR2) is not read here: :class:`JointStateReader` raises
-:class:`CdrError` and the caller falls back to rclpy's ``deserialize_message``. The tests
-compare every function with rclpy's own ``serialize_message`` / ``deserialize_message``.
+encapsulation (big-endian, XCDR2) is not read here: the readers raise :class:`CdrError` and
+the caller falls back to rclpy's ``deserialize_message`` (``contract.read_serialized``). The
+tests compare every function with rclpy's own ``serialize_message`` /
+``deserialize_message`` (test/interfaces/test_cdr.py).
 """
 
 import struct
@@ -25,7 +26,7 @@ import struct
 ENCAPSULATION = b'\x00\x01\x00\x00'
 """CDR, little-endian, XCDR1 (the encapsulation rmw_fastrtps writes for ROS 2 messages)."""
 MAX_SEQUENCE = 4096
-"""Longest array a JointState may carry here (joints); a longer one is refused."""
+"""Longest array, name list or layout a message read here may carry; a longer one is refused."""
 
 _U32 = struct.Struct('<I')
 _HEADER = struct.Struct('<iII')     # stamp.sec, stamp.nanosec, frame_id's length
