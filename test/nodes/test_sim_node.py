@@ -674,3 +674,27 @@ def test_realtime_diverged_plant_freezes_reports_error_at_1hz_and_reset_brings_q
     assert ctl.arrivals[-1].velocity.tolist() == [0.0, 0.0, 0.0]
     assert procs.stop(proc) == 0
     assert ', 1 divergences' in procs.log(proc)
+
+
+def test_a_command_that_cannot_be_read_is_refused_counted_and_not_applied(ros_node):
+    """
+    In-process, no DDS delivery: the simulator's command callback called with bytes.
+
+    A command is taken serialized (``freejoint_common.cdr``, else rclpy's deserialization):
+    bytes neither reads are refused (counted, logged), the step does not advance; the
+    controller's serialized command for the current step then advances it.
+    """
+    from rclpy.parameter import Parameter
+    from freejoint_common.cdr import CommandWriter
+    from freejoint_common.contract import stamp_label
+    from freejoint_sim.sim_node import SimNode
+    node = SimNode(parameter_overrides=[Parameter('case', value='vertical')])
+    try:
+        node._pub_js.publish = node._pub_ee.publish = lambda data: None
+        k0 = node._k
+        node._on_command(b'\x00\x01\x00\x00\x07')
+        assert (node._refused, node._k) == (1, k0)
+        node._on_command(CommandWriter(2)(stamp_label(node._t_ns), (0.5, -0.5)))
+        assert (node._refused, node._k) == (1, k0 + 1)
+    finally:
+        node.destroy_node()
