@@ -29,6 +29,15 @@ NODES = {
                    'controller ready'),
     'planner': ('freejoint_planner', 'planner_node', 'planner.yaml', 'ready:'),
 }
+SIM_COMMAND_TIMEOUT = 'command_timeout:=30.0'
+"""The simulator's command timeout in these runs (a test's own override comes after it).
+
+config/sim.yaml's 0.5 s is what a user's lockstep run waits for a controller before zero
+effort; here the graph is compared with the offline runner tick by tick, and a machine
+stalling the controller or the planner for 0.5 s (CI 86: 4 timeouts in a row while the
+suite's other workers ran graphs) would apply zero effort and change the run, not show a
+defect of the graph. A stall of 30 s still fails the test (a timeout in the log).
+"""
 
 
 def _demo():
@@ -57,6 +66,8 @@ class Run:
     def start(self, name, *overrides, args=()):
         pkg, exe, params, ready = NODES[name]
         cmd = ['--ros-args', '--params-file', os.path.join(CONFIG, params), *args]
+        if name == 'sim':
+            overrides = (SIM_COMMAND_TIMEOUT, *overrides)
         for item in overrides:
             cmd += ['-p', item]
         proc = self.procs.start_node(pkg, exe, name, cmd)
