@@ -34,9 +34,9 @@ SIM_COMMAND_TIMEOUT = 'command_timeout:=30.0'
 
 config/sim.yaml's 0.5 s is what a user's lockstep run waits for a controller before zero
 effort; here the graph is compared with the offline runner tick by tick, and a machine
-stalling the controller or the planner for 0.5 s (CI 86: 4 timeouts in a row while the
-suite's other workers ran graphs) would apply zero effort and change the run, not show a
-defect of the graph. A stall of 30 s still fails the test (a timeout in the log).
+stalling the controller or the planner for 0.5 s (the suite's other workers running graphs
+beside, a slow host) would apply zero effort and change the run, not show a defect of the
+graph (docs/performance.md, the test suite). A stall of 30 s still fails the test.
 """
 
 
