@@ -151,12 +151,24 @@ NAMES_CASES = [
 ]
 
 
-@pytest.mark.parametrize('names', NAMES_CASES)
-@pytest.mark.parametrize('frame', ['', 'b', 'base_link'])
-@pytest.mark.parametrize('lengths', [(3, 3, 3), (3, 3, 0), (0, 2, 1), (0, 0, 0)])
+def joint_state_cases(test):
+    """Run ``test`` on every name list, frame and array lengths (``names, frame, lengths``)."""
+    for mark in (pytest.mark.parametrize('lengths', [(3, 3, 3), (3, 3, 0), (0, 2, 1), (0, 0, 0)]),
+                 pytest.mark.parametrize('frame', ['', 'b', 'base_link']),
+                 pytest.mark.parametrize('names', NAMES_CASES)):
+        test = mark(test)
+    return test
+
+
+def _arrays(lengths, seed):
+    """Return position, velocity and effort lists of ``lengths``, random from ``seed``."""
+    rnd = random.Random(seed)
+    return ([rnd.uniform(-3, 3) for _ in range(n)] for n in lengths)
+
+
+@joint_state_cases
 def test_joint_state_rclpy_wrote_is_read_here_field_for_field(names, frame, lengths):
-    rnd = random.Random(len(names) * 7 + len(frame))
-    pos, vel, eff = ([rnd.uniform(-3, 3) for _ in range(n)] for n in lengths)
+    pos, vel, eff = _arrays(lengths, len(names) * 7 + len(frame))
     data = _serialize(_joint_state(12, 345_678_901, names, pos, vel, eff, frame))
     sec, nanosec, got_names, got_pos, got_vel, got_eff = JointStateReader()(data)
     assert (sec, nanosec) == (12, 345_678_901)
@@ -228,13 +240,10 @@ def test_a_name_that_is_not_utf8_is_refused():
         JointStateReader()(bytes(data))
 
 
-@pytest.mark.parametrize('names', NAMES_CASES)
-@pytest.mark.parametrize('frame', ['', 'b', 'base_link'])
-@pytest.mark.parametrize('lengths', [(3, 3, 3), (3, 3, 0), (0, 2, 1), (0, 0, 0)])
+@joint_state_cases
 def test_joint_state_written_here_is_the_message_rclpy_reads(names, frame, lengths):
     from sensor_msgs.msg import JointState
-    rnd = random.Random(len(names) * 5 + len(frame))
-    pos, vel, eff = ([rnd.uniform(-3, 3) for _ in range(n)] for n in lengths)
+    pos, vel, eff = _arrays(lengths, len(names) * 5 + len(frame))
     msg = _deserialize(JointStateWriter(names, frame)(12, 345_678_901, pos, vel, eff),
                        JointState)
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id) == (

@@ -234,7 +234,67 @@ class ControllerStateWriter:
         return f.build()
 
 
-class JointStateReader:
+class _Reader:
+    """
+    What the readers share: the encapsulation check, strings, float64 arrays, errors.
+
+    A ``struct`` error (a short message) becomes a :class:`CdrError` naming ``topic``.
+    """
+
+    topic = ''
+
+    def __init__(self):
+        self._doubles = {}          # struct of n float64 per n
+
+    def _read(self, buf, fields):
+        """Return ``fields(buf)`` of a CDR little-endian message; raise CdrError if not one."""
+        if not buf.startswith(ENCAPSULATION):
+            raise CdrError('%s: encapsulation %r, not CDR little-endian (XCDR1)'
+                           % (self.topic, bytes(buf[:4])))
+        try:
+            return fields(buf)
+        except struct.error as exc:
+            raise CdrError('%s: message short or malformed (%s)' % (self.topic, exc)) \
+                from None
+
+    def _count_at(self, buf, at, what):
+        """Return the ``uint32`` count at ``at``; above MAX_SEQUENCE raise, ``what % count``."""
+        (count,) = _U32.unpack_from(buf, at)
+        if count > MAX_SEQUENCE:
+            raise CdrError('%s: %s (at most %d)' % (self.topic, what % count, MAX_SEQUENCE))
+        return count
+
+    def _string_at(self, buf, at, noun, decode=True):
+        """
+        Return ``(text, end)`` of the string at ``at`` (``end``: past its NUL, unaligned).
+
+        ``decode`` False: only checked as a string, ``text`` None (not decoded).
+        """
+        (length,) = _U32.unpack_from(buf, at)
+        end = at + 4 + length
+        if length < 1 or end > len(buf) or buf[end - 1] != 0:
+            raise CdrError('%s: a %s is malformed' % (self.topic, noun))
+        if not decode:
+            return None, end
+        try:
+            return buf[at + 4:end - 1].decode('utf-8'), end
+        except UnicodeDecodeError:
+            raise CdrError('%s: a %s is not UTF-8' % (self.topic, noun)) from None
+
+    def _doubles_at(self, buf, at):
+        """Return ``(values, end)`` of the float64[] at ``at`` (a tuple of float)."""
+        count = self._count_at(buf, at, 'an array of %d values')
+        at += 4
+        if not count:
+            return (), at
+        at += -(at - 4) % 8
+        fmt = self._doubles.get(count)
+        if fmt is None:
+            fmt = self._doubles[count] = struct.Struct('<%dd' % count)
+        return fmt.unpack_from(buf, at), at + 8 * count
+
+
+class JointStateReader(_Reader):
     """
     Read a serialized ``sensor_msgs/JointState``: stamp, names, positions, velocities, efforts.
 
@@ -242,10 +302,12 @@ class JointStateReader:
     stream's every message) returns that same list object, compared in place, not decoded.
     """
 
+    topic = 'joint_states'
+
     def __init__(self):
+        super().__init__()
         self._names = []            # the last name list
         self._encoded = ()          # its strings serialized (count + bytes + NUL), each
-        self._doubles = {}          # struct of n float64 per n
 
     def __call__(self, buf):
         """
@@ -269,26 +331,23 @@ class JointStateReader:
             ``buf`` is not a CDR little-endian message, or is short or malformed.
 
         """
-        if not buf.startswith(ENCAPSULATION):
-            raise CdrError('joint_states: encapsulation %r, not CDR little-endian (XCDR1)'
-                           % bytes(buf[:4]))
-        try:
-            sec, nanosec, length = _HEADER.unpack_from(buf, 4)
-            at = 16 + length                # past frame_id (offsets here count the header)
-            at += -at % 4
-            names, at = self._names_at(buf, at)
-            position, at = self._doubles_at(buf, at)
-            velocity, at = self._doubles_at(buf, at)
-            effort, at = self._doubles_at(buf, at)
-        except struct.error as exc:
-            raise CdrError('joint_states: message short or malformed (%s)' % exc) from None
+        return self._read(buf, self._fields)
+
+    def _fields(self, buf):
+        sec, nanosec, length = _HEADER.unpack_from(buf, 4)
+        at = 16 + length                # past frame_id (offsets here count the header)
+        at += -at % 4
+        names, at = self._names_at(buf, at)
+        position, at = self._doubles_at(buf, at)
+        velocity, at = self._doubles_at(buf, at)
+        effort, at = self._doubles_at(buf, at)
         return sec, nanosec, names, position, velocity, effort
 
     def _names_at(self, buf, at):
-        (count,) = _U32.unpack_from(buf, at)
+        count = self._count_at(buf, at, '%d names')
         known = self._encoded
+        pos = at + 4
         if count == len(known):
-            pos = at + 4
             for item in known:
                 if not buf.startswith(item, pos):
                     break
@@ -296,37 +355,15 @@ class JointStateReader:
                 pos += -pos % 4
             else:
                 return self._names, pos
-        if count > MAX_SEQUENCE:
-            raise CdrError('joint_states: %d names (at most %d)' % (count, MAX_SEQUENCE))
+            pos = at + 4
         names, encoded = [], []
-        pos = at + 4
         for _ in range(count):
-            (length,) = _U32.unpack_from(buf, pos)
-            end = pos + 4 + length
-            if length < 1 or end > len(buf) or buf[end - 1] != 0:
-                raise CdrError('joint_states: a name string is malformed')
-            try:
-                names.append(buf[pos + 4:end - 1].decode('utf-8'))
-            except UnicodeDecodeError:
-                raise CdrError('joint_states: a name is not UTF-8') from None
+            name, end = self._string_at(buf, pos, 'name string')
+            names.append(name)
             encoded.append(bytes(buf[pos:end]))
             pos = end + (-end % 4)
         self._names, self._encoded = names, tuple(encoded)
         return names, pos
-
-    def _doubles_at(self, buf, at):
-        (count,) = _U32.unpack_from(buf, at)
-        at += 4
-        if not count:
-            return (), at
-        if count > MAX_SEQUENCE:
-            raise CdrError('joint_states: an array of %d values (at most %d)'
-                           % (count, MAX_SEQUENCE))
-        at += -(at - 4) % 8
-        fmt = self._doubles.get(count)
-        if fmt is None:
-            fmt = self._doubles[count] = struct.Struct('<%dd' % count)
-        return fmt.unpack_from(buf, at), at + 8 * count
 
 
 class JointStateWriter:
@@ -404,11 +441,10 @@ class PointStampedWriter:
                                  self._frame, x, y, z)
 
 
-class CommandReader:
+class CommandReader(_Reader):
     """Read a serialized ``std_msgs/Float64MultiArray``: its first label and its data."""
 
-    def __init__(self):
-        self._doubles = {}
+    topic = 'command'
 
     def __call__(self, buf):
         """
@@ -431,38 +467,15 @@ class CommandReader:
             ``buf`` is not a CDR little-endian message, or is short or malformed.
 
         """
-        if not buf.startswith(ENCAPSULATION):
-            raise CdrError('command: encapsulation %r, not CDR little-endian (XCDR1)'
-                           % bytes(buf[:4]))
-        try:
-            (dims,) = _U32.unpack_from(buf, 4)
-            if dims > MAX_SEQUENCE:
-                raise CdrError('command: %d layout dimensions (at most %d)'
-                               % (dims, MAX_SEQUENCE))
-            label = None
-            at = 8
-            for i in range(dims):
-                (length,) = _U32.unpack_from(buf, at)
-                end = at + 4 + length
-                if length < 1 or end > len(buf) or buf[end - 1] != 0:
-                    raise CdrError('command: a dimension label is malformed')
-                if i == 0:
-                    try:
-                        label = buf[at + 4:end - 1].decode('utf-8')
-                    except UnicodeDecodeError:
-                        raise CdrError('command: a label is not UTF-8') from None
-                at = end + (-end % 4) + 8           # then size, stride
-            at += 4                                 # layout.data_offset
-            (count,) = _U32.unpack_from(buf, at)
-            at += 4
-            if not count:
-                return label, ()
-            if count > MAX_SEQUENCE:
-                raise CdrError('command: %d values (at most %d)' % (count, MAX_SEQUENCE))
-            at += -(at - 4) % 8
-            fmt = self._doubles.get(count)
-            if fmt is None:
-                fmt = self._doubles[count] = struct.Struct('<%dd' % count)
-            return label, fmt.unpack_from(buf, at)
-        except struct.error as exc:
-            raise CdrError('command: message short or malformed (%s)' % exc) from None
+        return self._read(buf, self._fields)
+
+    def _fields(self, buf):
+        dims = self._count_at(buf, 4, '%d layout dimensions')
+        label = None
+        at = 8
+        for i in range(dims):
+            text, end = self._string_at(buf, at, 'dimension label', decode=i == 0)
+            if i == 0:
+                label = text
+            at = end + (-end % 4) + 8               # then size, stride
+        return label, self._doubles_at(buf, at + 4)[0]     # past layout.data_offset

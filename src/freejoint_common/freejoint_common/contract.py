@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
+from freejoint_common.cdr import CdrError
 from freejoint_common.setpoint import SetpointSample
 from freejoint_msgs.msg import CartesianSetpoints, ControllerState
 from freejoint_msgs.srv import FailJoint, PlanCircle
@@ -335,7 +336,6 @@ def read_serialized(data, read, msg_type, fields):
         Neither can read it; the reason names both failures.
 
     """
-    from freejoint_common.cdr import CdrError
     try:
         return read(data)
     except CdrError as exc:
