@@ -61,6 +61,14 @@ SETTLE = 1.0
 """Wall seconds between the recorder's readiness and the start of the circle."""
 DRAIN_QUIET = 0.5
 """Wall seconds the recorder's count must stay unchanged before the nodes are stopped."""
+COLLECT_DEPTH = 20000
+"""Keep-last depth of the collected streams, in this process's readers and in the nodes'
+writers of them (:func:`collected_writer_args`).
+
+A reliable writer can resend to a reader that fell behind only what its own history still
+holds: with the contract's 1000 a reader stalled for 1000 ticks - well under a second of
+wall time in lockstep, which runs faster than real time - loses messages for good
+(docs/performance.md, the test suite)."""
 FIGURES = os.path.join(ROOT, 'docs', 'figures')
 ARMS = {'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0},
         'ur5': {'passive_joint': 'wrist_2_joint', 'bound_mm': 3.0, 'spatial': 'ur5_wrist2',
@@ -151,7 +159,7 @@ class Collector:
     run.  Deep reader queues keep every message while this process catches up.
     """
 
-    def __init__(self, node, depth=20000):
+    def __init__(self, node, depth=COLLECT_DEPTH):
         from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION, JOINT_STATES
         from freejoint_common.contract import profile
         qos = profile(depth)
@@ -241,6 +249,20 @@ def ee_trajectory(points, dt_ns, n_ticks, dims=2):
     return out
 
 
+def collected_writer_args(node):
+    """
+    Return ``-p`` items giving ``node``'s writers of the collected streams COLLECT_DEPTH.
+
+    ``node``: 'sim' (joint_states, ee_position) or 'controller' (controller_state); any
+    other node writes none of them (``[]``).  The items are ros2's read-only
+    ``qos_overrides.<topic>.publisher.depth``, which the nodes take at start-up.
+    """
+    from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION, JOINT_STATES
+    topics = {'sim': (JOINT_STATES, EE_POSITION), 'controller': (CONTROLLER_STATE,)}
+    return ['qos_overrides./%s.publisher.depth:=%d' % (topic.name, COLLECT_DEPTH)
+            for topic in topics.get(node, ())]
+
+
 def _overlay_files(overlays, node):
     """Return the files ``config/<dir>/<node>.yaml`` of ``overlays`` (dirs) that exist."""
     paths = [os.path.join(CONFIG, name, node + '.yaml') for name in overlays]
@@ -253,8 +275,9 @@ def _overlay(overlays, node):
 
 
 def _args(node_args, node):
-    """Return the ``-p`` arguments of ``node_args[node]`` (none: ``[]``)."""
-    return [arg for item in (node_args or {}).get(node, ()) for arg in ('-p', item)]
+    """Return the ``-p`` arguments of :func:`collected_writer_args` and ``node_args[node]``."""
+    items = collected_writer_args(node) + list((node_args or {}).get(node, ()))
+    return [arg for item in items for arg in ('-p', item)]
 
 
 def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,

@@ -68,7 +68,7 @@ class Run:
         cmd = ['--ros-args', '--params-file', os.path.join(CONFIG, params), *args]
         if name == 'sim':
             overrides = (SIM_COMMAND_TIMEOUT, *overrides)
-        for item in overrides:
+        for item in demo.collected_writer_args(name) + list(overrides):
             cmd += ['-p', item]
         proc = self.procs.start_node(pkg, exe, name, cmd)
         self.wait(lambda: ready in self.procs.log(proc) or proc.poll() is not None, 30.0,
@@ -151,6 +151,39 @@ def _assert_ticks_equal_offline(run, case, n, complete=True):
     assert np.max(np.abs(arrays['q_passive'][keep] - trace['q'][k, 2])) <= 1e-9
     if complete:
         assert np.max(np.abs(run.ee(n) - trace['p'][:n])) <= 1e-9
+
+
+def test_the_collected_streams_writers_keep_as_many_ticks_as_this_processs_readers(ros_node):
+    """
+    In-process: the nodes built with ``demo.collected_writer_args`` write joint_states,
+    ee_position and controller_state with a history of ``demo.COLLECT_DEPTH``.
+
+    A reader stalled longer than the writer's history loses messages for good
+    (docs/performance.md, the test suite); the graph runs here and in ``make demo`` give
+    the nodes the depth of the collector's readers.
+    """
+    from rclpy.parameter import Parameter
+    from freejoint_control.controller_node import ControllerNode
+    from freejoint_sim.sim_node import SimNode
+    depth = {}
+    for name, kind, publishers in (('sim', SimNode, ('_pub_js', '_pub_ee')),
+                                   ('controller', ControllerNode, ('_pub_state',))):
+        items = [item.split(':=') for item in demo.collected_writer_args(name)]
+        node = kind(parameter_overrides=[Parameter(key, value=int(value))
+                                         for key, value in items])
+        try:
+            for attr in publishers:
+                pub = getattr(node, attr)
+                depth[pub.topic_name] = pub.qos_profile.depth
+        finally:
+            node.destroy_node()
+    assert depth == {'/joint_states': demo.COLLECT_DEPTH, '/ee_position': demo.COLLECT_DEPTH,
+                     '/controller_state': demo.COLLECT_DEPTH}
+    collector = demo.Collector(ros_node)
+    try:
+        assert {sub.qos_profile.depth for sub in collector.subs.values()} == {demo.COLLECT_DEPTH}
+    finally:
+        collector.close()
 
 
 def test_lockstep_graph_end_effector_equals_the_offline_runner_at_every_step(
