@@ -155,10 +155,9 @@ def _assert_ticks_equal_offline(run, case, n, complete=True):
 
 def test_the_collected_streams_writers_keep_as_many_ticks_as_this_processs_readers(ros_node):
     """
-    In-process: the nodes built with ``demo.collected_writer_args`` write joint_states,
-    ee_position and controller_state with a history of ``demo.COLLECT_DEPTH``.
+    In-process: the nodes given ``demo.collected_writer_args`` keep COLLECT_DEPTH messages.
 
-    A reader stalled longer than the writer's history loses messages for good
+    Their writers of joint_states, ee_position and controller_state do.  A reader stalled longer than the writer's history loses messages for good
     (docs/performance.md, the test suite); the graph runs here and in ``make demo`` give
     the nodes the depth of the collector's readers.
     """
