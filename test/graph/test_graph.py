@@ -157,9 +157,10 @@ def test_the_collected_streams_writers_keep_as_many_ticks_as_this_processs_reade
     """
     In-process: the nodes given ``demo.collected_writer_args`` keep COLLECT_DEPTH messages.
 
-    Their writers of joint_states, ee_position and controller_state do.  A reader stalled longer than the writer's history loses messages for good
-    (docs/performance.md, the test suite); the graph runs here and in ``make demo`` give
-    the nodes the depth of the collector's readers.
+    Their writers of joint_states, ee_position and controller_state do.  A reader stalled
+    longer than the writer's history loses messages for good (docs/performance.md, the test
+    suite); the graph runs here and in ``make demo`` give the nodes the depth of the
+    collector's readers.
     """
     from rclpy.parameter import Parameter
     from freejoint_control.controller_node import ControllerNode
