@@ -3,11 +3,12 @@
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := . tools/env.sh &&
-# Test processes (pytest-xdist workers): one per core and one more (the node-process tests
-# mostly wait), at most 8; JOBS=1 runs the tests one after the other in one process. Two
-# per core were faster on the 2-core VM (237-305 s against 333-356 s) but lost messages
-# and command deadlines when the machine slowed (CI 86, 87; docs/performance.md).
-JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( n + 1 > 8 ? 8 : n + 1 )))
+# Test processes (pytest-xdist workers): two per core (the node-process tests mostly wait),
+# at most 8; JOBS=1 runs the tests one after the other in one process. The graph tests give
+# the simulator a 30-s command deadline and the nodes' collected writers the collector's
+# depth, so a slowed machine neither zeroes a command nor loses a message of the test's
+# (CI 86, 87; docs/performance.md).
+JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( 2 * n > 8 ? 8 : 2 * n )))
 XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 
 .PHONY: help setup demo test test-fast offline bench soak analyze clean campaign
@@ -21,7 +22,7 @@ help:
 	@echo '              STABILISE=1: internal motion stabilised, both cases (issue 22)'
 	@echo '              FAIL=joint3@2.5: all joints driven, joint 3 fails at 2.5 s (issue 23)'
 	@echo '              CIRCLES=N REST=S: N revolutions back to back, S s rest between (issue 22)'
-	@echo 'make test     run every test (core math, nodes, interfaces, linters), JOBS (nproc + 1)'
+	@echo 'make test     run every test (core math, nodes, interfaces, linters), JOBS (2 x nproc)'
 	@echo '              pytest processes at once; JOBS=1: one'
 	@echo 'make test-fast  the tests without DDS or node processes (core math, schemas,'
 	@echo '              loop logic, linters), JOBS processes: the edit-run loop'

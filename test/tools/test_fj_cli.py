@@ -3,9 +3,10 @@
 
 The controller, the planner and the recorder run as ``ros2 run`` starts them; every
 command runs as the user types it (the installed ``fj`` console script, a process of its
-own) and must print what ``ros2`` prints, with a non-zero exit status on failure. The
-lists get ``--spin-time 4``: what they print is checked here, not how fast discovery is at
-the load of a shared test machine (a node can show up seconds after the others).
+own) and must print what ``ros2`` prints, with a non-zero exit status on failure. A list
+is run again until it shows what the test expects, at most ``LIST_WAIT`` s: what it prints
+is checked here, not how fast discovery is at the load of a shared test machine (a node
+can show up seconds after the others).
 """
 import os
 import re
@@ -33,6 +34,25 @@ PARAM_TIMEOUT = '60'
 """fj's ``--timeout`` for a ``param`` command that gives none: its 10-s default is too short
 for a node on this machine while the suite's other workers run SCHED_FIFO graphs (CI 70: no
 describe_parameters answer within 10 s from a live controller)."""
+
+
+LIST_WAIT = 60.0
+"""Seconds a list command is run again for until it shows the lines the test expects."""
+
+
+def fj_list(*args, expect):
+    """
+    Run ``fj args...`` until its stdout lines include ``expect``; return the last run.
+
+    At most ``LIST_WAIT`` s (then the last run is returned for the test's assertions); a run
+    that fails is returned at once.
+    """
+    deadline = time.monotonic() + LIST_WAIT
+    while True:
+        done = fj(*args)
+        if done.returncode != 0 or set(expect) <= set(done.stdout.splitlines()) or \
+                time.monotonic() > deadline:
+            return done
 
 
 def fj(*args, timeout=120):
@@ -77,7 +97,8 @@ def graph(tmp_path_factory):
 
 
 def test_fj_node_list_shows_the_running_nodes_but_not_itself(graph):
-    done = fj('node', 'list', '--spin-time', '4')
+    done = fj_list('node', 'list',
+                   expect=('/controller_node', '/freejoint_planner', '/recorder'))
     assert done.returncode == 0, done.stderr
     names = done.stdout.split()
     assert {'/controller_node', '/freejoint_planner', '/recorder'} <= set(names)
@@ -85,14 +106,17 @@ def test_fj_node_list_shows_the_running_nodes_but_not_itself(graph):
 
 
 def test_fj_topic_list_shows_the_graph_topics_with_their_types(graph):
-    done = fj('topic', 'list', '-t', '--spin-time', '4')
+    typed = ('/joint_states [sensor_msgs/msg/JointState]',
+             '/setpoints [freejoint_msgs/msg/CartesianSetpoints]',
+             '/controller_state [freejoint_msgs/msg/ControllerState]')
+    done = fj_list('topic', 'list', '-t', expect=typed)
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
-    for line in ('/joint_states [sensor_msgs/msg/JointState]',
-                 '/setpoints [freejoint_msgs/msg/CartesianSetpoints]',
-                 '/controller_state [freejoint_msgs/msg/ControllerState]'):
+    for line in typed:
         assert line in lines, done.stdout
-    names = fj('topic', 'list', '--spin-time', '4').stdout.splitlines()
+    names = fj_list('topic', 'list',
+                    expect=('/joint_states', '/setpoints', '/controller_state'))
+    names = names.stdout.splitlines()
     assert {'/joint_states', '/setpoints', '/controller_state'} <= set(names)
     assert names == sorted(names) and not any(' ' in n for n in names)
 
@@ -105,7 +129,8 @@ def test_fj_param_list_names_each_declared_parameter_indented_as_ros2_param(grap
     assert lines == sorted(lines)
     typed = fj('param', 'list', 'controller_node', '--param-type').stdout.splitlines()
     assert '  K (type: double array)' in typed and '  robust (type: boolean)' in typed
-    every = fj('param', 'list', '--spin-time', '4').stdout.splitlines()
+    every = fj_list('param', 'list', expect=('/controller_node:', '/freejoint_planner:'))
+    every = every.stdout.splitlines()
     assert '/controller_node:' in every and '/freejoint_planner:' in every
 
 
