@@ -258,9 +258,9 @@ def collected_writer_args(node):
     ``qos_overrides.<topic>.publisher.depth``, which the nodes take at start-up.
     """
     from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION, JOINT_STATES
+    from freejoint_common.contract import publisher_depth_override
     topics = {'sim': (JOINT_STATES, EE_POSITION), 'controller': (CONTROLLER_STATE,)}
-    return ['qos_overrides./%s.publisher.depth:=%d' % (topic.name, COLLECT_DEPTH)
-            for topic in topics.get(node, ())]
+    return [publisher_depth_override(topic, COLLECT_DEPTH) for topic in topics.get(node, ())]
 
 
 def _overlay_files(overlays, node):

@@ -451,13 +451,15 @@ def _realtime(procs, *extra):
 
 
 def test_realtime_states_are_stamped_on_the_step_grid_at_publish_rate(procs, ros_node, wait):
+    from freejoint_common.contract import JOINT_STATES, publisher_depth_override
     from freejoint_sim.sim_node import MAX_CATCH_UP
     # 1 kHz steps, joint_states at 500 Hz: the states a 500 Hz driver gives its controller.
-    # Every state reaches this process: its reader and the simulator's writer hold 20000
+    # Every state reaches this process: its reader and the simulator's writer hold `every`
     # (a busy test process overflowed a reader of 100: CI 93).
+    every = 20000
     proc = _realtime(procs, '-p', 'publish_rate:=500.0',
-                     '-p', 'qos_overrides./joint_states.publisher.depth:=20000')
-    ctl = Controller(ros_node, wait, state_depth=20000)
+                     '-p', publisher_depth_override(JOINT_STATES, every))
+    ctl = Controller(ros_node, wait, state_depth=every)
     ctl.connect(proc, procs)
 
     def commanding():

@@ -72,6 +72,17 @@ def profile(depth, reliable=True, latched=False, **policies):
         **policies)
 
 
+def publisher_depth_override(topic, depth):
+    """
+    Return the ``-p`` item giving a node's publisher on ``topic`` a keep-last ``depth``.
+
+    ``topic``: a :class:`Topic` of this contract (not remapped). The item is ros2's
+    read-only ``qos_overrides./<topic>.publisher.depth``, taken at start-up by the nodes'
+    overridable publishers.
+    """
+    return 'qos_overrides./%s.publisher.depth:=%d' % (topic.name.lstrip('/'), depth)
+
+
 def is_latched(qos):
     """Return whether ``qos`` is transient local (a latched topic)."""
     return qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
