@@ -13,9 +13,11 @@ every wait bounded, every process stopped whatever happens:
 * the graph in lockstep without the recorder (``bench/graph.py``'s lockstep run, the 5-s
   horizontal case, a process per node) with the echo started beside it
   (``beside_cpu_per_tick``: ``echo_node.py --out echo/commands``, answering every state the
-  simulator publishes, its command taken by this process): the controller's and the
-  echo's CPU per tick over the same ticks at the same time; twice, the controller's
-  ``ControllerState`` every tick (the default) and thinned to 100 Hz (``THINNED``);
+  simulator publishes, its command taken by this process), its threads at the
+  controller's scheduling (``--priority``: SCHED_FIFO at the bench's ``thread_priority``):
+  the controller's and the echo's CPU and wake-ups per tick over the same ticks at the
+  same time; twice, the controller's ``ControllerState`` every tick (the default) and
+  thinned to 100 Hz (``THINNED``);
 * the graph as ``make demo`` runs it (the recorder on): the controller's and the
   simulator's CPU per tick (the graph benchmark's own run when ``make bench`` ran it).
 
@@ -24,7 +26,9 @@ the echo beside it: both answer the same states from the same simulator in the s
 whose CPU per tick moves from run to run by more than the target's margin on this
 2-vCPU VM (a wake-up costs more when four processes take turns than when two do, and the
 other processes' timing differs run to run), so the echo driven alone or in another run
-is not the comparison. Benchmarks assert nothing.
+is not the comparison; and at the same scheduling, since an echo at the default
+scheduler beside SCHED_FIFO nodes runs after them, finds several states waiting and
+wakes about half as often per tick (docs/performance.md). Benchmarks assert nothing.
 Usage: ``. tools/env.sh && python bench/echo.py``, or ``make bench BENCH=echo``.
 """
 
@@ -157,21 +161,24 @@ def _lockstep_run(record, ctl_overrides=(), beside=None, setup=None):
         client.close()
 
 
-def _cpu_per_tick(rows, nodes=('controller_node', 'echo_node', 'sim_node')):
+def _cpu_per_tick(rows, nodes=('controller_node', 'echo_node', 'sim_node'),
+                  what='CPU per tick'):
     """Return ``{node: CPU per lockstep tick [us]}`` of those of ``nodes`` the rows have."""
-    names = {'lockstep: %s CPU per tick' % node: node for node in nodes}
+    names = {'lockstep: %s %s' % (node, what): node for node in nodes}
     return {names[row['name']]: row['value'] for row in rows if row['name'] in names}
 
 
-def beside_cpu_per_tick(executor, ctl_overrides=()):
+def beside_cpu_per_tick(executor, ctl_overrides=(), wakeups=None):
     """
     Return ``{node: CPU per lockstep tick [us]}`` of the controller and an echo beside it.
 
     One lockstep run of the graph without the recorder and an echo node (on ``executor``)
     started beside it, answering every state on ``echo/commands`` (taken by this process,
-    one reader as the controller's command has): both measured over the same ticks on the
-    same machine at the same time, what no two runs can be (``ctl_overrides``: the
-    controller's).
+    one reader as the controller's command has), its threads at the controller's
+    scheduling (``--priority``: the bench's ``thread_priority``): both measured over the
+    same ticks on the same machine at the same time, what no two runs can be
+    (``ctl_overrides``: the controller's). ``wakeups``: a dict given the nodes' wake-ups
+    per tick (``graph.proc_wakeups``).
     """
     from freejoint_common.contract import COMMANDS
 
@@ -179,8 +186,13 @@ def beside_cpu_per_tick(executor, ctl_overrides=()):
         client.node.create_subscription(COMMANDS.msg_type, BESIDE_TOPIC, lambda _msg: None,
                                         COMMANDS.qos)
 
-    beside = ('echo_node', [sys.executable, ECHO_NODE, executor, '--out', BESIDE_TOPIC])
-    return _cpu_per_tick(_lockstep_run(False, ctl_overrides, beside, take_echo_commands))
+    args = [sys.executable, ECHO_NODE, executor, '--out', BESIDE_TOPIC]
+    if graph_bench.PRIORITY:
+        args += ['--priority', str(graph_bench.PRIORITY)]
+    rows = _lockstep_run(False, ctl_overrides, ('echo_node', args), take_echo_commands)
+    if wakeups is not None:
+        wakeups.update(_cpu_per_tick(rows, what='wake-ups per tick'))
+    return _cpu_per_tick(rows)
 
 
 def graph_cpu_per_tick(record=True, ctl_overrides=()):
@@ -218,11 +230,15 @@ def run():
     # one reader, as the echo's.
     for tag, target, extra in (('', '<= 1.5', ()),
                                (', controller_state 100 Hz', None, THINNED)):
-        nodes = beside_cpu_per_tick(kind, extra)
+        wakeups = {}
+        nodes = beside_cpu_per_tick(kind, extra, wakeups)
         ctl, near = nodes.get('controller_node'), nodes.get('echo_node')
         graph_bench.say('CPU per lockstep tick, recorder off%s: controller %s us, an echo '
-                        '(%s) beside it %s us, simulator %s us' % (
-                            tag, _us(ctl), kind, _us(near), _us(nodes.get('sim_node'))))
+                        '(%s, %s) beside it %s us, simulator %s us; wake-ups per tick: '
+                        'controller %s, echo %s' % (
+                            tag, _us(ctl), kind, _scheduling(), _us(near),
+                            _us(nodes.get('sim_node')), _us(wakeups.get('controller_node'), 2),
+                            _us(wakeups.get('echo_node'), 2)))
         rows += [
             {'name': 'lockstep, recorder off%s: controller_node CPU per tick' % tag,
              'value': ctl, 'unit': 'us'},
@@ -246,8 +262,14 @@ def run():
     return rows
 
 
-def _us(value):
-    return 'n/a' if value is None else '%.1f' % value
+def _us(value, digits=1):
+    return 'n/a' if value is None else '%.*f' % (digits, value)
+
+
+def _scheduling():
+    """Return the scheduling the controller and the echo beside it run at."""
+    return ('SCHED_FIFO %d as the controller' % graph_bench.PRIORITY if graph_bench.PRIORITY
+            else 'default scheduler as the controller')
 
 
 def main():

@@ -13,15 +13,21 @@ as the project's runner drives every node, until SIGINT / SIGTERM.
 
 ``--out TOPIC``: its commands on TOPIC instead (``bench/echo.py`` runs it beside the
 controller in the lockstep graph, where the simulator must not take them).
+``--priority N``: its threads at SCHED_FIFO N as the controller's ``thread_priority: N``
+puts the controller's (``freejoint_common.scheduling``, threads started later included:
+the runner's ``spin_until``); refused (no permission): said on stderr, the default
+scheduler kept, as the controller does.
 
-Usage: ``python bench/echo_node.py [events | single_threaded] [--out TOPIC]``
-(under ``. tools/env.sh``); ``bench/echo.py`` runs it.
+Usage: ``python bench/echo_node.py [events | single_threaded] [--out TOPIC]
+[--priority N]`` (under ``. tools/env.sh``); ``bench/echo.py`` runs it.
 """
 
 import signal
 import sys
 
 from freejoint_common.contract import COMMANDS, JOINT_STATES, stamp_label, to_ns
+from freejoint_common.runner import spin_until
+from freejoint_common.scheduling import process_scheduling
 import rclpy
 from std_msgs.msg import MultiArrayDimension
 
@@ -39,13 +45,20 @@ def make_executor(kind):
     raise SystemExit('echo_node: executor must be events or single_threaded, got %r' % kind)
 
 
+def take_option(argv, name, default):
+    """Remove ``name VALUE`` from ``argv``; return VALUE (``default`` if absent)."""
+    if name not in argv:
+        return default
+    i = argv.index(name)
+    value = argv[i + 1]
+    del argv[i:i + 2]
+    return value
+
+
 def main(argv):
     """Echo states as commands until SIGINT / SIGTERM."""
-    out_topic = COMMANDS.name
-    if '--out' in argv:
-        i = argv.index('--out')
-        out_topic = argv[i + 1]
-        del argv[i:i + 2]
+    out_topic = take_option(argv, '--out', COMMANDS.name)
+    priority = int(take_option(argv, '--priority', '0'))
     kind = argv[0] if argv else 'events'
     stop = []
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -64,8 +77,12 @@ def main(argv):
 
     node.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name, echo, JOINT_STATES.qos)
     executor.add_node(node)
-    while not stop:
-        executor.spin_once(timeout_sec=0.1)
+    if priority:
+        refused = process_scheduling().request(NODE_NAME, priority, ())
+        if refused is not None:
+            print('echo_node: --priority %d not applied: %s' % (priority, refused),
+                  file=sys.stderr, flush=True)
+    spin_until(executor.spin_once, rclpy.ok, stop)
     executor.shutdown()
     node.destroy_node()
     rclpy.try_shutdown()

@@ -107,6 +107,32 @@ def proc_cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
+def proc_wakeups(pid):
+    """
+    Return the voluntary context switches of every thread of a process (0 if gone).
+
+    A thread's voluntary switch is a wait it entered (for a message, a timer, a lock):
+    per tick, how many times the process slept and was woken. A process that finds
+    several messages waiting when it wakes (it runs after others) wakes less than once
+    per message, and spends less CPU per message. Threads that ended are not counted.
+    """
+    total = 0
+    try:
+        tids = os.listdir('/proc/%d/task' % pid)
+    except OSError:
+        return 0
+    for tid in tids:
+        try:
+            with open('/proc/%d/task/%s/status' % (pid, tid)) as f:
+                for line in f:
+                    if line.startswith('voluntary_ctxt_switches:'):
+                        total += int(line.split()[1])
+                        break
+        except OSError:
+            continue            # the thread ended meanwhile
+    return total
+
+
 def machine_cpu_jiffies():
     """Return ``(idle, steal)`` jiffies of the whole machine (``/proc/stat``; idle + iowait)."""
     with open('/proc/stat') as f:
@@ -132,6 +158,7 @@ class Graph(Processes):
     def __init__(self, log_dir, tag, env):
         super().__init__(log_dir, tag, env, cwd=ROOT)
         self._cpu = {}
+        self._wakeups = {}
 
     def cpu(self):
         """Return {name: CPU seconds so far} (a process that exited: its last reading)."""
@@ -139,6 +166,13 @@ class Graph(Processes):
             if proc.poll() is None:
                 self._cpu[name] = proc_cpu_seconds(proc.pid)
         return dict(self._cpu)
+
+    def wakeups(self):
+        """Return {name: voluntary context switches so far} (:func:`proc_wakeups`)."""
+        for name, proc in self.procs.items():
+            if proc.poll() is None:
+                self._wakeups[name] = proc_wakeups(proc.pid)
+        return dict(self._wakeups)
 
     def vmhwm(self):
         """Return {name: VmHWM MiB}."""
@@ -324,7 +358,7 @@ def _percentiles(values):
             float(np.max(values)))
 
 
-def _node_rows(prefix, cpu0, cpu1, hwm, ticks, exited=()):
+def _node_rows(prefix, cpu0, cpu1, hwm, ticks, exited=(), wakeups=None):
     rows = []
     for name in NODES:
         if name in cpu1:
@@ -332,6 +366,13 @@ def _node_rows(prefix, cpu0, cpu1, hwm, ticks, exited=()):
                          'value': None if name in exited else
                          1e6 * (cpu1[name] - cpu0.get(name, 0.0)) / max(ticks, 1),
                          'unit': 'us', 'target': None})
+    if wakeups is not None:
+        before, after = wakeups
+        for name in NODES:
+            if name in after and name not in exited:
+                rows.append({'name': '%s: %s wake-ups per tick' % (prefix, name),
+                             'value': (after[name] - before.get(name, 0)) / max(ticks, 1),
+                             'unit': '', 'target': None})
     for name in NODES:
         if hwm.get(name) is not None:
             rows.append({'name': '%s: %s peak RSS (VmHWM)' % (prefix, name),
@@ -393,9 +434,9 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True,
         if answer is None or not answer.accepted:
             raise RuntimeError('the planner did not start the circle: %s' % (
                 'no answer' if answer is None else answer.reason))
-        cpu0 = graph.cpu()
+        cpu0, wake0 = graph.cpu(), graph.wakeups()
         wait_for_file(timing_path, graph, 120.0 + ticks * 0.01, 'lockstep run')
-        cpu1 = graph.cpu()
+        cpu1, wake1 = graph.cpu(), graph.wakeups()
         hwm = graph.vmhwm()
         lag = None
         if record:
@@ -435,7 +476,7 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True,
                      'value': max(0, ticks - kept), 'unit': 'ticks', 'target': '<= 0'})
         rows.append({'name': '%s: recorder behind at the last tick (until drained)' % tag,
                      'value': lag, 'unit': 's', 'target': None})
-    rows += _node_rows(tag, cpu0, cpu1, hwm, ticks + 100)
+    rows += _node_rows(tag, cpu0, cpu1, hwm, ticks + 100, wakeups=(wake0, wake1))
     rows.append({'name': '%s: load average (1 min) at the end' % tag, 'value': load1,
                  'unit': '', 'target': None})
     if not ctl_overrides and beside is None:
