@@ -1,6 +1,6 @@
 """The controller node's message conversions: serialized state in, command and state out."""
 from freejoint_common.contract import label_stamp
-from freejoint_control.conversions import Messages
+from freejoint_control.conversions import Messages, StateThinning
 from freejoint_control.loop import Result
 import pytest
 
@@ -70,3 +70,19 @@ def test_a_joint_state_is_read_from_its_bytes_and_an_unreadable_one_raises_namin
         3_000_000_004, ['joint1', 'joint2'], [0.5, 1.5], [-1.0, 2.0], [])
     with pytest.raises(ValueError, match='joint_states: .*malformed.*rclpy cannot deserialize'):
         messages.read_state(serialize_message(msg)[:30])
+
+
+def test_state_thinning_gives_one_per_period_of_stamps_and_one_at_each_status_change():
+    ms = 1_000_000
+    thin = StateThinning(200.0)                     # a 5-ms period of stamps
+    due = [k for k in range(12) if thin.due(k * ms, 0)]
+    assert due == [0, 5, 10]
+    assert thin.due(11 * ms, 64)                    # a status change: at once
+    assert not thin.due(12 * ms, 64)
+    assert thin.due(3 * ms, 64)                     # the stamps went back
+    assert not thin.due(4 * ms, 64)
+    assert thin.due(-1, 64) and thin.due(-1, 64)    # no stamp: the last one's is kept
+    thin.set_rate(0.0)                              # every answer
+    assert all(thin.due(k * ms, 64) for k in range(5, 9))
+    every = StateThinning(0.0)
+    assert all(every.due(k * ms, 0) for k in range(4))

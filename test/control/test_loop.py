@@ -191,6 +191,32 @@ def test_a_state_comes_before_its_setpoint_and_is_answered_when_the_setpoint_com
                                   _setpoint(0)[4:6], DT).tau.tolist()
 
 
+def test_a_batch_of_setpoints_answers_each_waiting_state_in_order_and_refuses_a_wrong_size():
+    from freejoint_common.contract import SetpointSample
+    loop, logs = make()
+    ctl = RobustController(table1('horizontal').scaled(0.7), Gains())
+
+    def sample(k, m=2):
+        v = _setpoint(k)
+        pad = (0.0,) * (m - 2)
+        return SetpointSample(k * DT_NS, v[0:2] + pad, v[2:4] + pad, v[4:6] + pad, 0, 0.0,
+                              False)
+
+    published = []
+    assert state(loop, 0) is None
+    # state 0 waits: the batch answers it with setpoint 0, refuses setpoint 1, keeps 2
+    loop.on_setpoints([sample(0), sample(1, m=3), sample(2)], 100.0,
+                      lambda res: published.append((res.stamp_ns, list(res.effort))))
+    sp0 = _setpoint(0)
+    tau0 = ctl.step(Q0, QD0, sp0[0:2], sp0[2:4], sp0[4:6], DT).tau.tolist()
+    assert published == [(0, tau0)]
+    assert loop.refused_setpoints == 1
+    assert 'setpoint stamped 1000000 ns refused: 3 values per vector, the task dimension ' \
+        'is 2' in logs[-1][2]
+    res = state(loop, 2)        # setpoint 1 was refused, setpoint 2 taken
+    assert res.setpoint_ns == 2 * DT_NS
+
+
 def test_joint_state_in_another_order_with_extra_joints_drives_it_the_same():
     loop, _ = make()
     ctl = RobustController(table1('horizontal').scaled(0.7), Gains())

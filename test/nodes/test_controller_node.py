@@ -318,24 +318,47 @@ def test_reset_service_restarts_theta_hat(procs, ros_node, wait):
     assert procs.stop(proc) == 0
 
 
-def test_state_publish_rate_thins_controller_state_but_not_the_commands(procs, ros_node, wait):
-    # Every 5 ms of stamps. A long stale_timeout: the watchdog's zero effort after 0.5 s
-    # without a state (a status change, so a ControllerState) must not come during the final
-    # spins on a loaded machine (a CI run got one stamped 11 ms).
-    proc = _start(procs, '-p', 'state_publish_rate:=200.0', '-p', 'stale_timeout:=60.0')
-    drv = Driver(ros_node, wait)
-    drv.connect(proc, procs)
-    for k in range(12):
-        drv.setpoint(k, _setpoint(k))
-        drv.joint_state(k, Q0, QD0)       # the same status throughout
-        ns = drv.ns(k)
-        wait(lambda: stamp_label(ns) in drv.commands, 15.0, 'the command of tick %d' % k,
-             spin=drv.spin)
-    wait(lambda: 10 * DT_NS in drv.states, 15.0, 'the state of tick 10', spin=drv.spin)
-    for _ in range(10):
-        drv.spin()
-    assert sorted(drv.states) == [0, 5 * DT_NS, 10 * DT_NS]
-    assert procs.stop(proc) == 0
+def test_state_publish_rate_thins_controller_state_but_not_the_commands(ros_node, monkeypatch):
+    """
+    In-process, lockstep: 12 ticks 1 ms apart at ``state_publish_rate`` 200 Hz.
+
+    Every state gets its command; ControllerStates at 0, 5 and 10 ms of stamps. Set to 0
+    while running: every answer from the next on gets one.
+    """
+    from rclpy.parameter import Parameter
+    from freejoint_control.controller_node import ControllerNode
+    from freejoint_msgs.msg import CartesianSetpoints
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+    node = ControllerNode(parameter_overrides=[Parameter('case', value='vertical'),
+                                               Parameter('state_publish_rate', value=200.0)])
+    try:
+        commands, states = [], []
+        monkeypatch.setattr(node._pub_cmd, 'publish', commands.append)
+        monkeypatch.setattr(node._pub_state, 'publish', lambda data: states.append(
+            to_ns(_controller_state(data).header.stamp)))
+        values = [_setpoint(k) for k in range(16)]
+        node._on_setpoints(CartesianSetpoints(
+            stamps=[k * DT_NS for k in range(16)], position=[v for s in values for v in s[0:2]],
+            velocity=[v for s in values for v in s[2:4]],
+            acceleration=[v for s in values for v in s[4:6]]))
+
+        def state(k):
+            msg = JointState(name=NAMES, position=list(Q0), velocity=list(QD0))
+            stamp_from_ns(k * DT_NS, msg.header.stamp)
+            node._on_joint_state(serialize_message(msg))
+
+        for k in range(12):
+            state(k)
+        assert len(commands) == 12
+        assert states == [0, 5 * DT_NS, 10 * DT_NS]
+        assert node.set_parameters([Parameter('state_publish_rate', value=0.0)])[0].successful
+        for k in range(12, 16):
+            state(k)
+        assert len(commands) == 16
+        assert states[3:] == [k * DT_NS for k in range(12, 16)]
+    finally:
+        node.destroy_node()
 
 
 @pytest.mark.parametrize('kind', ['single_threaded', 'events'])

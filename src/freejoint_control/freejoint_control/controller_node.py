@@ -31,7 +31,7 @@ from freejoint_common.node_tools import NodeParameters, overridable, plain, QOS_
 from freejoint_common.node_tools import Throttle
 from freejoint_common.runner import Lifecycle, run
 from freejoint_common.scheduling import process_scheduling
-from freejoint_control.conversions import Messages
+from freejoint_control.conversions import Messages, StateThinning
 from freejoint_control.loop import ControlLoop, ERROR, RECEIPT, WARN
 from freejoint_control.params import SCHEMA
 from freejoint_control.supervisor import notify_ready
@@ -52,13 +52,10 @@ class ControllerNode(Node, Lifecycle):
         self._loop = ControlLoop(cfg, self._log)
         self._params.listen(self._apply)
         self._lockstep = cfg.lockstep
-        self._set_state_rate(cfg)
+        self._thinning = StateThinning(cfg.state_publish_rate)
 
         # Serialized in and out (conversions.Messages): no message object per tick.
         self._messages = Messages(cfg.joints, self._loop.result.law_state_names)
-        self._m = self._loop.task_dim
-        self._state_pub_ns = None       # stamp of the last ControllerState published
-        self._state_status = None       # and its status
         self._latency = LatencyWindow()
         self._quiet_sent = False
         # Clock of the state ages: system time (what real-time stamps are on), read without
@@ -200,15 +197,11 @@ class ControllerNode(Node, Lifecycle):
                                'zero')
 
     # -- parameters ------------------------------------------------------------
-    def _set_state_rate(self, cfg):
-        rate = cfg.state_publish_rate
-        self._state_period_ns = round(1e9 / rate) if rate > 0.0 else 0
-
     def _apply(self, old, cfg, params):
         """Take a validated parameter change (the set-parameters callback's last step)."""
         self._loop.apply(old, cfg)
         self.config = cfg
-        self._set_state_rate(cfg)
+        self._thinning.set_rate(cfg.state_publish_rate)
         changed = ', '.join('%s=%s' % (p.name, plain(p.value)) for p in params)
         self.get_logger().info('parameters set (effective next tick): ' + changed)
 
@@ -254,17 +247,7 @@ class ControllerNode(Node, Lifecycle):
             if len(msg.stamps):
                 loop.refuse_setpoint(int(msg.stamps[0]), str(exc), len(msg.stamps))
             return
-        m = self._m
-        mono = _monotonic()
-        for sp in samples:
-            if len(sp.position) != m:
-                loop.refuse_setpoint(sp.stamp_ns, '%d values per vector, the task dimension is '
-                                     '%d' % (len(sp.position), m))
-                continue
-            res = loop.on_setpoint(sp.stamp_ns, sp.position + sp.velocity + sp.acceleration, 0,
-                                   mono)
-            if res is not None:
-                self._publish(res)
+        loop.on_setpoints(samples, _monotonic(), self._publish)
 
     def _publish(self, res):
         """Publish the command and (rate allowing) the ControllerState of a Result."""
@@ -283,14 +266,8 @@ class ControllerNode(Node, Lifecycle):
             self._latency.note(int((_monotonic() - self._loop.last_state_wall) * 1e9))
         elif latency is not None:
             self._latency.note(latency)
-        period = self._state_period_ns
-        if period and self._state_pub_ns is not None and res.status == self._state_status and (
-                0 <= ns - self._state_pub_ns < period):
-            return                      # thinned: state_publish_rate
-        if ns >= 0:
-            self._state_pub_ns = ns
-        self._state_status = res.status
-        self._pub_state.publish(messages.write_controller_state(res))
+        if self._thinning.due(ns, res.status):     # state_publish_rate
+            self._pub_state.publish(messages.write_controller_state(res))
 
     def _on_reset(self, request, response):
         """~/reset: restart theta_hat and the hold / blend state (std_srvs/Trigger)."""

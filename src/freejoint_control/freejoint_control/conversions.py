@@ -82,3 +82,39 @@ class Messages:
         self.controller_state = data = self._state(
             self._stamp, (0, 0) if sp is None else divmod(sp, NS_PER_S), res, self._text_bytes)
         return data
+
+
+class StateThinning:
+    """
+    Which answers get a ControllerState: at most ``rate`` per second of stamps, and any change.
+
+    ros2_control's state publishers' rate: a ControllerState when ``1 / rate`` s of stamps
+    passed since the last one, when the status changed, or when the stamps went back; every
+    answer with ``rate`` 0.
+
+    Parameters
+    ----------
+    rate : float
+        ControllerStates per second of stamps [Hz], >= 0 (0: every answer).
+
+    """
+
+    def __init__(self, rate):
+        self.set_rate(rate)
+        self._ns = None                 # stamp of the last one published
+        self._status = None             # and its status
+
+    def set_rate(self, rate):
+        """Take a new ``rate`` [Hz] (from the next answer on)."""
+        self._period_ns = round(1e9 / rate) if rate > 0.0 else 0
+
+    def due(self, ns, status):
+        """Return whether the answer stamped ``ns`` [ns] with ``status`` gets one (noted)."""
+        period = self._period_ns
+        if period and self._ns is not None and status == self._status and (
+                0 <= ns - self._ns < period):
+            return False
+        if ns >= 0:
+            self._ns = ns
+        self._status = status
+        return True

@@ -724,6 +724,34 @@ class ControlLoop:
                     del setpoints[key]
         return None
 
+    def on_setpoints(self, samples, mono, publish):
+        """
+        Take a batch's setpoints in order; call ``publish`` with each Result computed.
+
+        Parameters
+        ----------
+        samples : sequence of SetpointSample
+            ``contract.setpoint_samples`` of a batch: ``stamp_ns`` [ns] and ``position``,
+            ``velocity``, ``acceleration`` (m values each); one of another length than the
+            task dimension is refused (counted, logged).
+        mono : float
+            Monotonic time [s] of their receipt.
+        publish : callable
+            ``publish(result)``, called as each Result is computed (lockstep: a waiting
+            state answered); the next reuses the Result object, so publish it at once.
+
+        """
+        m = self.task_dim
+        for sp in samples:
+            if len(sp.position) != m:
+                self.refuse_setpoint(sp.stamp_ns, '%d values per vector, the task dimension '
+                                     'is %d' % (len(sp.position), m))
+                continue
+            res = self.on_setpoint(sp.stamp_ns, sp.position + sp.velocity + sp.acceleration,
+                                   0, mono)
+            if res is not None:
+                publish(res)
+
     def refuse_setpoint(self, ns, reason, count=1):
         """
         Drop the setpoint stamped ``ns`` for ``reason``: counted, logged, noted.
