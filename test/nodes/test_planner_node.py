@@ -362,7 +362,7 @@ def test_a_circle_change_starts_at_the_next_tick_by_a_transition_and_a_map_chang
 BAD_START = [
     # parameter, bad value, what the one line says after 'bad parameter: <name>: '
     ('radius', '-1.0', 'out of range'),      # a descriptor's range (every parameter's
-    #   range is declared on the node: test_node_parameters.py's descriptor test)
+    #   range is declared on the node: test_node_parameters.py's schema test)
     ('centre', '[0.1]', 'expected 2 values (x, y) in m, got 1'),
     ('resolution_deg', '0.7', '360 / 0.7 must be an even integer'),
     ('case', 'diagonal', "expected one of ('horizontal', 'vertical'), got 'diagonal'"),

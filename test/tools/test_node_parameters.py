@@ -6,13 +6,20 @@ The parameters of every freejoint node, as ros2 param, rqt_reconfigure and Foxgl
   ``ros2 param dump`` then prints ``ros__parameters: {}``).
 - ``fj param dump`` (ros2 param dump's YAML) given back as ``--params-file`` starts a node
   with equal parameters.
+- Every schema entry, and nothing else of the node's, is declared on the running node
+  with its descriptor (description, read-only, range).
 - A bad start-up parameter (range, type, the node's validator) ends the process with one
-  line naming the parameter and the reason, exit status 2, no traceback.
+  line naming the parameter and the reason, exit status 2, no traceback. Every row of
+  ``BAD_START`` runs in this process through the ``main`` its executable runs (the same
+  parameter checks and runner, the line read from this process's stdout and stderr); one
+  row per executable is started as a process too (what only a process shows: its exit
+  status, a Python that exits after the line).
 
 Every node process is started as ``ros2 run`` would (install/<pkg>/lib/<pkg>/<exe>).
 """
 import os
 import subprocess
+import threading
 
 import pytest
 
@@ -55,10 +62,42 @@ def _node(kind, tmp_path, make_bag, config=True):
              '-p', 'wait_timeout:=120.0'])
 
 
-def _all_parameters(node, name):
+def _schema(kind):
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_sim.params import SCHEMA as SIM
+    from freejoint_tools.params import PLAYER, RECORDER
+    return {'sim_node': SIM, 'controller_node': CONTROLLER, 'planner_node': PLANNER,
+            'recorder': RECORDER, 'player': PLAYER}[kind]
+
+
+def _assert_schema_declared_with_descriptors(client, schema):
+    """Assert that ``client``'s node declares every entry of ``schema`` as described, only."""
+    names = [p.name for p in schema]
+    listed = set(client.list_parameters())
+    assert set(names) <= listed, sorted(set(names) - listed)
+    extra = sorted(n for n in listed - set(names)
+                   if n not in ('use_sim_time', 'start_type_description_service')
+                   and not n.startswith('qos_overrides.'))
+    assert extra == [], 'declared outside the schema: %s' % extra
+    descriptors = client.describe_parameters(names)
+    assert [d.name for d in descriptors] == names
+    for entry, desc in zip(schema, descriptors):
+        assert desc.description == entry.description, entry.name
+        assert desc.read_only == entry.read_only, entry.name
+        ranges = [(r.from_value, r.to_value, r.step)
+                  for r in list(desc.floating_point_range) + list(desc.integer_range)]
+        if entry.bounds is None:
+            assert ranges == [], entry.name
+        else:
+            step = entry.bounds[2] if len(entry.bounds) > 2 else (
+                1 if isinstance(entry.default, int) else 0.0)
+            assert ranges == [(entry.bounds[0], entry.bounds[1], step)], entry.name
+
+
+def _all_parameters(client):
     """Return {name: ParameterValue} from one list_parameters and one get_parameters call."""
-    from freejoint_tools.harness import ParameterCalls
-    client = ParameterCalls(node, name, timeout=30.0)
+    name = client.target
     names = sorted(client.list_parameters())
     values = client.get_parameters(names)
     assert len(values) == len(names), (
@@ -75,11 +114,16 @@ def _plain(values):
 
 
 @pytest.mark.parametrize('kind', NODES)
-def test_every_parameter_has_a_value_in_one_get_and_its_dump_restarts_an_equal_node(
+def test_the_node_declares_its_schema_as_described_with_values_and_its_dump_restarts_it_equal(
         kind, procs, ros_node, tmp_path, make_bag):
+    # One node process for both: its declarations and descriptors, then its values in one
+    # get; the dump of these values starts a second process with equal parameters.
+    from freejoint_tools.harness import ParameterCalls
     pkg, exe, name, args = _node(kind, tmp_path, make_bag)
     first = procs.start_node(pkg, exe, exe, ['--ros-args', *args])
-    before = _all_parameters(ros_node, name)
+    client = ParameterCalls(ros_node, name, timeout=30.0)
+    _assert_schema_declared_with_descriptors(client, _schema(kind))
+    before = _all_parameters(client)
     assert len(before) >= 5, sorted(before)
     dumped = subprocess.run([FJ, 'param', 'dump', name, '--timeout', '30'],
                             capture_output=True, text=True, timeout=120)
@@ -91,7 +135,7 @@ def test_every_parameter_has_a_value_in_one_get_and_its_dump_restarts_an_equal_n
     params_file.write_text(dumped.stdout)
     second = procs.start_node(pkg, exe, exe + '_again',
                               ['--ros-args', '--params-file', str(params_file)])
-    after = _all_parameters(ros_node, name)
+    after = _all_parameters(ParameterCalls(ros_node, name, timeout=30.0))
     assert second.poll() is None, procs.log(second)
     assert _plain(after) == _plain(before)
     assert {n: v.type for n, v in after.items()} == {n: v.type for n, v in before.items()}
@@ -120,24 +164,36 @@ BAD_START = [
     ('graph', 'sim.seed', 'abc', 'type'),
     ('graph', 'controller.K', '[-1.0,100.0]', '> 0'),
 ]
+AS_PROCESS = [row for row in BAD_START if row[:3] in {
+    # one row per executable: rclpy's checks and the schemas' validators both among them;
+    # the graph's sim node is made before the controller fails, and shut down
+    ('sim_node', 'dt_sub', '-1.0'),
+    ('controller_node', 'K', '[-1.0, 100.0]'),
+    ('planner_node', 'lookahead', 'abc'),
+    ('recorder', 'compression', 'lz4'),
+    ('player', 'bag', "''"),
+    ('graph', 'controller.nominal_scale', '1000.0'),
+}]
+"""The rows started as a process too (what only a process shows: its exit status)."""
 
 
-@pytest.mark.parametrize('kind, param, value, reason', BAD_START,
-                         ids=['%s-%s=%s' % row[:3] for row in BAD_START])
-def test_a_bad_start_up_parameter_ends_the_node_with_one_line_naming_it_and_exit_2(
-        kind, param, value, reason, tmp_path, make_bag):
+def _bad_start(kind, param, value, tmp_path, make_bag):
+    """
+    Return (package, executable, arguments, parameter name) of a start with one bad value.
+
+    ``param``: the parameter's name (for ``graph``: ``<node>.<name>``), set to ``value``.
+    """
     if kind == 'graph':
         node, param = param.split('.')
-        cmd = [os.path.join(ROOT, 'install', 'freejoint_bringup', 'lib', 'freejoint_bringup',
-                            'graph'), '--nodes', 'sim', 'controller',
-               '--%s' % node, '%s=%s' % (param, value)]
-    else:
-        pkg, exe, _, args = _node(kind, tmp_path, make_bag, config=False)
-        cmd = [os.path.join(ROOT, 'install', pkg, 'lib', pkg, exe), '--ros-args', *args,
-               '-p', '%s:=%s' % (param, value)]
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-    out = done.stdout + done.stderr
-    assert done.returncode == 2, 'exit %s, expected 2:\n%s' % (done.returncode, out)
+        return ('freejoint_bringup', 'graph',
+                ['--nodes', 'sim', 'controller', '--%s' % node, '%s=%s' % (param, value)],
+                param)
+    pkg, exe, _, args = _node(kind, tmp_path, make_bag, config=False)
+    return pkg, exe, ['--ros-args', *args, '-p', '%s:=%s' % (param, value)], param
+
+
+def _assert_one_line_naming_it_and_exit_2(code, out, param, reason):
+    assert code == 2, 'exit %s, expected 2:\n%s' % (code, out)
     assert 'Traceback' not in out, out
     failures = [line for line in out.splitlines()
                 if 'FATAL' in line or 'ERROR' in line or 'error' in line.lower()]
@@ -148,41 +204,49 @@ def test_a_bad_start_up_parameter_ends_the_node_with_one_line_naming_it_and_exit
     assert reasons.get(reason, reason) in line, line
 
 
-def _schema(kind):
-    from freejoint_control.params import SCHEMA as CONTROLLER
-    from freejoint_planner.params import SCHEMA as PLANNER
-    from freejoint_sim.params import SCHEMA as SIM
-    from freejoint_tools.params import PLAYER, RECORDER
-    return {'sim_node': SIM, 'controller_node': CONTROLLER, 'planner_node': PLANNER,
-            'recorder': RECORDER, 'player': PLAYER}[kind]
+def _entry_point(pkg, exe):
+    """Return the function the installed executable ``exe`` of ``pkg`` runs (its main)."""
+    from importlib.metadata import distribution
+    points = [point for point in distribution(pkg).entry_points
+              if point.group == 'console_scripts' and point.name == exe]
+    assert len(points) == 1, (pkg, exe, points)
+    return points[0].load()
 
 
-@pytest.mark.parametrize('kind', NODES)
-def test_every_schema_entry_is_declared_on_the_running_node_with_its_descriptor(
-        kind, procs, ros_node, tmp_path, make_bag):
-    from freejoint_tools.harness import ParameterCalls
-    schema = _schema(kind)
-    pkg, exe, name, args = _node(kind, tmp_path, make_bag)
-    node = procs.start_node(pkg, exe, exe, ['--ros-args', *args])
-    client = ParameterCalls(ros_node, name, timeout=30.0)
-    names = [p.name for p in schema]
-    listed = set(client.list_parameters())
-    assert set(names) <= listed, sorted(set(names) - listed)
-    extra = sorted(n for n in listed - set(names)
-                   if n not in ('use_sim_time', 'start_type_description_service')
-                   and not n.startswith('qos_overrides.'))
-    assert extra == [], 'declared outside the schema: %s' % extra
-    descriptors = client.describe_parameters(names)
-    assert [d.name for d in descriptors] == names
-    for entry, desc in zip(schema, descriptors):
-        assert desc.description == entry.description, entry.name
-        assert desc.read_only == entry.read_only, entry.name
-        ranges = [(r.from_value, r.to_value, r.step)
-                  for r in list(desc.floating_point_range) + list(desc.integer_range)]
-        if entry.bounds is None:
-            assert ranges == [], entry.name
-        else:
-            step = entry.bounds[2] if len(entry.bounds) > 2 else (
-                1 if isinstance(entry.default, int) else 0.0)
-            assert ranges == [(entry.bounds[0], entry.bounds[1], step)], entry.name
-    assert node.poll() is None, procs.log(node)
+@pytest.mark.parametrize('kind, param, value, reason', BAD_START,
+                         ids=['%s-%s=%s' % row[:3] for row in BAD_START])
+def test_a_bad_start_up_parameter_makes_the_executables_main_log_one_line_naming_it_and_return_2(
+        kind, param, value, reason, tmp_path, make_bag, capfd, monkeypatch):
+    # In this process: rclpy.init, the node's constructor, its parameter checks and the
+    # runner's line, as the executable runs them; main's return is the process's status.
+    import rclpy
+    from freejoint_common import scheduling
+    pkg, exe, args, name = _bad_start(kind, param, value, tmp_path, make_bag)
+    main = _entry_point(pkg, exe)
+    # A node made before the failure (the graph's sim) asks for the process's scheduling:
+    # a scheduling state of this test's own, not the test process's.
+    monkeypatch.setattr(scheduling, '_PROCESS', [])
+    capfd.readouterr()
+    # Bounded: a node that took the value would run on; rclpy shut down after 60 s ends
+    # its loop (the runner's loops end when rclpy is shut down), main then returns 0.
+    deadline = threading.Timer(60.0, rclpy.try_shutdown)
+    deadline.start()
+    try:
+        code = main([exe, *args])
+    finally:
+        deadline.cancel()
+        deadline.join()
+    captured = capfd.readouterr()
+    _assert_one_line_naming_it_and_exit_2(code, captured.out + captured.err, name, reason)
+
+
+@pytest.mark.parametrize('kind, param, value, reason', AS_PROCESS,
+                         ids=['%s-%s=%s' % row[:3] for row in AS_PROCESS])
+def test_a_bad_start_up_parameter_ends_the_node_with_one_line_naming_it_and_exit_2(
+        kind, param, value, reason, tmp_path, make_bag):
+    # What only the process shows, once per executable (every row: the test above).
+    pkg, exe, args, name = _bad_start(kind, param, value, tmp_path, make_bag)
+    done = subprocess.run([os.path.join(ROOT, 'install', pkg, 'lib', pkg, exe), *args],
+                          capture_output=True, text=True, timeout=120)
+    _assert_one_line_naming_it_and_exit_2(done.returncode, done.stdout + done.stderr, name,
+                                          reason)
