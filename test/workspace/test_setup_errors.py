@@ -1,9 +1,12 @@
 """Set-up stops with a message that names what is missing, not a traceback."""
+import glob
 import os
+import shlex
 import shutil
 import stat
 import subprocess
 import sys
+import sysconfig
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -71,12 +74,41 @@ def test_missing_cmake_is_named(tmp_path):
     assert "'cmake' not found" in out.stderr
 
 
+def _venv_without_packages(tmp_path):
+    """
+    Make the .venv a set-up that failed to download leaves: a venv, no package in it.
+
+    Its pip is ensurepip's wheel, the pip ``python -m venv`` installs, run from the wheel
+    as ensurepip runs it: ``python -m venv`` spends most of its seconds installing that pip
+    (6-11 s on 2 cores), which is not what the test is about.
+    """
+    import ensurepip
+    wheels = []
+    for folder in (os.path.join(os.path.dirname(ensurepip.__file__), '_bundled'),
+                   sysconfig.get_config_var('WHEEL_PKG_DIR')):    # Debian's python3-venv
+        if folder and os.path.isdir(folder):
+            wheels += glob.glob(os.path.join(folder, 'pip-*.whl'))
+    assert wheels, 'no pip wheel of ensurepip found for %s' % sys.executable
+    venv = tmp_path / '.venv'
+    subprocess.run([sys.executable, '-m', 'venv', '--without-pip', str(venv)], check=True,
+                   timeout=60)
+    pip = venv / 'bin' / 'pip'
+    pip.write_text('#!/bin/sh\nPYTHONPATH=%s exec %s -m pip "$@"\n'
+                   % (shlex.quote(wheels[0]), shlex.quote(str(venv / 'bin' / 'python'))))
+    pip.chmod(pip.stat().st_mode | stat.S_IEXEC)
+
+
 def test_failed_download_says_what_failed_and_how_to_retry(tmp_path):
     setup = _copy_tools(tmp_path)
+    _venv_without_packages(tmp_path)
     # Port 9 (discard) on loopback: nothing listens, the download fails at once.
     out = _run(setup, {'PIP_INDEX_URL': 'http://127.0.0.1:9/simple', 'PIP_NO_CACHE_DIR': '1',
                        'PIP_RETRIES': '0', 'PIP_TIMEOUT': '2', 'PIP_FIND_LINKS': ''})
     assert out.returncode != 0, out.stdout
+    assert 'installing' in out.stdout and 'pinned packages into .venv' in out.stdout, out.stdout
     assert 'downloading/installing the Python packages failed' in out.stderr
+    assert '\n  ERROR: ' in out.stderr, out.stderr       # pip's own reason, relayed
     assert 'PyPI is reachable' in out.stderr
+    assert "run 'make setup' again" in out.stderr
     assert 'Traceback' not in out.stderr
+    assert not (tmp_path / '.stamps' / 'venv').exists()     # the next run installs again
