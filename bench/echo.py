@@ -21,14 +21,14 @@ every wait bounded, every process stopped whatever happens:
 * the graph as ``make demo`` runs it (the recorder on): the controller's and the
   simulator's CPU per tick (the graph benchmark's own run when ``make bench`` ran it).
 
-Rows: the CPU figures per tick and the ratios. The target compares the controller with
-the echo beside it: both answer the same states from the same simulator in the same run,
-whose CPU per tick moves from run to run by more than the target's margin on this
-2-vCPU VM (a wake-up costs more when four processes take turns than when two do, and the
-other processes' timing differs run to run), so the echo driven alone or in another run
-is not the comparison; and at the same scheduling, since an echo at the default
-scheduler beside SCHED_FIFO nodes runs after them, finds several states waiting and
-wakes about half as often per tick (docs/performance.md). Benchmarks assert nothing.
+Rows: the CPU figures and wake-ups per tick and the ratios. The target compares the
+controller with the echo beside it: both answer the same states from the same simulator
+in the same run, whose CPU per tick moves from run to run by more than the target's
+margin on this 2-vCPU VM (a wake-up costs more when four processes take turns than when
+two do, and the other processes' timing differs run to run), so the echo driven alone or
+in another run is not the comparison; and at the same scheduling, since an echo at the
+default scheduler beside SCHED_FIFO nodes runs after them, finds several states waiting
+and wakes about half as often per tick (docs/performance.md). Benchmarks assert nothing.
 Usage: ``. tools/env.sh && python bench/echo.py``, or ``make bench BENCH=echo``.
 """
 
@@ -246,6 +246,12 @@ def run():
              % (tag, kind), 'value': near, 'unit': 'us'},
             {'name': 'lockstep, recorder off%s: controller / echo beside it' % tag,
              'value': ratio(ctl, near), 'unit': 'x', 'target': target},
+            {'name': 'lockstep, recorder off%s: simulator / echo beside it' % tag,
+             'value': ratio(nodes.get('sim_node'), near), 'unit': 'x'},
+            {'name': 'lockstep, recorder off%s: controller wake-ups per tick' % tag,
+             'value': wakeups.get('controller_node'), 'unit': ''},
+            {'name': 'lockstep, recorder off%s: echo wake-ups per tick' % tag,
+             'value': wakeups.get('echo_node'), 'unit': ''},
         ]
     # As make demo runs (the recorder on): the figures of the graph benchmark.
     nodes = graph_cpu_per_tick(True)
