@@ -1,5 +1,6 @@
 """Shared fixtures: an isolated ROS 2 domain per test run, and managed node processes."""
 import os
+import threading
 import time
 
 from freejoint_tools.harness import clean_stale_fast_dds_shm, Processes
@@ -103,3 +104,68 @@ def ros_node():
 def wait():
     """Give the test `wait_for(predicate, timeout, what, spin=None)`."""
     return wait_for
+
+
+def _entry_point(pkg, exe):
+    """Return the function the installed executable ``exe`` of ``pkg`` runs (its main)."""
+    from importlib.metadata import distribution
+    points = [point for point in distribution(pkg).entry_points
+              if point.group == 'console_scripts' and point.name == exe]
+    assert len(points) == 1, (pkg, exe, points)
+    return points[0].load()
+
+
+@pytest.fixture
+def run_main(capfd, monkeypatch):
+    """
+    Give the test a call of an executable's main in the test process.
+
+    ``run_main(pkg, exe, argv)`` calls the ``main`` of the installed executable ``exe``
+    of ``pkg`` (its console_scripts entry point) with ``argv`` (``sys.argv[1:]``), as its
+    process would: rclpy.init, the node's constructor and parameter checks, the runner's
+    lines. It returns (main's return: the process's exit status, what main wrote to this
+    process's stdout and stderr, rcutils' log lines included). Bounded: a node that took
+    the value would run on; rclpy shut down after 60 s ends the runner's loop, main then
+    returns 0. The runner installs signal handlers: the test runs in the main thread
+    (pytest-xdist's workers' too).
+    """
+    def run(pkg, exe, argv):
+        import rclpy
+        from freejoint_common import scheduling
+        main = _entry_point(pkg, exe)
+        # A node made before the failure (the graph's sim) asks for the process's
+        # scheduling: a scheduling state of this test's own, not the test process's.
+        monkeypatch.setattr(scheduling, '_PROCESS', [])
+        capfd.readouterr()
+        deadline = threading.Timer(60.0, rclpy.try_shutdown)
+        deadline.start()
+        try:
+            code = main([exe, *argv])
+        finally:
+            deadline.cancel()
+            deadline.join()
+        captured = capfd.readouterr()
+        return code, captured.out + captured.err
+    return run
+
+
+def _bad_parameter_line(code, output, name):
+    """
+    Assert a start refused for parameter ``name``; return its one line.
+
+    Exit status 2, no traceback, one line of failure (FATAL, ERROR or error) in
+    ``output``, saying ``bad parameter: <name>: ``.
+    """
+    assert code == 2, 'exit %s, expected 2:\n%s' % (code, output)
+    assert 'Traceback' not in output, output
+    failures = [line for line in output.splitlines()
+                if 'FATAL' in line or 'ERROR' in line or 'error' in line.lower()]
+    assert len(failures) == 1, 'expected one line, got:\n%s' % output
+    assert 'bad parameter: %s: ' % name in failures[0], failures[0]
+    return failures[0]
+
+
+@pytest.fixture
+def bad_parameter_line():
+    """Give the test the check of a start refused for one parameter: ``(code, output, name)``."""
+    return _bad_parameter_line

@@ -1,6 +1,9 @@
 """
 The planner node in its own process: map, path, setpoint stream in sim time, refusals.
 
+Its bad start-up parameters run in the test process, through the ``main`` the
+executable runs.
+
 The test process plays the simulator's part of the lockstep protocol: it owns `/clock`.
 """
 import os
@@ -376,20 +379,14 @@ BAD_START = [
 
 @pytest.mark.parametrize('param, value, reason', BAD_START,
                          ids=['%s=%s' % row[:2] for row in BAD_START])
-def test_a_bad_start_up_parameter_ends_the_planner_with_one_line_naming_it_and_exit_2(
-        param, value, reason):
-    import subprocess
-    exe = os.path.join(ROOT, 'install', 'freejoint_planner', 'lib', 'freejoint_planner',
-                       'planner_node')
-    done = subprocess.run([exe, '--ros-args', '-p', '%s:=%s' % (param, value)],
-                          capture_output=True, text=True, timeout=120)
-    out = done.stdout + done.stderr
-    assert done.returncode == 2, 'exit %s, expected 2:\n%s' % (done.returncode, out)
-    assert 'Traceback' not in out, out
-    failures = [line for line in out.splitlines()
-                if 'FATAL' in line or 'ERROR' in line or 'error' in line.lower()]
-    assert len(failures) == 1, 'expected one line, got:\n%s' % out
-    assert 'bad parameter: %s: ' % param in failures[0] and reason in failures[0], failures[0]
+def test_a_bad_start_up_parameter_makes_the_planners_main_log_one_line_naming_it_and_return_2(
+        param, value, reason, run_main, bad_parameter_line):
+    # In this process, through the main planner_node runs (its exit status as a process:
+    # test_node_parameters.py's planner_node row started as one).
+    code, out = run_main('freejoint_planner', 'planner_node',
+                         ['--ros-args', '-p', '%s:=%s' % (param, value)])
+    line = bad_parameter_line(code, out, param)
+    assert reason in line, line
 
 
 def test_plan_circle_every_1_3_s_while_circles_run_never_steps_the_setpoint_and_every_accepted_circle_is_reached(  # noqa: E501
