@@ -5,18 +5,17 @@ A URDF the core does not model (a prismatic, non-parallel or floating joint, a l
 without inertial), a passive set leaving fewer than two active joints, or a
 ``passive_joints`` name the URDF does not have ends the simulator, the controller and the
 planner at start-up with one line naming the parameter and the problem, exit status 2
-(``freejoint_common.runner``), as any other bad start-up parameter.
+(``freejoint_common.runner``), as any other bad start-up parameter. These start-up
+refusals run in the test process, through the ``main`` each executable runs.
 """
 import os
 import re
-import subprocess
 
 import pytest
 
 pytestmark = pytest.mark.ros
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-INSTALL = os.path.join(ROOT, 'install')
 URDF_DIR = os.path.join(ROOT, 'src', 'freejoint_description', 'urdf')
 FOUR_LINK = os.path.join(URDF_DIR, 'four_link_arm.urdf')
 NODES = {
@@ -69,12 +68,6 @@ REFUSALS = [
 ]
 
 
-def _run(pkg, exe, args):
-    done = subprocess.run([os.path.join(INSTALL, pkg, 'lib', pkg, exe), '--ros-args', *args],
-                          capture_output=True, text=True, timeout=120)
-    return done.returncode, done.stdout + done.stderr
-
-
 def _refused_at_start_up(node, values):
     """Raise what ``node`` refuses ``values`` with at start-up (its schema, the arm)."""
     from freejoint_common.arm_description import resolve_arm
@@ -103,33 +96,30 @@ def test_an_arm_the_core_cannot_model_is_refused_by_each_node_naming_the_paramet
 
 
 @pytest.mark.parametrize('node, row', [('sim', 0), ('controller', 3), ('planner', 5)])
-def test_an_arm_the_core_cannot_model_ends_the_node_with_one_line_naming_it_and_exit_2(
-        node, row, tmp_path):
-    # What only the process shows (one refusal per node; each node's refusal of every
-    # arm: the test above): one FATAL line, no traceback, exit status 2.
+def test_an_arm_the_core_cannot_model_makes_the_nodes_main_log_one_line_naming_it_and_return_2(
+        node, row, tmp_path, run_main, bad_parameter_line):
+    # The runner's end of a refused arm (one refusal per node; each node's refusal of every
+    # arm: the test above): one line, no traceback, main's return 2 (the process's exit
+    # status; each executable's as a process: test_node_parameters.py).
     case, edit, passive, param, reason = REFUSALS[row]
     path = tmp_path / ('%s.urdf' % case)
     path.write_text(_four_link(edit))
-    code, out = _run(*NODES[node], ['-p', 'description_file:=%s' % path,
-                                    '-p', 'passive_joints:=%s' % passive])
-    assert code == 2, 'exit %s, expected 2:\n%s' % (code, out)
-    assert 'Traceback' not in out, out
-    fatal = [line for line in out.splitlines() if 'FATAL' in line]
-    assert len(fatal) == 1, out
-    assert re.search(r'bad parameter: %s: .*%s' % (param, re.escape(reason)), fatal[0]), \
-        fatal[0]
+    code, out = run_main(*NODES[node], ['--ros-args', '-p', 'description_file:=%s' % path,
+                                        '-p', 'passive_joints:=%s' % passive])
+    line = bad_parameter_line(code, out, param)
+    assert re.search(r'bad parameter: %s: .*%s' % (param, re.escape(reason)), line), line
 
 
-def test_a_description_file_that_cannot_be_read_is_named_and_exit_2():
-    code, out = _run('freejoint_sim', 'sim_node',
-                     ['-p', 'description_file:=/nonexistent/arm.urdf'])
-    assert code == 2, out
-    fatal = [line for line in out.splitlines() if 'FATAL' in line]
-    assert len(fatal) == 1 and ('bad parameter: description_file: cannot read '
-                                "'/nonexistent/arm.urdf'") in fatal[0], out
+def test_a_description_file_that_cannot_be_read_is_named_and_main_returns_2(
+        run_main, bad_parameter_line):
+    code, out = run_main('freejoint_sim', 'sim_node',
+                         ['--ros-args', '-p', 'description_file:=/nonexistent/arm.urdf'])
+    line = bad_parameter_line(code, out, 'description_file')
+    assert "bad parameter: description_file: cannot read '/nonexistent/arm.urdf'" in line, line
 
 
-def test_robot_description_text_from_a_parameter_file_is_taken_as_the_arm(tmp_path):
+def test_robot_description_text_from_a_parameter_file_is_taken_as_the_arm(
+        tmp_path, run_main, bad_parameter_line):
     # The way controller_manager / robot_state_publisher get it: the URDF text as a
     # parameter (here from a parameter file); the controller refuses the default effort
     # limits (two values) for the arm's three active joints, naming them from the URDF.
@@ -138,10 +128,11 @@ def test_robot_description_text_from_a_parameter_file_is_taken_as_the_arm(tmp_pa
     params.write_text('/**:\n  ros__parameters:\n    passive_joints: [joint1]\n'
                       '    robot_description: |\n%s\n'
                       % '\n'.join('      ' + line for line in text.splitlines()))
-    code, out = _run('freejoint_control', 'controller_node', ['--params-file', str(params)])
-    assert code == 2, out
+    code, out = run_main('freejoint_control', 'controller_node',
+                         ['--ros-args', '--params-file', str(params)])
+    line = bad_parameter_line(code, out, 'effort_limits')
     assert ('bad parameter: effort_limits: expected 3 values in (0, 1e6] N m (one per joint '
-            "of joints ['joint2', 'joint3', 'joint4'])") in out, out
+            "of joints ['joint2', 'joint3', 'joint4'])") in line, line
 
 
 CONFIG = os.path.join(ROOT, 'config')

@@ -123,14 +123,14 @@ def graph(procs, ros_node, wait, tmp_path):
     g.close()
 
 
-def test_standby_with_lockstep_exits_2_with_one_line(procs, wait):
-    proc = procs.start_node('freejoint_control', 'controller_node', 'controller', _args(
+def test_standby_with_lockstep_makes_the_controllers_main_log_one_line_and_return_2(
+        run_main, bad_parameter_line):
+    # In this process, through the main controller_node runs (its exit status as a
+    # process: test_node_parameters.py's controller_node row started as one).
+    code, out = run_main('freejoint_control', 'controller_node', _args(
         'controller.yaml', 'lockstep:=true', 'standby:=true'))
-    wait(lambda: proc.poll() is not None, 60.0, 'the controller to exit')
-    assert proc.returncode == 2
-    lines = [ln for ln in procs.log(proc).splitlines() if 'standby' in ln]
-    assert len(lines) == 1 and 'bad parameter: standby: a hot spare is for real time' in \
-        lines[0], procs.log(proc)
+    line = bad_parameter_line(code, out, 'standby')
+    assert 'bad parameter: standby: a hot spare is for real time' in line, line
 
 
 def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_bounds(
