@@ -10,6 +10,10 @@ ENV := . tools/env.sh &&
 # (CI 86, 87; docs/performance.md).
 JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( 2 * n > 8 ? 8 : 2 * n )))
 XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
+# The linters skip the files they found clean before with the same bytes, linters and
+# configuration (test/lint_cache.py, .stamps/lint), as in make test-fast; CI (CI set, as
+# .ci/run runs) lints every file.
+LINT_CACHE = $(if $(CI),,FREEJOINT_LINT_CACHE=$${FREEJOINT_LINT_CACHE-$$PWD/.stamps/lint})
 
 .PHONY: help setup demo test test-fast offline bench soak analyze clean campaign
 
@@ -43,7 +47,7 @@ demo: setup
 	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise) $(if $(FAIL),--fail $(FAIL)) $(if $(CIRCLES),--circles $(CIRCLES)) $(if $(REST),--rest $(REST)) $(if $(PLANE),--plane-normal $(PLANE))
 
 test: setup
-	@$(ENV) python -m pytest -c pytest.ini $(XDIST)
+	@$(ENV) $(LINT_CACHE) python -m pytest -c pytest.ini $(XDIST)
 
 test-fast: setup
 	@$(ENV) bash tools/test_fast.sh $(XDIST)

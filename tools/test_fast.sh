@@ -6,7 +6,7 @@ set -u
 cd "$(dirname "$0")/.."
 start=$SECONDS
 # The linters lint only the files they have not found clean before (test/lint_cache.py);
-# make test and CI lint every file.
+# CI and a package's colcon test lint every file.
 export FREEJOINT_LINT_CACHE=${FREEJOINT_LINT_CACHE-$PWD/.stamps/lint}
 python -m pytest -c pytest.ini -q -m 'not dds and not slow' "$@"
 rc=$?
