@@ -68,7 +68,7 @@ writers of them (:func:`collected_writer_args`).
 A reliable writer can resend to a reader that fell behind only what its own history still
 holds: with the contract's 1000 a reader stalled for 1000 ticks - well under a second of
 wall time in lockstep, which runs faster than real time - loses messages for good
-(docs/performance.md, the test suite)."""
+(docs/performance-history.md, "The test suite, 2026-11-27 to 28")."""
 FIGURES = os.path.join(ROOT, 'docs', 'figures')
 ARMS = {'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0},
         'ur5': {'passive_joint': 'wrist_2_joint', 'bound_mm': 3.0, 'spatial': 'ur5_wrist2',

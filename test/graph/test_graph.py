@@ -36,7 +36,8 @@ config/sim.yaml's 0.5 s is what a user's lockstep run waits for a controller bef
 effort; here the graph is compared with the offline runner tick by tick, and a machine
 stalling the controller or the planner for 0.5 s (the suite's other workers running graphs
 beside, a slow host) would apply zero effort and change the run, not show a defect of the
-graph (docs/performance.md, the test suite). A stall of 30 s still fails the test.
+graph (docs/performance-history.md, "The test suite, 2026-11-27 to 28"). A stall of 30 s
+still fails the test.
 """
 
 
@@ -158,8 +159,8 @@ def test_the_collected_streams_writers_keep_as_many_ticks_as_this_processs_reade
     In-process: the nodes given ``demo.collected_writer_args`` keep COLLECT_DEPTH messages.
 
     Their writers of joint_states, ee_position and controller_state do.  A reader stalled
-    longer than the writer's history loses messages for good (docs/performance.md, the test
-    suite); the graph runs here and in ``make demo`` give the nodes the depth of the
+    longer than the writer's history loses messages for good (docs/performance-history.md,
+    "The test suite, 2026-11-27 to 28"); the graph runs here and in ``make demo`` give the nodes the depth of the
     collector's readers.
     """
     from rclpy.parameter import Parameter
