@@ -160,8 +160,8 @@ def test_the_collected_streams_writers_keep_as_many_ticks_as_this_processs_reade
 
     Their writers of joint_states, ee_position and controller_state do.  A reader stalled
     longer than the writer's history loses messages for good (docs/performance-history.md,
-    "The test suite, 2026-11-27 to 28"); the graph runs here and in ``make demo`` give the nodes the depth of the
-    collector's readers.
+    "The test suite, 2026-11-27 to 28"); the graph runs here and in ``make demo`` give the
+    nodes the depth of the collector's readers.
     """
     from rclpy.parameter import Parameter
     from freejoint_control.controller_node import ControllerNode
