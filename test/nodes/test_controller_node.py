@@ -327,9 +327,6 @@ def test_state_publish_rate_thins_controller_state_but_not_the_commands(ros_node
     """
     from rclpy.parameter import Parameter
     from freejoint_control.controller_node import ControllerNode
-    from freejoint_msgs.msg import CartesianSetpoints
-    from rclpy.serialization import serialize_message
-    from sensor_msgs.msg import JointState
     node = ControllerNode(parameter_overrides=[Parameter('case', value='vertical'),
                                                Parameter('state_publish_rate', value=200.0)])
     try:
@@ -337,24 +334,14 @@ def test_state_publish_rate_thins_controller_state_but_not_the_commands(ros_node
         monkeypatch.setattr(node._pub_cmd, 'publish', commands.append)
         monkeypatch.setattr(node._pub_state, 'publish', lambda data: states.append(
             to_ns(_controller_state(data).header.stamp)))
-        values = [_setpoint(k) for k in range(16)]
-        node._on_setpoints(CartesianSetpoints(
-            stamps=[k * DT_NS for k in range(16)], position=[v for s in values for v in s[0:2]],
-            velocity=[v for s in values for v in s[2:4]],
-            acceleration=[v for s in values for v in s[4:6]]))
-
-        def state(k):
-            msg = JointState(name=NAMES, position=list(Q0), velocity=list(QD0))
-            stamp_from_ns(k * DT_NS, msg.header.stamp)
-            node._on_joint_state(serialize_message(msg))
-
+        node._on_setpoints(_batch(range(16)))
         for k in range(12):
-            state(k)
+            _serialized_state(node, k)
         assert len(commands) == 12
         assert states == [0, 5 * DT_NS, 10 * DT_NS]
         assert node.set_parameters([Parameter('state_publish_rate', value=0.0)])[0].successful
         for k in range(12, 16):
-            state(k)
+            _serialized_state(node, k)
         assert len(commands) == 16
         assert states[3:] == [k * DT_NS for k in range(12, 16)]
     finally:
@@ -428,9 +415,6 @@ def test_a_batch_of_setpoints_is_applied_one_by_one_and_a_refused_one_alone_is_d
     """
     from rclpy.parameter import Parameter
     from freejoint_control.controller_node import ControllerNode
-    from freejoint_msgs.msg import CartesianSetpoints
-    from rclpy.serialization import serialize_message
-    from sensor_msgs.msg import JointState
     node = ControllerNode(parameter_overrides=[Parameter('case', value='vertical')])
     try:
         answers = []
@@ -438,36 +422,21 @@ def test_a_batch_of_setpoints_is_applied_one_by_one_and_a_refused_one_alone_is_d
         monkeypatch.setattr(node._pub_state, 'publish', lambda data: answers.append(
             (lambda msg: (to_ns(msg.header.stamp), to_ns(msg.setpoint_stamp),
                           list(msg.effort)))(_controller_state(data))))
-
-        def batch(ks, bad=(), m=2):
-            values = [_setpoint(k) for k in ks]
-            pos = [v for k, s in zip(ks, values) for v in (
-                (math.nan, 0.0) if k in bad else s[0:2]) + (0.0,) * (m - 2)]
-            return CartesianSetpoints(
-                stamps=[k * DT_NS for k in ks], position=pos,
-                velocity=[v for s in values for v in s[2:4] + (0.0,) * (m - 2)],
-                acceleration=[v for s in values for v in s[4:6] + (0.0,) * (m - 2)])
-
-        def state(k):
-            msg = JointState(name=NAMES, position=list(Q0), velocity=list(QD0))
-            stamp_from_ns(k * DT_NS, msg.header.stamp)
-            node._on_joint_state(serialize_message(msg))     # taken serialized (raw)
-
-        node._on_setpoints(batch([0, 1, 2, 3], bad=(2,)))
+        node._on_setpoints(_batch([0, 1, 2, 3], bad=(2,)))
         assert node._loop.refused_setpoints == 1
         for k in (0, 1):
-            state(k)
+            _serialized_state(node, k)
         assert [a[:2] for a in answers] == [(0, 0), (DT_NS, DT_NS)]
-        state(2)
+        _serialized_state(node, 2)
         assert len(answers) == 2, 'state 2 answered without its setpoint'
-        short = batch([2, 5])
+        short = _batch([2, 5])
         short.velocity = [0.0]
         node._on_setpoints(short)           # both its setpoints counted
-        node._on_setpoints(batch([2], m=3))
+        node._on_setpoints(_batch([2], m=3))
         assert node._loop.refused_setpoints == 4 and len(answers) == 2
-        node._on_setpoints(batch([2]))
+        node._on_setpoints(_batch([2]))
         assert [a[:2] for a in answers[2:]] == [(2 * DT_NS, 2 * DT_NS)]
-        state(3)
+        _serialized_state(node, 3)
         assert [a[:2] for a in answers[3:]] == [(3 * DT_NS, 3 * DT_NS)]
         loop = _loop(case='vertical')
         for k in range(4):
@@ -478,6 +447,27 @@ def test_a_batch_of_setpoints_is_applied_one_by_one_and_a_refused_one_alone_is_d
         assert node._loop.refused_states == 1 and len(answers) == 4
     finally:
         node.destroy_node()
+
+
+def _batch(ks, bad=(), m=2):
+    """Return the CartesianSetpoints of ticks ``ks`` (``bad``: a NaN position; m values)."""
+    from freejoint_msgs.msg import CartesianSetpoints
+    values = [_setpoint(k) for k in ks]
+    pos = [v for k, s in zip(ks, values) for v in (
+        (math.nan, 0.0) if k in bad else s[0:2]) + (0.0,) * (m - 2)]
+    return CartesianSetpoints(
+        stamps=[k * DT_NS for k in ks], position=pos,
+        velocity=[v for s in values for v in s[2:4] + (0.0,) * (m - 2)],
+        acceleration=[v for s in values for v in s[4:6] + (0.0,) * (m - 2)])
+
+
+def _serialized_state(node, k):
+    """Give the node in this process the state of tick k, serialized as it takes it (raw)."""
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+    msg = JointState(name=NAMES, position=list(Q0), velocity=list(QD0))
+    stamp_from_ns(k * DT_NS, msg.header.stamp)
+    node._on_joint_state(serialize_message(msg))
 
 
 def _controller_state(data):
