@@ -12,7 +12,7 @@ every wait bounded, every process stopped whatever happens:
   process's CPU seconds (``/proc/<pid>/stat``) over the measured ticks, per tick;
 * the graph in lockstep without the recorder (``bench/graph.py``'s lockstep run, the 5-s
   horizontal case, a process per node) with the echo started beside it
-  (``beside_cpu_per_tick``: ``echo_node.py --out echo/commands``, answering every state the
+  (``beside_per_tick``: ``echo_node.py --out echo/commands``, answering every state the
   simulator publishes, its command taken by this process), its threads at the
   controller's scheduling (``--priority``: SCHED_FIFO at the bench's ``thread_priority``):
   the controller's and the echo's CPU and wake-ups per tick over the same ticks at the
@@ -161,24 +161,24 @@ def _lockstep_run(record, ctl_overrides=(), beside=None, setup=None):
         client.close()
 
 
-def _cpu_per_tick(rows, nodes=('controller_node', 'echo_node', 'sim_node'),
-                  what='CPU per tick'):
-    """Return ``{node: CPU per lockstep tick [us]}`` of those of ``nodes`` the rows have."""
+def _per_tick(rows, nodes=('controller_node', 'echo_node', 'sim_node'), what='CPU per tick'):
+    """Return ``{node: figure}`` of the rows ``lockstep: <node> <what>`` of ``nodes``."""
     names = {'lockstep: %s %s' % (node, what): node for node in nodes}
     return {names[row['name']]: row['value'] for row in rows if row['name'] in names}
 
 
-def beside_cpu_per_tick(executor, ctl_overrides=(), wakeups=None):
+def beside_per_tick(executor, ctl_overrides=()):
     """
-    Return ``{node: CPU per lockstep tick [us]}`` of the controller and an echo beside it.
+    Return ``{node: CPU per lockstep tick [us]}``, ``{node: wake-ups per tick}`` beside.
+
+    Of the controller, the simulator and an echo beside them.
 
     One lockstep run of the graph without the recorder and an echo node (on ``executor``)
     started beside it, answering every state on ``echo/commands`` (taken by this process,
     one reader as the controller's command has), its threads at the controller's
     scheduling (``--priority``: the bench's ``thread_priority``): both measured over the
     same ticks on the same machine at the same time, what no two runs can be
-    (``ctl_overrides``: the controller's). ``wakeups``: a dict given the nodes' wake-ups
-    per tick (``graph.proc_wakeups``).
+    (``ctl_overrides``: the controller's). Wake-ups: ``graph.proc_wakeups``.
     """
     from freejoint_common.contract import COMMANDS
 
@@ -190,9 +190,7 @@ def beside_cpu_per_tick(executor, ctl_overrides=(), wakeups=None):
     if graph_bench.PRIORITY:
         args += ['--priority', str(graph_bench.PRIORITY)]
     rows = _lockstep_run(False, ctl_overrides, ('echo_node', args), take_echo_commands)
-    if wakeups is not None:
-        wakeups.update(_cpu_per_tick(rows, what='wake-ups per tick'))
-    return _cpu_per_tick(rows)
+    return _per_tick(rows), _per_tick(rows, what='wake-ups per tick')
 
 
 def graph_cpu_per_tick(record=True, ctl_overrides=()):
@@ -206,7 +204,7 @@ def graph_cpu_per_tick(record=True, ctl_overrides=()):
     rows = None if ctl_overrides else graph_bench.LOCKSTEP_ROWS.get(('separate', record))
     if rows is None:
         rows = _lockstep_run(record, ctl_overrides)
-    return _cpu_per_tick(rows, ('sim_node', 'controller_node'))
+    return _per_tick(rows, ('sim_node', 'controller_node'))
 
 
 def run():
@@ -230,8 +228,7 @@ def run():
     # one reader, as the echo's.
     for tag, target, extra in (('', '<= 1.5', ()),
                                (', controller_state 100 Hz', None, THINNED)):
-        wakeups = {}
-        nodes = beside_cpu_per_tick(kind, extra, wakeups)
+        nodes, wakeups = beside_per_tick(kind, extra)
         ctl, near = nodes.get('controller_node'), nodes.get('echo_node')
         graph_bench.say('CPU per lockstep tick, recorder off%s: controller %s us, an echo '
                         '(%s, %s) beside it %s us, simulator %s us; wake-ups per tick: '
