@@ -32,7 +32,7 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from freejoint_common.cdr import CdrError
 from freejoint_common.setpoint import SetpointSample
-from freejoint_msgs.msg import CartesianSetpoints, ControllerState
+from freejoint_msgs.msg import CartesianSetpoints, ControllerReadiness, ControllerState
 from freejoint_msgs.srv import FailJoint, PlanCircle
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import OccupancyGrid
@@ -193,6 +193,10 @@ BRAKE_REQUEST = Topic('brake_request', String, profile(10))
 volatile (a request is for the arm now, never for a driver started later), depth 10. The
 driver releases them at its next accepted command, as after its command watchdog
 (the simulator's ``brake_timeout``), which stays the fallback of a driver without it."""
+CONTROLLER_READINESS = Topic('controller_readiness', ControllerReadiness, LATCHED_QOS)
+"""Controller -> planner (and operator, recorder): the loop's readiness at start-up and at
+each change (freejoint_msgs/ControllerReadiness; reliable, transient local, depth 1). A
+planner pauses its plan while the controller is not ready and refuses a new one."""
 BRAKE_TIMEOUT_REQUEST = Topic('brake_timeout_request', Float64, profile(1, latched=True))
 """Controller -> driver (real time): from now on, brake after ``data`` s without a command
 when that is shorter than the driver's own wait (``data`` 0: no request, the driver's own).
