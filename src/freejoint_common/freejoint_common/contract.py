@@ -178,7 +178,7 @@ PLAN_CIRCLE = Service('~/plan_circle', PlanCircle)
 RECORDER_STATUS = Service('~/status', Trigger)
 """Recorder: success once every graph topic has a matched publisher."""
 
-# -- joint failures (issue 23) ----------------------------------------------------------------
+# -- joint failures ----------------------------------------------------------------------------
 FAILURE_NOTICE_QOS = profile(10, latched=True)
 """``joint_failures``: reliable, transient local (a controller started later still learns
 of a failure already reported), depth 10."""
@@ -187,7 +187,7 @@ JOINT_FAILURES = Topic('joint_failures', String, FAILURE_NOTICE_QOS)
 FAIL_JOINT = Service('~/fail_joint', FailJoint)
 """Simulator: make a joint's actuator and brake fail from the next step."""
 
-# -- brakes on request (issue 21) ------------------------------------------------------------
+# -- brakes on request ---------------------------------------------------------------------
 BRAKE_REQUEST = Topic('brake_request', String, profile(10))
 """Controller -> driver: engage the brakes now, where the arm is (``data``: why); reliable,
 volatile (a request is for the arm now, never for a driver started later), depth 10. The

@@ -29,7 +29,7 @@ MAX_PRIORITY = 98
 
 BEST_EFFORT_THREADS = ('dds.asyn',)
 """Prefixes of thread names kept at the default scheduler (their CPUs are still set): Fast
-DDS's asynchronous writer thread busy-waits at times (a CI run: 0.95 s of CPU a second while
+DDS's asynchronous writer thread busy-waits at times (measured: 0.95 s of CPU a second while
 the node started), and at the node's SCHED_FIFO priority on the node's one CPU it starved
 every other thread of the process (FIFO threads of one priority do not share a CPU)."""
 

@@ -104,7 +104,7 @@ class ControllerNode(Node, Lifecycle):
         if not cfg.standby:
             self._subscribe_states()
         self.create_service(RESET.srv_type, RESET.name, self._on_reset)
-        # Joint failures (issue 23): a driver's or operator's notice (joint_failures on).
+        # Joint failures: a driver's or operator's notice (joint_failures on).
         # Its detections go out there too (the planner, a spare and the bag learn of them).
         self._pub_failure = None
         if cfg.joint_failures != 'off':

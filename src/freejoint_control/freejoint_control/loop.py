@@ -168,7 +168,7 @@ class ControlLoop:
         cfg = config
         self.log = log or _no_log
         self.law = config_law(cfg)
-        if cfg.values['free_link_damping']:     # issue 22: the reference damps the free link
+        if cfg.values['free_link_damping']:     # the reference damps the free link
             values = cfg.values
             self.law = FreeLinkDampedLaw(self.law, values['free_link_delta_max'],
                                          k2_rest=values['free_link_rest_damping'],
@@ -176,7 +176,7 @@ class ControlLoop:
                                          mode=values['free_link_mode'],
                                          settle_window=values['free_link_settle_window'],
                                          sat=values['free_link_drive_max'])
-        # Joint failures (issue 23, freejoint_control/failures.py): None when off.
+        # Joint failures (freejoint_control/failures.py): None when off.
         self.failures = None if cfg.values['joint_failures'] == 'off' else \
             failures.FailureMonitor(cfg, self.law, self.log)
         self._state_effort = None

@@ -89,7 +89,7 @@ def _theta_max(value):
     return None
 
 
-# Joint failures (issue 23, freejoint_control/failures.py); defaults: freejoint_core.failure.
+# Joint failures (freejoint_control/failures.py); defaults: freejoint_core.failure.
 FAILURE_PARAMS = (
     Param('joint_failures', 'off',
           "'off': no failure handling (the paper's law exactly); 'notice': a notice on "
@@ -122,7 +122,7 @@ FAILURE_PARAMS = (
           read_only=True),
 )
 
-# The free link's damping (issue 22, r = m; freejoint_core.laws.FreeLinkDampedLaw).
+# The free link's damping (r = m; freejoint_core.laws.FreeLinkDampedLaw).
 FREE_LINK_PARAMS = (
     Param('free_link_damping', False,
           "true: the reference passes through the free link's damping before the law "

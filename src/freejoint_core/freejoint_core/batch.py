@@ -4,7 +4,7 @@ Batched closed-loop simulator: many runs of the paper's 3-link arm advanced toge
 Every run is the offline runner's loop (``freejoint_core.offline``, module notes:
 tick ``k``, controller on the state of ``t_k``, RK4 plant over ``[t_k, t_{k+1}]``,
 the same divergence rule) with a few uncertainty axes a robustness campaign
-varies per run (issue 24).  Everything is a numpy array over the runs; the arm
+varies per run.  Everything is a numpy array over the runs; the arm
 is Table I's (three links, joint 3 passive) or, with ``arms``, another 3-link arm whose
 joint 3 alone is passive (a URDF arm's ``ArmParams``), the law the paper's fast path
 (``control.RobustController._step_fast``), the plant ``plant.Plant`` (fast3 RK4).

@@ -1,5 +1,5 @@
 """
-Joint failure: detection, isolation and the reconfiguration verdict (issue 23, no ROS).
+Joint failure: detection, isolation and the reconfiguration verdict (no ROS).
 
 Momentum residual (De Luca and Mattone, ICRA 2003).  With the generalised momentum
 ``p = M(q) qd``, eq. (1) gives ``pdot = tau + C^T qd - G + d`` (``Mdot = C + C^T``), so

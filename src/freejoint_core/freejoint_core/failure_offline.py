@@ -1,5 +1,5 @@
 """
-Offline failure scenarios (issue 23): a joint fails mid-task, is detected, the law switches.
+Offline failure scenarios: a joint fails mid-task, is detected, the law switches.
 
 ``python -m freejoint_core.failure_offline --actuated all --fail joint3@2.5 --seeds 0-9``
 runs, per case and seed, the closed loop of ``freejoint_core.offline`` (70 % nominal,
@@ -55,7 +55,7 @@ DEFAULT_OUT = 'bags/offline/failures.json'
 EFFORT_LIMITS = (300.0, 200.0, 200.0)
 """Per-joint effort limits [N m] (config effort_limits 300/200; joint 3 taken as 200)."""
 DEFAULT_NULLSPACE_KD = 3.0
-"""Null-space damping [N m s/rad] of the fully actuated arm (issue 22's option)."""
+"""Null-space damping [N m s/rad] of the fully actuated arm (``internal.NullSpace``)."""
 HOLD_S = 5.0
 """Hold after the circle [s]."""
 FAILURE_FREE_LINK_DAMPING = {'mode': 'rest', 'delta_max': 0.03, 'sat': 0.27}
@@ -410,7 +410,7 @@ def _seeds(spec):
 
 def _parse(argv):
     ap = argparse.ArgumentParser(
-        prog='failure_offline', description='Offline joint-failure scenarios (issue 23): '
+        prog='failure_offline', description='Offline joint-failure scenarios: '
         'a joint fails mid-task, the momentum residual (or effort, or a notice) detects it, '
         'the law switches or gives up (cannot_track); one record per run in '
         f'{DEFAULT_OUT}.')

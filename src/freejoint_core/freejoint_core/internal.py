@@ -1,5 +1,5 @@
 """
-Internal-motion stabilisation: what the paper's law leaves to itself (issue 22).
+Internal-motion stabilisation: what the paper's law leaves to itself.
 
 The paper's law (eq. 15) fixes the m = 2 task accelerations and nothing else; its
 Theorem 1 bounds the tracking error, not the arm's internal motion.  Two parts of
@@ -357,8 +357,8 @@ class FreeLinkModulation:
     Damping of the free link's zero dynamics by a bounded modulation of the task reference.
 
     For the arm whose last joint is free (r = m = 2, the paper's), with the end
-    effector at the free link's tip the link obeys (the issue's and
-    docs/internal-motion.md's derivation)::
+    effector at the free link's tip the link obeys (docs/internal-motion.md's
+    derivation)::
 
         J_eff thdd3 = -m3 c3 u3perp(th3) . (pdd_E + g y) + d3,
         J_eff = I3 + m3 c3 (c3 - L3),  u3perp = (-sin th3, cos th3)

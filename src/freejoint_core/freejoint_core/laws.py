@@ -21,7 +21,7 @@ same numbers) is registered as ``'robust'``; :func:`register_law` adds another l
 module defining it and calling ``register_law``), :func:`make_law` builds the one a
 controller's parameter ``law`` names.  :class:`FreeLinkDampedLaw` wraps a law so that its
 reference passes through the free link's damping first (the controller's parameter
-``free_link_damping``, issue 22).
+``free_link_damping``).
 
 """
 
@@ -161,7 +161,7 @@ register_law('spatial', _spatial_law)
 
 class FreeLinkDampedLaw(ControlLaw):
     """
-    A law whose reference passes through the free link's damping first (issue 22, r = m).
+    A law whose reference passes through the free link's damping first (r = m).
 
     Each step the setpoint goes through
     :class:`freejoint_core.internal.FreeLinkModulation` (the bounded shift ``delta`` of the
@@ -172,7 +172,7 @@ class FreeLinkDampedLaw(ControlLaw):
     with the law's.
 
     While the wrapped law's nominal arm does not have its last joint alone free (a fully
-    actuated arm before a joint fails, issue 23) the modulation is off: the wrapped law's
+    actuated arm before a joint fails) the modulation is off: the wrapped law's
     step exactly, the shift 0.  :meth:`set_nominal` with such an arm (the failure
     monitor's switch) turns it on, its shift from 0, as
     ``freejoint_core.failure_offline.run_failure_case`` with ``free_link_damping`` does.

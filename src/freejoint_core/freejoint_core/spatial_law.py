@@ -453,8 +453,8 @@ class SpatialControlLaw(ControlLaw):
     The controller's loop steps it as any law: ``step(q, qd, p_d, pd_d, pdd_d, dt)`` with
     m-sized setpoints (m = 3: the tip position; m = 6 needs an orientation setpoint, which
     the seam does not carry: refused).  The inverse is the inertia-weighted one with the
-    dynamically consistent projector (the pseudo-inverse diverges on spatial arms,
-    issue 25); ``set_nullspace_gains`` sets the null-space damping ``kd`` and posture
+    dynamically consistent projector (the pseudo-inverse diverges on spatial arms);
+    ``set_nullspace_gains`` sets the null-space damping ``kd`` and posture
     stiffness ``kp`` (``nullspace_kd``, ``nullspace_kp``): the posture is the active
     joints' angles at the first step after construction or :meth:`reset` (where the task
     began), so that the redundant joints do not drift over a long hold.

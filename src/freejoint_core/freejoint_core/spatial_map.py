@@ -1,5 +1,5 @@
 """
-Sampled singularity map of a spatial arm's workspace (issue 25).
+Sampled singularity map of a spatial arm's workspace.
 
 A grid over the joints is out of reach for 6-7 joints (the Panda at 2 deg: about 4e12
 postures), so the map samples: ``samples`` postures drawn uniformly within the URDF

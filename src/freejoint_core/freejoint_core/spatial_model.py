@@ -1,5 +1,5 @@
 """
-Spatial serial arm from any URDF, on Pinocchio (issue 25).
+Spatial serial arm from any URDF, on Pinocchio.
 
 :class:`SpatialArm` cuts the chain ``base_link -> tip_link`` out of a URDF: every joint
 outside it (e.g. the Panda's fingers) is locked at its reference angle (0 clipped into

@@ -1,5 +1,5 @@
 """
-Offline study of spatial arms with a free joint (issue 25).
+Offline study of spatial arms with a free joint.
 
 Run ``python -m freejoint_core.spatial_offline`` (``--help``).
 

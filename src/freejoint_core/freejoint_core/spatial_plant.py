@@ -1,5 +1,5 @@
 """
-The simulated spatial arm: Pinocchio's ABA of a URDF chain integrated by RK4 (issue 25).
+The simulated spatial arm: Pinocchio's ABA of a URDF chain integrated by RK4.
 
 ``SpatialPlant`` is ``freejoint_core.plant.Plant`` for a
 :class:`freejoint_core.spatial_model.SpatialArm` (the real arm: the URDF's masses): the
