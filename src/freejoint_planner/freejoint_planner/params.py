@@ -113,7 +113,7 @@ PARAMS = (
           'vertical plane facing the robot. Planar arms: leave it at [0, 0, 0].',
           validator=_normal),
     Param('circles', 1,
-          'Revolutions of every plan, back to back (issue 22): each but the last followed by '
+          'Revolutions of every plan, back to back: each but the last followed by '
           "rest; the stream is the offline circles runner's (freejoint_core.trajectory."
           'RepeatedCircle).', (1, 100000)),
     Param('rest', 0.0,
@@ -134,7 +134,7 @@ PARAMS = (
           "Longest transition (s) from the current setpoint into a new plan's start; none "
           'shorter within the bounds: the plan is refused.', (0.0, 600.0), exclusive_min=True),
     Param('settle_swing_deg', 0.0,
-          'Settle gate (issue 22): a plan_circle request that would start a plan is refused '
+          'Settle gate: a plan_circle request that would start a plan is refused '
           "('settling: ...') while the free link swings more than this (deg, from the newest "
           'joint_states: freejoint_core.internal.free_link_swing) or no joint state tells; '
           '0 = off. For the arm whose last joint alone is free, with gravity; the '

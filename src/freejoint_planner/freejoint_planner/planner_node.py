@@ -50,7 +50,7 @@ depth 1 on a hidden helper node no executor spins: no callback per tick); with a
 the clock); with none at all (in real time: none within ``ARM_DISCOVERY_S`` of the
 planner's start) it starts at the circle's start as before (logged).
 A joint reported failed on ``joint_failures`` (std_msgs/String, its name: a driver's or
-operator's notice, or the controller's detection, issue 23) joins the passive set of the
+operator's notice, or the controller's detection) joins the passive set of the
 arm the planner plans for (``planning.after_failure``): the map is recomputed for that arm
 and checks the plans from then on, or, if the arm cannot track (fewer active joints than
 the task has, or an internal motion that runs away), every plan is refused saying why; the
@@ -59,14 +59,14 @@ new map (0.05-0.25 s of CPU) are made at the next plan request, not at the failu
 the graph needs the CPU (measured in real time: on the executor they stalled the stream,
 in a process beside it they starved the middleware).
 Its state goes on ``/diagnostics`` once a second (``planning.planner_status``): ready
-(OK), settling (WARN: the settle gate's free link still swinging, issue 22) or cannot
+(OK), settling (WARN: the settle gate's free link still swinging) or cannot
 plan (ERROR: a joint failure left an arm that cannot track), with the running plan's id
 and the passive joints of its arm.
 Refusals name the usable region (``SingularityModel.usable``). Every circle is
 held to the arm's reach and to ``max_speed`` / ``max_acceleration``. ``lookahead`` is checked
 against the clock spacing rule at run time.
 
-A spatial arm (``task_dim`` 3, ``NodeArm.spatial``; issue 25) takes another branch, the
+A spatial arm (``task_dim`` 3, ``NodeArm.spatial``) takes another branch, the
 planar one untouched: its plan is the offline runner's circle
 (``spatial_planning.SpatialCircle``: ``freejoint_core.spatial_offline.circle(p0, radius, t,
 duration, normal)``) from the tip ``p0`` of the arm's joint state, in the vertical plane
@@ -219,8 +219,8 @@ class PlannerNode(Node, Lifecycle):
         self.create_subscription(CLOCK.msg_type, CLOCK.name, self._on_clock,
                                  CLOCK_SUBSCRIPTION_QOS)
         self._timer = self._make_timer()
-        # A joint reported failed (by a driver, an operator or the controller's detection,
-        # issue 23): plans from then on are for the arm with it free.
+        # A joint reported failed (by a driver, an operator or the controller's detection):
+        # plans from then on are for the arm with it free.
         self.create_subscription(JOINT_FAILURES.msg_type, JOINT_FAILURES.name,
                                  self._on_joint_failure, JOINT_FAILURES.qos)
         # Its state on /diagnostics once a second: ready, settling (the settle gate) or
@@ -515,7 +515,7 @@ class PlannerNode(Node, Lifecycle):
                                    f'margin {margin:.4f} m (not executed)')
         return response
 
-    # ---- spatial arms (issue 25) ----------------------------------------------------
+    # ---- spatial arms ---------------------------------------------------------------
     def _init_spatial(self):
         """Check a spatial arm's configured circle and say what does not apply to it."""
         cfg = self._cfg

@@ -408,7 +408,7 @@ class FailedArm:
 def after_failure(arm, joint_names, name, state=None, trajectory=None, nominal_scale=0.7,
                   gains=None):
     """
-    Return the arm the planner plans for once the joint ``name`` failed (issue 23).
+    Return the arm the planner plans for once the joint ``name`` failed.
 
     The failed joint joins the passive set.  Fewer active joints than the task has
     (``r < m``) or an internal motion that runs away or grows (the controller's own
@@ -493,7 +493,7 @@ def planner_status(failure_refusal, pending, settling):
     -------
     tuple of (str, str)
         ``(FAILED | SETTLING | READY, message)``: ``FAILED`` while no plan can be tracked,
-        ``SETTLING`` while the free link swings beyond the gate (issue 22: the rest between
+        ``SETTLING`` while the free link swings beyond the gate (the rest between
         tasks), else ``READY`` (saying what is pending or that the link settled).
 
     """

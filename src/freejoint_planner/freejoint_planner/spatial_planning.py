@@ -1,5 +1,5 @@
 """
-Spatial plans (issue 25): the offline runner's 3-D circle and its plan-time checks (no ROS).
+Spatial plans: the offline runner's 3-D circle and its plan-time checks (no ROS).
 
 A spatial arm (``NodeArm.spatial``, task_dim 3) gets one kind of plan: the circle of
 ``freejoint_core.spatial_offline.circle(p0, radius, t, duration)`` from the tip's start

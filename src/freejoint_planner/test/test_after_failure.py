@@ -1,4 +1,4 @@
-"""The arm the planner plans for after a joint failure (issue 23), no ROS."""
+"""The arm the planner plans for after a joint failure, no ROS."""
 from dataclasses import replace
 
 from freejoint_core.arm import table1

@@ -1,11 +1,11 @@
 """
-A plan from rest starts where the arm is, never with a step (issue 21).
+A plan from rest starts where the arm is, never with a step.
 
-With nothing streamed yet (the first plan, a reset simulator) the planner used to start the
-circle at its start point whatever the arm's position: a 0.45 m jump in one tick. The plan
-now starts at the arm's end effector (the nominal model's kinematics of a joint state) and
-reaches the circle's start by a transition from rest, held to the circle's own largest step
-per tick, or is refused with the reason. In-process: synthetic joint states, no DDS.
+With nothing streamed yet (the first plan, a reset simulator) the plan starts at the arm's
+end effector (the nominal model's kinematics of a joint state), not at the circle's start
+point whatever the arm's position (a 0.45 m jump in one tick), and reaches the circle's
+start by a transition from rest, held to the circle's own largest step per tick, or is
+refused with the reason. In-process: synthetic joint states, no DDS.
 """
 import math
 
@@ -21,7 +21,7 @@ MS = 1_000_000  # ns
 DT = 0.001
 JOINTS = ('joint1', 'joint2', 'joint3')
 BOUNDS = (1.0, 5.0)          # the planner's default max_speed, max_acceleration
-# The issue's case: the arm at the simulator's default start (0.2, 0), a circle whose start
+# The case of a far start: the arm at the simulator's default start (0.2, 0), a circle whose start
 # is 0.45 m away: centre (-0.05, 0), radius 0.2, start angle pi -> start (-0.25, 0).
 AWAY = CircleQuintic(centre=(-0.05, 0.0), radius=0.2, start_angle=math.pi)
 

@@ -1,4 +1,4 @@
-"""The settle gate's judgement (issue 22): the free link's swing of a joint state, no ROS."""
+"""The settle gate's judgement: the free link's swing of a joint state, no ROS."""
 import math
 
 from freejoint_core.arm import table1

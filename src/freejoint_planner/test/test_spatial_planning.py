@@ -1,5 +1,5 @@
 """
-Spatial plans (issue 25) without ROS: the offline runner's circle, streamed; the plan checks.
+Spatial plans without ROS: the offline runner's circle, streamed; the plan checks.
 
 The arms are those of the planner's overlays (config/ur5/planner.yaml and
 config/panda/planner.yaml on config/planner.yaml, resolved as the node resolves them); the

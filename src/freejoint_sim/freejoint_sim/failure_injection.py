@@ -1,5 +1,5 @@
 """
-Joint failures the simulator injects (issue 23), without ROS.
+Joint failures the simulator injects, without ROS.
 
 A failure is scheduled by the parameter ``fail_joint`` (``'joint3@2.5'``: the joint's
 actuator and brake fail from simulation time 2.5 s; several joined by ``,``; ``''``: none)

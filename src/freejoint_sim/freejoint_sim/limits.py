@@ -1,7 +1,7 @@
 """
 The URDF's joint limits, watched on the simulated arm (no ROS types).
 
-The plants integrate the arm without end stops or speed limits (issue 25: the Panda's
+The plants integrate the arm without end stops or speed limits (the Panda's
 free joint 7 turns far past its +-2.9 rad range and its rated speed under the joint
 disturbance alone). A real arm would reach its stop, so the simulator says when a joint
 passes its URDF limits: :class:`LimitWatch` notes, per joint, the first time its angle

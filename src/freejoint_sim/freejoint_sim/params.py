@@ -132,8 +132,8 @@ PARAMS = (
           "needs them, within the URDF's position limits; takes effect on reset"),
     Param('start_pose', 'paper',
           "'paper': q(0) as initial_position and initial_passive_deg (or "
-          "initial_joint_positions) give it; 'hanging': the free link at rest under gravity "
-          '(issue 22): for the 3-link arm with joint 3 free, hanging straight down with the '
+          "initial_joint_positions) give it; 'hanging': the free link at rest under gravity"
+          ': for the 3-link arm with joint 3 free, hanging straight down with the '
           'end effector at initial_position (freejoint_core.internal.hanging_pose); for '
           'another arm, the static equilibrium of its free joints nearest '
           'initial_joint_positions, the end effector where those put it '
@@ -192,7 +192,7 @@ PARAMS = (
           validator=lambda v: None if 0 <= v <= MAX_TIMING_STEPS else
           f'expected an integer in [0, {MAX_TIMING_STEPS}], got {v!r}'),
     SCHEDULING,
-    # Joint failures (issue 23, freejoint_sim/failure_injection.py).
+    # Joint failures (freejoint_sim/failure_injection.py).
     Param('fail_joint', '',
           "scheduled failures: '<joint>@<t>[,<joint>@<t>]' (e.g. 'joint3@2.5': the joint's "
           'actuator and brake fail from simulation time 2.5 s: no torque, the disturbance '

@@ -12,8 +12,8 @@ initial configuration, at rest, with a freshly seeded disturbance, at the next s
 keeps running), and clears a divergence.  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray,
 one status named ``<node>: simulator``) at 1 Hz: OK / WARN with steps, step rate, command
 latency (state to command), command timeouts, refused commands, dropped steps, brakes;
-ERROR with the reason at once when the plant diverges.  Joint failures (issue 23,
-``freejoint_sim.failure_injection``): parameter ``fail_joint`` (``joint3@2.5``) and
+ERROR with the reason at once when the plant diverges.  Joint failures
+(``freejoint_sim.failure_injection``): parameter ``fail_joint`` (``joint3@2.5``) and
 ``~/fail_joint`` (freejoint_msgs/FailJoint) make a joint's actuator and brake fail; its
 effort then reads 0, the log and ``/diagnostics`` say when, and with ``report_failures``
 a notice goes out on ``joint_failures``.  A spatial arm (``task_dim`` 3: a serial URDF
@@ -176,7 +176,7 @@ class SimNode(Node, Lifecycle):
                                      self._on_brake_request, BRAKE_REQUEST.qos)
             self.create_subscription(BRAKE_TIMEOUT_REQUEST.msg_type, BRAKE_TIMEOUT_REQUEST.name,
                                      self._on_brake_timeout_request, BRAKE_TIMEOUT_REQUEST.qos)
-        # Joint failures (issue 23): ~/fail_joint, the notices a driver would publish.
+        # Joint failures: ~/fail_joint, the notices a driver would publish.
         self.create_service(FAIL_JOINT.srv_type, FAIL_JOINT.name, self._on_fail_joint)
         self._pub_failures = (self.create_publisher(JOINT_FAILURES.msg_type,
                                                     JOINT_FAILURES.name, JOINT_FAILURES.qos)
@@ -276,7 +276,7 @@ class SimNode(Node, Lifecycle):
             self._brake_reason = ''
             self.get_logger().info('reset: brakes engaged until the next command')
 
-    # -- joint failures (issue 23) ----------------------------------------------
+    # -- joint failures ----------------------------------------------------------
     def _make_injector(self, cfg):
         """Return the failure schedule of a new plant (parameter ``fail_joint``)."""
         injector = Injector(self._plant, cfg.joint_names)

@@ -1,4 +1,4 @@
-"""The simulator's watch of the URDF's joint limits (freejoint_sim.limits, issue 25)."""
+"""The simulator's watch of the URDF's joint limits (freejoint_sim.limits)."""
 import math
 
 from freejoint_sim.limits import LimitWatch

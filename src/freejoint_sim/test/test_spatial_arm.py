@@ -1,5 +1,5 @@
 """
-The simulator's configuration of a spatial arm (task_dim 3, issue 25), without ROS.
+The simulator's configuration of a spatial arm (task_dim 3), without ROS.
 
 The UR5 and Panda overlays (config/ur5/sim.yaml, config/panda/sim.yaml on top of
 config/sim.yaml) build; their initial posture is the offline runner's start posture, computed

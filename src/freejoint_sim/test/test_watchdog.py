@@ -1,4 +1,4 @@
-"""The simulated drive's command watchdog (freejoint_sim.watchdog, issue 21)."""
+"""The simulated drive's command watchdog (freejoint_sim.watchdog)."""
 from freejoint_core.errors import FreejointValueError
 from freejoint_sim.params import SCHEMA
 from freejoint_sim.watchdog import DriveWatchdog

@@ -41,7 +41,7 @@ from the nominal parameters, with the recorded planner map (OccupancyGrid) and p
 ``compare.png`` side by side. Per-bag figures go into the bag directory, the others into
 the bags' common parent directory, unless ``--figures-dir`` names one directory for all.
 
-Joint failures (issue 23): a joint the simulator made fail (its ``/diagnostics`` key
+Joint failures: a joint the simulator made fail (its ``/diagnostics`` key
 ``failed joints``, e.g. ``joint3 at 2.500 s``) and the controller's detection (the first
 ``ControllerState.message`` ``joint3 failed at t = 2.507 s (detected by effort) ...``) are
 read from the bag (:func:`failures_of`); per failure one line says when it failed, when and

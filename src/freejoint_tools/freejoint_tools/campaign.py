@@ -1,5 +1,5 @@
 """
-Robustness campaigns: thousands of closed-loop runs over what a lab is unsure of (issue 24).
+Robustness campaigns: thousands of closed-loop runs over what a lab is unsure of.
 
 ``fj campaign run FILE`` (or ``ros2 run freejoint_tools campaign run FILE``) reads a
 campaign file (YAML, below), checks all of it before any run starts (a bad file ends

@@ -1,5 +1,5 @@
 """
-Sampled singularity map of a spatial arm on the command line, in process or on Ray (issue 25).
+Sampled singularity map of a spatial arm on the command line, in process or on Ray.
 
 The math is ``freejoint_core.spatial_map`` (module notes there); this is its runner::
 
