@@ -7,7 +7,7 @@ ENV := . tools/env.sh &&
 # at most 8; JOBS=1 runs the tests one after the other in one process. The graph tests give
 # the simulator a 30-s command deadline and the nodes' collected writers the collector's
 # depth, so a slowed machine neither zeroes a command nor loses a message of the test's
-# (CI 86, 87; docs/performance.md).
+# (docs/performance.md, "The test suite").
 JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( 2 * n > 8 ? 8 : 2 * n )))
 XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 # The linters skip the files they found clean before with the same bytes, linters and
@@ -21,11 +21,11 @@ help:
 	@echo 'make demo     run the paper'"'"'s two cases through the ROS 2 node graph (main job)'
 	@echo '              ARM=four_link: the shipped 4-link example instead (config/four_link)'
 	@echo '              ARM=ur5 / ARM=panda: a spatial arm with a free wrist joint, a 3-D'
-	@echo '              circle then a 10-s hold (config/ur5, config/panda; issue 25);'
+	@echo '              circle then a 10-s hold (config/ur5, config/panda);'
 	@echo '              PLANE="0 0 1": the circle in the plane of that normal'
-	@echo '              STABILISE=1: internal motion stabilised, both cases (issue 22)'
-	@echo '              FAIL=joint3@2.5: all joints driven, joint 3 fails at 2.5 s (issue 23)'
-	@echo '              CIRCLES=N REST=S: N revolutions back to back, S s rest between (issue 22)'
+	@echo '              STABILISE=1: internal motion stabilised, both cases'
+	@echo '              FAIL=joint3@2.5: all joints driven, joint 3 fails at 2.5 s'
+	@echo '              CIRCLES=N REST=S: N revolutions back to back, S s rest between'
 	@echo 'make test     run every test (core math, nodes, interfaces, linters), JOBS (2 x nproc)'
 	@echo '              pytest processes at once; JOBS=1: one'
 	@echo 'make test-fast  the tests without DDS or node processes (core math, schemas,'

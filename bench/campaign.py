@@ -1,5 +1,5 @@
 """
-Campaign throughput (issue 24): runs per second in-process, on a local two-node Ray cluster.
+Campaign throughput: runs per second in-process, on a local two-node Ray cluster.
 
 Usage: python bench/campaign.py [--file config/campaigns/paper_vertical_10k.yaml]
 [--scalar-runs 5] [--no-ray] [--no-kill]

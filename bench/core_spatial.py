@@ -1,5 +1,5 @@
 """
-Benchmark: spatial arms from URDFs (issue 25), per tick and per singularity sample.
+Benchmark: spatial arms from URDFs, per tick and per singularity sample.
 
 Figures (printed; nothing is asserted):
 

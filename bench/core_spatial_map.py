@@ -1,5 +1,5 @@
 """
-Benchmark: the sampled singularity map of a spatial arm (issue 25, freejoint_core.spatial_map).
+Benchmark: the sampled singularity map of a spatial arm (freejoint_core.spatial_map).
 
 Figures (printed; nothing is asserted), UR5 (wrist_2 free) and Panda (joint 7 free), m = 3,
 nominal 0.7:

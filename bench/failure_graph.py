@@ -1,5 +1,5 @@
 """
-A joint fails in the lockstep graph: the same run as the offline runner (issue 23).
+A joint fails in the lockstep graph: the same run as the offline runner.
 
 Runs the simulator, the controller and the planner in lockstep (``tools/demo.py``'s
 harness, no recorder) with the fully actuated arm (``config/fully_actuated/``), the

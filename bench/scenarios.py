@@ -1,5 +1,5 @@
 """
-Real-time scenarios of issues 10 and 11, on demand (not in ``make test``): figures and JSON.
+Real-time scenarios: replans, restarts, drivers (not in ``make test``): figures and JSON.
 
 Each scenario starts the real-time graph as ``bench/soak.py`` does (a process per node, the
 recorder on, sim and controller at SCHED_FIFO ``--priority``, a ROS domain per run, every
@@ -30,7 +30,7 @@ The tracking bound is 1.5 x the offline runner's worst max error of seeds 0-9 of
     effector's largest deviation from ``initial_position`` before the plan (<= 2 mm); then
     one circle: tracking vs the bound.
 
-``joint_failure``  (f) both cases, issue 23: the fully actuated arm (config/fully_actuated/),
+``joint_failure``  (f) both cases: the fully actuated arm (config/fully_actuated/),
     one circle, joint 3 made to fail ``--mid`` (2.5) s after its acceptance through the
     simulator's ``~/fail_joint`` (``soak.py --fully-actuated --fail-at``'s run): the
     detection and its delay from the failure taking effect, false alarms, tracking after it
@@ -704,7 +704,7 @@ def _fl(values):
     return 'n/a' if values is None else '[%s]' % ', '.join('%.1f' % v for v in values)
 
 
-# -- (f) a joint fails (issue 23) -------------------------------------------------------------
+# -- (f) a joint fails ---------------------------------------------------------------------
 def joint_failure(args, index):
     """Both cases: the fully actuated arm's joint 3 fails ``--mid`` s into a circle."""
     results = []

@@ -15,8 +15,8 @@ the soak's expected length, and is killed at the end in any case).
 Per run, from its bag (``controller_state``) and the simulator's per-step timing file:
 
 * tracking error rms / max over the measured window (``|position - position_desired|``);
-  with ``--stabilise`` or ``--fail-at`` over the ticks whose setpoint moves (the circles,
-  as issues 22 and 23 count it), the largest error in the rests apart (column ``rest mm``);
+  with ``--stabilise`` or ``--fail-at`` over the ticks whose setpoint moves (the circles:
+  every circle's max error), the largest error in the rests apart (column ``rest mm``);
 * stale periods: control periods over which the simulator applied no command answering the
   newest state it had published (none, or an older one), and the longest run of them;
 * holds: controller ticks with the ``STATUS_HOLDING`` bit (32);
@@ -518,7 +518,7 @@ def rest_at_q0(client):
 
 
 STABILISED_OVERLAYS = {'vertical': 'stabilised', 'horizontal': 'stabilised_horizontal'}
-"""The overlay of ``--stabilise`` per case (issue 22, ``freejoint_core.circles.
+"""The overlay of ``--stabilise`` per case (``freejoint_core.circles.
 stabilised_options``): vertical config/stabilised/ (the free link starts hanging, its
 damping on); horizontal config/stabilised_horizontal/ (the free rotor slowed in the first
 0.6 s of each rest, the shift back by 1 s: back to back, the circles 1 s apart)."""
@@ -670,8 +670,8 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
     ticks = controller_ticks(s.bag)
     window = (ticks['stamp_ns'] >= lo) & (ticks['stamp_ns'] <= hi)
     if stabilise or fail_at is not None:
-        # As the acceptance counts it (issue 22: every circle's max error; issue 23: the
-        # max over the whole circle): the ticks of a moving setpoint. The rests are
+        # Every circle's max error, over the whole circle: the ticks of a moving
+        # setpoint. The rests are
         # reported apart: there the horizontal settle shifts the end effector on purpose
         # (up to free_link_delta_max), and after a failure the law leaves the new free
         # link's swing to itself (docs/failures.md).
@@ -734,8 +734,8 @@ def failure_judgement(row, ticks, fail):
 
 
 FAIL_DELAY_MS = 50.0
-"""A failure made by ``--fail-at`` must be detected within this (issue 23's horizontal
-budget is 100 ms, vertical 20 ms offline; real time adds the service call and a period)."""
+"""A failure made by ``--fail-at`` must be detected within this (the offline detection
+budget is 100 ms horizontal, 20 ms vertical; real time adds the service call and a period)."""
 
 
 COLUMNS = (('case', '%-10s'), ('run', '%3s'), ('rms_mm', '%7.3f'), ('max_mm', '%7.3f'),
@@ -810,7 +810,7 @@ def parse(argv):
                     'before each (the vertical arm then drifts beyond the paper: see '
                     'rest_at_q0)')
     ap.add_argument('--stabilise', action='store_true',
-                    help='internal-motion stabilisation (issue 22): vertical, the free link '
+                    help='internal-motion stabilisation: vertical, the free link '
                     'starts hanging and the controller damps it (config/stabilised/); '
                     'horizontal, the free link slowed in the rests '
                     '(config/stabilised_horizontal/); back to back the circles 1 s apart; '
@@ -818,7 +818,7 @@ def parse(argv):
                     '(config/fully_actuated/free_link_damping.yaml)')
     ap.add_argument('--fully-actuated', action='store_true',
                     help='the paper arm with all joints driven and joint failure detection on '
-                    "(config/fully_actuated/, issue 23): each run counts the controller's "
+                    "(config/fully_actuated/): each run counts the controller's "
                     'detections (false alarms without --fail-at)')
     ap.add_argument('--fail-at', type=float, default=None, metavar='S',
                     help='with --fully-actuated: one circle per run, joint3 made to fail S s '

@@ -13,7 +13,7 @@ graph's records to ``bags/demo/metrics.json`` and runs ``analyze`` on the bags i
 
 Usage: ``python tools/demo.py [--cases horizontal vertical] [--seed 0] [--out bags/demo]``
 
-``--stabilise`` runs the vertical case with config/stabilised/ on top (issue 22: the free
+``--stabilise`` runs the vertical case with config/stabilised/ on top (the free
 link starts hanging, the controller's ``free_link_damping`` on) beside the offline circles
 runner with the same options (``freejoint_core.circles.run_circles``, one circle), into
 ``<out>/stabilised``.
@@ -25,13 +25,13 @@ the horizontal case), recorded and analysed, beside its offline runner
 With ``--stabilise`` too (``make demo ARM=four_link STABILISE=1``) it runs the example in
 the vertical plane with ``config/four_link/stabilised/`` on top (its hanging equilibrium,
 null-space damping, twice the paper's task gains) beside the offline circles runner.
-``--arm ur5`` / ``--arm panda`` (``make demo ARM=ur5``, issue 25) run a spatial arm from
+``--arm ur5`` / ``--arm panda`` (``make demo ARM=ur5``) run a spatial arm from
 example-robot-data's URDF (``config/<arm>/``: UR5 with wrist_2 free, Panda with joint 7
 free, task_dim 3): the tip's 0.1-m circle in the vertical plane facing the robot, then a
 10-s hold, beside the offline twin (``freejoint_core.spatial_offline.run_twin`` with the
 graph's parameter files); the tip compared tick by tick (1e-9 m), the 3-mm bound, the
 efforts and joint speeds against the URDF's limits.
-``--fail joint3@2.5`` (``make demo FAIL=joint3@2.5``, issue 23) runs the paper's arm with
+``--fail joint3@2.5`` (``make demo FAIL=joint3@2.5``) runs the paper's arm with
 all three joints driven (``config/fully_actuated/``) whose joint 3 loses its actuator and
 brake at 2.5 s (the simulator's ``fail_joint``): the controller detects it (momentum
 residual and the effort of joint_states) and switches to the law with that joint free,
@@ -68,7 +68,7 @@ writers of them (:func:`collected_writer_args`).
 A reliable writer can resend to a reader that fell behind only what its own history still
 holds: with the contract's 1000 a reader stalled for 1000 ticks - well under a second of
 wall time in lockstep, which runs faster than real time - loses messages for good
-(docs/performance-history.md, "The test suite, 2026-11-27 to 28")."""
+(docs/performance.md, "The test suite")."""
 FIGURES = os.path.join(ROOT, 'docs', 'figures')
 ARMS = {'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0},
         'ur5': {'passive_joint': 'wrist_2_joint', 'bound_mm': 3.0, 'spatial': 'ur5_wrist2',
@@ -79,13 +79,13 @@ STABILISED = 'stabilised'
 STABILISED_HORIZONTAL = 'stabilised_horizontal'
 """The horizontal case's overlay of ``--stabilise`` (the free link settled in the rests)."""
 FULLY_ACTUATED = 'fully_actuated'
-"""The overlay of ``--fail``: config/fully_actuated/ (issue 23), all three joints driven."""
+"""The overlay of ``--fail``: config/fully_actuated/, all three joints driven."""
 FAILURE_BOUND_MM = {'horizontal': 1.7, 'vertical': 5.5}
-"""The paper's single-circle bounds, which a run with a joint failing keeps (issue 23)."""
-"""The overlay of ``--stabilise``: config/stabilised/ (issue 22), the vertical case."""
+"""The paper's single-circle bounds, which a run with a joint failing keeps."""
+"""The overlay of ``--stabilise``: config/stabilised/, the vertical case."""
 """The shipped examples of ``--arm``: parameter overlay ``config/<name>/``, the passive joint
 recorded, the stated tracking bound (horizontal; test/core/test_four_link_example.py); a
-spatial arm (issue 25) also its case of ``freejoint_core.spatial_offline`` and the hold
+spatial arm also its case of ``freejoint_core.spatial_offline`` and the hold
 after the circle [s]."""
 """Where the figures of the two paper cases go (shown in the README)."""
 
@@ -430,7 +430,7 @@ def arm_offline(arm, case, seed, n_ticks, normal=None):
 
 def spatial_offline(arm, seed, n_ticks, normal=None):
     """
-    Return the offline twin's record and trace of a spatial example arm (issue 25).
+    Return the offline twin's record and trace of a spatial example arm.
 
     Everything is taken from the graph's parameter files (``config/*.yaml`` and
     ``config/<arm>/*.yaml``): the real arm and its start posture, dt_sub, the disturbance
