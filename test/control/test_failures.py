@@ -1,5 +1,5 @@
 """
-A joint fails during the task: the controller's loop in one process (issue 23).
+A joint fails during the task: the controller's loop in one process.
 
 The loop is driven in lockstep by the core's plant stepped here (``Plant.fail_joint``), no
 DDS, no clock; the setpoints are the paper's circle.  The reference for the detection and

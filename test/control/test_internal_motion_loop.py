@@ -1,5 +1,5 @@
 """
-The free link's damping in the controller's loop, one process (issue 22, r = m).
+The free link's damping in the controller's loop, one process (r = m).
 
 The loop (``free_link_damping: true``) is driven in lockstep by the core's plant stepped
 here from the hanging start, vertical case, seed 0, over one circle and a rest; the

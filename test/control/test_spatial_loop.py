@@ -1,4 +1,4 @@
-"""The controller's loop runs a spatial arm (issue 25): lockstep ticks equal the offline twin."""
+"""The controller's loop runs a spatial arm: lockstep ticks equal the offline twin."""
 import os
 
 from freejoint_control.loop import config_law, ControlLoop

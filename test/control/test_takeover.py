@@ -78,7 +78,7 @@ def takeover(case, kill_at, gap, brakes=True, seed=0):
 @pytest.mark.parametrize('case', ['vertical', 'horizontal'])
 @pytest.mark.parametrize('gap', [0.03, 0.25, 1.0])
 def test_a_spare_activated_after_a_kill_mid_circle_tracks_within_2_s(case, gap):
-    # 0.03 s: a takeover as measured (docs/performance-history.md "Hot spare");
+    # 0.03 s: a takeover as measured (docs/performance.md, "Real time under stress");
     # 0.25 s and 1 s: a slow one on a loaded machine, the brakes engaged meanwhile.
     errors, efforts = takeover(case, kill_at=1.0, gap=gap)
     assert errors and max(errors) < 0.005, max(errors)

@@ -1,4 +1,4 @@
-"""Joint failures: plant injection, momentum residual, detectors, verdicts (issue 23)."""
+"""Joint failures: plant injection, momentum residual, detectors, verdicts."""
 
 import dataclasses
 import math

@@ -90,7 +90,7 @@ def test_four_link_example_tracks_its_circle_within_the_stated_bound_horizontal(
 
 
 def test_the_stabilised_four_link_example_tracks_circles_back_to_back_in_the_vertical_plane():
-    # Issue 22: base joint free under gravity, hanging-equilibrium start, null-space damping
+    # The base joint free under gravity, hanging-equilibrium start, null-space damping
     # and twice the paper's task gains (circles.stabilised_options); seed 0, 2 circles back
     # to back within the stated bound (10 seeds x 10 circles: docs/internal-motion.md).
     from freejoint_core.circles import FOUR_LINK_TASK_GAINS, run_circles, stabilised_options

@@ -1,4 +1,4 @@
-"""Spatial arms from URDFs (issue 25): model terms, law, plan-time checks, a short run."""
+"""Spatial arms from URDFs: model terms, law, plan-time checks, a short run."""
 
 import re
 

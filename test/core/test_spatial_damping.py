@@ -1,5 +1,5 @@
 """
-A failed joint's drivetrain in the spatial plant: ``passive_damping`` (issue 25).
+A failed joint's drivetrain in the spatial plant: ``passive_damping``.
 
 The damping is checked against the arm's energy, not against the code's own formula: with
 no gravity, no disturbance and no actuator torque, the kinetic energy ``0.5 qd' M(q) qd``

@@ -1,4 +1,4 @@
-"""Sampled singularity map of a spatial arm (issue 25): kappa, voxels, chunks, merging."""
+"""Sampled singularity map of a spatial arm: kappa, voxels, chunks, merging."""
 
 import math
 import re

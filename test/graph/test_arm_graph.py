@@ -1,5 +1,5 @@
 """
-The node graph on another engine and on another arm (issue 13), in lockstep.
+The node graph on another engine and on another arm, in lockstep.
 
 * The paper's arm on the simulator's MuJoCo engine (``engine: mujoco``): the graph follows
   the offline runner on the RK4 plant within what the two integrators differ by (closed
@@ -12,7 +12,7 @@ The node graph on another engine and on another arm (issue 13), in lockstep.
   whole circle within the example's stated bound (``test/core/test_four_link_example.py``;
   recorded and analysed: ``make demo ARM=four_link``). The URDF arms in their own frames
   likewise (the whole circle offline here, in one process).
-* The spatial examples (``config/ur5``, ``config/panda``; issue 25): the graph equals the
+* The spatial examples (``config/ur5``, ``config/panda``): the graph equals the
   offline twin (``freejoint_core.spatial_offline.run_twin`` on the same parameter files)
   to 1e-9 per tick on the tip, the setpoint, the commands, the law's state and the free
   joint (``make demo ARM=ur5`` / ``ARM=panda`` runs the whole 15 s, recorded and analysed).
@@ -226,7 +226,7 @@ def test_urdf_arm_in_its_own_frames_tracks_its_whole_circle_offline_within_the_b
 @pytest.mark.timeout(600)
 @pytest.mark.parametrize('arm', ['ur5', 'panda'])
 def test_spatial_arm_graph_equals_its_offline_twin_tick_by_tick(procs, ros_node, wait, arm):
-    # make demo ARM=ur5 / ARM=panda in short (issue 25): the three nodes on config/<arm>/,
+    # make demo ARM=ur5 / ARM=panda in short: the three nodes on config/<arm>/,
     # the planner's autostart from the first joint state, against
     # spatial_offline.run_twin on the same parameter files (tools/demo.py spatial_offline)
     overlay = os.path.join(ROOT, 'config', arm)

@@ -36,7 +36,7 @@ config/sim.yaml's 0.5 s is what a user's lockstep run waits for a controller bef
 effort; here the graph is compared with the offline runner tick by tick, and a machine
 stalling the controller or the planner for 0.5 s (the suite's other workers running graphs
 beside, a slow host) would apply zero effort and change the run, not show a defect of the
-graph (docs/performance-history.md, "The test suite, 2026-11-27 to 28"). A stall of 30 s
+graph (docs/performance.md, "The test suite"). A stall of 30 s
 still fails the test.
 """
 
@@ -159,8 +159,8 @@ def test_the_collected_streams_writers_keep_as_many_ticks_as_this_processs_reade
     In-process: the nodes given ``demo.collected_writer_args`` keep COLLECT_DEPTH messages.
 
     Their writers of joint_states, ee_position and controller_state do.  A reader stalled
-    longer than the writer's history loses messages for good (docs/performance-history.md,
-    "The test suite, 2026-11-27 to 28"); the graph runs here and in ``make demo`` give the
+    longer than the writer's history loses messages for good (docs/performance.md,
+    "The test suite"); the graph runs here and in ``make demo`` give the
     nodes the depth of the collector's readers.
     """
     from rclpy.parameter import Parameter
@@ -292,8 +292,8 @@ def test_stopping_the_controller_makes_the_sim_apply_zero_effort_within_its_time
     # ros2_control would hold the last command forever; the simulator applies zero.
     wait(lambda: efforts[-1] == [0.0, 0.0, 0.0], 30.0, 'zero effort after the timeout',
          spin=run.spin)
-    # The line may reach the log after the zero effort reaches this node (CI 70: read at
-    # once, it was not there yet).
+    # The line may reach the log after the zero effort reaches this node (read at once
+    # on a loaded machine, it was not there yet).
     line = ('no command on /effort_controller/commands for 0.3 s: zero effort (not holding '
             'the last one)')
     wait(lambda: line in procs.log(sim), 30.0, "the simulator's timeout line", spin=run.spin)

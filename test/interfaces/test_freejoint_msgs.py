@@ -73,7 +73,7 @@ def test_plan_circle_service_answers_from_another_process(procs, ros_node):
                                  start_angle=0.0, direction=1, execute=True)
     # Sent again after 3 s unanswered (the echo's answer is idempotent): rmw_fastrtps drops
     # a response sent before the server matched the client's response reader
-    # (ros2/rmw_fastrtps#390, #467) - a CI run waited 10 s for one in vain.
+    # (ros2/rmw_fastrtps#390, #467): waiting for it alone can take 10 s in vain.
     answer = ServiceCalls(ros_node).call(PlanCircle, '/probe/plan_circle', request, 30.0,
                                          resend=3.0)
     assert answer is not None, 'no answer from plan_circle within 30 s'

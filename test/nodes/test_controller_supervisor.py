@@ -29,15 +29,15 @@ PRIORITY = 'thread_priority:=50'
 """Sim and controllers at SCHED_FIFO 50, the planner at 40, as the soak runs them: a
 vertical arm at the default scheduler on a loaded machine is not a real-time loop."""
 NO_GUARD = 'readiness_guard:=false'
-"""The supervisor is tested here, not the readiness guard (test/control/test_readiness.py): a
-CI run's active controller, whose guard found the loop short of its margins on that
-machine, never released the brakes within 60 s."""
+"""The supervisor is tested here, not the readiness guard (test/control/test_readiness.py): on a
+loaded machine the active controller's guard can find the loop short of its margins and
+not release the brakes within 60 s."""
 CHILDREN = {'controller_node', 'controller_node_spare'}
 """The supervisor's two node names (a new spare takes the one that is free)."""
 TAKEOVER_WALL_S = 5.0
 """Bound on the wall time from the kill to the next command this process receives: that the
 spare took over and commands flow again, not how fast. This process's receipt lags the
-simulator's on a loaded machine (a clean-clone CI run: 1.6 s here while the simulator's
+simulator's on a loaded machine (1.6 s here while the simulator's
 drive watchdog, 50 ms, never engaged: its commands had resumed within 50 ms). How fast a
 spare catches the arm is tested in one process (test/control/test_takeover.py) and measured
 by ``bench/scenarios.py controller_restart``."""
@@ -175,7 +175,7 @@ def test_killed_active_controller_mid_circle_is_taken_over_by_the_spare_within_b
     # No divergence (the simulator's log says none); the activated spare reports its state.
     # Whether it catches the arm is test/control/test_takeover.py's (one process, no wall
     # clock): here, on a loaded machine, the new spare's start-up 2 s after the kill shares
-    # the CPUs with the loop, and a CI run's tracking then was that machine's, not the code's.
+    # the CPUs with the loop, and the tracking then is that machine's, not the code's.
     assert not [ln for ln in procs.log(sim).splitlines() if 'diverg' in ln.lower()]
     assert [t for t, _, _ in g.ctl_states if t > resumed], 'no controller_state after the kill'
     assert procs.stop(sup) == 0, procs.tail(sup, 20)

@@ -391,7 +391,7 @@ def test_a_bad_start_up_parameter_makes_the_planners_main_log_one_line_naming_it
 
 def test_plan_circle_every_1_3_s_while_circles_run_never_steps_the_setpoint_and_every_accepted_circle_is_reached(  # noqa: E501
         procs, ros_node, wait):
-    """Issue 10's acceptance, in sim time: plan requests while moving make no step."""
+    """In sim time: plan requests while moving make no step."""
     import math
     import numpy as np
     from freejoint_core.trajectory import CircleQuintic

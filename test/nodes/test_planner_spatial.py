@@ -1,5 +1,5 @@
 """
-The planner node on a spatial arm (issue 25) in its own process, driven by this test.
+The planner node on a spatial arm in its own process, driven by this test.
 
 Started on config/planner.yaml with the UR5 overlay (config/ur5/planner.yaml: wrist_2 free)
 in sim time, fed the joint state of the offline runner's start posture as the lockstep

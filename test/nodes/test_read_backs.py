@@ -1,5 +1,5 @@
 """
-Read-backs tell the values in use (issue 21).
+Read-backs tell the values in use.
 
 ``joint_names`` / ``joints`` not given are declared with the arm's, so ``ros2 param get``
 answers the names the node uses.

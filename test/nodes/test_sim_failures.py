@@ -1,5 +1,5 @@
 """
-The simulator's joint failures (issue 23) in its own process, driven by this test.
+The simulator's joint failures in its own process, driven by this test.
 
 Every published state is compared with ``freejoint_core.plant.Plant`` stepped here with the
 same commands and the same failures (``Plant.fail_joint``).

@@ -455,7 +455,7 @@ def test_realtime_states_are_stamped_on_the_step_grid_at_publish_rate(procs, ros
     from freejoint_sim.sim_node import MAX_CATCH_UP
     # 1 kHz steps, joint_states at 500 Hz: the states a 500 Hz driver gives its controller.
     # Every state reaches this process: its reader and the simulator's writer hold `every`
-    # (a busy test process overflowed a reader of 100: CI 93).
+    # (a busy test process overflows a reader of 100).
     every = 20000
     proc = _realtime(procs, '-p', 'publish_rate:=500.0',
                      '-p', publisher_depth_override(JOINT_STATES, every))
@@ -535,8 +535,8 @@ def test_realtime_no_command_for_brake_timeout_stops_the_arm_where_it_is_until_t
     wait(lambda: len(ctl.arrivals) >= 2 and list(ctl.arrivals[-1].velocity) == [0.0] * 3,
          5.0, 'a braked state', spin=ctl.spin)
     n = len(ctl.arrivals)
-    # A zero command still in flight when the watchdog fired (taken late on a loaded machine:
-    # a CI run) is a next command: it releases the brakes, and the watchdog engages them
+    # A zero command still in flight when the watchdog fired (taken late on a loaded
+    # machine) is a next command: it releases the brakes, and the watchdog engages them
     # again 0.05 s later. Every release after the start is such a command, and the arm is
     # held after the last engagement: wait for 0.2 s of states with the log's engagements
     # and releases paired.

@@ -1,5 +1,5 @@
 """
-The simulator node on a spatial arm (issue 25) in its own process, driven by this test.
+The simulator node on a spatial arm in its own process, driven by this test.
 
 Started on config/sim.yaml with the UR5 overlay (config/ur5/sim.yaml: wrist_2 free) in
 lockstep, it publishes the six chain joints at the offline runner's start posture, at rest,

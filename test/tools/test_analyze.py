@@ -118,7 +118,7 @@ def test_bad_input_gives_one_line_naming_the_file_and_a_non_zero_exit(
 def test_a_real_time_bag_is_analysed_in_seconds_from_its_first_tick(tmp_path, make_bag):
     from freejoint_tools.analyze import analyse_bag
     path = str(tmp_path / 'horizontal')
-    t0_ns = 1_795_695_095_917_000_000             # the real-time run, Unix time
+    t0_ns = 1_795_695_095_917_000_000             # a real-time run's, Unix time
     make_bag(path, 300, custom_data={'case': 'horizontal', 'variant': 'robust'}, t0_ns=t0_ns)
     _, trace, _ = analyse_bag(path)
     assert trace['t0'] == pytest.approx(t0_ns * 1e-9, abs=1e-6)

@@ -33,7 +33,7 @@ def test_player_republishes_a_bag_in_order_with_its_clock(procs, ros_node, wait,
          % procs.log(player), spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.01))
     assert player.returncode == 0, procs.log(player)
     # (/clock too: reliable, but its 300 messages can still be in flight behind the others
-    # when the player has exited - on a loaded machine, CI 62)
+    # when the player has exited - on a loaded machine)
 
     def spin():
         rclpy.spin_once(ros_node, timeout_sec=0.01)

@@ -42,7 +42,7 @@ def _assert_every_gap_reported(stamps, log, topic):
     At 1 kHz on an idle machine nothing is missing; on an overloaded one a publisher's
     depth-100 history can overflow while the recorder is starved of CPU - which the
     recorder must then say (no silent loss). Fast DDS may report more than the bag misses
-    (a CI run with 5 CPU-bound processes on 2 cores: 121 reported, none missing): every
+    (with 5 CPU-bound processes on 2 cores: 121 reported, none missing): every
     missing tick reported is the property, not the count's equality.
     """
     assert stamps == sorted(set(stamps)) and stamps[0] == 0
@@ -86,7 +86,7 @@ def test_recorder_holds_every_message_of_a_1khz_lockstep_like_run(procs, wait, t
     bag = open_bag(bag_path)
     assert bag.finalised, bag.notes
     # Every message published is in the bag or reported lost by the middleware. On a loaded
-    # machine (a CI run with three test workers) the recorder can be starved long enough for
+    # machine (three test workers beside it) the recorder can be starved long enough for
     # a burst to be lost - and says so; how much it holds without loss is a benchmark's
     # figure (bench/tools_recorder.py), so the exact comparison below is made when nothing
     # was reported lost.

@@ -1,8 +1,8 @@
 """
 The recorder's readiness (``~/status``) in real time and in sim time (no DDS).
 
-A real-time graph has no ``/clock``: a recorder waiting for it never answered success
-(issue 21). ``/clock`` is waited for only in sim time, where the log times come from it.
+A real-time graph has no ``/clock``: a recorder waiting for it would never answer
+success. ``/clock`` is waited for only in sim time, where the log times come from it.
 """
 from freejoint_common import contract
 from freejoint_tools.params import RECORDER

@@ -60,7 +60,7 @@ def test_system_time_stamps_are_not_a_grid_and_are_named_from_the_first_stamp():
 
 
 def test_a_real_time_stream_on_a_1_ms_wall_grid_counts_no_ticks():
-    # the real-time run: stamps of the wall clock, each a whole millisecond
+    # a real-time run: stamps of the wall clock, each a whole millisecond
     t0 = 1_795_695_095_917 * MS
     grid = _grid([t0 + k * MS for k in range(500)])
     assert grid.system_time() and not grid.on_grid()

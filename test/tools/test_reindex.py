@@ -191,7 +191,7 @@ def test_sigkill_then_reindex_gives_a_bag_rosbags_and_mcap_read(procs, wait, tmp
     assert not before.finalised
     from rosbags.rosbag2 import Reader
     with pytest.raises(FileNotFoundError, match='metadata'):
-        Reader(bag_path)                  # what the issue saw: rosbags cannot open it
+        Reader(bag_path)                  # what a user sees: rosbags cannot open it
     done = subprocess.run([REINDEX, bag_path],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr

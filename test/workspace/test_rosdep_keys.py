@@ -16,7 +16,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 KEYS_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'rosdep_keys.txt')
 MANIFESTS = sorted(glob.glob(os.path.join(ROOT, 'src', '*', 'package.xml')))
 NOT_KEYS = {'python3-mcap', 'python3-rosbags'}
-"""Names that look like rosdep keys but are not in rosdistro (the issue-14 finding)."""
+"""Names that look like rosdep keys but are not in rosdistro."""
 
 
 def _known_keys():
