@@ -24,7 +24,7 @@ every wait bounded, every process stopped whatever happens:
 Rows: the CPU figures and wake-ups per tick and the ratios. The target compares the
 controller with the echo beside it: both answer the same states from the same simulator
 in the same run, whose CPU per tick moves from run to run by more than the target's
-margin on this 2-vCPU VM (a wake-up costs more when four processes take turns than when
+margin on a 2-vCPU VM (a wake-up costs more when four processes take turns than when
 two do, and the other processes' timing differs run to run), so the echo driven alone or
 in another run is not the comparison; and at the same scheduling, since an echo at the
 default scheduler beside SCHED_FIFO nodes runs after them, finds several states waiting

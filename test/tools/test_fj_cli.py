@@ -32,7 +32,7 @@ process left in /dev/shm, whatever fj does."""
 
 PARAM_TIMEOUT = '60'
 """fj's ``--timeout`` for a ``param`` command that gives none: its 10-s default is too short
-for a node on this machine while the suite's other workers run SCHED_FIFO graphs (no
+for a node on a 2-core machine while the suite's other workers run SCHED_FIFO graphs (no
 describe_parameters answer within 10 s from a live controller)."""
 
 
