@@ -655,9 +655,9 @@ class ControlLoop:
 
     def _planned(self, ns, sp):
         """
-        Return the plan's position for the state stamped ``ns`` (ControllerState's
-        ``position_planned``): the setpoint ``sp`` used, as streamed, else (real time) the
-        newest fresh one, else ().
+        Return the plan's position for the state stamped ``ns`` (``position_planned``).
+
+        The setpoint ``sp`` used, as streamed; else (real time) the newest fresh one; else ().
         """
         if sp is None:
             if self.lockstep:
