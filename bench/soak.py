@@ -859,7 +859,34 @@ def worst_of(rows):
             'rest_max_mm': max((r.get('rest_max_mm') or 0.0) for r in done),
             'bound_mm': done[0]['bound_mm'],
             'met_runs': sum(1 for r in rows if r.get('met')),
+            'met_reference_runs': sum(1 for r in rows if r.get('met_reference')),
             'all_met': all(r.get('met') for r in rows)}
+
+
+def worst_lines(case, worst):
+    """Return the summary lines of a case (:func:`worst_of`): against the plan, then the rest."""
+    if not worst.get('completed'):
+        return ['%-10s no run completed' % case]
+    plan = ('%-10s worst of %d against the plan: max %s mm, rms %s mm, %s %% of the '
+            "plan's moving ticks within %.3f mm, held or braked %s s while the plan moved, "
+            '%d of %d plans completed%s: %d/%d runs met' % (
+                case, worst['completed'], _text(worst['plan_max_mm'], '%.3f'),
+                _text(worst['plan_rms_mm'], '%.3f'), _text(worst['plan_share_pct'], '%.1f'),
+                worst['bound_mm'], _text(worst['plan_held_s'], '%.2f'),
+                worst['plans_completed'], worst['plans_total'],
+                '' if worst['plan_late_max_s'] is None
+                else ', late by at most %.3f s' % worst['plan_late_max_s'],
+                worst['met_runs'], worst['runs']))
+    rest = ('%-10s vs the controller reference: max %.3f mm, rms %.3f mm; stale %d (longest '
+            'run %d), holds %d, diverged runs %d, latency max %.2f ms, state age max %.2f ms, '
+            'machine wake-up late %.1f ms; %d/%d runs within the bound against the reference'
+            % (case, worst['max_mm'], worst['rms_mm'], worst['stale'], worst['longest_stale'],
+               worst['holds'], worst['diverged_runs'], worst['latency_max_ms'],
+               worst['state_age_max_ms'], worst['wake_max_ms'], worst['met_reference_runs'],
+               worst['runs']))
+    if worst['rest_max_mm']:
+        rest += '; in the rests at most %.3f mm' % worst['rest_max_mm']
+    return [plan, rest]
 
 
 def _text(value, fmt):
@@ -968,28 +995,7 @@ def main(argv=None):
               % (row['case'], row['run'], row['error']))
     print()
     for case, worst in per_case.items():
-        if worst.get('completed'):
-            print('%-10s worst of %d against the plan: max %s mm, rms %s mm, %s %% of the '
-                  "plan's moving ticks within %.3f mm, held or braked %s s while the plan "
-                  'moved, %d of %d plans completed%s' % (
-                      case, worst['completed'], _text(worst['plan_max_mm'], '%.3f'),
-                      _text(worst['plan_rms_mm'], '%.3f'),
-                      _text(worst['plan_share_pct'], '%.1f'), worst['bound_mm'],
-                      _text(worst['plan_held_s'], '%.2f'), worst['plans_completed'],
-                      worst['plans_total'], '' if worst['plan_late_max_s'] is None
-                      else ', late by at most %.3f s' % worst['plan_late_max_s']))
-            print('%-10s vs the controller reference: max %.3f mm, rms %.3f mm; stale %d '
-                  '(longest run %d), holds %d, diverged runs %d, latency max %.2f ms, '
-                  'state age max %.2f ms, machine wake-up late %.1f ms: %d/%d runs met'
-                  % (case, worst['max_mm'],
-                     worst['rms_mm'], worst['stale'], worst['longest_stale'], worst['holds'],
-                     worst['diverged_runs'], worst['latency_max_ms'],
-                     worst['state_age_max_ms'], worst['wake_max_ms'], worst['met_runs'],
-                     worst['runs'])
-                  + ('; in the rests at most %.3f mm' % worst['rest_max_mm']
-                     if worst['rest_max_mm'] else ''))
-        else:
-            print('%-10s no run completed' % case)
+        print('\n'.join(worst_lines(case, worst)))
     with open(args.out, 'w') as f:
         json.dump({'conditions': cond, 'runs': rows, 'worst': per_case}, f, indent=2)
     say('written to %s; load %.2f at the end'

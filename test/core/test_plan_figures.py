@@ -100,21 +100,26 @@ def test_a_plan_whose_time_stood_still_is_late_by_that_long():
     # so its final setpoint comes 0.25 s after its nominal end. Plan 2 starts and is cut off.
     stamps, ids, ptime, final = [], [], [], []
     k = 0
+
+    def add(plan, t, end=False):
+        stamps.append(len(stamps) * DT)
+        ids.append(plan)
+        ptime.append(t)
+        final.append(end)
     for i in range(-20, 0):                  # transition ticks before the start: not counted
-        stamps.append(k * DT); ids.append(1); ptime.append(i * DT); final.append(False)
+        add(1, i * DT)
         k += 1
     plan_t = 0.0
     while True:
-        stamps.append(k * DT); ids.append(1); ptime.append(plan_t)
         done = plan_t > 0.5
-        final.append(done)
+        add(1, plan_t, done)
         k += 1
         if done:
             break
         paused = 0.2 <= plan_t and k * DT < 0.2 + 0.25 + 20 * DT
         plan_t = plan_t if paused else round(plan_t + DT, 9)
     for i in range(100):
-        stamps.append(k * DT); ids.append(2); ptime.append(i * DT); final.append(False)
+        add(2, i * DT)
         k += 1
     n = len(stamps)
     sp = np.zeros((n, 2))

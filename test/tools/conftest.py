@@ -182,6 +182,7 @@ def start_circle(ros_node):
         assert answer.accepted, answer.reason
     return start
 
+
 class PlanCheck:
     """
     An independent check of a bag's figures against the plan, written apart from
@@ -238,7 +239,6 @@ class PlanCheck:
             share = sum(1 for e in moving if e * 1e3 <= bound_mm) / len(moving)
         return rms, max(errors), len(errors), len(moving), share
 
-
     @staticmethod
     def analyze_line(done, name):
         """Return the groups of ``make analyze``'s plan line of bag ``name``."""
@@ -247,7 +247,6 @@ class PlanCheck:
             if found and found.group(1) == name:
                 return found
         raise AssertionError('no plan line for %s in:\n%s' % (name, done.stdout))
-
 
     @staticmethod
     def assert_printed_equals(found, check, tol_m=1e-6):

@@ -93,8 +93,8 @@ def test_a_state_counts_held_after_50_ms_without_a_command_or_while_the_controll
     assert not held[700:800].any() and held[800:900].all() and not held[900:].any()
 
 
-def test_a_run_held_while_the_plan_moved_is_not_met_though_its_reference_was(tmp_path,
-                                                                                plan_check):
+def test_a_run_held_while_the_plan_moved_is_not_met_though_its_reference_was(
+        tmp_path, plan_check):
     path = str(tmp_path / 'held')
     _write_held_run(path)
     # What the controller reports while it holds: its held reference, 0.05 mm off.
@@ -133,4 +133,5 @@ def test_a_real_time_soak_run_prints_the_figures_an_independent_check_gives(
     assert row['plan_moving_ticks'] > 1000                         # the circle ran
     done = analyze(bag, '--no-plots')
     assert done.returncode == 0, done.stderr
-    plan_check.assert_printed_equals(plan_check.analyze_line(done, 'bag'), plan_check.independent(bag, bound_mm=bound))
+    plan_check.assert_printed_equals(plan_check.analyze_line(done, 'bag'),
+                                     plan_check.independent(bag, bound_mm=bound))
