@@ -185,10 +185,12 @@ def start_circle(ros_node):
 
 class PlanCheck:
     """
-    An independent check of a bag's figures against the plan, written apart from
-    ``freejoint_core.plan_figures``: per state stamp, the setpoints' positions interpolated
-    with ``np.interp`` on integer-ns stamps, a state counted moving when the setpoint of its
-    stamp - or either neighbour between two - has a non-zero velocity.
+    An independent check of a bag's figures against the plan.
+
+    Written apart from ``freejoint_core.plan_figures``: per state stamp, the setpoints'
+    positions interpolated with ``np.interp`` on integer-ns stamps, a state counted moving
+    when the setpoint of its stamp - or either neighbour between two - has a non-zero
+    velocity.
     """
 
     PLAN_LINE = re.compile(r'^plan: (\S+): rms ([0-9.]+) mm, max ([0-9.]+) mm over '

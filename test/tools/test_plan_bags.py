@@ -18,11 +18,11 @@ START_NS = 1_800_000_000_000_000_000
 
 def _write_held_run(path, seconds=2.0, more=None):
     """
-    A run whose arm stands at the plan's start while the plan goes round a 0.1-m circle.
+    Write a run whose arm stands at the plan's start while the plan goes round a circle.
 
-    ``more(put, k, ns)``: writes more messages of tick k (``put(topic, type, ns, msg)``).
+    The circle's radius is 0.1 m. ``more(put, k, ns)`` writes more messages of tick k
+    (``put(topic, type, ns, msg)``).
     """
-    from builtin_interfaces.msg import Time
     from freejoint_common.contract import stamp_from_ns
     from freejoint_msgs.msg import CartesianSetpoints
     from geometry_msgs.msg import PointStamped
@@ -52,7 +52,7 @@ def _write_held_run(path, seconds=2.0, more=None):
         sp.acceleration = [0.0, 0.0]
         sp.plan_id, sp.plan_time, sp.final = [1], [t], [False]
         ee = PointStamped(header=sp.header)
-        ee.header.stamp = Time(sec=ns // 10 ** 9, nanosec=ns % 10 ** 9)
+        stamp_from_ns(ns, ee.header.stamp)
         ee.point.x, ee.point.y = 0.3, 0.0
         put('/setpoints', 'freejoint_msgs/msg/CartesianSetpoints', ns, sp)
         put('/ee_position', 'geometry_msgs/msg/PointStamped', ns, ee)
@@ -63,7 +63,7 @@ def _write_held_run(path, seconds=2.0, more=None):
 
 def test_a_state_counts_held_after_50_ms_without_a_command_or_while_the_controller_holds(
         tmp_path):
-    from freejoint_common.contract import stamp_label
+    from freejoint_common.contract import stamp_from_ns, stamp_label
     from freejoint_msgs.msg import ControllerState
     from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -78,7 +78,7 @@ def test_a_state_counts_held_after_50_ms_without_a_command_or_while_the_controll
             put('/effort_controller/commands', 'std_msgs/msg/Float64MultiArray', ns, cmd)
         if k in (0, 800, 900):              # thinned: published on a change of status only
             cs = ControllerState(status=32 if k == 800 else 0)
-            cs.header.stamp.sec, cs.header.stamp.nanosec = divmod(ns, 10 ** 9)
+            stamp_from_ns(ns, cs.header.stamp)
             # every vector filled: rclpy pads an empty float64[] as rosbags does not read
             for name in ('error', 'error_rate', 'sliding', 'law_state', 'effort', 'position',
                          'position_desired', 'position_planned'):

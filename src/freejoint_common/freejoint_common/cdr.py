@@ -185,7 +185,8 @@ class ControllerStateWriter:
         res : freejoint_control.loop.Result
             Its ``error``, ``error_rate``, ``sliding``, ``law_state_values``, ``effort``,
             ``position``, ``position_desired``, ``position_planned`` (sequences of float: lists,
-            tuples or numpy arrays; ``position_planned`` may be empty), ``det_dd``, ``status``, ``setpoint_age``, ``dt``, ``state_age``.
+            tuples or numpy arrays; ``position_planned`` may be empty), ``det_dd``,
+            ``status``, ``setpoint_age``, ``dt``, ``state_age``.
         message : bytes
             ``res.message`` UTF-8 encoded.
 
