@@ -18,8 +18,12 @@ rows tagged ``[1 process]``). Each run is isolated in a ROS domain of its own wi
   process per node: state->command latency p50 / p99 / max (from the
   simulator's publication of state k to its receipt of the command answering k), control
   periods without a fresh command (the command applied over period k did not answer state
-  k, or none came), periods skipped, the tracking error (from the bag's controller_state)
-  against the offline runner's bound (worst max error of seeds 0-9, same case);
+  k, or none came), periods skipped; against the plan (``freejoint_core.plan_figures`` of
+  the bag's ``ee_position`` and ``setpoints``): the end effector's max / rms error, the share
+  of the plan's moving ticks within the case's bound (1.5 x the offline worst max), the time
+  held or braked while the plan moved, the plans completed and how late; and the error
+  against the controller's own reference (the bag's controller_state) against the offline
+  runner's worst max / rms (seeds 0-9, same case);
 * for both: CPU time per tick and peak resident memory (``VmHWM`` of ``/proc/<pid>/status``
   at the end of the run) of each node, and the machine's load average.
 
@@ -525,6 +529,34 @@ def tracking_error(bag, window_ns):
     return float(err.max()), float(np.sqrt(np.mean(err ** 2))), len(err)
 
 
+def plan_rows(tag, bag, case, window_ns):
+    """Return the rows of the figures against the plan of the states stamped in the window."""
+    from freejoint_core.plan_figures import format_figures, SHARE_MET, tracking_bound_mm
+    from freejoint_tools.plan_bag import bag_plan_figures
+    bound = tracking_bound_mm(case)[0]
+    try:
+        fig = bag_plan_figures(bag, bound, window_ns)
+    except ValueError as exc:
+        say('%s: no figures against the plan: %s' % (tag, exc))
+        return [{'name': '%s: figures against the plan' % tag, 'value': 0, 'unit': '',
+                 'target': '>= 1'}]
+    say('%s: against the plan: %s' % (tag, format_figures(fig)))
+    share = None if fig['share'] is None else 100.0 * fig['share']
+    return [
+        {'name': '%s: end effector vs the plan max' % tag, 'value': fig['max_mm'],
+         'unit': 'mm', 'target': None},
+        {'name': '%s: end effector vs the plan rms' % tag, 'value': fig['rms_mm'],
+         'unit': 'mm', 'target': None},
+        {'name': "%s: plan's moving ticks within %.3g mm" % (tag, bound), 'value': share,
+         'unit': '%', 'target': '>= %g' % (100.0 * SHARE_MET)},
+        {'name': '%s: held or braked while the plan moved' % tag, 'value': fig['held_s'],
+         'unit': 's', 'target': None},
+        {'name': '%s: plans completed (of %d)' % (tag, len(fig['plans'])),
+         'value': fig['plans_completed'], 'unit': 'plans', 'target': None},
+        {'name': '%s: latest plan end behind its nominal end' % tag,
+         'value': fig['late_max_s'], 'unit': 's', 'target': None}]
+
+
 def bring_up_realtime(client, graph, layout, bag, case, sim, ctl=(), planner=(),
                       custom=None, reset=True):
     """
@@ -677,6 +709,7 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS, case=CASE):
     max_mm, rms_mm, n_err = tracking_error(bag, (int(t['stamp_ns'][k0]),
                                                  int(t['stamp_ns'][k1])))
     bound_max, bound_rms = offline_bound(case)
+    plan = plan_rows(tag, bag, case, (int(t['stamp_ns'][k0]), int(t['stamp_ns'][k1])))
     say('%s: %d periods in %.1f s, latency p50 %.0f us p99 %.0f us max %.0f us, %d '
         'without a fresh command (%d without any), %d skipped; tracking max %.3f mm rms %.3f '
         'mm over %d ticks (offline worst max %.3f, rms %.3f); %d plans; exit codes %s; '
@@ -703,11 +736,11 @@ def realtime(client, env, layout='separate', seconds=RT_SECONDS, case=CASE):
          'unit': 'lines', 'target': '<= 0'},
         {'name': '%s: max gap between state publications' % tag,
          'value': gaps.max() * 1e-3, 'unit': 'ms', 'target': None},
-        {'name': '%s: tracking error max' % tag, 'value': max_mm,
+        {'name': '%s: error vs controller reference max' % tag, 'value': max_mm,
          'unit': 'mm', 'target': '<= %.4g' % bound_max},
-        {'name': '%s: tracking error rms' % tag, 'value': rms_mm, 'unit': 'mm',
-         'target': '<= %.4g' % bound_rms},
-    ]
+        {'name': '%s: error vs controller reference rms' % tag, 'value': rms_mm,
+         'unit': 'mm', 'target': '<= %.4g' % bound_rms},
+    ] + plan
     rows += _node_rows(tag, cpu0, cpu1, hwm, len(ks), exited)
     hz = os.sysconf('SC_CLK_TCK') * (end - start)
     used = sum(cpu1[n] - cpu0.get(n, 0.0) for n in cpu1) / (end - start)

@@ -549,6 +549,47 @@ def test_a_late_setpoint_stream_is_carried_forward_then_held_and_rejoined_withou
             assert abs(refs[k][0] - refs[k - 1][0] - refs[k - 1][2] * DT) < 2e-5, k
 
 
+def test_position_planned_is_the_streamed_setpoint_while_the_reference_is_carried_or_held():
+    # The late stream above: no setpoint from 30 to 89 ms. The reference is carried forward
+    # (40-79), then held (80-89), then blends back; position_planned is the newest
+    # setpoint as streamed throughout, and the error against it is |position - planned|.
+    loop, _ = make(lockstep=False, max_state_age=0.0, stale_timeout=2.0, resume_time=0.02,
+                   carry_forward_time=0.05)
+    q, qd = Q0, (0.0, 0.0, 0.0)
+    base = loop.law.model.fk(q).tolist()
+
+    def stream(j):
+        return (base[0] + 1e-4 * j, base[1], 0.1, 0.0, 0.0, 0.0)
+    plan_errors = []
+    for k in range(120):
+        if not 30 <= k < 90:
+            setpoint(loop, k, stream(k))
+        res = state(loop, k, q, qd)
+        newest = min(k, 29) if 30 <= k < 90 else k
+        assert tuple(res.position_planned) == stream(newest)[0:2], k
+        if 40 <= k < 90:
+            assert tuple(res.position_desired) != tuple(res.position_planned), k
+        plan_errors.append(math.dist(res.position, stream(newest)[0:2]))
+    values = dict(loop.diagnostics(1.0, loop.counters(), False, ('1.0', '2.0'),
+                                   '/joint_states', None)[3])
+    assert values['error vs plan max [mm]'] == '%.4g' % (max(plan_errors) * 1e3)
+    assert values['error vs plan [mm]'] == '%.4g' % (plan_errors[-1] * 1e3)
+
+
+def test_position_planned_is_the_lockstep_setpoint_and_empty_without_a_plan():
+    loop, _ = make(stale_timeout=0.5)
+    for k in range(3):
+        setpoint(loop, k, _setpoint(k))
+        res = state(loop, k)
+        assert tuple(res.position_planned) == _setpoint(k)[0:2]
+    state(loop, 3)
+    res = loop.watchdog(0, 100.0 + 3 * DT + 1.0)        # stale: the lockstep hold
+    assert res.status & STATUS_HOLDING and tuple(res.position_planned) == ()
+    values = dict(loop.diagnostics(1.0, loop.counters(), False, ('1.0', '2.0'),
+                                   '/joint_states', None)[3])
+    assert values['error vs plan [mm]'] == '-'
+
+
 def test_real_time_skips_a_state_older_than_max_state_age_without_a_command():
     loop, logs = make(lockstep=False, max_state_age=2.0)
     now = 10_000 * DT_NS + 20_000_000_000

@@ -78,6 +78,8 @@ class _Result:
         self.det_dd = 1.5e-3
         self.position = [rnd.uniform(-1, 1) for _ in range(m)]
         self.position_desired = [rnd.uniform(-1, 1) for _ in range(m)]
+        # the plan's setpoint: m values, or none (no plan) for an odd k
+        self.position_planned = [rnd.uniform(-1, 1) for _ in range(m)] if k % 2 == 0 else []
         self.status = 0x0421
         self.message = message
         self.setpoint_age = 0.004
@@ -107,6 +109,7 @@ def test_controller_state_written_here_is_the_message_rclpy_reads(m, k, n, messa
     assert msg.det_dd == res.det_dd
     assert list(msg.position) == res.position
     assert list(msg.position_desired) == res.position_desired
+    assert list(msg.position_planned) == res.position_planned
     assert msg.status == res.status
     assert msg.message == message
     assert msg.state_age == res.state_age
@@ -120,7 +123,7 @@ def test_controller_state_of_numpy_arrays_is_the_same_message_as_of_lists():
     write = ControllerStateWriter(['j1', 'j2'], ['x'] * 8)
     of_lists = write((1, 2), (3, 4), res, b'x')
     for name in ('error', 'error_rate', 'sliding', 'law_state_values', 'effort', 'position',
-                 'position_desired'):
+                 'position_desired', 'position_planned'):
         setattr(res, name, np.array(getattr(res, name)))
     assert write((1, 2), (3, 4), res, b'x') == of_lists
 

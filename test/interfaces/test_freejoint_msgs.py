@@ -40,6 +40,7 @@ def _state():
     msg.det_dd = 1.5e-3
     msg.position = [0.2, 0.0]
     msg.position_desired = [0.2001, 0.0]
+    msg.position_planned = [0.2002, 0.0]
     msg.status = ControllerState.STATUS_NEAR_SINGULAR | ControllerState.STATUS_TORQUE_LIMITED
     msg.message = 'near singular; torque limited'
     return msg

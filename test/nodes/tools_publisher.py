@@ -68,6 +68,7 @@ def tick_messages(k):
     cs = ControllerState()
     cs.header.stamp = js.header.stamp
     cs.position_desired = sp.position
+    cs.position_planned = sp.position
     cs.position = [sp.position[0] + 1e-3 * math.sin(k / 7.0),
                    sp.position[1] - 1e-3 * math.cos(k / 11.0)]
     cs.error = [cs.position[0] - sp.position[0], cs.position[1] - sp.position[1]]

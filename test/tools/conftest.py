@@ -1,9 +1,13 @@
 """Fixtures of the freejoint_tools tests: bags written in-process, the test publisher."""
+import math
 import os
+import re
 import subprocess
 import sys
 
+from freejoint_common.contract import to_ns
 from freejoint_tools.harness import load_source
+import numpy as np
 import pytest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -177,3 +181,86 @@ def start_circle(ros_node):
         assert answer is not None, 'no answer from plan_circle'
         assert answer.accepted, answer.reason
     return start
+
+
+class PlanCheck:
+    """
+    An independent check of a bag's figures against the plan.
+
+    Written apart from ``freejoint_core.plan_figures``: per state stamp, the setpoints'
+    positions interpolated with ``np.interp`` on integer-ns stamps, a state counted moving
+    when the setpoint of its stamp - or either neighbour between two - has a non-zero
+    velocity.
+    """
+
+    PLAN_LINE = re.compile(r'^plan: (\S+): rms ([0-9.]+) mm, max ([0-9.]+) mm over '
+                           r'(\d+) ticks; (?:([0-9.]+) % of the )?(\d+) moving ticks')
+    """``make analyze``'s line per bag (groups: bag, rms, max [mm], ticks, share [%], moving)."""
+
+    @staticmethod
+    def independent(path, window_ns=None, bound_mm=None):
+        """
+        Return (rms [m], max [m], ticks, moving ticks, share) of a bag, sample by sample.
+
+        ``window_ns``: only the states stamped in it. ``bound_mm``: for the share (else None).
+        """
+        from freejoint_tools.bagfile import open_bag
+        bag = open_bag(path)
+        ee = {}
+        for _, msg in bag.decode('/ee_position'):
+            ee.setdefault(to_ns(msg.header.stamp), (msg.point.x, msg.point.y))
+        setpoints = {}
+        for _, msg in bag.decode('/setpoints'):
+            m = len(msg.position) // len(msg.stamps)
+            for i, ns in enumerate(msg.stamps):
+                setpoints[int(ns)] = (list(msg.position[i * m:i * m + 2]),
+                                      list(msg.velocity[i * m:i * m + 2]))
+        sp_ns = sorted(setpoints)
+        first = sp_ns[0]
+        x = np.array([float(ns - first) for ns in sp_ns])
+        px = np.array([setpoints[ns][0][0] for ns in sp_ns])
+        py = np.array([setpoints[ns][0][1] for ns in sp_ns])
+        errors, moving = [], []
+        for ns in sorted(ee):
+            if window_ns is not None and not window_ns[0] <= ns <= window_ns[1]:
+                continue
+            if not sp_ns[0] <= ns <= sp_ns[-1]:
+                continue
+            at = float(ns - first)
+            plan = (float(np.interp(at, x, px)), float(np.interp(at, x, py)))
+            error = math.hypot(ee[ns][0] - plan[0], ee[ns][1] - plan[1])
+            errors.append(error)
+            i = int(np.searchsorted(sp_ns, ns))
+            around = [sp_ns[i]] if sp_ns[i] == ns else [sp_ns[i - 1], sp_ns[i]]
+            moves = any(any(v != 0.0 for v in setpoints[k][1]) for k in around)
+            if moves:
+                moving.append(error)
+        rms = math.sqrt(sum(e * e for e in errors) / len(errors))
+        share = None
+        if bound_mm is not None and moving:
+            share = sum(1 for e in moving if e * 1e3 <= bound_mm) / len(moving)
+        return rms, max(errors), len(errors), len(moving), share
+
+    @staticmethod
+    def analyze_line(done, name):
+        """Return the groups of ``make analyze``'s plan line of bag ``name``."""
+        for line in done.stdout.splitlines():
+            found = PlanCheck.PLAN_LINE.match(line)
+            if found and found.group(1) == name:
+                return found
+        raise AssertionError('no plan line for %s in:\n%s' % (name, done.stdout))
+
+    @staticmethod
+    def assert_printed_equals(found, check, tol_m=1e-6):
+        rms, worst, ticks, moving, share = check
+        assert abs(float(found.group(2)) * 1e-3 - rms) <= tol_m
+        assert abs(float(found.group(3)) * 1e-3 - worst) <= tol_m
+        assert (int(found.group(4)), int(found.group(6))) == (ticks, moving)
+        if share is not None:
+            assert abs(float(found.group(5)) - 100.0 * share) <= 0.05 + 1e-9
+
+
+@pytest.fixture
+def plan_check():
+    """Give the independent check of the figures against the plan (:class:`PlanCheck`)."""
+    return PlanCheck

@@ -22,7 +22,8 @@ HOLD_AFTER = 60
 
 def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, tmp_path,
                                                          same_record, start_circle,
-                                                         recorder_drained):
+                                                         recorder_drained, plan_check,
+                                                         analyze):
     import rclpy
     from freejoint_common.contract import CONTROLLER_STATE, JOINT_STATES, profile
 
@@ -71,6 +72,23 @@ def test_bag_of_the_lockstep_graph_gives_the_live_record(procs, ros_node, wait, 
     assert min(recorded) == 0
     graph = compute_record('horizontal', 'robust', 0, source='graph', **arrays_from_messages(
         live['states'], live['joints'], 'joint3', max_ticks=TICKS))
-    record, _, warnings = analyse_bag(bag_path)
+    record, trace, warnings = analyse_bag(bag_path)
     assert warnings == []
     same_record(record, graph)
+
+    # Against the plan: what make analyze prints is the independent per-sample check; in
+    # lockstep every state has the setpoint of its own stamp, which the controller reports
+    # as position_planned.
+    check = plan_check.independent(bag_path, bound_mm=trace['plan']['bound_mm'])
+    done = analyze(bag_path, '--no-plots')
+    assert done.returncode == 0, done.stderr
+    plan_check.assert_printed_equals(plan_check.analyze_line(done, 'horizontal'), check)
+    assert check[3] > 0                                     # the circle moved
+    setpoints = {}
+    for _, msg in bag.decode('/setpoints'):
+        for i, ns in enumerate(msg.stamps):
+            setpoints[int(ns)] = list(msg.position[2 * i:2 * i + 2])
+    planned = [(stamp_ns(m), list(m.position_planned)) for _, m in
+               bag.decode('/controller_state') if len(m.position_planned)]
+    assert len(planned) > TICKS // 2
+    assert all(setpoints[ns] == p for ns, p in planned)

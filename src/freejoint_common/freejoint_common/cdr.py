@@ -184,8 +184,9 @@ class ControllerStateWriter:
             ``header.stamp`` and ``setpoint_stamp`` as ``(sec, nanosec)``.
         res : freejoint_control.loop.Result
             Its ``error``, ``error_rate``, ``sliding``, ``law_state_values``, ``effort``,
-            ``position``, ``position_desired`` (sequences of float: lists, tuples or numpy
-            arrays), ``det_dd``, ``status``, ``setpoint_age``, ``dt``, ``state_age``.
+            ``position``, ``position_desired``, ``position_planned`` (sequences of float: lists,
+            tuples or numpy arrays; ``position_planned`` may be empty), ``det_dd``,
+            ``status``, ``setpoint_age``, ``dt``, ``state_age``.
         message : bytes
             ``res.message`` UTF-8 encoded.
 
@@ -198,7 +199,9 @@ class ControllerStateWriter:
         e, ed, s = _plain(res.error), _plain(res.error_rate), _plain(res.sliding)
         law, eff = _plain(res.law_state_values), _plain(res.effort)
         p, pd = _plain(res.position), _plain(res.position_desired)
-        key = (len(e), len(ed), len(s), len(law), len(eff), len(p), len(pd), len(message))
+        pp = _plain(res.position_planned)
+        key = (len(e), len(ed), len(s), len(law), len(eff), len(p), len(pd), len(pp),
+               len(message))
         fmt = self._formats.get(key)
         if fmt is None:
             fmt = self._formats[key] = self._compile(key)
@@ -207,11 +210,11 @@ class ControllerStateWriter:
         return fmt.pack(ENCAPSULATION, sec, nanosec, 1, b'',
                         key[0], *e, key[1], *ed, key[2], *s, self._law_names,
                         key[3], *law, key[4], *eff, self._joints, res.det_dd,
-                        key[5], *p, key[6], *pd, res.status, key[7] + 1, message,
+                        key[5], *p, key[6], *pd, key[7], *pp, res.status, key[8] + 1, message,
                         res.state_age, sp_sec, sp_nsec, res.setpoint_age, res.dt)
 
     def _compile(self, key):
-        n_e, n_ed, n_s, n_law, n_eff, n_p, n_pd, n_msg = key
+        n_e, n_ed, n_s, n_law, n_eff, n_p, n_pd, n_pp, n_msg = key
         f = _Format()
         f.primitive('i', 4)                 # header.stamp.sec
         f.primitive('I', 4)                 # header.stamp.nanosec
@@ -225,6 +228,7 @@ class ControllerStateWriter:
         f.primitive('d', 8)                 # det_dd
         f.sequence(n_p)                     # position
         f.sequence(n_pd)                    # position_desired
+        f.sequence(n_pp)                    # position_planned
         f.primitive('H', 2)                 # status
         f.string(n_msg)                     # message
         f.primitive('d', 8)                 # state_age

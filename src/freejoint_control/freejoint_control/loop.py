@@ -86,7 +86,11 @@ class Result:
     effort : list of float, (r,)
         The command [N m] in the order of parameter ``joints``.
     error, error_rate, sliding, position, position_desired : sequence of float, (m,)
-        ControllerState's task-space terms [m, m/s] (m: the task dimension).
+        ControllerState's task-space terms [m, m/s] (m: the task dimension); ``error``
+        against the controller's reference ``position_desired``.
+    position_planned : sequence of float, (m,) or (0,)
+        The plan's setpoint for the state, as streamed (before hold, blend or carrying
+        forward) [m]; empty without one (ControllerState's ``position_planned``).
     det_dd, state_age, setpoint_age, dt : float
         As ControllerState's fields.
     status : int
@@ -107,7 +111,7 @@ class Result:
     """
 
     __slots__ = ('stamp_ns', 'effort', 'error', 'error_rate', 'sliding', 'det_dd',
-                 'position', 'position_desired', 'status',
+                 'position', 'position_desired', 'position_planned', 'status',
                  'message', 'setpoint_ns', 'setpoint_age', 'dt', 'state_age',
                  'law_state_names', 'law_state_values', 'repeated', 'latency_ns')
 
@@ -117,6 +121,7 @@ class Result:
         self.effort = []
         self.error = self.error_rate = self.sliding = zero
         self.position = self.position_desired = zero
+        self.position_planned = ()
         self.det_dd = self.state_age = self.setpoint_age = self.dt = 0.0
         self.status = 0
         self.message = ''
@@ -225,6 +230,9 @@ class ControlLoop:
         self.stale_periods = 0          # onsets of a stale (or late) setpoint stream
         self._stale_now = False
         self.period_bits = 0            # status bits of the answers of the status period
+        self._plan_error_max = 0.0      # |position - position_planned| max of the period [m]
+        self._plan_error_last = None    # and of the last answer (None: no plan)
+        self._ref_error_max = 0.0       # |error| (vs the controller's reference) max [m]
         self._last_sp_refusal = ''
         self._good_state = self.law.save_state()
         # Last command sent, in command order (None: none yet in lockstep, whose start is
@@ -645,6 +653,21 @@ class ControlLoop:
             self.log(ERROR, None, 'cannot start from the measured motion (%s): blending '
                      'from the position at rest' % exc)
 
+    def _planned(self, ns, sp):
+        """
+        Return the plan's position for the state stamped ``ns`` (``position_planned``).
+
+        The setpoint ``sp`` used, as streamed; else (real time) the newest fresh one; else ().
+        """
+        if sp is None:
+            if self.lockstep:
+                return ()
+            found = self._realtime_setpoint(ns)
+            if found is None:
+                return ()
+            sp = found[1]
+        return sp[0:self.task_dim]
+
     def _no_setpoint(self, ns, q, qd, now_ns, late=None):
         """Answer a state without a fresh (or timely) setpoint: hold or zero effort."""
         if late is not None:
@@ -806,6 +829,7 @@ class ControlLoop:
     def _tick(self, ns, q, qd, sp_ns, sp, now_ns, hold_reason='', late=False):
         """Compute the answer to the state stamped ns (sp None: hold)."""
         status = 0
+        planned = self._planned(ns, sp)
         shaper = self.shaper
         law = self.law
         if self.lockstep or self.last_ns < 0:
@@ -907,6 +931,17 @@ class ControlLoop:
         res.det_dd = out.det
         res.position = out.p if pred is None else law.model.fk(q)
         res.position_desired = p_ref
+        res.position_planned = planned
+        if planned:
+            plan_error = math.dist(res.position, planned)
+            self._plan_error_last = plan_error
+            if plan_error > self._plan_error_max:
+                self._plan_error_max = plan_error
+        else:
+            self._plan_error_last = None
+        ref_error = math.hypot(*out.e)
+        if ref_error > self._ref_error_max:
+            self._ref_error_max = ref_error
         res.status = status
         res.message = _status_message(status, out.det, self.config, hold_reason,
                                       shaper) if status else ''
@@ -938,7 +973,7 @@ class ControlLoop:
             holding = sp is None
             limit = self._max_hold_error if holding else self._max_error
             if limit:
-                error = math.hypot(*out.e)
+                error = ref_error
                 if error > limit:
                     return self._following_error(ns, error, guard, limit, holding)
         return res
@@ -1019,6 +1054,7 @@ class ControlLoop:
         q = self._last_q
         res.position = law.model.fk(q) if q is not None else self._last_sp
         res.position_desired = self._last_sp
+        res.position_planned = ()
         res.status = status
         res.message = message
         res.setpoint_ns = None
@@ -1071,6 +1107,8 @@ class ControlLoop:
         old = self.old_states - old0
         bits = self.period_bits
         self.period_bits = 0
+        plan_max, self._plan_error_max = self._plan_error_max, 0.0
+        ref_max, self._ref_error_max = self._ref_error_max, 0.0
         res = self.result
         current = res.status
         period = 'in the last %.1f s' % elapsed
@@ -1130,6 +1168,10 @@ class ControlLoop:
             ('latency max [ms]', latency[1]),
             ('status', current),
             ('status message', res.message),
+            ('error vs plan [mm]', '-' if self._plan_error_last is None
+             else '%.4g' % (self._plan_error_last * 1e3)),
+            ('error vs plan max [mm]', '%.4g' % (plan_max * 1e3)),
+            ('error vs controller reference max [mm]', '%.4g' % (ref_max * 1e3)),
             ('ticks', self.ticks),
             ('zero-effort answers', self.zero_answers),
             ('holds', self.holds),

@@ -48,6 +48,16 @@ read from the bag (:func:`failures_of`); per failure one line says when it faile
 how it was detected, the delay and the largest tracking error after it, and Figs. 3/4 mark
 both times.
 
+Against the plan: the table's figures are the error against the controller's own
+reference (``ControllerState.position_desired``: held, blended or carried forward). Per bag
+one line ``plan: <bag>: ...`` gives the arm against the plan
+(``freejoint_core.plan_figures.plan_figures`` of ``freejoint_tools.plan_bag``: the recorded
+``ee_position`` against the ``setpoints`` interpolated at each state stamp): rms / max, the
+share of the plan's moving ticks within the bound (``--bound-mm``, default the paper's
+case's ``tracking_bound_mm``; none for another arm), the time held or braked while the plan
+moved, the plans completed and how late. A bag without ``ee_position`` or ``setpoints``
+gives a warning instead.
+
 Bad input (a missing, truncated or foreign bag, a bag without the run's topics) gives one
 line ``analyze: error: <file>: <problem>`` on stderr and exit code 1. A bag whose recorder
 was killed (not finalised) is analysed up to its last complete chunk, with a warning.
@@ -201,6 +211,7 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     trace['t0'] = time_origin(arrays['t'])
     trace['t'] = arrays['t'] - trace['t0']
     trace['failures'] = failures_of(states, [m for topic in diag for _, m in decoded[topic]])
+    trace['plan'] = plan_of(bag, store, info, arm, warnings)
     trace['grid'] = trace['path'] = None
     grids = bag.topics_of_type(GRID_TYPE)
     if grids and bag.topics[grids[0]].count:
@@ -209,6 +220,30 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     if markers and bag.topics[markers[0]].count:
         trace['path'] = bag.decode(markers[0], store)[-1][1]
     return record, trace, warnings
+
+
+def plan_of(bag, store, info, arm, warnings):
+    """
+    Return the bag's figures against the plan (``plan_figures``), or None with a warning.
+
+    The bound: ``info['bound_mm']`` if given, else the paper's case's ``tracking_bound_mm``
+    for the Table I arm, else none (no share).
+    """
+    from freejoint_core.errors import FreejointValueError
+    from freejoint_core.plan_figures import plan_figures, tracking_bound_mm
+    from .plan_bag import plan_arrays
+    bound = info.get('bound_mm')
+    if bound is None and arm['name'] == 'Table I' and info['case'] in ('horizontal',
+                                                                       'vertical'):
+        bound = tracking_bound_mm(info['case'])[0]
+    try:
+        arrays, origin = plan_arrays(bag, store)
+        figures = plan_figures(bound_mm=bound, **arrays)
+    except (ValueError, FreejointValueError) as exc:
+        warnings.append('%s: no figures against the plan: %s' % (bag.path, exc))
+        return None
+    figures['origin_ns'] = origin
+    return figures
 
 
 def failures_of(states, diagnostics=()):
@@ -448,7 +483,19 @@ def _parse(argv):
     parser.add_argument('--state-topic', default=None, help='ControllerState topic')
     parser.add_argument('--joint-topic', default=None, help='JointState topic')
     parser.add_argument('--theta', action='store_true', help='table with theta_final')
+    parser.add_argument('--bound-mm', type=float, default=None,
+                        help="tracking bound against the plan [mm] (default: the paper's "
+                        "case's, 1.5 x the offline worst max; none for another arm)")
     return parser.parse_args(argv)
+
+
+def print_plan_lines(traces):
+    """Print per bag the figures against the plan (the table is vs the controller's reference)."""
+    from freejoint_core.plan_figures import format_figures
+    print('(the table: error against the controller reference, position_desired)')
+    for trace in traces:
+        if trace['plan'] is not None:
+            print('plan: %s: %s' % (trace['name'], format_figures(trace['plan'])))
 
 
 def main(argv=None):
@@ -456,7 +503,8 @@ def main(argv=None):
     opts = _parse(sys.argv[1:] if argv is None else argv)
     from freejoint_core.metrics import format_table, write_records
     overrides = {'case': opts.case, 'variant': opts.variant, 'seed': opts.seed,
-                 'passive_joint': opts.passive_joint, 'max_ticks': opts.max_ticks}
+                 'passive_joint': opts.passive_joint, 'max_ticks': opts.max_ticks,
+                 'bound_mm': opts.bound_mm}
     records, traces = [], []
     for path in opts.bags:
         try:
@@ -476,6 +524,7 @@ def main(argv=None):
         records.append(record)
         traces.append(trace)
     print(format_table(records, theta=opts.theta))
+    print_plan_lines(traces)
     import numpy as np
     for trace in traces:
         error = np.linalg.norm(trace['p'] - trace['p_d'], axis=1)

@@ -799,6 +799,20 @@ class Recorder(Node, Lifecycle):
             lines.append('  %d message(s) taken after a later one was written (their log '
                          'time as if in order)' % self._late)
         self.get_logger().info('\n'.join(lines))
+        self._log_plan_figures()
+
+    def _log_plan_figures(self):
+        """Log the run's figures against the plan, read back from the finalised bag."""
+        from .plan_bag import plan_summary
+        if not self.writer.closed or self.problem or not {
+                contract.EE_POSITION.absolute, contract.SETPOINTS.absolute} <= set(self._channels):
+            return
+        try:
+            line = plan_summary(self.output, self.writer.custom_data.get('case'))
+        except Exception as exc:  # noqa: B902 - a summary line must not cost the bag
+            self.get_logger().warn('no figures against the plan: %s' % exc)
+        else:
+            self.get_logger().info('against the plan: %s' % line)
 
     def run_notes(self):
         """

@@ -1,0 +1,314 @@
+"""
+Figures of a run against the plan: the measured end effector vs the planner's setpoints.
+
+The controller's own reference (``ControllerState.position_desired``) is held, blended back
+from a hold or carried forward when the loop cannot keep up; the error against it says how
+well the law followed that reference, not whether the arm did its task. The figures here
+judge the arm against the plan: the end effector measured at each state stamp (the
+simulator's or driver's ``ee_position``) against the planner's streamed setpoint
+interpolated (linearly, per axis) at that stamp.
+
+:func:`plan_figures` is the one computation the analysis (``make analyze``), the soak, the
+graph benchmark, the recorder's end-of-run summary and the controller's ``/diagnostics``
+use. :func:`tracking_bound_mm` is the one definition of the per-case bound those runs are
+judged by (1.5 x the offline runner's worst max error over seeds 0-9: 1.70 mm horizontal,
+5.51 mm vertical on the reference machine), :func:`plan_met` the one verdict.
+
+Plain numpy, no ROS: arrays of stamps [s], positions [m], velocities [m/s].
+"""
+
+import math
+
+import numpy as np
+
+from .errors import FreejointValueError, positive
+
+BOUND_FACTOR = 1.5
+"""The tracking bound of a real-time run: this x the offline runner's worst max error."""
+BOUND_FACTOR_HOGS = 3.0
+"""The same beside CPU hogs (``make soak --hogs N``)."""
+BOUND_SEEDS = range(10)
+"""The offline seeds the bound is taken over."""
+SHARE_MET = 0.99
+"""A run meets its bound when at least this share of the plan's moving ticks is within it."""
+OFFLINE_WORST_MAX_MM = {'horizontal': (5, 1.1336738429506854),
+                        'vertical': (6, 3.6728808453953605)}
+"""(seed, max error [mm]) of the worst of :data:`BOUND_SEEDS` per case, as ``make offline``
+computes it on the reference machine (test_plan_figures recomputes the seed: another CPU
+gives other last bits). The tools that do not run the offline seeds take the bound from it."""
+
+_BOUNDS = {}
+
+
+def tracking_bound_mm(case, hogs=False, recompute=False):
+    """
+    Return the tracking bound of ``case`` [mm] and how it is made.
+
+    The bound is :data:`BOUND_FACTOR` (:data:`BOUND_FACTOR_HOGS` with ``hogs``) x the
+    offline runner's worst max error over the seeds :data:`BOUND_SEEDS` (the paper's
+    circle, robust law, disturbance on: ``freejoint_core.offline.run_case``): with
+    ``recompute`` run here, once per process (a few seconds per seed; what the soak
+    does), else :data:`OFFLINE_WORST_MAX_MM` (1.70 mm horizontal, 5.51 mm vertical).
+
+    Parameters
+    ----------
+    case : str
+        'horizontal' or 'vertical' (the paper's arm).
+    hogs : bool
+        The run had CPU hogs beside it.
+    recompute : bool
+        Run the offline seeds on this machine.
+
+    Returns
+    -------
+    tuple of float
+        ``(bound_mm, factor, offline_worst_max_mm)``.
+
+    Raises
+    ------
+    FreejointValueError
+        ``case`` is not one of the paper's cases.
+
+    """
+    from .offline import run_case
+    if case not in ('horizontal', 'vertical'):
+        raise FreejointValueError(f"case: expected 'horizontal' or 'vertical', got {case!r}")
+    if not recompute:
+        worst = OFFLINE_WORST_MAX_MM[case][1]
+    else:
+        if case not in _BOUNDS:
+            _BOUNDS[case] = max(run_case(case, 'robust', seed)[0]['max_mm']
+                                for seed in BOUND_SEEDS)
+        worst = _BOUNDS[case]
+    factor = BOUND_FACTOR_HOGS if hogs else BOUND_FACTOR
+    return factor * worst, factor, worst
+
+
+def _array(name, value, shape):
+    """Return ``value`` as a finite float array of ``shape`` (None: any length), or raise."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise FreejointValueError(f'{name}: expected a numeric array, got {value!r}') from None
+    if arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape,
+                                                                              shape)):
+        want = '(%s)' % ', '.join('n' if s is None else str(s) for s in shape)
+        raise FreejointValueError(f'{name}: expected shape {want}, got {arr.shape}')
+    if arr.size and not np.all(np.isfinite(arr)):
+        row = int(np.nonzero(~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1))[0][0])
+        raise FreejointValueError(f'{name}: non-finite value at row {row}')
+    return arr
+
+
+def _increasing(name, t):
+    if t.size > 1 and np.any(np.diff(t) <= 0.0):
+        k = int(np.nonzero(np.diff(t) <= 0.0)[0][0])
+        raise FreejointValueError(f'{name}: stamps must increase, row {k + 1} is not after '
+                                  f'row {k}')
+
+
+def plan_figures(t, p, sp_t, sp_p, sp_v, bound_mm=None, held=None, plan_id=None,
+                 plan_time=None, final=None):
+    """
+    Return the figures of a run against the plan.
+
+    Parameters
+    ----------
+    t : array_like, shape (N,)
+        State stamps [s], increasing (subtract an origin first for system time: float64
+        keeps 0.2 us at 1.8e9 s).
+    p : array_like, shape (N, m)
+        The end effector measured at those stamps [m] (m = 2 or 3).
+    sp_t : array_like, shape (K,)
+        The planner's setpoint stamps [s] on the same time base, increasing (one per
+        stamp: the last one recorded).
+    sp_p, sp_v : array_like, shape (K, m)
+        Their positions [m] and velocities [m/s].
+    bound_mm : float, optional
+        The run's tracking bound [mm] (:func:`tracking_bound_mm`); None: no share.
+    held : array_like of bool, shape (N,), optional
+        States the controller did not track the plan from: no command answered them (the
+        driver braked) or it held (``STATUS_HOLDING``). None: not known.
+    plan_id, plan_time, final : array_like, shape (K,), optional
+        The setpoints' plan, time within it [s] and end mark (``CartesianSetpoints``):
+        per plan its lateness. All three or none.
+
+    Returns
+    -------
+    dict
+        ``ticks`` (states within the setpoints' span, judged), ``rms_mm`` / ``max_mm``
+        (error ``|p - p_plan|`` over them [mm]; None without any), ``moving_ticks`` (the
+        judged states whose interpolated setpoint speed is non-zero: the plan moves),
+        ``moving_max_mm``, ``within`` (moving ticks within ``bound_mm``), ``share``
+        (``within / moving_ticks``; None without bound or moving tick), ``bound_mm``,
+        ``moving_s`` (time the plan moved while states came: the moving ticks' intervals
+        to the next state [s]), ``held_s`` (of it, the time the controller held or the
+        driver braked [s]; None without ``held``), ``plans`` (list of dict per plan id >
+        0 in the order they start: ``plan_id``, ``start_s`` (stamp of its first setpoint
+        at plan time >= 0 [s]), ``end_s`` (stamp of its ``final`` setpoint, None: not
+        completed - replaced, or the record ended), ``late_s`` (end minus the nominal end,
+        the start plus the plan time at the end [s]: how long the plan's time stood
+        still, None if not completed)), ``plans_completed``, ``late_max_s`` (largest
+        ``late_s``, None if none completed), ``error_mm`` (N,) (NaN outside the span),
+        ``moving`` (N,) bool.
+
+    Raises
+    ------
+    FreejointValueError
+        Naming the first bad argument (shapes, non-finite values, stamps not increasing,
+        a negative bound).
+
+    Notes
+    -----
+    A state stamped outside ``[sp_t[0], sp_t[-1]]`` has no plan and is not judged. A
+    planner that pauses its plan's time (a feed hold) streams setpoints at rest meanwhile:
+    those ticks do not count as moving, and the pause shows as the plan's lateness.
+
+    """
+    t = _array('t', t, (None,))
+    n = t.shape[0]
+    p = _array('p', p, (n, None))
+    m = p.shape[1]
+    if m not in (2, 3):
+        raise FreejointValueError(f'p: expected 2 or 3 values per row, got {m}')
+    _increasing('t', t)
+    sp_t = _array('sp_t', sp_t, (None,))
+    k = sp_t.shape[0]
+    sp_p = _array('sp_p', sp_p, (k, m))
+    sp_v = _array('sp_v', sp_v, (k, m))
+    _increasing('sp_t', sp_t)
+    if bound_mm is not None:
+        bound_mm = positive('bound_mm', bound_mm)
+    if held is not None:
+        held = np.asarray(held)
+        if held.shape != (n,):
+            raise FreejointValueError(f'held: expected shape ({n},), got {held.shape}')
+        held = held.astype(bool)
+    extra = (plan_id, plan_time, final)
+    if any(v is not None for v in extra) and any(v is None for v in extra):
+        raise FreejointValueError('plan_id: plan_id, plan_time and final go together')
+
+    error = np.full(n, np.nan)
+    moving = np.zeros(n, dtype=bool)
+    judged = np.zeros(n, dtype=bool)
+    if k:
+        judged = (t >= sp_t[0]) & (t <= sp_t[-1])
+        tj = t[judged]
+        plan = np.column_stack([np.interp(tj, sp_t, sp_p[:, j]) for j in range(m)])
+        error[judged] = 1e3 * np.sqrt(np.sum((p[judged] - plan) ** 2, axis=1))
+        speed = np.sqrt(np.sum(sp_v * sp_v, axis=1))
+        moving[judged] = np.interp(tj, sp_t, speed) > 0.0
+    err = error[judged]
+    moving_err = error[moving]
+    step = np.append(np.diff(t), 0.0)
+    within = int(np.count_nonzero(moving_err <= bound_mm)) if bound_mm is not None else None
+    out = {
+        'ticks': int(err.size),
+        'rms_mm': float(math.sqrt(float(np.mean(err * err)))) if err.size else None,
+        'max_mm': float(err.max()) if err.size else None,
+        'moving_ticks': int(moving_err.size),
+        'moving_max_mm': float(moving_err.max()) if moving_err.size else None,
+        'bound_mm': bound_mm,
+        'within': within,
+        'share': (within / moving_err.size if within is not None and moving_err.size
+                  else None),
+        'moving_s': float(step[moving].sum()),
+        'held_s': None if held is None else float(step[moving & held].sum()),
+        'error_mm': error,
+        'moving': moving,
+    }
+    out.update(_plans(sp_t, extra) if plan_id is not None else
+               {'plans': [], 'plans_completed': 0, 'late_max_s': None})
+    return out
+
+
+def _plans(sp_t, extra):
+    """Return the per-plan figures of the setpoints' plan ids, times and end marks."""
+    k = sp_t.shape[0]
+    ids = np.asarray(extra[0])
+    if ids.shape != (k,) or (k and (not np.all(np.isfinite(ids.astype(float)))
+                                    or np.any(ids < 0))):
+        raise FreejointValueError(f'plan_id: expected ({k},) ids >= 0, got {ids!r:.60}')
+    ids = ids.astype(np.int64)
+    ptime = _array('plan_time', extra[1], (k,))
+    final = np.asarray(extra[2])
+    if final.shape != (k,):
+        raise FreejointValueError(f'final: expected shape ({k},), got {final.shape}')
+    final = final.astype(bool)
+    plans = []
+    started = (ids > 0) & (ptime >= 0.0)
+    for pid in dict.fromkeys(ids[started].tolist()):
+        rows = np.nonzero((ids == pid) & started)[0]
+        first = rows[0]
+        ends = rows[final[rows]]
+        entry = {'plan_id': pid, 'start_s': float(sp_t[first]), 'end_s': None,
+                 'late_s': None}
+        if ends.size:
+            end = ends[0]
+            entry['end_s'] = float(sp_t[end])
+            entry['late_s'] = float((sp_t[end] - sp_t[first]) - (ptime[end] - ptime[first]))
+        plans.append(entry)
+    done = [e['late_s'] for e in plans if e['late_s'] is not None]
+    return {'plans': plans, 'plans_completed': len(done),
+            'late_max_s': max(done) if done else None}
+
+
+def plan_met(figures, diverged=False, outcome_excuses=False):
+    """
+    Return whether a run met its bound against the plan.
+
+    Parameters
+    ----------
+    figures : dict
+        :func:`plan_figures` with a ``bound_mm``.
+    diverged : bool
+        The plant diverged (never met).
+    outcome_excuses : bool
+        The plan's own outcome says it was paused or aborted with a reason and the arm
+        stayed within the bound of the path meanwhile (a planner with a goal outcome
+        reports it; the caller judges it). Then a share below :data:`SHARE_MET` is met.
+
+    Returns
+    -------
+    bool
+        Not diverged, at least one moving tick judged, and :data:`SHARE_MET` of the moving
+        ticks within the bound (or ``outcome_excuses``).
+
+    """
+    if diverged or figures.get('share') is None:
+        return False
+    return bool(figures['share'] >= SHARE_MET or outcome_excuses)
+
+
+def format_figures(figures):
+    """
+    Return one line of the figures against the plan (what the tools print).
+
+    Parameters
+    ----------
+    figures : dict
+        :func:`plan_figures`.
+
+    Returns
+    -------
+    str
+
+    """
+    def mm(value):
+        return 'n/a' if value is None else '%.4f mm' % value
+    parts = ['rms %s, max %s over %d ticks' % (mm(figures['rms_mm']), mm(figures['max_mm']),
+                                               figures['ticks'])]
+    if figures['share'] is not None:
+        parts.append('%.1f %% of the %d moving ticks within %.3f mm' % (
+            100.0 * figures['share'], figures['moving_ticks'], figures['bound_mm']))
+    else:
+        parts.append('%d moving ticks' % figures['moving_ticks'])
+    if figures['held_s'] is not None:
+        parts.append('held or braked %.3f s of the %.3f s the plan moved'
+                     % (figures['held_s'], figures['moving_s']))
+    total = len(figures['plans'])
+    if total:
+        parts.append('%d of %d plans completed%s' % (
+            figures['plans_completed'], total, '' if figures['late_max_s'] is None
+            else ', late by at most %.3f s' % figures['late_max_s']))
+    return '; '.join(parts)
