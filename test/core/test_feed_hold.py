@@ -99,7 +99,7 @@ def test_scaled_sample_is_the_chain_rule_of_the_plan_at_its_own_time():
 
 
 def _held_circle(stop_at, stop_time, resume_at, start_time, ticks):
-    """The paper's circle streamed per tick through a feed stopped and resumed."""
+    """Return the paper's circle per tick through a feed stopped and resumed."""
     circle = CircleQuintic()
     feed = FeedRate(DT)
     out = []

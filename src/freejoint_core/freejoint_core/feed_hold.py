@@ -211,6 +211,13 @@ class FeedRate:
         return (self._lag0 + n - gained / dt, r0 + (r1 - r0) * smoothstep(u),
                 (r1 - r0) * smoothstep_rate(u) / T)
 
+    def stand(self, k):
+        """Stand still from tick ``k`` on (rate 0; a plan held at its start, at rest)."""
+        self._lag0 = 0.0
+        self._k0 = int(k)
+        self._r0 = self._r1 = 0.0
+        self._T = self.dt
+
     def ramp(self, k, target, full_time):
         """
         From tick ``k`` on, take the rate from its value at ``k`` to ``target``.

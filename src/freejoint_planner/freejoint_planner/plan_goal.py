@@ -96,7 +96,7 @@ class Outcome:
         return CODE_NAMES.get(self.code, str(self.code))
 
     def line(self):
-        """Return the outcome in one line (the log, ``fj``, the analysis)."""
+        """Return the outcome as one line of text (the log, ``fj``, the analysis)."""
         text = f'plan {self.plan_id}: {self.code_name}'
         if self.message:
             text += f': {self.message}'
@@ -167,7 +167,7 @@ class PlanMonitor:
 
     # -- inputs ---------------------------------------------------------------------------
     def published(self, batch):
-        """Keep a batch of setpoints the stream published (its stamps increasing)."""
+        """Keep what the stream published: one batch of setpoints (stamps increasing)."""
         if batch:
             self._history.append(batch)
 
@@ -204,7 +204,7 @@ class PlanMonitor:
             path = self.limits.path
             if path is not None and error > path:
                 self._stop(PATH_TOLERANCE_VIOLATED,
-                           f'the end effector was {error * 1e3:.2f} mm from the plan\'s '
+                           f"the end effector was {error * 1e3:.2f} mm from the plan's "
                            f'setpoint at t = {stamp_ns * 1e-9:.3f} s (path_tolerance '
                            f'{path * 1e3:.2f} mm): stopped along the path', stamp_ns)
         return error
@@ -226,12 +226,17 @@ class PlanMonitor:
         """
         Take the controller's readiness at ROS time ``now_ns``; return the outcome if decided.
 
-        Call after the stream's ``advance`` (and :meth:`published`) of this trigger.
+        Call before the stream's ``advance`` of this trigger: a ramp starts on its first
+        unpublished tick; a plan not started yet starts with its feed standing if the
+        controller is not ready (``Plan.start_held``).
         """
         if self.outcome is not None:
             return self.outcome
         plan = self.plan
-        if self.stream.plan is not plan or plan.start_tick is None:
+        if self.stream.plan is not plan:
+            return None
+        if plan.start_tick is None:
+            plan.start_held = not ready
             return None
         if self.check_from is None and not self.paused and not self.moved:
             self.check_from = self._first_tick()
@@ -247,7 +252,7 @@ class PlanMonitor:
                 self.check_from = None
                 self._ramp(0.0, self.stop_time)
             self.why = reason or 'the controller is not ready'
-            if self.moved and (now_ns - self.pause_since) * 1e-9 > self.limits.max_pause:
+            if self.moved and now_ns - self.pause_since > self.limits.max_pause * 1e9:
                 self.time_paused += (now_ns - self.pause_since) * 1e-9
                 self.pause_since = None
                 self._finish(PAUSED_TOO_LONG,
@@ -344,10 +349,10 @@ class PlanMonitor:
             return self.outcome
         if self.error <= goal:
             self._finish(SUCCEEDED, '', now_ns)
-        elif (now_ns - self.ended_ns) * 1e-9 > self.limits.goal_time:
+        elif now_ns - self.ended_ns > self.limits.goal_time * 1e9:
             self._stop(GOAL_TOLERANCE_VIOLATED,
                        f'the end effector was {self.error * 1e3:.2f} mm from the end point '
-                       f'{self.limits.goal_time:g} s after the plan\'s end (goal_tolerance '
+                       f"{self.limits.goal_time:g} s after the plan's end (goal_tolerance "
                        f'{goal * 1e3:.2f} mm)', now_ns)
         return self.outcome
 

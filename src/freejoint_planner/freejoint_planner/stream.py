@@ -150,6 +150,7 @@ class Plan:
         self.start_tick = None          # fixed by SetpointStream.advance
         self.joined = bool(joined)
         self.feed = None                # its FeedRate (feed hold), given by the stream
+        self.start_held = False         # start with the feed standing (feed hold)
         self.transition = None
         self.transition_ticks = 0
         self.transition_tick = None
@@ -331,6 +332,8 @@ class SetpointStream:
             plan.start_tick = max(self.next_tick if plan.transition is None
                                   else plan.transition_end(),
                                   first_tick_at_or_after(now_ns + plan.start_delay_ns, dt_ns))
+            if plan.start_held:         # the controller not ready: the feed stands
+                plan.feed.stand(self.next_tick)
         last = last_tick_due(now_ns, dt_ns, self.lookahead)
         start = self.next_tick
         out = [self.setpoint(k) for k in range(start, last + 1)]
