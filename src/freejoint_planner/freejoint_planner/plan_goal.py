@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import math
 from typing import NamedTuple, Optional
 
-from freejoint_core.feed_hold import ramp_time
+from freejoint_core.feed_hold import PEAK_RATE, ramp_time
 
 SUCCEEDED = 0
 INVALID_GOAL = -1
@@ -47,6 +47,18 @@ CODE_NAMES = {SUCCEEDED: 'SUCCEEDED', INVALID_GOAL: 'INVALID_GOAL',
               GOAL_TOLERANCE_VIOLATED: 'GOAL_TOLERANCE_VIOLATED', CANCELLED: 'CANCELLED',
               PREEMPTED: 'PREEMPTED'}
 """Code -> name (freejoint_msgs/PlanOutcome's constants)."""
+
+
+def circle_peak_speed(radius, duration):
+    """
+    Return the peak speed [m/s] of one quintic-timed revolution: ``2 pi r 1.875 / T``.
+
+    The angle runs along ``s(t / T)``, ``s`` the quintic smoothstep, whose slope peaks at
+    1.875 (``freejoint_core.feed_hold.PEAK_RATE``); planar and spatial circles alike.
+    """
+    return 2.0 * math.pi * float(radius) * PEAK_RATE / float(duration)
+
+
 HISTORY_BATCHES = 400
 """Published batches kept to find the setpoint of a measured state's stamp (at 10 ticks a
 batch, 4 s of ticks: a joint state taken late is still matched)."""
@@ -217,9 +229,19 @@ class PlanMonitor:
 
     def preempt(self, now_ns, by):
         """Return the outcome PREEMPTED: the plan ``by`` replaced this one."""
+        return self.finish(PREEMPTED, f'replaced by plan {by}', now_ns)
+
+    def finish(self, code, message, now_ns):
+        """Decide the outcome now (if not decided yet); return it."""
         if self.outcome is None:
-            self._finish(PREEMPTED, f'replaced by plan {by}', now_ns)
+            self._finish(code, message, now_ns)
         return self.outcome
+
+    def fresh(self):
+        """Return a new monitor of the stream's plan with these limits (a new time base)."""
+        monitor = PlanMonitor(self.stream, self.limits, self.stop_time, self.start_time, 0.0,
+                              1.0)
+        return monitor
 
     # -- per trigger ----------------------------------------------------------------------
     def update(self, now_ns, ready, reason=''):

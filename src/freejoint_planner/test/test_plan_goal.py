@@ -3,9 +3,9 @@ import math
 
 from freejoint_core.feed_hold import lateness
 from freejoint_core.trajectory import circle_peaks, CircleQuintic
-from freejoint_planner.plan_goal import CANCELLED, GOAL_TOLERANCE_VIOLATED, Limits
-from freejoint_planner.plan_goal import PATH_TOLERANCE_VIOLATED, PAUSED_TOO_LONG, PlanMonitor
-from freejoint_planner.plan_goal import position_of, PREEMPTED, SUCCEEDED
+from freejoint_planner.plan_goal import CANCELLED, circle_peak_speed, GOAL_TOLERANCE_VIOLATED
+from freejoint_planner.plan_goal import Limits, PATH_TOLERANCE_VIOLATED, PAUSED_TOO_LONG
+from freejoint_planner.plan_goal import PlanMonitor, position_of, PREEMPTED, SUCCEEDED
 from freejoint_planner.stream import Plan, SetpointStream
 import pytest
 
@@ -172,3 +172,8 @@ def test_a_newer_plan_preempts_the_running_one():
     outcome = run.monitor.preempt(run.now, 2)
     assert outcome.code == PREEMPTED and outcome.message == 'replaced by plan 2'
     assert run.monitor.update(run.now + MS, True) is outcome
+
+
+def test_the_peak_speed_of_a_quintic_revolution_is_2_pi_r_1_875_over_t():
+    assert circle_peak_speed(0.2, 5.0) == pytest.approx(circle_peaks(CircleQuintic())[0],
+                                                        rel=1e-6)
