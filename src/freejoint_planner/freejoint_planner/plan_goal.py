@@ -16,7 +16,8 @@ unpublished tick and decides the outcome (docs/feed_hold.md):
   from the setpoint the plan streamed for the state's stamp, on ticks at full feed and at
   least ``settle`` after a resume ramp ended (the controller's blend from the arm to the
   held setpoint runs meanwhile): the plan stops along the path.
-* **SUCCEEDED** at the plan's end (its ``final`` setpoint at the current time), or, with
+* **SUCCEEDED** at the plan's end (its setpoint at the current time at the plan's
+  duration: the end point), or, with
   a ``goal_tolerance``, once the end effector is within it of the end point;
   **GOAL_TOLERANCE_VIOLATED** if not within ``goal_time_tolerance`` after the end.
 * **CANCELLED** once a cancelled plan's feed stood still; **PREEMPTED** when a newer plan
@@ -31,6 +32,7 @@ from dataclasses import dataclass
 import math
 from typing import NamedTuple, Optional
 
+from freejoint_common.outcome import outcome_line
 from freejoint_core.feed_hold import PEAK_RATE, ramp_time
 
 SUCCEEDED = 0
@@ -109,14 +111,7 @@ class Outcome:
 
     def line(self):
         """Return the outcome as one line of text (the log, ``fj``, the analysis)."""
-        text = f'plan {self.plan_id}: {self.code_name}'
-        if self.message:
-            text += f': {self.message}'
-        if self.plan_id:
-            text += (f' (elapsed {self.elapsed:.3f} s, late {self.lateness:.3f} s, '
-                     f'{self.pauses} pause(s) {self.time_paused:.3f} s, max path error '
-                     f'{self.max_path_error * 1e3:.2f} mm)')
-        return text
+        return outcome_line(self)
 
 
 def refused(code, message, stamp_ns=0):
@@ -175,6 +170,7 @@ class PlanMonitor:
         self.ended_ns = None        # ROS time the plan's end was first seen
         self.max_error = math.nan
         self.error = math.nan       # newest measured |ee - setpoint| [m]
+        self.error_at = -1          # its state's stamp [ns]
         self._history = deque(maxlen=HISTORY_BATCHES)
 
     # -- inputs ---------------------------------------------------------------------------
@@ -208,6 +204,7 @@ class PlanMonitor:
             return math.nan
         error = math.dist(position, position_of(sp))
         self.error = error
+        self.error_at = stamp_ns
         k = stamp_ns // self.stream.dt_ns
         if self.check_from is not None and k >= self.check_from and not self.paused \
                 and self.stopping is None and self.outcome is None and not sp.final:
@@ -361,7 +358,7 @@ class PlanMonitor:
 
     def _check_end(self, now_ns):
         sp = self.setpoint_at(now_ns)
-        if sp is None or not sp.final:
+        if sp is None or sp.plan_time < self.plan.trajectory.duration:
             return None
         if self.ended_ns is None:
             self.ended_ns = now_ns
@@ -369,7 +366,7 @@ class PlanMonitor:
         if goal is None:
             self._finish(SUCCEEDED, '', now_ns)
             return self.outcome
-        if self.error <= goal:
+        if self.error_at >= self.ended_ns and self.error <= goal:   # a state since the end
             self._finish(SUCCEEDED, '', now_ns)
         elif now_ns - self.ended_ns > self.limits.goal_time * 1e9:
             self._stop(GOAL_TOLERANCE_VIOLATED,

@@ -63,8 +63,8 @@ def test_a_plan_always_ready_succeeds_at_its_end_on_time_never_paused():
     assert outcome is not None and outcome.code == SUCCEEDED and outcome.code_name == 'SUCCEEDED'
     assert outcome.pauses == 0 and outcome.time_paused == 0.0
     assert outcome.lateness == 0.0 and run.stream.plan.feed.steady
-    # ended at the first trigger whose setpoint is final: t = 5.01 s
-    assert outcome.stamp_ns == 5010 * MS and outcome.elapsed == pytest.approx(5.01)
+    # ended at the trigger whose setpoint is the end point: t = 5.00 s
+    assert outcome.stamp_ns == 5000 * MS and outcome.elapsed == pytest.approx(5.0)
     assert outcome.max_path_error == 0.0
 
 
@@ -83,7 +83,7 @@ def test_not_ready_at_1_s_pauses_along_the_path_resumes_and_ends_late_by_the_pau
     # first unpublished tick (20 ticks ahead): late by T_stop / 2 + 1 s + T_start / 2
     assert outcome.time_paused == pytest.approx(1.0, abs=1e-9)
     assert outcome.lateness == pytest.approx(lateness(STOP, 1.0 - STOP, START), abs=1e-9)
-    assert outcome.stamp_ns * 1e-9 == pytest.approx(5.01 + outcome.lateness, abs=0.011)
+    assert outcome.stamp_ns * 1e-9 == pytest.approx(5.0 + outcome.lateness, abs=0.011)
     # on the circle, no step beyond the circle's own at full feed
     p = run.positions()
     steps = [math.dist(a, b) for a, b in zip(p, p[1:])]
@@ -149,7 +149,7 @@ def test_goal_tolerance_waits_for_the_arm_then_aborts_if_it_never_arrives():
     off = (end[0] + 0.002, end[1])
     outcome = run.until(6.0, ee=off)
     assert outcome.code == GOAL_TOLERANCE_VIOLATED and '2.00 mm' in outcome.message
-    assert outcome.stamp_ns * 1e-9 == pytest.approx(5.01 + 0.31, abs=1e-9)
+    assert outcome.stamp_ns * 1e-9 == pytest.approx(5.0 + 0.31, abs=1e-9)
     good = Run(LIMITS._replace(path=None, goal=0.001, goal_time=0.3))
     good.until(5.0)
     assert good.until(6.0, ee=(end[0] + 0.0005, end[1])).code == SUCCEEDED

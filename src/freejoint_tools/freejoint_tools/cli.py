@@ -9,6 +9,8 @@ works with either tool (``ros2 param set ...`` or ``fj param set ...``)::
     fj topic list [-t]
     fj service list [-t]
     fj service call <service> <type> ['<yaml>']
+    fj action list [-t]
+    fj action send_goal <action> <type> ['<yaml>'] [-f]
     fj param list [node] [--param-type]
     fj param get <node> <name> [--hide-type]
     fj param set <node> <name> <value> [<name> <value> ...]
@@ -536,6 +538,81 @@ def _service_call(s, args):
     return 0
 
 
+# -- actions ----------------------------------------------------------------------------
+GOAL_STATUS = {1: 'ACCEPTED', 2: 'EXECUTING', 3: 'CANCELING', 4: 'SUCCEEDED', 5: 'CANCELED',
+               6: 'ABORTED'}
+"""action_msgs/msg/GoalStatus -> the name ``ros2 action send_goal`` prints."""
+
+
+def _action_list(s, args):
+    from rclpy.action import get_action_names_and_types
+    return _names_and_types(s.settled(lambda: get_action_names_and_types(s.node)),
+                            args.show_types)
+
+
+def _outcome_line(result):
+    """Return a freejoint PlanOutcome result in one line, '' for another action's result."""
+    from freejoint_common.outcome import outcome_line
+    outcome = getattr(result, 'outcome', None)
+    if outcome is None or not hasattr(outcome, 'code_name'):
+        return ''
+    return 'Outcome: ' + outcome_line(outcome)
+
+
+def _send_goal(s, args):
+    """
+    Send a goal as ``ros2 action send_goal`` does; print feedback (``-f``) and the result.
+
+    Ctrl-C cancels the goal and waits for its result. Exit status 0 when the goal
+    succeeded, 1 otherwise (ros2 action exits 0 whatever the outcome).
+    """
+    import yaml
+    from rclpy.action import ActionClient
+    name = absolute_name(args.action_name)
+    action = interface_class(args.action_type)
+    goal = action.Goal(check_fields=True)
+    try:
+        values = yaml.safe_load(args.goal) if args.goal else {}
+    except yaml.YAMLError as exc:
+        raise CommandError('The passed value is not valid YAML: %s' % exc)
+    set_message_fields(goal, values or {})
+    client = ActionClient(s.node, action, name)
+    if not client.server_is_ready():
+        print('Waiting for an action server to become available...')
+        deadline = time.monotonic() + args.timeout
+        while not client.server_is_ready():
+            if time.monotonic() >= deadline:
+                raise CommandError('Action server not available: %s (waited %g s)'
+                                   % (name, args.timeout))
+            s.spin_for(0.05)
+    print('Sending goal:\n     %r\n' % (goal,))
+
+    def feedback(msg):
+        print('Feedback:\n    %r\n' % (msg.feedback,))
+    handle = s.wait_future(client.send_goal_async(
+        goal, feedback_callback=feedback if args.feedback else None), name)
+    if not handle.accepted:
+        print('Goal was rejected.')
+        return 1
+    print('Goal accepted with ID: %s\n' % bytes(handle.goal_id.uuid).hex())
+    future = handle.get_result_async()
+    try:
+        while not future.done():
+            s.executor.spin_once(timeout_sec=0.1)
+    except KeyboardInterrupt:
+        print('Canceling goal...')
+        s.wait_future(handle.cancel_goal_async(), name + ' (cancel)')
+        s.wait_future(future, name + ' (result)')
+    answer = future.result()
+    print('Result:\n    %r\n' % (answer.result,))
+    line = _outcome_line(answer.result)
+    if line:
+        print(line)
+    status = GOAL_STATUS.get(answer.status, str(answer.status))
+    print('Goal finished with status: %s' % status)
+    return 0 if status == 'SUCCEEDED' else 1
+
+
 # -- run --------------------------------------------------------------------------------
 def executable_path(package, executable):
     """Return ``<prefix>/lib/<package>/<executable>`` as ``ros2 run`` finds it."""
@@ -622,6 +699,24 @@ def build_parser():
                    help='request fields in YAML, e.g. "{radius: 0.2}"')
     _waits(p)
     p.set_defaults(func=_service_call)
+
+    action = cmds.add_parser('action', help='actions').add_subparsers(
+        dest='verb', required=True, metavar='verb')
+    p = action.add_parser('list', help='output a list of action names')
+    p.add_argument('-t', '--show-types', action='store_true')
+    _waits(p, spin=True)
+    p.set_defaults(func=_action_list)
+    p = action.add_parser('send_goal', help='send an action goal, print its result')
+    p.add_argument('action_name')
+    p.add_argument('action_type', help='e.g. freejoint_msgs/action/FollowCircle')
+    p.add_argument('goal', nargs='?', default='{}',
+                   help='goal fields in YAML, e.g. "{radius: 0.2, duration: 5.0}"')
+    p.add_argument('-f', '--feedback', action='store_true', help='echo the feedback messages')
+    p.add_argument('--timeout', type=float, default=10.0, metavar='N',
+                   help='wait N s for the action server (default %(default)s)')
+    p.add_argument('--service-timeout', type=float, default=10.0, metavar='N',
+                   help='wait N s for the goal to be answered (default %(default)s)')
+    p.set_defaults(func=_send_goal)
 
     param = cmds.add_parser('param', help='parameters').add_subparsers(
         dest='verb', required=True, metavar='verb')
