@@ -882,9 +882,10 @@ class PlannerNode(Node, Lifecycle):
         """Send an Outcome on plan_outcome (latched) and log it."""
         msg = outcome_msg(outcome)
         self._outcome_pub.publish(msg)
-        log = self.get_logger().info if outcome.code == SUCCEEDED else \
-            self.get_logger().warning
-        log(f'outcome: {outcome.line()}')
+        if outcome.code == SUCCEEDED:       # one severity per call site (rclpy's logger)
+            self.get_logger().info(f'outcome: {outcome.line()}')
+        else:
+            self.get_logger().warning(f'outcome: {outcome.line()}')
         return msg
 
     async def _on_follow_circle(self, goal_handle):
