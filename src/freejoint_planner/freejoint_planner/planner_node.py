@@ -505,10 +505,7 @@ class PlannerNode(Node, Lifecycle):
         """
         ready, why = self._ready()
         if request.execute and not ready:
-            response.accepted = False
-            response.reason = f'controller not ready: {why}'
-            response.margin = math.nan
-            response.plan_id = 0
+            _refuse(response, f'controller not ready: {why}')
             self.get_logger().warning(f'plan_circle: refused: {response.reason}',
                                       throttle_duration_sec=1.0)
         elif self._spatial is not None:
@@ -534,10 +531,7 @@ class PlannerNode(Node, Lifecycle):
                                    start_angle=request.start_angle,
                                    direction=int(request.direction))
         except FreejointValueError as exc:
-            response.accepted = False
-            response.reason = f'bad request: {exc}'
-            response.margin = math.nan
-            response.plan_id = 0
+            _refuse(response, f'bad request: {exc}')
             self.get_logger().error(f'plan_circle: {response.reason}',
                                     throttle_duration_sec=1.0)
             return response
@@ -734,9 +728,7 @@ class PlannerNode(Node, Lifecycle):
         what = describe_spatial(request.radius, request.duration)
         response.plan_id = 0
         if problem:
-            response.accepted = False
-            response.reason = f'bad request: {problem}'
-            response.margin = math.nan
+            _refuse(response, f'bad request: {problem}')
             self.get_logger().error(f'plan_circle: {response.reason}',
                                     throttle_duration_sec=1.0)
             return response
@@ -1141,6 +1133,15 @@ class PlannerNode(Node, Lifecycle):
         """Destroy the node and its hidden joint-state helper."""
         self._js_node.destroy_node()
         super().destroy_node()
+
+
+def _refuse(response, reason):
+    """Fill a PlanCircle response refusing the request for ``reason``; return it."""
+    response.accepted = False
+    response.reason = reason
+    response.margin = math.nan
+    response.plan_id = 0
+    return response
 
 
 def main(args=None):
