@@ -211,3 +211,57 @@ def test_goals_end_preempted_cancelled_and_paused_too_long(procs, ros_node, wait
     assert [(o.plan_id, o.code_name) for o in rig.outcomes] == [
         (1, 'PREEMPTED'), (2, 'CANCELLED'), (3, 'PAUSED_TOO_LONG')]
     assert procs.stop(rig.proc) == 0
+
+
+def test_in_real_time_a_goal_paused_for_a_second_ends_late_by_the_pause_and_its_ramps(
+        procs, ros_node, wait):
+    # the planner on the system clock (readiness auto: a controller not heard is not ready)
+    import time
+    from action_msgs.msg import GoalStatus
+    from freejoint_common.contract import CONTROLLER_READINESS, FOLLOW_CIRCLE
+    from freejoint_msgs.msg import PlanOutcome
+    from rclpy.action import ActionClient
+    h = _helpers()
+    proc = h._start_planner(procs, ('-p', 'use_sim_time:=false', '-p', 'autostart:=false',
+                                    '-p', 'feed_hold_time:=%g' % STOP,
+                                    '-p', 'feed_resume_time:=%g' % START))
+    h._wait_ready(ros_node, procs, proc, wait)
+    readiness = ros_node.create_publisher(CONTROLLER_READINESS.msg_type,
+                                          CONTROLLER_READINESS.name, CONTROLLER_READINESS.qos)
+    action = ActionClient(ros_node, FOLLOW_CIRCLE.action_type,
+                          FOLLOW_CIRCLE.of('freejoint_planner'))
+
+    def spin():
+        h._spin(ros_node, 0.02)
+    wait(action.server_is_ready, 30.0, 'the action server', spin=spin)
+    readiness.publish(CONTROLLER_READINESS.msg_type(ready=True))
+    wait(lambda: 'controller ready' in procs.log(proc), 30.0, 'readiness taken', spin=spin)
+    # a 1.5-s circle of radius 0.05 m (peak 0.39 m/s: its stop ramp is the 0.2 s set)
+    goal = FOLLOW_CIRCLE.action_type.Goal(centre=[0.0, 0.0], radius=0.05, duration=1.5,
+                                          start_angle=0.0, direction=1)
+    sent = action.send_goal_async(goal)
+    wait(sent.done, 30.0, 'the goal answered', spin=spin)
+    result = sent.result().get_result_async()
+    # no joint_states: it starts at its start point (after waiting for a publisher)
+    wait(lambda: 'plan 1 starts at its start point' in procs.log(proc), 30.0,
+         'the plan started', spin=spin)
+    start = time.monotonic()
+    wait(lambda: time.monotonic() - start > 0.3, 5.0, '0.3 s', spin=spin)
+    readiness.publish(CONTROLLER_READINESS.msg_type(ready=False, reason='tripped'))
+    wait(lambda: 'plan 1 paused' in procs.log(proc), 30.0, 'the pause', spin=spin)
+    paused = time.monotonic()
+    wait(lambda: time.monotonic() - paused > 1.0, 5.0, '1 s paused', spin=spin)
+    assert not result.done(), 'the plan ran on while the controller was not ready'
+    readiness.publish(CONTROLLER_READINESS.msg_type(ready=True))
+    wait(result.done, 30.0, 'the result (log: %s)' % procs.log(proc), spin=spin)
+    status, outcome = result.result().status, result.result().result.outcome
+    assert (status, outcome.code, outcome.pauses) == (
+        GoalStatus.STATUS_SUCCEEDED, PlanOutcome.SUCCEEDED, 1), outcome.message
+    assert outcome.time_paused >= 1.0
+    # late by the time paused, less half the stop ramp, plus half the resume ramp: each
+    # ramp starts on the first unpublished tick after the trigger that saw the change, so
+    # the two triggers' delays (a stall of the loaded machine) shift it; 0.25 s allowed
+    expected = outcome.time_paused - STOP / 2 + START / 2
+    assert abs(outcome.lateness - expected) < 0.25, (outcome.lateness, expected)
+    assert outcome.elapsed == pytest.approx(1.5 + outcome.lateness, abs=0.1)
+    assert procs.stop(proc) == 0

@@ -389,9 +389,16 @@ class PlannerNode(Node, Lifecycle):
         state, message = planner_status(self._failure_refusal, self._failures_pending,
                                         settling)
         plan = self._stream.plan
+        monitor = self._monitor
+        level = {READY: OK, SETTLING: WARN}.get(state, ERROR)
+        if monitor is not None and monitor.outcome is None and monitor.paused:
+            level = max(level, WARN)
+            message += f'; plan {monitor.plan.plan_id} paused: {monitor.why}'
         self._diagnostics.publish(
-            {READY: OK, SETTLING: WARN}.get(state, ERROR), message,
+            level, message,
             (('state', state), ('plan', plan.plan_id if plan is not None else 'none'),
+             ('plan state', 'none' if monitor is None else
+              monitor.status(self._now_ns())['state']),
              ('passive joints', [self._joint_names[i] for i in (
                  self._model.nominal.passive if self._spatial is None
                  else self._spatial.passive)])))
