@@ -710,10 +710,7 @@ def build_parser():
     p.add_argument('goal', nargs='?', default='{}',
                    help='goal fields in YAML, e.g. "{radius: 0.2, duration: 5.0}"')
     p.add_argument('-f', '--feedback', action='store_true', help='echo the feedback messages')
-    p.add_argument('--timeout', type=float, default=10.0, metavar='N',
-                   help='wait N s for the action server (default %(default)s)')
-    p.add_argument('--service-timeout', type=float, default=10.0, metavar='N',
-                   help='wait N s for the goal to be answered (default %(default)s)')
+    _waits(p)
     p.set_defaults(func=_send_goal)
 
     param = cmds.add_parser('param', help='parameters').add_subparsers(
