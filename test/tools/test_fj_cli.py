@@ -219,6 +219,29 @@ def test_fj_service_call_plan_circle_answers_accepted_or_refused_with_the_reason
     assert 'accepted=False' in response and "reason=''" not in response, response
 
 
+def test_fj_action_list_and_send_goal_print_the_outcome_of_a_refused_follow_circle(graph):
+    listed = fj_list('action', 'list', '-t', expect=(
+        '/freejoint_planner/follow_circle [freejoint_msgs/action/FollowCircle]',))
+    assert listed.returncode == 0, listed.stderr
+    assert '/freejoint_planner/follow_circle [freejoint_msgs/action/FollowCircle]' in \
+        listed.stdout.splitlines()
+    # no simulator: the controller is not ready (it says so, or is not heard in real
+    # time): the goal is accepted and aborted at once with the reason; exit status 1
+    done = fj('action', 'send_goal', '/freejoint_planner/follow_circle',
+              'freejoint_msgs/action/FollowCircle', '{radius: 0.2, duration: 5.0}', '-f',
+              '--timeout', '60', '--service-timeout', '60')
+    assert done.returncode == 1, done.stdout + done.stderr
+    out = done.stdout
+    assert out.startswith(('Sending goal:', 'Waiting for an action server')), out
+    assert 'Goal accepted with ID: ' in out
+    assert 'Result:\n    freejoint_msgs.action.FollowCircle_Result(outcome=' in out
+    assert '\nOutcome: plan 0 CONTROLLER_NOT_READY: controller not ready: ' in out, out
+    assert out.endswith('Goal finished with status: ABORTED\n'), out
+    bad = fj('action', 'send_goal', '/freejoint_planner/follow_circle',
+             'freejoint_msgs/action/FollowCircle', '{radios: 0.2}')
+    assert bad.returncode == 1 and bad.stderr.startswith('Failed to populate field radios')
+
+
 def test_fj_service_call_trigger_and_bad_requests(graph):
     done = fj('service', 'call', '/recorder/status', 'std_srvs/srv/Trigger')
     assert done.returncode == 0, done.stderr

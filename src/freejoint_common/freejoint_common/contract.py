@@ -6,7 +6,8 @@ from here:
 
 * the topics (:class:`Topic`: name, message class, default QoS) and ``GRAPH_TOPICS``, the
   ones a run's recorder subscribes to from its start;
-* the services (:class:`Service`: name, service class);
+* the services (:class:`Service`: name, service class) and the planner's action
+  (:class:`Action`);
 * the QoS profiles, one name per profile (``STREAM_QOS``, ``REALTIME_STATE_QOS``,
   ``SETPOINT_QOS``, ``STANDBY_SETPOINT_QOS``, ``LATCHED_QOS``, ``CLOCK_PUBLISHER_QOS``,
   ``CLOCK_SUBSCRIPTION_QOS``, ``DIAGNOSTICS_QOS``) and :func:`profile` for a profile built
@@ -32,7 +33,9 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from freejoint_common.cdr import CdrError
 from freejoint_common.setpoint import SetpointSample
+from freejoint_msgs.action import FollowCircle
 from freejoint_msgs.msg import CartesianSetpoints, ControllerReadiness, ControllerState
+from freejoint_msgs.msg import PlanOutcome
 from freejoint_msgs.srv import FailJoint, PlanCircle
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import OccupancyGrid
@@ -134,6 +137,12 @@ class Topic(NamedTuple):
         return is_latched(self.qos)
 
 
+def _on_node(node, name):
+    """Return the full name of a node's ``~/`` (or relative) ``name`` (root namespace)."""
+    return '/%s/%s' % (node.strip('/'), name[2:] if name.startswith('~/')
+                       else name.lstrip('/'))
+
+
 class Service(NamedTuple):
     """A service of a node: name (``~/`` = in the node's namespace) and service class."""
 
@@ -142,8 +151,18 @@ class Service(NamedTuple):
 
     def of(self, node):
         """Return the service's full name on the node named ``node`` (root namespace)."""
-        return '/%s/%s' % (node.strip('/'), self.name[2:] if self.name.startswith('~/')
-                           else self.name.lstrip('/'))
+        return _on_node(node, self.name)
+
+
+class Action(NamedTuple):
+    """An action of a node: name (``~/`` = in the node's namespace) and action class."""
+
+    name: str
+    action_type: type
+
+    def of(self, node):
+        """Return the action's full name on the node named ``node`` (root namespace)."""
+        return _on_node(node, self.name)
 
 
 def type_name(cls):
@@ -163,8 +182,13 @@ PLANNED_PATH = Topic('planned_path', Marker, LATCHED_QOS)
 DIAGNOSTICS = Topic('/diagnostics', DiagnosticArray, DIAGNOSTICS_QOS)
 ROBOT_DESCRIPTION = Topic('/robot_description', String, LATCHED_QOS)
 
+PLAN_OUTCOME = Topic('plan_outcome', PlanOutcome, profile(10, latched=True))
+"""Planner -> operator, recorder: how each plan ended (freejoint_msgs/PlanOutcome: the code,
+why, lateness, pauses), and each refused request to execute one (plan_id 0); reliable,
+transient local, depth 10 (a recorder or ``fj`` started later still reads the last ten)."""
+
 GRAPH_TOPICS = (CLOCK, JOINT_STATES, EE_POSITION, COMMANDS, CONTROLLER_STATE, SETPOINTS,
-                SEMI_SINGULAR_MAP, PLANNED_PATH)
+                SEMI_SINGULAR_MAP, PLANNED_PATH, PLAN_OUTCOME)
 """The run's topics a recorder subscribes to from its start (docs/GRAPH.md, Recording)."""
 NEVER_QUIET_TOPICS = ('/rosout', '/parameter_events', DIAGNOSTICS.name)
 """Topics every running node publishes on its own (its log, parameter events, its 1-Hz
@@ -175,6 +199,9 @@ RESET = Service('~/reset', Trigger)
 """Simulator and controller: back to the initial state."""
 PLAN_CIRCLE = Service('~/plan_circle', PlanCircle)
 """Planner: check (and execute) a circle."""
+FOLLOW_CIRCLE = Action('~/follow_circle', FollowCircle)
+"""Planner: the circle of ``PLAN_CIRCLE`` as a goal with feedback and an outcome (feed hold,
+path and goal tolerances; freejoint_msgs/action/FollowCircle)."""
 RECORDER_STATUS = Service('~/status', Trigger)
 """Recorder: success once every graph topic has a matched publisher."""
 

@@ -68,9 +68,11 @@ def test_graph_topics_are_the_recorded_names_types_and_durabilities():
         ('setpoints', 'freejoint_msgs/msg/CartesianSetpoints', True),
         ('semi_singular_map', 'nav_msgs/msg/OccupancyGrid', True),
         ('planned_path', 'visualization_msgs/msg/Marker', True),
+        ('plan_outcome', 'freejoint_msgs/msg/PlanOutcome', True),
     ]
     assert contract.type_name(contract.PLAN_CIRCLE.srv_type) == 'freejoint_msgs/srv/PlanCircle'
     assert (contract.JOINT_STATES.absolute, contract.CLOCK.absolute) == \
         ('/joint_states', '/clock')
     assert contract.PLAN_CIRCLE.of('freejoint_planner') == '/freejoint_planner/plan_circle'
     assert contract.RECORDER_STATUS.of('/recorder') == '/recorder/status'
+    assert contract.FOLLOW_CIRCLE.of('freejoint_planner') == '/freejoint_planner/follow_circle'

@@ -284,11 +284,20 @@ class RepeatedCircle:
         """
         Sample at time ``t`` (s) as plain floats: ``(px, py, vx, vy, ax, ay)``.
 
-        ``t`` is taken as the tick ``round(t / dt)`` (before 0: the circle's start held).
+        ``t`` on the grid (within 1e-6 of a tick) is taken as the tick ``round(t / dt)``
+        (before 0: the circle's start held); between ticks (a plan slowed by a feed hold,
+        ``freejoint_core.feed_hold``) the series is sampled at ``t`` itself.
         """
-        j = round(t / self.dt)
+        x = t / self.dt
+        j = round(x)
         if j < 0:
             return self.circle.sample_tuple(t)
+        if abs(x - j) > 1e-6:
+            c = int(x // self._period)
+            u = t - c * self._period * self.dt
+            if c >= self.count or u >= self.circle.duration:
+                return self._rest
+            return self.circle.sample_tuple(u)
         c, i = divmod(j, self._period)
         if c >= self.count or i >= self._n:
             return self._rest

@@ -9,7 +9,8 @@ Message conversions of the planner (ROS message types only, no node, no spinning
 
 import array
 
-from freejoint_common.contract import SEMI_SINGULAR_MAP, SETPOINTS, stamp_from_ns
+from freejoint_common.contract import PLAN_OUTCOME, SEMI_SINGULAR_MAP, SETPOINTS
+from freejoint_common.contract import stamp_from_ns
 from geometry_msgs.msg import Point
 import numpy as np
 from visualization_msgs.msg import Marker
@@ -107,3 +108,13 @@ def path_marker(points, frame_id, stamp_ns, plan_id=0, width=0.005):
     else:
         msg.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in pts]
     return msg
+
+
+def outcome_msg(outcome):
+    """Return the ``freejoint_msgs/PlanOutcome`` of a ``plan_goal.Outcome``."""
+    return PLAN_OUTCOME.msg_type(
+        stamp=stamp_from_ns(max(outcome.stamp_ns, 0)), plan_id=outcome.plan_id,
+        code=outcome.code, code_name=outcome.code_name, message=outcome.message,
+        planned_duration=float(outcome.planned_duration), elapsed=float(outcome.elapsed),
+        lateness=float(outcome.lateness), time_paused=float(outcome.time_paused),
+        pauses=outcome.pauses, max_path_error=float(outcome.max_path_error))

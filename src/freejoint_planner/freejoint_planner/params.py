@@ -17,7 +17,7 @@ import math
 
 from freejoint_common.arm_description import ARM_SPECS
 from freejoint_common.schema import CASE, CONTROL_PERIOD, FRAME_ID, NOMINAL_SCALE, Param
-from freejoint_common.schema import SCHEDULING, Schema
+from freejoint_common.schema import one_of, SCHEDULING, Schema
 from freejoint_core.trajectory import CircleQuintic
 
 _CIRCLE = {name: p.default for name, p in
@@ -25,6 +25,8 @@ _CIRCLE = {name: p.default for name, p in
            if p.default is not inspect.Parameter.empty}
 """The paper's circle: the defaults of ``CircleQuintic``."""
 
+READINESS_MODES = ('auto', 'required', 'ignore')
+"""``readiness``: how the planner takes the controller's controller_readiness."""
 # Parameters of the configured circle; an accepted change of any of them re-checks it.
 CIRCLE_KEYS = ('centre', 'radius', 'duration', 'start_angle', 'direction', 'start_delay',
                'circles', 'rest', 'plane_normal')
@@ -139,6 +141,40 @@ PARAMS = (
           'joint_states: freejoint_core.internal.free_link_swing) or no joint state tells; '
           '0 = off. For the arm whose last joint alone is free, with gravity; the '
           "controller's free_link_damping settles the link meanwhile.", (0.0, 180.0)),
+    # feed hold and the plan's outcome (plan_goal, docs/feed_hold.md)
+    Param('readiness', 'auto',
+          "The controller's controller_readiness: a plan pauses (feed hold) while it says not "
+          'ready, and a request to execute one (plan_circle, follow_circle) is refused. '
+          "'auto': in real time a controller not heard (no publisher) is not ready, in sim "
+          'time it is ready (lockstep: a controller that says nothing answers every state); '
+          "'required': not heard is not ready in sim time too; 'ignore': never pause nor "
+          'refuse for it (a controller without the topic).',
+          validator=one_of(READINESS_MODES)),
+    Param('feed_hold_time', 0.1,
+          "Time (s) the plan's feed takes from full to a stop along its path when the "
+          'controller turns not ready, at least 1.875 peak speed / max_acceleration (the '
+          "stop's tangential deceleration within max_acceleration); the plan goes on "
+          'half of it before it stands.', (0.0, 10.0), exclusive_min=True),
+    Param('feed_resume_time', 0.5,
+          "Time (s) the plan's feed takes from a stop back to full when the controller is "
+          "ready again (at least as feed_hold_time's bound); at or above the controller's "
+          'resume_time, so its blend from the arm to the held setpoint is over before full '
+          'speed.', (0.0, 10.0), exclusive_min=True),
+    Param('max_pause', 5.0,
+          'Longest pause (s) for a not-ready controller: beyond it the plan ends '
+          'PAUSED_TOO_LONG and stays stopped (a plan the controller was never ready for '
+          'waits at its start without limit). A follow_circle goal may set its own.',
+          (0.0, 3600.0), exclusive_min=True),
+    Param('path_tolerance', 0.0,
+          'Largest |end effector - setpoint| (m) while a plan moves at full feed (from '
+          'feed_resume_time after a resume ramp): beyond it the plan stops along the path '
+          'and ends PATH_TOLERANCE_VIOLATED; 0 = not checked (the largest error is still '
+          'reported). A follow_circle goal may set its own.', (0.0, 10.0)),
+    Param('goal_tolerance', 0.0,
+          "Largest |end effector - end point| (m) for a plan's success, within "
+          "goal_time_tolerance of its end; 0 = success at the plan's end.", (0.0, 10.0)),
+    Param('goal_time_tolerance', 1.0,
+          "Time (s) after a plan's end to come within goal_tolerance.", (0.0, 3600.0)),
     Param('autostart', True,
           'Start the configured circle at activation and after every accepted change of its '
           'parameters.'),

@@ -97,9 +97,10 @@ import time
 
 from freejoint_common.arm_description import resolve_arm
 from freejoint_common.clock import own_clock, set_ros_time
-from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, JOINT_FAILURES
-from freejoint_common.contract import JOINT_STATES, PLAN_CIRCLE
-from freejoint_common.contract import PLANNED_PATH, profile, SEMI_SINGULAR_MAP, SETPOINTS, to_ns
+from freejoint_common.contract import CLOCK, CLOCK_SUBSCRIPTION_QOS, CONTROLLER_READINESS
+from freejoint_common.contract import FOLLOW_CIRCLE, JOINT_FAILURES, JOINT_STATES, PLAN_CIRCLE
+from freejoint_common.contract import PLAN_OUTCOME, PLANNED_PATH, profile, SEMI_SINGULAR_MAP
+from freejoint_common.contract import SETPOINTS, to_ns
 from freejoint_common.diagnostics import Diagnostics, ERROR, OK, WARN
 from freejoint_common.node_tools import NodeParameters, overridable, QOS_OVERRIDES
 from freejoint_common.runner import Lifecycle, run
@@ -108,13 +109,17 @@ from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
 from freejoint_core.trajectory import CircleQuintic, RepeatedCircle
 import numpy as np
+from rclpy.action import ActionServer, CancelResponse
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.task import Future
 
-from .conversions import occupancy_grid, path_marker, setpoints_msg
+from .conversions import occupancy_grid, outcome_msg, path_marker, setpoints_msg
 from .params import CIRCLE_KEYS, LOOKAHEAD_MAX, MAP_KEYS, SCHEMA, validate
+from .plan_goal import CANCELLED, circle_peak_speed, CONTROLLER_NOT_READY, INVALID_GOAL
+from .plan_goal import Limits, PlanMonitor, refused, SUCCEEDED
 from .planning import assess_failure, circle_bounds, compute_model, describe_join
 from .planning import end_effector, grid_bound, grid_extent, join_from_arm, joint_state
 from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle, planner_status, READY, SETTLING
@@ -131,6 +136,8 @@ together can take that long; in sim time the simulator's /clock and joint_states
 together, and a planner alone is driven by its /clock)."""
 
 MARKER_POINTS = 361
+FEEDBACK_PERIOD = 0.1
+"""[s] Wall time between two follow_circle feedback messages."""
 
 
 class PlannerNode(Node, Lifecycle):
@@ -201,6 +208,17 @@ class PlannerNode(Node, Lifecycle):
         self._restarts_logged = 0
         self._spacing_logged = 0
         self._late_logged = 0
+        # The plan as a goal (plan_goal): the controller's readiness pauses it (feed hold)
+        # and refuses new ones; each outcome goes out latched on plan_outcome.
+        self._readiness = None          # (ready, reason) last heard, None: nothing yet
+        self._readiness_sub = self.create_subscription(
+            CONTROLLER_READINESS.msg_type, CONTROLLER_READINESS.name, self._on_readiness,
+            CONTROLLER_READINESS.qos)
+        self._outcome_pub = self.create_publisher(PLAN_OUTCOME.msg_type, PLAN_OUTCOME.name,
+                                                  PLAN_OUTCOME.qos)
+        self._monitor = None            # PlanMonitor of the running plan
+        self._goal = None               # (goal handle, Future of its Outcome, plan id)
+        self._feedback_at = 0.0         # monotonic time of the last feedback
         self._publish_map()
         if self._cfg['autostart'] and self._spatial is not None:
             # from rest: the circle starts at the tip of the first joint state (_join)
@@ -229,6 +247,9 @@ class PlannerNode(Node, Lifecycle):
                                         self._on_diagnostics_timer)
         self._params.listen(self._apply, self._check, watch=('use_sim_time',))
         self.create_service(PLAN_CIRCLE.srv_type, PLAN_CIRCLE.name, self._on_plan_circle)
+        self._action = ActionServer(self, FOLLOW_CIRCLE.action_type, FOLLOW_CIRCLE.name,
+                                    self._on_follow_circle,
+                                    cancel_callback=self._on_cancel_goal)
         self.get_logger().info(
             f"ready: {'sim time (/clock)' if self._sim else 'system time'}, "
             f"dt {self._cfg['control_period']:g} s, lookahead {self._cfg['lookahead']} ticks")
@@ -368,9 +389,16 @@ class PlannerNode(Node, Lifecycle):
         state, message = planner_status(self._failure_refusal, self._failures_pending,
                                         settling)
         plan = self._stream.plan
+        monitor = self._monitor
+        level = {READY: OK, SETTLING: WARN}.get(state, ERROR)
+        if monitor is not None and monitor.outcome is None and monitor.paused:
+            level = max(level, WARN)
+            message += f'; plan {monitor.plan.plan_id} paused: {monitor.why}'
         self._diagnostics.publish(
-            {READY: OK, SETTLING: WARN}.get(state, ERROR), message,
+            level, message,
             (('state', state), ('plan', plan.plan_id if plan is not None else 'none'),
+             ('plan state', 'none' if monitor is None else
+              monitor.status(self._now_ns())['state']),
              ('passive joints', [self._joint_names[i] for i in (
                  self._model.nominal.passive if self._spatial is None
                  else self._spatial.passive)])))
@@ -456,6 +484,7 @@ class PlannerNode(Node, Lifecycle):
                     transition=segment, ticks=0 if segment is None else choice.ticks,
                     transition_tick=tick, joined=not (from_rest and choice is None))
         self._stream.start(plan)
+        self._watch(plan, circle.radius, circle.duration)
         self._publish_marker(plan)
         if not plan.joined:
             how = 'from rest: where the arm is is decided when it starts'
@@ -475,9 +504,28 @@ class PlannerNode(Node, Lifecycle):
         return plan.plan_id
 
     def _on_plan_circle(self, request, response):
-        """Check a requested circle; if accepted and ``execute``, start it now."""
-        if self._spatial is not None:
-            return self._plan_circle_spatial(request, response)
+        """
+        Check a requested circle; if accepted and ``execute``, start it now.
+
+        A request to execute one while the controller is not ready is refused with the
+        reason; a refused request to execute goes out on plan_outcome (plan_id 0).
+        """
+        ready, why = self._ready()
+        if request.execute and not ready:
+            _refuse(response, f'controller not ready: {why}')
+            self.get_logger().warning(f'plan_circle: refused: {response.reason}',
+                                      throttle_duration_sec=1.0)
+        elif self._spatial is not None:
+            self._plan_circle_spatial(request, response)
+        else:
+            self._plan_circle_planar(request, response)
+        if request.execute and not response.accepted:
+            self._publish_outcome(refused(INVALID_GOAL if ready else CONTROLLER_NOT_READY,
+                                          response.reason, self._now_ns()))
+        return response
+
+    def _plan_circle_planar(self, request, response):
+        """``~/plan_circle`` of a planar arm (the controller ready, or a check only)."""
         try:
             problem = validate({'centre': list(request.centre), 'radius': request.radius,
                                 'duration': request.duration,
@@ -490,10 +538,7 @@ class PlannerNode(Node, Lifecycle):
                                    start_angle=request.start_angle,
                                    direction=int(request.direction))
         except FreejointValueError as exc:
-            response.accepted = False
-            response.reason = f'bad request: {exc}'
-            response.margin = math.nan
-            response.plan_id = 0
+            _refuse(response, f'bad request: {exc}')
             self.get_logger().error(f'plan_circle: {response.reason}',
                                     throttle_duration_sec=1.0)
             return response
@@ -637,6 +682,7 @@ class PlannerNode(Node, Lifecycle):
         plan = Plan(self._last_plan_id, traj, round(float(start_delay) * 1e9),
                     joined=verdict is not None)
         self._stream.start(plan)
+        self._watch(plan, radius, duration)
         self._publish_marker(plan)
         if verdict is None:
             what = describe_spatial(radius, duration)
@@ -689,9 +735,7 @@ class PlannerNode(Node, Lifecycle):
         what = describe_spatial(request.radius, request.duration)
         response.plan_id = 0
         if problem:
-            response.accepted = False
-            response.reason = f'bad request: {problem}'
-            response.margin = math.nan
+            _refuse(response, f'bad request: {problem}')
             self.get_logger().error(f'plan_circle: {response.reason}',
                                     throttle_duration_sec=1.0)
             return response
@@ -712,6 +756,188 @@ class PlannerNode(Node, Lifecycle):
             self.get_logger().info(f'plan_circle: {what} accepted (not executed): '
                                    f'{verdict.describe()}')
         return response
+
+    # ---- the plan as a goal: readiness, feed hold, outcome (plan_goal) ----------------
+    def _on_readiness(self, msg):
+        """controller_readiness: the controller's judgement of its loop (latched)."""
+        before = self._readiness
+        self._readiness = (bool(msg.ready), str(msg.reason))
+        if before != self._readiness:
+            self.get_logger().info(
+                'controller ready' if msg.ready else f'controller not ready: {msg.reason}')
+
+    def _ready(self):
+        """
+        Return ``(ready, reason)``: may a plan move (``readiness`` parameter, module notes).
+
+        Not ready: the controller said so, or (real time, or ``required``) it is not
+        heard: no controller_readiness publisher, or none heard from yet.
+        """
+        mode = self._cfg['readiness']
+        if mode == 'ignore':
+            return True, ''
+        trust_silence = self._sim and mode == 'auto'
+        if self._readiness_sub.get_publisher_count() == 0:
+            if trust_silence:
+                return True, ''
+            return False, ('no controller_readiness publisher (no controller running, or '
+                           "one that does not say; readiness: 'ignore' for such a one)")
+        if self._readiness is None:
+            return (True, '') if trust_silence else (
+                False, 'no controller_readiness heard yet')
+        ready, why = self._readiness
+        return ready, why or ('' if ready else 'the controller says not ready')
+
+    def _limits(self, goal=None):
+        """Return the plan's Limits: the parameters, or a follow_circle goal's own."""
+        cfg = self._cfg
+
+        def pick(value, default):
+            # goal: 0 = the parameter, < 0 = not checked; parameter 0 = not checked
+            value = default if goal is None or value == 0.0 else value
+            return None if not value > 0.0 else float(value)
+        g = goal
+        return Limits(path=pick(g and g.path_tolerance, cfg['path_tolerance']),
+                      goal=pick(g and g.goal_tolerance, cfg['goal_tolerance']),
+                      goal_time=float(g.goal_time_tolerance if g is not None
+                                      and g.goal_time_tolerance > 0.0
+                                      else cfg['goal_time_tolerance']),
+                      max_pause=float(g.max_pause if g is not None and g.max_pause > 0.0
+                                      else cfg['max_pause']))
+
+    def _watch(self, plan, radius, duration):
+        """Watch a plan just started (PlanMonitor); the one it replaced is PREEMPTED."""
+        old = self._monitor
+        if old is not None and old.outcome is None:
+            self._end(old.preempt(self._now_ns(), plan.plan_id))
+        cfg = self._cfg
+        self._monitor = PlanMonitor(self._stream, self._limits(), cfg['feed_hold_time'],
+                                    cfg['feed_resume_time'],
+                                    circle_peak_speed(radius, duration),
+                                    cfg['max_acceleration'])
+
+    def _supervise(self, now_ns):
+        """Before the stream's advance: readiness -> feed hold; the outcome if decided."""
+        monitor = self._monitor
+        if monitor is None or monitor.outcome is not None:
+            return
+        if monitor.plan is not self._stream.plan:       # refused at its start (_join)
+            self._end(monitor.finish(INVALID_GOAL, 'refused at its start (see the log)',
+                                     now_ns))
+            return
+        ready, why = self._ready()
+        paused = monitor.paused
+        outcome = monitor.update(now_ns, ready, why)
+        if monitor.paused != paused and outcome is None:
+            if monitor.paused:
+                self.get_logger().warning(
+                    f'plan {monitor.plan.plan_id} paused (feed hold: it stops along its path '
+                    f'within {monitor.stop_time:.3f} s and waits): controller not ready: {why}')
+            else:
+                self.get_logger().info(
+                    f'plan {monitor.plan.plan_id} resumes (feed back to full within '
+                    f'{monitor.start_time:.3f} s): controller ready')
+        if outcome is not None:
+            self._end(outcome)
+
+    def _measure(self, due):
+        """After the stream's advance: keep what went out, measure the arm against it."""
+        monitor = self._monitor
+        if monitor is None:
+            return
+        monitor.published(due)
+        if monitor.outcome is not None:
+            return
+        got = self._take_arm_state()
+        if got is not None:
+            position = self._end_effector(got)
+            if position is not None:
+                monitor.measure(to_ns(got.header.stamp), position)
+            if monitor.outcome is not None:
+                self._end(monitor.outcome)
+        if self._goal is not None and time.monotonic() - self._feedback_at >= FEEDBACK_PERIOD:
+            self._feedback_at = time.monotonic()
+            self._goal[0].publish_feedback(
+                FOLLOW_CIRCLE.action_type.Feedback(**monitor.status(self._now_ns())))
+
+    def _end_effector(self, state):
+        """Return the end effector (m values) of a joint state, None if it has no arm."""
+        if self._spatial is None:
+            return end_effector(self._model, self._joint_names, state.name, state.position,
+                                self._offsets)
+        q = joint_state(self._joint_names, state.name, state.position,
+                        [0.0] * len(state.position))
+        return None if q is None else tuple(self._spatial.fk(np.asarray(q[0])))
+
+    def _end(self, outcome):
+        """Publish a plan's outcome, log it and end its goal (if it has one)."""
+        self._publish_outcome(outcome)
+        goal = self._goal
+        if goal is not None and goal[2] == outcome.plan_id:
+            self._goal = None
+            goal[1].set_result(outcome)
+
+    def _publish_outcome(self, outcome):
+        """Send an Outcome on plan_outcome (latched) and log it."""
+        msg = outcome_msg(outcome)
+        self._outcome_pub.publish(msg)
+        if outcome.code == SUCCEEDED:       # one severity per call site (rclpy's logger)
+            self.get_logger().info(f'outcome: {outcome.line()}')
+        else:
+            self.get_logger().warning(f'outcome: {outcome.line()}')
+        return msg
+
+    async def _on_follow_circle(self, goal_handle):
+        """
+        follow_circle: the circle as a goal (plan_circle's checks), ended by its outcome.
+
+        Refused requests (not ready, a bad or refused circle) are accepted goals aborted at
+        once with the code and the reason: an action's rejection carries no reason.
+        """
+        goal = goal_handle.request
+        request = PLAN_CIRCLE.srv_type.Request(
+            centre=list(goal.centre), radius=goal.radius, duration=goal.duration,
+            start_angle=goal.start_angle, direction=goal.direction, execute=True)
+        reason = ''
+        for name in ('path_tolerance', 'goal_tolerance', 'goal_time_tolerance', 'max_pause'):
+            if not math.isfinite(getattr(goal, name)):
+                reason = f'bad request: {name}: expected a finite number, got ' \
+                    f'{getattr(goal, name)!r}'
+        answer = PLAN_CIRCLE.srv_type.Response()
+        if reason:
+            answer.reason = reason
+            self._publish_outcome(refused(INVALID_GOAL, reason, self._now_ns()))
+        else:
+            self._on_plan_circle(request, answer)
+        if not answer.accepted:
+            goal_handle.abort()
+            code = CONTROLLER_NOT_READY if answer.reason.startswith('controller not ready') \
+                else INVALID_GOAL
+            return self._result(refused(code, answer.reason, self._now_ns()))
+        self._monitor.limits = self._limits(goal)
+        future = Future()       # a goal running before was preempted (_watch): ended
+        self._goal = (goal_handle, future, answer.plan_id)
+        outcome = await future
+        if outcome.code == SUCCEEDED:
+            goal_handle.succeed()
+        elif outcome.code == CANCELLED:
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()
+        return self._result(outcome)
+
+    def _result(self, outcome):
+        """Return the FollowCircle result of an Outcome."""
+        return FOLLOW_CIRCLE.action_type.Result(outcome=outcome_msg(outcome))
+
+    def _on_cancel_goal(self, goal_handle):
+        """Cancel the running goal: its plan stops along the path, then ends CANCELLED."""
+        goal = self._goal
+        if goal is None or goal[0] is not goal_handle or self._monitor is None:
+            return CancelResponse.REJECT
+        self._monitor.cancel(self._now_ns())
+        self.get_logger().info(f'plan {goal[2]}: cancel requested: stopping along the path')
+        return CancelResponse.ACCEPT
 
     # ---- publishing -------------------------------------------------------------------
     def _now_ns(self):
@@ -835,10 +1061,14 @@ class PlannerNode(Node, Lifecycle):
         plan = stream.plan
         hold = (plan is not None and plan.start_tick is None and not plan.joined
                 and self._join(plan))
+        self._supervise(now_ns)
         due = stream.advance(now_ns, hold=hold)
         if due:
             publish(setpoints_msg(due, frame_id))
+        self._measure(due)
         if stream.restarts != self._restarts_logged:
+            if self._monitor is not None and self._monitor.outcome is None:
+                self._monitor = self._monitor.fresh()   # the plan starts again
             self._restarts_logged = stream.restarts
             self._spacing_logged = 0
             self.get_logger().warning(
@@ -910,6 +1140,15 @@ class PlannerNode(Node, Lifecycle):
         """Destroy the node and its hidden joint-state helper."""
         self._js_node.destroy_node()
         super().destroy_node()
+
+
+def _refuse(response, reason):
+    """Fill a PlanCircle response refusing the request for ``reason``; return it."""
+    response.accepted = False
+    response.reason = reason
+    response.margin = math.nan
+    response.plan_id = 0
+    return response
 
 
 def main(args=None):

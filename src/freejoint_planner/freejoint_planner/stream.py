@@ -49,6 +49,7 @@ ROS time had passed them (``late``), so the node can warn and name the rule.
 from typing import NamedTuple
 
 from freejoint_common.setpoint import SetpointSample
+from freejoint_core.feed_hold import FeedRate, scale_sample
 
 
 def period_ns(dt):
@@ -148,6 +149,8 @@ class Plan:
         self.start_delay_ns = int(start_delay_ns)
         self.start_tick = None          # fixed by SetpointStream.advance
         self.joined = bool(joined)
+        self.feed = None                # its FeedRate (feed hold), given by the stream
+        self.start_held = False         # start with the feed standing (feed hold)
         self.transition = None
         self.transition_ticks = 0
         self.transition_tick = None
@@ -225,6 +228,7 @@ class SetpointStream:
     def start(self, plan):
         """Replace the running plan by ``plan``; it starts at the next ``advance``."""
         plan.start_tick = None
+        plan.feed = FeedRate(self.dt)
         self.plan = plan
 
     def reset_time_base(self):
@@ -240,6 +244,7 @@ class SetpointStream:
         self.streamed = False
         if self.plan is not None:
             self.plan.start_tick = None
+            self.plan.feed = FeedRate(self.dt)
             self.plan.set_transition(None, 0)
             self.plan.joined = False
 
@@ -273,6 +278,8 @@ class SetpointStream:
         plan = self.plan
         if plan.transition is not None and plan.transition_tick is None:
             return plan.transition.sample_tuple(0.0)        # anchored at its first tick
+        if plan.start_tick is not None and not plan.feed.steady:
+            return self._held(k)[1:7]
         if plan.transition is not None and k < plan.transition_end():
             return plan.transition.sample_tuple((k - plan.transition_tick) * self.dt)
         if plan.start_tick is None:
@@ -325,6 +332,8 @@ class SetpointStream:
             plan.start_tick = max(self.next_tick if plan.transition is None
                                   else plan.transition_end(),
                                   first_tick_at_or_after(now_ns + plan.start_delay_ns, dt_ns))
+            if plan.start_held:         # the controller not ready: the feed stands
+                plan.feed.stand(self.next_tick)
         last = last_tick_due(now_ns, dt_ns, self.lookahead)
         start = self.next_tick
         out = [self.setpoint(k) for k in range(start, last + 1)]
@@ -338,6 +347,8 @@ class SetpointStream:
     def setpoint(self, k):
         """Return the setpoint of tick ``k`` of the running plan (which must have started)."""
         plan = self.plan
+        if not plan.feed.steady:
+            return self._held(k)
         traj = plan.trajectory
         k_plan = k - plan.start_tick
         if plan.transition is not None and k < plan.transition_end():
@@ -353,3 +364,35 @@ class SetpointStream:
         px, py, vx, vy, ax, ay = traj.sample_tuple(t)
         return Setpoint(k * self.dt_ns, px, py, vx, vy, ax, ay, plan.plan_id,
                         (k_plan * self.dt_ns) * 1e-9, t > traj.duration)
+
+    def plan_time_at(self, k):
+        """Return the running plan's time [s] at tick ``k`` (after its start; feed hold in)."""
+        plan = self.plan
+        lag = plan.feed.at(k)[0]
+        return ((k - plan.start_tick) - lag) * self.dt
+
+    def _held(self, k):
+        """
+        Return the setpoint of tick ``k`` of a plan whose feed ramped (feed hold).
+
+        The plan is evaluated at the fractional tick ``k - lag`` (its transition, the held
+        start, the trajectory, as :meth:`setpoint` at whole ticks), its velocity and
+        acceleration scaled by the feed (``freejoint_core.feed_hold.scale_sample``).
+        """
+        plan = self.plan
+        traj = plan.trajectory
+        lag, rate, rate_dot = plan.feed.at(k)
+        plan_time = ((k - plan.start_tick) - lag) * self.dt
+        final = False
+        if plan.transition is not None and (k - plan.transition_end()) - lag < 0:
+            sample = plan.transition.sample_tuple(((k - plan.transition_tick) - lag)
+                                                  * self.dt)
+        else:
+            sample = traj.sample_tuple(plan_time)
+            final = plan_time > traj.duration
+        v = scale_sample(sample, rate, rate_dot)
+        m = len(v) // 3
+        if m == 3:
+            return SpatialSetpoint(k * self.dt_ns, v[:3], v[3:6], v[6:], plan.plan_id,
+                                   plan_time, final)
+        return Setpoint(k * self.dt_ns, *v, plan.plan_id, plan_time, final)

@@ -58,6 +58,11 @@ case's ``tracking_bound_mm``; none for another arm), the time held or braked whi
 moved, the plans completed and how late. A bag without ``ee_position`` or ``setpoints``
 gives a warning instead.
 
+Plans: every outcome the planner published on ``plan_outcome`` (recorded by the recorder
+with the graph's topics) is printed, one line each: ``outcome: <bag>: plan N SUCCEEDED
+(elapsed .. s, late .. s, n pause(s) .. s, max path error .. mm)``, or the code and why
+(docs/feed_hold.md); a bag recorded before the topic existed has none.
+
 Bad input (a missing, truncated or foreign bag, a bag without the run's topics) gives one
 line ``analyze: error: <file>: <problem>`` on stderr and exit code 1. A bag whose recorder
 was killed (not finalised) is analysed up to its last complete chunk, with a warning.
@@ -69,8 +74,9 @@ import re
 import sys
 
 from freejoint_common.contract import CONTROLLER_STATE, DIAGNOSTICS, JOINT_STATES
-from freejoint_common.contract import ROBOT_DESCRIPTION
+from freejoint_common.contract import PLAN_OUTCOME, ROBOT_DESCRIPTION
 from freejoint_common.contract import seconds_to_ns, to_ns
+from freejoint_common.outcome import outcome_line
 
 from .bagfile import BagError, open_bag, SYSTEM_TIME_NS
 
@@ -219,6 +225,9 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     markers = bag.topics_of_type(MARKER_TYPE)
     if markers and bag.topics[markers[0]].count:
         trace['path'] = bag.decode(markers[0], store)[-1][1]
+    outcome = PLAN_OUTCOME.absolute
+    trace['outcomes'] = [m for _, m in bag.decode(outcome, store)] \
+        if outcome in bag.topics and bag.topics[outcome].count else []
     return record, trace, warnings
 
 
@@ -531,6 +540,8 @@ def main(argv=None):
         for line in failure_lines(trace['name'], trace['failures'], trace['t'] + trace['t0'],
                                   error):
             print('failure: %s' % line)
+        for outcome in trace['outcomes']:
+            print('outcome: %s: %s' % (trace['name'], outcome_line(outcome)))
     if not opts.no_plots:
         from .plots import write_figures
         try:

@@ -9,6 +9,8 @@ works with either tool (``ros2 param set ...`` or ``fj param set ...``)::
     fj topic list [-t]
     fj service list [-t]
     fj service call <service> <type> ['<yaml>']
+    fj action list [-t]
+    fj action send_goal <action> <type> ['<yaml>'] [-f]
     fj param list [node] [--param-type]
     fj param get <node> <name> [--hide-type]
     fj param set <node> <name> <value> [<name> <value> ...]
@@ -511,29 +513,105 @@ def set_message_fields(msg, values, where=''):
             raise CommandError('Failed to populate field %s: %s' % (path, exc))
 
 
-def _service_call(s, args):
+def fill_from_yaml(msg, text):
+    """Fill ``msg`` from the YAML ``text`` of a command line (CommandError naming why)."""
     import yaml
+    try:
+        values = yaml.safe_load(text) if text else {}
+    except yaml.YAMLError as exc:
+        raise CommandError('The passed value is not valid YAML: %s' % exc)
+    set_message_fields(msg, values or {})
+
+
+def _wait_server(s, ready, waiting, missing):
+    """Wait up to ``--timeout`` s for ``ready()`` (a server discovered), saying so once."""
+    if ready():
+        return
+    print(waiting)
+    deadline = time.monotonic() + s.args.timeout
+    while not ready():
+        if time.monotonic() >= deadline:
+            raise CommandError('%s (waited %g s)' % (missing, s.args.timeout))
+        s.spin_for(0.05)
+
+
+def _service_call(s, args):
     service = absolute_name(args.service_name)
     srv = interface_class(args.service_type)
     request = srv.Request(check_fields=True)  # a value of the wrong type raises, named
-    try:
-        values = yaml.safe_load(args.values) if args.values else {}
-    except yaml.YAMLError as exc:
-        raise CommandError('The passed value is not valid YAML: %s' % exc)
-    set_message_fields(request, values or {})
+    fill_from_yaml(request, args.values)
     client = s.node.create_client(srv, service)
-    if not client.service_is_ready():
-        print('waiting for service to become available...')
-        deadline = time.monotonic() + args.timeout
-        while not client.service_is_ready():
-            if time.monotonic() >= deadline:
-                raise CommandError('Service not available: %s (waited %g s)'
-                                   % (service, args.timeout))
-            s.spin_for(0.05)
+    _wait_server(s, client.service_is_ready, 'waiting for service to become available...',
+                 'Service not available: %s' % service)
     print('requester: making request: %r\n' % (request,))
     response = s.wait_future(client.call_async(request), service)
     print('response:\n%r\n' % (response,))
     return 0
+
+
+# -- actions ----------------------------------------------------------------------------
+GOAL_STATUS = {1: 'ACCEPTED', 2: 'EXECUTING', 3: 'CANCELING', 4: 'SUCCEEDED', 5: 'CANCELED',
+               6: 'ABORTED'}
+"""action_msgs/msg/GoalStatus -> the name ``ros2 action send_goal`` prints."""
+
+
+def _action_list(s, args):
+    from rclpy.action import get_action_names_and_types
+    return _names_and_types(s.settled(lambda: get_action_names_and_types(s.node)),
+                            args.show_types)
+
+
+def _outcome_line(result):
+    """Return a freejoint PlanOutcome result in one line, '' for another action's result."""
+    from freejoint_common.outcome import outcome_line
+    outcome = getattr(result, 'outcome', None)
+    if outcome is None or not hasattr(outcome, 'code_name'):
+        return ''
+    return 'Outcome: ' + outcome_line(outcome)
+
+
+def _send_goal(s, args):
+    """
+    Send a goal as ``ros2 action send_goal`` does; print feedback (``-f``) and the result.
+
+    Ctrl-C cancels the goal and waits for its result. Exit status 0 when the goal
+    succeeded, 1 otherwise (ros2 action exits 0 whatever the outcome).
+    """
+    from rclpy.action import ActionClient
+    name = absolute_name(args.action_name)
+    action = interface_class(args.action_type)
+    goal = action.Goal(check_fields=True)
+    fill_from_yaml(goal, args.goal)
+    client = ActionClient(s.node, action, name)
+    _wait_server(s, client.server_is_ready,
+                 'Waiting for an action server to become available...',
+                 'Action server not available: %s' % name)
+    print('Sending goal:\n     %r\n' % (goal,))
+
+    def feedback(msg):
+        print('Feedback:\n    %r\n' % (msg.feedback,))
+    handle = s.wait_future(client.send_goal_async(
+        goal, feedback_callback=feedback if args.feedback else None), name)
+    if not handle.accepted:
+        print('Goal was rejected.')
+        return 1
+    print('Goal accepted with ID: %s\n' % bytes(handle.goal_id.uuid).hex())
+    future = handle.get_result_async()
+    try:
+        while not future.done():
+            s.executor.spin_once(timeout_sec=0.1)
+    except KeyboardInterrupt:
+        print('Canceling goal...')
+        s.wait_future(handle.cancel_goal_async(), name + ' (cancel)')
+        s.wait_future(future, name + ' (result)')
+    answer = future.result()
+    print('Result:\n    %r\n' % (answer.result,))
+    line = _outcome_line(answer.result)
+    if line:
+        print(line)
+    status = GOAL_STATUS.get(answer.status, str(answer.status))
+    print('Goal finished with status: %s' % status)
+    return 0 if status == 'SUCCEEDED' else 1
 
 
 # -- run --------------------------------------------------------------------------------
@@ -576,6 +654,17 @@ def _campaign(args):
     return campaign.main(args.argv)
 
 
+def _typed_list(cmds, noun, nouns, help_text, func):
+    """Add ``fj <noun> list [-t]``; return the noun's verb subparsers (for more verbs)."""
+    verbs = cmds.add_parser(noun, help=nouns).add_subparsers(
+        dest='verb', required=True, metavar='verb')
+    p = verbs.add_parser('list', help=help_text)
+    p.add_argument('-t', '--show-types', action='store_true')
+    _waits(p, spin=True)
+    p.set_defaults(func=func)
+    return verbs
+
+
 def build_parser():
     """Return the argparse parser of ``fj``."""
     parser = argparse.ArgumentParser(
@@ -602,19 +691,9 @@ def build_parser():
     _waits(p, spin=True)
     p.set_defaults(func=_node_list)
 
-    topic = cmds.add_parser('topic', help='topics').add_subparsers(
-        dest='verb', required=True, metavar='verb')
-    p = topic.add_parser('list', help='output a list of available topics')
-    p.add_argument('-t', '--show-types', action='store_true')
-    _waits(p, spin=True)
-    p.set_defaults(func=_topic_list)
-
-    service = cmds.add_parser('service', help='services').add_subparsers(
-        dest='verb', required=True, metavar='verb')
-    p = service.add_parser('list', help='output a list of available services')
-    p.add_argument('-t', '--show-types', action='store_true')
-    _waits(p, spin=True)
-    p.set_defaults(func=_service_list)
+    _typed_list(cmds, 'topic', 'topics', 'output a list of available topics', _topic_list)
+    service = _typed_list(cmds, 'service', 'services', 'output a list of available services',
+                          _service_list)
     p = service.add_parser('call', help='call a service')
     p.add_argument('service_name')
     p.add_argument('service_type', help='e.g. freejoint_msgs/srv/PlanCircle')
@@ -622,6 +701,17 @@ def build_parser():
                    help='request fields in YAML, e.g. "{radius: 0.2}"')
     _waits(p)
     p.set_defaults(func=_service_call)
+
+    action = _typed_list(cmds, 'action', 'actions', 'output a list of action names',
+                         _action_list)
+    p = action.add_parser('send_goal', help='send an action goal, print its result')
+    p.add_argument('action_name')
+    p.add_argument('action_type', help='e.g. freejoint_msgs/action/FollowCircle')
+    p.add_argument('goal', nargs='?', default='{}',
+                   help='goal fields in YAML, e.g. "{radius: 0.2, duration: 5.0}"')
+    p.add_argument('-f', '--feedback', action='store_true', help='echo the feedback messages')
+    _waits(p)
+    p.set_defaults(func=_send_goal)
 
     param = cmds.add_parser('param', help='parameters').add_subparsers(
         dest='verb', required=True, metavar='verb')
