@@ -40,7 +40,7 @@ over the period.  With every axis off (``noise_* = 0``, ``delay = 0``,
 ``lag = 0``, ``dist_type`` uniform) a run is ``offline.run_case(case, 'robust',
 seed, nominal_scale=s, dist_bound=b, q3_0_deg=...)`` (equal scales ``s``);
 :func:`run_scalar` is the per-run reference built from the same components
-(``Plant``, ``RobustController``) and :func:`simulate` equals it to round-off
+(``Plant``, the registered law) and :func:`simulate` equals it to round-off
 (tests: ``test/core/test_batch.py``).
 """
 
@@ -51,8 +51,9 @@ import os
 import numpy as np
 
 from .arm import ArmParams, table1
-from .control import Gains, RobustController
+from .control import Gains
 from .errors import FreejointValueError
+from .laws import make_law
 from .offline import _BLOWUP, DEFAULT_DT, initial_state
 from .plant import DEFAULT_DT_SUB, Plant
 from .trajectory import CircleQuintic
@@ -825,13 +826,102 @@ def _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory, diverge
     return res
 
 
-def run_scalar(run, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration=5.0,
-               trajectory=None, diverge_m=0.5, diverge_qd=1000.0, arms=None):
+KERNELS = {'robust': simulate}
+"""Batched kernels registered per law name: ``kernel(runs, gains, **options)`` computing
+what :func:`run_scalar` computes with that law, run by run (tests check they agree)."""
+
+
+def register_kernel(law, kernel):
+    """Register the batched campaign kernel of the law registered as ``law``."""
+    if not callable(kernel):
+        raise FreejointValueError(f'kernel: expected a callable, got {kernel!r}')
+    KERNELS[law] = kernel
+
+
+def simulate_law(runs, gains=None, *, law='robust', law_params=None, processes=None,
+                 **options):
     """
-    One run of :func:`simulate`, tick by tick with ``Plant`` and ``RobustController``.
+    Run every run of ``runs`` with the registered law ``law``; return their metrics.
+
+    The law's batched kernel (:data:`KERNELS`) when it has one and no own gains are
+    given, else its scalar step run by run (:func:`run_scalar`, ``processes`` worker
+    processes, default every core): the same metrics, slower.
+
+    Parameters
+    ----------
+    runs, gains
+        As :func:`simulate`.
+    law : str
+        A law of ``freejoint_core.laws.LAWS``.
+    law_params : mapping of str to float, optional
+        The laws' own gains by namespaced name.
+    processes : int, optional
+        Worker processes of the scalar path (1: in this process).
+    **options
+        ``dt``, ``dt_sub``, ``duration``, ``trajectory``, ``diverge_m``, ``diverge_qd``,
+        ``arms`` (and for a kernel its own options).
+
+    Returns
+    -------
+    dict of str to numpy.ndarray, each (n,)
+        Keys :data:`METRICS`.
+
+    """
+    from .laws import LAWS
+    if law not in LAWS:
+        raise FreejointValueError(f'law: expected one of {tuple(LAWS)}, got {law!r}')
+    own = {k: v for k, v in (law_params or {}).items() if k.startswith(law + '.')}
+    if law in KERNELS and not own:
+        return KERNELS[law](runs, gains, **options)
+    runs = check_runs(runs)
+    n = runs['seed'].shape[0]
+    one = [{k: v[i] for k, v in runs.items()} for i in range(n)]
+    job = _ScalarJob(gains, law, own or None, options)
+    workers = max(1, min(processes or os.cpu_count() or 1, n))
+    if workers == 1:
+        results = [job(r) for r in one]
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(
+                'forkserver')) as pool:
+            results = list(pool.map(job, one, chunksize=max(1, n // (4 * workers))))
+    out = {name: np.array([r[name] for r in results], dtype=float) for name in METRICS}
+    out['ticks'] = out['ticks'].astype(np.int64)
+    return out
+
+
+class _ScalarJob:
+    """
+    One run of :func:`run_scalar` with fixed law and options (picklable).
+
+    A worker process imports the module that registered the law first (a law registered
+    by a module the worker has not imported yet, e.g. a lab's own).
+    """
+
+    def __init__(self, gains, law, law_params, options):
+        from .laws import LAWS
+        self.module = getattr(LAWS[law], '__module__', None)
+        self.args = (gains, law, law_params, options)
+
+    def __call__(self, run):
+        from .laws import LAWS
+        gains, law, law_params, options = self.args
+        if law not in LAWS and self.module:
+            import importlib
+            importlib.import_module(self.module)
+        return run_scalar(run, gains, law=law, law_params=law_params, **options)[0]
+
+
+def run_scalar(run, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration=5.0,
+               trajectory=None, diverge_m=0.5, diverge_qd=1000.0, arms=None, law='robust',
+               law_params=None):
+    """
+    One run of :func:`simulate`, tick by tick with ``Plant`` and the law's scalar step.
 
     The reference :func:`simulate` is tested against: ``offline.run_case``'s loop with
-    the campaign axes added in the order of the module notes.
+    the campaign axes added in the order of the module notes; the law built by
+    ``laws.make_law`` (a law without a batched kernel runs in campaigns through this).
 
     Parameters
     ----------
@@ -839,6 +929,8 @@ def run_scalar(run, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duratio
         One value per :data:`RUN_FIELDS` key.
     gains, dt, dt_sub, duration, trajectory, diverge_m, diverge_qd, arms
         As :func:`simulate`.
+    law, law_params
+        The registered control law and the laws' own gains (``offline.run_case``).
 
     Returns
     -------
@@ -858,7 +950,7 @@ def run_scalar(run, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duratio
     px0, py0 = trajectory.sample(0.0)[0]
     plant = Plant(real, dt_sub, dist_bound=0.0, seed=seed,
                   q0=initial_state(real, r['q3_0_deg'], (px0, py0)))
-    ctrl = RobustController(nominal, gains)
+    ctrl = make_law(law, nominal, gains, params=law_params)
     fk = plant.model.fk
     b = float(r['dist_bound'])
     rng_d = np.random.default_rng(seed)
