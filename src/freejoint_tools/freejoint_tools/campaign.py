@@ -853,6 +853,28 @@ def summary(cols, names):
     return '\n'.join(lines)
 
 
+def _save(fig, path):
+    """Write ``fig`` to ``path`` (90 dpi) and close it; return the path."""
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def _frame(ax, x, y, paper):
+    """Label a cell plot's axes ``(name, centres, labels)``; star the paper's point."""
+    (a, ca, la), (b, cb, lb) = x, y
+    ax.set_xticks(range(len(la)), la, rotation=45, fontsize=7)
+    ax.set_yticks(range(len(lb)), lb, fontsize=7)
+    ax.set_xlabel(a)
+    ax.set_ylabel(b)
+    px = np.interp(paper[a], ca, np.arange(len(ca))) if a in paper else None
+    py = np.interp(paper[b], cb, np.arange(len(cb))) if b in paper else None
+    if px is not None and py is not None:
+        ax.plot(px, py, marker='*', color='w', markeredgecolor='k', markersize=14)
+
+
 def heatmaps(cols, names, folder, paper=PAPER_POINT):
     """Draw success rate and worst max error over every pair of axes; return the files."""
     import matplotlib
@@ -879,25 +901,14 @@ def heatmaps(cols, names, folder, paper=PAPER_POINT):
                  'viridis', {})):
             im = ax.imshow(data, origin='lower', aspect='auto', cmap=cmap, **kw)
             fig.colorbar(im, ax=ax)
-            ax.set_xticks(range(len(la)), la, rotation=45, fontsize=7)
-            ax.set_yticks(range(len(lb)), lb, fontsize=7)
-            ax.set_xlabel(a)
-            ax.set_ylabel(b)
             ax.set_title(title, fontsize=9)
             if data is rate and np.nanmin(rate) < 0.5 < np.nanmax(rate):
                 ax.contour(np.nan_to_num(rate, nan=0.0), levels=[0.5], colors='k',
                            linewidths=1.5)
-            px = np.interp(paper[a], ca, np.arange(len(ca))) if a in paper else None
-            py = np.interp(paper[b], cb, np.arange(len(cb))) if b in paper else None
-            if px is not None and py is not None:
-                ax.plot(px, py, marker='*', color='w', markeredgecolor='k', markersize=14)
+            _frame(ax, (a, ca, la), (b, cb, lb), paper)
         fig.suptitle(f"{a} x {b}: {len(holds)} runs (star: the paper's point; black: "
                      '50 % boundary)', fontsize=9)
-        fig.tight_layout()
-        path = os.path.join(folder, f'heatmap_{a}__{b}.png')
-        fig.savefig(path, dpi=90)
-        plt.close(fig)
-        files.append(path)
+        files.append(_save(fig, os.path.join(folder, f'heatmap_{a}__{b}.png')))
     return files
 
 
@@ -972,24 +983,13 @@ def boundaries(per_law, names, folder, paper=PAPER_POINT):
                 ax.contour(np.nan_to_num(rate, nan=0.0), levels=[0.5], colors=colour,
                            linewidths=2.0)
             handles.append(plt.Line2D([], [], color=colour, lw=2, label=label))
-        px = np.interp(paper[a], ca, np.arange(len(ca))) if a in paper else None
-        py = np.interp(paper[b], cb, np.arange(len(cb))) if b in paper else None
-        if px is not None and py is not None:
-            ax.plot(px, py, marker='*', color='w', markeredgecolor='k', markersize=14)
+        _frame(ax, (a, ca, la), (b, cb, lb), paper)
         ax.set_xlim(-0.5, len(ca) - 0.5)
         ax.set_ylim(-0.5, len(cb) - 0.5)
-        ax.set_xticks(range(len(la)), la, rotation=45, fontsize=7)
-        ax.set_yticks(range(len(lb)), lb, fontsize=7)
-        ax.set_xlabel(a)
-        ax.set_ylabel(b)
         ax.legend(handles=handles, fontsize=8, loc='best')
         ax.set_title(f'{a} x {b}: where each law holds in half the runs (50 % contour; the '
                      "law holds on the side of the paper's point, star)", fontsize=8)
-        fig.tight_layout()
-        path = os.path.join(folder, f'boundary_{a}__{b}.png')
-        fig.savefig(path, dpi=90)
-        plt.close(fig)
-        files.append(path)
+        files.append(_save(fig, os.path.join(folder, f'boundary_{a}__{b}.png')))
     return files
 
 
@@ -1002,13 +1002,18 @@ def report_laws(folder, camp, figures=True):
     names = _varied(per_law[camp['laws'][0]], camp)
     for cols in per_law.values():
         _varied(cols, camp)
-    text = comparison(per_law, names)
-    with open(os.path.join(folder, 'comparison.md'), 'w') as f:
+    return _publish(os.path.join(folder, 'comparison.md'), comparison(per_law, names),
+                    (lambda: boundaries(per_law, names, folder)) if figures and len(names) >= 2
+                    else None)
+
+
+def _publish(path, text, draw):
+    """Write and print ``text``; draw the figures (``draw()``: their files) and name them."""
+    with open(path, 'w') as f:
         f.write(text + '\n')
     print(text)
-    if figures and len(names) >= 2:
-        for path in boundaries(per_law, names, folder):
-            print(f'figure: {path}')
+    for fig in draw() if draw is not None else ():
+        print(f'figure: {fig}')
     return 0
 
 
@@ -1022,14 +1027,9 @@ def report(results, figures=True):
             return report_laws(results, camp, figures)
     cols, camp, folder = _read(results)
     names = _varied(cols, camp)
-    text = summary(cols, names)
-    with open(os.path.join(folder, 'summary.md'), 'w') as f:
-        f.write(text + '\n')
-    print(text)
-    if figures and len(names) >= 2:
-        for path in heatmaps(cols, names, folder):
-            print(f'figure: {path}')
-    return 0
+    return _publish(os.path.join(folder, 'summary.md'), summary(cols, names),
+                    (lambda: heatmaps(cols, names, folder)) if figures and len(names) >= 2
+                    else None)
 
 
 # -- command line -----------------------------------------------------------------------
