@@ -242,3 +242,20 @@ def test_the_laws_of_one_module_each_are_what_the_registry_builds():
     nominal = table1('horizontal').scaled(0.7)
     assert type(make_law('vsc', nominal, Gains())) is SlidingModeLaw
     assert type(make_law('tdc', nominal, Gains())) is TimeDelayLaw
+
+
+@pytest.mark.parametrize('law, gain, value, cls', [('vsc', 'vsc.phi', 0.05, SlidingModeLaw),
+                                                   ('tdc', 'tdc.filter', 0.0, TimeDelayLaw)])
+def test_the_node_builds_the_laws_from_the_literature_with_their_namespaced_parameters(
+        law, gain, value, cls):
+    from freejoint_control.loop import ControlLoop
+    from freejoint_control.params import SCHEMA
+    values = dict(SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml')),
+                  readiness_guard=False, law=law)
+    values[gain] = value
+    loop = ControlLoop(SCHEMA.config(values))
+    assert type(loop.law) is cls and loop.law.params[gain] == value
+    assert loop.result.law_state_names == cls.state_names
+    values[gain] = -1.0
+    with pytest.raises(FreejointValueError, match=f'^{gain}: '):
+        SCHEMA.config(values)

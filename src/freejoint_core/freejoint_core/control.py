@@ -279,6 +279,35 @@ def _vec3(x, name):
     raise _bad(name, x, 3)
 
 
+def decay_coefficients(gamma, sigma, dt):
+    """
+    Return the exact zero-order-hold step of the adaptation (19), per component.
+
+    ``theta <- a_i theta + c_i u_i`` with ``a_i = exp(-Gamma_i sigma_i dt)``,
+    ``c_i = (1 - a_i) / sigma_i`` (``sigma_i = 0``: ``a_i = 1``, ``c_i = Gamma_i dt``).
+
+    Parameters
+    ----------
+    gamma, sigma : sequence of float, (5,)
+        Diagonals of Gamma and sigma.
+    dt : float
+        Step [s].
+
+    Returns
+    -------
+    tuple of (float, float), (5,)
+
+    """
+    coef = []
+    for g, sg in zip(gamma, sigma):
+        if sg > 0.0:
+            a = math.exp(-g * sg * dt)
+            coef.append((a, (1.0 - a) / sg))
+        else:
+            coef.append((1.0, g * dt))
+    return tuple(coef)
+
+
 def _dot(u, v):
     """Return ``u . v`` of two or three floats, summed left to right."""
     if len(u) == 2:
@@ -490,14 +519,7 @@ class RobustController(HoldStiffness):
         """Per-component (a_i, c_i): theta <- a_i theta + c_i u_i."""
         if self._decay_cache[0] == dt:
             return self._decay_cache[1]
-        coef = []
-        for g, sg in zip(self._gamma, self._sigma):
-            if sg > 0.0:
-                a = math.exp(-g * sg * dt)
-                coef.append((a, (1.0 - a) / sg))
-            else:
-                coef.append((1.0, g * dt))
-        coef = tuple(coef)
+        coef = decay_coefficients(self._gamma, self._sigma, dt)
         self._decay_cache = (dt, coef)
         return coef
 

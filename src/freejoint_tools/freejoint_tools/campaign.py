@@ -831,6 +831,16 @@ def _bins(values, axis, k=8):
     return centres, [f'{c:.3g}' for c in centres], idx
 
 
+def _bin_rows(cols, names):
+    """Yield ``(axis, label, selection)`` per non-empty value (bin) of each axis."""
+    for a in names:
+        _, labels, idx = _bins(cols[a], a)
+        for b, lab in enumerate(labels):
+            sel = idx == b
+            if sel.any():
+                yield a, lab, sel
+
+
 def summary(cols, names):
     """Return the summary table (Markdown): overall, then per value (bin) of each axis."""
     holds = np.asarray(cols['holds'])
@@ -841,15 +851,10 @@ def summary(cols, names):
              f'{np.median(cols["rms_mm"]):.3g} mm', '',
              '| axis | value | runs | holds | diverged | worst max (mm) | median rms (mm) |',
              '|---|---:|---:|---:|---:|---:|---:|']
-    for a in names:
-        centres, labels, idx = _bins(cols[a], a)
-        for b, lab in enumerate(labels):
-            sel = idx == b
-            if not sel.any():
-                continue
-            lines.append(f'| {a} | {lab} | {sel.sum()} | {holds[sel].mean():.1%} '
-                         f'| {div[sel].sum()} | {mx[sel].max():.3g} '
-                         f'| {np.median(np.asarray(cols["rms_mm"])[sel]):.3g} |')
+    for a, lab, sel in _bin_rows(cols, names):
+        lines.append(f'| {a} | {lab} | {sel.sum()} | {holds[sel].mean():.1%} '
+                     f'| {div[sel].sum()} | {mx[sel].max():.3g} '
+                     f'| {np.median(np.asarray(cols["rms_mm"])[sel]):.3g} |')
     return '\n'.join(lines)
 
 
@@ -936,19 +941,11 @@ def comparison(per_law, names):
     lines += ['', '| axis | value | runs | ' + ' | '.join(
         f'{law} holds | {law} worst max (mm)' for law in laws) + ' |',
         '|---|---:|---:|' + '---:|---:|' * len(laws)]
-    first = per_law[laws[0]]
-    for a in names:
-        _, labels, idx = _bins(first[a], a)
-        for b, lab in enumerate(labels):
-            sel = idx == b
-            if not sel.any():
-                continue
-            cells = []
-            for law in laws:
-                cols = per_law[law]
-                cells.append(f'{np.asarray(cols["holds"])[sel].mean():.0%} '
-                             f'| {np.asarray(cols["max_mm"], dtype=float)[sel].max():.3g}')
-            lines.append(f'| {a} | {lab} | {sel.sum()} | ' + ' | '.join(cells) + ' |')
+    for a, lab, sel in _bin_rows(per_law[laws[0]], names):
+        cells = [f'{np.asarray(cols["holds"])[sel].mean():.0%} '
+                 f'| {np.asarray(cols["max_mm"], dtype=float)[sel].max():.3g}'
+                 for cols in per_law.values()]
+        lines.append(f'| {a} | {lab} | {sel.sum()} | ' + ' | '.join(cells) + ' |')
     return '\n'.join(lines)
 
 
