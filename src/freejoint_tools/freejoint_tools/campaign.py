@@ -984,8 +984,8 @@ def boundaries(per_law, names, folder, paper=PAPER_POINT):
         ax.set_xlim(-0.5, len(ca) - 0.5)
         ax.set_ylim(-0.5, len(cb) - 0.5)
         ax.legend(handles=handles, fontsize=8, loc='best')
-        ax.set_title(f'{a} x {b}: where each law holds in half the runs (50 % contour; the '
-                     "law holds on the side of the paper's point, star)", fontsize=8)
+        ax.set_title(f"{a} x {b}: each law's 50 % boundary, {len(ia)} runs (star: the "
+                     "paper's point)", fontsize=8)
         files.append(_save(fig, os.path.join(folder, f'boundary_{a}__{b}.png')))
     return files
 
