@@ -1057,7 +1057,7 @@ def main(argv=None):
         if args.verb == 'report':
             return report(args.results, figures=not args.no_figures)
         camp = load(args.file)
-        n = len(design(camp)['run_index'])
+        n = len(design(camp)['run_index']) * len(camp.get('laws', ('robust',)))
         if args.check:
             print(f'campaign {camp["name"]}: {n} runs, axes {", ".join(camp["axes"])}')
             return 0
@@ -1066,7 +1066,7 @@ def main(argv=None):
         path = run(camp, out, address=args.address, progress=not args.no_progress)
         wall = time.monotonic() - t0
         print(f'campaign {camp["name"]}: {n} runs, {wall:.1f} s wall '
-              f'({n / wall:.0f} runs/s incl. resumed), results {path}')
+              f'({n / wall:.3g} runs/s incl. resumed), results {path}')
         if args.report and path:
             return report(out)
         return 0
