@@ -64,7 +64,7 @@ def test_a_law_refuses_gains_it_does_not_declare_or_out_of_range():
         make_law('vsc', nominal, Gains(), params={'vsc.delta': 1.0})
     with pytest.raises(FreejointValueError, match=r"^robust\.K: law 'robust' has no gains"):
         make_law('robust', nominal, Gains(), params={'robust.K': 1.0})
-    with pytest.raises(FreejointValueError, match="is not named mine.<gain>"):
+    with pytest.raises(FreejointValueError, match='is not named mine.<gain>'):
         laws.register_law('mine', SlidingModeLaw)
     # another law's gains are ignored: a configuration carries every law's
     assert make_law('tdc', nominal, Gains(), params={'vsc.phi': 0.2}).params == {
