@@ -60,7 +60,7 @@ def test_single_tick_record():
     ('p', np.zeros((2, 2)), r'^p: expected shape \(3, 2\)'),
     ('p_d', [[0.0, 0.0], [0.0, float('nan')], [0.0, 0.0]], '^p_d: non-finite value at row 1'),
     ('tau', np.zeros((3,)), '^tau:'),
-    ('theta', np.zeros(4), '^theta:'),
+    ('theta', np.zeros((2, 5)), r'^theta: expected shape \(k,\) or \(3, k\)'),
     ('q_passive', np.zeros((3, 2)), '^q_passive:'),
     ('det', np.zeros(2), '^det:'),
     ('diverged_at_s', float('inf'), '^diverged_at_s:'),

@@ -136,8 +136,8 @@ def config_law(cfg):
     """
     Return the law a controller configuration names, with its null-space terms.
 
-    ``make_law`` of ``cfg.law`` on the nominal model and gains, then
-    ``failures.install_nullspace`` (``nullspace_kd``, ``nullspace_kp``): the law the loop
+    ``make_law`` of ``cfg.law`` on the nominal model, the gains and the laws' own gains,
+    then ``failures.install_nullspace`` (``nullspace_kd``, ``nullspace_kp``): the law the loop
     steps (before the free link's damping wraps it) and the one an offline twin of the
     graph must run.
 
@@ -151,7 +151,8 @@ def config_law(cfg):
     freejoint_core.laws.ControlLaw
 
     """
-    law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model)
+    law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model,
+                   params=cfg.law_params)
     failures.install_nullspace(law, cfg)
     return law
 

@@ -25,7 +25,7 @@ from freejoint_core.circles import HORIZONTAL_SETTLE, MODULATION
 from freejoint_core.control import Gains, H_FORMS
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.failure import DEFAULT_K_O, DEFAULT_MARGIN, DEFAULT_TICKS
-from freejoint_core.laws import LAWS
+from freejoint_core.laws import gain_schema, LAWS
 from freejoint_core.urdf_offline import nominal_model
 
 SPATIAL_LAW = 'spatial'
@@ -163,6 +163,11 @@ FREE_LINK_PARAMS = (
           'between tasks must be about 0.4 s longer)', (1e-3, 3600.0), read_only=True),
 )
 
+LAW_GAIN_PARAMS = tuple(
+    Param(g.name, float(g.default), f"law '{g.name.split('.')[0]}': {g.description}",
+          g.bounds, read_only=True) for g in gain_schema())
+"""The laws' own gains (``<law>.<gain>``, each law's ``gain_schema``); read by that law."""
+
 PARAMS = (
     CASE, ARM_SPECS, NOMINAL_SCALE, ARM_JOINT_NAMES, ARM_JOINTS, CONTROL_PERIOD,
     Param('lockstep', True,
@@ -276,6 +281,7 @@ PARAMS = (
           'another law is one module registering itself '
           '(freejoint_core.laws.register_law) and this value; takes effect at start-up',
           read_only=True, validator=one_of(LAWS)),
+    *LAW_GAIN_PARAMS,
     Param('state_publish_rate', 0.0,
           'rate [Hz of state stamps] of controller_state (as ros2_control state publishers '
           'thin theirs): 0 = one per answered state; else at most one per 1/rate s, and '
@@ -486,8 +492,8 @@ class Config(LoopConfig):
     Besides the loop's fields (:class:`LoopConfig`): the nominal model (``ArmParams``; a
     spatial arm's ``SpatialArm``), the gains, the command order, the limits and the arm's
     joint offsets (added to the measured angles:
-    ``NodeArm.joint_offsets``, model order). Every other parameter is ``config.<name>``
-    as validated.
+    ``NodeArm.joint_offsets``, model order), the laws' own gains (``law_params``,
+    ``<law>.<gain>``). Every other parameter is ``config.<name>`` as validated.
     """
 
     nominal: ArmParams
@@ -500,6 +506,7 @@ class Config(LoopConfig):
     reach: float
     nominal_model: object = field(default=None, compare=False)
     joint_offsets: tuple = ()
+    law_params: dict = field(default_factory=dict)
 
 
 GAIN_NAMES = ('K', 'Lambda', 'R', 'Gamma', 'sigma', 'epsilon', 'h_form', 'theta0', 'robust',
@@ -557,7 +564,8 @@ def build(values):
         position_lower=_floats('joint_position_lower', values['joint_position_lower']),
         position_upper=_floats('joint_position_upper', values['joint_position_upper']),
         velocity_limit=_floats('joint_velocity_limit', values['joint_velocity_limit']),
-        reach=reach, nominal_model=model, joint_offsets=tuple(arm.joint_offsets))
+        reach=reach, nominal_model=model, joint_offsets=tuple(arm.joint_offsets),
+        law_params={p.name: float(values[p.name]) for p in LAW_GAIN_PARAMS})
 
 
 SCHEMA = Schema(PARAMS, CHECKS, build)

@@ -1,8 +1,9 @@
 """
 Compiled kernel of :func:`freejoint_core.batch.simulate` (numba, runs split over threads).
 
-One run per loop iteration, tick by tick, with the very operations (same order) of
-``fast3.Arm3Model``, ``RobustController._step_fast`` and ``Plant._rk4_fast3``; no
+One run per loop iteration, tick by tick: the arm's closed forms are ``fast3``'s own
+functions (``terms``, ``qdd``, ``task``) compiled, the law and the RK4 step the very
+operations (same order) of ``RobustController._step_fast`` and ``Plant._rk4_fast3``; no
 fast-math; numpy's error model (a division by zero gives inf, caught by the divergence
 rule like the exception ``offline.run_case`` catches).  No parfors: ``run_range``
 releases the GIL and ``batch`` runs one per thread (a short compile; docs/campaigns.md).
@@ -20,92 +21,34 @@ Layouts (n runs, N ticks):
 """
 
 import math
+import types
 
+from freejoint_core import fast3
 import numba
 import numpy as np
 
 N_OUT = 11
 
 
-@numba.njit(cache=True, error_model='numpy')
-def _terms(c, q0, q1, q2, w0, w1, w2):
-    f2 = q0 + q1
-    f3 = f2 + q2
-    c1 = math.cos(q0)
-    s1 = math.sin(q0)
-    c2 = math.cos(f2)
-    s2 = math.sin(f2)
-    c3 = math.cos(f3)
-    s3 = math.sin(f3)
-    o2 = w0 + w1
-    o3 = o2 + w2
-    k1 = w0 * w0
-    k2 = o2 * o2
-    k3 = o3 * o3
-    h12 = c[3]
-    h13 = c[4]
-    h23 = c[5]
-    x = h12 * (c1 * c2 + s1 * s2)
-    y = h13 * (c1 * c3 + s1 * s3)
-    z = h23 * (c2 * c3 + s2 * s3)
-    a12 = h12 * (s1 * c2 - c1 * s2)
-    a13 = h13 * (s1 * c3 - c1 * s3)
-    a23 = h23 * (s2 * c3 - c2 * s3)
-    d1 = c[0]
-    d2 = c[1]
-    d3 = c[2]
-    a11 = d2 * d3 - z * z
-    b12 = y * z - x * d3
-    b13 = x * z - d2 * y
-    a22 = d1 * d3 - y * y
-    b23 = x * y - d1 * z
-    a33 = d1 * d2 - x * x
-    inv = 1.0 / (d1 * a11 + x * b12 + y * b13)
-    return (c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23,
-            a11, b12, b13, a22, b23, a33, inv)
+_jit = numba.njit(cache=True, error_model='numpy')
 
 
-@numba.njit(cache=True, error_model='numpy')
-def _qdd(c, q0, q1, q2, w0, w1, w2, t0, t1, t2):
-    (c1, _, c2, _, c3, _, _, _, k1, k2, k3, a12, a13, a23,
-     a11, b12, b13, a22, b23, a33, inv) = _terms(c, q0, q1, q2, w0, w1, w2)
-    r1 = t0 - t1 - (a12 * k2 + a13 * k3) - c[6] * c1
-    r2 = t1 - t2 - (a23 * k3 - a12 * k1) - c[7] * c2
-    r3 = t2 + (a13 * k1 + a23 * k2) - c[8] * c3
-    p1 = (a11 * r1 + b12 * r2 + b13 * r3) * inv
-    p2 = (b12 * r1 + a22 * r2 + b23 * r3) * inv
-    p3 = (b13 * r1 + b23 * r2 + a33 * r3) * inv
-    return p1, p2 - p1, p3 - p2
+def _compiled(fn, **calls):
+    """Return ``fn`` compiled, the functions it calls by name replaced by compiled ones."""
+    return _jit(types.FunctionType(fn.__code__, dict(fn.__globals__, **calls), fn.__name__))
 
 
-@numba.njit(cache=True, error_model='numpy')
+# the scalar model's own closed forms (fast3), compiled: one definition of the arithmetic
+_terms = _compiled(fast3.terms)
+_qdd = _compiled(fast3.qdd, terms=_terms)
+_task_full = _compiled(fast3.task, terms=_terms)
+
+
+@_jit
 def _task(c, ln, q0, q1, q2, w0, w1, w2):
-    (c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23,
-     a11, b12, b13, a22, b23, a33, inv) = _terms(c, q0, q1, q2, w0, w1, w2)
-    f1v = a12 * k2 + a13 * k3 + c[6] * c1
-    f2v = a23 * k3 - a12 * k1 + c[7] * c2
-    f3v = -(a13 * k1 + a23 * k2) + c[8] * c3
-    lc1 = ln[0] * c1
-    lc2 = ln[1] * c2
-    lc3 = ln[2] * c3
-    ls1 = ln[0] * s1
-    ls2 = ln[1] * s2
-    ls3 = ln[2] * s3
-    px = lc1 + lc2 + lc3
-    py = ls1 + ls2 + ls3
-    vx = -(ls1 * w0 + ls2 * o2 + ls3 * o3)
-    vy = lc1 * w0 + lc2 * o2 + lc3 * o3
-    jdx = -(lc1 * k1 + lc2 * k2 + lc3 * k3)
-    jdy = -(ls1 * k1 + ls2 * k2 + ls3 * k3)
-    vx1 = -(a11 * ls1 + b12 * ls2 + b13 * ls3) * inv
-    vx2 = -(b12 * ls1 + a22 * ls2 + b23 * ls3) * inv
-    vx3 = -(b13 * ls1 + b23 * ls2 + a33 * ls3) * inv
-    vy1 = (a11 * lc1 + b12 * lc2 + b13 * lc3) * inv
-    vy2 = (b12 * lc1 + a22 * lc2 + b23 * lc3) * inv
-    vy3 = (b13 * lc1 + b23 * lc2 + a33 * lc3) * inv
-    bx = jdx - (vx1 * f1v + vx2 * f2v + vx3 * f3v)
-    by = jdy - (vy1 * f1v + vy2 * f2v + vy3 * f3v)
-    return px, py, vx, vy, vx1, vx2 - vx1, vy1, vy2 - vy1, bx, by
+    """Return ``fast3.task`` with ``Da`` of joints 1, 2 (joint 3 passive), row-major."""
+    px, py, vx, vy, x0, x1, _, y0, y1, _, bx, by = _task_full(c, ln, q0, q1, q2, w0, w1, w2)
+    return px, py, vx, vy, x0, x1, y0, y1, bx, by
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')

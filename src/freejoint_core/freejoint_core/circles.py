@@ -37,10 +37,11 @@ import math
 import numpy as np
 
 from .arm import ArmModel, CASES, NOMINAL_SCALE, table1
-from .control import Gains, RobustController
+from .control import Gains
 from .errors import FreejointValueError, positive
 from .internal import (equilibrium_pose, free_link_swing, FreeLinkModulation, hanging_pose,
                        initial_state, null_space_velocity)
+from .laws import make_law
 from .plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
 from .trajectory import CircleQuintic
 
@@ -100,7 +101,7 @@ def run_circles(case, variant='robust', seed=0, *, circles=1, rest=0.0, hold=0.0
                 arm='paper', actuated='paper', start='paper', stabilise=None, nullspace=None,
                 dt=1e-3, dt_sub=DEFAULT_DT_SUB, nominal_scale=NOMINAL_SCALE,
                 dist_bound=DEFAULT_DIST_BOUND, gains=None, diverge_m=0.5, diverge_qd=1000.0,
-                record_trace=False):
+                record_trace=False, law='robust', law_params=None):
     """
     Run ``circles`` circles back to back and return one record per circle.
 
@@ -138,6 +139,8 @@ def run_circles(case, variant='robust', seed=0, *, circles=1, rest=0.0, hold=0.0
         Error [m] and joint speed [rad/s] beyond which the run stops.
     record_trace : bool
         Also return per-tick ``t``, ``q``, ``qd``, ``e``, ``tau``, ``delta``.
+    law, law_params
+        The registered control law and the laws' own gains (``offline.run_case``).
 
     Returns
     -------
@@ -169,8 +172,8 @@ def run_circles(case, variant='robust', seed=0, *, circles=1, rest=0.0, hold=0.0
     real, plant, nominal, model, traj = _setup(arm, case, actuated, scale, start,
                                                dt_sub * 1.0, dist, seed)
     del n_sub
-    ctrl = RobustController(nominal, Gains() if gains is None else gains, model=model,
-                            nullspace=nullspace)
+    ctrl = make_law(law, nominal, Gains() if gains is None else gains, model=model,
+                    params=law_params, **({} if nullspace is None else {'nullspace': nullspace}))
     mod = None if stabilise is None else FreeLinkModulation(nominal, **dict(stabilise))
     swing_on = arm == 'paper' and actuated == 'paper' and real.gravity > 0.0
     act = list(real.active)

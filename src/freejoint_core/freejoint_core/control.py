@@ -228,6 +228,25 @@ def stiffness_scale(scale):
     return value
 
 
+def clip_torque(tau, limit):
+    """
+    Return ``tau`` within ``[-limit, limit]`` and ``STATUS_TORQUE_LIMITED`` if it clipped.
+
+    Parameters
+    ----------
+    tau : numpy.ndarray, (r,)
+        Torques [N m].
+    limit : None or sequence of float, (r,)
+        Per-joint limits [N m], > 0; None: ``tau`` as is, status 0.
+
+    """
+    if limit is None:
+        return tau, 0
+    lim = np.array(limit)
+    clipped = np.clip(tau, -lim, lim)
+    return clipped, STATUS_TORQUE_LIMITED if np.any(clipped != tau) else 0
+
+
 def _bad(name, value, n):
     shape = np.shape(value) if not isinstance(value, (str, bytes)) else '?'
     return FreejointValueError(
@@ -260,13 +279,76 @@ def _vec3(x, name):
     raise _bad(name, x, 3)
 
 
+def decay_coefficients(gamma, sigma, dt):
+    """
+    Return the exact zero-order-hold step of the adaptation (19), per component.
+
+    ``theta <- a_i theta + c_i u_i`` with ``a_i = exp(-Gamma_i sigma_i dt)``,
+    ``c_i = (1 - a_i) / sigma_i`` (``sigma_i = 0``: ``a_i = 1``, ``c_i = Gamma_i dt``).
+
+    Parameters
+    ----------
+    gamma, sigma : sequence of float, (5,)
+        Diagonals of Gamma and sigma.
+    dt : float
+        Step [s].
+
+    Returns
+    -------
+    tuple of (float, float), (5,)
+
+    """
+    coef = []
+    for g, sg in zip(gamma, sigma):
+        if sg > 0.0:
+            a = math.exp(-g * sg * dt)
+            coef.append((a, (1.0 - a) / sg))
+        else:
+            coef.append((1.0, g * dt))
+    return tuple(coef)
+
+
+def _dot(u, v):
+    """Return ``u . v`` of two or three floats, summed left to right."""
+    if len(u) == 2:
+        return u[0] * v[0] + u[1] * v[1]
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
 def _dls_lambda2(det, trace, thr):
     """Smallest lam2 >= 0 with det(A + lam2 I) = thr for a 2x2 PSD A (det < thr)."""
     gap = thr - det
     return 2.0 * gap / (trace + _sqrt(trace * trace + 4.0 * gap))
 
 
-class RobustController:
+class HoldStiffness:
+    """A law whose hold scales its ``K`` and ``Lambda`` (``_scale_gains`` caches them)."""
+
+    def set_stiffness(self, scale):
+        """
+        Scale K and Lambda by ``scale`` from the next step (1: the gains as given).
+
+        Holding a point against a constant model error ``eta`` [m/s^2], the law's static
+        error is ``eta / (K Lambda)``: ``scale`` 2 quarters it (a stiffer hold).  The step
+        then equals a law built with ``K * scale`` and ``Lambda * scale`` exactly.
+
+        Parameters
+        ----------
+        scale : float
+            Factor, finite and > 0; ``scale * (K + Lambda)`` should stay well below
+            ``1 / dt`` (the caller's parameters check it).
+
+        Raises
+        ------
+        FreejointValueError
+            If ``scale`` is not finite and > 0.
+
+        """
+        self.stiffness = stiffness_scale(scale)
+        self._scale_gains()
+
+
+class RobustController(HoldStiffness):
     """
     The paper's robust controller with sigma-modified adaptation.
 
@@ -392,29 +474,6 @@ class RobustController:
         if self._theta_max is not None and self._theta is not None:
             self._theta = [min(th, tm) for th, tm in zip(self._theta, self._theta_max)]
 
-    def set_stiffness(self, scale):
-        """
-        Scale K and Lambda by ``scale`` from the next step (1: the gains as given).
-
-        Holding a point against a constant model error ``eta`` [m/s^2], the law's static
-        error is ``eta / (K Lambda)``: ``scale`` 2 quarters it (a stiffer hold).  The step
-        then equals a controller built with ``K * scale`` and ``Lambda * scale`` exactly.
-
-        Parameters
-        ----------
-        scale : float
-            Factor, finite and > 0; ``scale * (K + Lambda)`` should stay well below
-            ``1 / dt`` (the caller's parameters check it).
-
-        Raises
-        ------
-        FreejointValueError
-            If ``scale`` is not finite and > 0.
-
-        """
-        self.stiffness = stiffness_scale(scale)
-        self._scale_gains()
-
     def _scale_gains(self):
         """Cache the (scaled) K, Lambda terms of the step."""
         kx, ky = self.gains.K
@@ -460,14 +519,7 @@ class RobustController:
         """Per-component (a_i, c_i): theta <- a_i theta + c_i u_i."""
         if self._decay_cache[0] == dt:
             return self._decay_cache[1]
-        coef = []
-        for g, sg in zip(self._gamma, self._sigma):
-            if sg > 0.0:
-                a = math.exp(-g * sg * dt)
-                coef.append((a, (1.0 - a) / sg))
-            else:
-                coef.append((1.0, g * dt))
-        coef = tuple(coef)
+        coef = decay_coefficients(self._gamma, self._sigma, dt)
         self._decay_cache = (dt, coef)
         return coef
 
@@ -500,10 +552,8 @@ class RobustController:
             if not (_isfinite(dtf) and dtf > 0.0):
                 raise FreejointValueError(f'dt: must be finite and > 0, got {dt!r}')
             dt = dtf
-        if self._fast:
+        if self._fast or self._fast_full:
             return self._step_fast(q, qd, p_d, pd_d, pdd_d, dt)
-        if self._fast_full:
-            return self._step_fast_full(q, qd, p_d, pd_d, pdd_d, dt)
         return self._step_general(q, qd, p_d, pd_d, pdd_d, dt)
 
     def _robust_term(self, sx, sy, w0, w1, w2, adx, ady, edx, edy, ex, ey, dt):
@@ -533,15 +583,24 @@ class RobustController:
         self._theta = theta
         return rho, -f * alx, -f * aly
 
-    def _step_fast_full(self, q, qd, p_d, pd_d, pdd_d, dt):
-        """Compute the tick of the 3-link arm with every joint driven (r = 3) on floats."""
+    def _step_fast(self, q, qd, p_d, pd_d, pdd_d, dt):
+        """
+        Compute the tick of the 3-link arm on floats (r = 2, or r = 3 every joint driven).
+
+        ``Da`` comes by rows, ``(x_0 .. x_{r-1})`` and ``(y_0 .. y_{r-1})``: of
+        ``Arm3Model.task`` (r = 2, the active columns) or ``_task_full`` (r = 3, with the
+        optional kinematic null-space term); every sum in the order of the general path.
+        """
         q0, q1, q2 = _vec3(q, 'q')
         w0, w1, w2 = _vec3(qd, 'qd')
         pdx, pdy = _vec2(p_d, 'p_d')
         vdx, vdy = _vec2(pd_d, 'pd_d')
         adx, ady = _vec2(pdd_d, 'pdd_d')
-        px, py, vx, vy, (x0, x1, x2), (y0, y1, y2), bx, by = self._task_full(
-            q0, q1, q2, w0, w1, w2)
+        if self._fast:
+            px, py, vx, vy, d00, d01, d10, d11, bx, by = self._task(q0, q1, q2, w0, w1, w2)
+            rx, ry = (d00, d01), (d10, d11)
+        else:
+            px, py, vx, vy, rx, ry, bx, by = self._task_full(q0, q1, q2, w0, w1, w2)
         ex = px - pdx
         ey = py - pdy
         edx = vx - vdx
@@ -561,9 +620,9 @@ class RobustController:
         wx = vvx + dvx - bx
         wy = vvy + dvy - by
         # A = Da Da^T (2x2, symmetric), damped near a singularity as the general path
-        a00 = x0 * x0 + x1 * x1 + x2 * x2
-        a01 = x0 * y0 + x1 * y1 + x2 * y2
-        a11 = y0 * y0 + y1 * y1 + y2 * y2
+        a00 = _dot(rx, rx)
+        a01 = _dot(rx, ry)
+        a11 = _dot(ry, ry)
         det = a00 * a11 - a01 * a01
         status = 0
         if abs(det) < self._thr:
@@ -577,93 +636,34 @@ class RobustController:
         # tau = Da^T A^-1 w (the pseudo-inverse)
         c0 = (a11 * wx - a01 * wy) / det_use
         c1 = (a00 * wy - a01 * wx) / det_use
-        t0 = x0 * c0 + y0 * c1
-        t1 = x1 * c0 + y1 * c1
-        t2 = x2 * c0 + y2 * c1
-        ns = self.nullspace
-        if ns is not None:
-            # + (I - Da# Da) tau0, tau0 = -kd qd (+ kp (posture - q))
-            k0, k1, k2 = ns.kd if isinstance(ns.kd, tuple) else (ns.kd,) * 3
-            n0 = -k0 * w0
-            n1 = -k1 * w1
-            n2 = -k2 * w2
-            if ns.posture is not None:
-                p0, p1, p2 = ns.posture
-                s0, s1, s2 = ns.kp if isinstance(ns.kp, tuple) else (ns.kp,) * 3
-                n0 += s0 * (p0 - q0)
-                n1 += s1 * (p1 - q1)
-                n2 += s2 * (p2 - q2)
-            zx = x0 * n0 + x1 * n1 + x2 * n2
-            zy = y0 * n0 + y1 * n1 + y2 * n2
-            u0 = (a11 * zx - a01 * zy) / det_use
-            u1 = (a00 * zy - a01 * zx) / det_use
-            t0 += n0 - (x0 * u0 + y0 * u1)
-            t1 += n1 - (x1 * u0 + y1 * u1)
-            t2 += n2 - (x2 * u0 + y2 * u1)
+        tau = [x * c0 + y * c1 for x, y in zip(rx, ry)]
+        if self.nullspace is not None:
+            self._null_space_fast(tau, (q0, q1, q2), (w0, w1, w2), rx, ry, a00, a01, a11,
+                                  det_use)
         lim = self._limit
-        if lim is not None:
-            l0, l1, l2 = lim
-            if (t0 > l0 or t0 < -l0 or t1 > l1 or t1 < -l1 or t2 > l2 or t2 < -l2):
-                t0 = l0 if t0 > l0 else (-l0 if t0 < -l0 else t0)
-                t1 = l1 if t1 > l1 else (-l1 if t1 < -l1 else t1)
-                t2 = l2 if t2 > l2 else (-l2 if t2 < -l2 else t2)
-                status |= STATUS_TORQUE_LIMITED
-        arr = np.array((t0, t1, t2, ex, ey, edx, edy, sx, sy, dvx, dvy, px, py, *self._theta))
-        return ControlOutput(arr[0:3], arr[3:5], arr[5:7], arr[7:9], arr[13:18], rho,
-                             arr[9:11], abs(det), arr[11:13], status)
+        if lim is not None and any(t > lm or t < -lm for t, lm in zip(tau, lim)):
+            tau = [lm if t > lm else (-lm if t < -lm else t) for t, lm in zip(tau, lim)]
+            status |= STATUS_TORQUE_LIMITED
+        r = len(tau)
+        arr = np.array((*tau, ex, ey, edx, edy, sx, sy, dvx, dvy, px, py, *self._theta))
+        return ControlOutput(arr[0:r], arr[r:r + 2], arr[r + 2:r + 4], arr[r + 4:r + 6],
+                             arr[r + 10:r + 15], rho, arr[r + 6:r + 8], abs(det),
+                             arr[r + 8:r + 10], status)
 
-    def _step_fast(self, q, qd, p_d, pd_d, pdd_d, dt):
-        q0, q1, q2 = _vec3(q, 'q')
-        w0, w1, w2 = _vec3(qd, 'qd')
-        pdx, pdy = _vec2(p_d, 'p_d')
-        vdx, vdy = _vec2(pd_d, 'pd_d')
-        adx, ady = _vec2(pdd_d, 'pdd_d')
-        px, py, vx, vy, d00, d01, d10, d11, bx, by = self._task(q0, q1, q2, w0, w1, w2)
-        ex = px - pdx
-        ey = py - pdy
-        edx = vx - vdx
-        edy = vy - vdy
-        lx, ly = self._lam
-        sx = edx + lx * ex
-        sy = edy + ly * ey
-        gdx, gdy = self._k_plus_lam
-        gpx, gpy = self._k_times_lam
-        vvx = adx - gdx * edx - gpx * ex
-        vvy = ady - gdy * edy - gpy * ey
-        if self._robust:
-            rho, dvx, dvy = self._robust_term(sx, sy, w0, w1, w2, adx, ady, edx, edy, ex, ey,
-                                              dt)
-        else:
-            rho = dvx = dvy = 0.0
-        wx = vvx + dvx - bx
-        wy = vvy + dvy - by
-        a00 = d00 * d00 + d01 * d01
-        a01 = d00 * d10 + d01 * d11
-        a11 = d10 * d10 + d11 * d11
-        det = a00 * a11 - a01 * a01
-        status = 0
-        if abs(det) < self._thr:
-            lam2 = _dls_lambda2(det, a00 + a11, self._thr)
-            a00 += lam2
-            a11 += lam2
-            det_use = a00 * a11 - a01 * a01
-            status = STATUS_NEAR_SINGULAR
-        else:
-            det_use = det
-        y0 = (a11 * wx - a01 * wy) / det_use
-        y1 = (a00 * wy - a01 * wx) / det_use
-        t0 = d00 * y0 + d10 * y1
-        t1 = d01 * y0 + d11 * y1
-        lim = self._limit
-        if lim is not None:
-            l0, l1 = lim
-            if t0 > l0 or t0 < -l0 or t1 > l1 or t1 < -l1:
-                t0 = l0 if t0 > l0 else (-l0 if t0 < -l0 else t0)
-                t1 = l1 if t1 > l1 else (-l1 if t1 < -l1 else t1)
-                status |= STATUS_TORQUE_LIMITED
-        arr = np.array((t0, t1, ex, ey, edx, edy, sx, sy, dvx, dvy, px, py, *self._theta))
-        return ControlOutput(arr[0:2], arr[2:4], arr[4:6], arr[6:8], arr[12:17], rho,
-                             arr[8:10], abs(det), arr[10:12], status)
+    def _null_space_fast(self, tau, q, w, rx, ry, a00, a01, a11, det_use):
+        """Add ``(I - Da# Da) tau0``, ``tau0 = -kd qd (+ kp (posture - q))``, to ``tau``."""
+        ns = self.nullspace
+        kd = ns.kd if isinstance(ns.kd, tuple) else (ns.kd,) * 3
+        n = [-k * v for k, v in zip(kd, w)]
+        if ns.posture is not None:
+            kp = ns.kp if isinstance(ns.kp, tuple) else (ns.kp,) * 3
+            n = [ni + k * (p - qi) for ni, k, p, qi in zip(n, kp, ns.posture, q)]
+        zx = _dot(rx, n)
+        zy = _dot(ry, n)
+        u0 = (a11 * zx - a01 * zy) / det_use
+        u1 = (a00 * zy - a01 * zx) / det_use
+        for i, (x, y) in enumerate(zip(rx, ry)):
+            tau[i] += n[i] - (x * u0 + y * u1)
 
     def _step_general(self, q, qd, p_d, pd_d, pdd_d, dt):
         q = check_vector(q, self.n, 'q')
@@ -706,14 +706,9 @@ class RobustController:
             tau = da.T @ np.linalg.solve(a, v + dv - b)
         else:
             tau = self._null_space_torque(q, qd, da, a, status, v + dv - b)
-        if self._limit is not None:
-            lim = np.array(self._limit)
-            clipped = np.clip(tau, -lim, lim)
-            if np.any(clipped != tau):
-                status |= STATUS_TORQUE_LIMITED
-            tau = clipped
+        tau, limited = clip_torque(tau, self._limit)
         return ControlOutput(tau, e, edot, s, np.array(self._theta), rho, dv, abs(det), p,
-                             status)
+                             status | limited)
 
     def _null_space_torque(self, q, qd, da, a, status, w):
         """``Da# w + N tau_0`` of ``freejoint_core.internal`` (a: ``Da Da^T``, damped)."""

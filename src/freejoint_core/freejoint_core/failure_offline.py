@@ -42,11 +42,12 @@ import time
 import numpy as np
 
 from .arm import CASES, NOMINAL_SCALE, table1
-from .control import Gains, RobustController
+from .control import Gains
 from .errors import FreejointValueError
 from .failure import (DEFAULT_K_O, DEFAULT_MARGIN, DEFAULT_TICKS, least_harm_torque,
                       Reconfigurer, TRACKING)
 from .internal import FreeLinkModulation, NullSpace
+from .laws import make_law
 from .offline import DEFAULT_DT, initial_state
 from .plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
 from .trajectory import CircleQuintic
@@ -99,7 +100,8 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
                      nullspace_kd=DEFAULT_NULLSPACE_KD, k_o=DEFAULT_K_O,
                      margin=DEFAULT_MARGIN, ticks=DEFAULT_TICKS, detect=True, assess=None,
                      diverge_m=0.5, diverge_qd=1000.0, record_trace=False,
-                     internal_check=True, free_link_damping=None):
+                     internal_check=True, free_link_damping=None, law='robust',
+                     law_params=None):
     """
     Run one failure scenario and return its record (and trace).
 
@@ -142,6 +144,8 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
         (from the switch on, its shift from 0). None (default): the paper's law alone.
         :data:`FAILURE_FREE_LINK_DAMPING` is the option measured (the controller's
         config/fully_actuated/free_link_damping.yaml; docs/failures.md).
+    law, law_params
+        The registered control law and the laws' own gains (``offline.run_case``).
 
     Returns
     -------
@@ -169,7 +173,8 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
         except (TypeError, ValueError) as exc:
             raise FreejointValueError(f'free_link_damping: {exc}') from None
     ns = NullSpace(kd=nullspace_kd) if actuated == 'all' else None
-    ctrl = RobustController(nominal, Gains(), nullspace=ns)
+    ctrl = make_law(law, nominal, Gains(), params=law_params,
+                    **({} if ns is None else {'nullspace': ns}))
     plant = Plant(real, dt_sub, dist_bound=dist_bound, seed=seed, q0=q0)
     fail = sorted(fail, key=lambda f: f[1])
     for j, at in fail:

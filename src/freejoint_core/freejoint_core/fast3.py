@@ -70,6 +70,9 @@ class Arm3Model(ArmModel):
         self._h23 = l2 * h3
         g = params.gravity
         self._gh1, self._gh2, self._gh3 = g * h1, g * h2, g * h3
+        self._c = (self._d1, self._d2, self._d3, self._h12, self._h13, self._h23,
+                   self._gh1, self._gh2, self._gh3)
+        self._ln = (l1, l2, l3)
         if self.r == 2:
             self._ia, self._ib = self.active
         else:
@@ -77,114 +80,23 @@ class Arm3Model(ArmModel):
 
     # -- scalar kernels (hot path) ------------------------------------------
     def _terms(self, q0, q1, q2, w0, w1, w2):
-        """
-        Return the terms ``qdd`` and ``_task_full`` share, on floats.
-
-        The tuple is ``(c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23, a11, b12,
-        b13, a22, b23, a33, inv)``: ``cos`` / ``sin`` of the absolute angles, the absolute
-        rates ``o2, o3`` (``o1 = w0``) and their squares ``k``, the ``H_ab sin(phi_a -
-        phi_b)`` terms ``a``, the adjugate of ``M_phi`` (``a11 .. a33``, symmetric) and
-        ``1 / det M_phi``.
-        """
-        f2 = q0 + q1
-        f3 = f2 + q2
-        c1 = _cos(q0)
-        s1 = _sin(q0)
-        c2 = _cos(f2)
-        s2 = _sin(f2)
-        c3 = _cos(f3)
-        s3 = _sin(f3)
-        o2 = w0 + w1
-        o3 = o2 + w2
-        k1 = w0 * w0
-        k2 = o2 * o2
-        k3 = o3 * o3
-        h12 = self._h12
-        h13 = self._h13
-        h23 = self._h23
-        x = h12 * (c1 * c2 + s1 * s2)
-        y = h13 * (c1 * c3 + s1 * s3)
-        z = h23 * (c2 * c3 + s2 * s3)
-        a12 = h12 * (s1 * c2 - c1 * s2)
-        a13 = h13 * (s1 * c3 - c1 * s3)
-        a23 = h23 * (s2 * c3 - c2 * s3)
-        d1 = self._d1
-        d2 = self._d2
-        d3 = self._d3
-        a11 = d2 * d3 - z * z
-        b12 = y * z - x * d3
-        b13 = x * z - d2 * y
-        a22 = d1 * d3 - y * y
-        b23 = x * y - d1 * z
-        a33 = d1 * d2 - x * x
-        inv = 1.0 / (d1 * a11 + x * b12 + y * b13)
-        return (c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23,
-                a11, b12, b13, a22, b23, a33, inv)
+        """Return :func:`terms` of this arm."""
+        return terms(self._c, q0, q1, q2, w0, w1, w2)
 
     def qdd(self, q0, q1, q2, w0, w1, w2, t0, t1, t2):
         """
-        Forward dynamics on floats.
+        Return the joint accelerations [rad/s^2] on floats (:func:`qdd`).
 
-        Parameters
-        ----------
-        q0, q1, q2 : float
-            Joint angles [rad].
-        w0, w1, w2 : float
-            Joint velocities [rad/s].
-        t0, t1, t2 : float
-            Generalised force on each joint (actuator + disturbance) [N m].
-
-        Returns
-        -------
-        tuple of float
-            Joint accelerations ``(qdd0, qdd1, qdd2)`` [rad/s^2].
-
+        ``q`` [rad], ``w`` [rad/s] the state, ``t`` [N m] the generalised force on each
+        joint (actuator + disturbance).
         """
-        (c1, _, c2, _, c3, _, _, _, k1, k2, k3, a12, a13, a23,
-         a11, b12, b13, a22, b23, a33, inv) = self._terms(q0, q1, q2, w0, w1, w2)
-        r1 = t0 - t1 - (a12 * k2 + a13 * k3) - self._gh1 * c1
-        r2 = t1 - t2 - (a23 * k3 - a12 * k1) - self._gh2 * c2
-        r3 = t2 + (a13 * k1 + a23 * k2) - self._gh3 * c3
-        p1 = (a11 * r1 + b12 * r2 + b13 * r3) * inv
-        p2 = (b12 * r1 + a22 * r2 + b23 * r3) * inv
-        p3 = (b13 * r1 + b23 * r2 + a33 * r3) * inv
-        return p1, p2 - p1, p3 - p2
+        return qdd(self._c, q0, q1, q2, w0, w1, w2, t0, t1, t2)
 
     def _task_full(self, q0, q1, q2, w0, w1, w2):
-        """Kinematics, ``W = J M^-1`` (2x3, row-major) and ``b`` on floats."""
-        (c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23,
-         a11, b12, b13, a22, b23, a33, inv) = self._terms(q0, q1, q2, w0, w1, w2)
-        # c_phi + G_phi
-        f1v = a12 * k2 + a13 * k3 + self._gh1 * c1
-        f2v = a23 * k3 - a12 * k1 + self._gh2 * c2
-        f3v = -(a13 * k1 + a23 * k2) + self._gh3 * c3
-        l1 = self._l1
-        l2 = self._l2
-        l3 = self._l3
-        lc1 = l1 * c1
-        lc2 = l2 * c2
-        lc3 = l3 * c3
-        ls1 = l1 * s1
-        ls2 = l2 * s2
-        ls3 = l3 * s3
-        px = lc1 + lc2 + lc3
-        py = ls1 + ls2 + ls3
-        vx = -(ls1 * w0 + ls2 * o2 + ls3 * o3)
-        vy = lc1 * w0 + lc2 * o2 + lc3 * o3
-        jdx = -(lc1 * k1 + lc2 * k2 + lc3 * k3)
-        jdy = -(ls1 * k1 + ls2 * k2 + ls3 * k3)
-        # V = J_phi M_phi^-1, rows x and y (J_phi x-row = -ls, y-row = lc).
-        vx1 = -(a11 * ls1 + b12 * ls2 + b13 * ls3) * inv
-        vx2 = -(b12 * ls1 + a22 * ls2 + b23 * ls3) * inv
-        vx3 = -(b13 * ls1 + b23 * ls2 + a33 * ls3) * inv
-        vy1 = (a11 * lc1 + b12 * lc2 + b13 * lc3) * inv
-        vy2 = (b12 * lc1 + a22 * lc2 + b23 * lc3) * inv
-        vy3 = (b13 * lc1 + b23 * lc2 + a33 * lc3) * inv
-        bx = jdx - (vx1 * f1v + vx2 * f2v + vx3 * f3v)
-        by = jdy - (vy1 * f1v + vy2 * f2v + vy3 * f3v)
-        wx = (vx1, vx2 - vx1, vx3 - vx2)
-        wy = (vy1, vy2 - vy1, vy3 - vy2)
-        return px, py, vx, vy, wx, wy, bx, by
+        """Kinematics, ``W = J M^-1`` (2x3, row-major) and ``b`` on floats (:func:`task`)."""
+        px, py, vx, vy, x0, x1, x2, y0, y1, y2, bx, by = task(
+            self._c, self._ln, q0, q1, q2, w0, w1, w2)
+        return px, py, vx, vy, (x0, x1, x2), (y0, y1, y2), bx, by
 
     def task(self, q0, q1, q2, w0, w1, w2):
         """
@@ -296,3 +208,105 @@ class Arm3Model(ArmModel):
         pot = (self._gh1 * _sin(q0) + self._gh2 * _sin(q0 + q1)
                + self._gh3 * _sin(q0 + q1 + q2))
         return float(0.5 * om @ m_phi @ om + pot)
+
+
+# -- the closed forms, on floats; the campaign kernel compiles these same functions --------
+# ``c``: the arm's constants (d1, d2, d3, h12, h13, h23, g h1, g h2, g h3) (Arm3Model's,
+# ``batch._consts``); ``ln``: the link lengths (3,).
+
+
+def terms(c, q0, q1, q2, w0, w1, w2):
+    """
+    Return the terms :func:`qdd` and :func:`task` share, on floats.
+
+    The tuple is ``(c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23, a11, b12,
+    b13, a22, b23, a33, inv)``: ``cos`` / ``sin`` of the absolute angles, the absolute
+    rates ``o2, o3`` (``o1 = w0``) and their squares ``k``, the ``H_ab sin(phi_a -
+    phi_b)`` terms ``a``, the adjugate of ``M_phi`` (``a11 .. a33``, symmetric) and
+    ``1 / det M_phi``.
+    """
+    f2 = q0 + q1
+    f3 = f2 + q2
+    c1 = math.cos(q0)
+    s1 = math.sin(q0)
+    c2 = math.cos(f2)
+    s2 = math.sin(f2)
+    c3 = math.cos(f3)
+    s3 = math.sin(f3)
+    o2 = w0 + w1
+    o3 = o2 + w2
+    k1 = w0 * w0
+    k2 = o2 * o2
+    k3 = o3 * o3
+    h12 = c[3]
+    h13 = c[4]
+    h23 = c[5]
+    x = h12 * (c1 * c2 + s1 * s2)
+    y = h13 * (c1 * c3 + s1 * s3)
+    z = h23 * (c2 * c3 + s2 * s3)
+    a12 = h12 * (s1 * c2 - c1 * s2)
+    a13 = h13 * (s1 * c3 - c1 * s3)
+    a23 = h23 * (s2 * c3 - c2 * s3)
+    d1 = c[0]
+    d2 = c[1]
+    d3 = c[2]
+    a11 = d2 * d3 - z * z
+    b12 = y * z - x * d3
+    b13 = x * z - d2 * y
+    a22 = d1 * d3 - y * y
+    b23 = x * y - d1 * z
+    a33 = d1 * d2 - x * x
+    inv = 1.0 / (d1 * a11 + x * b12 + y * b13)
+    return (c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23,
+            a11, b12, b13, a22, b23, a33, inv)
+
+
+def qdd(c, q0, q1, q2, w0, w1, w2, t0, t1, t2):
+    """Return the joint accelerations [rad/s^2] under the joint forces ``t`` [N m]."""
+    (c1, _, c2, _, c3, _, _, _, k1, k2, k3, a12, a13, a23,
+     a11, b12, b13, a22, b23, a33, inv) = terms(c, q0, q1, q2, w0, w1, w2)
+    r1 = t0 - t1 - (a12 * k2 + a13 * k3) - c[6] * c1
+    r2 = t1 - t2 - (a23 * k3 - a12 * k1) - c[7] * c2
+    r3 = t2 + (a13 * k1 + a23 * k2) - c[8] * c3
+    p1 = (a11 * r1 + b12 * r2 + b13 * r3) * inv
+    p2 = (b12 * r1 + a22 * r2 + b23 * r3) * inv
+    p3 = (b13 * r1 + b23 * r2 + a33 * r3) * inv
+    return p1, p2 - p1, p3 - p2
+
+
+def task(c, ln, q0, q1, q2, w0, w1, w2):
+    """
+    Return the task terms: ``px, py, vx, vy``, ``W = J M^-1`` by rows and ``b`` (eq. 5).
+
+    ``(px, py, vx, vy, x0, x1, x2, y0, y1, y2, bx, by)``: the end effector [m], its
+    velocity ``J qd`` [m/s], the rows of ``J M^-1`` (the decoupling matrix's columns
+    of the active joints) and the drift [m/s^2].
+    """
+    (c1, s1, c2, s2, c3, s3, o2, o3, k1, k2, k3, a12, a13, a23,
+     a11, b12, b13, a22, b23, a33, inv) = terms(c, q0, q1, q2, w0, w1, w2)
+    # c_phi + G_phi
+    f1v = a12 * k2 + a13 * k3 + c[6] * c1
+    f2v = a23 * k3 - a12 * k1 + c[7] * c2
+    f3v = -(a13 * k1 + a23 * k2) + c[8] * c3
+    lc1 = ln[0] * c1
+    lc2 = ln[1] * c2
+    lc3 = ln[2] * c3
+    ls1 = ln[0] * s1
+    ls2 = ln[1] * s2
+    ls3 = ln[2] * s3
+    px = lc1 + lc2 + lc3
+    py = ls1 + ls2 + ls3
+    vx = -(ls1 * w0 + ls2 * o2 + ls3 * o3)
+    vy = lc1 * w0 + lc2 * o2 + lc3 * o3
+    jdx = -(lc1 * k1 + lc2 * k2 + lc3 * k3)
+    jdy = -(ls1 * k1 + ls2 * k2 + ls3 * k3)
+    # V = J_phi M_phi^-1, rows x and y (J_phi x-row = -ls, y-row = lc).
+    vx1 = -(a11 * ls1 + b12 * ls2 + b13 * ls3) * inv
+    vx2 = -(b12 * ls1 + a22 * ls2 + b23 * ls3) * inv
+    vx3 = -(b13 * ls1 + b23 * ls2 + a33 * ls3) * inv
+    vy1 = (a11 * lc1 + b12 * lc2 + b13 * lc3) * inv
+    vy2 = (b12 * lc1 + a22 * lc2 + b23 * lc3) * inv
+    vy3 = (b13 * lc1 + b23 * lc2 + a33 * lc3) * inv
+    bx = jdx - (vx1 * f1v + vx2 * f2v + vx3 * f3v)
+    by = jdy - (vy1 * f1v + vy2 * f2v + vy3 * f3v)
+    return px, py, vx, vy, vx1, vx2 - vx1, vx3 - vx2, vy1, vy2 - vy1, vy3 - vy2, bx, by

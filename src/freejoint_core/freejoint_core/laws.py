@@ -30,10 +30,10 @@ from dataclasses import replace
 from freejoint_core.control import RobustController
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import FreeLinkModulation
-from freejoint_core.law_base import ControlLaw, INF
+from freejoint_core.law_base import ControlLaw, INF, LAWS, register_law
 
-__all__ = ('ControlLaw', 'FreeLinkDampedLaw', 'INF', 'LAWS', 'make_law', 'register_law',
-           'RobustLaw')
+__all__ = ('ControlLaw', 'FreeLinkDampedLaw', 'gain_schema', 'INF', 'LAWS', 'make_law',
+           'register_law', 'RobustLaw')
 
 
 class RobustLaw(RobustController, ControlLaw):
@@ -46,10 +46,12 @@ class RobustLaw(RobustController, ControlLaw):
     """
 
     name = 'robust'
+    accelerator = 'robust'
 
-    def __init__(self, nominal_params, gains=None, model=None):
+    def __init__(self, nominal_params, gains=None, model=None, nullspace=None, use_fast=True):
         self._last = None
-        super().__init__(nominal_params, gains, model=model)
+        super().__init__(nominal_params, gains, use_fast=use_fast, model=model,
+                         nullspace=nullspace)
         self.state_names = _robust_state_names(self.model.task_dim)
 
     def set_gains(self, gains):
@@ -93,30 +95,12 @@ def _robust_state_names(m):
         'delta_v[%d]' % i for i in range(m))
 
 
-LAWS = {}
-"""The registry: law name -> factory ``(nominal, gains, model) -> ControlLaw``."""
+def gain_schema():
+    """Return every registered law's own gains (``LawGain``), in registration order."""
+    return tuple(g for factory in LAWS.values() for g in getattr(factory, 'gain_schema', ()))
 
 
-def register_law(name, factory):
-    """
-    Register a control law under ``name`` (the value of the controller's parameter ``law``).
-
-    Parameters
-    ----------
-    name : str
-        Its name, non-empty.
-    factory : callable
-        ``factory(nominal, gains, model=None)`` returning a :class:`ControlLaw`.
-
-    """
-    if not isinstance(name, str) or not name:
-        raise FreejointValueError(f'name: expected a non-empty string, got {name!r}')
-    if not callable(factory):
-        raise FreejointValueError(f'factory: expected a callable, got {factory!r}')
-    LAWS[name] = factory
-
-
-def make_law(name, nominal, gains, model=None):
+def make_law(name, nominal, gains, model=None, params=None, **options):
     """
     Build the control law registered as ``name``.
 
@@ -130,6 +114,11 @@ def make_law(name, nominal, gains, model=None):
         The gains.
     model : ArmModel, optional
         The nominal model's implementation (default: the law's choice).
+    params : mapping of str to float, optional
+        Laws' own gains by namespaced name (``vsc.phi``); the ones of law ``name`` are
+        passed to it (``params=``), the others ignored.
+    **options
+        Passed to the factory (e.g. ``nullspace`` of the paper's law).
 
     Returns
     -------
@@ -138,22 +127,35 @@ def make_law(name, nominal, gains, model=None):
     Raises
     ------
     FreejointValueError
-        If no law is registered as ``name``.
+        If no law is registered as ``name``, or its own gains are refused.
 
     """
     factory = LAWS.get(name)
     if factory is None:
         raise FreejointValueError(f'law: expected one of {tuple(LAWS)}, got {name!r}')
-    return factory(nominal, gains, model=model)
+    own = {k: v for k, v in (params or {}).items() if k.startswith(name + '.')}
+    if own:
+        if not getattr(factory, 'gain_schema', ()):
+            raise FreejointValueError(f'{next(iter(own))}: law {name!r} has no gains of its own')
+        options['params'] = own
+    return factory(nominal, gains, model=model, **options)
 
 
 register_law(RobustLaw.name, RobustLaw)
 
 
-def _spatial_law(nominal, gains, model=None):
-    """Build ``freejoint_core.spatial_law.SpatialControlLaw`` (imported on first use)."""
-    from freejoint_core.spatial_law import SpatialControlLaw
-    return SpatialControlLaw(nominal, gains, model)
+def _spatial_law(nominal, gains, model=None, nullspace=None, free_damping=None):
+    """
+    Build the spatial law (``freejoint_core.spatial_law``, imported on first use).
+
+    ``SpatialControlLaw`` (the controller's); with ``nullspace`` or ``free_damping`` the
+    study's ``SpatialLaw`` of those options.
+    """
+    if nullspace is None and free_damping is None:
+        from freejoint_core.spatial_law import SpatialControlLaw
+        return SpatialControlLaw(nominal, gains, model)
+    from freejoint_core.spatial_law import SpatialLaw
+    return SpatialLaw(nominal, gains, nullspace, free_damping=free_damping or 0.0)
 
 
 register_law('spatial', _spatial_law)
@@ -309,3 +311,8 @@ class FreeLinkDampedLaw(ControlLaw):
     def set_gains(self, gains):
         """Give the wrapped law new gains."""
         self.law.set_gains(gains)
+
+
+# The laws from the literature shipped with the stack, after the paper's (each module
+# registers itself).
+from freejoint_core import law_tdc, law_vsc  # noqa: E402,F401,I100,I202

@@ -13,7 +13,8 @@ rms_mm         float        RMS over the recorded ticks of ``||p - p_d||`` (mm)
 max_mm         float        maximum of ``||p - p_d||`` (mm)
 final_mm       float        ``||p - p_d||`` at the last recorded tick (mm)
 tau_peak_nm    [float] (r)  ``max_k |tau_i(t_k)|`` per active joint (N m)
-theta_final    [float] (5)  adaptive estimate after the last tick
+theta_final    [float] (k)  adaptive estimate after the last tick (the paper's law: 5;
+                            a law without adaptation: none)
 q3_range_deg   [float] (2)  (min, max) of the passive joint angle (deg), as
                             integrated (not wrapped)
 min_det        float        minimum of ``|det(Da Da^T)|`` of the nominal model
@@ -76,7 +77,7 @@ def compute_record(case, variant, seed, t, p, p_d, tau, theta, q_passive, det,
         tip of a spatial arm).
     tau : array_like, shape (N, r)
         Active joint torques (N m).
-    theta : array_like, shape (5,) or (N, 5)
+    theta : array_like, shape (k,) or (N, k)
         Adaptive estimate; the last row (or the vector) is reported.
     q_passive : array_like, shape (N,) or (N, 1)
         Passive joint angle (rad).
@@ -122,8 +123,8 @@ def compute_record(case, variant, seed, t, p, p_d, tau, theta, q_passive, det,
         raise FreejointValueError(f'tau: expected shape ({n}, r), got {tau.shape}')
     theta = _array('theta', theta, (1, 2))
     last_theta = theta if theta.ndim == 1 else theta[-1]
-    if last_theta.shape != (5,) or (theta.ndim == 2 and theta.shape[0] != n):
-        raise FreejointValueError(f'theta: expected shape (5,) or ({n}, 5), got {theta.shape}')
+    if last_theta.ndim != 1 or (theta.ndim == 2 and theta.shape[0] != n):
+        raise FreejointValueError(f'theta: expected shape (k,) or ({n}, k), got {theta.shape}')
     qp = _array('q_passive', q_passive, (1, 2))
     if qp.ndim == 2 and qp.shape[1] == 1:
         qp = qp[:, 0]

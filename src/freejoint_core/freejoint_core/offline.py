@@ -58,10 +58,11 @@ import time
 import numpy as np
 
 from .arm import CASES, NOMINAL_SCALE, table1
-from .control import Gains, RobustController
+from .control import Gains
 from .delay import DEFAULT_BIAS_GAIN, extrapolate_setpoint, StatePredictor
 from .errors import FreejointValueError, positive
 from .internal import DEFAULT_Q3_0_DEG, initial_state, NullSpace  # noqa: F401 (API)
+from .laws import make_law
 from .metrics import compute_record, format_summary, format_table, write_records
 from .models import make_model
 from .plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
@@ -81,7 +82,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
              dist_bound=DEFAULT_DIST_BOUND, gains=None, record_trace=False,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0, delay_ticks=0, predict=False,
              bias_gain=DEFAULT_BIAS_GAIN, predict_ticks=None, echo=False, delay_jitter=0,
-             actuated='paper', nullspace=None):
+             actuated='paper', nullspace=None, law='robust', law_params=None):
     """
     Run one closed-loop case and return its metrics record (and trace).
 
@@ -138,6 +139,11 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     actuated : {'paper', 'all'}
         'paper': joint 3 free (Table I); 'all': every joint driven (r = 3 > m = 2, the
         start pose unchanged); the variant is labelled ``<variant> all``.
+    law : str
+        The registered control law (``freejoint_core.laws``; the node's parameter
+        ``law``), built by ``make_law`` with ``gains``, ``law_params`` and ``nullspace``.
+    law_params : mapping of str to float, optional
+        The laws' own gains by namespaced name (``vsc.phi``).
     nullspace : freejoint_core.internal.NullSpace, optional
         The controller's null-space option (r > m); labelled ``+ns``.
 
@@ -215,8 +221,11 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     px0, py0 = trajectory.sample(0.0)[0]
     q0 = initial_state(start_arm, q3_0_deg, (px0, py0))
     plant = Plant(real, dt_sub, dist_bound=dist, seed=seed, q0=q0)
-    ctrl = RobustController(nominal, gains, nullspace=nullspace)
+    options = {} if nullspace is None else {'nullspace': nullspace}
+    ctrl = make_law(law, nominal, gains, params=law_params, **options)
     label = variant + (' all' if actuated == 'all' else '') + ('+ns' if nullspace else '')
+    if law != 'robust':
+        label = f'{law} {label}'
     pred = None
     pipeline = bool(delay_ticks or delay_jitter)
     if pipeline:
@@ -248,7 +257,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     if record_trace:
         q_buf = np.empty((n_ticks, 3))
         qd_buf = np.empty((n_ticks, 3))
-        th_buf = np.empty((n_ticks, 5))
+        th_buf = np.empty((n_ticks, ctrl.theta.size))
         rho_buf = np.empty(n_ticks)
         st_buf = np.empty(n_ticks, dtype=np.int64)
         if pred is not None:
@@ -546,6 +555,13 @@ def _parse(argv):
     ap.add_argument('--echo', action='store_true',
                     help='predictor horizon and observer from the applied command the plant '
                     'reports (joint_states.effort)')
+    ap.add_argument('--law', default='robust',
+                    help="the registered control law (default 'robust', the paper's; 'vsc', "
+                    "'tdc', ...): its runs at the paper's point over the seeds, labelled "
+                    '<law> robust (no robust_off runs); default --out '
+                    'bags/offline/metrics_<law>.json')
+    ap.add_argument('--law-param', action='append', default=[], metavar='NAME=VALUE',
+                    help="a law's own gain, e.g. vsc.phi=0.05 (repeatable)")
     ap.add_argument('--actuated', choices=ACTUATED, default='paper',
                     help="'paper': joint 3 free (default); 'all': every joint driven "
                     '(r = 3 > m = 2)')
@@ -595,6 +611,10 @@ def main(argv=None):
     if args.circles is not None:
         return _main_circles(args)
     off = None if args.off_seeds is None else range(args.off_seeds)
+    if args.law != 'robust':
+        off = ()
+        if args.out is None:
+            args.out = f'bags/offline/metrics_{args.law}.json'
     t0 = time.perf_counter()
     records = run_all(range(args.seeds), args.cases, args.dt_sub, off,
                       delay_ticks=args.delay_ticks, predict=args.predict,
@@ -639,6 +659,15 @@ def main(argv=None):
 def _internal_options(args):
     """Return the ``actuated`` / ``nullspace`` keywords of :func:`run_case` from the CLI."""
     out = {}
+    if args.law != 'robust' or args.law_param:
+        out['law'] = args.law
+        out['law_params'] = {}
+        for item in args.law_param:
+            name, _, value = item.partition('=')
+            try:
+                out['law_params'][name.strip()] = float(value)
+            except ValueError:
+                raise SystemExit(f'offline: --law-param: expected NAME=NUMBER, got {item!r}')
     if args.actuated != 'paper':
         out['actuated'] = args.actuated
     if args.nullspace_kd is not None:

@@ -49,7 +49,7 @@ import math
 from typing import NamedTuple
 
 from freejoint_core.control import _vector, ControlOutput, Gains, STATUS_NEAR_SINGULAR
-from freejoint_core.control import STATUS_OK, STATUS_TORQUE_LIMITED, stiffness_scale
+from freejoint_core.control import HoldStiffness, STATUS_OK, STATUS_TORQUE_LIMITED
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
 from freejoint_core.law_base import ControlLaw, INF
@@ -194,7 +194,7 @@ def rotation_error(rot, rot_d):
     return np.array(pin.log3(rot @ rot_d.T))
 
 
-class SpatialLaw:
+class SpatialLaw(HoldStiffness):
     """
     The robust law on a spatial arm (module notes).
 
@@ -246,22 +246,6 @@ class SpatialLaw:
         self._lam = np.array(self.gains.Lambda) * self.stiffness
         self._kd = k + self._lam
         self._kp = k * self._lam
-
-    def set_stiffness(self, scale):
-        """
-        Scale K and Lambda by ``scale`` from the next step (1: the gains as given).
-
-        As ``control.RobustController.set_stiffness``: the step then equals a law built
-        with ``K * scale`` and ``Lambda * scale``.
-
-        Raises
-        ------
-        FreejointValueError
-            If ``scale`` is not finite and > 0.
-
-        """
-        self.stiffness = stiffness_scale(scale)
-        self._scale_gains()
 
     def reset(self):
         """Set theta back to ``gains.theta0``."""

@@ -41,8 +41,8 @@ import time
 
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
-from freejoint_core.spatial_law import gravity_carrying_free_joint, SpatialControlLaw
-from freejoint_core.spatial_law import SpatialGains, SpatialLaw
+from freejoint_core.laws import make_law
+from freejoint_core.spatial_law import gravity_carrying_free_joint, SpatialGains
 from freejoint_core.spatial_model import known_arm
 from freejoint_core.spatial_plant import SpatialPlant
 import numpy as np
@@ -196,12 +196,13 @@ def run_case(case, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, nominal=NOMINAL
     if q0 is None:
         raise FreejointValueError(why)
     if inverse == 'weighted' and kf == 0.0:
-        law = SpatialControlLaw(real.nominal(nominal), SpatialGains(task_dim=3))
+        law = make_law('spatial', real.nominal(nominal), SpatialGains(task_dim=3))
         law.set_nullspace_gains(kd, kp)
     else:
         proj = 'dynamic' if inverse == 'weighted' else 'kinematic'
-        law = SpatialLaw(real.nominal(nominal), SpatialGains(task_dim=3),
-                         NullSpace(kd=kd, inverse=inverse, projector=proj), free_damping=kf)
+        law = make_law('spatial', real.nominal(nominal), SpatialGains(task_dim=3),
+                       nullspace=NullSpace(kd=kd, inverse=inverse, projector=proj),
+                       free_damping=kf)
     out = run_twin(real, q0, law, seed, t_move=t_move, t_hold=t_hold, dt=dt, dt_sub=dt_sub,
                    dist=dist, t_stop=t_stop, passive_damping=passive_damping)
     out.pop('trace')

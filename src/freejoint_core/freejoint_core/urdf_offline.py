@@ -5,7 +5,7 @@ The loop of ``freejoint_core.offline`` for any arm ``freejoint_core.urdf`` accep
 ``k = 0 .. N-1`` at ``t_k = k dt``::
 
     (q, qd) = plant state at t_k
-    out = RobustController(arm.nominal(nominal_scale)).step(q, qd, p_d(t_k), ..., dt)
+    out = make_law(law, arm.nominal(nominal_scale), gains).step(q, qd, p_d(t_k), ..., dt)
     plant.step(out.tau, dt)
 
 with the nominal model from Pinocchio for n != 3 (:func:`nominal_model`, as the
@@ -22,8 +22,9 @@ tick whose output is not finite or whose tracking error exceeds ``diverge_m``.
 import math
 
 from freejoint_core.arm import NOMINAL_SCALE
-from freejoint_core.control import Gains, RobustController
+from freejoint_core.control import Gains
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
+from freejoint_core.laws import make_law
 from freejoint_core.metrics import compute_record
 from freejoint_core.plant import DEFAULT_DT_SUB, Plant
 from freejoint_core.urdf import UrdfArm
@@ -93,7 +94,7 @@ def nominal_model(arm, scale):
 
 def run_arm(arm, trajectory, q0, *, label='urdf', seed=0, nominal_scale=NOMINAL_SCALE,
             dist_bound=0.5, dt=1e-3, dt_sub=DEFAULT_DT_SUB, n_ticks=None, engine='rk4',
-            gains=None, diverge_m=0.5):
+            gains=None, diverge_m=0.5, law='robust', law_params=None):
     """
     Run the closed loop of a URDF arm; return its metrics record and per-tick trace.
 
@@ -123,6 +124,8 @@ def run_arm(arm, trajectory, q0, *, label='urdf', seed=0, nominal_scale=NOMINAL_
         The paper's by default.
     diverge_m : float
         Tracking error [m] beyond which the run stops.
+    law, law_params
+        The registered control law and the laws' own gains (``offline.run_case``).
 
     Returns
     -------
@@ -138,14 +141,15 @@ def run_arm(arm, trajectory, q0, *, label='urdf', seed=0, nominal_scale=NOMINAL_
     if n_ticks is None:
         n_ticks = int(round(trajectory.duration / dt))
     plant = make_plant(arm, engine, dt_sub, dist_bound, seed, q0)
-    ctrl = RobustController(arm.nominal(nominal_scale), Gains() if gains is None else gains,
-                            model=nominal_model(arm, nominal_scale))
+    ctrl = make_law(law, arm.nominal(nominal_scale), Gains() if gains is None else gains,
+                    model=nominal_model(arm, nominal_scale), params=law_params)
     n, r = arm.params.n, arm.params.r
     passive = arm.params.passive[0] if arm.params.passive else 0
     t = np.arange(n_ticks) * dt
     q_buf, qd_buf = np.empty((n_ticks, n)), np.empty((n_ticks, n))
     p_buf, pd_buf = np.empty((n_ticks, 2)), np.empty((n_ticks, 2))
-    tau_buf, th_buf, det_buf = np.empty((n_ticks, r)), np.empty((n_ticks, 5)), np.empty(n_ticks)
+    tau_buf, th_buf, det_buf = np.empty((n_ticks, r)), np.empty((n_ticks, ctrl.theta.size)), \
+        np.empty(n_ticks)
     diverged, done = None, 0
     for k in range(n_ticks):
         pdx, pdy, vdx, vdy, adx, ady = trajectory.sample_tuple(k * dt)

@@ -69,7 +69,7 @@ _BOUNDS = {  # axis: (lowest, highest, lowest excluded, integer)
     'noise_qd': (0.0, 100.0, False, False), 'noise_tau': (0.0, 1e3, False, False),
     'delay': (0, 1000, False, True), 'lag': (0.0, 10.0, False, False),
     'q3_0_deg': (-360.0, 360.0, False, False), 'seed': (0, 2 ** 63 - 1, False, True)}
-TOP_KEYS = ('name', 'arm', 'case', 'task', 'duration', 'dt', 'dt_sub', 'controller',
+TOP_KEYS = ('name', 'arm', 'case', 'task', 'duration', 'dt', 'dt_sub', 'laws', 'controller',
             'success', 'design', 'seeds', 'fixed', 'axes', 'chunk')
 DESIGNS = ('grid', 'lhs', 'random')
 SUCCESS_KEYS = ('max_mm', 'rms_mm', 'final_mm')
@@ -161,9 +161,15 @@ def _check_axis(name, spec, kind):
 
 
 def _check_controller(given):
-    """Return the Gains of the controller-node parameters ``given`` (their schema checks)."""
+    """
+    Return the Gains of the controller-node parameters ``given`` (their schema checks).
+
+    The laws' own gains (``vsc.phi``, ``freejoint_core.laws.gain_schema``) are checked by
+    their declarations and left to :func:`_law_params`.
+    """
     from freejoint_core.control import Gains
     from freejoint_core.errors import FreejointValueError
+    from freejoint_core.laws import gain_schema
     if not isinstance(given, dict):
         raise CampaignError(f'controller: expected a mapping of parameters, got {given!r}')
     try:
@@ -174,8 +180,14 @@ def _check_controller(given):
                       'robust', 'det_threshold')
     used = GAIN_NAMES + ('theta_max', 'effort_limits')
     fields = {}
+    law_gains = {g.name: g for g in gain_schema()}
     for name, value in given.items():
         where = f'controller.{name}'
+        if name in law_gains:
+            problem = law_gains[name].reason(value)
+            if problem:
+                raise CampaignError(f'controller.{problem}')
+            continue
         if SCHEMA is not None and name not in SCHEMA:
             raise CampaignError(f'{where}: not a parameter of the controller node')
         if name not in used:
@@ -285,6 +297,9 @@ def parse(raw):
         raise CampaignError(str(exc)) from None
     c['_gains'] = _check_controller(raw.get('controller') or {})
     c['controller'] = dict(raw.get('controller') or {})
+    c['_law_params'] = {k: float(v) for k, v in c['controller'].items() if '.' in k}
+    if 'laws' in raw:
+        c['laws'] = _check_laws(raw['laws'])
     success = raw.get('success', {'max_mm': 20.0})
     if not isinstance(success, dict) or not success:
         raise CampaignError(f'success: expected a mapping of bounds, got {success!r}')
@@ -356,6 +371,20 @@ def parse(raw):
             raise CampaignError(f'axes.q3_0_deg: {q3:g} deg: no configuration puts the end '
                                 f'effector on the start of the task') from None
     return c
+
+
+def _check_laws(laws):
+    """Return the list of registered law names a campaign compares."""
+    from freejoint_core.laws import LAWS
+    if not isinstance(laws, list) or not laws:
+        raise CampaignError(f'laws: expected a non-empty list of law names, got {laws!r}')
+    for i, name in enumerate(laws):
+        if name not in LAWS or name == 'spatial':
+            known = [k for k in LAWS if k != 'spatial']
+            raise CampaignError(f'laws[{i}]: expected one of {known}, got {name!r}')
+    if len(set(laws)) != len(laws):
+        raise CampaignError(f'laws: a law named twice in {laws}')
+    return list(laws)
 
 
 URDF_ARM_KEYS = ('urdf', 'passive_joints', 'tip_link', 'gravity')
@@ -526,11 +555,12 @@ def run_chunk(camp, rows):
         ``rows`` and :data:`METRIC_COLUMNS`.
 
     """
-    from freejoint_core.batch import simulate
+    from freejoint_core.batch import simulate_law
     from freejoint_core.trajectory import CircleQuintic
-    res = simulate(_batch_runs(rows, camp['case']), camp['_gains'], dt=camp['dt'],
-                   dt_sub=camp['dt_sub'], duration=camp['duration'],
-                   trajectory=CircleQuintic(**camp['task']), arms=camp.get('_arms'))
+    res = simulate_law(_batch_runs(rows, camp['case']), camp['_gains'],
+                       law=camp.get('_law', 'robust'), law_params=camp['_law_params'],
+                       dt=camp['dt'], dt_sub=camp['dt_sub'], duration=camp['duration'],
+                       trajectory=CircleQuintic(**camp['task']), arms=camp.get('_arms'))
     out = dict(rows)
     for k, v in res.items():
         out[k] = v
@@ -564,7 +594,8 @@ def _chunk_path(out_dir, i):
 def _fingerprint(camp):
     keys = ('arm', 'case', 'task', 'duration', 'dt', 'dt_sub', 'controller', 'success',
             'design', 'seeds', 'fixed', 'axes', 'chunk')
-    return hashlib.sha256(repr([camp[k] for k in keys]).encode()).hexdigest()[:16]
+    extra = [camp[k] for k in ('laws', '_law') if k in camp]   # none: a one-law campaign
+    return hashlib.sha256(repr([camp[k] for k in keys] + extra).encode()).hexdigest()[:16]
 
 
 class Progress:
@@ -626,24 +657,17 @@ def run(camp, out_dir, address=None, progress=True, max_chunks=None):
         ``out_dir/results.parquet``, or None when stopped before the end.
 
     """
+    if 'laws' in camp and '_law' not in camp:
+        _start(camp, out_dir)
+        paths = [run(dict(camp, _law=law), os.path.join(out_dir, law), address, progress,
+                     max_chunks) for law in camp['laws']]
+        return None if None in paths else out_dir
     rows = design(camp)
     n = len(rows['run_index'])
     chunk = camp['chunk']
     spans = [(i, lo, min(lo + chunk, n)) for i, lo in enumerate(range(0, n, chunk))]
     os.makedirs(os.path.join(out_dir, 'chunks'), exist_ok=True)
-    stamp = os.path.join(out_dir, 'fingerprint')
-    fp = _fingerprint(camp)
-    if os.path.exists(stamp):
-        with open(stamp) as f:
-            if f.read().strip() != fp:
-                raise CampaignError(f'{out_dir}: holds the results of another campaign '
-                                    '(remove it or choose another --out)')
-    else:
-        with open(stamp, 'w') as f:
-            f.write(fp + '\n')
-    with open(os.path.join(out_dir, 'campaign.yaml'), 'w', encoding='utf-8') as f:
-        f.write(camp.get('_text') or yaml.safe_dump(
-            {k: v for k, v in camp.items() if not k.startswith('_')}))
+    _start(camp, out_dir)
     todo = [s for s in spans if not os.path.exists(_chunk_path(out_dir, s[0]))]
     if max_chunks is not None:
         todo = todo[:max_chunks]
@@ -671,6 +695,24 @@ def run(camp, out_dir, address=None, progress=True, max_chunks=None):
     if not all(os.path.exists(_chunk_path(out_dir, s[0])) for s in spans):
         return None
     return merge(out_dir, n)
+
+
+def _start(camp, out_dir):
+    """Stamp ``out_dir`` with the campaign (refusing another's folder); write its file."""
+    os.makedirs(out_dir, exist_ok=True)
+    stamp = os.path.join(out_dir, 'fingerprint')
+    fp = _fingerprint(camp)
+    if os.path.exists(stamp):
+        with open(stamp) as f:
+            if f.read().strip() != fp:
+                raise CampaignError(f'{out_dir}: holds the results of another campaign '
+                                    '(remove it or choose another --out)')
+    else:
+        with open(stamp, 'w') as f:
+            f.write(fp + '\n')
+    with open(os.path.join(out_dir, 'campaign.yaml'), 'w', encoding='utf-8') as f:
+        f.write(camp.get('_text') or yaml.safe_dump(
+            {k: v for k, v in camp.items() if not k.startswith('_')}))
 
 
 def merge(out_dir, n):
@@ -789,6 +831,16 @@ def _bins(values, axis, k=8):
     return centres, [f'{c:.3g}' for c in centres], idx
 
 
+def _bin_rows(cols, names):
+    """Yield ``(axis, label, selection)`` per non-empty value (bin) of each axis."""
+    for a in names:
+        _, labels, idx = _bins(cols[a], a)
+        for b, lab in enumerate(labels):
+            sel = idx == b
+            if sel.any():
+                yield a, lab, sel
+
+
 def summary(cols, names):
     """Return the summary table (Markdown): overall, then per value (bin) of each axis."""
     holds = np.asarray(cols['holds'])
@@ -799,16 +851,33 @@ def summary(cols, names):
              f'{np.median(cols["rms_mm"]):.3g} mm', '',
              '| axis | value | runs | holds | diverged | worst max (mm) | median rms (mm) |',
              '|---|---:|---:|---:|---:|---:|---:|']
-    for a in names:
-        centres, labels, idx = _bins(cols[a], a)
-        for b, lab in enumerate(labels):
-            sel = idx == b
-            if not sel.any():
-                continue
-            lines.append(f'| {a} | {lab} | {sel.sum()} | {holds[sel].mean():.1%} '
-                         f'| {div[sel].sum()} | {mx[sel].max():.3g} '
-                         f'| {np.median(np.asarray(cols["rms_mm"])[sel]):.3g} |')
+    for a, lab, sel in _bin_rows(cols, names):
+        lines.append(f'| {a} | {lab} | {sel.sum()} | {holds[sel].mean():.1%} '
+                     f'| {div[sel].sum()} | {mx[sel].max():.3g} '
+                     f'| {np.median(np.asarray(cols["rms_mm"])[sel]):.3g} |')
     return '\n'.join(lines)
+
+
+def _save(fig, path):
+    """Write ``fig`` to ``path`` (90 dpi) and close it; return the path."""
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def _frame(ax, x, y, paper):
+    """Label a cell plot's axes ``(name, centres, labels)``; star the paper's point."""
+    (a, ca, la), (b, cb, lb) = x, y
+    ax.set_xticks(range(len(la)), la, rotation=45, fontsize=7)
+    ax.set_yticks(range(len(lb)), lb, fontsize=7)
+    ax.set_xlabel(a)
+    ax.set_ylabel(b)
+    px = np.interp(paper[a], ca, np.arange(len(ca))) if a in paper else None
+    py = np.interp(paper[b], cb, np.arange(len(cb))) if b in paper else None
+    if px is not None and py is not None:
+        ax.plot(px, py, marker='*', color='w', markeredgecolor='k', markersize=14)
 
 
 def heatmaps(cols, names, folder, paper=PAPER_POINT):
@@ -837,40 +906,127 @@ def heatmaps(cols, names, folder, paper=PAPER_POINT):
                  'viridis', {})):
             im = ax.imshow(data, origin='lower', aspect='auto', cmap=cmap, **kw)
             fig.colorbar(im, ax=ax)
-            ax.set_xticks(range(len(la)), la, rotation=45, fontsize=7)
-            ax.set_yticks(range(len(lb)), lb, fontsize=7)
-            ax.set_xlabel(a)
-            ax.set_ylabel(b)
             ax.set_title(title, fontsize=9)
             if data is rate and np.nanmin(rate) < 0.5 < np.nanmax(rate):
                 ax.contour(np.nan_to_num(rate, nan=0.0), levels=[0.5], colors='k',
                            linewidths=1.5)
-            px = np.interp(paper[a], ca, np.arange(len(ca))) if a in paper else None
-            py = np.interp(paper[b], cb, np.arange(len(cb))) if b in paper else None
-            if px is not None and py is not None:
-                ax.plot(px, py, marker='*', color='w', markeredgecolor='k', markersize=14)
+            _frame(ax, (a, ca, la), (b, cb, lb), paper)
         fig.suptitle(f"{a} x {b}: {len(holds)} runs (star: the paper's point; black: "
                      '50 % boundary)', fontsize=9)
-        fig.tight_layout()
-        path = os.path.join(folder, f'heatmap_{a}__{b}.png')
-        fig.savefig(path, dpi=90)
-        plt.close(fig)
-        files.append(path)
+        files.append(_save(fig, os.path.join(folder, f'heatmap_{a}__{b}.png')))
     return files
+
+
+def comparison(per_law, names):
+    """
+    Return the laws side by side (Markdown): overall, then per value (bin) of each axis.
+
+    Parameters
+    ----------
+    per_law : dict of str to dict
+        Result columns of each law (the same runs).
+    names : list of str
+        The varied axes.
+
+    """
+    laws = list(per_law)
+    lines = ['| law | runs | holds | diverged | worst max (mm) | median rms (mm) |',
+             '|---|---:|---:|---:|---:|---:|']
+    for law, cols in per_law.items():
+        holds = np.asarray(cols['holds'])
+        div = np.isfinite(np.asarray(cols['diverged_at_s'], dtype=float))
+        lines.append(f'| {law} | {len(holds)} | {holds.mean():.1%} | {div.sum()} '
+                     f'| {np.nanmax(cols["max_mm"]):.3g} '
+                     f'| {np.median(cols["rms_mm"]):.3g} |')
+    lines += ['', '| axis | value | runs | ' + ' | '.join(
+        f'{law} holds | {law} worst max (mm)' for law in laws) + ' |',
+        '|---|---:|---:|' + '---:|---:|' * len(laws)]
+    for a, lab, sel in _bin_rows(per_law[laws[0]], names):
+        cells = [f'{np.asarray(cols["holds"])[sel].mean():.0%} '
+                 f'| {np.asarray(cols["max_mm"], dtype=float)[sel].max():.3g}'
+                 for cols in per_law.values()]
+        lines.append(f'| {a} | {lab} | {sel.sum()} | ' + ' | '.join(cells) + ' |')
+    return '\n'.join(lines)
+
+
+LAW_COLOURS = ('k', 'tab:blue', 'tab:orange', 'tab:green', 'tab:red', 'tab:purple')
+
+
+def boundaries(per_law, names, folder, paper=PAPER_POINT):
+    """Draw each law's 50 % boundary over every pair of axes on one figure; return files."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    first = next(iter(per_law.values()))
+    files = []
+    for a, b in itertools.combinations(names, 2):
+        ca, la, ia = _bins(first[a], a)
+        cb, lb, ib = _bins(first[b], b)
+        fig, ax = plt.subplots(figsize=(6.4, 4.8))
+        handles = []
+        for j, (law, cols) in enumerate(per_law.items()):
+            holds = np.asarray(cols['holds'], dtype=float)
+            rate = np.zeros((len(cb), len(ca)))
+            for x in range(len(ca)):
+                for y in range(len(cb)):
+                    sel = (ia == x) & (ib == y)
+                    rate[y, x] = holds[sel].mean() if sel.any() else np.nan
+            colour = LAW_COLOURS[j % len(LAW_COLOURS)]
+            lo, hi = np.nanmin(rate), np.nanmax(rate)
+            label = (f'{law}: holds {np.nanmean(holds):.0%}' + (
+                ' (>= 50 % in every cell)' if lo >= 0.5 else
+                ' (< 50 % in every cell)' if hi < 0.5 else ''))
+            if lo < 0.5 <= hi:
+                ax.contour(np.nan_to_num(rate, nan=0.0), levels=[0.5], colors=colour,
+                           linewidths=2.0)
+            handles.append(plt.Line2D([], [], color=colour, lw=2, label=label))
+        _frame(ax, (a, ca, la), (b, cb, lb), paper)
+        ax.set_xlim(-0.5, len(ca) - 0.5)
+        ax.set_ylim(-0.5, len(cb) - 0.5)
+        ax.legend(handles=handles, fontsize=8, loc='best')
+        ax.set_title(f"{a} x {b}: each law's 50 % boundary, {len(ia)} runs (star: the "
+                     "paper's point)", fontsize=8)
+        files.append(_save(fig, os.path.join(folder, f'boundary_{a}__{b}.png')))
+    return files
+
+
+def report_laws(folder, camp, figures=True):
+    """Report each law of a comparison (its folder), then the laws side by side."""
+    per_law = {}
+    for law in camp['laws']:
+        report(os.path.join(folder, law), figures=figures)
+        per_law[law] = _read(os.path.join(folder, law))[0]
+    names = _varied(per_law[camp['laws'][0]], camp)
+    for cols in per_law.values():
+        _varied(cols, camp)
+    return _publish(os.path.join(folder, 'comparison.md'), comparison(per_law, names),
+                    (lambda: boundaries(per_law, names, folder)) if figures and len(names) >= 2
+                    else None)
+
+
+def _publish(path, text, draw):
+    """Write and print ``text``; draw the figures (``draw()``: their files) and name them."""
+    with open(path, 'w') as f:
+        f.write(text + '\n')
+    print(text)
+    for fig in draw() if draw is not None else ():
+        print(f'figure: {fig}')
+    return 0
 
 
 def report(results, figures=True):
     """Print the summary of a results folder (or Parquet file), write summary.md and figures."""
+    camp_path = os.path.join(results, 'campaign.yaml')
+    if os.path.isdir(results) and os.path.exists(camp_path) and not os.path.exists(
+            os.path.join(results, 'results.parquet')):
+        camp = load(camp_path)
+        if 'laws' in camp:
+            return report_laws(results, camp, figures)
     cols, camp, folder = _read(results)
     names = _varied(cols, camp)
-    text = summary(cols, names)
-    with open(os.path.join(folder, 'summary.md'), 'w') as f:
-        f.write(text + '\n')
-    print(text)
-    if figures and len(names) >= 2:
-        for path in heatmaps(cols, names, folder):
-            print(f'figure: {path}')
-    return 0
+    return _publish(os.path.join(folder, 'summary.md'), summary(cols, names),
+                    (lambda: heatmaps(cols, names, folder)) if figures and len(names) >= 2
+                    else None)
 
 
 # -- command line -----------------------------------------------------------------------
@@ -901,7 +1057,7 @@ def main(argv=None):
         if args.verb == 'report':
             return report(args.results, figures=not args.no_figures)
         camp = load(args.file)
-        n = len(design(camp)['run_index'])
+        n = len(design(camp)['run_index']) * len(camp.get('laws', ('robust',)))
         if args.check:
             print(f'campaign {camp["name"]}: {n} runs, axes {", ".join(camp["axes"])}')
             return 0
@@ -910,7 +1066,7 @@ def main(argv=None):
         path = run(camp, out, address=args.address, progress=not args.no_progress)
         wall = time.monotonic() - t0
         print(f'campaign {camp["name"]}: {n} runs, {wall:.1f} s wall '
-              f'({n / wall:.0f} runs/s incl. resumed), results {path}')
+              f'({n / wall:.3g} runs/s incl. resumed), results {path}')
         if args.report and path:
             return report(out)
         return 0

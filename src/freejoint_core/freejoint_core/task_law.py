@@ -1,0 +1,209 @@
+"""
+What every Cartesian law of this stack shares: the task terms, the surface, the inverse.
+
+A Cartesian law of a free-joint arm computes, from the nominal model (paper eqs. 4, 5),
+the task-space dynamics ``pdd = Da tau + b`` of the end effector with the free joints'
+dynamics eliminated, then asks for a task acceleration ``w`` and realises it with the
+right inverse ``tau = Da# (w - b)`` (damped near a singularity, as the paper's law).
+The laws differ in the acceleration they ask for.  :class:`TaskLaw` holds the shared
+part; a law overrides :meth:`TaskLaw.command` (and, with internal state,
+:meth:`TaskLaw.applied`, ``reset``, the state's methods)::
+
+    e = p - p_d,   edot = J qd - pd_d,   s = edot + Lam e                  (sliding surface)
+    u0 = pdd_d - Lam edot - K s = pdd_d - (K + Lam) edot - K Lam e         (paper eq. 16)
+    tau = Da# (command(...) - b)  (law's command), limited to the torque limit
+
+``K`` and ``Lambda`` (scaled by the hold stiffness), the torque limit and the
+singularity threshold are the shared :class:`freejoint_core.control.Gains`; a law's own
+gains are its ``gain_schema`` (``<law>.<gain>``, :class:`freejoint_core.law_base.LawGain`).
+
+The output is :class:`freejoint_core.control.ControlOutput` with the fields a law
+without adaptation has (``theta`` empty, ``rho`` the law's robust gain, ``dv`` its
+robust term): the loop and the metrics read ``tau``, ``e``, ``p``, ``det`` and
+``status``.
+"""
+
+import math
+
+from freejoint_core.arm import ArmParams, check_vector
+from freejoint_core.control import (_dls_lambda2, clip_torque, ControlOutput, Gains,
+                                    HoldStiffness, RobustController, STATUS_NEAR_SINGULAR)
+from freejoint_core.errors import FreejointValueError
+from freejoint_core.law_base import ControlLaw, law_params
+from freejoint_core.models import make_model
+import numpy as np
+
+_EMPTY = np.zeros(0)
+
+
+def damped_right_inverse(da, w, thr):
+    """
+    Return ``Da# w`` (damped least squares near a singularity), ``|det(Da Da^T)|``, status.
+
+    Parameters
+    ----------
+    da : numpy.ndarray, (2, r)
+        Decoupling matrix of the nominal model (planar task).
+    w : numpy.ndarray, (2,)
+        Task acceleration to realise (drift already subtracted) [m/s^2].
+    thr : float
+        Threshold on ``|det(Da Da^T)|`` below which the inverse is damped (the paper's
+        ``eps_d``; ``control`` module notes: the smallest damping reaching it).
+
+    Returns
+    -------
+    tau : numpy.ndarray, (r,)
+    det : float
+    status : int
+        ``STATUS_NEAR_SINGULAR`` when damped, else 0.
+
+    """
+    (a00, a01), (_, a11) = (da @ da.T).tolist()
+    det = a00 * a11 - a01 * a01
+    status = 0
+    if abs(det) < thr:
+        lam2 = _dls_lambda2(det, a00 + a11, thr)
+        a00 += lam2
+        a11 += lam2
+        status = STATUS_NEAR_SINGULAR
+    det_use = a00 * a11 - a01 * a01
+    wx, wy = w.tolist()
+    c = np.array(((a11 * wx - a01 * wy) / det_use, (a00 * wy - a01 * wx) / det_use))
+    return da.T @ c, abs(det), status
+
+
+def sat(s, phi):
+    """
+    Return the boundary-layer switching direction ``s / max(||s||, phi)`` (norm <= 1).
+
+    Inside the layer (``||s|| < phi``) it is linear, ``s / phi``, continuous across the
+    layer's edge; outside, the unit vector of ``s`` (the discontinuous ``sign`` of an
+    ideal sliding mode, smoothed).
+    """
+    ns = float(np.linalg.norm(s))
+    return s / (ns if ns > phi else phi)
+
+
+class TaskLaw(HoldStiffness, ControlLaw):
+    """
+    The shared part of a planar Cartesian law on the nominal model (module notes).
+
+    Parameters
+    ----------
+    nominal : ArmParams
+        Nominal parameters (``Da``, ``b``).
+    gains : Gains, optional
+        The shared task gains (``K``, ``Lambda``, ``tau_limit``, ``det_threshold``).
+    model : ArmModel, optional
+        The nominal model's implementation (default ``make_model(nominal)``).
+    params : mapping of str to float, optional
+        The law's own gains by namespaced name (its ``gain_schema``; defaults otherwise).
+
+    """
+
+    def __init__(self, nominal, gains=None, model=None, params=None):
+        self.stiffness = 1.0
+        self.params = law_params(self.name, self.gain_schema, params)
+        self.gains = None
+        self.set_nominal(nominal, model)
+        self.set_gains(Gains() if gains is None else gains)
+        self.reset()
+
+    def set_nominal(self, params, model=None):
+        """Take a new nominal model (next step); the law's state is kept."""
+        if not isinstance(params, ArmParams):
+            raise FreejointValueError(
+                f'nominal_params: expected ArmParams, got {type(params).__name__}')
+        if model is None:
+            model = make_model(params)
+        elif getattr(model, 'params', None) != params:
+            raise FreejointValueError('model: expected an ArmModel of the nominal parameters, '
+                                      f'got {type(model).__name__}')
+        if self.gains is not None and self.gains.tau_limit is not None:
+            RobustController._resolve_limit(self.gains.tau_limit, params.r)
+        self.nominal, self.model, self.n, self.r = params, model, params.n, params.r
+        # the 3-link arm's closed forms (fast3.Arm3Model.task) when it has them
+        self._task = model.task if params.n == 3 and params.r == 2 and hasattr(
+            model, 'task') else None
+        if self.gains is not None:
+            self.set_gains(self.gains)
+
+    def set_gains(self, gains):
+        """Take new shared gains (next step); the state is kept."""
+        if not isinstance(gains, Gains):
+            raise FreejointValueError(f'gains: expected Gains, got {type(gains).__name__}')
+        m = self.model.task_dim
+        if m != 2:
+            raise FreejointValueError(f'nominal: law {self.name!r} is planar (task_dim 2), '
+                                      f'the model has task_dim {m}')
+        if gains.task_dim != m:
+            raise FreejointValueError(f'gains: sized for task dimension {gains.task_dim}, the '
+                                      f'model has {m}')
+        self._limit = RobustController._resolve_limit(gains.tau_limit, self.r)
+        self.gains = gains
+        self._scale_gains()
+
+    def _scale_gains(self):
+        s = self.stiffness
+        self.k = np.array(self.gains.K) * s
+        self.lam = np.array(self.gains.Lambda) * s
+
+    def step(self, q, qd, p_d, pd_d, pdd_d, dt):
+        """
+        Return the torques of one tick (``ControlOutput``) and advance the law by ``dt``.
+
+        Parameters
+        ----------
+        q, qd : array_like, (n,)
+            Measured joint angles [rad] and velocities [rad/s].
+        p_d, pd_d, pdd_d : array_like, (m,)
+            Setpoint position [m], velocity [m/s], acceleration [m/s^2].
+        dt : float
+            Time step [s], > 0.
+
+        """
+        try:
+            dtf = float(dt)
+        except (TypeError, ValueError):
+            dtf = math.nan
+        if not (math.isfinite(dtf) and dtf > 0.0):
+            raise FreejointValueError(f'dt: must be finite and > 0, got {dt!r}')
+        m = self.model.task_dim
+        q = check_vector(q, self.n, 'q')
+        qd = check_vector(qd, self.n, 'qd')
+        p_d = check_vector(p_d, m, 'p_d')
+        pd_d = check_vector(pd_d, m, 'pd_d')
+        pdd_d = check_vector(pdd_d, m, 'pdd_d')
+        p, v, da, b = self._terms(q, qd)
+        e = p - p_d
+        edot = v - pd_d
+        s = edot + self.lam * e
+        u0 = pdd_d - self.lam * edot - self.k * s
+        w, rho, dv = self.command(q, qd, v, da, b, e, edot, s, u0, pdd_d, dtf)
+        tau, det, status = damped_right_inverse(da, w, self.gains.det_threshold)
+        tau, limited = clip_torque(tau, self._limit)
+        self.applied(tau, da)
+        return ControlOutput(tau, e, edot, s, _EMPTY.copy(), float(rho), dv, det, p,
+                             status | limited)
+
+    def _terms(self, q, qd):
+        """Return ``p``, ``J qd`` (m,), ``Da`` (m, r), ``b`` (m,) of the nominal model."""
+        if self._task is not None:
+            px, py, vx, vy, d00, d01, d10, d11, bx, by = self._task(*q.tolist(), *qd.tolist())
+            return (np.array((px, py)), np.array((vx, vy)),
+                    np.array(((d00, d01), (d10, d11))), np.array((bx, by)))
+        model = self.model
+        da, b = model.decoupling(q, qd)
+        return model.fk(q), model.jacobian(q) @ qd, da, b
+
+    def command(self, q, qd, v, da, b, e, edot, s, u0, pdd_d, dt):
+        """
+        Return the law's task acceleration minus drift ``w``, its gain ``rho`` and term.
+
+        The torque is ``Da# w``; the nominal computed torque is ``w = u0 - b`` (``rho``
+        0, term zeros).  ``v`` is the task velocity ``J qd`` [m/s].
+        """
+        return u0 - b, 0.0, np.zeros_like(u0)
+
+    def applied(self, tau, da):
+        """Take note of the torque the step returns (after the limit); nothing here."""
