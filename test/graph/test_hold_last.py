@@ -44,15 +44,15 @@ def test_a_driver_holding_its_last_command_keeps_the_arm_while_the_controller_is
     # the active joints, and the link hangs on; at the paper's start it would swing.
     sim = procs.start_node('freejoint_sim', 'sim_node', 'sim', [
         '--ros-args', '--params-file', os.path.join(CONFIG, 'sim.yaml'), '-p', 'mode:=realtime',
-        '-p', 'case:=%s' % case, '-p', 'command_watchdog:=false', '-p', 'publish_rate:=250.0',
+        '-p', 'case:=%s' % case, '-p', 'command_watchdog:=false', '-p', 'publish_rate:=500.0',
         *(['-p', 'start_pose:=hanging'] if case == 'vertical' else [])])
     relay = procs.start_script(RELAY, 'relay', ['--pass', '1.0', '--starve', '2.0',
                                                 '--gap', '0.1', '--period', '0.3'])
-    # A state every 4 ms; the guard's thresholds loose enough for a loaded test machine
+    # A state every 2 ms; the guard's thresholds loose enough for a loaded test machine
     # to start (what is tested is the stop, not the margins).
     ctl = procs.start_node('freejoint_control', 'controller_node', 'controller', [
         '--ros-args', '--params-file', os.path.join(CONFIG, 'controller.yaml'),
-        '-p', 'lockstep:=false', '-p', 'case:=%s' % case, '-p', 'control_period:=0.004',
+        '-p', 'lockstep:=false', '-p', 'case:=%s' % case, '-p', 'control_period:=0.002',
         '-p', 'readiness_action:=damp', '-p', 'readiness_max_delay:=0.012',
         '-p', 'readiness_min_answer_rate:=0.6', '-p', 'readiness_resume_delay:=0.012',
         '-p', 'readiness_resume_answer_rate:=0.7',
@@ -65,7 +65,7 @@ def test_a_driver_holding_its_last_command_keeps_the_arm_while_the_controller_is
     wait(lambda: len(readiness) >= 4 and readiness[-1][0], 60.0,
          'ready again after the stop (%s)' % readiness, spin=spin)
     n = len(ee)
-    wait(lambda: len(ee) > n + 125, 30.0, '0.5 s more states', spin=spin)
+    wait(lambda: len(ee) > n + 250, 30.0, '0.5 s more states', spin=spin)
     log = procs.log(ctl)
     # Stopped on the starved link, with the reason, the damped hold answered meanwhile.
     stops = [reason for ready, reason in readiness[1:] if not ready]

@@ -327,7 +327,8 @@ class ControlLoop:
                      max_delay * 1e3, margins[1] * 100.0, cfg.readiness_window, margins[4],
                      guard.good_delay * 1e3, guard.good_rate * 100.0, margins[5],
                      'a stop command, the brakes asked for, then no command'
-                     if self._guard_brakes else 'hold'))
+                     if self._guard_brakes else 'the damped joint hold answered'
+                     if self._guard_damps else 'hold'))
 
     def apply(self, old, cfg):
         """Take a validated parameter change (effective on the next state)."""
@@ -630,7 +631,8 @@ class ControlLoop:
         guard = self._readiness
         self.readiness_note = (ns, guard.ready, guard.reason)
         if change == 1:
-            action = (_STOP_SAID if self._guard_brakes else 'holding position')
+            action = (_STOP_SAID if self._guard_brakes else _DAMP_SAID if self._guard_damps
+                      else 'holding position')
             self.log(ERROR, None, '%s: %s' % (guard.reason, action))
         else:
             self.log(WARN if guard.recoveries else INFO, None,
@@ -688,8 +690,8 @@ class ControlLoop:
             self._kept_hold = self.shaper.hold_position     # None unless holding
             self._withholding = True
             self._q_stop = [q[i] for i in self.law.model.active]
-            self._said_ns = ns
-            self.log(ERROR, 'readiness', '%s: %s' % (reason, _DAMP_SAID))
+            if self._said_ns is None:
+                self._said_ns = ns      # (a transition was said at once)
         said = self._said_ns
         if not 0 <= ns - said < _SAY_PERIOD_NS:
             self._said_ns = ns
