@@ -350,8 +350,9 @@ def test_state_publish_rate_thins_controller_state_but_not_the_commands(ros_node
 
 def test_the_node_publishes_its_readiness_at_start_up_and_at_each_change(ros_node, monkeypatch):
     """
-    In-process: lockstep is ready from the start; real time not ready until its good windows,
-    then each change (a stall of the states: not ready, the stop command sent first).
+    In-process: lockstep ready from the start, real time not until its good windows.
+
+    Then each change: a stall of the states makes it not ready, the stop command sent first.
     """
     from rclpy.parameter import Parameter
     from freejoint_control.controller_node import ControllerNode
