@@ -213,6 +213,7 @@ class ControlLoop:
         self._stale_stop = False        # real time: stopped for want of states
         self._stale_reason = ''
         self._commanded = False         # the last answer sent was a computed command
+        self._ever_commanded = False    # a computed command was sent (or taken over)
         self._q_stop = None             # 'damp': the active joints' angles the stop found
         self.stops = 0                  # stop commands sent
         self._install(cfg)
@@ -363,6 +364,7 @@ class ControlLoop:
         """Leave standby: answer from now on, the reference starting from the motion."""
         self.standby = False
         self._start_from_motion = True
+        self._commanded = self._ever_commanded = True   # the dead controller's command
 
     def standby_waits_for(self, cmd_matched, cmd_listed, sp_matched, sp_listed, mono, now_ns,
                           names=('commands', 'setpoints')):
@@ -542,9 +544,9 @@ class ControlLoop:
                     q = tuple([a + b for a, b in zip(q, self._offsets)])
         if q is None:
             self.refused_states += 1
-            if not self.lockstep and not self._commanded:
-                # Nothing computed was sent (the start, or stopped): nothing to replace, and
-                # any command would release the driver's brakes.
+            if not self.lockstep and not self._ever_commanded:
+                # Nothing computed was ever sent (the start): nothing to replace, and any
+                # command would release the driver's start-up brakes.
                 self.log(ERROR, kind, 'state refused: %s; no command, theta_hat kept' % reason)
                 return None
             if self.lockstep:
@@ -751,7 +753,11 @@ class ControlLoop:
         self._brake_asked = False
         kept, self._kept_hold = self._kept_hold, None
         if kept is None:
-            self.shaper.reset()         # hold at fk(q), or blend to the setpoint from it
+            # Hold at fk(q), or blend to the setpoint from the measured motion: a braked arm
+            # is at rest, but one a driver kept moving (the stop command held, the damped
+            # joint hold) is not, and a reference from rest would be a step in velocity.
+            self.shaper.reset()
+            self._start_from_motion = True
         else:
             # A hold stopped (e.g. a drift past readiness_max_hold_error): back to its own
             # position from where the arm was braked, so that stops do not add up.
@@ -1082,7 +1088,7 @@ class ControlLoop:
         self._last_sp = p_ref
         self._last_det = out.det
         self.ticks += 1
-        self._commanded = True
+        self._commanded = self._ever_commanded = True
         guard = self._readiness
         if guard is not None and guard.ready:
             holding = sp is None
