@@ -48,7 +48,10 @@ table per run, the worst per case and the conditions (load average, priority, la
 count, hogs) are printed and written to ``bags/soak/soak.json``.
 
 Usage: ``. tools/env.sh && python bench/soak.py [--runs 5] [--seconds 30]
-[--cases horizontal vertical] [--hogs N] [--priority 50]``. Bags and logs stay in
+[--cases horizontal vertical] [--hogs N] [--priority 50] [--driver hold-last]
+[--readiness-action brake|damp|hold]``. ``--driver hold-last`` meets a driver that holds
+its last command (no watchdog, no brakes on request; the controller's
+``readiness_action`` then ``damp`` unless given). Bags and logs stay in
 ``bags/soak/<case>_<run>/`` (git-ignored). Exit code 0 whatever the figures (a benchmark),
 1 if a run could not be made.
 """
@@ -674,8 +677,22 @@ def injected_at(graph):
     return None
 
 
+def driver_overrides(driver, action):
+    """
+    Return the (simulator, controller) ``-p`` items of ``--driver`` and ``--readiness-action``.
+
+    ``hold-last``: the simulator as a driver that holds its last command (ros2_control's
+    forward command controller: ``command_watchdog: false``, brake requests ignored); the
+    controller's ``readiness_action`` as given (None: its configured one).
+    """
+    sim = ['command_watchdog:=false'] if driver == 'hold-last' else []
+    ctl = [] if action is None else ['readiness_action:=%s' % action]
+    return sim, ctl
+
+
 def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=False,
-             fully_actuated=False, fail_at=None, ctl_extra=()):
+             fully_actuated=False, fail_at=None, ctl_extra=(), driver='watchdog',
+             action=None):
     """Make one run of ``case``; return its row (dict). ``ctl_extra``: controller items."""
     name = '%s_%d' % (case, run)
     planner = []
@@ -683,7 +700,8 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
         sim, ctl, planner = fully_actuated_overrides(stabilise)
     else:
         sim, ctl = stabilised_overrides(case) if stabilise else ([], [])
-    ctl = list(ctl) + list(ctl_extra)
+    extra_sim, extra_ctl = driver_overrides(driver, action)
+    sim, ctl = list(sim) + extra_sim, list(ctl) + extra_ctl + list(ctl_extra)
     bound, factor, worst = bound_of(case, hogs)
     row = {'case': case, 'run': run, 'seconds': seconds, 'bound_mm': bound,
            'bound_factor': factor, 'offline_worst_max_mm': worst}
@@ -718,6 +736,7 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
         say('%s run %d: no figures from the machine probe (%s)' % (case, run, probes.failure))
     row['back_to_back'] = back_to_back
     row['stabilised'] = stabilise
+    row['driver'], row['readiness_action'] = driver, action
     row['exit_codes'] = s.codes
     row['plans'] = len(loop.accepted)
     row['load_before'], row['load_after'] = load0, os.getloadavg()[0]
@@ -924,8 +943,20 @@ def parse(argv):
                     help='with --fully-actuated: one circle per run, joint3 made to fail S s '
                     "after the plan's acceptance (the simulator's ~/fail_joint); reports the "
                     'detection delay and the error after it')
+    ap.add_argument('--driver', choices=('watchdog', 'hold-last'), default='watchdog',
+                    help='the simulator as a drive with a command watchdog and brakes on '
+                    "request (default), or 'hold-last': a driver that applies its last "
+                    'command until the next, with no watchdog and no brakes but the start-up '
+                    "ones (ros2_control's forward command controller: command_watchdog "
+                    'false); docs/real-arm.md')
+    ap.add_argument('--readiness-action', choices=('brake', 'damp', 'hold'), default=None,
+                    help="the controller's readiness_action (default: its config's, brake, "
+                    'with --driver watchdog; damp with --driver hold-last, what '
+                    'docs/real-arm.md prescribes for such a driver)')
     ap.add_argument('--out', default=os.path.join(OUT, 'soak.json'))
     args = ap.parse_args(argv)
+    if args.readiness_action is None and args.driver == 'hold-last':
+        args.readiness_action = 'damp'
     if args.fail_at is not None and (not args.fully_actuated or args.fail_at < 0):
         ap.error('--fail-at needs --fully-actuated and S >= 0')
     if args.runs < 1 or args.seconds <= 0 or args.hogs < 0 or not 0 <= args.priority <= 98:
@@ -952,9 +983,12 @@ def main(argv=None):
     cond['stabilised'] = args.stabilise
     cond['fully_actuated'] = args.fully_actuated
     cond['fail_at_s'] = args.fail_at
+    cond['driver'] = args.driver
+    cond['readiness_action'] = args.readiness_action or 'configured (brake)'
     say('%d run(s) x %g s per case %s, sim and controller thread_priority %d, %d hog(s), '
-        '%d CPUs, load %.2f' % (args.runs, args.seconds, ', '.join(args.cases), args.priority,
-                                args.hogs, os.cpu_count(), os.getloadavg()[0]))
+        '%d CPUs, load %.2f, driver %s, readiness_action %s' % (
+            args.runs, args.seconds, ', '.join(args.cases), args.priority, args.hogs,
+            os.cpu_count(), os.getloadavg()[0], args.driver, cond['readiness_action']))
     for case in args.cases:
         bound, factor, worst = bound_of(case, args.hogs)
         say('%s: bound %.3f mm = %g x the offline worst max %.3f mm (seeds 0-9)'
@@ -970,7 +1004,8 @@ def main(argv=None):
                 say('%s run %d/%d: %g s' % (case, run + 1, args.runs, args.seconds))
                 try:
                     row = soak_run(case, index, run, args.seconds, args.hogs, args.back_to_back,
-                                   args.stabilise, args.fully_actuated, args.fail_at)
+                                   args.stabilise, args.fully_actuated, args.fail_at,
+                                   args.driver, args.readiness_action)
                 except Exception as exc:  # noqa: B902 - one bad run must not cost the soak
                     say('%s run %d failed: %s: %s' % (case, run, type(exc).__name__, exc))
                     row = {'case': case, 'run': run, 'error': str(exc), 'met': False}

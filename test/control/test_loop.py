@@ -10,9 +10,9 @@ import os
 
 from freejoint_control.loop import (ControlLoop, STATUS_DT_CLAMPED, STATUS_HOLDING,
                                     STATUS_LAW_FAULT, STATUS_RATE_LIMITED, STATUS_RESUMING,
-                                    STATUS_SETPOINT_LATE)
+                                    STATUS_SETPOINT_LATE, STATUS_STOPPED)
 from freejoint_control.params import SCHEMA
-from freejoint_core.arm import table1
+from freejoint_core.arm import ArmModel, table1
 from freejoint_core.control import (Gains, RobustController, STATUS_BAD_INPUT,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
                                     STATUS_TORQUE_LIMITED)
@@ -141,8 +141,8 @@ class Replica:
         self.last_ns = ns
         return effort, ref, dt, out
 
-    def zero(self, ns):
-        self.prev = [0.0, 0.0]
+    def zero(self, ns, effort=(0.0, 0.0)):
+        self.prev = list(effort)
         self.armed = True
         self.last_ns = ns
 
@@ -157,9 +157,9 @@ class Replica:
 def test_the_status_bits_are_the_controller_state_message_s():
     from freejoint_msgs.msg import ControllerState as CS
     assert (STATUS_HOLDING, STATUS_RATE_LIMITED, STATUS_LAW_FAULT, STATUS_RESUMING,
-            STATUS_DT_CLAMPED, STATUS_SETPOINT_LATE) == (
+            STATUS_DT_CLAMPED, STATUS_SETPOINT_LATE, STATUS_STOPPED) == (
         CS.STATUS_HOLDING, CS.STATUS_RATE_LIMITED, CS.STATUS_LAW_FAULT, CS.STATUS_RESUMING,
-        CS.STATUS_DT_CLAMPED, CS.STATUS_SETPOINT_LATE)
+        CS.STATUS_DT_CLAMPED, CS.STATUS_SETPOINT_LATE, CS.STATUS_STOPPED)
 
 
 # -- lockstep ---------------------------------------------------------------------------
@@ -335,10 +335,14 @@ def test_absurd_input_is_refused_with_a_reason_and_tracking_resumes_within_half_
     if kind == 'state':
         setpoint(loop, k, _setpoint(k))
         res = state(loop, k, *corrupt(Q0, QD0))
-        assert res.effort == [0.0, 0.0] and res.status == STATUS_BAD_INPUT, res.message
+        # Real time: the stop command, the nominal model's gravity load at the last good
+        # state (what a driver holding its last command keeps), not zero effort.
+        hold = ArmModel(table1('vertical').scaled(0.7)).gravity_torque(Q0)[0:2].tolist()
+        assert res.effort == pytest.approx(hold, abs=1e-12) and min(map(abs, hold)) > 1.0
+        assert res.status == STATUS_BAD_INPUT, res.message
         assert reason in res.message and res.law_state_values[:5] == theta_before
         assert 'implausible state' in logs[-1][2]
-        rep.zero(k * DT_NS)
+        rep.zero(k * DT_NS, res.effort)
     elif kind == 'setpoint':
         setpoint(loop, k, (1e300, 0.0, 0.0, 0.0, 0.0, 0.0))
         res = state(loop, k)
@@ -600,13 +604,17 @@ def test_real_time_skips_a_state_older_than_max_state_age_without_a_command():
     assert '1 states skipped as too old' in loop.report()
 
 
-def test_stale_state_in_real_time_commands_zero_then_holds_anew():
-    loop, _ = make(lockstep=False, max_state_age=0.0, stale_timeout=0.5)
+@pytest.mark.parametrize('case', ['horizontal', 'vertical'])
+def test_stale_state_in_real_time_sends_the_stop_command_then_holds_anew(case):
+    loop, _ = make(case=case, lockstep=False, max_state_age=0.0, stale_timeout=0.5)
     setpoint(loop, 0, _setpoint(0))
     state(loop, 0, mono=1.0)
     res = loop.watchdog(2 * DT_NS, 1.6)
-    assert res.status == STATUS_STALE_STATE and res.effort == [0.0, 0.0]
+    # The gravity load of the active joints at the last state (0 in a horizontal plane).
+    hold = ArmModel(table1(case).scaled(0.7)).gravity_torque(Q0)[0:2].tolist()
+    assert res.status == STATUS_STALE_STATE and res.effort == pytest.approx(hold, abs=1e-12)
     assert loop.shaper.mode == MODE_NONE
+    assert loop.watchdog(3 * DT_NS, 1.7) is None        # once
 
 
 def test_delay_compensation_predict_runs_the_law_on_the_predicted_state():
@@ -779,4 +787,13 @@ def test_diagnostics_say_holding_then_tracking_then_stale_then_no_state():
     loop.watchdog(0, 1e6)
     errors, _, _, _ = loop.diagnostics(1.0, loop.counters(), True, ('-', '-'),
                                        '/joint_states', None)
-    assert errors == ['no joint_states for 0.5 s: zero effort commanded']
+    assert errors == ['no joint_states for 0.5 s: the stop command sent (gravity hold), the '
+                      'brakes asked for']
+    assert loop.result.status == STATUS_STALE_STATE and loop.result.effort == [0.0, 0.0]
+    assert loop.take_brake_request() == 'stale state: no joint_states within 0.5 s: brake now'
+    assert loop.take_readiness()[1:] == (False, 'stale state: no joint_states within 0.5 s: '
+                                         'stop command sent (the gravity hold of the active '
+                                         'joints), the brakes asked for; no command until '
+                                         'the loop is ready again')
+    state(loop, 10)     # states again: ready (no guard here)
+    assert loop.take_readiness() == (10 * DT_NS, True, '')

@@ -4,13 +4,15 @@ The real-time readiness guard on the loop: synthetic streams in one process, no 
 The states' ages are set by the ``now_ns`` the test passes with each stamp; windows are
 judged at the first state whose stamp is a window (0.1 s) past the window's first one.
 """
+import math
 import os
 
 from freejoint_control.loop import (ControlLoop, ERROR, INFO, STATUS_HOLDING, STATUS_RESUMING,
-                                    WARN)
+                                    STATUS_STOPPED, WARN)
 from freejoint_control.params import SCHEMA
-from freejoint_control.readiness import (effective_periods, MEASURED_MARGIN, ReadinessGuard,
-                                         tolerated_delay)
+from freejoint_control.readiness import (effective_periods, guard_margins, MEASURED,
+                                         ReadinessGuard)
+from freejoint_core.arm import table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import divergence_reason
 from freejoint_core.offline import run_case
@@ -24,19 +26,45 @@ DT_NS = 1_000_000
 NAMES = ['joint1', 'joint2', 'joint3']
 Q0 = (-1.369438, 1.691679, 2.094395)    # the paper's start: end effector at (0.2, 0)
 QD0 = (0.0, 0.0, 0.0)
+STOP_SAID = ('stop command sent (the gravity hold of the active joints), the brakes asked '
+             'for; no command until the loop is ready again')
+QUIET_SAID = 'no command until the loop is ready (the brakes asked for)'
+
+
+def gravity_hold(q, scale=0.7, g=9.81):
+    """
+    Return the stop command by hand: G_1, G_2 of Table I (L 0.5 m, m 1 kg, L_c 0.25 m) at ``q``.
+
+    The nominal model scales masses and L_c by ``scale``; with the absolute angles
+    phi_1 = q1, phi_2 = q1 + q2, phi_3 = phi_2 + q3 and gravity along -y:
+    G_2 = g ((m2 lc2 + m3 L2) cos phi_2 + m3 lc3 cos phi_3),
+    G_1 = G_2 + g (m1 lc1 + (m2 + m3) L1) cos phi_1.
+    """
+    m, lc, length = scale * 1.0, scale * 0.25, 0.5
+    p1, p2 = q[0], q[0] + q[1]
+    p3 = p2 + q[2]
+    g2 = g * ((m * lc + m * length) * math.cos(p2) + m * lc * math.cos(p3))
+    return [g2 + g * (m * lc + 2 * m * length) * math.cos(p1), g2]
+
+
+PINNED = {'readiness_max_delay': 0.002, 'readiness_min_answer_rate': 0.8,
+          'readiness_resume_delay': 0.0015, 'readiness_resume_answer_rate': 0.95,
+          'readiness_max_gap': 100000}
+"""The guard's thresholds in these tests (given, not the arm's measured ones: the windows'
+figures below are derived from these)."""
 
 
 def make(warm=True, **given):
     """
     Return (loop, log lines) of a real-time vertical controller, ``given`` on top.
 
-    Windows of 0.1 s (``readiness_window``), the other readiness parameters as shipped.
+    Windows of 0.1 s (``readiness_window``), the thresholds :data:`PINNED`.
 
     ``warm``: fed the 5 good windows (stamps 0-499 ms, on time) after which it is ready
     (it starts not ready); the test's tick 0 is stamped 500 ms and judges the fifth.
     """
     values = dict(FILE, case='vertical', lockstep=False, max_state_age=0.0, stale_timeout=2.0,
-                  readiness_window=0.1)
+                  readiness_window=0.1, **PINNED)
     values.update(given)
     logs = []
     loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: logs.append(
@@ -74,16 +102,43 @@ def test_a_command_acts_one_period_after_the_period_its_state_was_answered_in():
     assert effective_periods(-5_000_000, DT_NS) == 1     # clocks apart: not negative
 
 
-def test_the_tolerated_delay_is_the_measured_margin_of_the_case_unless_given():
-    # docs/delay.md "Delay margin": all 10 seeds track at these fixed delays.
-    assert tolerated_delay('vertical', 'off') == 0.002
-    assert tolerated_delay('horizontal', 'off') == 0.010
-    assert tolerated_delay('vertical', 'predict') == 0.010
-    assert tolerated_delay('horizontal', 'predict') == 0.020
-    assert tolerated_delay('vertical', 'off', 0.004) == 0.004
-    assert len(MEASURED_MARGIN) == 4
-    with pytest.raises(FreejointValueError, match='readiness_max_delay'):
-        tolerated_delay('sideways', 'off')
+def test_the_guard_thresholds_are_the_arms_measured_ones_unless_given():
+    # Keyed by the arm's parameters (docs/real-time.md, bench/guard_margin.py), not a name.
+    vertical = MEASURED[(table1('vertical'), 'off')]
+    assert guard_margins(table1('vertical'), 'off')[:5] == (
+        vertical.max_delay, vertical.min_rate, vertical.resume_delay, vertical.resume_rate,
+        vertical.max_gap)
+    assert guard_margins(table1('vertical'), 'off', 0.004)[0] == 0.004
+    assert guard_margins(table1('vertical'), 'off', 0.004)[1] == vertical.min_rate
+    assert len(MEASURED) == 4
+    # Every measured threshold keeps the trip looser than the resume (hysteresis).
+    for m in MEASURED.values():
+        assert m.resume_delay <= m.max_delay and m.resume_rate >= m.min_rate
+    other = table1('vertical').scaled(1.1)
+    strictest = guard_margins(other, 'off')
+    assert strictest[:5] == guard_margins(table1('vertical'), 'off')[:5]
+    assert strictest[5].startswith('readiness_max_delay, readiness_min_answer_rate, '
+                                   'readiness_resume_delay, readiness_resume_answer_rate, '
+                                   'readiness_max_gap not measured for this arm')
+    assert guard_margins(other, 'off', 0.003, 0.9, 0.002, 0.95, 7) == (
+        0.003, 0.9, 0.002, 0.95, 7, 'given')
+
+
+def test_an_arm_without_measured_thresholds_gets_the_strictest_and_a_warning():
+    # The paper's arm under another gravity (5 m/s^2): another arm, not measured.
+    values = dict(FILE, lockstep=False, case='vertical', gravity=[0.0, -5.0, 0.0])
+    values.update(dict.fromkeys(PINNED, 0))
+    logs = []
+    loop = ControlLoop(SCHEMA.config(values), lambda *line: logs.append(line))
+    vertical = MEASURED[(table1('vertical'), 'off')]
+    assert loop._readiness.max_gap == vertical.max_gap
+    assert loop._readiness.max_delay == vertical.max_delay
+    assert [text for level, _, text in logs if level == WARN][0].startswith(
+        'readiness guard: readiness_max_delay, readiness_min_answer_rate')
+    given = dict(values, readiness_max_delay=0.002, readiness_min_answer_rate=0.9,
+                 readiness_resume_delay=0.0015, readiness_resume_answer_rate=0.97,
+                 readiness_max_gap=5)
+    assert ControlLoop(SCHEMA.config(given))._readiness.good_rate == 0.97
 
 
 def test_guard_arguments_are_validated_naming_the_argument():
@@ -97,44 +152,54 @@ def test_guard_arguments_are_validated_naming_the_argument():
             ReadinessGuard(**args)
 
 
-def test_states_answered_late_trip_the_guard_no_command_and_the_reason_logged_and_on_diagnostics():
+def test_states_answered_late_trip_the_guard_a_stop_command_then_none_the_reason_said():
     loop, logs = make()
-    assert any('tolerated mean state->command delay 2 ms' in text for _, _, text in logs)
+    assert any('trips past a mean state->command delay of 2 ms' in text for _, _, text in logs)
     # First window: ages 0.3 ms (M = 1): tracked.
     first = feed(loop, range(100), 300_000)
     assert all(a is not None and not a[0] & STATUS_HOLDING for a in first)
     # Second window: every state 2.5 ms old (M = 3, 3 ms > 2 ms): answered until judged.
     assert all(a is not None for a in feed(loop, range(100, 200), 2_500_000))
-    assert feed(loop, [200], 2_500_000) == [None]      # judged at 200 ms: no command
+    # Judged at 200 ms: the stop command (the gravity hold at the measured angles) once.
+    reason = ('real-time loop not ready: mean state->command delay 3 ms > the 2 ms the law '
+              'tolerates over 0.1 s')
+    [(status, message, effort)] = feed(loop, [200], 2_500_000)
+    assert status == STATUS_STOPPED and message == reason + ': ' + STOP_SAID
+    assert effort == pytest.approx(gravity_hold(Q0), abs=1e-9)
+    assert loop.take_readiness() == (700 * DT_NS, False, reason)
     errors = [text for level, kind, text in logs if level == ERROR and kind is None]
-    assert errors == ['real-time loop not ready: mean state->command delay 3 ms > the 2 ms '
-                      'the law tolerates over 0.1 s: no command sent, the driver brakes the arm']
-    # Still no command while not ready, even for a good or an implausible state (a zero
-    # command would release the driver's brakes).
+    assert errors == [reason + ': ' + STOP_SAID]
+    # Then no command while not ready, even for a good or an implausible state (a command
+    # would release the driver's brakes).
     assert feed(loop, range(201, 250), 0) == [None] * 49
     assert loop.on_state(750 * DT_NS, NAMES, list(Q0), [0.0, 500.0, 0.0], 750 * DT_NS,
                          100.75) is None
-    assert loop.refused_states == 0 and loop.withheld == 500 + 51
+    assert loop.refused_states == 0 and loop.withheld == 500 + 50 and loop.stops == 1
     errors, warnings, ok, values = loop.diagnostics(1.0, loop.counters(), False, ('-', '-'),
                                                     '/joint_states', None)
-    assert errors == ['real-time loop not ready: mean state->command delay 3 ms > the 2 ms the '
-                      'law tolerates over 0.1 s: no command sent (the driver brakes); 551 '
-                      'states not answered']
+    assert errors == [reason + ': stopped (stop command, brakes asked for); 550 states not '
+                      'answered']
     values = dict(values)
     assert values['readiness'] == 'not ready' and values['readiness trips'] == 1
     assert values['window mean delay [ms]'] == '3' and values['tolerated delay [ms]'] == '2'
-    assert 'readiness guard: 1 trips, 551 states not answered' in loop.report()
+    assert values['stop commands'] == 1
+    assert 'readiness guard: 1 trips, 1 stop commands, 550 states not answered' in loop.report()
 
 
 def test_the_loop_does_not_start_tracking_before_its_good_windows_and_says_why():
     loop, logs = make(warm=False)
-    # Not ready at start: no command, so the driver's brakes (engaged at start) stay on.
+    assert loop.readiness() == (False, 'real-time loop not judged yet: waiting for 5 good '
+                                'windows of 0.1 s')
+    # Not ready at start: no command at all (nothing to replace), so the driver's brakes
+    # (engaged at start) stay on.
     assert feed(loop, range(-500, 0), 0) == [None] * 500
+    assert loop.take_readiness() is None and loop.stops == 0
     # Said at the first state, then at most once per second of stamps.
     assert [(level, text) for level, kind, text in logs if kind == 'readiness'] == [
-        (ERROR, 'real-time loop not judged yet: waiting for 5 good windows of 0.1 s: no '
-                'command sent, the driver brakes the arm')]
+        (ERROR, 'real-time loop not judged yet: waiting for 5 good windows of 0.1 s: '
+         + QUIET_SAID)]
     status, message, effort = feed(loop, [0], 0)[0]     # the fifth good window judged
+    assert loop.take_readiness() == (500 * DT_NS, True, '') and loop.readiness() == (True, '')
     assert logs[-1] == (INFO, None, 'real-time loop ready (5 good windows: mean delay 1 ms, '
                         '100 % of the states answered): tracking starts from a hold where '
                         'the arm is')
@@ -160,10 +225,11 @@ def test_a_stream_at_a_quarter_of_the_rate_trips_the_guard_once_it_missed_what_a
     # Every fourth state, on time. A 0.1 s window may miss 20 of its 100 states: at the
     # state stamped 28 ms, 8 of 29 were taken (21 missed), the window is bad already.
     answers = feed(loop, range(0, 101, 4), 0)
-    assert None not in answers[:7] and answers[7:] == [None] * 19
+    assert None not in answers[:7] and answers[7][0] == STATUS_STOPPED
+    assert answers[8:] == [None] * 18
     assert [text for level, kind, text in logs if level == ERROR and kind is None] == [
         'real-time loop not ready: 8 of 29 states answered so far, more than the 20 a 0.1 s '
-        'window may miss (answer rate 80 %): no command sent, the driver brakes the arm']
+        'window may miss (answer rate 80 %): ' + STOP_SAID]
 
 
 def test_windows_within_the_answer_rate_pass():
@@ -174,17 +240,32 @@ def test_windows_within_the_answer_rate_pass():
     assert guard.trips == 0 and guard.last_rate == pytest.approx(1 / 3, abs=0.01)
 
 
+def test_by_default_a_vertical_loop_rides_through_5_missed_states_and_stops_after_6():
+    # The vertical arm's measured default (readiness_max_gap 5: bursts of 5 missed states
+    # kept every seed within the bound at a 1-ms delay, bursts of 20 did not).
+    loop, _ = make(**dict.fromkeys(PINNED, 0))
+    assert loop._readiness.max_gap == 5
+    assert None not in feed(loop, range(10), 0)
+    assert feed(loop, [15], 0)[0][0] != STATUS_STOPPED         # 5 missed (10-14)
+    [(status, _, _)] = feed(loop, [22], 0)                      # 6 missed (16-21)
+    assert status == STATUS_STOPPED
+    assert loop._readiness.reason == ('real-time loop not ready: 6 consecutive states not '
+                                      'answered, more than the 5 the law rides through')
+
+
 def test_a_stall_of_the_loop_trips_the_guard_at_the_first_state_after_it():
     loop, _ = make()
     assert None not in feed(loop, range(10), 0)
-    # 30 ms without a state: 30 missed > 20 - the next state is not answered.
-    assert feed(loop, [40], 0) == [None]
+    # 30 ms without a state: 30 missed > 20 - the next state gets the stop command.
+    assert feed(loop, [40], 0)[0][0] == STATUS_STOPPED and feed(loop, [41], 0) == [None]
     assert loop._readiness.reason.startswith('real-time loop not ready: 11 of 41 states')
 
 
 def test_the_loop_tracks_again_after_the_recovery_windows_from_a_hold_with_the_torque_ramped():
     loop, logs = make()
-    feed(loop, range(200), 2_500_000)               # judged bad at 100 ms
+    answers = feed(loop, range(200), 2_500_000)     # judged bad at 100 ms: the stop
+    assert answers[100][0] == STATUS_STOPPED and answers[101:] == [None] * 99
+    stop = answers[100][2]
     assert feed(loop, [200], 0) == [None]
     # Good windows [200, 300), ..., [600, 700): the fifth is judged at 700 ms.
     assert feed(loop, range(201, 700), 0) == [None] * 499
@@ -196,8 +277,8 @@ def test_the_loop_tracks_again_after_the_recovery_windows_from_a_hold_with_the_t
     # From where the braked arm is (0.2, 0) to the setpoint (0.25, 0): a blend, no step.
     assert status & STATUS_RESUMING
     assert loop.result.position_desired[0] == pytest.approx(0.2, abs=1e-5)  # 50 mm away
-    # The braked arm got zero effort: the command ramps from it (<= 20000 N m/s x 1 ms).
-    assert max(abs(v) for v in effort) <= 20.0
+    # The driver got the stop command: the command ramps from it (<= 20000 N m/s x 1 ms).
+    assert max(abs(v - w) for v, w in zip(effort, stop)) <= 20.0 + 1e-9
 
 
 def test_a_marginal_loop_does_not_start_again_hysteresis():
@@ -228,16 +309,16 @@ def test_the_hold_action_holds_with_the_reason_in_the_message():
     assert loop.holds == 2 and loop.withheld == 0     # at start (not judged yet), at 200 ms
 
 
-def test_stopping_at_rest_asks_the_driver_to_brake_now_once_per_stop_saying_why():
+def test_every_stop_asks_the_driver_to_brake_now_once_saying_why():
     loop, logs = make()
-    # The start (not ready until its good windows; the setpoint at rest) asked once.
+    # The start (not ready until its good windows) asked once.
     assert loop.take_brake_request().startswith('real-time loop not judged yet: waiting for')
     assert loop.take_brake_request() is None
     feed(loop, range(200), 2_500_000)
     assert feed(loop, [200], 2_500_000) == [None]
     assert loop.take_brake_request() == (
         'real-time loop not ready: mean state->command delay 3 ms > the 2 ms the law '
-        'tolerates over 0.1 s while the setpoint rests: brake now')
+        'tolerates over 0.1 s: brake now')
     # Not again while it stays stopped.
     assert feed(loop, range(201, 700), 0) == [None] * 499
     assert loop.take_brake_request() is None
@@ -245,14 +326,14 @@ def test_stopping_at_rest_asks_the_driver_to_brake_now_once_per_stop_saying_why(
     assert feed(loop, range(700, 800), 0)[0] is not None
     assert loop.take_brake_request() is None
     feed(loop, range(800, 900), 2_500_000)
-    assert feed(loop, [900], 2_500_000) == [None]
-    assert loop.take_brake_request().endswith('while the setpoint rests: brake now')
+    assert feed(loop, [900], 2_500_000)[0][0] == STATUS_STOPPED
+    assert loop.take_brake_request().endswith('over 0.1 s: brake now')
     assert loop.brake_requests == 3
     values = dict(loop.diagnostics(1.0, loop.counters(), False, ('-', '-'), '/joint_states',
                                    None)[3])
-    assert values['brake requests (at rest)'] == 3
-    assert loop.report().endswith('readiness guard: 2 trips, 1101 states not answered, 3 '
-                                  'brake requests')
+    assert values['brake requests'] == 3
+    assert loop.report().endswith('readiness guard: 2 trips, 2 stop commands, 1099 states not '
+                                  'answered, 3 brake requests')
 
 
 def moving(k):
@@ -260,17 +341,17 @@ def moving(k):
     return (0.2 + 1e-5 * k, 0.0, 0.01, 0.0, 0.0, 0.0)
 
 
-def test_stopping_while_the_setpoint_moves_leaves_the_brakes_to_the_drivers_watchdog():
+def test_stopping_while_the_setpoint_moves_sends_the_stop_command_and_asks_for_the_brakes():
+    # A driver that holds its last command would drive the arm on with the last tracking
+    # command: the stop replaces it and asks for the brakes, moving or not.
     loop, _ = make()
     loop.take_brake_request()
     assert None not in feed(loop, range(100), 300_000, setpoint=moving)
     assert None not in feed(loop, range(100, 200), 2_500_000, setpoint=moving)
-    assert feed(loop, [200], 2_500_000, setpoint=moving) == [None]
+    [(status, _, effort)] = feed(loop, [200], 2_500_000, setpoint=moving)
+    assert status == STATUS_STOPPED and effort == pytest.approx(gravity_hold(Q0), abs=1e-9)
     assert feed(loop, range(201, 300), 0, setpoint=moving) == [None] * 99
-    assert loop.take_brake_request() is None and loop.brake_requests == 1
-    # The setpoint comes to rest while the loop is still stopped: asked then.
-    assert feed(loop, [300], 0, target=(0.23, 0.0)) == [None]
-    assert loop.take_brake_request().endswith('while the setpoint rests: brake now')
+    assert loop.take_brake_request().endswith('brake now') and loop.brake_requests == 2
 
 
 @pytest.mark.parametrize('given', [{'readiness_brake_request': False},
@@ -345,18 +426,22 @@ def test_a_tracking_error_past_readiness_max_error_stops_a_ready_loop_braking_at
     assert 0.010 < offset < 0.013
     ns = 510 * DT_NS
     loop.on_setpoint(ns, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 0.01)
-    # Every window on time, but the arm is 12 mm from where it is held: no command.
-    assert loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.01) is None
+    # Every window on time, but the arm is 12 mm from where it is held: the stop command
+    # at the sagged arm's angles.
+    res = loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.01)
+    assert res.status == STATUS_STOPPED
+    assert list(res.effort) == pytest.approx(gravity_hold(q), abs=1e-9)
     reason = ('real-time loop not ready: tracking error %.3g mm > the 10 mm of '
               'readiness_max_error (the law does not hold the arm on this loop)'
               % (offset * 1e3))
-    assert loop.take_brake_request() == reason + ' while the setpoint rests: brake now'
+    assert loop.take_brake_request() == reason + ': brake now'
     assert [text for level, kind, text in logs if level == ERROR][-1] == (
-        reason + ': no command sent, the driver brakes the arm')
+        reason + ': ' + STOP_SAID)
     assert loop._readiness.trips == 1 and not loop._readiness.ready
     # Back in place, it tracks again only after its good windows (0.5 s).
     answers = feed(loop, range(11, 711), 0)
     assert answers[:400] == [None] * 400 and answers[-1] is not None
+    assert answers[-1][0] != STATUS_STOPPED
 
 
 def test_readiness_max_error_0_leaves_a_drifting_arm_to_the_law():
@@ -388,11 +473,11 @@ def test_a_hold_without_setpoints_stops_at_readiness_max_hold_error_and_resumes_
     loop.take_brake_request()
     q, offset = _sagged(loop, drop=0.02)
     assert 0.003 < offset < 0.005                  # under readiness_max_error's 10 mm
-    assert states(loop, [1], q) == [None]
+    assert states(loop, [1], q)[0] is not None and loop.result.status == STATUS_STOPPED
     reason = ('real-time loop not ready: tracking error %.3g mm > the 3 mm of '
               'readiness_max_hold_error while holding (the law does not hold the arm on '
               'this loop)' % (offset * 1e3))
-    assert loop.take_brake_request() == reason + ' while the setpoint rests: brake now'
+    assert loop.take_brake_request() == reason + ': brake now'
     # Braked where it drifted to; after its good windows the hold resumes at its own
     # position, the reference starting at the braked arm (no step, no second trip).
     answers = states(loop, range(2, 602), q)
@@ -413,7 +498,8 @@ def test_by_default_a_hold_stops_at_readiness_max_error():
     q, offset = _sagged(loop, drop=0.02)
     assert states(loop, [1], q)[0] is not None and loop._readiness.ready     # 4 mm: held
     q, offset = _sagged(loop, drop=0.06)
-    assert offset > 0.010 and states(loop, [2], q) == [None]                 # 12 mm: stop
+    assert offset > 0.010 and states(loop, [2], q)[0] is not None           # 12 mm: stop
+    assert loop.result.status == STATUS_STOPPED and states(loop, [3], q) == [None]
 
 
 def test_with_a_setpoint_the_hold_bound_does_not_apply():
@@ -478,3 +564,24 @@ def test_divergence_speed_at_the_controllers_plausible_speed_flags_divergence_be
     # The tracking loop itself (no delay) stays far below it.
     rec, trace = run_case('vertical', 'robust', 0, record_trace=True)
     assert np.abs(np.asarray(trace['qd'])).max() < speed / 3.0     # 28.8 rad/s
+
+
+def test_the_damp_action_answers_every_state_with_the_damped_joint_hold_once_it_had_started():
+    # For a driver that holds its last command: not ready at the start, nothing (its
+    # start-up brakes stay on, even for a refused state); after a trip, every state.
+    loop, _ = make(warm=False, readiness_action='damp')
+    assert feed(loop, range(-500, -1), 0) == [None] * 499
+    bad = (-1 * DT_NS) + 500 * DT_NS
+    assert loop.on_state(bad, NAMES, [math.nan] * 3, list(QD0), bad, 99.0) is None
+    assert feed(loop, [0], 0)[0] is not None and loop._readiness.ready
+    feed(loop, range(1, 200), 2_500_000)                  # trips at 100 ms
+    q = (Q0[0] - 0.01, Q0[1] + 0.02, Q0[2])
+    qd = (0.3, -0.2, 1.0)
+    ns = 700 * DT_NS
+    res = loop.on_state(ns, NAMES, list(q), list(qd), ns, 100.2)
+    assert res.status == STATUS_STOPPED and 'damped joint hold' in res.message
+    # G_a(q) + 200 (q_stop - q) - 20 qd: q_stop the angles at the trip (Q0).
+    hold = gravity_hold(q)
+    want = [hold[0] + 200.0 * 0.01 - 20.0 * 0.3, hold[1] - 200.0 * 0.02 + 20.0 * 0.2]
+    assert list(res.effort) == pytest.approx(want, abs=1e-9)
+    assert feed(loop, range(201, 210), 0)[-1][0] == STATUS_STOPPED      # every state

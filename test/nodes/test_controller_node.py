@@ -348,6 +348,50 @@ def test_state_publish_rate_thins_controller_state_but_not_the_commands(ros_node
         node.destroy_node()
 
 
+def test_the_node_publishes_its_readiness_at_start_up_and_at_each_change(ros_node, monkeypatch):
+    """
+    In-process: lockstep ready from the start, real time not until its good windows.
+
+    Then each change: a stall of the states makes it not ready, the stop command sent first.
+    """
+    from rclpy.parameter import Parameter
+    from freejoint_control.controller_node import ControllerNode
+    from freejoint_control.loop import STATUS_STOPPED
+    sent = []
+    monkeypatch.setattr(ControllerNode, '_publish_readiness',
+                        lambda self, ns, ready, reason: sent.append((ns, ready, reason)))
+    node = ControllerNode(parameter_overrides=[Parameter('case', value='vertical')])
+    node.destroy_node()
+    assert [s[1:] for s in sent] == [(True, '')]
+    del sent[:]
+    node = ControllerNode(parameter_overrides=[Parameter('case', value='vertical'),
+                                               Parameter('lockstep', value=False),
+                                               Parameter('max_state_age', value=0.0)])
+    try:
+        assert [s[1:] for s in sent] == [(False, 'real-time loop not judged yet: waiting for 5 '
+                                          'good windows of 0.2 s')]
+        commands = []
+        monkeypatch.setattr(node._pub_cmd, 'publish', commands.append)
+        now = [0]
+        monkeypatch.setattr(node, '_now_ns', lambda: now[0])
+        for k in range(1100):              # on time: ready at the fifth window (1 s)
+            now[0] = k * DT_NS
+            _serialized_state(node, k)
+        assert sent[1] == (1000 * DT_NS, True, '') and len(sent) == 2
+        n = len(commands)
+        now[0] = 1110 * DT_NS              # 10 states missed (> 5, the vertical arm's gap)
+        _serialized_state(node, 1110)
+        assert sent[2] == (1110 * DT_NS, False, 'real-time loop not ready: 10 consecutive '
+                           'states not answered, more than the 5 the law rides through')
+        assert len(commands) == n + 1      # the stop command, then nothing
+        assert node._loop.result.status == STATUS_STOPPED
+        now[0] = 1111 * DT_NS
+        _serialized_state(node, 1111)
+        assert len(commands) == n + 1 and len(sent) == 3
+    finally:
+        node.destroy_node()
+
+
 @pytest.mark.parametrize('kind', ['single_threaded', 'events'])
 def test_a_setpoint_delivered_before_a_state_is_applied_before_the_state_is_answered(
         ros_node, wait, monkeypatch, kind):
@@ -576,15 +620,17 @@ def test_a_loop_not_ready_at_rest_asks_the_driver_to_brake_once_on_brake_request
         drv.spin()
 
     wait(lambda: asked, 15.0, 'a brake request', spin=stepping)
-    assert asked[0] == ('real-time loop not judged yet: waiting for 5 good windows of 0.2 s '
-                        'while the setpoint rests: brake now')
-    # Once per stop, however many states it leaves unanswered; never a command.
+    assert asked[0] == ('real-time loop not judged yet: waiting for 5 good windows of 0.2 s: '
+                        'brake now')
+    # Once per stop, however many states it leaves unanswered; never a command (nothing
+    # computed was sent: the start-up brakes stay on).
     target = k + 20
     wait(lambda: diag.statuses and int(diag.statuses[-1][2].get(
-        'states not answered (brake)', 0)) >= target, 15.0, '20 more states withheld',
+        'states not answered (stopped)', 0)) >= target, 15.0, '20 more states withheld',
         spin=stepping)
     assert len(asked) == 1 and not drv.commands
-    assert diag.statuses[-1][2]['brake requests (at rest)'] == '1'
+    assert diag.statuses[-1][2]['brake requests'] == '1'
+    assert diag.statuses[-1][2]['stop commands'] == '0'
     assert procs.stop(proc) == 0
 
 

@@ -713,3 +713,44 @@ def test_a_command_that_cannot_be_read_is_refused_counted_and_not_applied(ros_no
         assert (node._refused, node._k) == (1, k0 + 1)
     finally:
         node.destroy_node()
+
+
+def test_realtime_without_the_command_watchdog_the_last_command_is_held_and_brakes_ignored(
+        procs, ros_node, wait):
+    from freejoint_common.contract import BRAKE_REQUEST
+    # A driver that holds its last command (ros2_control's forward command controller): no
+    # watchdog (brake_timeout would be 0.05 s), no command timeout (0.3 s), brake requests
+    # ignored; only the start-up brakes, until the first command.
+    proc = _realtime(procs, '-p', 'publish_rate:=100.0', '-p', 'command_watchdog:=false',
+                     '-p', 'command_timeout:=0.3', '-p', 'brake_timeout:=0.05')
+    ctl = Controller(ros_node, wait)
+    ctl.connect(proc, procs)
+    assert 'command_watchdog: false: every command is applied until the next one' in \
+        procs.log(proc)
+    brake = ros_node.create_publisher(BRAKE_REQUEST.msg_type, BRAKE_REQUEST.name,
+                                      BRAKE_REQUEST.qos)
+    wait(lambda: brake.get_subscription_count() >= 1, 15.0, 'the brake request matched',
+         spin=ctl.spin)
+
+    def latest_effort():
+        return list(ctl.states[max(ctl.states)].effort)
+
+    def commanding():
+        ctl.command([1.5, -0.5])
+        ctl.spin()
+
+    wait(lambda: latest_effort() == [1.5, -0.5, 0.0], 15.0, 'the commanded effort applied',
+         spin=commanding)
+    silent_from = time.monotonic()
+    brake.publish(BRAKE_REQUEST.msg_type(data='test: stop here'))
+    # Silent for 1 s (past the timeouts a watchdog drive would have): still applied.
+    wait(lambda: time.monotonic() - silent_from > 1.0, 5.0, '1 s of silence', spin=ctl.spin)
+    n = len(ctl.arrivals)
+    wait(lambda: len(ctl.arrivals) >= n + 10, 5.0, '10 more states', spin=ctl.spin)
+    for msg in ctl.arrivals[n:]:
+        assert list(msg.effort) == [1.5, -0.5, 0.0]
+        assert list(msg.velocity) != [0.0, 0.0, 0.0]        # moving: not braked
+    log = procs.log(proc)
+    assert 'brake_request ignored (test: stop here)' in log
+    assert 'brakes engaged at step' not in log and 'zero effort' not in log
+    assert procs.stop(proc) == 0

@@ -12,11 +12,13 @@ GRAPH = ['/joint_states', '/ee_position', '/effort_controller/commands', '/contr
          '/setpoints', '/semi_singular_map', '/planned_path']
 
 
-def test_the_default_ready_topics_are_the_graph_topics_without_clock():
+def test_the_default_ready_topics_are_the_graph_topics_without_clock_and_readiness():
+    # controller_readiness is recorded but not waited for: latched, it arrives whenever
+    # its publisher matches (and a graph without a controller has none).
     default = RECORDER['ready_topics'].default
-    assert '/clock' not in default
+    assert '/clock' not in default and contract.CONTROLLER_READINESS.name not in default
     assert sorted(default) == sorted(t.name for t in contract.GRAPH_TOPICS
-                                     if t.name != '/clock')
+                                     if t.name not in ('/clock', 'controller_readiness'))
 
 
 def test_in_system_time_the_recorder_waits_only_for_the_topics_named():

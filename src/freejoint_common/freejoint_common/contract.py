@@ -182,13 +182,18 @@ PLANNED_PATH = Topic('planned_path', Marker, LATCHED_QOS)
 DIAGNOSTICS = Topic('/diagnostics', DiagnosticArray, DIAGNOSTICS_QOS)
 ROBOT_DESCRIPTION = Topic('/robot_description', String, LATCHED_QOS)
 
+CONTROLLER_READINESS = Topic('controller_readiness', ControllerReadiness, LATCHED_QOS)
+"""Controller -> planner (and operator, recorder): the loop's readiness at start-up and at
+each change (freejoint_msgs/ControllerReadiness; reliable, transient local, depth 1). A
+planner pauses its plan while the controller is not ready and refuses a new one."""
+
 PLAN_OUTCOME = Topic('plan_outcome', PlanOutcome, profile(10, latched=True))
 """Planner -> operator, recorder: how each plan ended (freejoint_msgs/PlanOutcome: the code,
 why, lateness, pauses), and each refused request to execute one (plan_id 0); reliable,
 transient local, depth 10 (a recorder or ``fj`` started later still reads the last ten)."""
 
 GRAPH_TOPICS = (CLOCK, JOINT_STATES, EE_POSITION, COMMANDS, CONTROLLER_STATE, SETPOINTS,
-                SEMI_SINGULAR_MAP, PLANNED_PATH, PLAN_OUTCOME)
+                SEMI_SINGULAR_MAP, PLANNED_PATH, CONTROLLER_READINESS, PLAN_OUTCOME)
 """The run's topics a recorder subscribes to from its start (docs/GRAPH.md, Recording)."""
 NEVER_QUIET_TOPICS = ('/rosout', '/parameter_events', DIAGNOSTICS.name)
 """Topics every running node publishes on its own (its log, parameter events, its 1-Hz
@@ -220,10 +225,6 @@ BRAKE_REQUEST = Topic('brake_request', String, profile(10))
 volatile (a request is for the arm now, never for a driver started later), depth 10. The
 driver releases them at its next accepted command, as after its command watchdog
 (the simulator's ``brake_timeout``), which stays the fallback of a driver without it."""
-CONTROLLER_READINESS = Topic('controller_readiness', ControllerReadiness, LATCHED_QOS)
-"""Controller -> planner (and operator, recorder): the loop's readiness at start-up and at
-each change (freejoint_msgs/ControllerReadiness; reliable, transient local, depth 1). A
-planner pauses its plan while the controller is not ready and refuses a new one."""
 BRAKE_TIMEOUT_REQUEST = Topic('brake_timeout_request', Float64, profile(1, latched=True))
 """Controller -> driver (real time): from now on, brake after ``data`` s without a command
 when that is shorter than the driver's own wait (``data`` 0: no request, the driver's own).

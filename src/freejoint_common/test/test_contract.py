@@ -68,6 +68,7 @@ def test_graph_topics_are_the_recorded_names_types_and_durabilities():
         ('setpoints', 'freejoint_msgs/msg/CartesianSetpoints', True),
         ('semi_singular_map', 'nav_msgs/msg/OccupancyGrid', True),
         ('planned_path', 'visualization_msgs/msg/Marker', True),
+        ('controller_readiness', 'freejoint_msgs/msg/ControllerReadiness', True),
         ('plan_outcome', 'freejoint_msgs/msg/PlanOutcome', True),
     ]
     assert contract.type_name(contract.PLAN_CIRCLE.srv_type) == 'freejoint_msgs/srv/PlanCircle'

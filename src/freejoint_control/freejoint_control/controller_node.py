@@ -12,9 +12,12 @@ with ros2's ``qos_overrides.<topic>.<publisher|subscription>.<policy>`` paramete
 ``standby: true`` (real time): a hot spare of ``controller_supervisor``, idle and not
 subscribed to joint_states until SIGUSR1, then active from the arm's measured motion.
 ``joint_failures`` not ``off``: notices on ``joint_failures`` in, the failure monitor's
-detections out there (docs/failures.md). A readiness stop while the setpoint rests asks
-the driver to brake on ``brake_request`` (std_msgs/String: why); a resting setpoint, for
-a shorter drive watchdog on ``brake_timeout_request`` (real time).
+detections out there (docs/failures.md). Whenever it stops in real time (a readiness
+trip, no joint_states) it sends the stop command (the gravity hold of the active joints)
+and asks the driver to brake on ``brake_request`` (std_msgs/String: why); a resting
+setpoint, for a shorter drive watchdog on ``brake_timeout_request``. Its judgement of its
+loop goes out on ``controller_readiness`` (latched) at start-up (a spare: at its
+activation) and at each change.
 
 """
 
@@ -23,7 +26,8 @@ import time
 
 from freejoint_common.arm_description import resolve_arm
 from freejoint_common.contract import BRAKE_REQUEST, BRAKE_TIMEOUT_REQUEST, COMMANDS
-from freejoint_common.contract import CONTROLLER_STATE, JOINT_FAILURES, JOINT_STATES
+from freejoint_common.contract import CONTROLLER_READINESS, CONTROLLER_STATE, JOINT_FAILURES
+from freejoint_common.contract import JOINT_STATES, stamp_from_ns
 from freejoint_common.contract import REALTIME_STATE_QOS, RESET, SETPOINTS
 from freejoint_common.contract import setpoint_samples, STANDBY_SETPOINT_QOS
 from freejoint_common.diagnostics import Diagnostics, LatencyWindow, level_and_message, OK
@@ -94,6 +98,11 @@ class ControllerNode(Node, Lifecycle):
                                                 BRAKE_REQUEST.qos)
         self._pub_wait = None if cfg.lockstep else self.create_publisher(
             BRAKE_TIMEOUT_REQUEST.msg_type, BRAKE_TIMEOUT_REQUEST.name, BRAKE_TIMEOUT_REQUEST.qos)
+        # The loop's readiness (latched): a spare publishes from its activation on, not to
+        # override the active controller's judgement.
+        self._pub_ready = None
+        if not cfg.standby:
+            self._start_readiness()
         self._sp_sub = self.create_subscription(
             SETPOINTS.msg_type, SETPOINTS.name, self._on_setpoints,
             overridable(STANDBY_SETPOINT_QOS if cfg.standby else SETPOINTS.qos),
@@ -182,9 +191,33 @@ class ControllerNode(Node, Lifecycle):
             self.get_logger().info('activation requested (SIGUSR1): joint_states subscribed, '
                                    'active from the first state')
 
+    def _start_readiness(self):
+        """Create the readiness publisher; publish the judgement now (start-up)."""
+        self._pub_ready = self.create_publisher(
+            CONTROLLER_READINESS.msg_type, CONTROLLER_READINESS.name, CONTROLLER_READINESS.qos)
+        ready, reason = self._loop.readiness()
+        self._publish_readiness(self._now_ns(), ready, reason)
+
+    def _publish_readiness(self, ns, ready, reason):
+        """Publish a ControllerReadiness (stamp [ns]: the state's, or now)."""
+        msg = CONTROLLER_READINESS.msg_type(ready=bool(ready), reason=reason)
+        stamp_from_ns(max(0, ns), msg.stamp)
+        self._pub_ready.publish(msg)
+
+    def _send_stop_notes(self):
+        """Publish what the loop noted: a readiness change, a brake request (after the command)."""
+        loop = self._loop
+        note = loop.take_readiness()
+        if note is not None and self._pub_ready is not None:
+            self._publish_readiness(*note)
+        if loop.brake_request is not None:
+            self._pub_brake.publish(BRAKE_REQUEST.msg_type(data=loop.take_brake_request()))
+
     def _activate(self):
         """Leave standby: this state and the next are answered; start from the motion."""
         self._loop.activate()
+        if self._pub_ready is None:
+            self._start_readiness()
         self._activated_wall = time.time()
         cfg = self.config
         refused = process_scheduling().request(self.get_fully_qualified_name(),
@@ -222,9 +255,8 @@ class ControllerNode(Node, Lifecycle):
             self._pub_wait.publish(BRAKE_TIMEOUT_REQUEST.msg_type(data=loop.take_drive_wait()))
         if res is not None:
             self._publish(res)
-        elif loop.brake_request is not None:    # the guard stopped the loop at rest
-            why = loop.take_brake_request()
-            self._pub_brake.publish(BRAKE_REQUEST.msg_type(data=why))
+        if loop.readiness_note is not None or loop.brake_request is not None:
+            self._send_stop_notes()
         if self._pub_failure is not None:
             for name in loop.failures.announcements():
                 self._pub_failure.publish(JOINT_FAILURES.msg_type(data=name))
@@ -289,6 +321,7 @@ class ControllerNode(Node, Lifecycle):
         res = loop.watchdog(self._now_ns(), _monotonic())
         if res is not None:
             self._publish(res)
+            self._send_stop_notes()
 
     # -- status ----------------------------------------------------------------
     def _on_diagnostics_timer(self):

@@ -23,7 +23,13 @@ values) or None when nothing is to be published yet.  It owns:
   the content of the ``/diagnostics`` status (:meth:`ControlLoop.diagnostics`);
 - real time, the readiness guard (``freejoint_control.readiness``, parameters
   ``readiness_*``): while the loop cannot keep within the delay its law tolerates or
-  misses states, no command (the driver's watchdog brakes) or a hold, saying why.
+  misses states, a stop (one stop command, the brakes asked for, then no command) or a
+  hold, saying why; its judgement for the ``controller_readiness`` topic
+  (:meth:`ControlLoop.take_readiness`);
+- the stop command (:meth:`ControlLoop.stop_effort`): what a driver is left with whenever
+  the controller stops answering or cannot compute (a guard trip, stale or bad state in
+  real time): the active joints' static gravity load at the measured angles
+  (``freejoint_core.guards.hold_effort``), never a stale tracking command.
 
 Logging goes through the ``log(level, kind, text)`` callable given (``kind`` names a
 throttled kind of line, None: always); status bits are ControllerState's.
@@ -32,14 +38,15 @@ throttled kind of line, None: always); status bits are ControllerState's.
 
 import math
 
+from freejoint_common.arm_description import resolve_arm
 from freejoint_control import failures
-from freejoint_control.readiness import ReadinessGuard, tolerated_delay
+from freejoint_control.readiness import guard_margins, ReadinessGuard
 from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
                                     STATUS_TORQUE_LIMITED)
 from freejoint_core.delay import extrapolate_setpoint, StatePredictor
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.guards import (clamp_dt, law_output_fault, limit_effort,
+from freejoint_core.guards import (clamp_dt, hold_effort, law_output_fault, limit_effort,
                                    setpoint_refusal, state_refusal)
 from freejoint_core.laws import FreeLinkDampedLaw, make_law
 from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
@@ -52,6 +59,7 @@ STATUS_LAW_FAULT = 128
 STATUS_RESUMING = 256
 STATUS_DT_CLAMPED = 512
 STATUS_SETPOINT_LATE = 1024
+STATUS_STOPPED = 2048
 
 STANDBY_SETTLE = 0.5
 """[s] A spare is ready once nothing was lacking for this long (its discovery of the graph,
@@ -69,6 +77,11 @@ _isfinite = math.isfinite
 _NAME_MAP_CACHE = 16
 _SAY_PERIOD_NS = round(1e9)
 """[ns of stamps] At most one 'not ready' line per this period (a transition at once)."""
+_STOP_SAID = ('stop command sent (the gravity hold of the active joints), the brakes asked '
+              'for; no command until the loop is ready again')
+_QUIET_SAID = 'no command until the loop is ready (the brakes asked for)'
+_DAMP_SAID = ('the damped joint hold answered to every state (readiness_action damp) until '
+              'the loop is ready again')
 
 
 def _no_log(level, kind, text):
@@ -202,6 +215,13 @@ class ControlLoop:
         self.brake_requests = 0
         self.drive_wait = None          # the brake_timeout_request sent last [s] (None: none)
         self.drive_wait_request = None  # the one to send now (the node sends), or None
+        self.readiness_note = None      # (stamp_ns, ready, reason) to publish, or None
+        self._stale_stop = False        # real time: stopped for want of states
+        self._stale_reason = ''
+        self._commanded = False         # the last answer sent was a computed command
+        self._ever_commanded = False    # a computed command was sent (or taken over)
+        self._q_stop = None             # 'damp': the active joints' angles the stop found
+        self.stops = 0                  # stop commands sent
         self._install(cfg)
         self.result = Result(m)
         self.result.law_state_names = tuple(self.law.state_names)
@@ -280,35 +300,45 @@ class ControlLoop:
 
     def _install_readiness(self, cfg):
         """(Re)build the readiness guard when its parameters change (keeps its verdict)."""
+        self._guard_brakes = cfg.readiness_action == 'brake'
+        self._guard_damps = cfg.readiness_action == 'damp'
+        self._stop_gains = (cfg.stop_stiffness, cfg.stop_damping)
+        self._ask_brakes = cfg.readiness_brake_request and not cfg.lockstep
         if cfg.lockstep or not cfg.readiness_guard:
             self._readiness = None
             self._readiness_key = None
             self._withholding = False
             return
-        max_delay = tolerated_delay(cfg.case, cfg.delay_compensation, cfg.readiness_max_delay)
-        key = (cfg.dt_ns, max_delay, cfg.readiness_min_answer_rate, cfg.readiness_window,
-               cfg.readiness_recover_windows)
-        self._guard_brakes = cfg.readiness_action == 'brake'
-        self._ask_brakes = self._guard_brakes and cfg.readiness_brake_request
+        margins = guard_margins(resolve_arm(cfg.values).params, cfg.delay_compensation,
+                                cfg.readiness_max_delay, cfg.readiness_min_answer_rate,
+                                cfg.readiness_resume_delay, cfg.readiness_resume_answer_rate,
+                                cfg.readiness_max_gap)
+        max_delay = margins[0]
+        key = (cfg.dt_ns, max_delay, margins[1], cfg.readiness_window,
+               cfg.readiness_recover_windows, margins[2], margins[3], margins[4])
         self._max_error = cfg.readiness_max_error
         self._max_hold_error = cfg.readiness_max_hold_error or cfg.readiness_max_error
         if key == self._readiness_key:
             return
         old = self._readiness
-        guard = ReadinessGuard(*key, start_ready=cfg.standby)
+        guard = ReadinessGuard(*key[:5], start_ready=cfg.standby, resume_delay=key[5],
+                               resume_rate=key[6], max_gap=key[7])
+        if 'not measured' in margins[5]:
+            self.log(WARN, None, 'readiness guard: ' + margins[5])
         if old is not None:
             guard.ready, guard.reason, guard.started = old.ready, old.reason, old.started
             guard.trips, guard.recoveries = old.trips, old.recoveries
         self._readiness = guard
         self._readiness_key = key
-        self.log(INFO, None, 'readiness guard: tolerated mean state->command delay %.3g ms '
-                 '(%s), at least %.0f %% of the states answered per %.3g s window; '
-                 'not ready: %s' % (
-                     max_delay * 1e3, 'readiness_max_delay' if cfg.readiness_max_delay > 0.0
-                     else 'measured margin of %s, delay_compensation %s' % (
-                         cfg.case, cfg.delay_compensation),
-                     cfg.readiness_min_answer_rate * 100.0, cfg.readiness_window,
-                     'no command (the driver brakes)' if self._guard_brakes else 'hold'))
+        self.log(INFO, None, 'readiness guard: trips past a mean state->command delay of '
+                 '%.3g ms, under %.0f %% of the states answered per %.3g s window or past %d '
+                 'states missed in a row, resumes within %.3g ms and %.0f %% (%s); not ready: '
+                 '%s' % (
+                     max_delay * 1e3, margins[1] * 100.0, cfg.readiness_window, margins[4],
+                     guard.good_delay * 1e3, guard.good_rate * 100.0, margins[5],
+                     'a stop command, the brakes asked for, then no command'
+                     if self._guard_brakes else 'the damped joint hold answered'
+                     if self._guard_damps else 'hold'))
 
     def apply(self, old, cfg):
         """Take a validated parameter change (effective on the next state)."""
@@ -343,6 +373,7 @@ class ControlLoop:
         """Leave standby: answer from now on, the reference starting from the motion."""
         self.standby = False
         self._start_from_motion = True
+        self._commanded = self._ever_commanded = True   # the dead controller's command
 
     def standby_waits_for(self, cmd_matched, cmd_listed, sp_matched, sp_listed, mono, now_ns,
                           names=('commands', 'setpoints')):
@@ -455,11 +486,16 @@ class ControlLoop:
                 self._guard_ns = ns
                 change = guard.observe(ns, now_ns)
                 if change:
-                    self._readiness_changed(change)
+                    self._readiness_changed(change, ns)
                     self._said_ns = ns
+        if self._stale_stop:
+            self._stale_stop = False
+            if guard is None or guard.ready:
+                self.readiness_note = (ns, True, '')
+        if guard is not None:
             if not guard.ready and self._guard_brakes:
-                return self._withhold(ns)
-            if self._withholding:
+                return self._withhold(ns, now_ns)
+            if self._withholding and guard.ready:
                 self._resume_after_brake()
         if self._max_age_ns:
             age_ns = now_ns - ns
@@ -517,8 +553,18 @@ class ControlLoop:
                     q = tuple([a + b for a, b in zip(q, self._offsets)])
         if q is None:
             self.refused_states += 1
-            self.log(ERROR, kind, 'state refused: %s; zero effort, theta_hat kept' % reason)
-            return self._answer_zero(ns, STATUS_BAD_INPUT, 'bad input: ' + reason, now_ns)
+            if not self.lockstep and not self._ever_commanded:
+                # Nothing computed was ever sent (the start): nothing to replace, and any
+                # command would release the driver's start-up brakes.
+                self.log(ERROR, kind, 'state refused: %s; no command, theta_hat kept' % reason)
+                return None
+            if self.lockstep:
+                self.log(ERROR, kind, 'state refused: %s; zero effort, theta_hat kept' % reason)
+                return self._answer_zero(ns, STATUS_BAD_INPUT, 'bad input: ' + reason, now_ns)
+            self.log(ERROR, kind, 'state refused: %s; the stop command (gravity hold at the '
+                     'last good state), theta_hat kept' % reason)
+            return self._answer_stop(ns, STATUS_BAD_INPUT, 'bad input: %s: the stop command '
+                                     '(gravity hold at the last good state)' % reason, now_ns)
         self._last_q = q
         if self._start_from_motion:
             self._start_from_motion = False
@@ -536,6 +582,10 @@ class ControlLoop:
             return self._tick(ns, q, qd, ns, sp, now_ns)
         if guard is not None and not guard.ready:
             self._ask_drive_wait(True)
+            if self._guard_damps:
+                if not guard.started:
+                    return self._withhold(ns, now_ns)   # never started: the brakes stay on
+                return self._damped_stop(ns, q, qd, now_ns)
             return self._readiness_hold(ns, q, qd, now_ns, guard)
         found = self._realtime_setpoint(ns)
         if found is None:
@@ -567,11 +617,32 @@ class ControlLoop:
         return wait
 
     # -- readiness guard (real time) ---------------------------------------------------
-    def _readiness_changed(self, change):
-        """Log a change of the guard's verdict (once per transition)."""
+    def readiness(self):
+        """
+        Return the loop's readiness now: ``(ready, reason)``.
+
+        Lockstep, or real time without the guard: ready (never judged). A stop for want of
+        states (the watchdog's stale state) is not ready until the next state.
+        """
+        if self._stale_stop:
+            return False, self._stale_reason
         guard = self._readiness
+        if guard is None:
+            return True, ''
+        return guard.ready, guard.reason
+
+    def take_readiness(self):
+        """Return the readiness change to publish, ``(stamp_ns, ready, reason)``, once, or None."""
+        note = self.readiness_note
+        self.readiness_note = None
+        return note
+
+    def _readiness_changed(self, change, ns):
+        """Log a change of the guard's verdict (once per transition); note it to publish."""
+        guard = self._readiness
+        self.readiness_note = (ns, guard.ready, guard.reason)
         if change == 1:
-            action = ('no command sent, the driver brakes the arm' if self._guard_brakes
+            action = (_STOP_SAID if self._guard_brakes else _DAMP_SAID if self._guard_damps
                       else 'holding position')
             self.log(ERROR, None, '%s: %s' % (guard.reason, action))
         else:
@@ -582,33 +653,102 @@ class ControlLoop:
                          guard.last_delay * 1e3, guard.last_rate * 100.0,
                          'resumes' if guard.recoveries else 'starts'))
 
-    def _withhold(self, ns):
-        """Not ready, 'brake': answer nothing (the driver's command watchdog brakes)."""
+    def _withhold(self, ns, now_ns):
+        """
+        Not ready, 'brake': stop - the stop command once, the brakes asked for - then quiet.
+
+        The first state of a not-ready spell is answered with the stop command
+        (:meth:`stop_effort`: what a driver that keeps its last command then holds, instead
+        of the last tracking command) and the brakes are asked for (``brake_request``);
+        the states after it are not answered (a driver with a command watchdog brakes).
+        """
+        reason = self._readiness.reason
         if not self._withholding:
             self._kept_hold = self.shaper.hold_position     # None unless holding
-        self._withholding = True
+            self._withholding = True
+            self.pending = None
+            self._ask_brake(reason)
+            if self._commanded:
+                # The driver holds a computed command: replace it before going quiet.
+                return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, _STOP_SAID),
+                                         now_ns)
         self.withheld += 1
         self.pending = None
         said = self._said_ns
         if said is None or not 0 <= ns - said < _SAY_PERIOD_NS:
             # At most once per second of stamps (a transition is said at once).
             self._said_ns = ns
-            self.log(ERROR, 'readiness', '%s: no command sent, the driver brakes the arm'
-                     % self._readiness.reason)
-        if self._ask_brakes and not self._brake_asked and self._setpoint_rests(ns):
-            # At rest nothing is lost by stopping now; the driver's watchdog would first
-            # apply the last command open loop for its brake_timeout. Moving, the loop
-            # rides through a short stall and the watchdog brakes a long one.
-            self._brake_asked = True
-            self.brake_requests += 1
-            self.brake_request = ('%s while the setpoint rests: brake now'
-                                  % self._readiness.reason)
+            self.log(ERROR, 'readiness', '%s: %s' % (reason, _QUIET_SAID))
         return None
 
-    def _setpoint_rests(self, ns):
-        """Return True when no fresh setpoint moves at ``ns`` (none, stale, or v = a = 0)."""
-        found = self._realtime_setpoint(ns)
-        return found is None or not any(found[1][self.task_dim:])
+    def _ask_brake(self, reason):
+        """Ask the driver for its brakes now (once per stop; ``readiness_brake_request``)."""
+        if self._ask_brakes and not self._brake_asked:
+            self._brake_asked = True
+            self.brake_requests += 1
+            self.brake_request = '%s: brake now' % reason
+
+    def _damped_stop(self, ns, q, qd, now_ns):
+        """
+        Not ready, 'damp': answer with the damped joint hold (a driver holding its last command).
+
+        The active joints held where the stop found them (``stop_stiffness``,
+        ``stop_damping``, on the gravity load of the nominal model), every state until the
+        loop is ready again; nothing is asked of the brakes.
+        """
+        reason = self._readiness.reason
+        if not self._withholding:
+            self._kept_hold = self.shaper.hold_position     # None unless holding
+            self._withholding = True
+            self._q_stop = [q[i] for i in self.law.model.active]
+            if self._said_ns is None:
+                self._said_ns = ns      # (a transition was said at once)
+        said = self._said_ns
+        if not 0 <= ns - said < _SAY_PERIOD_NS:
+            self._said_ns = ns
+            self.log(ERROR, 'readiness', '%s: %s' % (reason, _DAMP_SAID))
+        return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, _DAMP_SAID), now_ns,
+                                 q, qd)
+
+    def stop_effort(self, q=None, qd=None):
+        """
+        Return the stop command [N m] in command order (``freejoint_core.guards.hold_effort``).
+
+        The active joints' gravity load of the law's (nominal) model at ``q`` (the core's
+        angles; default the last good measured state), within the torque limits: zero in a
+        horizontal plane, and zero before any state was measured. With ``qd`` (the damped
+        stop, ``readiness_action: damp``): plus ``stop_stiffness`` towards the angles the
+        stop found and ``stop_damping`` against ``qd``.
+        """
+        q = self._last_q if q is None else q
+        if q is None:
+            return list(self._zero)
+        model = self.law.model
+        try:
+            if qd is None:
+                tau = hold_effort(model.gravity_torque(q).tolist(), model.active)
+            else:
+                tau = hold_effort(model.gravity_torque(q).tolist(), model.active, None, q, qd,
+                                  self._q_stop, *self._stop_gains)
+        except (FreejointValueError, ArithmeticError):
+            return list(self._zero)
+        effort = tau if self._identity else [tau[i] for i in self._cmd_index]
+        limits = self._limits
+        if limits is not None:
+            effort = hold_effort(effort, range(len(effort)), limits)
+        return effort
+
+    def _answer_stop(self, ns, status, message, now_ns, q=None, qd=None):
+        """Return the stop command's answer to the state stamped ns, saying why."""
+        res = self._answer_zero(ns, status, message, now_ns)
+        effort = self.stop_effort(q, qd)
+        res.effort = effort
+        self.zero_answers -= 1
+        self.stops += 1
+        self._prev_cmd = list(effort)   # a resume ramps from it, not from zero
+        if self._predictor is not None:
+            self._predictor.reset()
+        return res
 
     def take_brake_request(self):
         """Return the brake request to send (why), once, or None."""
@@ -622,14 +762,17 @@ class ControlLoop:
         self._brake_asked = False
         kept, self._kept_hold = self._kept_hold, None
         if kept is None:
-            self.shaper.reset()         # hold at fk(q), or blend to the setpoint from it
+            # Hold at fk(q), or blend to the setpoint from the measured motion: a braked arm
+            # is at rest, but one a driver kept moving (the stop command held, the damped
+            # joint hold) is not, and a reference from rest would be a step in velocity.
+            self.shaper.reset()
+            self._start_from_motion = True
         else:
             # A hold stopped (e.g. a drift past readiness_max_hold_error): back to its own
             # position from where the arm was braked, so that stops do not add up.
             self.shaper.return_to(kept)
         self.last_ns = -1               # dt of the first tick: one control period
-        self._prev_cmd = list(self._zero)   # the braked arm got zero: ramp from it
-        self._rate_armed = True
+        self._rate_armed = True         # ramp from the stop command the driver got
         self.law.restart_motion()       # e.g. the free link's shift: its swing was stopped
         self._good_state = self.law.save_state()
         if self._predictor is not None:
@@ -816,13 +959,25 @@ class ControlLoop:
         last = self.last_state_wall
         if last is not None and not self.stale_reported and mono - last > self.stale_timeout:
             self.stale_reported = True
-            self.log(WARN, None, 'no joint_states for %g s: zero effort' % self.stale_timeout)
-            res = self._answer_zero(self.last_ns, STATUS_STALE_STATE,
-                                    'stale state: no joint_states within %g s'
-                                    % self.stale_timeout, now_ns)
-            if not self.lockstep:
-                # The arm moved under zero effort: the next state starts a hold / blend.
-                self.shaper.reset()
+            if self.lockstep:
+                self.log(WARN, None, 'no joint_states for %g s: zero effort' % self.stale_timeout)
+                return self._answer_zero(self.last_ns, STATUS_STALE_STATE,
+                                         'stale state: no joint_states within %g s'
+                                         % self.stale_timeout, now_ns)
+            if not self._commanded:
+                return None     # nothing to replace (the driver got no computed command)
+            why = ('stale state: no joint_states within %g s: %s'
+                   % (self.stale_timeout, _STOP_SAID))
+            self.log(ERROR, None, why)
+            self._stale_stop = True
+            self._stale_reason = why
+            self.readiness_note = (self.last_ns, False, why)
+            self._ask_brake('stale state: no joint_states within %g s' % self.stale_timeout)
+            self._brake_asked = False       # a later stop asks again
+            res = self._answer_stop(self.last_ns, STATUS_STALE_STATE, why, now_ns)
+            # The arm may move meanwhile: the next state starts a hold / blend from it.
+            self.shaper.reset()
+            self.law.restart_motion()
             return res
         return None
 
@@ -969,6 +1124,7 @@ class ControlLoop:
         self._last_sp = p_ref
         self._last_det = out.det
         self.ticks += 1
+        self._commanded = self._ever_commanded = True
         guard = self._readiness
         if guard is not None and guard.ready:
             holding = sp is None
@@ -976,20 +1132,23 @@ class ControlLoop:
             if limit:
                 error = ref_error
                 if error > limit:
-                    return self._following_error(ns, error, guard, limit, holding)
+                    return self._following_error(ns, error, guard, limit, holding, now_ns,
+                                                 q, qd)
         return res
 
-    def _following_error(self, ns, error, guard, limit, holding):
+    def _following_error(self, ns, error, guard, limit, holding, now_ns, q, qd):
         """Real time: the arm does not follow; stop tracking as a bad window would."""
         if guard.trip('real-time loop not ready: tracking error %.3g mm > the %.3g mm of '
                       '%s (the law does not hold the arm on this loop)'
                       % (error * 1e3, limit * 1e3, 'readiness_max_hold_error while holding'
                          if holding and self.config.readiness_max_hold_error
                          else 'readiness_max_error')):
-            self._readiness_changed(1)
+            self._readiness_changed(1, ns)
             self._said_ns = ns
         if self._guard_brakes:
-            return self._withhold(ns)
+            return self._withhold(ns, now_ns)
+        if self._guard_damps:
+            return self._damped_stop(ns, q, qd, now_ns)
         return self.result
 
     def _effort_of(self, n):
@@ -1067,6 +1226,7 @@ class ControlLoop:
         if ns >= 0:
             self.last_ns = ns
         self.zero_answers += 1
+        self._commanded = False
         # The arm got zero: the next computed command ramps up from it.
         self._prev_cmd = list(self._zero)
         self._rate_armed = True
@@ -1077,7 +1237,7 @@ class ControlLoop:
     # -- status ------------------------------------------------------------------------
     def counters(self):
         """Return the counters a status period starts from (answers, faults, refusals)."""
-        return (self.ticks + self.zero_answers, self.faults, self.refused_states,
+        return (self.ticks + self.zero_answers + self.stops, self.faults, self.refused_states,
                 self.refused_setpoints, self.old_states)
 
     def diagnostics(self, elapsed, start, silent, latency, states_topic, activated_at):
@@ -1101,7 +1261,7 @@ class ControlLoop:
 
         """
         answers0, faults0, refused_states0, refused_sp0, old0 = start
-        answers = self.ticks + self.zero_answers - answers0
+        answers = self.ticks + self.zero_answers + self.stops - answers0
         faults = self.faults - faults0
         refused_states = self.refused_states - refused_states0
         refused_sp = self.refused_setpoints - refused_sp0
@@ -1119,7 +1279,9 @@ class ControlLoop:
         if self.last_state_wall is None:
             no_state = 'no joint_states yet on %s' % states_topic
         elif self.stale_reported:
-            no_state = 'no joint_states for %g s: zero effort commanded' % self.stale_timeout
+            no_state = 'no joint_states for %g s: %s' % (
+                self.stale_timeout, 'zero effort commanded' if self.lockstep else
+                'the stop command sent (gravity hold), the brakes asked for')
         elif silent:
             no_state = 'no joint_states %s' % period
         if no_state is not None:
@@ -1129,8 +1291,8 @@ class ControlLoop:
                 errors.append(no_state)
         guard = self._readiness
         if guard is not None and not guard.ready:
-            errors.append('%s: %s' % (guard.reason, 'no command sent (the driver brakes); '
-                                      '%d states not answered' % self.withheld
+            errors.append('%s: %s' % (guard.reason, 'stopped (stop command, brakes asked '
+                                      'for); %d states not answered' % self.withheld
                                       if self._guard_brakes else 'holding position'))
         if faults:
             errors.append('%d law faults %s: the previous command repeated, theta_hat '
@@ -1190,8 +1352,9 @@ class ControlLoop:
                  else '%.3g' % (guard.last_delay * 1e3)),
                 ('window answered [%]', '-' if guard.last_rate is None
                  else '%.0f' % (guard.last_rate * 100.0)),
-                ('states not answered (brake)', self.withheld),
-                ('brake requests (at rest)', self.brake_requests))
+                ('states not answered (stopped)', self.withheld),
+                ('stop commands', self.stops),
+                ('brake requests', self.brake_requests))
         return errors, warnings, ok, values
 
     def report(self):
@@ -1202,8 +1365,9 @@ class ControlLoop:
                 % (self.ticks, self.zero_answers, self.holds, self.refused_states,
                    self.refused_setpoints, self.faults, self.old_states,
                    '' if self._readiness is None else
-                   ', readiness guard: %d trips, %d states not answered, %d brake requests'
-                   % (self._readiness.trips, self.withheld, self.brake_requests)))
+                   ', readiness guard: %d trips, %d stop commands, %d states not answered, %d '
+                   'brake requests' % (self._readiness.trips, self.stops, self.withheld,
+                                       self.brake_requests)))
 
 
 def _status_message(status, det, cfg, hold_reason, shaper):

@@ -33,7 +33,7 @@ SPATIAL_LAW = 'spatial'
 ON_STALE = ('hold', 'zero')
 DELAY_COMPENSATION = ('off', 'predict')
 FAILURE_MODES = ('off', 'notice', 'detect')
-READINESS_ACTIONS = ('brake', 'hold')
+READINESS_ACTIONS = ('brake', 'damp', 'hold')
 GAIN_MAX = {'K': 1e4, 'Lambda': 1e4, 'R': 1e3, 'Gamma': 1e3, 'sigma': 1e3}
 """Upper bounds of the gain vectors (K, Lambda in 1/s; beyond them the law is meaningless
 at any control rate this node runs; (K + Lambda) * control_period <= 1 is checked too)."""
@@ -292,16 +292,27 @@ PARAMS = (
           'against readiness_min_answer_rate - and stop tracking while it cannot keep '
           'within them (readiness_action), saying why; lockstep is never judged'),
     Param('readiness_action', 'brake',
-          "what a not-ready loop does: 'brake' = send no command (the driver's watchdog "
-          "brakes the arm where it is: the simulator's brake_timeout), 'hold' = hold the "
-          'end effector with the law (the law still runs on late states)',
+          "what a not-ready loop does: 'brake' = stop: answer the first state with the stop "
+          'command (the gravity hold of the active joints, what a driver that keeps its '
+          'last command then holds), ask for the brakes (readiness_brake_request), then '
+          "send no command (a driver's watchdog brakes: the simulator's brake_timeout); "
+          "'damp' = for a driver that holds its last command and has no brakes to ask for "
+          '(command_watchdog false in the simulator): answer every state with a damped '
+          'joint hold of the active joints (stop_stiffness, stop_damping on the gravity '
+          "load), which tolerates what the law does not; 'hold' = hold the end effector "
+          'with the law (the law still runs on late states)',
           validator=one_of(READINESS_ACTIONS)),
+    Param('stop_stiffness', 200.0,
+          "readiness_action 'damp': stiffness [N m/rad] of the joint hold towards the "
+          "active joints' angles when the loop stopped (docs/real-time.md)", (0.0, 1e5)),
+    Param('stop_damping', 20.0,
+          "readiness_action 'damp': damping [N m s/rad] of the active joints' speeds in "
+          'the joint hold', (0.0, 1e5)),
     Param('readiness_brake_request', True,
-          "with readiness_action 'brake': when the loop stops while the setpoint rests (no "
-          'plan, or its newest setpoint has zero velocity and acceleration), also ask the '
-          'driver to brake now (brake_request) instead of leaving it to its command '
-          "watchdog, which first applies the last command open loop (the simulator's "
-          'brake_timeout); moving, only the watchdog brakes (short stalls ridden through)'),
+          'real time: whenever the controller stops (a readiness trip with readiness_action '
+          "'brake', or no joint_states for stale_timeout), ask the driver to brake now "
+          '(brake_request), after the stop command, instead of leaving it to its command '
+          'watchdog (if it has one)'),
     Param('hold_brake_timeout', 0.01,
           'real time: while the setpoint rests (no plan, a stale stream, or the newest '
           'setpoint with zero velocity and acceleration), ask the driver on '
@@ -312,13 +323,26 @@ PARAMS = (
           'nothing from a stall ridden open loop (docs/real-time.md); 0 = never ask',
           (0.0, 10.0)),
     Param('readiness_max_delay', 0.0,
-          'tolerated mean effective delay [s] (state age when taken, in whole control '
-          'periods, plus the one period to the next step); 0 = the delay margin measured '
-          'for the case and delay_compensation (docs/delay.md: vertical 2 ms, horizontal '
-          '10 ms; with predict 10 / 20 ms)', (0.0, 10.0)),
-    Param('readiness_min_answer_rate', 0.8,
-          'least fraction of the expected states (window span / control_period) the loop '
-          'must take per window', (0.01, 1.0)),
+          'trip: tolerated mean effective delay [s] (state age when taken, in whole control '
+          'periods, plus the one period to the next step); 0 = measured for the arm and '
+          'delay_compensation (freejoint_control.readiness.MEASURED, docs/real-time.md; '
+          'an arm without a measurement: the strictest measured, with a warning)',
+          (0.0, 10.0)),
+    Param('readiness_min_answer_rate', 0.0,
+          'trip: least share of the expected states (window span / control_period) the '
+          'loop must answer per window; 0 = measured for the arm (as readiness_max_delay)',
+          (0.0, 1.0)),
+    Param('readiness_max_gap', 0,
+          'trip: a ready loop stops at the first state after more consecutive states not '
+          'answered than this (a stall of the loop); 0 = measured for the arm (as '
+          'readiness_max_delay)', (0, 100000)),
+    Param('readiness_resume_delay', 0.0,
+          'resume: a window counts towards readiness (readiness_recover_windows of them in '
+          'a row) at this mean effective delay [s] or less; 0 = measured for the arm (as '
+          'readiness_max_delay)', (0.0, 10.0)),
+    Param('readiness_resume_answer_rate', 0.0,
+          'resume: ... and at this share of the expected states answered or more; 0 = '
+          'measured for the arm (as readiness_max_delay)', (0.0, 1.0)),
     Param('readiness_window', 0.2,
           'window [s of state stamps] over which delay and answer rate are judged; one bad '
           'window stops tracking (at once when it already missed more states than the rate '

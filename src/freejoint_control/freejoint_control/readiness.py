@@ -1,75 +1,129 @@
 """
-The real-time readiness guard: the loop within the delay its law tolerates, or not.
+The real-time readiness guard: the loop within what its law tolerates, or not.
 
 In real time the command computed from the state stamped ``t_k`` acts from the simulator's
 (or driver's) first step after it is sent: over ``[t_{k+M}, t_{k+M+1}]`` with
 ``M = floor(age / control_period) + 1`` periods, ``age`` the state's age when the loop
-takes it (system time minus stamp).  The paper's law tolerates a bounded ``M``
-(docs/delay.md: the vertical case diverges at a fixed 3 ms, the horizontal at 15 ms), and
-each state the loop does not answer holds the previous command one period longer.
-:class:`ReadinessGuard` measures both over consecutive windows of state-stamp time:
+takes it (system time minus stamp), and each state the loop does not answer holds the
+previous command one period longer. What the law tolerates of both is measured offline per
+arm (docs/real-time.md, ``bench/guard_margin.py``: :data:`MEASURED`, :func:`guard_margins`).
+:class:`ReadinessGuard` judges consecutive windows of state-stamp time:
 
 - the mean effective delay ``mean(M) * control_period`` of the states taken in the window,
-  against the tolerated delay (parameter ``readiness_max_delay``; 0 = the measured margin
-  of the running case, :func:`tolerated_delay`);
+  against ``max_delay`` (parameter ``readiness_max_delay``);
 - the answer rate: states taken / states expected (the window's stamp span over the
-  control period), against ``readiness_min_answer_rate``.
+  control period), against ``min_rate`` (``readiness_min_answer_rate``);
+- a gap: more consecutive states not answered than ``max_gap`` (``readiness_max_gap``).
 
 A loop starts not ready (the driver's brakes, engaged at start, stay on) until
 ``readiness_recover_windows`` good windows; a hot spare starts ready (it must take over at
-once).  One bad window makes the loop not ready: it stops tracking (the loop withholds its
-commands, so the driver's watchdog brakes, or holds: parameter ``readiness_action``); a
-window that has already missed more states than the answer rate allows (a stall of the
-loop) does so at once, not at its end.  ``readiness_recover_windows`` consecutive good
-windows make it ready again, good meaning within half the margins: a mean delay at most
-halfway from one period to the tolerated one, at most a quarter of the states a window may
-miss missed (hysteresis: a marginal loop does not release the brakes).  Lockstep
-never trips (the simulator waits for each command: no delay).  It reads no clock: the
-caller passes the stamps and the system time, so a test drives it deterministically.
-
+once).  One bad window makes the loop not ready (what the controller then does:
+``readiness_action``); a window that has already missed more states than the answer rate
+allows, or a gap, does so at once, not at the window's end.  ``readiness_recover_windows``
+consecutive good windows make it ready again, good meaning within the resume thresholds
+(hysteresis: a marginal loop does not release the brakes).  Lockstep never trips (the
+simulator waits for each command: no delay).  It reads no clock: the caller passes the
+stamps and the system time, so a test drives it deterministically.
 """
 
+from dataclasses import dataclass
+
+from freejoint_core.arm import table1
 from freejoint_core.errors import FreejointValueError
 
-MEASURED_MARGIN = {
-    # (case, delay_compensation) -> largest fixed delay [s] at which all 10 seeds of the
-    # delay study tracked (docs/delay.md, "Delay margin"; 70 % nominal, disturbance on).
-    ('horizontal', 'off'): 0.010,
-    ('horizontal', 'predict'): 0.020,
-    ('vertical', 'off'): 0.002,
-    ('vertical', 'predict'): 0.010,
-}
-"""The law's measured delay margin [s] per case and delay compensation (docs/delay.md)."""
 
-
-def tolerated_delay(case, delay_compensation, given=0.0):
+@dataclass(frozen=True)
+class GuardMargins:
     """
-    Return the delay [s] the loop may keep on average: ``given`` if > 0, else the margin.
+    The guard's thresholds measured for one arm and delay compensation (docs/real-time.md).
+
+    Attributes
+    ----------
+    max_delay : float
+        Trip: mean effective delay [s] above which a window is bad.
+    min_rate : float
+        Trip: least share of the expected states answered per window.
+    resume_delay : float
+        Resume: a window counts towards readiness at this mean delay [s] or less.
+    resume_rate : float
+        Resume: ... and at this share of the states answered or more.
+    max_gap : int
+        Trip: more consecutive states not answered than this (a stall of the loop).
+
+    """
+
+    max_delay: float
+    min_rate: float
+    resume_delay: float
+    resume_rate: float
+    max_gap: int
+
+
+MEASURED = {
+    # The Table I arm (70 % nominal model, disturbance on, the paper's gains), measured by
+    # bench/guard_margin.py (states missed in bursts, a delay of 1 ms or 1-3 ms) and the
+    # fixed-delay study (docs/delay.md); keyed by the real arm's parameters and
+    # delay_compensation. docs/real-time.md, "What the law tolerates".
+    (table1('horizontal'), 'off'): GuardMargins(0.010, 0.7, 0.0055, 0.85, 20),
+    (table1('horizontal'), 'predict'): GuardMargins(0.020, 0.7, 0.0105, 0.85, 20),
+    (table1('vertical'), 'off'): GuardMargins(0.0015, 0.9, 0.0012, 0.95, 5),
+    (table1('vertical'), 'predict'): GuardMargins(0.010, 0.9, 0.0055, 0.95, 5),
+}
+"""The guard's measured thresholds per arm (:class:`GuardMargins`)."""
+STRICTEST = MEASURED[(table1('vertical'), 'off')]
+"""What an arm without a measurement gets: the strictest measured thresholds."""
+
+
+def guard_margins(arm, delay_compensation, max_delay=0.0, min_rate=0.0, resume_delay=0.0,
+                  resume_rate=0.0, max_gap=0):
+    """
+    Return the guard's thresholds: each given one (> 0), else the arm's measured one.
 
     Parameters
     ----------
-    case : {'horizontal', 'vertical'}
-        The nominal model's case (controller parameter ``case``).
+    arm : freejoint_core.arm.ArmParams or other arm
+        The real arm's parameters (``resolve_arm(values).params``).
     delay_compensation : {'off', 'predict'}
         The controller's parameter of that name.
-    given : float
-        ``readiness_max_delay`` [s]; 0 = the measured margin (:data:`MEASURED_MARGIN`).
+    max_delay, min_rate, resume_delay, resume_rate : float
+        The parameters ``readiness_max_delay`` [s], ``readiness_min_answer_rate``,
+        ``readiness_resume_delay`` [s], ``readiness_resume_answer_rate``; 0 = measured.
+    max_gap : int
+        ``readiness_max_gap`` [states]; 0 = measured.
 
     Returns
     -------
-    float
-        Seconds (> 0).
+    tuple
+        ``(max_delay, min_rate, resume_delay, resume_rate, max_gap, source)``: seconds,
+        shares and a count, ``source`` saying where they came from. An arm with no
+        measurement takes the strictest measured thresholds (:data:`STRICTEST`) for those
+        not given, and ``source`` says so (the controller logs it as a warning).
 
     """
-    if given > 0.0:
-        return float(given)
+    given = (max_delay, min_rate, resume_delay, resume_rate, max_gap)
+    names = ('readiness_max_delay', 'readiness_min_answer_rate', 'readiness_resume_delay',
+             'readiness_resume_answer_rate', 'readiness_max_gap')
     try:
-        return MEASURED_MARGIN[(case, delay_compensation)]
-    except KeyError:
-        raise FreejointValueError(
-            'case / delay_compensation: no measured delay margin for %r with %r (known: %s); '
-            'set readiness_max_delay' % (case, delay_compensation,
-                                         sorted(MEASURED_MARGIN))) from None
+        measured = MEASURED.get((arm, delay_compensation))
+    except TypeError:       # an arm of no hashable kind: not measured
+        measured = None
+    if measured is None:
+        missing = [n for n, v in zip(names, given) if not v > 0.0]
+        if not missing:
+            return (*(float(v) for v in given[:4]), int(max_gap), 'given')
+        measured = STRICTEST
+        source = ('%s not measured for this arm with delay_compensation %s: the strictest '
+                  'measured (the Table I vertical arm uncompensated); measure them with '
+                  'bench/guard_margin.py (docs/real-time.md)'
+                  % (', '.join(missing), delay_compensation))
+    else:
+        source = ('measured for this arm, delay_compensation %s' % delay_compensation
+                  if not any(v > 0 for v in given) else 'given and measured')
+    out = tuple(v if v > 0 else m for v, m in zip(given, (
+        measured.max_delay, measured.min_rate, measured.resume_delay, measured.resume_rate,
+        measured.max_gap)))
+    out = (*(float(v) for v in out[:4]), int(out[4]))
+    return (*out, source)
 
 
 def effective_periods(age_ns, dt_ns):
@@ -93,7 +147,7 @@ class ReadinessGuard:
     dt_ns : int
         Control period [ns] (> 0).
     max_delay : float
-        Tolerated mean effective delay [s] (> 0, :func:`tolerated_delay`).
+        Tolerated mean effective delay [s] (> 0, :func:`guard_margins`).
     min_rate : float
         Least fraction of the expected states taken per window, in (0, 1].
     window : float
@@ -103,6 +157,14 @@ class ReadinessGuard:
     start_ready : bool
         Ready before any window was judged (a hot spare); else not ready until
         ``recover_windows`` good windows.
+    resume_delay, resume_rate : float, optional
+        What a window must keep to count towards readiness [s, share]; None: half the
+        margins (a mean delay halfway from one period to ``max_delay``, a quarter of the
+        misses ``min_rate`` allows).
+    max_gap : int, optional
+        A ready loop trips at the first state after more consecutive states not answered
+        than this (stamps more than ``max_gap + 1`` periods apart); None: only the
+        window's share.
 
     Attributes
     ----------
@@ -122,7 +184,7 @@ class ReadinessGuard:
     """
 
     def __init__(self, dt_ns, max_delay, min_rate, window, recover_windows,
-                 start_ready=False):
+                 start_ready=False, resume_delay=None, resume_rate=None, max_gap=None):
         if not (isinstance(dt_ns, int) and dt_ns > 0):
             raise FreejointValueError('dt_ns: expected an int > 0, got %r' % (dt_ns,))
         if not max_delay > 0.0:
@@ -140,11 +202,17 @@ class ReadinessGuard:
         self.min_rate = float(min_rate)
         self.window_ns = round(window * 1e9)
         # A good window (one of those that make a not-ready loop ready): half the margins.
-        self.good_delay = 0.5 * (dt_ns * 1e-9 + self.max_delay)
-        self.good_rate = 1.0 - 0.25 * (1.0 - self.min_rate)
+        self.good_delay = (0.5 * (dt_ns * 1e-9 + self.max_delay) if resume_delay is None
+                           else min(float(resume_delay), self.max_delay))
+        self.good_rate = (1.0 - 0.25 * (1.0 - self.min_rate) if resume_rate is None
+                          else max(float(resume_rate), self.min_rate))
         # States a window may miss: more, and it is bad whatever follows.
         self._may_miss = int((1.0 - self.min_rate) * (self.window_ns // dt_ns) + 1e-9)
         self.recover_windows = recover_windows
+        self.max_gap = max_gap
+        # Stamps further apart than this [ns]: a gap of more than max_gap states.
+        self._gap_ns = None if max_gap is None else (max_gap + 1) * dt_ns + dt_ns // 2
+        self._last_ns = None
         self.ready = self.started = bool(start_ready)
         self.reason = '' if start_ready else (
             'real-time loop not judged yet: waiting for %d good windows of %.3g s'
@@ -175,6 +243,14 @@ class ReadinessGuard:
             became ready (``recoveries`` counts the times after the first).
 
         """
+        last, self._last_ns = self._last_ns, ns
+        gap_ns = self._gap_ns
+        if (gap_ns is not None and self.ready and last is not None
+                and ns - last > gap_ns):
+            self._start_ns = None       # the next window opens at the next state
+            return self._not_ready(
+                'real-time loop not ready: %d consecutive states not answered, more than '
+                'the %d the law rides through' % ((ns - last) // self.dt_ns - 1, self.max_gap))
         start = self._start_ns
         if start is None or ns < start:
             self._start_ns = ns

@@ -7,6 +7,9 @@ The controller's and the simulator's guards: plausibility checks and limits, in 
   out-of-range torque, a law state outside its bounds);
 - :func:`limit_effort`: the torque limit and the rate limit of the command;
 - :func:`clamp_dt`: the law's time step measured from state stamps, bounded;
+- :func:`hold_effort`: the command a controller leaves a driver when it stops (the static
+  gravity load of the active joints, safe to be held by a driver that keeps its last
+  command; docs/real-time.md);
 - :func:`divergence_reason`: a simulated plant whose state is not a physical one any more
   (``freejoint_core.plant.Plant.step`` raises ``PlantDivergedError`` on a non-finite state;
   the simulator also stops at a joint faster than its ``divergence_speed`` or an angle
@@ -56,6 +59,63 @@ def clamp_dt(dt, nominal, low=0.25, high=4.0):
     if dt > hi:
         return hi, True
     return dt, False
+
+
+def hold_effort(gravity, active, limits=None, q=None, qd=None, q_hold=None, stiffness=0.0,
+                damping=0.0):
+    """
+    Return the stop command: the active joints' gravity load ``G_a(q)``, limited.
+
+    What a controller sends when it stops (docs/real-time.md, "Stopping"). Sent once
+    before it goes quiet (no ``stiffness``, ``damping``): a driver that keeps applying its
+    last command (ros2_control's forward command controller) then holds the active joints
+    against gravity at the configuration the stop found, where zero effort lets a vertical
+    arm fall and a stale tracking command (its acceleration and feedback terms) drives it
+    on; the brakes, asked for at the same time, are what stops the arm. Answered to every
+    state (``readiness_action: damp``, for a driver without brakes or watchdog), with
+    ``stiffness`` and ``damping``: a joint-space hold of the active joints at ``q_hold``,
+    ``G_a(q) + stiffness (q_hold - q_a) - damping qd_a``, which tolerates the late and
+    missed states the law does not (its gains are far below the law's).
+
+    Parameters
+    ----------
+    gravity : sequence of float, (n,)
+        Gravity torques ``G(q) = dV/dq`` of the model at the measured angles [N m] (the
+        controller's nominal model: ``model.gravity_torque(q)``); 0 in a horizontal plane.
+    active : sequence of int, (r,)
+        Indices of the active joints in ``gravity``, ``q`` and ``qd`` (the model's order).
+    limits : sequence of float, (r,), optional
+        Per-joint torque limits [N m] (> 0), None: none.
+    q, qd : sequence of float, (n,), optional
+        Measured angles [rad] and speeds [rad/s] (needed with stiffness or damping).
+    q_hold : sequence of float, (r,), optional
+        The active joints' angles to hold [rad] (needed with stiffness).
+    stiffness : float
+        [N m/rad] >= 0.
+    damping : float
+        [N m s/rad] >= 0.
+
+    Returns
+    -------
+    list of float, (r,)
+        The command clipped to ``[-limit, limit]`` [N m], in the order of ``active``; a
+        non-finite term gives 0 for that joint (never a non-finite command).
+
+    """
+    out = []
+    for j, i in enumerate(active):
+        g = float(gravity[i])
+        if stiffness:
+            g += stiffness * (q_hold[j] - q[i])
+        if damping:
+            g -= damping * qd[i]
+        if not _isfinite(g):
+            g = 0.0
+        if limits is not None:
+            lim = limits[j]
+            g = lim if g > lim else -lim if g < -lim else g
+        out.append(g)
+    return out
 
 
 def limit_effort(tau, limits, prev=None, max_step=None):

@@ -82,7 +82,8 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
              dist_bound=DEFAULT_DIST_BOUND, gains=None, record_trace=False,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0, delay_ticks=0, predict=False,
              bias_gain=DEFAULT_BIAS_GAIN, predict_ticks=None, echo=False, delay_jitter=0,
-             actuated='paper', nullspace=None, law='robust', law_params=None):
+             actuated='paper', nullspace=None, law='robust', law_params=None,
+             loss_rate=0.0, loss_burst=1):
     """
     Run one closed-loop case and return its metrics record (and trace).
 
@@ -146,6 +147,16 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
         The laws' own gains by namespaced name (``vsc.phi``).
     nullspace : freejoint_core.internal.NullSpace, optional
         The controller's null-space option (r > m); labelled ``+ns``.
+    loss_rate : float
+        Share of the states the controller does not answer, in [0, 1): missed in bursts
+        of ``loss_burst`` consecutive ticks (tick 0 always answered), the burst starts
+        drawn from their own generator seeded from ``seed``. A missed tick computes no
+        command (the law does not step; its next step takes the stamps' gap as dt, at
+        most 4 periods as the node clamps it) and the plant keeps the previous command
+        one period longer, as a real-time loop that misses a state. Labelled
+        ``L<rate>x<burst>``.
+    loss_burst : int
+        Consecutive states missed per burst (>= 1).
 
     Returns
     -------
@@ -190,6 +201,11 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
             or delay_jitter < 0:
         raise FreejointValueError(f'delay_jitter: expected an int >= 0, got {delay_jitter!r}')
     delay_jitter = int(delay_jitter)
+    if not (isinstance(loss_rate, (int, float)) and 0.0 <= loss_rate < 1.0):
+        raise FreejointValueError(f'loss_rate: expected a share in [0, 1), got {loss_rate!r}')
+    if isinstance(loss_burst, bool) or not isinstance(loss_burst, (int, np.integer)) \
+            or loss_burst < 1:
+        raise FreejointValueError(f'loss_burst: expected an int >= 1, got {loss_burst!r}')
     if gains is None:
         gains = Gains()
     elif not isinstance(gains, Gains):
@@ -227,10 +243,12 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     if law != 'robust':
         label = f'{law} {label}'
     pred = None
-    pipeline = bool(delay_ticks or delay_jitter)
+    missed = _loss_pattern(loss_rate, int(loss_burst), n_ticks, seed)
+    pipeline = bool(delay_ticks or delay_jitter or missed)
+    fk_real = make_model(real).fk
     if pipeline:
         label = f'{label} d{delay_ticks}' + (f'~{delay_jitter}' if delay_jitter else '') \
-            + ('+p' if predict else '')
+            + (f' L{loss_rate:g}x{loss_burst}' if missed else '') + ('+p' if predict else '')
         if predict and predict_ticks != delay_ticks:
             label += f'{predict_ticks}'
         if predict and echo:
@@ -239,12 +257,10 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
             pred = StatePredictor(nominal, dt, dt_sub, bias_gain=bias_gain,
                                   max_ticks=max(delay_ticks + delay_jitter, predict_ticks, 1))
             h_pred = predict_ticks * dt
-            fk_real = make_model(real).fk
         jitter = np.random.default_rng([7919, 0 if seed is None else int(seed)]).integers(
             0, delay_jitter + 1, n_ticks).tolist() if delay_jitter else [0] * n_ticks
         arrive = []         # tick at which each computed command reaches the plant
         applied_at = []     # index of the command each plant step applied
-        cur = 0
 
     # Setpoints of every tick, through the same scalar path the graph uses.
     sample = trajectory.sample_tuple
@@ -269,14 +285,47 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     theta = ctrl.theta
     diverged = None
     n_rec = 0
+    last_k = 0
     for k in range(n_ticks):
         t = k * dt
         pdx, pdy, vdx, vdy, adx, ady = des[k]
         q = plant.q
         qd = plant.qd
+        if missed and k in missed:
+            # Not answered: no law step, the previous command held one more period.
+            px, py = fk_real(q).tolist()
+            ex = px - pdx
+            ey = py - pdy
+            p_buf[k] = px, py
+            tau_buf[k] = tau_buf[k - 1]
+            det_buf[k] = det_buf[k - 1]
+            q3_buf[k] = q[passive]
+            if record_trace:
+                q_buf[k] = q
+                qd_buf[k] = qd
+                th_buf[k] = theta
+                rho_buf[k] = rho_buf[k - 1]
+                st_buf[k] = st_buf[k - 1]
+                if pred is not None:
+                    ql_buf[k] = ql_buf[k - 1]
+                    qdl_buf[k] = qdl_buf[k - 1]
+            n_rec = k + 1
+            w0, w1, w2 = qd.tolist()
+            if ex * ex + ey * ey > limit2 or max(abs(w0), abs(w1), abs(w2)) > diverge_qd:
+                diverged = t
+                break
+            try:
+                _pipeline_step(plant, tau_buf, arrive, applied_at, k,
+                               delay_ticks + jitter[k], dt)
+            except _BLOWUP:
+                diverged = (k + 1) * dt
+                break
+            continue
+        dt_law = dt if not missed else min(k - last_k, 4) * dt if k else dt
+        last_k = k
         try:
             if pred is None:
-                out = ctrl.step(q, qd, (pdx, pdy), (vdx, vdy), (adx, ady), dt)
+                out = ctrl.step(q, qd, (pdx, pdy), (vdx, vdy), (adx, ady), dt_law)
             else:
                 if echo and k:
                     applied = tau_buf[applied_at[k - 1]]
@@ -287,7 +336,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
                 else:
                     qp, qdp = pred.predict(q, qd, predict_ticks)
                     sp = extrapolate_setpoint((pdx, pdy), (vdx, vdy), (adx, ady), h_pred)
-                out = ctrl.step(qp, qdp, *sp, dt)
+                out = ctrl.step(qp, qdp, *sp, dt_law)
                 if not all(map(isfinite, out.theta.tolist() + qdp.tolist())):
                     raise ArithmeticError('non-finite prediction or estimate')
                 pred.push(out.tau)
@@ -302,7 +351,8 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
         ex = px - pdx
         ey = py - pdy
         err2 = ex * ex + ey * ey
-        if not (isfinite(err2) and all(map(isfinite, tau_k)) and isfinite(out.det)):
+        if not (isfinite(err2) and all(map(isfinite, tau_k)) and isfinite(out.det)
+                and all(map(isfinite, out.theta.tolist()))):
             diverged = t
             break
         p_buf[k] = px, py
@@ -326,11 +376,8 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
             break
         try:
             if pipeline:
-                arrive.append(max(k + delay_ticks + jitter[k], arrive[-1] if k else 0))
-                while cur < k and arrive[cur + 1] <= k:
-                    cur += 1
-                applied_at.append(cur)
-                plant.step(tau_buf[cur], dt)
+                _pipeline_step(plant, tau_buf, arrive, applied_at, k,
+                               delay_ticks + jitter[k], dt)
             else:
                 plant.step(out.tau, dt)
         except _BLOWUP:
@@ -355,6 +402,40 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
         trace['q_law'] = ql_buf[:n_rec]
         trace['qd_law'] = qdl_buf[:n_rec]
     return record, trace
+
+
+def _loss_pattern(rate, burst, n_ticks, seed):
+    """
+    Return the set of ticks not answered: bursts of ``burst`` ticks, a share ``rate``.
+
+    Between bursts the answered runs are geometric with mean ``burst (1 - rate) / rate``
+    ticks (a burst starts after each answered tick with probability ``rate / (burst (1 -
+    rate))``), so the expected share missed is ``rate``; tick 0 is always answered. Its
+    own generator, seeded from ``seed`` (the disturbance's draws are unchanged).
+    """
+    if rate <= 0.0:
+        return frozenset()
+    start = rate / (burst * (1.0 - rate))
+    draws = np.random.default_rng([104729, 0 if seed is None else int(seed)]).random(n_ticks)
+    out = set()
+    k = 1
+    while k < n_ticks:
+        if draws[k] < start:
+            out.update(range(k, min(k + burst, n_ticks)))
+            k += burst + 1      # the tick after a burst is answered
+        else:
+            k += 1
+    return frozenset(out)
+
+
+def _pipeline_step(plant, tau_buf, arrive, applied_at, k, lag, dt):
+    """Step the plant over tick ``k`` with the newest command arrived (delayed loop)."""
+    arrive.append(max(k + lag, arrive[-1] if k else 0))
+    cur = applied_at[-1] if applied_at else 0
+    while cur < k and arrive[cur + 1] <= k:
+        cur += 1
+    applied_at.append(cur)
+    plant.step(tau_buf[cur], dt)
 
 
 def run_all(seeds=range(10), cases=CASES, dt_sub=DEFAULT_DT_SUB, off_seeds=None,
@@ -550,6 +631,11 @@ def _parse(argv):
     ap.add_argument('--delay-jitter', type=int, default=0, metavar='J',
                     help='variable delay: each command arrives 0..J ticks later still '
                     '(in order; the plant applies the newest arrived)')
+    ap.add_argument('--loss-rate', type=float, default=0.0, metavar='R',
+                    help='share of the states not answered (the previous command held one '
+                    'more period), in bursts of --loss-burst (default 0)')
+    ap.add_argument('--loss-burst', type=int, default=1, metavar='B',
+                    help='consecutive states missed per burst (default 1)')
     ap.add_argument('--predict-ticks', type=int, default=None, metavar='P',
                     help='predictor horizon (default: --delay-ticks)')
     ap.add_argument('--echo', action='store_true',
@@ -604,6 +690,8 @@ def main(argv=None):
     if args.delay_ticks < 0 or args.delay_jitter < 0 or (args.predict_ticks or 0) < 0:
         raise SystemExit('offline: --delay-ticks, --delay-jitter and --predict-ticks must be '
                          '>= 0')
+    if not 0.0 <= args.loss_rate < 1.0 or args.loss_burst < 1:
+        raise SystemExit('offline: --loss-rate must lie in [0, 1), --loss-burst be >= 1')
     if not 0.0 <= args.bias_gain <= 1.0:
         raise SystemExit('offline: --bias-gain must lie in [0, 1]')
     if args.delay_study:
@@ -620,18 +708,21 @@ def main(argv=None):
                       delay_ticks=args.delay_ticks, predict=args.predict,
                       bias_gain=args.bias_gain, predict_ticks=args.predict_ticks,
                       echo=args.echo, delay_jitter=args.delay_jitter,
+                      loss_rate=args.loss_rate, loss_burst=args.loss_burst,
                       **_internal_options(args))
     wall = time.perf_counter() - t0
     print(f'offline: {len(records)} runs, dt = 1 ms, dt_sub = {args.dt_sub:g} s, '
           f'{wall:.1f} s wall')
-    delayed = args.delay_ticks or args.delay_jitter
+    delayed = args.delay_ticks or args.delay_jitter or args.loss_rate
     if delayed:
-        print(f'command delay {args.delay_ticks} + 0..{args.delay_jitter} ticks, predictor '
-              f'{f"on (bias_gain {args.bias_gain:g})" if args.predict else "off"}')
+        print(f'command delay {args.delay_ticks} + 0..{args.delay_jitter} ticks, '
+              f'{args.loss_rate:.0%} of the states missed in bursts of {args.loss_burst}, '
+              f'predictor {f"on (bias_gain {args.bias_gain:g})" if args.predict else "off"}')
     if args.out is None:
         args.out = DEFAULT_OUT if not delayed else (
             f'bags/offline/delay_m{args.delay_ticks}'
             f'{f"j{args.delay_jitter}" if args.delay_jitter else ""}'
+            f'{f"l{args.loss_rate:g}x{args.loss_burst}" if args.loss_rate else ""}'
             f'{"_p" if args.predict else ""}.json')
     print(format_table(records, theta=args.theta))
     print()

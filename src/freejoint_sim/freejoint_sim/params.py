@@ -148,6 +148,14 @@ PARAMS = (
           'states still published at publish_rate) until the first accepted command, and '
           'again after ~/reset until the next one; false = the arm moves (a vertical arm '
           'falls) from the first step. Lockstep waits for the first command anyway'),
+    Param('command_watchdog', True,
+          'real time: true = a drive with a command watchdog (brake_timeout, '
+          'brake_timeout_at_rest, command_timeout) that brakes when asked (brake_request, '
+          'brake_timeout_request); false = a driver that holds the last command, as '
+          "ros2_control's forward_command_controller (JointGroupEffortController) does: "
+          'every command is applied until the next one, with no watchdog, no timeout and no '
+          'brakes but the start-up ones (start_braked, until the first command); the brake '
+          'topics are ignored (docs/real-arm.md)'),
     Param('brake_timeout', 0.05,
           'real time: no command for this long [s] after the last one engages the brakes, '
           'as a drive watchdog does: the arm stops where it is (every joint, the passive one '

@@ -41,6 +41,11 @@ Modes (docs/GRAPH.md):
   brakes where the arm is (a drive watchdog) until the next accepted command;
   ``brake_timeout_at_rest`` after a command that found the arm at rest, or the
   controller's ``brake_timeout_request`` when shorter (``freejoint_sim.watchdog``).
+  Brakes engaged after the start are released by a command answering a state published
+  after they engaged (a command computed before, e.g. a controller's stop command or a
+  stalled one catching up, leaves them on). With ``command_watchdog: false`` it is a
+  driver that holds the last command (ros2_control's forward_command_controller): no
+  watchdog, no command timeout, the brake topics ignored; only the start-up brakes.
 
 A diverged plant (non-finite, or a joint faster than ``divergence_speed``, or an angle
 beyond ``freejoint_core.guards.MAX_ANGLE``) is not integrated further: the simulator
@@ -84,6 +89,8 @@ REPUBLISH_PERIOD = 0.2
 """Lockstep: wall period [s] of republishing step 0 until the first command arrives."""
 MAX_CATCH_UP = 20
 """Real time: steps integrated at most at one wake-up before dropping behind."""
+_UNLABELLED = 1 << 62
+"""The stamp of a command without a label: it answers the newest state (releases brakes)."""
 
 _isfinite = math.isfinite
 _monotonic = time.monotonic
@@ -139,6 +146,7 @@ class SimNode(Node, Lifecycle):
         self._brake_engagements = 0
         self._brake_asked = None       # real time: why the controller asked to brake now
         self._brakes_asked = 0
+        self._braked_ns = -1           # real time: stamp of the last state before the brakes
         self._rt_origin_ns = 0         # real time: system time [ns] of step 0 on the grid
         self._take_state()
         self._diag_window = (_monotonic(), 0, 0, 0, 0)
@@ -212,6 +220,11 @@ class SimNode(Node, Lifecycle):
             if self._braked:
                 self.get_logger().info('brakes engaged: the arm is held at q0 until the '
                                        'first command')
+            if self._holds_last:
+                self.get_logger().warn('command_watchdog: false: every command is applied '
+                                       'until the next one, with no watchdog, no command '
+                                       'timeout and no brakes on request (a driver that '
+                                       'holds the last command)')
             self._rt_thread.start()
 
     def _publish_description(self, arm):
@@ -231,8 +244,10 @@ class SimNode(Node, Lifecycle):
         self._dt = cfg.dt
         self._dt_ns = cfg.dt_ns
         self._timeout = cfg.command_timeout
-        self._watchdog = DriveWatchdog(0.0 if cfg.lockstep else cfg.brake_timeout,
-                                       cfg.brake_timeout_at_rest, cfg.rest_speed)
+        self._holds_last = not cfg.lockstep and not cfg.command_watchdog
+        self._watchdog = DriveWatchdog(
+            0.0 if cfg.lockstep or self._holds_last else cfg.brake_timeout,
+            cfg.brake_timeout_at_rest, cfg.rest_speed)
         self._every = cfg.publish_every
         self._clock_every = cfg.clock_every
         self._lockstep = cfg.lockstep
@@ -273,6 +288,7 @@ class SimNode(Node, Lifecycle):
         if not cfg.lockstep and cfg.start_braked:
             self._braked = True
             self._braked_since = _monotonic()
+            self._braked_ns = -1
             self._brake_reason = ''
             self.get_logger().info('reset: brakes engaged until the next command')
 
@@ -361,7 +377,8 @@ class SimNode(Node, Lifecycle):
             if self._observer is not None:
                 answered = self._observer.command_received(ns, self._k, now)
             self._latest = (self._zero if tau is None else tau, now, answered, tau is not None,
-                            *self._watchdog.judge(self._qd_list, self._requested_wait))
+                            *self._watchdog.judge(self._qd_list, self._requested_wait),
+                            _UNLABELLED if ns is None else ns)
             if self._cmd_timed_out:
                 self._cmd_timed_out = False
                 self.get_logger().info('commands are back')
@@ -555,7 +572,8 @@ class SimNode(Node, Lifecycle):
             if not self._braked and self._diverged is None:
                 self._engage_brakes(now, asked)
         if self._braked:
-            if latest is not None and latest[3] and latest[1] >= self._braked_since:
+            if (latest is not None and latest[3] and latest[1] >= self._braked_since
+                    and latest[6] >= self._braked_ns):
                 self._braked = False
                 self._brake_reason = ''
                 self.get_logger().info('brakes released at step %d (t = %.3f s): first '
@@ -567,7 +585,7 @@ class SimNode(Node, Lifecycle):
             latest = self._latest
             if latest is None:
                 tau = self._zero
-            elif now - latest[1] > self._timeout:
+            elif now - latest[1] > self._timeout and not self._holds_last:
                 tau = self._zero
                 if not self._cmd_timed_out:
                     self._cmd_timed_out = True
@@ -594,6 +612,8 @@ class SimNode(Node, Lifecycle):
         self._take_state()
         self._braked = True
         self._braked_since = now
+        # Released by a command answering a state after this one (not one computed before).
+        self._braked_ns = self._t_ns + self._rt_origin_ns + 1
         if asked is None:
             self._brake_engagements += 1
             rest = {'at rest': ', the arm at rest',
@@ -630,6 +650,11 @@ class SimNode(Node, Lifecycle):
 
     def _on_brake_request(self, msg):
         """brake_request: engage the brakes at the next step (the stepping thread does)."""
+        if self._holds_last:
+            self._throttle(self.get_logger().warn, 'brake_request',
+                           'brake_request ignored (%s): this driver holds the last command '
+                           '(command_watchdog: false)' % (msg.data or 'no reason given'))
+            return
         self._brake_asked = msg.data or 'no reason given'
 
     def _cmd_topic(self):

@@ -105,7 +105,8 @@ RECORDER = Schema((
     Param('graph_topics', True, 'Subscribe to the freejoint graph topics (docs/GRAPH.md) at '
           'start, with their contract types and QoS, so a run that starts before discovery '
           'loses nothing', read_only=True),
-    Param('ready_topics', [t.name for t in contract.GRAPH_TOPICS if t is not contract.CLOCK],
+    Param('ready_topics', [t.name for t in contract.GRAPH_TOPICS
+                           if t not in (contract.CLOCK, contract.CONTROLLER_READINESS)],
           '~/status answers success once each of these topics has a matched publisher; with '
           'use_sim_time also /clock (the log times come from it; a real-time graph has none)',
           read_only=True, validator=_topic_names),
