@@ -139,6 +139,13 @@ PARAMS = (
           'joint_states: freejoint_core.internal.free_link_swing) or no joint state tells; '
           '0 = off. For the arm whose last joint alone is free, with gravity; the '
           "controller's free_link_damping settles the link meanwhile.", (0.0, 180.0)),
+    Param('nullspace_kd', 20.0,
+          "Spatial arms: the controller's nullspace_kd [N m s/rad], which the plan's "
+          'nominal closed loop runs with (give both nodes the same value: fj arm init writes '
+          "it into both files); 20 = the shipped arms'. Planar arms: not used.", (0.0, 1e4)),
+    Param('nullspace_kp', 10.0,
+          "Spatial arms: the controller's nullspace_kp [N m/rad] for the plan's nominal "
+          "closed loop (as nullspace_kd); 10 = the shipped arms'.", (0.0, 1e4)),
     Param('autostart', True,
           'Start the configured circle at activation and after every accepted change of its '
           'parameters.'),

@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import math
 import time
 
+from freejoint_core.arm_gains import BETA, kernel_basis
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
 from freejoint_core.spatial_law import arm_reach, gravity_carrying_free_joint, SpatialGains
@@ -351,16 +352,47 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
         if err > TRACK_BOUND:
             reason = (f'the nominal closed loop cannot follow the path: tip error '
                       f'{err * 1e3:.3g} mm at t = {t:.3f} s (> {TRACK_BOUND * 1e3:g} mm; '
-                      f'kappa {out.kappa:.3g}): out of reach or through a singular posture')
+                      f'kappa {out.kappa:.3g}): '
+                      + (too_stiff(nominal, x, kd, period) or 'out of reach or through a '
+                         'singular posture'))
             break
         try:
             plant.step(out.tau, period)
         except FreejointValueError as exc:
-            reason = f'the nominal closed loop diverged at t = {t:.3f} s: {exc}'
+            reason = (f'the nominal closed loop diverged at t = {t:.3f} s: '
+                      + (too_stiff(nominal, x, kd, period) or str(exc)))
             break
     outside = tuple(names[j] for j in free if q_min[j] < lower[j] or q_max[j] > upper[j])
     return LoopCheck(reason, kmin, t_kmin, emax, k + 1, time.perf_counter() - t0,
                      tuple(q_min.tolist()), tuple(q_max.tolist()), outside)
+
+
+def too_stiff(nominal, q, kd, period=CHECK_PERIOD):
+    """
+    Return why ``kd`` is too stiff for the arm's lightest internal mode at ``q``, or ''.
+
+    The null-space damping removes ``period kd / I`` of an internal mode's rate per step
+    (``freejoint_core.arm_gains``: ``I`` an eigenvalue of the null-space inertia); above
+    1 the mode reverses each step, at 2 it grows. The reason names the joint that moves
+    most in that mode, the ratio and the largest ``kd`` of the rule
+    (``arm_gains.nullspace_gains``).
+    """
+    if kd <= 0.0:
+        return ''
+    terms = nominal.terms(np.asarray(q, dtype=float), np.zeros(nominal.n))
+    da, _, maa = nominal.decoupling(terms)
+    basis = kernel_basis(da @ maa)
+    if basis.shape[1] == 0:
+        return ''
+    inertia, modes = np.linalg.eigh(basis.T @ maa @ basis)
+    ratio = period * kd / inertia[0]
+    if ratio <= 1.0:
+        return ''
+    joint = nominal.joint_names[nominal.active[int(np.argmax(np.abs(basis @ modes[:, 0])))]]
+    return (f'null-space damping nullspace_kd {kd:g} N m s/rad too stiff for joint {joint}: '
+            f'its internal mode has inertia {inertia[0]:.3g} kg m^2, so one {period * 1e3:g}-ms '
+            f'step removes {ratio:.3g} x its rate (> 1); nullspace_kd <= '
+            f'{BETA * inertia[0] / period:.3g} (fj arm init\'s rule)')
 
 
 @dataclass(frozen=True)
@@ -398,7 +430,7 @@ class SpatialVerdict:
 
 
 def check_spatial_plan(nominal, q, qd, radius, duration, max_speed, max_acceleration,
-                       p0=None, reach=None, normal=None):
+                       p0=None, reach=None, normal=None, kd=KD, kp=KP):
     """
     Check a spatial plan from the arm's state (module notes); the first refusal wins.
 
@@ -420,6 +452,9 @@ def check_spatial_plan(nominal, q, qd, radius, duration, max_speed, max_accelera
     normal : array_like, (3,), optional
         Normal of the circle's plane (the ``plane_normal`` parameter; None or zeros: the
         vertical plane facing the robot).
+    kd, kp : float
+        The controller's null-space damping [N m s/rad] and posture stiffness [N m/rad]
+        (``nullspace_kd``, ``nullspace_kp``: the planner's parameters of the same names).
 
     Returns
     -------
@@ -441,7 +476,7 @@ def check_spatial_plan(nominal, q, qd, radius, duration, max_speed, max_accelera
     rest, why = gravity_carrying_free_joint(nominal, q)
     if rest is None:
         return SpatialVerdict(why, path, margin)
-    loop = nominal_loop(nominal, q, qd, path)
+    loop = nominal_loop(nominal, q, qd, path, kd=kd, kp=kp)
     return SpatialVerdict(loop.reason, path, margin, rest, loop)
 
 
