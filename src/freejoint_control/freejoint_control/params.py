@@ -73,6 +73,15 @@ def _h_form(value):
     return None if value in H_FORMS else f"expected 'sum' or 'sat', got {value!r}"
 
 
+def _nonnegative_floats(name):
+    def check(value):
+        vals = _floats(name, value)
+        if any(not 0.0 <= v <= 1e4 for v in vals):
+            return f'values must be in [0, 1e4], got {list(vals)}'
+        return None
+    return check
+
+
 def _positive_floats(name):
     def check(value):
         vals = _floats(name, value)
@@ -114,6 +123,12 @@ FAILURE_PARAMS = (
           'null-space damping [N m s/rad] of the active joint rates when more joints are '
           'driven than the task has (r > 2, freejoint_core.internal.NullSpace); 0 = none '
           "(the paper's law exactly)", (0.0, 1e4), read_only=True),
+    Param('nullspace_kd_joints', [0.0],
+          "spatial law: null-space damping per active joint [N m s/rad] (r values, the "
+          'active joints base to tip), in place of nullspace_kd; [0.0] (default) = '
+          'nullspace_kd for every joint. fj arm init sets it from the joints\' effective '
+          'inertia (freejoint_core.arm_gains)', read_only=True,
+          validator=_nonnegative_floats('nullspace_kd_joints')),
     Param('nullspace_kp', 0.0,
           "null-space posture stiffness [N m/rad] of the spatial law (law 'spatial'): the "
           "active joints are pulled to their angles at the law's first tick after start-up "
@@ -442,7 +457,15 @@ def _check_spatial(values):
         if values['nullspace_kp'] != 0.0:
             return ("nullspace_kp: the posture term is the spatial law's (task_dim 3); a "
                     'planar arm takes 0')
+        if list(values['nullspace_kd_joints']) != [0.0]:
+            return ("nullspace_kd_joints: the spatial law's (task_dim 3); a planar arm takes "
+                    '[0.0] (nullspace_kd)')
         return None
+    per_joint = list(values['nullspace_kd_joints'])
+    active = resolve_arm(values).spatial.r
+    if per_joint != [0.0] and len(per_joint) != active:
+        return (f'nullspace_kd_joints: expected {active} values (one per active joint) or '
+                f'[0.0], got {per_joint}')
     for name, planar in (('joint_failures', 'off'), ('delay_compensation', 'off'),
                          ('free_link_damping', False)):
         if values[name] != planar:

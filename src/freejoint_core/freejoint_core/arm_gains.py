@@ -2,38 +2,47 @@
 Null-space gains of a spatial arm from its own inertia (the rule of ``fj arm init``).
 
 The spatial law (``spatial_law.SpatialControlLaw``) adds to the task torque
-``N tau_0``, ``tau_0 = -kd qd_a + kp (q_a0 - q_a)`` (null-space damping and posture
-stiffness, the controller's ``nullspace_kd`` / ``nullspace_kp``).  The task rows are
-decoupled by the nominal inertia, so the task gains ``K``, ``Lambda`` (s^-1) and the
-robust bound ``R`` are accelerations and do not depend on the arm's size; the null-space
-gains are torques per rate and per angle, and do.
+``N tau_0``, ``tau_0 = -D qd_a + kp (q_a0 - q_a)`` (null-space damping, per active joint
+``D = diag(kd_i)``: the controller's ``nullspace_kd_joints``, or ``nullspace_kd`` for all;
+posture stiffness ``nullspace_kp``).  The task rows are decoupled by the nominal inertia,
+so the task gains ``K``, ``Lambda`` (s^-1) and the robust bound ``R`` are accelerations and
+do not depend on the arm's size; the null-space gains are torques per rate and per angle,
+and do.
 
 **Derivation.** Let ``Z`` (r x (r - m)) be an orthonormal basis of the kernel of
 ``J~ = Da M~aa`` (the constrained Jacobian: the active joint motions that do not move the
-tip, the free joints following).  Internal motion ``qd_a = Z nu``
-has kinetic energy ``nu^T (Z^T M~aa Z) nu / 2`` and, with the dynamically consistent
-projector, is driven only by the null-space torque, whose damping part does work
-``-kd nu^T Z^T Z nu = -kd |nu|^2``.  So each internal mode ``i`` obeys
-``I_i nud_i = -kd nu_i`` with ``I_i`` the eigenvalues of ``Z^T M~aa Z`` (the
-*null-space inertia*, kg m^2).  A controller that holds its torque over a period ``dt``
-(zero-order hold) maps ``nu_{k+1} = (1 - dt kd / I_i) nu_k``: stable for
-``dt kd / I_i < 2``, without overshoot for ``< 1``.  The lightest mode ``I_min`` decides.
-The rule::
+tip, the free joints following).  Internal motion ``qd_a = Z nu`` is driven only by the
+projected null-space torque (``Z^T N = Z^T`` for the dynamically consistent projector
+``N = I - X Da``), so ``(Z^T M~aa Z) nud = -(Z^T D Z) nu``: the internal modes decay at
+the generalized eigenvalues ``lambda`` of ``(Z^T D Z, Z^T M~aa Z)`` [1/s].  A controller
+that holds its torque over a period ``dt`` (zero-order hold) maps each mode by
+``1 - dt lambda``: stable for ``dt lambda < 2``, without overshoot for ``< 1``.  With one
+``kd`` for all joints, ``lambda = kd / I`` with ``I`` the eigenvalues of ``Z^T M~aa Z``
+(the *null-space inertia*), so the lightest mode (a light wrist spinning) bounds ``kd`` and
+leaves the heavy modes undamped.  Per joint, ``kd_i`` in proportion to the joint's own
+effective inertia ``I_i = (M~aa)_ii`` (about its axis, the free joints following) gives
+every mode a similar rate.  The rule::
 
-    kd = min(KD_REF, BETA I_min / CHECK_DT),   kp = kd / POSTURE_TIME
+    kd_i = min(KD_REF, BETA I_i / CHECK_DT),   then all kd_i / s where
+    s = max(1, CHECK_DT lambda_max)  (no internal mode reverses in one check step)
+    kp = KD_REF / POSTURE_TIME
 
 ``BETA`` = 0.5 at the planner's check period ``CHECK_DT`` = 2 ms (the coarsest loop that
-must stay stable; 0.25 at the controller's 1 ms): the fastest internal mode loses at most
-half its rate per check step and never reverses.  ``KD_REF`` = 20 N m s/rad caps it (the
-value the UR5 and Panda were tuned with; a heavier arm is damped no harder than they are).
-``kp = kd / POSTURE_TIME``, ``POSTURE_TIME`` = 2 s (their ratio 10 / 20): the posture
-term is a slow pull, ``kp dt^2 / I_min`` is ``BETA dt / POSTURE_TIME`` = 5e-4, far below
-the damping's share.  ``I_min`` is taken at the start posture on the nominal model.
+must stay stable; half that at the controller's 1 ms).  ``KD_REF`` = 20 N m s/rad caps it
+(the value the UR5 and Panda were tuned with; a heavier joint is damped no harder).
+``kp`` = 10 N m/rad (their value): the posture term is a slow pull (time constant
+``kd_i / kp`` = 2 s on a capped joint); on a light joint it is damped by
+``zeta_i = kd_i / (2 sqrt(kp I_i)) = (BETA / (2 CHECK_DT)) sqrt(I_i / kp)`` (0.88 at
+``I_i`` = 5e-4 kg m^2), and ``kp dt^2 / I_i`` stays below 0.02 at 1 ms.  Everything is
+taken at the start posture on the nominal model; the planner's nominal closed loop checks
+the whole circle with these gains.
 
-Hand figures: UR5 (wrist_2 free, 70 % model, its start posture) ``I_min`` = 0.518 kg m^2
-gives 0.5 x 0.518 / 0.002 = 129.6 -> capped at 20; a mode of 0.0005 kg m^2 gives
-0.125 N m s/rad.
+Hand figures: ``I_i`` = 5e-4 kg m^2 gives 0.5 x 5e-4 / 0.002 = 0.125 N m s/rad; 0.05 gives
+12.5; 0.1 and above the cap 20.  (The UR5's shipped scalar ``kd`` = 20 has
+``dt lambda`` = 3.3 at 2 ms on its wrist_3 mode, 0.012 kg m^2: that mode is not excited by
+the circle, and at the controller's 1 ms it is 1.67, stable but reversing every tick.)
 """
+
 
 from freejoint_core.errors import FreejointValueError
 import numpy as np
@@ -91,9 +100,57 @@ def nullspace_inertia(nominal, q):
     return np.linalg.eigvalsh(basis.T @ maa @ basis)
 
 
+def _terms(nominal, q):
+    terms = nominal.terms(np.asarray(q, dtype=float), np.zeros(nominal.n))
+    da, _, maa = nominal.decoupling(terms)
+    return da, maa
+
+
+def joint_inertia(nominal, q):
+    """Return ``diag(M~aa)`` (r,) [kg m^2]: each active joint's inertia about its axis."""
+    return np.diag(_terms(nominal, q)[1]).copy()
+
+
+def mode_steps(nominal, q, kd, dt=CHECK_DT):
+    """
+    Return ``dt lambda`` of the internal modes (descending) and each one's leading joint.
+
+    Parameters
+    ----------
+    nominal : SpatialArm
+    q : array_like, (n,)
+        Posture [rad].
+    kd : float or sequence of float, (r,)
+        Null-space damping [N m s/rad] (one for all or per active joint).
+    dt : float
+        Period [s].
+
+    Returns
+    -------
+    (numpy.ndarray, list of str)
+        ``dt lambda`` per mode (module notes) and the name of the active joint moving most
+        in it; empty without redundancy.
+
+    """
+    da, maa = _terms(nominal, q)
+    basis = kernel_basis(da @ maa)
+    if basis.shape[1] == 0:
+        return np.zeros(0), []
+    damp = np.diag(np.broadcast_to(np.asarray(kd, dtype=float), (nominal.r,)))
+    inertia = basis.T @ maa @ basis
+    # symmetric form: inertia^-1/2 (Z^T D Z) inertia^-1/2
+    w, v = np.linalg.eigh(inertia)
+    half = v @ np.diag(w ** -0.5) @ v.T
+    rates, modes = np.linalg.eigh(half @ basis.T @ damp @ basis @ half)
+    order = np.argsort(rates)[::-1]
+    joints = [nominal.joint_names[nominal.active[int(np.argmax(np.abs(basis @ half @ modes[:, i])))]]
+              for i in order]
+    return dt * rates[order], joints
+
+
 def nullspace_gains(nominal, q, dt=CHECK_DT):
     """
-    Return ``(kd, kp, i_min)`` of the rule (module notes) at the posture ``q``.
+    Return ``(kd, kp, inertia)`` of the rule (module notes) at the posture ``q``.
 
     Parameters
     ----------
@@ -106,9 +163,8 @@ def nullspace_gains(nominal, q, dt=CHECK_DT):
 
     Returns
     -------
-    (float, float, float)
-        ``kd`` [N m s/rad], ``kp`` [N m/rad], and ``I_min`` [kg m^2] (inf: no redundancy,
-        then ``kd = KD_REF``).
+    (tuple of float, float, numpy.ndarray)
+        ``kd_i`` (r,) [N m s/rad], ``kp`` [N m/rad] and ``I_i`` (r,) [kg m^2].
 
     Raises
     ------
@@ -118,12 +174,15 @@ def nullspace_gains(nominal, q, dt=CHECK_DT):
     """
     if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0.0):
         raise FreejointValueError(f'dt: expected a finite number > 0 [s], got {dt!r}')
-    inertia = nullspace_inertia(nominal, q)
-    i_min = float(inertia[0]) if inertia.size else float('inf')
-    kd = min(KD_REF, BETA * i_min / dt)
-    return kd, kd / POSTURE_TIME, i_min
+    inertia = joint_inertia(nominal, q)
+    kd = rule(inertia, dt)
+    steps, _ = mode_steps(nominal, q, kd, dt)
+    if steps.size and steps[0] > 1.0:
+        kd = kd / steps[0]
+    return tuple(float(v) for v in kd), KD_REF / POSTURE_TIME, inertia
 
 
-def damping_step(kd, i_min, dt=CHECK_DT):
-    """Return ``dt kd / I_min``: the share of the lightest internal mode's rate one step removes."""
-    return dt * kd / i_min
+def rule(inertia, dt=CHECK_DT):
+    """Return ``min(KD_REF, BETA I_i / dt)`` [N m s/rad] of joint inertias ``I_i`` [kg m^2]."""
+    return np.minimum(KD_REF, BETA * np.asarray(inertia, dtype=float) / dt)
+

@@ -121,6 +121,7 @@ from .planning import end_effector, grid_bound, grid_extent, join_from_arm, join
 from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle, planner_status, READY, SETTLING
 from .planning import prepare_transition, settle_gate_refusal, swing_deg
 from .spatial_planning import check_spatial_plan, describe as describe_spatial, plane_normal
+from .spatial_planning import planner_kd
 from .spatial_planning import spatial_bounds, SpatialRequest, start_point
 from .stream import Plan, SetpointStream
 
@@ -628,7 +629,7 @@ class PlannerNode(Node, Lifecycle):
             p0 = self._spatial.fk(np.asarray(q, dtype=float))
         return check_spatial_plan(self._node_arm.nominal(cfg['nominal_scale']), q, qd, radius,
                                   duration, cfg['max_speed'], cfg['max_acceleration'], p0=p0,
-                                  normal=cfg['plane_normal'], kd=cfg['nullspace_kd'],
+                                  normal=cfg['plane_normal'], kd=planner_kd(cfg),
                                   kp=cfg['nullspace_kp'])
 
     def _execute_spatial(self, radius, duration, start_delay, source, verdict=None):

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import math
 import time
 
-from freejoint_core.arm_gains import BETA, kernel_basis
+from freejoint_core.arm_gains import joint_inertia, mode_steps, rule
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
 from freejoint_core.spatial_law import arm_reach, gravity_carrying_free_joint, SpatialGains
@@ -333,6 +333,8 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
             reason = (f'the nominal closed loop takes the active joint {names[j]} to '
                       f'{x[j]:.4f} rad at t = {t:.3f} s, outside its URDF limits '
                       f'[{lower[j]:.4f}, {upper[j]:.4f}] rad')
+            stiff = too_stiff(nominal, x, kd, period)
+            reason += f': {stiff}' if stiff else ''
             break
         p_d, v_d, a_d = path.sample(t)
         try:
@@ -367,32 +369,34 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
                      tuple(q_min.tolist()), tuple(q_max.tolist()), outside)
 
 
+def planner_kd(cfg):
+    """Return the planner's null-space damping: ``nullspace_kd_joints`` unless [0.0], else ``nullspace_kd``."""
+    per_joint = tuple(float(v) for v in cfg['nullspace_kd_joints'])
+    return float(cfg['nullspace_kd']) if per_joint == (0.0,) else per_joint
+
+
 def too_stiff(nominal, q, kd, period=CHECK_PERIOD):
     """
-    Return why ``kd`` is too stiff for the arm's lightest internal mode at ``q``, or ''.
+    Return why the null-space damping ``kd`` is too stiff for the arm at ``q``, or ''.
 
-    The null-space damping removes ``period kd / I`` of an internal mode's rate per step
-    (``freejoint_core.arm_gains``: ``I`` an eigenvalue of the null-space inertia); above
-    1 the mode reverses each step, at 2 it grows. The reason names the joint that moves
-    most in that mode, the ratio and the largest ``kd`` of the rule
-    (``arm_gains.nullspace_gains``).
+    One step of ``period`` removes ``period lambda`` of an internal mode's rate
+    (``freejoint_core.arm_gains.mode_steps``); above 1 the mode reverses each step, at 2 it
+    grows. The reason names the joint that moves most in the stiffest mode, the ratio, and
+    that joint's effective inertia and damping of ``fj arm init``'s rule.
     """
-    if kd <= 0.0:
+    if not np.any(np.asarray(kd, dtype=float) > 0.0):
         return ''
-    terms = nominal.terms(np.asarray(q, dtype=float), np.zeros(nominal.n))
-    da, _, maa = nominal.decoupling(terms)
-    basis = kernel_basis(da @ maa)
-    if basis.shape[1] == 0:
+    steps, joints = mode_steps(nominal, q, kd, period)
+    if not steps.size or steps[0] <= 1.0:
         return ''
-    inertia, modes = np.linalg.eigh(basis.T @ maa @ basis)
-    ratio = period * kd / inertia[0]
-    if ratio <= 1.0:
-        return ''
-    joint = nominal.joint_names[nominal.active[int(np.argmax(np.abs(basis @ modes[:, 0])))]]
-    return (f'null-space damping nullspace_kd {kd:g} N m s/rad too stiff for joint {joint}: '
-            f'its internal mode has inertia {inertia[0]:.3g} kg m^2, so one {period * 1e3:g}-ms '
-            f'step removes {ratio:.3g} x its rate (> 1); nullspace_kd <= '
-            f'{BETA * inertia[0] / period:.3g} (fj arm init\'s rule)')
+    i = nominal.joint_names.index(joints[0])
+    a = nominal.active.index(i)
+    inertia = joint_inertia(nominal, q)[a]
+    given = np.broadcast_to(np.asarray(kd, dtype=float), (nominal.r,))[a]
+    return (f'null-space damping too stiff for joint {joints[0]}: nullspace_kd {given:.4g} '
+            f'N m s/rad on its effective inertia {inertia:.3g} kg m^2, one {period * 1e3:g}-ms '
+            f'step removes {steps[0]:.3g} x the rate of its internal mode (> 1); fj arm '
+            f"init's rule gives it {float(rule([inertia])[0]):.3g} (nullspace_kd_joints)")
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,9 @@ bound).  Everything comes from the URDF and one documented rule each:
 * the null-space gains: :func:`freejoint_core.arm_gains.nullspace_gains` (its docstring
   derives the rule); task gains ``K``, ``Lambda``, ``R``: the shipped per-row values
   (accelerations after the nominal inertia is inverted: arm-independent);
+* the free joints' viscous damping in the simulator (``passive_damping``): their URDF
+  ``<dynamics damping>`` (a failed joint keeps its drivetrain; none given: 0), capped
+  at what the simulator's RK4 integrates stably (:func:`stable_damping`);
 * the circle: radius ``min(0.1 m, L / 10)``, the planner's 5-s duration and facing plane.
 
 A refusal is one line naming the cause and the numbers (:class:`ArmInitError`).
@@ -84,6 +87,42 @@ def tip_leaf(text, base):
     return best(base)[2]
 
 
+def joint_damping(text, names):
+    """
+    Return the smallest ``<dynamics damping>`` [N m s/rad] of the joints ``names`` (0: none).
+
+    A failed joint keeps its drivetrain (docs/spatial.md): the simulator's
+    ``passive_damping`` of the free joints is what their URDF says.
+    """
+    import xml.etree.ElementTree as ET
+    robot = ET.fromstring(text)
+    values = []
+    for joint in robot.findall('joint'):
+        if joint.get('name') in names:
+            dyn = joint.find('dynamics')
+            values.append(float(dyn.get('damping', 0.0)) if dyn is not None else 0.0)
+    return min(values) if values else 0.0
+
+
+def stable_damping(real, q, damping):
+    """
+    Return ``(b, asked)``: the free joints' damping the simulator's RK4 integrates stably.
+
+    A viscous damping ``b`` on a free joint of effective inertia ``I = 1 / (M^-1)_pp`` is a
+    decay at ``b / I`` [1/s]; the explicit RK4 at ``dt_sub`` (the simulator's) is stable
+    for ``dt_sub b / I`` up to 2.78: the rule caps ``b`` at ``I / dt_sub`` (the lightest
+    free joint at the start posture), so that the plant, not the arm, does not diverge.
+    ``asked`` is the damping given when capped, else 0.
+    """
+    from freejoint_sim.params import SCHEMA as SIM
+    if damping <= 0.0:
+        return 0.0, 0.0
+    terms = real.terms(np.asarray(q, dtype=float), np.zeros(real.n))
+    inertia = float(min(1.0 / terms.Minv[p, p] for p in real.passive))
+    cap = inertia / float(SIM.defaults()['dt_sub'])
+    return (cap, damping) if damping > cap else (damping, 0.0)
+
+
 def solve_ik(arm, target, q_init, iters=300, tol=1e-6):
     """
     Damped least-squares IK of the tip position, pulled to mid-range in the null space.
@@ -143,7 +182,8 @@ def start_posture(nominal, radius, duration, max_speed, max_acceleration, log=No
     Returns
     -------
     dict
-        ``q0`` (n,), ``kd``, ``kp``, ``i_min``, ``kappa``, ``target``, ``verdict``.
+        ``q0`` (n,), ``kd`` (r,), ``kp``, ``inertia`` (r,), ``kappa``, ``target``,
+        ``verdict``.
 
     Raises
     ------
@@ -181,17 +221,17 @@ def start_posture(nominal, radius, duration, max_speed, max_acceleration, log=No
         if rest is None:
             reasons.append(why)
             continue
-        kd, kp, i_min = nullspace_gains(nominal, rest)
+        kd, kp, inertia = nullspace_gains(nominal, rest)
         verdict = check_spatial_plan(nominal, rest, np.zeros(nominal.n), radius, duration,
                                      max_speed, max_acceleration, kd=kd, kp=kp)
         if log is not None:
-            log(f'tip {np.round(target, 3).tolist()} m: kappa {kappa:.3g}, null-space inertia '
-                f'{i_min:.4g} kg m^2 -> kd {kd:.4g}, kp {kp:.4g}: '
-                f"{verdict.reason or 'accepted'}")
+            log(f'tip {np.round(target, 3).tolist()} m: kappa {kappa:.3g}, joint inertias '
+                f'{np.round(inertia, 4).tolist()} kg m^2 -> kd {np.round(kd, 4).tolist()}, kp '
+                f"{kp:.4g}: {verdict.reason or 'accepted'}")
         if verdict.reason:
             reasons.append(verdict.reason)
             continue
-        return {'q0': rest, 'kd': kd, 'kp': kp, 'i_min': i_min, 'kappa': kappa,
+        return {'q0': rest, 'kd': kd, 'kp': kp, 'inertia': inertia, 'kappa': kappa,
                 'target': target, 'verdict': verdict}
     raise ArmInitError('no start posture found: ' + '; '.join(reasons[-2:]))
 
@@ -200,7 +240,8 @@ def _floats(values):
     return '[' + ', '.join(repr(float(v)) for v in values) + ']'
 
 
-def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None):
+def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
+              passive_damping=None):
     """
     Return ``{file name: YAML text}`` of an arm (module notes).
 
@@ -214,6 +255,9 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None):
         The chain's links (default: the URDF's root and the deepest moving leaf).
     radius : float, optional
         The circle's radius [m] (default ``min(RADIUS, L / 10)``).
+    passive_damping : float, optional
+        The free joints' viscous damping in the simulator [N m s/rad] (default: their
+        URDF ``<dynamics damping>``, 0 if none).
 
     Raises
     ------
@@ -256,21 +300,32 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None):
             '# On top of config/{node}.yaml: --params-file config/{node}.yaml '
             '--params-file <this file>.\n')
     loop = found['verdict'].loop
+    damping = joint_damping(text, set(passive)) if passive_damping is None \
+        else float(passive_damping)
+    damping, capped = stable_damping(real, found['q0'], damping)
+    if capped and log is not None:
+        log(f'passive_damping: {capped:g} N m s/rad capped at {damping:.4g}, what the '
+            "simulator's RK4 integrates stably on the free joints' inertia")
     sim = (head.format(node='sim')
            + f'# Start posture: IK of the tip to {np.round(found["target"], 4).tolist()} m '
            f'(kappa {found["kappa"]:.3g}), the free joints at rest.\n'
            '/**:\n  ros__parameters:\n' + arm
            + "    initial_joint_positions: '%s'\n" % ' '.join(repr(float(v))
-                                                       for v in found['q0']))
+                                                       for v in found['q0'])
+           + ('' if damping <= 0.0 else
+              "    # the free joints' drivetrain (the URDF's <dynamics damping> unless given)\n"
+              f'    passive_damping: {damping!r}\n'))
     ctl = (head.format(node='controller')
-           + f'# nullspace_kd = min({20.0:g}, 0.5 x {found["i_min"]:.4g} kg m^2 / 2 ms), '
-           'nullspace_kp = kd / 2 s (freejoint_core.arm_gains);\n'
+           + '# nullspace_kd_joints: min(20, 0.5 I_i / 2 ms) of the joints\' effective '
+           f'inertias I_i {np.round(found["inertia"], 5).tolist()} kg m^2,\n# nullspace_kp '
+           '10 (freejoint_core.arm_gains);\n'
            "# limits: the URDF's (free and continuous joints: wide plausibility bounds).\n"
            '/**:\n  ros__parameters:\n' + arm
            + '    law: spatial\n'
            '    K: [100.0, 100.0, 100.0]\n    Lambda: [50.0, 50.0, 50.0]\n'
            '    R: [2.0, 2.0, 2.0]\n'
-           f'    nullspace_kd: {found["kd"]!r}\n    nullspace_kp: {found["kp"]!r}\n'
+           f'    nullspace_kd_joints: {_floats(found["kd"])}\n'
+           f'    nullspace_kp: {found["kp"]!r}\n'
            f'    effort_limits: {_floats(real.effort[list(real.active)])}\n'
            f'    joint_position_lower: {_floats(lower)}\n'
            f'    joint_position_upper: {_floats(upper)}\n'
@@ -279,7 +334,8 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None):
                + f'# The check at init: {loop.describe()}.\n'
                '/**:\n  ros__parameters:\n' + arm
                + f'    radius: {radius!r}\n'
-               f'    nullspace_kd: {found["kd"]!r}\n    nullspace_kp: {found["kp"]!r}\n')
+               f'    nullspace_kd_joints: {_floats(found["kd"])}\n'
+               f'    nullspace_kp: {found["kp"]!r}\n')
     meta = ('# What make demo ARM=DIR and spatial_offline --arm DIR read besides the nodes\' '
             'files.\n'
             f'name: {os.path.splitext(os.path.basename(path))[0]}_'
@@ -291,9 +347,10 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None):
             'arm.yaml': meta}
 
 
-def init_arm(urdf, passive, out, tip=None, base=None, radius=None, log=None):
+def init_arm(urdf, passive, out, tip=None, base=None, radius=None, log=None,
+             passive_damping=None):
     """Write :func:`arm_files` into ``out`` (created); return the paths written."""
-    files = arm_files(urdf, passive, tip, base, radius, log)
+    files = arm_files(urdf, passive, tip, base, radius, log, passive_damping)
     os.makedirs(out, exist_ok=True)
     paths = []
     for name, text in files.items():
