@@ -111,6 +111,12 @@ def arm_info(arm):
             'spatial': str(info['name']), 'hold_s': float(info['hold_s'])}
 
 
+def spatial_titles(passive_joint):
+    """Return the table titles of a spatial arm: its free joint's range, its kappa."""
+    name = passive_joint[:-len('_joint')] if passive_joint.endswith('_joint') else passive_joint
+    return {'q3_deg': name + '_deg', 'min_det': 'min_kappa'}
+
+
 def executable(pkg, exe):
     """Return what ``ros2 run <pkg> <exe>`` starts: install/<pkg>/lib/<pkg>/<exe>."""
     return os.path.join(INSTALL, pkg, 'lib', pkg, exe)
@@ -398,7 +404,8 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
                 next_report = now + 1.0
                 rtf = ns * 1e-9 / max(now - first_wall, 1e-9)
                 progress('  %-10s t = %.3f of %.3f s sim   (%.2fx real time)'
-                         % (case, ns * 1e-9, last_ns * 1e-9, rtf))
+                         % (recorded_as[0] if recorded_as else case, ns * 1e-9,
+                            last_ns * 1e-9, rtf))
             if graph.exited():
                 raise RuntimeError('%s exited during the run (logs in %s)'
                                    % (graph.exited(), log_dir))
@@ -781,11 +788,11 @@ def main(argv=None):
                 time.sleep(0.1)
             say('viewer: %s' % view.tail(proc, 1).split(']: ')[-1].strip())
         for i, case in enumerate(args.cases):
+            label = arm_info(args.arm)['spatial'] if spatial else case
             who = 'recorder, ' if record_bags else ''
             say('case %d/%d: %s - starting %ssim_node, controller_node, planner_node '
-                '(lockstep, %s, seed %d)' % (
-                    i + 1, len(args.cases), arm_info(args.arm)['spatial'] if spatial else case,
-                    who, 'spatial' if spatial else 'robust', args.seed))
+                '(lockstep, %s, seed %d)' % (i + 1, len(args.cases), label, who,
+                                             'spatial' if spatial else 'robust', args.seed))
             if collector is not None:
                 collector.close()
             collector = Collector(node)
@@ -797,12 +804,12 @@ def main(argv=None):
                                 recorded_as=(arm_info(args.arm)['spatial'], 'spatial')
                                 if spatial else None)
             except RuntimeError as exc:
-                say('error: %s: %s' % (case, exc))
+                say('error: %s: %s' % (label, exc))
                 failed = True
                 break
             bad = {name: code for name, code in run['codes'].items() if code != 0}
             say('  %s: %.3f s simulated in %.2f s wall (%.2fx real time); stopped cleanly%s'
-                % (case, run['sim_s'], run['wall_s'], run['sim_s'] / run['wall_s'],
+                % (label, run['sim_s'], run['wall_s'], run['sim_s'] / run['wall_s'],
                    '' if not bad else ' EXCEPT %s' % bad))
             with open(run['sim_log']) as f:
                 stop_line = [line for line in f if 'simulator stopped' in line]
@@ -813,7 +820,7 @@ def main(argv=None):
                     collector, arm_info(args.arm)['spatial'] if spatial else case, args.seed,
                     n_ticks, passive_joint, 'spatial' if spatial else 'robust')
             except (RuntimeError, ValueError) as exc:
-                say('error: %s: %s' % (case, exc))
+                say('error: %s: %s' % (label, exc))
                 failed = True
                 break
             if args.fail:
@@ -901,7 +908,7 @@ def main(argv=None):
         rows = [r for pair in zip(offline_records, graph_records) for r in pair] \
             if offline_records else graph_records
         print()
-        print(format_table(rows))
+        print(format_table(rows, titles=spatial_titles(passive_joint) if spatial else None))
         print()
     if not failed and os.path.exists(analyze) and record_bags:
         bags = [run['bag'] for run in runs]

@@ -194,7 +194,7 @@ _COLUMNS = (
 )
 
 
-def format_table(records, theta=False):
+def format_table(records, theta=False, titles=None):
     """
     Format records as a fixed-width text table (one row per record).
 
@@ -209,6 +209,10 @@ def format_table(records, theta=False):
         Records as from :func:`compute_record`.
     theta : bool
         Append the ``theta_final`` column.
+    titles : dict, optional
+        Column titles to show instead (e.g. a spatial arm's ``{'q3_deg': 'wrist_2_deg',
+        'min_det': 'min_kappa'}``: its free joint and its conditioning kappa); a column
+        widens to its title.
 
     Returns
     -------
@@ -217,7 +221,8 @@ def format_table(records, theta=False):
 
     """
     records = _check_records(records)
-    cols = list(_COLUMNS)
+    cols = [((titles or {}).get(title, title), max(w, len((titles or {}).get(title, title))),
+             fmt) for title, w, fmt in _COLUMNS]
     if theta:
         cols.append(('theta_final', 44,
                      lambda r: ' '.join(f'{v:.2e}' for v in r['theta_final'])))

@@ -17,7 +17,8 @@ bound).  Everything comes from the URDF and one documented rule each:
   solution of largest ``kappa`` within the limits (margin :data:`LIMIT_MARGIN`; scaled
   down within :data:`PREFERRED_MARGIN` of a limit), then the
   free joints' rest posture (``gravity_carrying_free_joint``) - accepted when the
-  planner's own check (:func:`freejoint_planner.spatial_planning.check_spatial_plan`,
+  planner's nominal loop stays :data:`LOOP_MARGIN` inside the active joints' limits and its
+  own check (:func:`freejoint_planner.spatial_planning.check_spatial_plan`,
   with these gains) accepts the circle from it;
 * the null-space gains: :func:`freejoint_core.arm_gains.nullspace_gains` (its docstring
   derives the rule); task gains ``K``, ``Lambda``, ``R``: the shipped per-row values
@@ -49,6 +50,9 @@ SEEDS = 24
 """IK start postures per target: the middle of the limits, then uniform draws (seed 0)."""
 LIMIT_MARGIN = 0.15
 """[rad] Distance a start posture keeps from every bounded joint's position limits."""
+LOOP_MARGIN = 0.2
+"""[rad] Distance the planner's nominal closed loop must keep from every bounded active
+joint's limits (the real arm, the 70 % model and the disturbance depart from it)."""
 PREFERRED_MARGIN = 0.5
 """[rad] Below this distance from a limit a solution's kappa counts in proportion."""
 FREE_BOUND = 1000.0
@@ -175,6 +179,19 @@ def limit_margin(arm, q):
     return float(np.min(gaps)) if gaps.size else math.inf
 
 
+def loop_margin_refusal(nominal, loop):
+    """Return why the nominal loop passes within ``LOOP_MARGIN`` of an active joint's limit."""
+    for j in nominal.active:
+        low = loop.q_min[j] - nominal.lower[j]
+        high = nominal.upper[j] - loop.q_max[j]
+        if min(low, high) < LOOP_MARGIN:
+            end, bound = (loop.q_min[j], nominal.lower[j]) if low < high else \
+                (loop.q_max[j], nominal.upper[j])
+            return (f'the nominal closed loop takes {nominal.joint_names[j]} to {end:.4f} rad, '
+                    f'within {LOOP_MARGIN} rad of its URDF limit {bound:.4f} rad')
+    return ''
+
+
 def start_posture(nominal, radius, duration, max_speed, max_acceleration, log=None):
     """
     Return the start posture, the plan check's verdict and the gains (module notes).
@@ -228,8 +245,11 @@ def start_posture(nominal, radius, duration, max_speed, max_acceleration, log=No
             log(f'tip {np.round(target, 3).tolist()} m: kappa {kappa:.3g}, joint inertias '
                 f'{np.round(inertia, 4).tolist()} kg m^2 -> kd {np.round(kd, 4).tolist()}, kp '
                 f"{kp:.4g}: {verdict.reason or 'accepted'}")
-        if verdict.reason:
-            reasons.append(verdict.reason)
+        reason = verdict.reason or loop_margin_refusal(nominal, verdict.loop)
+        if verdict.reason == '' and reason and log is not None:
+            log(reason)
+        if reason:
+            reasons.append(reason)
             continue
         return {'q0': rest, 'kd': kd, 'kp': kp, 'inertia': inertia, 'kappa': kappa,
                 'target': target, 'verdict': verdict}
