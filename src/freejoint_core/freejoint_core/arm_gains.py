@@ -27,18 +27,22 @@ every mode a similar rate.  The rule::
     s = max(1, CHECK_DT lambda_max)  (no internal mode reverses in one check step)
     kp = KD_REF / POSTURE_TIME
 
-``BETA`` = 0.5 at the planner's check period ``CHECK_DT`` = 2 ms (the coarsest loop that
-must stay stable; half that at the controller's 1 ms).  ``KD_REF`` = 20 N m s/rad caps it
+``BETA`` = 1 at the planner's check period ``CHECK_DT`` = 2 ms (the coarsest loop that
+must stay stable): a joint alone would lose its whole rate in one check step, half of it
+per 1-ms control period, the no-reversal bound.  Not less: the disturbance's speed noise
+on a light joint grows as ``1 / sqrt(1 - (1 - a)^2)`` with ``a`` the share removed per
+control period (with 0.5 here, ``a`` = 0.25, the UR10's wrist_3, 4e-4 kg m^2, passed its
+3.2 rad/s under the +-0.5 N m disturbance, 1.10 x; ``a`` = 0.5 gives 0.76 of that noise).  ``KD_REF`` = 20 N m s/rad caps it
 (the value the UR5 and Panda were tuned with; a heavier joint is damped no harder).
 ``kp`` = 10 N m/rad (their value): the posture term is a slow pull (time constant
 ``kd_i / kp`` = 2 s on a capped joint); on a light joint it is damped by
-``zeta_i = kd_i / (2 sqrt(kp I_i)) = (BETA / (2 CHECK_DT)) sqrt(I_i / kp)`` (0.88 at
+``zeta_i = kd_i / (2 sqrt(kp I_i)) = (BETA / (2 CHECK_DT)) sqrt(I_i / kp)`` (1.77 at
 ``I_i`` = 5e-4 kg m^2), and ``kp dt^2 / I_i`` stays below 0.02 at 1 ms.  Everything is
 taken at the start posture on the nominal model; the planner's nominal closed loop checks
 the whole circle with these gains.
 
-Hand figures: ``I_i`` = 5e-4 kg m^2 gives 0.5 x 5e-4 / 0.002 = 0.125 N m s/rad; 0.05 gives
-12.5; 0.1 and above the cap 20.  (The UR5's shipped scalar ``kd`` = 20 has
+Hand figures: ``I_i`` = 5e-4 kg m^2 gives 1 x 5e-4 / 0.002 = 0.25 N m s/rad; 0.02 gives
+10; 0.04 and above the cap 20.  (The UR5's shipped scalar ``kd`` = 20 has
 ``dt lambda`` = 3.3 at 2 ms on its wrist_3 mode, 0.012 kg m^2: that mode is not excited by
 the circle, and at the controller's 1 ms it is 1.67, stable but reversing every tick.)
 """
@@ -49,7 +53,7 @@ import numpy as np
 
 KD_REF = 20.0
 """[N m s/rad] Largest null-space damping the rule gives (the shipped arms' value)."""
-BETA = 0.5
+BETA = 1.0
 """Share of the lightest internal mode's rate the damping removes per check period."""
 CHECK_DT = 2e-3
 """[s] The period the rule is stable at (the planner's nominal-loop period)."""

@@ -194,6 +194,10 @@ _COLUMNS = (
 )
 
 
+SPATIAL_TITLES = {'q3_deg': 'free_deg', 'min_det': 'min_kappa'}
+"""A spatial arm's titles of the passive angle range and of its conditioning (kappa)."""
+
+
 def format_table(records, theta=False, titles=None):
     """
     Format records as a fixed-width text table (one row per record).
@@ -212,7 +216,8 @@ def format_table(records, theta=False, titles=None):
     titles : dict, optional
         Column titles to show instead (e.g. a spatial arm's ``{'q3_deg': 'wrist_2_deg',
         'min_det': 'min_kappa'}``: its free joint and its conditioning kappa); a column
-        widens to its title.
+        widens to its title. Default: :data:`SPATIAL_TITLES` when every record is a spatial
+        arm's (variant 'spatial'), else the planar titles.
 
     Returns
     -------
@@ -221,6 +226,8 @@ def format_table(records, theta=False, titles=None):
 
     """
     records = _check_records(records)
+    if titles is None and records and all(r['variant'] == 'spatial' for r in records):
+        titles = SPATIAL_TITLES
     cols = [((titles or {}).get(title, title), max(w, len((titles or {}).get(title, title))),
              fmt) for title, w, fmt in _COLUMNS]
     if theta:

@@ -387,7 +387,7 @@ def too_stiff(nominal, q, kd, period=CHECK_PERIOD):
     if not np.any(np.asarray(kd, dtype=float) > 0.0):
         return ''
     steps, joints = mode_steps(nominal, q, kd, period)
-    if not steps.size or steps[0] <= 1.0:
+    if not steps.size or steps[0] <= 1.0 + 1e-9:      # the rule scales to 1 exactly
         return ''
     i = nominal.joint_names.index(joints[0])
     a = nominal.active.index(i)

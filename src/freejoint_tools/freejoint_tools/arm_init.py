@@ -336,7 +336,7 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
               "    # the free joints' drivetrain (the URDF's <dynamics damping> unless given)\n"
               f'    passive_damping: {damping!r}\n'))
     ctl = (head.format(node='controller')
-           + '# nullspace_kd_joints: min(20, 0.5 I_i / 2 ms) of the joints\' effective '
+           + '# nullspace_kd_joints: min(20, I_i / 2 ms) of the joints\' effective '
            f'inertias I_i {np.round(found["inertia"], 5).tolist()} kg m^2,\n# nullspace_kp '
            '10 (freejoint_core.arm_gains);\n'
            "# limits: the URDF's (free and continuous joints: wide plausibility bounds).\n"
