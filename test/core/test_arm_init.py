@@ -3,6 +3,7 @@
 import math
 import os
 
+from freejoint_control.params import SCHEMA as CONTROLLER
 from freejoint_core.arm_gains import BETA, CHECK_DT, joint_inertia, KD_REF, kernel_basis
 from freejoint_core.arm_gains import mode_steps, nullspace_gains, nullspace_inertia
 from freejoint_core.arm_gains import POSTURE_TIME, rule
@@ -147,6 +148,15 @@ def test_init_then_the_twin_runs_the_jaco_within_its_bound_for_half_a_second(tmp
     out = tmp_path / 'jaco'
     init_arm(os.path.join(robot_data_dir(), JACO[0]), ['j2s6s200_joint_6'], str(out),
              JACO[2], JACO[1])
+    assert sorted(os.listdir(out)) == ['arm.yaml', 'controller.yaml', 'planner.yaml',
+                                       'sim.yaml']
+    # the limits are not written: the controller takes the URDF's (kinova.urdf's numbers)
+    cfg = CONTROLLER.from_yaml(os.path.join(ROOT, 'config', 'controller.yaml'),
+                               str(out / 'controller.yaml'))
+    assert cfg.effort_limits == (40.0, 80.0, 40.0, 20.0, 20.0)
+    assert cfg.position_lower[:3] == (-1000.0, 0.820304748437, 0.331612557879)  # 1: continuous
+    assert cfg.position_upper[5] == 1000.0 and cfg.velocity_limit[5] == 1000.0  # 6: free
+    assert cfg.velocity_limit[:5] == (0.628318530718,) * 3 + (0.837758040957,) * 2
     demo = load_source(os.path.join(ROOT, 'tools', 'demo.py'), 'freejoint_demo')
     record, trace = demo.spatial_offline(str(out), 0, 500)
     assert len(trace['p']) == 500 and record['diverged_at_s'] is None

@@ -8,10 +8,10 @@ ARM=DIR`` and ``spatial_offline --arm DIR`` read besides: the free joint, the ho
 bound).  Everything comes from the URDF and one documented rule each:
 
 * the chain ``base -> tip`` (default base: the URDF's root; tip: the one leaf link at the
-  end of the longest chain of moving joints), its limits (effort of the active joints,
-  position and velocity of all; the free joints' plausibility bounds wide, as the
-  shipped arms': a free joint is not driven); continuous joints have no position limits
-  (the controller's bounds +-1000 rad);
+  end of the longest chain of moving joints); its limits are not written: the controller
+  takes a spatial arm's URDF limits where they are not given
+  (``freejoint_control.params.arm_limits``: a free joint's bounds and a continuous
+  joint's position bounds wide, as the shipped arms');
 * the start posture: inverse kinematics of the tip to the first of :data:`TARGETS` (a
   point ahead of the base at a share of the reach ``L``) from deterministic seeds, the
   solution of largest ``kappa`` within the limits (margin :data:`LIMIT_MARGIN`; scaled
@@ -55,8 +55,6 @@ LOOP_MARGIN = 0.2
 joint's limits (the real arm, the 70 % model and the disturbance depart from it)."""
 PREFERRED_MARGIN = 0.5
 """[rad] Below this distance from a limit a solution's kappa counts in proportion."""
-FREE_BOUND = 1000.0
-"""[rad, rad/s] The controller's plausibility bounds of a free or continuous joint."""
 RADIUS = 0.1
 """[m] The circle's radius (at most a tenth of the reach)."""
 HOLD_S = 10.0
@@ -304,12 +302,6 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
     radius = float(radius) if radius is not None else min(RADIUS, reach / 10.0)
     found = start_posture(nominal, radius, float(plan['duration']), float(plan['max_speed']),
                           float(plan['max_acceleration']), log)
-    free = set(real.passive)
-    unbounded = set(real.joint_names.index(n) for n in real.continuous)
-    wide = free | unbounded
-    lower = [-FREE_BOUND if j in wide else real.lower[j] for j in range(real.n)]
-    upper = [FREE_BOUND if j in wide else real.upper[j] for j in range(real.n)]
-    vel = [FREE_BOUND if j in free else real.velocity[j] for j in range(real.n)]
     arm = ('    task_dim: 3\n'
            f'    description_file: {path}\n'
            f'    base_link: {base}\n'
@@ -339,17 +331,14 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
            + '# nullspace_kd_joints: min(20, I_i / 2 ms) of the joints\' effective '
            f'inertias I_i {np.round(found["inertia"], 5).tolist()} kg m^2,\n# nullspace_kp '
            '10 (freejoint_core.arm_gains);\n'
-           "# limits: the URDF's (free and continuous joints: wide plausibility bounds).\n"
+           '# effort_limits, joint_position_lower/upper, joint_velocity_limit: not given, the '
+           "URDF's\n# (freejoint_control.params.arm_limits; free and continuous joints wide).\n"
            '/**:\n  ros__parameters:\n' + arm
            + '    law: spatial\n'
            '    K: [100.0, 100.0, 100.0]\n    Lambda: [50.0, 50.0, 50.0]\n'
            '    R: [2.0, 2.0, 2.0]\n'
            f'    nullspace_kd_joints: {_floats(found["kd"])}\n'
-           f'    nullspace_kp: {found["kp"]!r}\n'
-           f'    effort_limits: {_floats(real.effort[list(real.active)])}\n'
-           f'    joint_position_lower: {_floats(lower)}\n'
-           f'    joint_position_upper: {_floats(upper)}\n'
-           f'    joint_velocity_limit: {_floats(vel)}\n')
+           f'    nullspace_kp: {found["kp"]!r}\n')
     planner = (head.format(node='planner')
                + f'# The check at init: {loop.describe()}.\n'
                '/**:\n  ros__parameters:\n' + arm
