@@ -1,7 +1,7 @@
 """
 The offline twin of ``make demo ARM=<arm>`` over seeds: one JSON line per seed, then a verdict.
 
-Usage: ``python tools/arm_offline.py ARM [--seeds 10] [--t-stop S]`` with ARM a shipped
+Usage: ``python tools/arm_offline.py ARM [--seeds 10] [--first 0] [--t-stop S]`` with ARM a shipped
 spatial arm (ur5, panda) or a directory of ``fj arm init``. Each seed runs
 ``tools/demo.py``'s ``spatial_offline`` (the graph's twin: the parameter files of the
 three nodes, the law the controller builds, the planner's circle, the hold) and reports
@@ -27,7 +27,8 @@ def main(argv=None):
     """Run the seeds; return the exit status."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     ap.add_argument('arm', help='ur5, panda or a directory of fj arm init')
-    ap.add_argument('--seeds', type=int, default=10, help='seeds 0..N-1')
+    ap.add_argument('--seeds', type=int, default=10, help='seeds FIRST..FIRST+N-1')
+    ap.add_argument('--first', type=int, default=0, metavar='FIRST', help='first seed (0)')
     ap.add_argument('--t-stop', type=float, help='end each run at this time [s] (tests)')
     args = ap.parse_args(argv)
     arm = args.arm if args.arm in demo.ARMS else os.path.abspath(args.arm)
@@ -40,7 +41,7 @@ def main(argv=None):
     n_ticks = int(round(seconds / dt))
     failed = 0
     worst = 0.0
-    for seed in range(args.seeds):
+    for seed in range(args.first, args.first + args.seeds):
         record, _ = demo.spatial_offline(arm, seed, n_ticks)
         row = {'arm': info['spatial'], 'seed': seed}
         row.update({key: record[key] for key in KEYS})

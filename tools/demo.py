@@ -30,7 +30,10 @@ example-robot-data's URDF (``config/<arm>/``: UR5 with wrist_2 free, Panda with 
 free, task_dim 3): the tip's 0.1-m circle in the vertical plane facing the robot, then a
 10-s hold, beside the offline twin (``freejoint_core.spatial_offline.run_twin`` with the
 graph's parameter files); the tip compared tick by tick (1e-9 m), the 3-mm bound, the
-efforts and joint speeds against the URDF's limits.
+efforts and joint speeds against the URDF's limits. ``--arm DIR`` does the same for the
+files ``fj arm init`` wrote into DIR (``make demo ARM=DIR``; the run named by DIR's
+arm.yaml), ``--arm FILE.urdf --passive JOINT [--tip T] [--base B]`` runs ``fj arm init``
+into ``OUT/<name>/`` first (docs/own-arm.md).
 ``--fail joint3@2.5`` (``make demo FAIL=joint3@2.5``, issue 23) runs the paper's arm with
 all three joints driven (``config/fully_actuated/``) whose joint 3 loses its actuator and
 brake at 2.5 s (the simulator's ``fail_joint``): the controller detects it (momentum
@@ -640,8 +643,13 @@ def _parse(argv):
     ap.add_argument('--no-record', action='store_true', help='do not start the recorder')
     ap.add_argument('--arm', metavar='ARM',
                     help='run a shipped example arm instead of the paper cases (%s; make '
-                    'demo ARM=four_link), or the directory fj arm init wrote (make demo '
-                    'ARM=DIR)' % ', '.join(sorted(ARMS)))
+                    'demo ARM=four_link), the directory fj arm init wrote (make demo '
+                    'ARM=DIR), or a URDF with --passive (fj arm init into OUT/<name>/arm '
+                    'first)' % ', '.join(sorted(ARMS)))
+    ap.add_argument('--passive', action='append', metavar='JOINT',
+                    help='with --arm FILE.urdf: its free joint (fj arm init --passive)')
+    ap.add_argument('--tip', help='with --arm FILE.urdf: the tip link (fj arm init --tip)')
+    ap.add_argument('--base', help='with --arm FILE.urdf: the base link (fj arm init --base)')
     ap.add_argument('--stabilise', action='store_true',
                     help='the internal-motion stabilisation (vertical: config/stabilised/, the '
                     'free link starts hanging, its damping on; horizontal: '
@@ -673,6 +681,26 @@ def main(argv=None):
     args = _parse(sys.argv[1:] if argv is None else argv)
     t_start = time.monotonic()
     overlays = ()
+    if args.arm and args.arm.endswith('.urdf'):
+        if not args.passive:
+            say('error: --arm %s: a URDF needs --passive JOINT (make demo ARM=... PASSIVE=...)'
+                % args.arm)
+            return 2
+        from freejoint_core.errors import FreejointValueError
+        from freejoint_tools.arm_init import init_arm
+        name = os.path.splitext(os.path.basename(args.arm))[0]
+        arm_dir = os.path.abspath(os.path.join(args.out, name))     # its files, then its bag
+        try:
+            init_arm(args.arm, args.passive, arm_dir, args.tip, args.base,
+                     log=lambda line: say('fj arm init: ' + line))
+        except FreejointValueError as exc:
+            say('error: fj arm init %s: %s' % (args.arm, exc))
+            return 2
+        say('fj arm init: wrote %s' % shown(arm_dir))
+        args.arm = arm_dir
+    elif args.passive or args.tip or args.base:
+        say('error: --passive, --tip and --base go with --arm FILE.urdf')
+        return 2
     if args.arm:
         # The 4-link example alone is the horizontal case: with the free base pivot under
         # gravity the paper's law does not stabilise it (offline: diverges within 0.2 s). A
