@@ -125,8 +125,12 @@ def arm_limits(values, name):
 
 
 def _follows_limits(name):
+    """Return the ``follows`` of a limit list: the arm's, from the other values declared."""
     def follows(values):
-        return list(arm_limits(values, name))
+        try:
+            return list(arm_limits(dict(values, **{name: _LIMIT_DEFAULTS[name]}), name))
+        except KeyError as exc:     # a parameter it reads is not declared yet
+            raise FreejointValueError(f'{name}: follows {exc}') from None
     return follows
 
 
@@ -181,9 +185,9 @@ FAILURE_PARAMS = (
           'driven than the task has (r > 2, freejoint_core.internal.NullSpace); 0 = none '
           "(the paper's law exactly)", (0.0, 1e4), read_only=True),
     Param('nullspace_kd_joints', [0.0],
-          "spatial law: null-space damping per active joint [N m s/rad] (r values, the "
+          'spatial law: null-space damping per active joint [N m s/rad] (r values, the '
           'active joints base to tip), in place of nullspace_kd; [0.0] (default) = '
-          'nullspace_kd for every joint. fj arm init sets it from the joints\' effective '
+          "nullspace_kd for every joint. fj arm init sets it from the joints' effective "
           'inertia (freejoint_core.arm_gains)', read_only=True,
           validator=_nonnegative_floats('nullspace_kd_joints')),
     Param('nullspace_kp', 0.0,
@@ -272,7 +276,8 @@ PARAMS = (
     Param('effort_limits', [300.0, 200.0],
           'per-joint torque limit [N m] (> 0, one per active joint in the order of joints); '
           'the paper runs peak at 13 / 11 (horizontal) and 133 / 74 (vertical). A spatial '
-          "arm (task_dim 3): not given, its URDF's efforts", follows=_follows_limits('effort_limits')),
+          "arm (task_dim 3): not given, its URDF's efforts",
+          follows=_follows_limits('effort_limits')),
     Param('effort_rate_limit', 20000.0,
           'largest torque change [N m/s] per joint after a (re)start, a hold, a reset or a '
           'zero-effort answer, until the command has caught up with the law (then off: the '

@@ -32,7 +32,8 @@ must stay stable): a joint alone would lose its whole rate in one check step, ha
 per 1-ms control period, the no-reversal bound.  Not less: the disturbance's speed noise
 on a light joint grows as ``1 / sqrt(1 - (1 - a)^2)`` with ``a`` the share removed per
 control period (with 0.5 here, ``a`` = 0.25, the UR10's wrist_3, 4e-4 kg m^2, passed its
-3.2 rad/s under the +-0.5 N m disturbance, 1.10 x; ``a`` = 0.5 gives 0.76 of that noise).  ``KD_REF`` = 20 N m s/rad caps it
+3.2 rad/s under the +-0.5 N m disturbance, 1.10 x; ``a`` = 0.5 gives 0.76 of that noise).
+``KD_REF`` = 20 N m s/rad caps it
 (the value the UR5 and Panda were tuned with; a heavier joint is damped no harder).
 ``kp`` = 10 N m/rad (their value): the posture term is a slow pull (time constant
 ``kd_i / kp`` = 2 s on a capped joint); on a light joint it is damped by
@@ -122,6 +123,7 @@ def mode_steps(nominal, q, kd, dt=CHECK_DT):
     Parameters
     ----------
     nominal : SpatialArm
+        The law's model.
     q : array_like, (n,)
         Posture [rad].
     kd : float or sequence of float, (r,)
@@ -147,7 +149,8 @@ def mode_steps(nominal, q, kd, dt=CHECK_DT):
     half = v @ np.diag(w ** -0.5) @ v.T
     rates, modes = np.linalg.eigh(half @ basis.T @ damp @ basis @ half)
     order = np.argsort(rates)[::-1]
-    joints = [nominal.joint_names[nominal.active[int(np.argmax(np.abs(basis @ half @ modes[:, i])))]]
+    shapes = basis @ half @ modes
+    joints = [nominal.joint_names[nominal.active[int(np.argmax(np.abs(shapes[:, i])))]]
               for i in order]
     return dt * rates[order], joints
 
@@ -189,4 +192,3 @@ def nullspace_gains(nominal, q, dt=CHECK_DT):
 def rule(inertia, dt=CHECK_DT):
     """Return ``min(KD_REF, BETA I_i / dt)`` [N m s/rad] of joint inertias ``I_i`` [kg m^2]."""
     return np.minimum(KD_REF, BETA * np.asarray(inertia, dtype=float) / dt)
-

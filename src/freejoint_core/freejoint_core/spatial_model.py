@@ -11,7 +11,8 @@ A continuous joint (Pinocchio's unbounded revolute: two configuration entries, c
 sin, one velocity) is read as a revolute joint about the same axis whose coordinate is
 its angle (:func:`angle_coordinates`): the same kinematics and dynamics, one
 configuration entry per joint as every node's ``q`` has, and no position limits
-(``lower`` / ``upper`` -inf / +inf; :attr:`SpatialArm.continuous` names them).  Gravity is ``(0, 0, -9.81)`` in the URDF's root frame unless given.
+(``lower`` / ``upper`` -inf / +inf; :attr:`SpatialArm.continuous` names them).  Gravity is
+``(0, 0, -9.81)`` in the URDF's root frame unless given.
 
 The task has ``m = 3`` rows (tip position) or ``m = 6`` (position, then orientation),
 in the root frame (``LOCAL_WORLD_ALIGNED``: the angular rows are the world angular

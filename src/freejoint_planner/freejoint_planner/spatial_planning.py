@@ -370,7 +370,7 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
 
 
 def planner_kd(cfg):
-    """Return the planner's null-space damping: ``nullspace_kd_joints`` unless [0.0], else ``nullspace_kd``."""
+    """Return the planner's null-space damping: ``nullspace_kd_joints``, or ``nullspace_kd``."""
     per_joint = tuple(float(v) for v in cfg['nullspace_kd_joints'])
     return float(cfg['nullspace_kd']) if per_joint == (0.0,) else per_joint
 

@@ -4,7 +4,7 @@
 ``fj arm init URDF --passive J [--tip T] [--base B] --out DIR [--radius R]`` writes
 ``DIR/sim.yaml``, ``DIR/controller.yaml``, ``DIR/planner.yaml`` (each on top of the
 shipped ``config/<node>.yaml``, as ``config/ur5/``) and ``DIR/arm.yaml`` (what ``make demo
-ARM=DIR`` and ``spatial_offline --arm DIR`` read besides: the free joint, the hold, the
+ARM=DIR`` and ``tools/arm_offline.py DIR`` read besides: the free joint, the hold, the
 bound).  Everything comes from the URDF and one documented rule each:
 
 * the chain ``base -> tip`` (default base: the URDF's root; tip: the one leaf link at the
@@ -132,10 +132,15 @@ def solve_ik(arm, target, q_init, iters=300, tol=1e-6):
     Parameters
     ----------
     arm : SpatialArm
+        The arm (its limits bound the search).
     target : numpy.ndarray, (3,)
         Tip position [m].
     q_init : numpy.ndarray, (n,)
         Start [rad].
+    iters : int
+        Iteration bound.
+    tol : float
+        Tip error accepted [m].
 
     Returns
     -------
@@ -276,6 +281,8 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
     passive_damping : float, optional
         The free joints' viscous damping in the simulator [N m s/rad] (default: their
         URDF ``<dynamics damping>``, 0 if none).
+    log : callable, optional
+        Called with a line per start point tried.
 
     Raises
     ------
@@ -322,13 +329,13 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
            + f'# Start posture: IK of the tip to {np.round(found["target"], 4).tolist()} m '
            f'(kappa {found["kappa"]:.3g}), the free joints at rest.\n'
            '/**:\n  ros__parameters:\n' + arm
-           + "    initial_joint_positions: '%s'\n" % ' '.join(repr(float(v))
-                                                       for v in found['q0'])
+           + "    initial_joint_positions: '%s'\n" % ' '.join(
+               repr(float(v)) for v in found['q0'])
            + ('' if damping <= 0.0 else
               "    # the free joints' drivetrain (the URDF's <dynamics damping> unless given)\n"
               f'    passive_damping: {damping!r}\n'))
     ctl = (head.format(node='controller')
-           + '# nullspace_kd_joints: min(20, I_i / 2 ms) of the joints\' effective '
+           + "# nullspace_kd_joints: min(20, I_i / 2 ms) of the joints' effective "
            f'inertias I_i {np.round(found["inertia"], 5).tolist()} kg m^2,\n# nullspace_kp '
            '10 (freejoint_core.arm_gains);\n'
            '# effort_limits, joint_position_lower/upper, joint_velocity_limit: not given, the '
@@ -345,7 +352,7 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
                + f'    radius: {radius!r}\n'
                f'    nullspace_kd_joints: {_floats(found["kd"])}\n'
                f'    nullspace_kp: {found["kp"]!r}\n')
-    meta = ('# What make demo ARM=DIR and spatial_offline --arm DIR read besides the nodes\' '
+    meta = ("# What make demo ARM=DIR and tools/arm_offline.py DIR read besides the nodes' "
             'files.\n'
             f'name: {os.path.splitext(os.path.basename(path))[0]}_'
             f'{"_".join(passive)}\n'
