@@ -80,35 +80,24 @@ def kernel_basis(da, tol=1e-10):
     return vt[rank:].T
 
 
-def nullspace_inertia(nominal, q):
-    """
-    Return the null-space inertia's eigenvalues at ``q`` (ascending, kg m^2) (module notes).
-
-    Parameters
-    ----------
-    nominal : SpatialArm
-        The law's model.
-    q : array_like, (n,)
-        Posture [rad].
-
-    Returns
-    -------
-    numpy.ndarray, (r - m,)
-        Empty when the arm has no redundancy (r = m).
-
-    """
-    terms = nominal.terms(np.asarray(q, dtype=float), np.zeros(nominal.n))
-    da, _, maa = nominal.decoupling(terms)
-    basis = kernel_basis(da @ maa)
-    if basis.shape[1] == 0:
-        return np.zeros(0)
-    return np.linalg.eigvalsh(basis.T @ maa @ basis)
-
-
 def _terms(nominal, q):
     terms = nominal.terms(np.asarray(q, dtype=float), np.zeros(nominal.n))
     da, _, maa = nominal.decoupling(terms)
     return da, maa
+
+
+def nullspace_inertia(nominal, q):
+    """
+    Return the null-space inertia's eigenvalues (ascending, kg m^2) (module notes).
+
+    ``nominal`` (the law's ``SpatialArm``) at the posture ``q`` (n,) [rad]; an array of
+    ``r - m`` values, empty when the arm has no redundancy (r = m).
+    """
+    da, maa = _terms(nominal, q)
+    basis = kernel_basis(da @ maa)
+    if basis.shape[1] == 0:
+        return np.zeros(0)
+    return np.linalg.eigvalsh(basis.T @ maa @ basis)
 
 
 def joint_inertia(nominal, q):
