@@ -23,6 +23,8 @@ help:
 	@echo '              ARM=ur5 / ARM=panda: a spatial arm with a free wrist joint, a 3-D'
 	@echo '              circle then a 10-s hold (config/ur5, config/panda);'
 	@echo '              PLANE="0 0 1": the circle in the plane of that normal'
+	@echo '              ARM=DIR: an arm fj arm init wrote (docs/own-arm.md); ARM=file.urdf'
+	@echo '              PASSIVE=joint [TIP=link BASE=link]: fj arm init first, into bags/demo/<name>/'
 	@echo '              STABILISE=1: internal motion stabilised, both cases'
 	@echo '              FAIL=joint3@2.5: all joints driven, joint 3 fails at 2.5 s'
 	@echo '              CIRCLES=N REST=S: N revolutions back to back, S s rest between'
@@ -32,6 +34,7 @@ help:
 	@echo '              loop logic, linters), JOBS processes: the edit-run loop'
 	@echo 'make setup    only set up: .venv with ROS 2 Jazzy wheels, colcon build'
 	@echo 'make offline  offline closed-loop runner (reference table, bags/offline/metrics.json)'
+	@echo '              ARM=DIR (or ur5, panda): a spatial arm'"'"'s offline twin, SEEDS (10) seeds'
 	@echo 'make bench    benchmarks (figures printed and written to bags/bench/bench.json);'
 	@echo '              BENCH="graph echo": only those (bench/run_all.py MODULES)'
 	@echo 'make soak     real-time soak, both cases, 5 x 30 s each (bags/soak/soak.json);'
@@ -44,7 +47,7 @@ setup:
 	@bash tools/setup.sh
 
 demo: setup
-	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise) $(if $(FAIL),--fail $(FAIL)) $(if $(CIRCLES),--circles $(CIRCLES)) $(if $(REST),--rest $(REST)) $(if $(PLANE),--plane-normal $(PLANE))
+	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise) $(if $(FAIL),--fail $(FAIL)) $(if $(CIRCLES),--circles $(CIRCLES)) $(if $(REST),--rest $(REST)) $(if $(PLANE),--plane-normal $(PLANE)) $(if $(PASSIVE),--passive $(PASSIVE)) $(if $(TIP),--tip $(TIP)) $(if $(BASE),--base $(BASE))
 
 test: setup
 	@$(ENV) $(LINT_CACHE) python -m pytest -c pytest.ini $(XDIST)
@@ -53,7 +56,7 @@ test-fast: setup
 	@$(ENV) bash tools/test_fast.sh $(XDIST)
 
 offline: setup
-	@$(ENV) python -m freejoint_core.offline
+	@$(ENV) $(if $(ARM),python tools/arm_offline.py $(ARM) --seeds $(or $(SEEDS),10),python -m freejoint_core.offline)
 
 bench: setup
 	@$(ENV) python bench/run_all.py $(if $(BENCH),--only $(BENCH))

@@ -30,7 +30,10 @@ example-robot-data's URDF (``config/<arm>/``: UR5 with wrist_2 free, Panda with 
 free, task_dim 3): the tip's 0.1-m circle in the vertical plane facing the robot, then a
 10-s hold, beside the offline twin (``freejoint_core.spatial_offline.run_twin`` with the
 graph's parameter files); the tip compared tick by tick (1e-9 m), the 3-mm bound, the
-efforts and joint speeds against the URDF's limits.
+efforts and joint speeds against the URDF's limits. ``--arm DIR`` does the same for the
+files ``fj arm init`` wrote into DIR (``make demo ARM=DIR``; the run named by DIR's
+arm.yaml), ``--arm FILE.urdf --passive JOINT [--tip T] [--base B]`` runs ``fj arm init``
+into ``OUT/<name>/`` first (docs/own-arm.md).
 ``--fail joint3@2.5`` (``make demo FAIL=joint3@2.5``) runs the paper's arm with
 all three joints driven (``config/fully_actuated/``) whose joint 3 loses its actuator and
 brake at 2.5 s (the simulator's ``fail_joint``): the controller detects it (momentum
@@ -88,6 +91,33 @@ recorded, the stated tracking bound (horizontal; test/core/test_four_link_exampl
 spatial arm also its case of ``freejoint_core.spatial_offline`` and the hold
 after the circle [s]."""
 """Where the figures of the two paper cases go (shown in the README)."""
+
+
+def arm_info(arm):
+    """
+    Return the ``ARMS`` entry of a shipped arm, or of an arm directory of ``fj arm init``.
+
+    A directory (``make demo ARM=DIR``) holds sim.yaml, controller.yaml, planner.yaml and
+    arm.yaml (``name``, ``passive_joint``, ``hold_s``, ``bound_mm``); its entry's
+    ``spatial`` (the run's case label) is ``name``.
+    """
+    if arm in ARMS:
+        return ARMS[arm]
+    meta = os.path.join(arm, 'arm.yaml')
+    if not os.path.isfile(meta):
+        raise SystemExit('demo: --arm %s: neither a shipped arm (%s) nor a directory of fj '
+                         'arm init (no %s)' % (arm, ', '.join(sorted(ARMS)), meta))
+    import yaml
+    with open(meta, encoding='utf-8') as fh:
+        info = yaml.safe_load(fh)
+    return {'passive_joint': str(info['passive_joint']), 'bound_mm': float(info['bound_mm']),
+            'spatial': str(info['name']), 'hold_s': float(info['hold_s'])}
+
+
+def spatial_titles(passive_joint):
+    """Return the table titles of a spatial arm: its free joint's range, its kappa."""
+    name = passive_joint[:-len('_joint')] if passive_joint.endswith('_joint') else passive_joint
+    return {'q3_deg': name + '_deg', 'min_det': 'min_kappa'}
 
 
 def executable(pkg, exe):
@@ -318,7 +348,7 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
     bag = None
     try:
         if record and os.path.exists(rec_exe):
-            bag = os.path.join(out_dir, case)
+            bag = os.path.join(out_dir, recorded_as[0] if recorded_as else case)
             info = 'case=%s, variant=%s, seed=%d, passive_joint=%s, max_ticks=%d' % (
                 *(recorded_as or (case, 'robust')), seed, passive_joint, n_ticks)
             graph.start('recorder', [rec_exe, '--ros-args', '-p', 'output:=' + bag,
@@ -377,7 +407,8 @@ def run_graph(case, seed, n_ticks, dt_ns, collector, executor, out_dir, log_dir,
                 next_report = now + 1.0
                 rtf = ns * 1e-9 / max(now - first_wall, 1e-9)
                 progress('  %-10s t = %.3f of %.3f s sim   (%.2fx real time)'
-                         % (case, ns * 1e-9, last_ns * 1e-9, rtf))
+                         % (recorded_as[0] if recorded_as else case, ns * 1e-9,
+                            last_ns * 1e-9, rtf))
             if graph.exited():
                 raise RuntimeError('%s exited during the run (logs in %s)'
                                    % (graph.exited(), log_dir))
@@ -418,7 +449,7 @@ def graph_record(collector, case, seed, n_ticks, passive_joint=PASSIVE_JOINT,
 
 def arm_offline(arm, case, seed, n_ticks, normal=None):
     """Return the offline runner's record and trace of a shipped example arm (``ARMS``)."""
-    if 'spatial' in ARMS[arm]:
+    if 'spatial' in arm_info(arm):
         return spatial_offline(arm, seed, n_ticks, normal)
     from freejoint_core.trajectory import CircleQuintic
     from freejoint_core.urdf import four_link_arm, FOUR_LINK_CIRCLE, FOUR_LINK_Q0
@@ -465,7 +496,7 @@ def spatial_offline(arm, seed, n_ticks, normal=None):
     trace = out['trace']
     n = len(trace['p'])
     passive = sim.arm.spatial.passive[0]
-    record = compute_record(ARMS[arm]['spatial'], 'spatial', seed,
+    record = compute_record(arm_info(arm)['spatial'], 'spatial', seed,
                             np.arange(n) * dt, trace['p'], trace['p_d'], trace['tau'],
                             trace['theta'], trace['q'][:, passive], trace['kappa'],
                             diverged_at_s=n * dt if out['diverged'] else None)
@@ -610,9 +641,15 @@ def _parse(argv):
     ap.add_argument('--out', default=os.path.join(ROOT, 'bags', 'demo'),
                     help='output directory (default bags/demo)')
     ap.add_argument('--no-record', action='store_true', help='do not start the recorder')
-    ap.add_argument('--arm', choices=sorted(ARMS),
-                    help='run a shipped example arm instead of the paper cases '
-                    '(make demo ARM=four_link)')
+    ap.add_argument('--arm', metavar='ARM',
+                    help='run a shipped example arm instead of the paper cases (%s; make '
+                    'demo ARM=four_link), the directory fj arm init wrote (make demo '
+                    'ARM=DIR), or a URDF with --passive (fj arm init into OUT/<name>/arm '
+                    'first)' % ', '.join(sorted(ARMS)))
+    ap.add_argument('--passive', action='append', metavar='JOINT',
+                    help='with --arm FILE.urdf: its free joint (fj arm init --passive)')
+    ap.add_argument('--tip', help='with --arm FILE.urdf: the tip link (fj arm init --tip)')
+    ap.add_argument('--base', help='with --arm FILE.urdf: the base link (fj arm init --base)')
     ap.add_argument('--stabilise', action='store_true',
                     help='the internal-motion stabilisation (vertical: config/stabilised/, the '
                     'free link starts hanging, its damping on; horizontal: '
@@ -644,16 +681,38 @@ def main(argv=None):
     args = _parse(sys.argv[1:] if argv is None else argv)
     t_start = time.monotonic()
     overlays = ()
+    if args.arm and args.arm.endswith('.urdf'):
+        if not args.passive:
+            say('error: --arm %s: a URDF needs --passive JOINT (make demo ARM=... PASSIVE=...)'
+                % args.arm)
+            return 2
+        from freejoint_core.errors import FreejointValueError
+        from freejoint_tools.arm_init import init_arm
+        name = os.path.splitext(os.path.basename(args.arm))[0]
+        arm_dir = os.path.abspath(os.path.join(args.out, name))     # its files, then its bag
+        try:
+            init_arm(args.arm, args.passive, arm_dir, args.tip, args.base,
+                     log=lambda line: say('fj arm init: ' + line))
+        except FreejointValueError as exc:
+            say('error: fj arm init %s: %s' % (args.arm, exc))
+            return 2
+        say('fj arm init: wrote %s' % shown(arm_dir))
+        args.arm = arm_dir
+    elif args.passive or args.tip or args.base:
+        say('error: --passive, --tip and --base go with --arm FILE.urdf')
+        return 2
     if args.arm:
         # The 4-link example alone is the horizontal case: with the free base pivot under
         # gravity the paper's law does not stabilise it (offline: diverges within 0.2 s). A
         # spatial arm has its own gravity (-z of its base); its case is not read.
-        if 'spatial' in ARMS[args.arm] and (args.stabilise or args.fail):
+        if 'spatial' in arm_info(args.arm) and (args.stabilise or args.fail):
             say('error: --arm %s runs the spatial example alone (not with --stabilise or '
                 '--fail)' % args.arm)
             return 2
+        if args.arm not in ARMS:
+            args.arm = os.path.abspath(args.arm)
         args.cases = ['horizontal']
-        args.out = os.path.join(args.out, args.arm)
+        args.out = os.path.join(args.out, os.path.basename(args.arm.rstrip(os.sep)))
         overlays = (args.arm,)
     per_case = {}
     if args.stabilise:
@@ -668,7 +727,7 @@ def main(argv=None):
         overlays += (os.path.join(args.arm, STABILISED) if args.arm else STABILISED,)
     node_args = None
     if args.plane_normal is not None:
-        if not (args.arm and 'spatial' in ARMS[args.arm]):
+        if not (args.arm and 'spatial' in arm_info(args.arm)):
             say('error: --plane-normal turns the circle of a spatial arm (--arm ur5, panda)')
             return 2
         node_args = {'planner': ['plane_normal:=[%s]' % ', '.join(
@@ -715,7 +774,7 @@ def main(argv=None):
     from rclpy.experimental import EventsExecutor
 
     settings = offline_settings()
-    passive_joint = ARMS[args.arm]['passive_joint'] if args.arm else (
+    passive_joint = arm_info(args.arm)['passive_joint'] if args.arm else (
         'joint%d' % (failing[0][0] + 1) if args.fail else PASSIVE_JOINT)
     dt_ns = round(settings['dt'] * 1e9)
     n_circle = int(round(settings['duration'] / settings['dt']))
@@ -725,9 +784,9 @@ def main(argv=None):
             % (args.rest, settings['dt']))
         return 2
     n_ticks = args.circles * n_circle + (args.circles - 1) * n_rest
-    spatial = args.arm and 'spatial' in ARMS[args.arm]
+    spatial = args.arm and 'spatial' in arm_info(args.arm)
     if spatial:         # the circle, then the hold (the planner's duration is 5 s as the paper's)
-        n_ticks += int(round(ARMS[args.arm]['hold_s'] / settings['dt']))
+        n_ticks += int(round(arm_info(args.arm)['hold_s'] / settings['dt']))
     out = os.path.abspath(args.out)
     log_dir = os.path.join(out, 'logs')
     os.makedirs(out, exist_ok=True)
@@ -757,9 +816,11 @@ def main(argv=None):
                 time.sleep(0.1)
             say('viewer: %s' % view.tail(proc, 1).split(']: ')[-1].strip())
         for i, case in enumerate(args.cases):
+            label = arm_info(args.arm)['spatial'] if spatial else case
             who = 'recorder, ' if record_bags else ''
             say('case %d/%d: %s - starting %ssim_node, controller_node, planner_node '
-                '(lockstep, robust, seed %d)' % (i + 1, len(args.cases), case, who, args.seed))
+                '(lockstep, %s, seed %d)' % (i + 1, len(args.cases), label, who,
+                                             'spatial' if spatial else 'robust', args.seed))
             if collector is not None:
                 collector.close()
             collector = Collector(node)
@@ -768,15 +829,15 @@ def main(argv=None):
                                 log_dir, record=record_bags,
                                 overlays=per_case.get(case, overlays),
                                 passive_joint=passive_joint, node_args=node_args,
-                                recorded_as=(ARMS[args.arm]['spatial'], 'spatial')
+                                recorded_as=(arm_info(args.arm)['spatial'], 'spatial')
                                 if spatial else None)
             except RuntimeError as exc:
-                say('error: %s: %s' % (case, exc))
+                say('error: %s: %s' % (label, exc))
                 failed = True
                 break
             bad = {name: code for name, code in run['codes'].items() if code != 0}
             say('  %s: %.3f s simulated in %.2f s wall (%.2fx real time); stopped cleanly%s'
-                % (case, run['sim_s'], run['wall_s'], run['sim_s'] / run['wall_s'],
+                % (label, run['sim_s'], run['wall_s'], run['sim_s'] / run['wall_s'],
                    '' if not bad else ' EXCEPT %s' % bad))
             with open(run['sim_log']) as f:
                 stop_line = [line for line in f if 'simulator stopped' in line]
@@ -784,10 +845,10 @@ def main(argv=None):
                 say('  ' + stop_line[-1].split(']: ')[-1].strip())
             try:
                 record, arrays = graph_record(
-                    collector, ARMS[args.arm]['spatial'] if spatial else case, args.seed,
+                    collector, arm_info(args.arm)['spatial'] if spatial else case, args.seed,
                     n_ticks, passive_joint, 'spatial' if spatial else 'robust')
             except (RuntimeError, ValueError) as exc:
-                say('error: %s: %s' % (case, exc))
+                say('error: %s: %s' % (label, exc))
                 failed = True
                 break
             if args.fail:
@@ -831,7 +892,7 @@ def main(argv=None):
             elif args.arm:
                 off, trace = arm_offline(args.arm, case, args.seed, n_ticks,
                                          args.plane_normal)
-                bound = ARMS[args.arm]['bound_mm']
+                bound = arm_info(args.arm)['bound_mm']
                 if spatial:
                     outside = off['active_outside_limits'] + off['free_outside_limits']
                     say('  offline twin: max %.3f mm (last second of the hold %.3f mm), '
@@ -847,7 +908,7 @@ def main(argv=None):
                         off['tau_ratio'] > 1.0 or off['vel_ratio'] > 1.0 or \
                         off['vel_ratio_free'] > 1.0 or bool(outside)
                 say('  %s example, %s: max tracking error %.3f mm (stated bound %g mm)%s'
-                    % (args.arm, ARMS[args.arm].get('spatial', case), record['max_mm'], bound,
+                    % (args.arm, arm_info(args.arm).get('spatial', case), record['max_mm'], bound,
                        '' if record['max_mm'] <= bound else '  NOT MET'))
                 failed = failed or record['max_mm'] > bound
             else:
@@ -875,7 +936,7 @@ def main(argv=None):
         rows = [r for pair in zip(offline_records, graph_records) for r in pair] \
             if offline_records else graph_records
         print()
-        print(format_table(rows))
+        print(format_table(rows, titles=spatial_titles(passive_joint) if spatial else None))
         print()
     if not failed and os.path.exists(analyze) and record_bags:
         bags = [run['bag'] for run in runs]

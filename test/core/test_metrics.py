@@ -103,6 +103,22 @@ def test_table_has_one_fixed_width_row_per_record():
     assert 'theta_final' in metrics.format_table(recs, theta=True)
 
 
+def test_a_spatial_arms_table_names_its_free_joint_and_kappa_not_q3_and_det():
+    recs = [_record(case='ur5_wrist2', variant='spatial')]
+    head = metrics.format_table(recs).split('\n')[0].split()
+    assert 'free_deg' in head and 'min_kappa' in head
+    assert 'q3_deg' not in head and 'min_det' not in head
+    named = metrics.format_table(recs, titles={'q3_deg': 'wrist_2_deg',
+                                               'min_det': 'min_kappa'})
+    lines = named.split('\n')
+    assert lines[0].split()[7:9] == ['wrist_2_deg', 'min_kappa']
+    # the column widened to its title: the values end where the titles end
+    end = lines[0].index('wrist_2_deg') + len('wrist_2_deg')
+    assert lines[2][:end].endswith('90..135')
+    mixed = metrics.format_table(recs + [_record()]).split('\n')[0].split()
+    assert 'q3_deg' in mixed                    # planar rows keep the planar titles
+
+
 def test_summary_reports_worst_case_over_seeds():
     recs = [_record(seed=0, rms_mm=0.5, max_mm=1.0), _record(seed=1, rms_mm=0.7, max_mm=0.9),
             _record(variant='exact', rms_mm=1e-4, max_mm=2e-4, diverged_at_s=2.0)]

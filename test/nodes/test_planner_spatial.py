@@ -99,8 +99,9 @@ def test_the_planner_on_the_ur5_config_streams_the_offline_runners_circle_from_t
         answer.reason
     moving = ('the running plan 1 moves until t = 5.000 s (ROS time): a spatial plan starts '
               'from rest (no 3-D transition); ask again once it holds its end point')
+    # direction left at the request's default (0): the spatial circle's one direction
     request = PlanCircle.Request(centre=[0.0, 0.0], radius=0.05, duration=4.0,
-                                 start_angle=0.0, direction=1, execute=True)
+                                 start_angle=0.0, execute=True)
     answer = helpers._call(ros_node, client, request, 'plan_circle', timeout=30.0)
     assert not answer.accepted and answer.plan_id == 0
     assert answer.reason.endswith('refused: ' + moving), answer.reason

@@ -68,6 +68,12 @@ watchdog, a stop), how long the effort detector waits before it judges again."""
 _ZERO2 = np.zeros(2)
 
 
+def spatial_nullspace_kd(values):
+    """Return ``nullspace_kd_joints`` as a tuple, or None when it is [0.0] (``nullspace_kd``)."""
+    per_joint = tuple(float(v) for v in values.get('nullspace_kd_joints', (0.0,)))
+    return None if per_joint == (0.0,) else per_joint
+
+
 def install_nullspace(law, cfg):
     """
     Give the law the null-space damping of ``nullspace_kd`` when it has r > m joints.
@@ -83,7 +89,10 @@ def install_nullspace(law, cfg):
     kd = float(cfg.values.get('nullspace_kd', 0.0))
     if hasattr(law, 'set_nullspace_gains'):     # the spatial law: its own inverse, a posture
         kp = float(cfg.values.get('nullspace_kp', 0.0))
-        if kd > 0.0 or kp > 0.0:
+        per_joint = spatial_nullspace_kd(cfg.values)
+        if per_joint is not None:
+            law.set_nullspace_gains(per_joint, kp)
+        elif kd > 0.0 or kp > 0.0:
             law.set_nullspace_gains(kd, kp)
         return
     if kd <= 0.0 or cfg.nominal.r <= M_TASK or not hasattr(law, 'nullspace'):

@@ -73,6 +73,76 @@ def _h_form(value):
     return None if value in H_FORMS else f"expected 'sum' or 'sat', got {value!r}"
 
 
+_LIMIT_DEFAULTS = {'effort_limits': (300.0, 200.0),
+                   'joint_position_lower': (-1000.0,) * 3,
+                   'joint_position_upper': (1000.0,) * 3,
+                   'joint_velocity_limit': (100.0,) * 3}
+WIDE = 1000.0
+"""[rad, rad/s] A spatial arm's plausibility bounds of a free joint (not driven: its rated
+limits are not the controller's to enforce) and of a continuous joint's position."""
+
+
+def arm_limits(values, name):
+    """
+    Return the per-joint limit list ``name`` in use: as given, or a spatial arm's URDF's.
+
+    Left at its default (the paper arm's), ``effort_limits`` of a spatial arm is its URDF's
+    efforts of ``joints``; ``joint_position_lower`` / ``upper`` and ``joint_velocity_limit``
+    its URDF's of ``joint_names``, a free joint's and a continuous joint's position bounds
+    and a free joint's speed bound +-:data:`WIDE`. A planar arm keeps the defaults.
+    """
+    given = tuple(float(v) for v in values[name])
+    if given != _LIMIT_DEFAULTS[name]:
+        return given
+    try:
+        arm = resolve_arm(values)
+    except (FreejointValueError, KeyError):
+        return given
+    spatial = arm.spatial
+    if spatial is None:
+        return given
+    try:
+        joint_names, joints = arm_joint_names(values, arm)
+    except KeyError:                    # declared before joint_names / joints (follows)
+        joint_names, joints = arm.joint_names, arm.active_names
+    index = spatial.joint_names.index
+    if name == 'effort_limits':
+        return tuple(float(spatial.effort[index(j)]) for j in joints if j in spatial.joint_names)
+    free = {spatial.joint_names[i] for i in spatial.passive}
+    out = []
+    for joint in joint_names:
+        if joint not in spatial.joint_names:
+            return given                # the check names the mismatch
+        i = index(joint)
+        wide = joint in free or (name != 'joint_velocity_limit'
+                                 and joint in spatial.continuous)
+        limit = {'joint_position_lower': spatial.lower[i],
+                 'joint_position_upper': spatial.upper[i],
+                 'joint_velocity_limit': spatial.velocity[i]}[name]
+        out.append((-WIDE if name == 'joint_position_lower' else WIDE) if wide
+                   else float(limit))
+    return tuple(out)
+
+
+def _follows_limits(name):
+    """Return the ``follows`` of a limit list: the arm's, from the other values declared."""
+    def follows(values):
+        try:
+            return list(arm_limits(dict(values, **{name: _LIMIT_DEFAULTS[name]}), name))
+        except KeyError as exc:     # a parameter it reads is not declared yet
+            raise FreejointValueError(f'{name}: follows {exc}') from None
+    return follows
+
+
+def _nonnegative_floats(name):
+    def check(value):
+        vals = _floats(name, value)
+        if any(not 0.0 <= v <= 1e4 for v in vals):
+            return f'values must be in [0, 1e4], got {list(vals)}'
+        return None
+    return check
+
+
 def _positive_floats(name):
     def check(value):
         vals = _floats(name, value)
@@ -114,6 +184,12 @@ FAILURE_PARAMS = (
           'null-space damping [N m s/rad] of the active joint rates when more joints are '
           'driven than the task has (r > 2, freejoint_core.internal.NullSpace); 0 = none '
           "(the paper's law exactly)", (0.0, 1e4), read_only=True),
+    Param('nullspace_kd_joints', [0.0],
+          'spatial law: null-space damping per active joint [N m s/rad] (r values, the '
+          'active joints base to tip), in place of nullspace_kd; [0.0] (default) = '
+          "nullspace_kd for every joint. fj arm init sets it from the joints' effective "
+          'inertia (freejoint_core.arm_gains)', read_only=True,
+          validator=_nonnegative_floats('nullspace_kd_joints')),
     Param('nullspace_kp', 0.0,
           "null-space posture stiffness [N m/rad] of the spatial law (law 'spatial'): the "
           "active joints are pulled to their angles at the law's first tick after start-up "
@@ -204,7 +280,9 @@ PARAMS = (
           '|det(Da Da^T)| below which the damped pseudo-inverse is used (> 0)', (1e-300, 1.0)),
     Param('effort_limits', [300.0, 200.0],
           'per-joint torque limit [N m] (> 0, one per active joint in the order of joints); '
-          'the paper runs peak at 13 / 11 (horizontal) and 133 / 74 (vertical)'),
+          'the paper runs peak at 13 / 11 (horizontal) and 133 / 74 (vertical). A spatial '
+          "arm (task_dim 3): not given, its URDF's efforts",
+          follows=_follows_limits('effort_limits')),
     Param('effort_rate_limit', 20000.0,
           'largest torque change [N m/s] per joint after a (re)start, a hold, a reset or a '
           'zero-effort answer, until the command has caught up with the law (then off: the '
@@ -254,12 +332,18 @@ PARAMS = (
     Param('joint_position_lower', [-1000.0, -1000.0, -1000.0],
           'plausible joint positions [rad], lower bound per joint of joint_names; a state '
           'outside is refused like NaN (zero effort, STATUS_BAD_INPUT). Wide by default (joint1 '
-          "turns continuously in the paper's runs, up to 32 rad): set the arm's URDF limits"),
+          "turns continuously in the paper's runs, up to 32 rad): set the arm's URDF limits. "
+          "A spatial arm: not given, its URDF's (a free or continuous joint: -1000)",
+          follows=_follows_limits('joint_position_lower')),
     Param('joint_position_upper', [1000.0, 1000.0, 1000.0],
-          'plausible joint positions [rad], upper bound per joint of joint_names'),
+          'plausible joint positions [rad], upper bound per joint of joint_names. A '
+          "spatial arm: not given, its URDF's (a free or continuous joint: 1000)",
+          follows=_follows_limits('joint_position_upper')),
     Param('joint_velocity_limit', [100.0, 100.0, 100.0],
-          'plausible joint speed [rad/s] per joint of joint_names (> 0)',
-          validator=_positive_floats('joint_velocity_limit')),
+          'plausible joint speed [rad/s] per joint of joint_names (> 0). A spatial arm: not '
+          "given, its URDF's (a free joint: 1000)",
+          validator=_positive_floats('joint_velocity_limit'),
+          follows=_follows_limits('joint_velocity_limit')),
     Param('setpoint_max_velocity', 5.0,
           'largest plausible setpoint speed [m/s]; a setpoint beyond it, its acceleration '
           "bound or the arm's reach is refused with the reason and dropped (none fresh left: "
@@ -414,7 +498,8 @@ def _check_theta0(values):
 
 def _check_effort_limits(values):
     joints = list(arm_joint_names(values, resolve_arm(values))[1])
-    limits = _floats('effort_limits', values['effort_limits'])
+    _floats('effort_limits', values['effort_limits'])
+    limits = arm_limits(values, 'effort_limits')
     if len(limits) != len(joints) or any(not 0.0 < v <= 1e6 for v in limits):
         return (f'effort_limits: expected {len(joints)} values in (0, 1e6] N m (one per joint '
                 f'of joints {joints}), got {list(limits)}')
@@ -430,9 +515,10 @@ def _check_delay_compensation(values):
 
 def _check_state_bounds(values):
     n = resolve_arm(values).params.n
-    lower = _floats('joint_position_lower', values['joint_position_lower'])
-    upper = _floats('joint_position_upper', values['joint_position_upper'])
-    vlim = _floats('joint_velocity_limit', values['joint_velocity_limit'])
+    for name in ('joint_position_lower', 'joint_position_upper', 'joint_velocity_limit'):
+        _floats(name, values[name])
+    lower, upper, vlim = (arm_limits(values, name) for name in (
+        'joint_position_lower', 'joint_position_upper', 'joint_velocity_limit'))
     for name, vals in (('joint_position_lower', lower), ('joint_position_upper', upper),
                        ('joint_velocity_limit', vlim)):
         if len(vals) != n:
@@ -472,7 +558,15 @@ def _check_spatial(values):
         if values['nullspace_kp'] != 0.0:
             return ("nullspace_kp: the posture term is the spatial law's (task_dim 3); a "
                     'planar arm takes 0')
+        if list(values['nullspace_kd_joints']) != [0.0]:
+            return ("nullspace_kd_joints: the spatial law's (task_dim 3); a planar arm takes "
+                    '[0.0] (nullspace_kd)')
         return None
+    per_joint = list(values['nullspace_kd_joints'])
+    active = resolve_arm(values).spatial.r
+    if per_joint != [0.0] and len(per_joint) != active:
+        return (f'nullspace_kd_joints: expected {active} values (one per active joint) or '
+                f'[0.0], got {per_joint}')
     for name, planar in (('joint_failures', 'off'), ('delay_compensation', 'off'),
                          ('free_link_damping', False)):
         if values[name] != planar:
@@ -568,7 +662,7 @@ def build(values):
     nominal = _nominal(values)
     joint_names, joints = arm_joint_names(values, resolve_arm(values))
     active_names = [joint_names[i] for i in nominal.active]
-    limits = _floats('effort_limits', values['effort_limits'])
+    limits = arm_limits(values, 'effort_limits')
     dt = float(values['control_period'])
     model = _nominal_model(values)
     arm = resolve_arm(values)
@@ -585,9 +679,9 @@ def build(values):
         joint_names=joint_names, joints=joints,
         cmd_index=tuple(active_names.index(name) for name in joints), dt=dt,
         dt_ns=round(dt * 1e9), lockstep=bool(values['lockstep']), effort_limits=limits,
-        position_lower=_floats('joint_position_lower', values['joint_position_lower']),
-        position_upper=_floats('joint_position_upper', values['joint_position_upper']),
-        velocity_limit=_floats('joint_velocity_limit', values['joint_velocity_limit']),
+        position_lower=arm_limits(values, 'joint_position_lower'),
+        position_upper=arm_limits(values, 'joint_position_upper'),
+        velocity_limit=arm_limits(values, 'joint_velocity_limit'),
         reach=reach, nominal_model=model, joint_offsets=tuple(arm.joint_offsets),
         law_params={p.name: float(values[p.name]) for p in LAW_GAIN_PARAMS})
 

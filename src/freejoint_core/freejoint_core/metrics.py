@@ -195,7 +195,11 @@ _COLUMNS = (
 )
 
 
-def format_table(records, theta=False):
+SPATIAL_TITLES = {'q3_deg': 'free_deg', 'min_det': 'min_kappa'}
+"""A spatial arm's titles of the passive angle range and of its conditioning (kappa)."""
+
+
+def format_table(records, theta=False, titles=None):
     """
     Format records as a fixed-width text table (one row per record).
 
@@ -210,6 +214,11 @@ def format_table(records, theta=False):
         Records as from :func:`compute_record`.
     theta : bool
         Append the ``theta_final`` column.
+    titles : dict, optional
+        Column titles to show instead (e.g. a spatial arm's ``{'q3_deg': 'wrist_2_deg',
+        'min_det': 'min_kappa'}``: its free joint and its conditioning kappa); a column
+        widens to its title. Default: :data:`SPATIAL_TITLES` when every record is a spatial
+        arm's (variant 'spatial'), else the planar titles.
 
     Returns
     -------
@@ -218,7 +227,10 @@ def format_table(records, theta=False):
 
     """
     records = _check_records(records)
-    cols = list(_COLUMNS)
+    if titles is None and records and all(r['variant'] == 'spatial' for r in records):
+        titles = SPATIAL_TITLES
+    cols = [((titles or {}).get(title, title), max(w, len((titles or {}).get(title, title))),
+             fmt) for title, w, fmt in _COLUMNS]
     if theta:
         cols.append(('theta_final', 44,
                      lambda r: ' '.join(f'{v:.2e}' for v in r['theta_final'])))

@@ -4,8 +4,15 @@ Spatial serial arm from any URDF, on Pinocchio.
 :class:`SpatialArm` cuts the chain ``base_link -> tip_link`` out of a URDF: every joint
 outside it (e.g. the Panda's fingers) is locked at its reference angle (0 clipped into
 its position limits) with ``pinocchio.buildReducedModel``; the chain's joints must be
-one-degree-of-freedom (revolute or prismatic).  Effort, velocity and position limits come
-from the URDF.  Gravity is ``(0, 0, -9.81)`` in the URDF's root frame unless given.
+one-degree-of-freedom (revolute, prismatic or continuous).  Effort, velocity and position
+limits come from the URDF.
+
+A continuous joint (Pinocchio's unbounded revolute: two configuration entries, cos and
+sin, one velocity) is read as a revolute joint about the same axis whose coordinate is
+its angle (:func:`angle_coordinates`): the same kinematics and dynamics, one
+configuration entry per joint as every node's ``q`` has, and no position limits
+(``lower`` / ``upper`` -inf / +inf; :attr:`SpatialArm.continuous` names them).  Gravity is
+``(0, 0, -9.81)`` in the URDF's root frame unless given.
 
 The task has ``m = 3`` rows (tip position) or ``m = 6`` (position, then orientation),
 in the root frame (``LOCAL_WORLD_ALIGNED``: the angular rows are the world angular
@@ -109,6 +116,67 @@ def root_link(text):
     return roots[0]
 
 
+def continuous_joints(text):
+    """
+    Return the names of a URDF's continuous joints (a set; none: empty).
+
+    Parameters
+    ----------
+    text : str
+        URDF text (well-formed XML: :func:`root_link`'s check).
+
+    """
+    import xml.etree.ElementTree as ET
+    try:
+        robot = ET.fromstring(text)
+    except ET.ParseError:
+        return set()
+    return {el.get('name') for el in robot.iter('joint') if el.get('type') == 'continuous'}
+
+
+def angle_coordinates(text):
+    """
+    Return a URDF's text with each continuous joint made a revolute joint without limits.
+
+    Pinocchio gives a continuous joint two configuration entries (cos, sin) and one
+    velocity; the nodes, the plants and the law take one angle per joint.  A revolute
+    joint about the same axis, its angle the coordinate, has the same kinematics and
+    dynamics; its ``<limit>`` keeps the URDF's effort and velocity, and its position
+    limits (which a continuous joint does not have) are replaced by -inf / +inf in
+    :class:`SpatialArm`.  Text without a continuous joint is returned unchanged (so
+    Pinocchio reads the same bytes as before).
+
+    Parameters
+    ----------
+    text : str
+        URDF text.
+
+    Returns
+    -------
+    str
+
+    """
+    if 'continuous' not in text:
+        return text
+    import xml.etree.ElementTree as ET
+    try:
+        robot = ET.fromstring(text)
+    except ET.ParseError:
+        return text             # Pinocchio's own error names what is wrong
+    changed = False
+    for joint in robot.iter('joint'):
+        if joint.get('type') != 'continuous':
+            continue
+        joint.set('type', 'revolute')
+        limit = joint.find('limit')
+        if limit is None:
+            limit = ET.SubElement(joint, 'limit', {'effort': '0', 'velocity': '0'})
+        limit.set('lower', '-1e9')
+        limit.set('upper', '1e9')
+        changed = True
+    return ET.tostring(robot, encoding='unicode') if changed else text
+
+
 class SpatialTerms(NamedTuple):
     """
     Model terms of one state (core joint order, task rows of ``m``).
@@ -167,7 +235,9 @@ class SpatialArm:
     active, passive : tuple of int
         Indices of the active and free joints.
     effort, velocity, lower, upper : numpy.ndarray, (n,)
-        URDF limits [N m, rad/s, rad, rad].
+        URDF limits [N m, rad/s, rad, rad] (a continuous joint: -inf, +inf).
+    continuous : tuple of str
+        The chain's continuous joints (no position limits).
 
     """
 
@@ -188,7 +258,7 @@ class SpatialArm:
             except OSError as exc:
                 raise FreejointValueError(f'urdf: cannot read {urdf!r} ({exc})') from None
         try:
-            full = pin.buildModelFromXML(text)
+            full = pin.buildModelFromXML(angle_coordinates(text))
         except (RuntimeError, ValueError) as exc:
             raise FreejointValueError(f'urdf: Pinocchio cannot read it ({exc})') from None
         for name, link in (('base_link', base_link), ('tip_link', tip_link)):
@@ -243,8 +313,12 @@ class SpatialArm:
                                       'task rows')
         self.effort = np.array(model.effortLimit, dtype=float)
         self.velocity = np.array(model.velocityLimit, dtype=float)
+        self.continuous = tuple(sorted(set(self.joint_names) & continuous_joints(text)))
         self.lower = np.array(model.lowerPositionLimit, dtype=float)
         self.upper = np.array(model.upperPositionLimit, dtype=float)
+        for name in self.continuous:
+            j = self.joint_names.index(name)
+            self.lower[j], self.upper[j] = -np.inf, np.inf
         self._zero = np.zeros(self.n)
         self._ia = np.array(self.active, dtype=int)
         self._ip = np.array(self.passive, dtype=int)

@@ -45,6 +45,17 @@ def _normal(value):
     return None
 
 
+def _kd_joints(value):
+    """Refuse null-space dampings that are not finite numbers in [0, 1e4]."""
+    try:
+        vec = [float(v) for v in value]
+    except (TypeError, ValueError):
+        return f'expected numbers, got {value!r}'
+    if not vec or not all(0.0 <= v <= 1e4 for v in vec):
+        return f'expected numbers in [0, 1e4], got {value!r}'
+    return None
+
+
 def _even_steps(value):
     steps = 360.0 / float(value)
     if abs(steps - round(steps)) > 1e-9 * steps or round(steps) % 2:
@@ -175,6 +186,17 @@ PARAMS = (
           "goal_time_tolerance of its end; 0 = success at the plan's end.", (0.0, 10.0)),
     Param('goal_time_tolerance', 1.0,
           "Time (s) after a plan's end to come within goal_tolerance.", (0.0, 3600.0)),
+    Param('nullspace_kd', 20.0,
+          "Spatial arms: the controller's nullspace_kd [N m s/rad], which the plan's "
+          'nominal closed loop runs with (give both nodes the same value: fj arm init writes '
+          "it into both files); 20 = the shipped arms'. Planar arms: not used.", (0.0, 1e4)),
+    Param('nullspace_kd_joints', [0.0],
+          "Spatial arms: the controller's nullspace_kd_joints (one damping per active joint "
+          '[N m s/rad], or [0.0] = nullspace_kd for all), for the nominal closed loop.',
+          validator=_kd_joints),
+    Param('nullspace_kp', 10.0,
+          "Spatial arms: the controller's nullspace_kp [N m/rad] for the plan's nominal "
+          "closed loop (as nullspace_kd); 10 = the shipped arms'.", (0.0, 1e4)),
     Param('autostart', True,
           'Start the configured circle at activation and after every accepted change of its '
           'parameters.'),

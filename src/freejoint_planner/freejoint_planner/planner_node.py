@@ -81,7 +81,8 @@ that must carry gravity, and the nominal closed loop (``spatial_planning.nominal
 kappa, the active joints' URDF limits, tracking; 0.6-1.1 s of CPU for the example arms,
 during which the node does nothing else), refused with one line in the log (nothing
 streams). A plan asked for by ``~/plan_circle`` (``radius``, ``duration``, ``execute``;
-``centre``, ``start_angle`` and ``direction`` must be ``[0, 0]``, 0, 1; ``margin`` is the
+``centre``, ``start_angle`` and ``direction`` must be ``[0, 0]``, 0, 0 or 1 (0: the
+request's default, the one direction a spatial circle has); ``margin`` is the
 reach margin [m]; with no joint state yet, an executed one is checked when it starts), or
 by a change of ``radius`` / ``duration`` once the stream has published, is checked at once
 from the newest joint state and starts where the running plan rests, at its start or its
@@ -125,6 +126,7 @@ from .planning import end_effector, grid_bound, grid_extent, join_from_arm, join
 from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle, planner_status, READY, SETTLING
 from .planning import prepare_transition, settle_gate_refusal, swing_deg
 from .spatial_planning import check_spatial_plan, describe as describe_spatial, plane_normal
+from .spatial_planning import planner_kd
 from .spatial_planning import spatial_bounds, SpatialRequest, start_point
 from .stream import Plan, SetpointStream
 
@@ -672,7 +674,8 @@ class PlannerNode(Node, Lifecycle):
             p0 = self._spatial.fk(np.asarray(q, dtype=float))
         return check_spatial_plan(self._node_arm.nominal(cfg['nominal_scale']), q, qd, radius,
                                   duration, cfg['max_speed'], cfg['max_acceleration'], p0=p0,
-                                  normal=cfg['plane_normal'])
+                                  normal=cfg['plane_normal'], kd=planner_kd(cfg),
+                                  kp=cfg['nullspace_kp'])
 
     def _execute_spatial(self, radius, duration, start_delay, source, verdict=None):
         """Replace the running plan by a spatial circle (``verdict`` None: from the tip)."""
@@ -727,10 +730,10 @@ class PlannerNode(Node, Lifecycle):
         centre = [float(v) for v in request.centre]
         problem = validate({'radius': request.radius, 'duration': request.duration})
         if not problem and (centre != [0.0, 0.0] or request.start_angle != 0.0
-                            or int(request.direction) != 1):
+                            or int(request.direction) not in (0, 1)):
             problem = ('centre, start_angle, direction: do not apply to a spatial arm (its '
                        'circle starts at the tip, in the plane of plane_normal): '
-                       f'send [0, 0], 0, 1; got {centre}, {request.start_angle:g}, '
+                       f'send [0, 0], 0, 0 or 1; got {centre}, {request.start_angle:g}, '
                        f'{int(request.direction)}')
         what = describe_spatial(request.radius, request.duration)
         response.plan_id = 0

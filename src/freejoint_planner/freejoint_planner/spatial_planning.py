@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import math
 import time
 
+from freejoint_core.arm_gains import joint_inertia, mode_steps, rule
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
 from freejoint_core.spatial_law import arm_reach, gravity_carrying_free_joint, SpatialGains
@@ -332,6 +333,8 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
             reason = (f'the nominal closed loop takes the active joint {names[j]} to '
                       f'{x[j]:.4f} rad at t = {t:.3f} s, outside its URDF limits '
                       f'[{lower[j]:.4f}, {upper[j]:.4f}] rad')
+            stiff = too_stiff(nominal, x, kd, period)
+            reason += f': {stiff}' if stiff else ''
             break
         p_d, v_d, a_d = path.sample(t)
         try:
@@ -351,16 +354,49 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
         if err > TRACK_BOUND:
             reason = (f'the nominal closed loop cannot follow the path: tip error '
                       f'{err * 1e3:.3g} mm at t = {t:.3f} s (> {TRACK_BOUND * 1e3:g} mm; '
-                      f'kappa {out.kappa:.3g}): out of reach or through a singular posture')
+                      f'kappa {out.kappa:.3g}): '
+                      + (too_stiff(nominal, x, kd, period) or 'out of reach or through a '
+                         'singular posture'))
             break
         try:
             plant.step(out.tau, period)
         except FreejointValueError as exc:
-            reason = f'the nominal closed loop diverged at t = {t:.3f} s: {exc}'
+            reason = (f'the nominal closed loop diverged at t = {t:.3f} s: '
+                      + (too_stiff(nominal, x, kd, period) or str(exc)))
             break
     outside = tuple(names[j] for j in free if q_min[j] < lower[j] or q_max[j] > upper[j])
     return LoopCheck(reason, kmin, t_kmin, emax, k + 1, time.perf_counter() - t0,
                      tuple(q_min.tolist()), tuple(q_max.tolist()), outside)
+
+
+def planner_kd(cfg):
+    """Return the planner's null-space damping: ``nullspace_kd_joints``, or ``nullspace_kd``."""
+    per_joint = tuple(float(v) for v in cfg['nullspace_kd_joints'])
+    return float(cfg['nullspace_kd']) if per_joint == (0.0,) else per_joint
+
+
+def too_stiff(nominal, q, kd, period=CHECK_PERIOD):
+    """
+    Return why the null-space damping ``kd`` is too stiff for the arm at ``q``, or ''.
+
+    One step of ``period`` removes ``period lambda`` of an internal mode's rate
+    (``freejoint_core.arm_gains.mode_steps``); above 1 the mode reverses each step, at 2 it
+    grows. The reason names the joint that moves most in the stiffest mode, the ratio, and
+    that joint's effective inertia and damping of ``fj arm init``'s rule.
+    """
+    if not np.any(np.asarray(kd, dtype=float) > 0.0):
+        return ''
+    steps, joints = mode_steps(nominal, q, kd, period)
+    if not steps.size or steps[0] <= 1.0 + 1e-9:      # the rule scales to 1 exactly
+        return ''
+    i = nominal.joint_names.index(joints[0])
+    a = nominal.active.index(i)
+    inertia = joint_inertia(nominal, q)[a]
+    given = np.broadcast_to(np.asarray(kd, dtype=float), (nominal.r,))[a]
+    return (f'null-space damping too stiff for joint {joints[0]}: nullspace_kd {given:.4g} '
+            f'N m s/rad on its effective inertia {inertia:.3g} kg m^2, one {period * 1e3:g}-ms '
+            f'step removes {steps[0]:.3g} x the rate of its internal mode (> 1); fj arm '
+            f"init's rule gives it {float(rule([inertia])[0]):.3g} (nullspace_kd_joints)")
 
 
 @dataclass(frozen=True)
@@ -398,7 +434,7 @@ class SpatialVerdict:
 
 
 def check_spatial_plan(nominal, q, qd, radius, duration, max_speed, max_acceleration,
-                       p0=None, reach=None, normal=None):
+                       p0=None, reach=None, normal=None, kd=KD, kp=KP):
     """
     Check a spatial plan from the arm's state (module notes); the first refusal wins.
 
@@ -420,6 +456,9 @@ def check_spatial_plan(nominal, q, qd, radius, duration, max_speed, max_accelera
     normal : array_like, (3,), optional
         Normal of the circle's plane (the ``plane_normal`` parameter; None or zeros: the
         vertical plane facing the robot).
+    kd, kp : float
+        The controller's null-space damping [N m s/rad] and posture stiffness [N m/rad]
+        (``nullspace_kd``, ``nullspace_kp``: the planner's parameters of the same names).
 
     Returns
     -------
@@ -441,7 +480,7 @@ def check_spatial_plan(nominal, q, qd, radius, duration, max_speed, max_accelera
     rest, why = gravity_carrying_free_joint(nominal, q)
     if rest is None:
         return SpatialVerdict(why, path, margin)
-    loop = nominal_loop(nominal, q, qd, path)
+    loop = nominal_loop(nominal, q, qd, path, kd=kd, kp=kp)
     return SpatialVerdict(loop.reason, path, margin, rest, loop)
 
 

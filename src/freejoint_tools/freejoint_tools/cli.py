@@ -665,6 +665,22 @@ def _typed_list(cmds, noun, nouns, help_text, func):
     return verbs
 
 
+def _arm_init(args):
+    """``fj arm init``: write the arm's files, or say in one line why not (status 2)."""
+    from freejoint_core.errors import FreejointValueError
+    from freejoint_tools.arm_init import init_arm
+    try:
+        paths = init_arm(args.urdf, args.passive, args.out, args.tip, args.base, args.radius,
+                         log=lambda line: print('fj arm init: ' + line, file=sys.stderr),
+                         passive_damping=args.passive_damping)
+    except FreejointValueError as exc:
+        print(f'fj arm init: refused: {exc}', file=sys.stderr)
+        return 2
+    for path in paths:
+        print(path)
+    return 0
+
+
 def build_parser():
     """Return the argparse parser of ``fj``."""
     parser = argparse.ArgumentParser(
@@ -683,6 +699,23 @@ def build_parser():
                            '(freejoint_tools.campaign)')
     camp.add_argument('argv', nargs=argparse.REMAINDER)
     camp.set_defaults(func=_campaign, session=False)
+
+    arm = cmds.add_parser('arm', help="a spatial arm's parameter files from its URDF "
+                          '(freejoint_tools.arm_init)').add_subparsers(
+        dest='verb', required=True, metavar='verb')
+    p = arm.add_parser('init', help='write DIR/{sim,controller,planner,arm}.yaml for make '
+                       'demo ARM=DIR')
+    p.add_argument('urdf')
+    p.add_argument('--passive', action='append', required=True, metavar='JOINT',
+                   help='a free joint (repeat for more)')
+    p.add_argument('--tip', help='tip link (default: the deepest link of moving joints)')
+    p.add_argument('--base', help="base link (default: the URDF's root link)")
+    p.add_argument('--radius', type=float, help='circle radius [m] (default min(0.1, L/10))')
+    p.add_argument('--passive-damping', type=float, metavar='B',
+                   help="the free joints' drivetrain damping in the simulator [N m s/rad] "
+                   "(default: the URDF's <dynamics damping>, else 0)")
+    p.add_argument('--out', required=True, metavar='DIR')
+    p.set_defaults(func=_arm_init, session=False)
 
     node = cmds.add_parser('node', help='nodes').add_subparsers(
         dest='verb', required=True, metavar='verb')

@@ -1,0 +1,183 @@
+"""
+Null-space gains of a spatial arm from its own inertia (the rule of ``fj arm init``).
+
+The spatial law (``spatial_law.SpatialControlLaw``) adds to the task torque
+``N tau_0``, ``tau_0 = -D qd_a + kp (q_a0 - q_a)`` (null-space damping, per active joint
+``D = diag(kd_i)``: the controller's ``nullspace_kd_joints``, or ``nullspace_kd`` for all;
+posture stiffness ``nullspace_kp``).  The task rows are decoupled by the nominal inertia,
+so the task gains ``K``, ``Lambda`` (s^-1) and the robust bound ``R`` are accelerations and
+do not depend on the arm's size; the null-space gains are torques per rate and per angle,
+and do.
+
+**Derivation.** Let ``Z`` (r x (r - m)) be an orthonormal basis of the kernel of
+``J~ = Da M~aa`` (the constrained Jacobian: the active joint motions that do not move the
+tip, the free joints following).  Internal motion ``qd_a = Z nu`` is driven only by the
+projected null-space torque (``Z^T N = Z^T`` for the dynamically consistent projector
+``N = I - X Da``), so ``(Z^T M~aa Z) nud = -(Z^T D Z) nu``: the internal modes decay at
+the generalized eigenvalues ``lambda`` of ``(Z^T D Z, Z^T M~aa Z)`` [1/s].  A controller
+that holds its torque over a period ``dt`` (zero-order hold) maps each mode by
+``1 - dt lambda``: stable for ``dt lambda < 2``, without overshoot for ``< 1``.  With one
+``kd`` for all joints, ``lambda = kd / I`` with ``I`` the eigenvalues of ``Z^T M~aa Z``
+(the *null-space inertia*), so the lightest mode (a light wrist spinning) bounds ``kd`` and
+leaves the heavy modes undamped.  Per joint, ``kd_i`` in proportion to the joint's own
+effective inertia ``I_i = (M~aa)_ii`` (about its axis, the free joints following) gives
+every mode a similar rate.  The rule::
+
+    kd_i = min(KD_REF, BETA I_i / CHECK_DT),   then all kd_i / s where
+    s = max(1, CHECK_DT lambda_max)  (no internal mode reverses in one check step)
+    kp = KD_REF / POSTURE_TIME
+
+``BETA`` = 1 at the planner's check period ``CHECK_DT`` = 2 ms (the coarsest loop that
+must stay stable): a joint alone would lose its whole rate in one check step, half of it
+per 1-ms control period, the no-reversal bound.  Not less: the disturbance's speed noise
+on a light joint grows as ``1 / sqrt(1 - (1 - a)^2)`` with ``a`` the share removed per
+control period (with 0.5 here, ``a`` = 0.25, the UR10's wrist_3, 4e-4 kg m^2, passed its
+3.2 rad/s under the +-0.5 N m disturbance, 1.10 x; ``a`` = 0.5 gives 0.76 of that noise).
+``KD_REF`` = 20 N m s/rad caps it
+(the value the UR5 and Panda were tuned with; a heavier joint is damped no harder).
+``kp`` = 10 N m/rad (their value): the posture term is a slow pull (time constant
+``kd_i / kp`` = 2 s on a capped joint); on a light joint it is damped by
+``zeta_i = kd_i / (2 sqrt(kp I_i)) = (BETA / (2 CHECK_DT)) sqrt(I_i / kp)`` (1.77 at
+``I_i`` = 5e-4 kg m^2), and ``kp dt^2 / I_i`` stays below 0.02 at 1 ms.  Everything is
+taken at the start posture on the nominal model; the planner's nominal closed loop checks
+the whole circle with these gains.
+
+Hand figures: ``I_i`` = 5e-4 kg m^2 gives 1 x 5e-4 / 0.002 = 0.25 N m s/rad; 0.02 gives
+10; 0.04 and above the cap 20.  (The UR5's shipped scalar ``kd`` = 20 has
+``dt lambda`` = 3.3 at 2 ms on its wrist_3 mode, 0.012 kg m^2: that mode is not excited by
+the circle, and at the controller's 1 ms it is 1.67, stable but reversing every tick.)
+"""
+
+
+from freejoint_core.errors import FreejointValueError
+import numpy as np
+
+KD_REF = 20.0
+"""[N m s/rad] Largest null-space damping the rule gives (the shipped arms' value)."""
+BETA = 1.0
+"""Share of the lightest internal mode's rate the damping removes per check period."""
+CHECK_DT = 2e-3
+"""[s] The period the rule is stable at (the planner's nominal-loop period)."""
+POSTURE_TIME = 2.0
+"""[s] ``kd / kp``: the time constant of the posture term's pull."""
+
+
+def kernel_basis(da, tol=1e-10):
+    """
+    Return an orthonormal basis (r, r - rank) of the kernel of ``da`` (m, r).
+
+    Parameters
+    ----------
+    da : numpy.ndarray, (m, r)
+        The decoupling matrix.
+    tol : float
+        Singular values at or below ``tol`` times the largest count as zero.
+
+    """
+    da = np.asarray(da, dtype=float)
+    _, sv, vt = np.linalg.svd(da)
+    rank = int(np.sum(sv > tol * (sv[0] if sv.size else 1.0)))
+    return vt[rank:].T
+
+
+def _terms(nominal, q):
+    terms = nominal.terms(np.asarray(q, dtype=float), np.zeros(nominal.n))
+    da, _, maa = nominal.decoupling(terms)
+    return da, maa
+
+
+def nullspace_inertia(nominal, q):
+    """
+    Return the null-space inertia's eigenvalues (ascending, kg m^2) (module notes).
+
+    ``nominal`` (the law's ``SpatialArm``) at the posture ``q`` (n,) [rad]; an array of
+    ``r - m`` values, empty when the arm has no redundancy (r = m).
+    """
+    da, maa = _terms(nominal, q)
+    basis = kernel_basis(da @ maa)
+    if basis.shape[1] == 0:
+        return np.zeros(0)
+    return np.linalg.eigvalsh(basis.T @ maa @ basis)
+
+
+def joint_inertia(nominal, q):
+    """Return ``diag(M~aa)`` (r,) [kg m^2]: each active joint's inertia about its axis."""
+    return np.diag(_terms(nominal, q)[1]).copy()
+
+
+def mode_steps(nominal, q, kd, dt=CHECK_DT):
+    """
+    Return ``dt lambda`` of the internal modes (descending) and each one's leading joint.
+
+    Parameters
+    ----------
+    nominal : SpatialArm
+        The law's model.
+    q : array_like, (n,)
+        Posture [rad].
+    kd : float or sequence of float, (r,)
+        Null-space damping [N m s/rad] (one for all or per active joint).
+    dt : float
+        Period [s].
+
+    Returns
+    -------
+    (numpy.ndarray, list of str)
+        ``dt lambda`` per mode (module notes) and the name of the active joint moving most
+        in it; empty without redundancy.
+
+    """
+    da, maa = _terms(nominal, q)
+    basis = kernel_basis(da @ maa)
+    if basis.shape[1] == 0:
+        return np.zeros(0), []
+    damp = np.diag(np.broadcast_to(np.asarray(kd, dtype=float), (nominal.r,)))
+    inertia = basis.T @ maa @ basis
+    # symmetric form: inertia^-1/2 (Z^T D Z) inertia^-1/2
+    w, v = np.linalg.eigh(inertia)
+    half = v @ np.diag(w ** -0.5) @ v.T
+    rates, modes = np.linalg.eigh(half @ basis.T @ damp @ basis @ half)
+    order = np.argsort(rates)[::-1]
+    shapes = basis @ half @ modes
+    joints = [nominal.joint_names[nominal.active[int(np.argmax(np.abs(shapes[:, i])))]]
+              for i in order]
+    return dt * rates[order], joints
+
+
+def nullspace_gains(nominal, q, dt=CHECK_DT):
+    """
+    Return ``(kd, kp, inertia)`` of the rule (module notes) at the posture ``q``.
+
+    Parameters
+    ----------
+    nominal : SpatialArm
+        The law's (nominal) model.
+    q : array_like, (n,)
+        Start posture [rad].
+    dt : float
+        The period the damping must be stable at [s], > 0.
+
+    Returns
+    -------
+    (tuple of float, float, numpy.ndarray)
+        ``kd_i`` (r,) [N m s/rad], ``kp`` [N m/rad] and ``I_i`` (r,) [kg m^2].
+
+    Raises
+    ------
+    FreejointValueError
+        ``dt`` not a finite number > 0.
+
+    """
+    if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0.0):
+        raise FreejointValueError(f'dt: expected a finite number > 0 [s], got {dt!r}')
+    inertia = joint_inertia(nominal, q)
+    kd = rule(inertia, dt)
+    steps, _ = mode_steps(nominal, q, kd, dt)
+    if steps.size and steps[0] > 1.0:
+        kd = kd / steps[0]
+    return tuple(float(v) for v in kd), KD_REF / POSTURE_TIME, inertia
+
+
+def rule(inertia, dt=CHECK_DT):
+    """Return ``min(KD_REF, BETA I_i / dt)`` [N m s/rad] of joint inertias ``I_i`` [kg m^2]."""
+    return np.minimum(KD_REF, BETA * np.asarray(inertia, dtype=float) / dt)
