@@ -22,11 +22,10 @@ Usage: ``python bench/echo_node.py [events | single_threaded] [--out TOPIC]
 [--priority N]`` (under ``. tools/env.sh``); ``bench/echo.py`` runs it.
 """
 
-import signal
 import sys
 
 from freejoint_common.contract import COMMANDS, JOINT_STATES, stamp_label, to_ns
-from freejoint_common.runner import spin_until
+from freejoint_common.runner import spin_until, StopFlag
 from freejoint_common.scheduling import process_scheduling
 import rclpy
 from std_msgs.msg import MultiArrayDimension
@@ -60,9 +59,7 @@ def main(argv):
     out_topic = take_option(argv, '--out', COMMANDS.name)
     priority = int(take_option(argv, '--priority', '0'))
     kind = argv[0] if argv else 'events'
-    stop = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.append(True))
+    stop = StopFlag().install()
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     executor = make_executor(kind)      # after init: an executor takes the default context
     node = rclpy.create_node(NODE_NAME)
@@ -82,7 +79,7 @@ def main(argv):
         if refused is not None:
             print('echo_node: --priority %d not applied: %s' % (priority, refused),
                   file=sys.stderr, flush=True)
-    spin_until(executor.spin_once, rclpy.ok, stop)
+    spin_until(executor, rclpy.ok, stop)
     executor.shutdown()
     node.destroy_node()
     rclpy.try_shutdown()
