@@ -1005,7 +1005,7 @@ def main(argv=None):
                 try:
                     row = soak_run(case, index, run, args.seconds, args.hogs, args.back_to_back,
                                    args.stabilise, args.fully_actuated, args.fail_at,
-                                   args.driver, args.readiness_action)
+                                   driver=args.driver, action=args.readiness_action)
                 except Exception as exc:  # noqa: B902 - one bad run must not cost the soak
                     say('%s run %d failed: %s: %s' % (case, run, type(exc).__name__, exc))
                     row = {'case': case, 'run': run, 'error': str(exc), 'met': False}
