@@ -35,6 +35,10 @@ die() {
   exit 1
 }
 hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -c1-16; }
+# The progress filters read line by line: mawk (Debian's awk) reads a pipe in blocks unless
+# told -W interactive, and its lines would come minutes late, all at once.
+AWK=(awk)
+case "$(awk -W version 2>&1 || true)" in *mawk*) AWK=(awk -W interactive) ;; esac
 # The phases' times: phase NAME starts one (ending the one before), phase - ends it.
 PHASES=
 PHASE=
@@ -122,7 +126,7 @@ find_uv() {
     UV=$dir/bin/uv
   else
     rm -rf "$dir.tmp.$$"
-    WHY_NO_UV="installing uv $pin failed: $(grep -m1 -E 'ERROR|error' "$STAMPS/uv-bootstrap.log" \
+    WHY_NO_UV="installing uv $pin failed: $(grep -m1 -E '^ERROR' "$STAMPS/uv-bootstrap.log" \
       || echo 'see .stamps/uv-bootstrap.log')"
   fi
   return 0
@@ -170,7 +174,7 @@ if [ "$want" != "$have" ] || [ ! -x "$VENV/bin/python" ]; then
     set +e
     (uv_env && "$UV" pip install --python "$VENV/bin/python" -r "$REQ") 2>&1 \
       | tee "$STAMPS/uv.log" \
-      | awk '/^(Resolved|Prepared|Installed|Uninstalled|Audited) [0-9]+ package/ {
+      | "${AWK[@]}" '/^(Resolved|Prepared|Installed|Uninstalled|Audited) [0-9]+ package/ {
                print "[setup] uv: " $0; fflush() }'
     rc=${PIPESTATUS[0]}
     set -e
@@ -188,7 +192,7 @@ if [ "$want" != "$have" ] || [ ! -x "$VENV/bin/python" ]; then
     set +e
     "$VENV/bin/pip" install --disable-pip-version-check --progress-bar off -r "$REQ" 2>&1 \
       | tee "$STAMPS/pip.log" \
-      | awk -v n="$n" '/^Collecting/ {c++; if (c % 25 == 0) printf "[setup] collected %d/%d\n", c, n; fflush()}
+      | "${AWK[@]}" -v n="$n" '/^Collecting/ {c++; if (c % 25 == 0) printf "[setup] collected %d/%d\n", c, n; fflush()}
                        /^Installing collected/ {print "[setup] installing ..."; fflush()}
                        /^Successfully installed/ {print "[setup] installed"; fflush()}'
     rc=${PIPESTATUS[0]}
@@ -246,7 +250,7 @@ if [ "$want_build" != "$(cat "$STAMPS/build" 2>/dev/null || true)" ] || [ ! -d "
     console_start_end+ \
     --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF 2>&1 \
     | tee "$STAMPS/colcon.log" \
-    | awk -v n="$total" -f "$ROOT/tools/colcon_progress.awk"
+    | "${AWK[@]}" -v n="$total" -f "$ROOT/tools/colcon_progress.awk"
   rc=${PIPESTATUS[0]}
   set -e
   if [ "$rc" -ne 0 ]; then
