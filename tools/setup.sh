@@ -97,7 +97,8 @@ uv_env() {
   return 0
 }
 
-# Sets UV to a uv binary, or leaves it empty with WHY_NO_UV saying why.
+# Sets UV to a uv binary (on PATH, in the bootstrap folder, with --bootstrap installed
+# there with .venv's pip), or leaves it empty with WHY_NO_UV saying why.
 find_uv() {
   UV=
   WHY_NO_UV=
@@ -115,6 +116,7 @@ find_uv() {
     say "installer: uv $pin (bootstrap folder $dir)"
     return 0
   fi
+  [ "${1:-}" = --bootstrap ] || return 0
   say "installer: installing uv $pin with pip into $dir (once per user)"
   mkdir -p "$cache" || { WHY_NO_UV="cannot create $cache"; return 0; }
   rm -rf "$dir.tmp.$$"
@@ -137,16 +139,25 @@ have=$(cat "$STAMPS/venv" 2>/dev/null || true)
 if [ "$want" != "$have" ] || [ ! -x "$VENV/bin/python" ]; then
   rm -f "$STAMPS/venv" "$STAMPS/build"
   phase venv
+  find_uv
   if [ ! -x "$VENV/bin/python" ]; then
-    say "creating .venv with $PY ($PYVER)"
-    if [ $MODE = system ]; then
-      "$PY" -m venv --system-site-packages "$VENV" || die "could not create .venv" "see the error above"
+    site=
+    [ $MODE = system ] && site=--system-site-packages
+    if [ -n "$UV" ]; then
+      # uv's venv with pip seeded from its cache: seconds, where ensurepip takes 5-10 s
+      say "creating .venv with $PY ($PYVER) and uv"
+      # shellcheck disable=SC2086
+      UV_PYTHON_DOWNLOADS=never "$UV" venv --quiet --seed $site \
+        --python "$(command -v "$PY")" "$VENV" >"$STAMPS/uv-venv.log" 2>&1 \
+        || { cat "$STAMPS/uv-venv.log" >&2; die "could not create .venv with uv" "see the error above"; }
     else
-      "$PY" -m venv "$VENV" || die "could not create .venv" "see the error above"
+      say "creating .venv with $PY ($PYVER)"
+      # shellcheck disable=SC2086
+      "$PY" -m venv $site "$VENV" || die "could not create .venv" "see the error above"
     fi
   fi
   phase installer
-  find_uv
+  [ -n "$UV" ] || find_uv --bootstrap
   if [ -z "$UV" ]; then
     [ "$INSTALLER" = uv ] && die "FREEJOINT_INSTALLER=uv, but no uv: $WHY_NO_UV"
     say "installer: pip ($WHY_NO_UV)"

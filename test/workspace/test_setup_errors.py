@@ -171,40 +171,50 @@ def test_uv_installs_the_pins_and_its_failure_is_relayed_with_the_pip_way_out(tm
                      '/etc/some-proxy-ca.pem' % (venv_python, req)]
 
 
+def _stand_in_pip(tmp_path):
+    """Make .venv's pip one that logs its arguments and fails at once as pip does."""
+    pip = tmp_path / '.venv' / 'bin' / 'pip'
+    pip.write_text('#!/bin/sh\necho "$*" >> %s\nfor a; do last=$a; done\n'
+                   'echo "ERROR: No matching distribution found for $(tail -1 "$last")"\n'
+                   'exit 1\n' % shlex.quote(str(tmp_path / 'pip-calls')))
+    return tmp_path / 'pip-calls'
+
+
 def test_without_uv_pip_installs_after_the_bootstrap_failed_and_says_why(tmp_path):
     setup = _copy_tools(tmp_path)
     _venv_without_packages(tmp_path)
+    calls = _stand_in_pip(tmp_path)
     cache = tmp_path / 'cache'
-    out = _run(setup, dict(DEAD_INDEX, PATH=_bin_without(tmp_path, {'uv'}),
-                           FREEJOINT_CACHE=str(cache)))
+    out = _run(setup, {'PATH': _bin_without(tmp_path, {'uv'}), 'FREEJOINT_CACHE': str(cache)})
     _assert_failed_cleanly(out, tmp_path)
-    assert 'installing uv %s with pip' % _uv_pin() in out.stdout, out.stdout
-    assert 'installer: pip (installing uv %s failed: ERROR: ' % _uv_pin() in out.stdout
+    pin = _uv_pin()
+    assert 'installing uv %s with pip into %s' % (pin, cache) in out.stdout, out.stdout
+    assert ('installer: pip (installing uv %s failed: ERROR: No matching distribution found '
+            'for uv==%s)' % (pin, pin)) in out.stdout
     assert not os.listdir(cache)                # no half-installed uv left to reuse
     assert 'pinned packages into .venv with pip' in out.stdout
-    assert '\n  ERROR: ' in out.stderr, out.stderr       # pip's own reason, relayed
+    assert '(pip exit 1)' in out.stderr
+    bootstrap, install = calls.read_text().splitlines()
+    assert bootstrap.startswith('install --disable-pip-version-check --progress-bar off '
+                                '--no-deps --target %s/uv-%s.tmp.' % (cache, pin))
+    assert bootstrap.endswith(' -r %s' % (tmp_path / 'tools' / 'requirements-uv.txt'))
+    assert install == ('install --disable-pip-version-check --progress-bar off -r %s'
+                       % (tmp_path / 'tools' / 'requirements.txt'))
 
 
-def test_freejoint_installer_pip_installs_the_pins_with_pip_though_uv_is_on_path(tmp_path):
+def test_failed_download_with_pip_says_what_failed_and_how_to_retry(tmp_path):
+    # FREEJOINT_INSTALLER=pip: pip though a uv is on PATH; the real pip, its own reason
     setup = _copy_tools(tmp_path)
     _venv_without_packages(tmp_path)
-    # .venv's pip logs its arguments and fails as pip does (the real one's failure: above)
-    pip = tmp_path / '.venv' / 'bin' / 'pip'
-    pip.write_text('#!/bin/sh\necho "$*" >> %s\n'
-                   'echo "ERROR: No matching distribution found for apsw==3.54.1.0"\nexit 1\n'
-                   % shlex.quote(str(tmp_path / 'pip-calls')))
     log = tmp_path / 'uv-calls'
     path = '%s:%s' % (_fake_uv(tmp_path / 'uvbin', log).parent, os.environ['PATH'])
-    out = _run(setup, {'PATH': path, 'FREEJOINT_INSTALLER': 'pip'})
+    out = _run(setup, dict(DEAD_INDEX, PATH=path, FREEJOINT_INSTALLER='pip'))
     _assert_failed_cleanly(out, tmp_path)
     assert 'installer: pip (FREEJOINT_INSTALLER=pip)' in out.stdout, out.stdout
     assert not log.exists()
     assert 'pinned packages into .venv with pip' in out.stdout
-    assert '(pip exit 1)' in out.stderr
-    assert '\n  ERROR: No matching distribution found for apsw==3.54.1.0' in out.stderr
-    assert (tmp_path / 'pip-calls').read_text() == (
-        'install --disable-pip-version-check --progress-bar off -r %s\n'
-        % (tmp_path / 'tools' / 'requirements.txt'))
+    assert '(pip exit ' in out.stderr
+    assert '\n  ERROR: ' in out.stderr, out.stderr       # pip's own reason, relayed
 
 
 def test_an_unknown_installer_is_named(tmp_path):
