@@ -155,7 +155,9 @@ def test_the_configured_plant_is_spatial_plant_stepped_by_hand_bit_for_bit(arm, 
 def test_engine_mujoco_is_spatial_plant_to_round_off(arm, case):
     # MuJoCo's RK4 on its own import of the URDF (the Panda's fingers fixed) against RK4 on
     # Pinocchio's ABA: the same held torque and disturbance draws, 300 steps (0.3 s) of
-    # gravity compensation plus a wave; the arm moves by 0.3-0.6 rad.
+    # gravity compensation plus a wave; the arm moves by 0.3-0.6 rad. Two programs' round-off
+    # over 600 RK4 steps of 0.5 ms from one posture: 3e-14 rad/s apart (AVX2 as AVX-512);
+    # 1e-12 bounds it; a posture 3e-13 rad off (another CPU's IK) already parts them by 8e-12.
     cfg = SCHEMA.config(_values(arm, engine='mujoco'))
     plant = make_plant(cfg)
     assert type(plant).__name__ == 'SpatialMujocoPlant'
