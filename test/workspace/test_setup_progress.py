@@ -37,4 +37,5 @@ def test_setup_feeds_colcon_s_start_and_end_events_to_the_progress_lines():
     with open(os.path.join(ROOT, 'tools', 'setup.sh'), encoding='utf-8') as fh:
         text = fh.read()
     assert 'console_start_end+' in text
-    assert 'awk -v n="$total" -f "$ROOT/tools/colcon_progress.awk"' in text
+    assert '"${AWK[@]}" -v n="$total" -f "$ROOT/tools/colcon_progress.awk"' in text
+    assert 'AWK=(awk -W interactive)' in text      # mawk: each line as it comes
