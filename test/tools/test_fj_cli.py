@@ -75,15 +75,17 @@ def fj(*args, timeout=120):
 
 @pytest.fixture(scope='module')
 def graph(tmp_path_factory):
-    """Start the controller, the planner (system time) and the recorder for the module."""
+    """Start the controller (real time), the planner (system time) and the recorder."""
     logs = tmp_path_factory.mktemp('fj_nodes')
     procs = Processes(str(logs), stop_timeout=10.0)
 
     def start(pkg, exe, *args):
         procs.start_node(pkg, exe, exe, ['--ros-args', *args])
 
+    # real time with no simulator: the controller says not ready (a lockstep one is ready
+    # from the start), so a plan to execute is refused with its reason
     start('freejoint_control', 'controller_node', '--params-file',
-          os.path.join(CONFIG, 'controller.yaml'))
+          os.path.join(CONFIG, 'controller.yaml'), '-p', 'lockstep:=false')
     start('freejoint_planner', 'planner_node', '--params-file',
           os.path.join(CONFIG, 'planner.yaml'), '-p', 'use_sim_time:=false',
           '-p', 'autostart:=false')
