@@ -878,6 +878,11 @@ class PlannerNode(Node, Lifecycle):
         goal = self._goal
         if goal is not None and goal[2] == outcome.plan_id:
             self._goal = None
+            monitor = self._monitor
+            if monitor is not None and monitor.plan.plan_id == outcome.plan_id:
+                # the last feedback says where the plan ended, whatever the feedback period
+                goal[0].publish_feedback(
+                    FOLLOW_CIRCLE.action_type.Feedback(**monitor.status(self._now_ns())))
             goal[1].set_result(outcome)
 
     def _publish_outcome(self, outcome):
