@@ -615,16 +615,21 @@ class CircleLoop:
     plan instead of cutting the running one off.
     """
 
-    def __init__(self, client, plan=None, period=None, strict=True, before=None):
+    def __init__(self, client, plan=None, period=None, strict=True, before=None,
+                 retry=None):
         self.client = client
         self.strict = strict
         self.before = before
-        """Called before each request but the first (e.g. the arm back at rest at q(0))."""
+        """Called before each request but the first (e.g. the arm back at rest at q(0)); not
+        before a retry of a refused one."""
+        self.retry = retry
+        """Seconds from a refused request to the next (``strict=False``; None: ``period``)."""
         self.refused = []
         """(monotonic time, reason) of the refused requests (``strict=False``)."""
         self.plan = plan or ros_params('planner.yaml')
         self.period = float(self.plan['duration']) + 0.5 if period is None else period
         self.next = time.monotonic()
+        self.retrying = False
         self.accepted = []
         """Monotonic wall times of the accepting replies."""
         self.accepted_wall = []
@@ -634,7 +639,7 @@ class CircleLoop:
         """Ask for the next circle if due; a refusal or silence raises if ``strict``."""
         if time.monotonic() < self.next:
             return False
-        if self.before is not None and self.accepted:
+        if self.before is not None and self.accepted and not self.retrying:
             self.before()
         answer = self.client.plan_circle(self.plan)
         now = time.monotonic()
@@ -643,8 +648,10 @@ class CircleLoop:
             if self.strict:
                 raise RuntimeError('the planner did not start the circle: %s' % reason)
             self.refused.append((now, reason))
-            self.next = now + self.period
+            self.next = now + (self.period if self.retry is None else self.retry)
+            self.retrying = True
             return False
+        self.retrying = False
         self.accepted.append(now)
         self.accepted_wall.append(time.time())
         self.next = now + self.period

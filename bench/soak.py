@@ -82,6 +82,8 @@ from freejoint_core.plan_figures import plan_met  # noqa: E402, I100
 
 OUT = os.path.join(ROOT, 'bags', 'soak')
 CASES = ('horizontal', 'vertical')
+RETRY_S = 0.5
+"""Seconds from a circle the planner refused (the controller not ready) to the next request."""
 STATUS_HOLDING = 32
 """``freejoint_msgs/ControllerState.STATUS_HOLDING`` (the message's constant when it has it)."""
 DIVERGED_MM = 500.0
@@ -714,8 +716,10 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
         else:
             plan = bench_graph.ros_params('planner.yaml')
             period = float(plan['duration']) + (STABILISED_REST if stabilise else 0.5)
+            # a circle the planner refuses (the controller not ready) is asked for again
+            # every RETRY_S; the run is judged from its bag, the refusals counted
             loop = bench_graph.CircleLoop(
-                s.client, plan, period,
+                s.client, plan, period, strict=False, retry=RETRY_S,
                 before=None if back_to_back else (lambda: rest_at_q0(s.client)))
         # The machine's own lateness beside the run: a SCHED_FIFO 99 probe per CPU
         # (a stall there stalls every node; columns 'wake' and '>10').
@@ -739,6 +743,9 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
     row['driver'], row['readiness_action'] = driver, action
     row['exit_codes'] = s.codes
     row['plans'] = len(loop.accepted)
+    refused = getattr(loop, 'refused', [])
+    row['refused'] = len(refused)
+    row['refused_reasons'] = sorted({reason for _, reason in refused})[:5]
     row['load_before'], row['load_after'] = load0, os.getloadavg()[0]
     timing = stale_periods(s.timing_path, (start, end))
     lo, hi = timing.pop('stamp_window_ns')
