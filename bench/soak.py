@@ -540,20 +540,8 @@ def judge(row, bag, bound, window_ns):
                            > DIVERGED_MM)
     row['met_reference'] = bool(row['max_mm'] is not None and row['max_mm'] <= bound
                                 and not row['diverged'])
-    row['met'] = plan_met({'share': row['plan_share']}, row['diverged'],
-                          plan_outcome_excuses(bag))
+    row['met'] = plan_met({'share': row['plan_share']}, row['diverged'])
     return row
-
-
-def plan_outcome_excuses(bag):
-    """
-    Return whether the plan's own outcome excuses a run below the share (``plan_met``).
-
-    A planner that offers its plan as a goal with an outcome (paused or aborted with a
-    reason, the arm within the bound of the path meanwhile) records that outcome; until
-    one is recorded in the bag, nothing excuses: False.
-    """
-    return False
 
 
 # -- one soak run -----------------------------------------------------------------------
