@@ -415,24 +415,30 @@ def test_bad_parameter_values_are_refused_with_a_reason_and_it_keeps_running(
     assert procs.stop(proc) == 0
 
 
+def _latest_effort(ctl):
+    """The effort (all joints) of the newest state the test's controller got."""
+    return list(ctl.states[max(ctl.states)].effort)
+
+
+def _command_until_applied(ctl, wait, effort):
+    """Command the active joints' ``effort`` until the newest state shows it applied."""
+    def commanding():
+        ctl.command(effort)
+        ctl.spin()
+
+    wait(lambda: _latest_effort(ctl) == list(effort) + [0.0], 15.0,
+         'the commanded effort applied', spin=commanding)
+
+
 def test_realtime_applies_the_latest_command_and_zero_after_the_timeout(
         procs, ros_node, wait):
     proc = _start(procs, '-p', 'mode:=realtime', '-p', 'command_timeout:=0.3',
                   '-p', 'publish_rate:=100.0', '-p', 'brake_timeout:=0.0')
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
-
-    def latest_effort():
-        return list(ctl.states[max(ctl.states)].effort)
-
-    def commanding():
-        ctl.command([1.5, -0.5])
-        ctl.spin()
-
-    wait(lambda: latest_effort() == [1.5, -0.5, 0.0], 15.0, 'the commanded effort applied',
-         spin=commanding)
+    _command_until_applied(ctl, wait, [1.5, -0.5])
     # The controller goes silent: zero effort after command_timeout, not the last command.
-    wait(lambda: latest_effort() == [0.0, 0.0, 0.0], 15.0, 'zero effort after the timeout',
+    wait(lambda: _latest_effort(ctl) == [0.0, 0.0, 0.0], 15.0, 'zero effort after the timeout',
          spin=ctl.spin)
     assert 'no command on /effort_controller/commands for 0.3 s: zero effort' in \
         procs.log(proc)
@@ -731,16 +737,7 @@ def test_realtime_without_the_command_watchdog_the_last_command_is_held_and_brak
                                       BRAKE_REQUEST.qos)
     wait(lambda: brake.get_subscription_count() >= 1, 15.0, 'the brake request matched',
          spin=ctl.spin)
-
-    def latest_effort():
-        return list(ctl.states[max(ctl.states)].effort)
-
-    def commanding():
-        ctl.command([1.5, -0.5])
-        ctl.spin()
-
-    wait(lambda: latest_effort() == [1.5, -0.5, 0.0], 15.0, 'the commanded effort applied',
-         spin=commanding)
+    _command_until_applied(ctl, wait, [1.5, -0.5])
     silent_from = time.monotonic()
     brake.publish(BRAKE_REQUEST.msg_type(data='test: stop here'))
     # Silent for 1 s (past the timeouts a watchdog drive would have): still applied.
