@@ -416,7 +416,7 @@ def test_bad_parameter_values_are_refused_with_a_reason_and_it_keeps_running(
 
 
 def _latest_effort(ctl):
-    """The effort (all joints) of the newest state the test's controller got."""
+    """Return the effort (all joints) of the newest state the test's controller got."""
     return list(ctl.states[max(ctl.states)].effort)
 
 
