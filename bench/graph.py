@@ -613,10 +613,21 @@ class CircleLoop:
     A plan is asked for ``period`` s (the circle's duration + 0.5 s) after the reply that
     accepted the previous one: a late answer (discovery, a loaded machine) delays the next
     plan instead of cutting the running one off.
+
+    ``follow``: each plan is followed to its outcome instead (``plan_outcome``, as a client
+    of the ``follow_circle`` action waits for its result): the next is asked for ``rest``
+    s after the outcome of the previous arrived, so a plan the feed hold made late runs to
+    its end and is neither cut off nor followed by ``before`` (the arm put back) while it
+    runs. A plan without an outcome :data:`OUTCOME_WAIT` s past its nominal end is
+    recorded as such and the next asked for.
     """
 
+    OUTCOME_WAIT = 20.0
+    """[s] How long past its duration a followed plan may take (its pauses: the planner's
+    ``max_pause`` 5 s each, the feed ramps) before the loop gives up waiting."""
+
     def __init__(self, client, plan=None, period=None, strict=True, before=None,
-                 retry=None):
+                 retry=None, follow=False, rest=0.5):
         self.client = client
         self.strict = strict
         self.before = before
@@ -634,10 +645,43 @@ class CircleLoop:
         """Monotonic wall times of the accepting replies."""
         self.accepted_wall = []
         """System-clock times (s) of the accepting replies."""
+        self.rest = float(rest)
+        self.waiting = None
+        """(plan id, monotonic deadline) of the followed plan without an outcome yet."""
+        self.outcomes = {}
+        """plan id -> freejoint_msgs/PlanOutcome received (``follow``)."""
+        self.followed = []
+        """Plan ids accepted while following, in order."""
+        self.unanswered = []
+        """Followed plan ids that had no outcome by their deadline."""
+        self._sub = None
+        if follow:
+            from freejoint_common.contract import PLAN_OUTCOME
+            self._sub = client.node.create_subscription(
+                PLAN_OUTCOME.msg_type, PLAN_OUTCOME.name,
+                lambda msg: self.outcomes.setdefault(int(msg.plan_id), msg), PLAN_OUTCOME.qos)
+
+    def _followed_done(self, now):
+        """Return whether the followed plan (if any) has ended; set the next request."""
+        if self.waiting is None:
+            return True
+        plan_id, deadline = self.waiting
+        if plan_id in self.outcomes:
+            self.waiting = None
+            self.next = now + self.rest
+            return False
+        if now > deadline:
+            self.unanswered.append(plan_id)
+            self.waiting = None
+            self.next = now
+        return False
 
     def poll(self):
         """Ask for the next circle if due; a refusal or silence raises if ``strict``."""
-        if time.monotonic() < self.next:
+        now = time.monotonic()
+        if self._sub is not None and not self._followed_done(now):
+            return False
+        if now < self.next:
             return False
         if self.before is not None and self.accepted and not self.retrying:
             self.before()
@@ -655,6 +699,10 @@ class CircleLoop:
         self.accepted.append(now)
         self.accepted_wall.append(time.time())
         self.next = now + self.period
+        if self._sub is not None:
+            self.followed.append(int(answer.plan_id))
+            self.waiting = (int(answer.plan_id),
+                            now + float(self.plan['duration']) + self.OUTCOME_WAIT)
         return True
 
 

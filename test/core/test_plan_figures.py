@@ -212,3 +212,66 @@ def test_the_stored_offline_worst_is_what_the_offline_runner_computes(case):
     from freejoint_core.offline import run_case
     seed, worst = pf.OFFLINE_WORST_MAX_MM[case]
     assert run_case(case, 'robust', seed)[0]['max_mm'] == pytest.approx(worst, rel=1e-6)
+
+
+def test_the_distance_to_the_path_is_to_its_segments_not_to_the_setpoint_of_the_time():
+    # A square's corner path (0,0)-(1,0)-(1,1) sampled every 1 mm: by hand, (0.5, 0.2)
+    # is 0.2 from the first side, (1.3, 0.5) 0.3 from the second, (1.3, -0.4) 0.5 from
+    # the corner (1, 0), (0.9995, 0.5) 0.5 mm inside the second side.
+    side = np.linspace(0.0, 1.0, 1001)
+    path = np.vstack([np.column_stack([side, np.zeros(1001)]),
+                      np.column_stack([np.ones(1000), side[1:]])])
+    pts = np.array([[0.5, 0.2], [1.3, 0.5], [1.3, -0.4], [0.9995, 0.5]])
+    got = pf.path_distance(pts, path)
+    np.testing.assert_allclose(got, [0.2, 0.3, 0.5, 0.0005], rtol=0, atol=1e-12)
+    assert pf.path_distance(np.array([[3.0, 4.0]]), np.zeros((1, 2)))[0] == 5.0
+
+
+def _paused_plan(arm_off_path):
+    # A 0.1-m circle of 2 s whose time stands 0.5 s (feed hold) from t = 0.5 s, the arm
+    # braked 0.1 s before the plan stood (it stops at once, the plan 20 mm further on):
+    # the moving ticks of that 0.1 s are off the 1.7-mm bound; the arm stays on the
+    # circle (or ``arm_off_path`` m outside it).
+    t = np.arange(3000) * DT
+    ptime = np.clip(t, None, 0.5) + np.clip(t - 1.0, 0.0, None)
+    w = 2.0 * math.pi / 2.0
+    sp = 0.1 * np.column_stack([np.cos(w * ptime), np.sin(w * ptime)])
+    moving = (t < 0.5) | (t >= 1.0)
+    v = 0.1 * w * np.column_stack([-np.sin(w * ptime), np.cos(w * ptime)]) * moving[:, None]
+    arm_time = np.where((t >= 0.4) & (t < 1.0), 0.4, ptime)
+    arm_time = np.where((t >= 1.0) & (t < 1.1), 0.4 + (t - 1.0) * 2.0, arm_time)
+    arm = (0.1 + arm_off_path) * np.column_stack([np.cos(w * arm_time),
+                                                  np.sin(w * arm_time)])
+    return pf.plan_figures(t, arm, t, sp, v, bound_mm=1.7, plan_id=np.ones(3000, int),
+                           plan_time=ptime, final=ptime >= ptime[-1])
+
+
+def test_a_plan_paused_and_finished_late_excuses_its_run_when_the_arm_stayed_on_the_path():
+    fig = _paused_plan(0.0)
+    plan = fig['plans'][0]
+    assert plan['within'] < plan['moving_ticks'] and fig['share'] < pf.SHARE_MET
+    assert plan['path_max_mm'] < 1e-3                    # on the circle all along
+    excused, why = pf.outcome_excuses(fig, {1: ('SUCCEEDED', 1)})
+    assert excused and 'plan 1 SUCCEEDED, 1 pause(s)' in why
+    assert pf.plan_met(fig, outcome_excuses=excused)
+
+
+@pytest.mark.parametrize('outcomes, off, reason', [
+    ({}, 0.0, 'plan 1: off the bound and no outcome'),
+    ({1: ('SUCCEEDED', 0)}, 0.0, 'plan 1: off the bound and SUCCEEDED with 0 pause(s)'),
+    ({1: ('PREEMPTED', 1)}, 0.0, 'plan 1: off the bound and PREEMPTED'),
+    ({1: ('SUCCEEDED', 1)}, 0.002, 'plan 1: SUCCEEDED but the arm left the path by 2.00 mm > 1.700 mm'),
+])
+def test_no_excuse_without_a_pause_or_abort_named_or_with_the_arm_off_the_path(
+        outcomes, off, reason):
+    fig = _paused_plan(off)
+    excused, why = pf.outcome_excuses(fig, outcomes)
+    assert not excused and why.startswith(reason)
+
+
+def test_a_plan_tracked_on_every_moving_tick_needs_no_excuse():
+    t, sp, v = _line_plan()
+    fig = pf.plan_figures(t, sp, t, sp, v, bound_mm=1.7, plan_id=np.ones(len(t), int),
+                          plan_time=t, final=t >= t[-1])
+    assert fig['plans'][0]['within'] == fig['plans'][0]['moving_ticks']
+    assert pf.outcome_excuses(fig, {}) == (False, 'no plan off the bound')

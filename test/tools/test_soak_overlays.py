@@ -41,3 +41,56 @@ def test_the_soak_pairs_each_state_with_the_setpoint_of_its_stamp_from_the_batch
         sent = setpoint_samples(publisher_module.tick_messages(k)[1])[0]
         assert tuple(setpoints[k].position) == tuple(sent.position)
         assert setpoints[k].stamp_ns == k * dt_ns
+
+
+class _Answer:
+    def __init__(self, accepted, plan_id=0, reason=''):
+        self.accepted, self.plan_id, self.reason = accepted, plan_id, reason
+
+
+class _Outcome:
+    def __init__(self, plan_id):
+        self.plan_id = plan_id
+
+
+class _Client:
+    """The bench client as CircleLoop uses it: plan requests, a node to subscribe with."""
+
+    def __init__(self, answers):
+        self.answers = list(answers)
+        self.requests = 0
+        self.node = self
+        self.deliver = None
+
+    def create_subscription(self, msg_type, name, callback, qos):
+        assert name == 'plan_outcome'
+        self.deliver = callback
+        return object()
+
+    def plan_circle(self, plan):
+        self.requests += 1
+        return self.answers.pop(0)
+
+
+def test_a_followed_circle_is_not_cut_off_by_the_next_until_its_outcome_came(monkeypatch):
+    graph = load_source(os.path.join(ROOT, 'bench', 'graph.py'), 'bench_graph_follow')
+    now = [100.0]
+    monkeypatch.setattr(graph.time, 'monotonic', lambda: now[0])
+    rested = []
+    client = _Client([_Answer(True, 7), _Answer(False, reason='not ready'), _Answer(True, 8)])
+    loop = graph.CircleLoop(client, {'duration': 5.0}, period=5.5, strict=False, retry=0.5,
+                            before=lambda: rested.append(now[0]), follow=True, rest=0.5)
+    assert loop.poll() and client.requests == 1
+    now[0] += 12.0                       # paused: 7 s late, no outcome yet
+    assert not loop.poll() and client.requests == 1 and not rested
+    client.deliver(_Outcome(7))
+    assert not loop.poll()               # the outcome: the next after the rest
+    now[0] += 0.4
+    assert not loop.poll() and client.requests == 1
+    now[0] += 0.1
+    assert not loop.poll() and client.requests == 2 and rested == [112.5]
+    now[0] += 0.5                        # refused: asked again, the arm not put back again
+    assert loop.poll() and client.requests == 3 and rested == [112.5]
+    assert loop.followed == [7, 8] and loop.waiting[0] == 8
+    now[0] += 5.0 + graph.CircleLoop.OUTCOME_WAIT + 0.1
+    assert not loop.poll() and loop.unanswered == [8]    # given up: recorded, next asked
