@@ -153,3 +153,29 @@ def test_a_repeated_circle_between_ticks_is_the_circle_at_that_time():
     assert series.sample_tuple(2.2004) == series.sample_tuple(2.2)            # at rest
     assert series.sample_tuple(4.6004)[2:] == (0.0, 0.0, 0.0, 0.0)            # held at the end
     assert math.isclose(series.sample_tuple(4.6004)[0], 0.2)
+
+
+def test_a_standing_plan_moved_back_lags_by_those_ticks_more_and_still_stands():
+    dt = 0.001
+    feed = FeedRate(dt)
+    feed.ramp(100, 0.0, 0.2)                     # stands from tick 300: lag 100 there
+    assert feed.at(300)[0] == pytest.approx(100.0, abs=1e-9)
+    feed.rewind(310, 42)
+    lag, rate, rate_dot = feed.at(310)
+    assert lag == pytest.approx(110.0 + 42.0, abs=1e-9) and (rate, rate_dot) == (0.0, 0.0)
+    assert feed.at(400)[0] == pytest.approx(200.0 + 42.0, abs=1e-9)
+    feed.ramp(400, 1.0, 0.5)                     # resumes from there: half its ramp more
+    assert feed.at(900 + 100)[0] == pytest.approx(242.0 + 250.0, abs=1e-9)
+
+
+def test_a_plan_is_moved_back_only_while_it_stands():
+    feed = FeedRate(0.001)
+    with pytest.raises(FreejointValueError, match='^k: the plan does not stand'):
+        feed.rewind(10, 5)                       # steady: rate 1
+    feed.ramp(100, 0.0, 0.2)
+    with pytest.raises(FreejointValueError, match='^k: the plan does not stand'):
+        feed.rewind(200, 5)                      # still ramping down
+    with pytest.raises(FreejointValueError, match='^ticks'):
+        feed.rewind(300, -1)
+    with pytest.raises(FreejointValueError, match='^k: tick 50 is before'):
+        feed.rewind(50, 1)

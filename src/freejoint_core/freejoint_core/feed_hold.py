@@ -218,6 +218,45 @@ class FeedRate:
         self._r0 = self._r1 = 0.0
         self._T = self.dt
 
+    def rewind(self, k, ticks):
+        """
+        While the plan stands, move its time back by ``ticks`` from tick ``k`` on.
+
+        A plan paused for an arm that stopped at once (braked) stands further along its
+        path than the arm, by what its stop ramp travelled; moved back to where the arm
+        stopped, it resumes from there instead of the arm catching up. The position steps
+        back along the path while the rate is 0 (nothing tracks it then); the rate and its
+        derivative stay 0.
+
+        Parameters
+        ----------
+        k : int
+            First tick of the new time (not earlier than the current ramp's first tick).
+        ticks : float
+            Plan ticks to go back, >= 0.
+
+        Raises
+        ------
+        FreejointValueError
+            ``ticks`` negative or not finite, ``k`` before the running ramp, or the plan
+            not standing at ``k`` (a ramp running or a rate above 0).
+
+        """
+        ticks = float(ticks)
+        if not (math.isfinite(ticks) and ticks >= 0.0):
+            raise FreejointValueError(f'ticks: expected a finite count >= 0, got {ticks!r}')
+        if self._k0 is not None and k < self._k0:
+            raise FreejointValueError(f'k: tick {k} is before the running ramp (tick '
+                                      f'{self._k0})')
+        lag, rate, _rate_dot = self.at(k)
+        if rate != 0.0 or self._k0 is None or k < self.ramp_end():
+            raise FreejointValueError(f'k: the plan does not stand at tick {k} (rate '
+                                      f'{rate:g})')
+        self._lag0 = float(lag) + ticks
+        self._k0 = int(k)
+        self._r0 = self._r1 = 0.0
+        self._T = self.dt
+
     def ramp(self, k, target, full_time):
         """
         From tick ``k`` on, take the rate from its value at ``k`` to ``target``.

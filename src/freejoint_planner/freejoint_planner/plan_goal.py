@@ -61,6 +61,11 @@ def circle_peak_speed(radius, duration):
     return 2.0 * math.pi * float(radius) * PEAK_RATE / float(duration)
 
 
+REWIND_WINDOW = 1.0
+"""[s] Plan time searched back from where a paused plan stands for the point of its path
+nearest the arm (its stop ramp travels half ``feed_hold_time``, the guard's trip comes
+within a readiness window of the stop)."""
+
 HISTORY_BATCHES = 400
 """Published batches kept to find the setpoint of a measured state's stamp (at 10 ticks a
 batch, 4 s of ticks: a joint state taken late is still matched)."""
@@ -171,6 +176,10 @@ class PlanMonitor:
         self.max_error = math.nan
         self.error = math.nan       # newest measured |ee - setpoint| [m]
         self.error_at = -1          # its state's stamp [ns]
+        self.position = None        # newest measured end effector (m values)
+        self.position_at = -1       # its state's stamp [ns]
+        self.rewound = None         # (plan time [s], distance [m]) moved back this pause
+        self.resume_note = ''       # what the last resume started from (the log)
         self._history = deque(maxlen=HISTORY_BATCHES)
 
     # -- inputs ---------------------------------------------------------------------------
@@ -199,6 +208,8 @@ class PlanMonitor:
             ``|position - setpoint at stamp_ns|`` [m] (NaN: no setpoint of this plan then).
 
         """
+        if stamp_ns > self.position_at:
+            self.position, self.position_at = tuple(position), stamp_ns
         sp = self.setpoint_at(stamp_ns)
         if sp is None:
             return math.nan
@@ -271,6 +282,8 @@ class PlanMonitor:
                 self.check_from = None
                 self._ramp(0.0, self.stop_time)
             self.why = reason or 'the controller is not ready'
+            if self.moved and self.rewound is None and self._stood_still(now_ns):
+                self._rewind_to_arm()
             if self.moved and now_ns - self.pause_since > self.limits.max_pause * 1e9:
                 self.time_paused += (now_ns - self.pause_since) * 1e-9
                 self.pause_since = None
@@ -280,6 +293,10 @@ class PlanMonitor:
             return self.outcome
         if self.paused:
             self.paused = False
+            self.resume_note = '' if not self.rewound else (
+                ' from the point of its path nearest the arm (%.1f mm, %.3f s of the plan '
+                'back)' % (1e3 * self.rewound[1], self.rewound[0]))
+            self.rewound = None
             if self.moved:
                 self.time_paused += (now_ns - self.pause_since) * 1e-9
             self.pause_since = None
@@ -346,6 +363,40 @@ class PlanMonitor:
     def _ramp(self, target, full_time):
         # from the first unpublished tick: what went out stays as it was
         self.plan.feed.ramp(self.stream.next_tick, target, full_time)
+
+    def _rewind_to_arm(self):
+        """
+        Move a plan that stands back along its path to the point nearest the arm.
+
+        The arm stops at once when the controller stops (the driver brakes it, or holds
+        it) while the plan's feed decelerates along the path for half ``feed_hold_time``:
+        it stands ahead of the arm. Once the feed stands and a state measured since says
+        where the arm is, the plan's time goes back (``FeedRate.rewind``, from the first
+        unpublished tick) to the point of its path nearest it, searched over
+        :data:`REWIND_WINDOW` s of plan time (not before the plan's start): it resumes
+        from where the arm stopped, the arm not catching up. Once per pause.
+        """
+        stream, plan = self.stream, self.plan
+        k = stream.next_tick
+        end = plan.feed.ramp_end()
+        if (self.position is None or k is None or end is None or k < end
+                or self.position_at < end * stream.dt_ns):
+            return
+        tau = stream.plan_time_at(k)
+        if not tau > 0.0:
+            return
+        traj = plan.trajectory
+        m = len(self.position)
+        best, back = math.inf, 0
+        for i in range(int(min(tau, REWIND_WINDOW) / stream.dt) + 1):
+            d = math.dist(self.position, traj.sample_tuple(tau - i * stream.dt)[:m])
+            if d < best:
+                best, back = d, i
+        moved = math.dist(traj.sample_tuple(tau)[:m], traj.sample_tuple(tau - back
+                                                                        * stream.dt)[:m])
+        if back:
+            plan.feed.rewind(k, back)
+        self.rewound = (back * stream.dt, moved)
 
     def _stood_still(self, now_ns):
         end = self.plan.feed.ramp_end()

@@ -839,7 +839,7 @@ class PlannerNode(Node, Lifecycle):
             else:
                 self.get_logger().info(
                     f'plan {monitor.plan.plan_id} resumes (feed back to full within '
-                    f'{monitor.start_time:.3f} s): controller ready')
+                    f'{monitor.start_time:.3f} s){monitor.resume_note}: controller ready')
         if outcome is not None:
             self._end(outcome)
 

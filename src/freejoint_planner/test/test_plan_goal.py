@@ -91,6 +91,47 @@ def test_not_ready_at_1_s_pauses_along_the_path_resumes_and_ends_late_by_the_pau
     assert all(abs(math.hypot(*q) - 0.2) < 1e-12 for q in p)
 
 
+def test_a_plan_paused_for_an_arm_braked_at_once_resumes_from_where_the_arm_stopped():
+    # The arm stops on its last state before the trip (the trigger of 0.99 s: plan time
+    # 0.990 s), braked; the stop ramp starts on the first unpublished tick (1.011 s: the
+    # trigger of 0.99 s published 20 ahead), so the feed stands at plan time 1.011 +
+    # STOP / 2 = 1.111 s. Once it stands it goes back 0.121 s to the arm and resumes
+    # from there: late by the pause, its ramps and the 0.121 s.
+    run = Run()
+    assert run.until(1.0) is None
+    arm = position_of(run.out[run.now - 10 * MS])
+    assert run.until(2.0, ready=False, reason='tripped', ee=arm) is None
+    mon = run.monitor
+    assert mon.rewound[0] == pytest.approx(0.121, abs=1e-9)
+    stood = position_of(run.out[run.now - 10 * MS])
+    assert math.dist(stood, arm) < 1e-12
+    assert mon.rewound[1] == pytest.approx(math.dist(
+        arm, run.circle.sample_tuple(1.111)[:2]), abs=1e-12)
+    run.step(ee=arm)
+    assert 'nearest the arm' in mon.resume_note and mon.rewound is None
+    outcome = run.until(9.0)
+    assert outcome.code == SUCCEEDED and outcome.pauses == 1
+    assert outcome.lateness == pytest.approx(lateness(STOP, 1.0 - STOP, START) + 0.121,
+                                             abs=1e-9)
+    # one step back along the circle, while the plan stood (velocity 0 both sides);
+    # every other step within the circle's own at full feed
+    keys = sorted(run.out)
+    p = run.positions()
+    fast = [i for i, (a, b) in enumerate(zip(p, p[1:]))
+            if math.dist(a, b) > circle_peaks(run.circle)[0] * 0.001 * (1 + 1e-6)]
+    assert len(fast) == 1
+    before, after = run.out[keys[fast[0]]], run.out[keys[fast[0] + 1]]
+    assert (before.vx, before.vy, after.vx, after.vy) == (0.0, 0.0, 0.0, 0.0)
+    assert all(abs(math.hypot(*q) - 0.2) < 1e-12 for q in p)
+
+
+def test_a_plan_paused_with_the_arm_on_its_setpoint_is_not_moved_back():
+    run = Run()
+    run.until(1.0)
+    run.until(2.0, ready=False)
+    assert run.monitor.rewound == (0.0, 0.0)
+
+
 def test_a_pause_longer_than_max_pause_aborts_and_the_plan_stays_stopped():
     run = Run(LIMITS._replace(max_pause=0.5))
     run.until(1.0)
