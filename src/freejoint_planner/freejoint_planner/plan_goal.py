@@ -428,7 +428,9 @@ class PlanMonitor:
 
     def _finish(self, code, message, now_ns):
         plan = self.plan
-        started = plan.start_tick is not None
+        # a plan replaced before its (delayed) first tick never started: elapsed 0
+        started = (plan.start_tick is not None
+                   and self._first_tick() * self.stream.dt_ns <= now_ns)
         if self.pause_since is not None and self.moved:
             self.time_paused += (now_ns - self.pause_since) * 1e-9
             self.pause_since = None

@@ -132,6 +132,16 @@ def test_a_plan_paused_with_the_arm_on_its_setpoint_is_not_moved_back():
     assert run.monitor.rewound == (0.0, 0.0)
 
 
+def test_a_plan_replaced_before_its_delayed_start_reports_no_time_elapsed():
+    stream = SetpointStream(0.001, 20)
+    stream.start(Plan(1, CircleQuintic(), start_delay_ns=3600 * 10 ** 9))
+    mon = PlanMonitor(stream, LIMITS, STOP, START, 0.5, 5.0)
+    mon.update(0, True)
+    stream.advance(0)
+    outcome = mon.preempt(2 * 10 ** 9, 2)
+    assert outcome.code == PREEMPTED and outcome.elapsed == 0.0
+
+
 def test_a_pause_longer_than_max_pause_aborts_and_the_plan_stays_stopped():
     run = Run(LIMITS._replace(max_pause=0.5))
     run.until(1.0)
