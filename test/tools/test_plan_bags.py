@@ -135,3 +135,31 @@ def test_a_real_time_soak_run_prints_the_figures_an_independent_check_gives(
     assert done.returncode == 0, done.stderr
     plan_check.assert_printed_equals(plan_check.analyze_line(done, 'bag'),
                                      plan_check.independent(bag, bound_mm=bound))
+
+
+def test_the_analysis_verdict_names_met_met_by_the_outcomes_or_why_not():
+    from types import SimpleNamespace
+
+    from freejoint_tools.analyze import verdict_line
+    import numpy as np
+    # 1000 moving ticks of plan 1, the last 20 off the 1.7-mm bound by 10 mm along the path
+    t = np.arange(1000) * 0.001
+    sp = np.column_stack([t * 0.1, np.zeros(1000)])
+    v = np.tile([0.1, 0.0], (1000, 1))
+    arm = sp.copy()
+    arm[-20:, 0] -= 0.01
+
+    def trace(outcomes):
+        from freejoint_core.plan_figures import plan_figures
+        fig = plan_figures(t, arm, t, sp, v, bound_mm=1.7, plan_id=np.ones(1000, int),
+                           plan_time=t, final=t >= t[-1])
+        return {'plan': fig, 'outcomes': [SimpleNamespace(plan_id=pid, code_name=code,
+                                                          pauses=n)
+                                          for pid, code, n in outcomes]}
+    assert verdict_line(trace([])) == ('NOT met (98.0 % of the moving ticks within 1.700 mm): '
+                                       'plan 1: off the bound and no outcome')
+    assert verdict_line(trace([(1, 'SUCCEEDED', 1)])).startswith(
+        'met by the outcomes (98.0 % of the moving ticks within 1.700 mm): plan 1 SUCCEEDED')
+    arm[:] = sp
+    assert verdict_line(trace([])) == 'met (100.0 % of the moving ticks within 1.700 mm)'
+    assert verdict_line({'plan': None, 'outcomes': []}) == ''

@@ -61,7 +61,10 @@ gives a warning instead.
 Plans: every outcome the planner published on ``plan_outcome`` (recorded by the recorder
 with the graph's topics) is printed, one line each: ``outcome: <bag>: plan N SUCCEEDED
 (elapsed .. s, late .. s, n pause(s) .. s, max path error .. mm)``, or the code and why
-(docs/feed_hold.md); a bag recorded before the topic existed has none.
+(docs/feed_hold.md); a bag recorded before the topic existed has none. Then the verdict,
+``verdict: <bag>: met (...)``, ``met by the outcomes (...)`` (each plan off the bound
+paused or was aborted for a controller not ready, the arm within the bound of its path:
+``plan_figures.outcome_excuses``) or ``NOT met (...)`` and why; none without a bound.
 
 Bad input (a missing, truncated or foreign bag, a bag without the run's topics) gives one
 line ``analyze: error: <file>: <problem>`` on stderr and exit code 1. A bag whose recorder
@@ -229,6 +232,30 @@ def analyse_bag(path, overrides=None, state_topic=None, joint_topic=None):
     trace['outcomes'] = [m for _, m in bag.decode(outcome, store)] \
         if outcome in bag.topics and bag.topics[outcome].count else []
     return record, trace, warnings
+
+
+def verdict_line(trace):
+    """
+    Return the run's verdict against the plan (``plan_met``), '' without a share.
+
+    ``met``: 99 % of the plan's moving ticks within the bound; ``met by the outcomes``:
+    each plan off the bound paused or was aborted for a controller not ready, the arm
+    within the bound of its path (``outcome_excuses``); else ``NOT met`` and why.
+    """
+    from freejoint_core.plan_figures import outcome_excuses, plan_met
+    figures = trace.get('plan')
+    if not figures or figures.get('share') is None:
+        return ''
+    outcomes = {int(m.plan_id): (m.code_name, int(m.pauses)) for m in trace['outcomes']
+                if int(m.plan_id) > 0}
+    share = '%.1f %% of the moving ticks within %.3f mm' % (100.0 * figures['share'],
+                                                           figures['bound_mm'])
+    if plan_met(figures):
+        return 'met (%s)' % share
+    excused, why = outcome_excuses(figures, outcomes)
+    if plan_met(figures, outcome_excuses=excused):
+        return 'met by the outcomes (%s): %s' % (share, why)
+    return 'NOT met (%s): %s' % (share, why)
 
 
 def plan_of(bag, store, info, arm, warnings):
@@ -542,6 +569,9 @@ def main(argv=None):
             print('failure: %s' % line)
         for outcome in trace['outcomes']:
             print('outcome: %s: %s' % (trace['name'], outcome_line(outcome)))
+        line = verdict_line(trace)
+        if line:
+            print('verdict: %s: %s' % (trace['name'], line))
     if not opts.no_plots:
         from .plots import write_figures
         try:
