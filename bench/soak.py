@@ -5,8 +5,7 @@ Soak: the real-time graph at 1 kHz, many runs per case, each judged against the 
 5) of ``--seconds`` s (default 30): a process per node as ``make demo`` starts them (the
 installed executables with ``config/*.yaml``), the recorder on, the simulator and the
 controller at SCHED_FIFO ``--priority`` (default 50: ``thread_priority``), the planner's
-circle asked for again and again (each 0.5 s after the previous one's duration, from the
-reply that accepted it). Each run has a ROS domain of its own
+circle asked for again and again (each 0.5 s after the previous one's outcome). Each run has a ROS domain of its own
 (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), every wait is bounded and every process is
 stopped (SIGINT, then SIGKILL of its group) whatever happens. ``--hogs N`` adds N CPU hog
 processes at normal priority beside the graph for the whole soak (each ends by itself after
@@ -20,7 +19,9 @@ Per run, from its bag and the simulator's per-step timing file:
   ``plan rms`` / ``plan max``), the share of the plan's moving ticks within the bound
   (``in %``), the time the controller held or the driver braked while the plan moved
   (``held s``), the plans completed and how late the latest ended (``late s``: the plan's
-  time stood still that long, e.g. a feed hold);
+  time stood still that long, e.g. a feed hold), the largest distance from the end
+  effector to the path of the plan it ran in (``path mm``), the controller's readiness
+  guard trips (``trips``, its end-of-run line) and each plan's outcome;
 * against the controller's own reference (``controller_state``: ``|position -
   position_desired|``, the reference held, blended or carried forward), column ``ref max``;
   with ``--stabilise`` or ``--fail-at`` over the ticks whose setpoint moves (the circles:
@@ -266,6 +267,17 @@ class Session:
     def diverged_lines(self):
         """Return the simulator's log lines about a diverged plant."""
         return self.graph.diverged()
+
+    def guard_trips(self):
+        """Return the readiness guard's trips of the controller's end-of-run line (None)."""
+        import re
+        path = os.path.join(self.graph.log_dir, 'run_controller_node.log')
+        try:
+            with open(path, errors='replace') as f:
+                found = re.findall(r'readiness guard: (\d+) trips', f.read())
+        except OSError:
+            return None
+        return int(found[-1]) if found else None
 
 
 # -- analysis ---------------------------------------------------------------------------
@@ -547,6 +559,9 @@ def judge(row, bag, bound, window_ns):
                                 and not row['diverged'])
     excused, why = outcome_excuses(
         {'bound_mm': bound, 'plans': row.get('plan_plans') or []}, row.get('outcomes', {}))
+    paths = [p['path_max_mm'] for p in row.get('plan_plans') or []
+             if p.get('path_max_mm') is not None]
+    row['plan_path_max_mm'] = max(paths) if paths else None
     row['excused'] = bool(excused and (row['plan_share'] or 0.0) < SHARE_MET)
     row['excuse'] = why
     row['met'] = plan_met({'share': row['plan_share']}, row['diverged'], excused)
@@ -780,6 +795,7 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
     if row.get('max_state_age') is not None:
         row['state_age_max_ms'] = 1e3 * row['max_state_age']
     row['diverged_log_lines'] = s.diverged_lines()
+    row['guard_trips'] = s.guard_trips()
     row['diverged_diagnostics'] = diagnostics_diverged(s.bag)
     judge(row, s.bag, bound, (lo, hi))
     if fully_actuated:
@@ -839,10 +855,12 @@ COLUMNS = (('case', '%-10s'), ('run', '%3s'), ('plan_rms_mm', '%7.3f'),
            ('holds', '%6d'), ('diverged', '%5s'), ('latency_max_ms', '%7.2f'),
            ('state_age_max_ms', '%7.2f'),
            ('plans', '%3d'), ('load_after', '%5.2f'), ('wake_max_ms', '%6.1f'),
-           ('wake_late', '%4d'), ('rest_max_mm', '%7.3f'), ('met', '%4s'))
+           ('wake_late', '%4d'), ('rest_max_mm', '%7.3f'), ('plan_path_max_mm', '%7.3f'),
+           ('guard_trips', '%5d'), ('met', '%4s'))
 HEADER = ('case', 'run', 'plan rms', 'plan max', 'in %', 'held s', 'late s', 'bound',
           'ref max', 'stale', 'run', 'holds', 'div',
-          'lat ms', 'age ms', 'pl', 'load', 'wake', '>10', 'rest mm', 'met')
+          'lat ms', 'age ms', 'pl', 'load', 'wake', '>10', 'rest mm', 'path mm', 'trips',
+          'met')
 
 
 def format_row(row):
