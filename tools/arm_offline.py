@@ -6,12 +6,15 @@ spatial arm (ur5, panda) or a directory of ``fj arm init``. Each seed runs
 ``tools/demo.py``'s ``spatial_offline`` (the graph's twin: the parameter files of the
 three nodes, the law the controller builds, the planner's circle, the hold) and reports
 the tip error against the plan [mm], the peak effort and speed shares of the URDF limits,
-the joints that left their URDF position limits (free ones included) and divergence.
+the joints that left their URDF position limits (free ones included), the smallest
+distance of any joint from its URDF position limits over the run (``limit_margin_rad``,
+the joint named; continuous joints have none) and divergence.
 Exit status 1 if a seed misses the bound of arm.yaml (3 mm), leaves a limit or diverges.
 """
 
 import argparse
 import json
+import math
 import os
 import sys
 
@@ -21,6 +24,20 @@ import demo  # noqa: E402  (tools/demo.py: the twin and the arm's entry)
 
 KEYS = ('rms_mm', 'max_mm', 'hold_last_s_max_mm', 'tau_ratio', 'vel_ratio', 'vel_ratio_free',
         'active_outside_limits', 'free_outside_limits', 'diverged_at_s')
+
+
+def limit_margin(real, q):
+    """
+    Return the smallest distance [rad] of the postures ``q`` (K, n) from the URDF limits.
+
+    Over every tick and every joint with position limits (free ones included; negative:
+    outside), and the joint it belongs to (inf and '' when no joint has limits).
+    """
+    import numpy as np
+    gaps = np.minimum(q - real.lower, real.upper - q).min(axis=0)
+    gaps = np.where(np.isfinite(gaps), gaps, np.inf)
+    j = int(np.argmin(gaps))
+    return (float(gaps[j]), real.joint_names[j]) if np.isfinite(gaps[j]) else (math.inf, '')
 
 
 def main(argv=None):
@@ -39,12 +56,16 @@ def main(argv=None):
     dt = settings['dt']
     seconds = args.t_stop if args.t_stop is not None else settings['duration'] + info['hold_s']
     n_ticks = int(round(seconds / dt))
+    real = demo.spatial_configs(arm)[0].arm.spatial
     failed = 0
     worst = 0.0
+    margin = math.inf
     for seed in range(args.first, args.first + args.seeds):
-        record, _ = demo.spatial_offline(arm, seed, n_ticks)
+        record, trace = demo.spatial_offline(arm, seed, n_ticks)
         row = {'arm': info['spatial'], 'seed': seed}
         row.update({key: record[key] for key in KEYS})
+        row['limit_margin_rad'], row['limit_margin_joint'] = limit_margin(real, trace['q'])
+        margin = min(margin, row['limit_margin_rad'])
         bad = (record['max_mm'] > info['bound_mm'] or record['diverged_at_s'] is not None
                or record['active_outside_limits'] or record['free_outside_limits']
                or record['tau_ratio'] > 1.0 or record['vel_ratio'] > 1.0
@@ -53,8 +74,9 @@ def main(argv=None):
         worst = max(worst, record['max_mm'])
         print(json.dumps({k: round(v, 4) if isinstance(v, float) else v
                           for k, v in row.items()}), flush=True)
-    print('%s: %d seeds, worst max %.3f mm (bound %g mm), %d seed(s) failing' % (
-        info['spatial'], args.seeds, worst, info['bound_mm'], failed))
+    print('%s: %d seeds, worst max %.3f mm (bound %g mm), worst limit margin %.3f rad, '
+          '%d seed(s) failing' % (info['spatial'], args.seeds, worst, info['bound_mm'], margin,
+                                  failed))
     return 1 if failed else 0
 
 

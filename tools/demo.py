@@ -459,6 +459,25 @@ def arm_offline(arm, case, seed, n_ticks, normal=None):
                    label=case, seed=seed, n_ticks=n_ticks)
 
 
+def spatial_configs(arm):
+    """
+    Return the simulator's and the controller's configs and the planner's values of ``arm``.
+
+    ``config/<node>.yaml`` with the arm's overlay (``config/<arm>/`` or the directory of
+    ``fj arm init``) on top, as the graph's nodes read them.
+    """
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_sim.params import SCHEMA as SIM
+    overlays = (arm,)
+    sim = SIM.from_yaml(os.path.join(CONFIG, 'sim.yaml'), *_overlay_files(overlays, 'sim'))
+    ctl = CONTROLLER.from_yaml(os.path.join(CONFIG, 'controller.yaml'),
+                               *_overlay_files(overlays, 'controller'))
+    plan = PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'),
+                               *_overlay_files(overlays, 'planner'))
+    return sim, ctl, plan
+
+
 def spatial_offline(arm, seed, n_ticks, normal=None):
     """
     Return the offline twin's record and trace of a spatial example arm.
@@ -472,19 +491,11 @@ def spatial_offline(arm, seed, n_ticks, normal=None):
     line (``--plane-normal``), else the planner's file's ``plane_normal``.
     """
     from freejoint_control.loop import config_law
-    from freejoint_control.params import SCHEMA as CONTROLLER
     from freejoint_core.metrics import compute_record
     from freejoint_core.spatial_offline import run_twin
-    from freejoint_planner.params import SCHEMA as PLANNER
     from freejoint_planner.spatial_planning import plane_normal
-    from freejoint_sim.params import SCHEMA as SIM
     import numpy as np
-    overlays = (arm,)
-    sim = SIM.from_yaml(os.path.join(CONFIG, 'sim.yaml'), *_overlay_files(overlays, 'sim'))
-    ctl = CONTROLLER.from_yaml(os.path.join(CONFIG, 'controller.yaml'),
-                               *_overlay_files(overlays, 'controller'))
-    plan = PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'),
-                               *_overlay_files(overlays, 'planner'))
+    sim, ctl, plan = spatial_configs(arm)
     law = config_law(ctl)
     dt = sim.dt
     duration = float(plan['duration'])
