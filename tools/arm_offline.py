@@ -52,10 +52,8 @@ def main(argv=None):
     info = demo.arm_info(arm)
     if 'spatial' not in info:
         raise SystemExit('arm_offline: %s is not a spatial arm' % args.arm)
-    settings = demo.offline_settings()
-    dt = settings['dt']
-    seconds = args.t_stop if args.t_stop is not None else settings['duration'] + info['hold_s']
-    n_ticks = int(round(seconds / dt))
+    n_ticks = demo.spatial_ticks(arm) if args.t_stop is None else \
+        int(round(args.t_stop / demo.offline_settings()['dt']))
     real = demo.spatial_configs(arm)[0].arm.spatial
     failed = 0
     worst = 0.0

@@ -478,6 +478,12 @@ def spatial_configs(arm):
     return sim, ctl, plan
 
 
+def spatial_ticks(arm):
+    """Return the ticks of a spatial arm's run: the planner's circle and the arm's hold."""
+    settings = offline_settings()
+    return int(round((settings['duration'] + arm_info(arm)['hold_s']) / settings['dt']))
+
+
 def spatial_offline(arm, seed, n_ticks, normal=None):
     """
     Return the offline twin's record and trace of a spatial example arm.

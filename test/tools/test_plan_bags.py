@@ -115,7 +115,8 @@ def test_a_real_time_soak_run_prints_the_figures_an_independent_check_gives(
         monkeypatch, analyze, tmp_path, plan_check):
     from freejoint_core.plan_figures import tracking_bound_mm
     # the stored bound (the soak runs the offline seeds for it), the default scheduler
-    monkeypatch.setattr(soak, 'bound_of', lambda case, hogs: tracking_bound_mm(case, hogs))
+    monkeypatch.setattr(soak, 'bound_of',
+                        lambda case, hogs, arm=None: tracking_bound_mm(case, hogs))
     monkeypatch.setattr(soak.bench_graph, 'PRIORITY', 0)
     monkeypatch.setattr(soak, 'OUT', str(tmp_path))
     # The guard off: the controller answers whatever the machine's load (what is under test
@@ -135,3 +136,36 @@ def test_a_real_time_soak_run_prints_the_figures_an_independent_check_gives(
     assert done.returncode == 0, done.stderr
     plan_check.assert_printed_equals(plan_check.analyze_line(done, 'bag'),
                                      plan_check.independent(bag, bound_mm=bound))
+
+
+@pytest.mark.ros
+def test_a_lockstep_soak_run_of_a_spatial_arm_is_judged_in_3_d_against_its_plan(
+        monkeypatch, tmp_path, plan_check):
+    from freejoint_core.plan_figures import tracking_bound_mm
+    # make soak SOAK_ARGS='--arm ur5 --lockstep': the UR5 as make demo ARM=ur5 runs it, in
+    # lockstep (what is under test is the soak's overlays and judgement of a spatial arm,
+    # not the machine); a given bound (the soak runs the twin's seeds 0-9 for it, minutes)
+    given = [1.39] * 10
+    monkeypatch.setattr(soak, 'bound_of', lambda case, hogs, arm=None: tracking_bound_mm(
+        case, hogs, offline_max_mm=given))
+    monkeypatch.setattr(soak.bench_graph, 'PRIORITY', 0)
+    monkeypatch.setattr(soak, 'OUT', str(tmp_path))
+    assert soak.arm_label('ur5') == 'ur5'
+    row = soak.soak_run('ur5', 78, 0, 3.0, 0, arm='ur5', lockstep=True)
+    assert row['arm'] == 'ur5' and row['lockstep']
+    assert row['bound_mm'] == pytest.approx(1.5 * 1.39)
+    bag = os.path.normpath(os.path.join(ROOT, row['bag']))
+    check = plan_check.independent(bag, tuple(row['stamp_window_ns']), row['bound_mm'])
+    cells = soak.format_row(row).split()
+    assert cells[:2] == ['ur5', '0']
+    assert abs(float(cells[2]) * 1e-3 - check[0]) <= 1e-6         # plan rms, as printed
+    assert abs(float(cells[3]) * 1e-3 - check[1]) <= 1e-6         # plan max
+    assert abs(float(cells[4]) - 100.0 * check[4]) <= 0.05 + 1e-9  # share, 0.1 %
+    assert (row['plan_ticks'], row['plan_moving_ticks']) == check[2:4]
+    assert row['plan_moving_ticks'] >= 2900                       # 3 s of the 5-s circle
+    # lockstep: no period without its command; the tip within the UR5's offline bound
+    assert row['stale'] == 0 and row['plans'] == 1 and row['met']
+    # the tip in 3-D: 3 values per setpoint (the UR5's circle), the error its 3-D norm
+    from freejoint_tools.bagfile import open_bag
+    _, msg = open_bag(bag).decode('/setpoints')[-1]
+    assert len(msg.position) == 3 * len(msg.stamps)
