@@ -229,3 +229,6 @@ def test_init_refuses_a_circle_too_fast_or_out_of_reach_before_any_search():
     assert str(err.value).startswith('no start posture found: radius: the circle leaves the '
                                      'reach of the arm: its point ')
     assert 'beyond the reach 0.4497 m' in str(err.value)
+    with pytest.raises(ArmInitError, match=r'^hold: expected a finite number of seconds > 0, '
+                       r'got -1.0$'):
+        arm_files(path, ['wrist_roll'], hold_s=-1.0)

@@ -302,7 +302,7 @@ def _floats(values):
 
 
 def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
-              passive_damping=None):
+              passive_damping=None, hold_s=HOLD_S):
     """
     Return ``{file name: YAML text}`` of an arm (module notes).
 
@@ -317,8 +317,10 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
     radius : float, optional
         The circle's radius [m] (default ``min(RADIUS, L / 10)``).
     passive_damping : float, optional
-        The free joints' viscous damping in the simulator [N m s/rad] (default: their
-        URDF ``<dynamics damping>``, 0 if none).
+        The free joints' viscous damping in the simulator [N m s/rad] (default:
+        :func:`free_damping`'s rule).
+    hold_s : float
+        The hold after the circle [s] (``arm.yaml``; the run the damping rule covers), > 0.
     log : callable, optional
         Called with a line per start point tried.
 
@@ -342,6 +344,8 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
     if not passive:
         raise ArmInitError('passive: name at least one free joint of the chain '
                            f'{real.joint_names}')
+    if not (isinstance(hold_s, (int, float)) and math.isfinite(hold_s) and hold_s > 0.0):
+        raise ArmInitError(f'hold: expected a finite number of seconds > 0, got {hold_s!r}')
     plan = PLANNER.defaults()
     reach = arm_reach(nominal)
     radius = float(radius) if radius is not None else min(RADIUS, reach / 10.0)
@@ -358,7 +362,7 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
             '--params-file <this file>.\n')
     loop = found['verdict'].loop
     damping = free_damping(real, found['q0'], joint_damping(text, set(passive)),
-                           passive_damping, log=log)
+                           passive_damping, float(plan['duration']) + hold_s, log=log)
     sim = (head.format(node='sim')
            + f'# Start posture: IK of the tip to {np.round(found["target"], 4).tolist()} m '
            f'(kappa {found["kappa"]:.3g}), the free joints at rest.\n'
@@ -393,16 +397,16 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
             f'name: {os.path.splitext(os.path.basename(path))[0]}_'
             f'{"_".join(passive)}\n'
             f'passive_joint: {passive[0]}\n'
-            f'hold_s: {HOLD_S!r}\n'
+            f'hold_s: {float(hold_s)!r}\n'
             f'bound_mm: {BOUND_MM!r}\n')
     return {'sim.yaml': sim, 'controller.yaml': ctl, 'planner.yaml': planner,
             'arm.yaml': meta}
 
 
 def init_arm(urdf, passive, out, tip=None, base=None, radius=None, log=None,
-             passive_damping=None):
+             passive_damping=None, hold_s=HOLD_S):
     """Write :func:`arm_files` into ``out`` (created); return the paths written."""
-    files = arm_files(urdf, passive, tip, base, radius, log, passive_damping)
+    files = arm_files(urdf, passive, tip, base, radius, log, passive_damping, hold_s)
     os.makedirs(out, exist_ok=True)
     paths = []
     for name, text in files.items():
