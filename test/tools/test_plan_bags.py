@@ -110,6 +110,19 @@ def test_a_run_held_while_the_plan_moved_is_not_met_though_its_reference_was(
     assert 'NOT' in soak.format_row(dict(row, case='horizontal', run=0, bound_mm=1.7))
 
 
+def _printed_row_is_the_bags(row, label, plan_check):
+    """Assert the soak's printed row is the independent check of its bag; return the bag."""
+    bag = os.path.normpath(os.path.join(ROOT, row['bag']))
+    check = plan_check.independent(bag, tuple(row['stamp_window_ns']), row['bound_mm'])
+    cells = soak.format_row(row).split()
+    assert cells[:2] == [label, '0']
+    assert abs(float(cells[2]) * 1e-3 - check[0]) <= 1e-6         # plan rms, as printed
+    assert abs(float(cells[3]) * 1e-3 - check[1]) <= 1e-6         # plan max
+    assert abs(float(cells[4]) - 100.0 * check[4]) <= 0.05 + 1e-9  # share, 0.1 %
+    assert (row['plan_ticks'], row['plan_moving_ticks']) == check[2:4]
+    return bag
+
+
 @pytest.mark.ros
 def test_a_real_time_soak_run_prints_the_figures_an_independent_check_gives(
         monkeypatch, analyze, tmp_path, plan_check):
@@ -122,15 +135,8 @@ def test_a_real_time_soak_run_prints_the_figures_an_independent_check_gives(
     # The guard off: the controller answers whatever the machine's load (what is under test
     # is that the printed figures are the bag's, not how well the arm tracks).
     row = soak.soak_run('horizontal', 79, 0, 4.0, 0, ctl_extra=['readiness_guard:=false'])
-    bag = os.path.normpath(os.path.join(ROOT, row['bag']))
+    bag = _printed_row_is_the_bags(row, 'horizontal', plan_check)
     bound = row['bound_mm']
-    check = plan_check.independent(bag, tuple(row['stamp_window_ns']), bound)
-    cells = soak.format_row(row).split()
-    assert cells[:2] == ['horizontal', '0']
-    assert abs(float(cells[2]) * 1e-3 - check[0]) <= 1e-6         # plan rms, as printed
-    assert abs(float(cells[3]) * 1e-3 - check[1]) <= 1e-6         # plan max
-    assert abs(float(cells[4]) - 100.0 * check[4]) <= 0.05 + 1e-9  # share, 0.1 %
-    assert (row['plan_ticks'], row['plan_moving_ticks']) == check[2:4]
     assert row['plan_moving_ticks'] > 1000                         # the circle ran
     done = analyze(bag, '--no-plots')
     assert done.returncode == 0, done.stderr
@@ -154,14 +160,7 @@ def test_a_lockstep_soak_run_of_a_spatial_arm_is_judged_in_3_d_against_its_plan(
     row = soak.soak_run('ur5', 78, 0, 3.0, 0, arm='ur5', lockstep=True)
     assert row['arm'] == 'ur5' and row['lockstep']
     assert row['bound_mm'] == pytest.approx(1.5 * 1.39)
-    bag = os.path.normpath(os.path.join(ROOT, row['bag']))
-    check = plan_check.independent(bag, tuple(row['stamp_window_ns']), row['bound_mm'])
-    cells = soak.format_row(row).split()
-    assert cells[:2] == ['ur5', '0']
-    assert abs(float(cells[2]) * 1e-3 - check[0]) <= 1e-6         # plan rms, as printed
-    assert abs(float(cells[3]) * 1e-3 - check[1]) <= 1e-6         # plan max
-    assert abs(float(cells[4]) - 100.0 * check[4]) <= 0.05 + 1e-9  # share, 0.1 %
-    assert (row['plan_ticks'], row['plan_moving_ticks']) == check[2:4]
+    bag = _printed_row_is_the_bags(row, 'ur5', plan_check)
     assert row['plan_moving_ticks'] >= 2900                       # 3 s of the 5-s circle
     # lockstep: no period without its command; the tip within the UR5's offline bound
     assert row['stale'] == 0 and row['plans'] == 1 and row['met']

@@ -618,6 +618,11 @@ def run_chunk(camp, rows):
                        law=camp.get('_law', 'robust'), law_params=camp['_law_params'],
                        dt=camp['dt'], dt_sub=camp['dt_sub'], duration=camp['duration'],
                        trajectory=CircleQuintic(**camp['task']), arms=camp.get('_arms'))
+    return _results(camp, rows, res)
+
+
+def _results(camp, rows, res):
+    """Return the result columns of ``rows`` and the runs' metrics ``res`` (and ``holds``)."""
     out = dict(rows)
     for k, v in res.items():
         out[k] = v
@@ -632,8 +637,8 @@ def run_chunk(camp, rows):
 def _spatial_chunk(camp, rows):
     """:func:`run_chunk` of a spatial arm: its offline twin per run (module notes)."""
     from freejoint_tools.arm_twin import twin
-    out = dict(rows)
-    cols = {k: np.full(len(rows['run_index']), np.nan) for k in METRIC_COLUMNS}
+    cols = {k: np.full(len(rows['run_index']), np.nan) for k in METRIC_COLUMNS
+            if k not in ('q3_range_deg', 'holds')}
     ticks = int(round(camp['duration'] / camp['dt']))
     for i in range(len(rows['run_index'])):
         record, trace = twin(camp['arm']['dir'], int(rows['seed'][i]), ticks,
@@ -650,14 +655,8 @@ def _spatial_chunk(camp, rows):
                   'ticks': len(err)}
         for k, v in values.items():
             cols[k][i] = v
-    out.update(cols)
-    out['ticks'] = cols['ticks'].astype(np.int64)
-    out['q3_range_deg'] = cols['q3_max_deg'] - cols['q3_min_deg']
-    holds = ~np.isfinite(cols['diverged_at_s'])
-    for key, bound in camp['success'].items():
-        holds &= out[key] <= bound
-    out['holds'] = holds
-    return {k: out[k] for k in INPUT_COLUMNS + METRIC_COLUMNS}
+    cols['ticks'] = cols['ticks'].astype(np.int64)
+    return _results(camp, rows, cols)
 
 
 def record_free(trace, camp):
