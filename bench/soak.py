@@ -564,9 +564,10 @@ def bound_of(case, hogs, arm=None):
     if arm is None:
         return tracking_bound_mm(case, bool(hogs), recompute=True)
     if arm not in _ARM_MAX_MM:
-        demo = demo_module()
-        ticks = demo.spatial_ticks(arm)
-        _ARM_MAX_MM[arm] = [demo.spatial_offline(arm, seed, ticks)[0]['max_mm']
+        from freejoint_tools.arm_twin import run_ticks, twin
+        where = arm_dir(arm)
+        ticks = run_ticks(where, bench_graph.CONFIG)
+        _ARM_MAX_MM[arm] = [twin(where, seed, ticks, bench_graph.CONFIG)[0]['max_mm']
                             for seed in BOUND_SEEDS]
     return tracking_bound_mm(case, bool(hogs), offline_max_mm=_ARM_MAX_MM[arm])
 
@@ -574,23 +575,20 @@ def bound_of(case, hogs, arm=None):
 _ARM_MAX_MM = {}
 
 
-def demo_module():
-    """Return tools/demo.py (the arms' parameter files and offline twin), loaded once."""
-    if not _DEMO:
-        from freejoint_tools.harness import load_source
-        _DEMO.append(load_source(os.path.join(ROOT, 'tools', 'demo.py'), 'freejoint_demo'))
-    return _DEMO[0]
-
-
-_DEMO = []
+def arm_dir(arm):
+    """Return the directory of ``--arm``: ``config/<arm>/`` of a shipped one, else ``arm``."""
+    from freejoint_tools.arm_twin import SPATIAL_ARMS
+    return os.path.join(bench_graph.CONFIG, arm) if arm in SPATIAL_ARMS else os.path.abspath(arm)
 
 
 def arm_label(arm):
     """Return the soak's name of a spatial arm: ``ur5``, ``panda`` or its directory's name."""
-    info = demo_module().arm_info(arm)
-    if 'spatial' not in info:
-        raise SystemExit('soak: --arm %s is not a spatial arm' % arm)
-    return arm if arm in demo_module().ARMS else os.path.basename(os.path.normpath(arm))
+    from freejoint_tools.arm_twin import arm_info
+    try:
+        arm_info(arm_dir(arm))
+    except FileNotFoundError as exc:
+        raise SystemExit('soak: --arm %s' % exc) from None
+    return os.path.basename(os.path.normpath(arm))
 
 
 def arm_overrides(arm):
@@ -604,14 +602,12 @@ def arm_overrides(arm):
     from freejoint_control.params import SCHEMA as CONTROLLER
     from freejoint_planner.params import SCHEMA as PLANNER
     from freejoint_sim.params import SCHEMA as SIM
-    demo = demo_module()
-    overlays = (arm if arm in demo.ARMS else os.path.abspath(arm),)
-    items = []
-    for node, schema in (('sim', SIM), ('controller', CONTROLLER), ('planner', PLANNER)):
-        items.append([item for path in demo._overlay_files(overlays, node)
-                      for item in schema.overrides(path)])
-    plan = PLANNER.yaml_values(os.path.join(bench_graph.CONFIG, 'planner.yaml'),
-                               *demo._overlay_files(overlays, 'planner'))
+    from freejoint_tools.arm_twin import arm_configs, arm_files
+    where = arm_dir(arm)
+    items = [[item for path in arm_files(where, node) for item in schema.overrides(path)]
+             for node, schema in (('sim', SIM), ('controller', CONTROLLER),
+                                  ('planner', PLANNER))]
+    plan = arm_configs(where, bench_graph.CONFIG)[2]
     return items[0], items[1], items[2], plan
 
 
