@@ -39,11 +39,13 @@ help:
 	@echo '              a machine without AVX-512 computes (tools/avx2.sh)'
 	@echo 'make setup    only set up: .venv with ROS 2 Jazzy wheels, colcon build'
 	@echo 'make offline  offline closed-loop runner (reference table, bags/offline/metrics.json)'
-	@echo '              ARM=DIR (or ur5, panda): a spatial arm'"'"'s offline twin, SEEDS (10) seeds'
+	@echo '              ARM=DIR (or ur5, panda): a spatial arm'"'"'s offline twin, SEEDS (10) seeds;'
+	@echo '              ARM=file.urdf PASSIVE=joint [TIP= BASE=]: fj arm init into bags/offline/<name>/'
 	@echo 'make bench    benchmarks (figures printed and written to bags/bench/bench.json);'
 	@echo '              BENCH="graph echo": only those (bench/run_all.py MODULES)'
 	@echo 'make soak     real-time soak, both cases, 5 x 30 s each (bags/soak/soak.json);'
-	@echo '              SOAK_ARGS="--runs 2 --seconds 10 --hogs 2 --cases vertical"'
+	@echo '              SOAK_ARGS="--runs 2 --seconds 10 --hogs 2 --cases vertical"; "--arm ur5"'
+	@echo '              (or panda, or DIR): that spatial arm, judged against its plan'
 	@echo 'make analyze BAGS="bags/demo/..."  metrics and plots from recorded bags'
 	@echo 'make campaign robustness campaign of the paper'"'"'s arm over the six categories'
 	@echo '              (bags/campaigns/paper_six_categories; CAMPAIGN=FILE for another)'
@@ -61,7 +63,7 @@ test-fast: setup
 	@$(ENV) $(AS_CPU)bash tools/test_fast.sh $(XDIST)
 
 offline: setup
-	@$(ENV) $(if $(ARM),python tools/arm_offline.py $(ARM) --seeds $(or $(SEEDS),10),python -m freejoint_core.offline)
+	@$(ENV) $(if $(ARM),python tools/arm_offline.py $(ARM) --seeds $(or $(SEEDS),10) $(if $(PASSIVE),--passive $(PASSIVE)) $(if $(TIP),--tip $(TIP)) $(if $(BASE),--base $(BASE)),python -m freejoint_core.offline)
 
 bench: setup
 	@$(ENV) python bench/run_all.py $(if $(BENCH),--only $(BENCH))

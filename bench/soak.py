@@ -53,10 +53,22 @@ circles asked for and those that succeeded are counted. The
 table per run, the worst per case and the conditions (load average, priority, layout, CPU
 count, hogs) are printed and written to ``bags/soak/soak.json``.
 
+``--lockstep`` runs the same graph in lockstep instead, one circle per run of ``--seconds``
+simulated seconds (the soak's check of its own overlays, bound and judgement in CI; no
+real-time figure).
+
+``--arm ARM`` (``ur5``, ``panda`` or a directory of ``fj arm init``) soaks a spatial arm
+instead of the paper's two cases: the nodes get the arm's parameter files (``config/<arm>/``
+or the directory's) on top of ``config/*.yaml``, as ``make demo ARM=...`` gives them, the
+planner asks for the arm's circle (its radius and duration), and the run is judged against
+the plan as the paper's arm is: its bound is the same 1.5 x (3 x with hogs) the offline
+worst max error over seeds 0-9, of the arm's offline twin (``make offline ARM=...``,
+the circle and the hold), run here.
+
 Usage: ``. tools/env.sh && python bench/soak.py [--runs 5] [--seconds 30]
-[--cases horizontal vertical] [--hogs N] [--priority 50] [--driver hold-last]
-[--readiness-action brake|damp|hold]``. ``--driver hold-last`` meets a driver that holds
-its last command (no watchdog, no brakes on request; the controller's
+[--cases horizontal vertical | --arm ARM] [--lockstep] [--hogs N] [--priority 50]
+[--driver hold-last] [--readiness-action brake|damp|hold]``. ``--driver hold-last`` meets a
+driver that holds its last command (no watchdog, no brakes on request; the controller's
 ``readiness_action`` then ``damp`` unless given). Bags and logs stay in
 ``bags/soak/<case>_<run>/`` (git-ignored). Exit code 0 whatever the figures (a benchmark),
 1 if a run could not be made.
@@ -88,6 +100,8 @@ from freejoint_core.plan_figures import outcome_excuses, plan_met, SHARE_MET  # 
 
 OUT = os.path.join(ROOT, 'bags', 'soak')
 CASES = ('horizontal', 'vertical')
+ARM_CASE = 'horizontal'
+"""The nodes' ``case`` of a spatial arm (``--arm``): its gravity is its URDF base frame's."""
 RETRY_S = 0.5
 """Seconds from a circle the planner refused (the controller not ready) to the next request."""
 STATUS_HOLDING = 32
@@ -188,7 +202,7 @@ class Session:
     """
 
     def __init__(self, name, index, case, seconds, sim=(), ctl=(), planner=(), reset=True,
-                 timing=True):
+                 timing=True, lockstep=False):
         self.name = name
         self.case = case
         self.dir = os.path.join(OUT, name)
@@ -198,7 +212,12 @@ class Session:
         self.timing_path = os.path.join(self.dir, 'timing.npz') if timing else None
         self.env = domain_env(index)
         self.sim = list(sim)
-        if timing:
+        self.lockstep = lockstep
+        self.steps = int(round(seconds * 1000))
+        if lockstep:
+            self.sim += ['timing_file:=' + self.timing_path,
+                         'timing_steps:=%d' % (self.steps + 1), 'max_steps:=%d' % self.steps]
+        elif timing:
             self.sim += ['timing_file:=' + self.timing_path,
                          'timing_steps:=%d' % (int(seconds * 1000)
                                                + bench_graph.RT_STARTUP_STEPS)]
@@ -223,6 +242,16 @@ class Session:
 
     def up(self):
         """Start the graph and wait until the controller holds the start point."""
+        if self.lockstep:
+            bench_graph.start_graph(
+                self.graph, 'separate', self.bag, self.sim, self.ctl,
+                self.planner + ['autostart:=false'],
+                ['use_sim_time:=true',      # the drain wait needs a count that goes quiet
+                 'exclude:=[%s]' % ', '.join(bench_graph.NEVER_QUIET_TOPICS)],
+                'case=%s, variant=robust, seed=%d, soak=%s, mode=lockstep'
+                % (self.case, bench_graph.SEED, self.name), self.case)
+            bench_graph.wait_ready(self.client, True)
+            return
         bench_graph.bring_up_realtime(
             self.client, self.graph, 'separate', self.bag, self.case, self.sim, self.ctl,
             self.planner, 'case=%s, variant=robust, seed=%d, soak=%s'
@@ -263,6 +292,24 @@ class Session:
         self.graph.procs[name].cmd = cmd
         self.killed.discard(name)
         return now
+
+    def one_circle(self, plan):
+        """
+        Lockstep: ask for one circle, wait until the simulator holds at its last step.
+
+        Returns an object with ``accepted`` (monotonic times of the accepting reply) and
+        ``refused`` as :class:`bench_graph.CircleLoop` has them; raise if it is refused.
+        """
+        answer = self.client.plan_circle(plan)
+        if answer is None or not answer.accepted:
+            raise RuntimeError('the planner did not start the circle: %s' % (
+                'no answer' if answer is None else answer.reason))
+        done = bench_graph.CircleLoop(self.client, plan)
+        done.accepted.append(time.monotonic())
+        bench_graph.wait_for_file(self.timing_path, self.graph, 120.0 + self.steps * 0.05,
+                                  'lockstep run')
+        self.client.recorder_drained()      # the sim holds at max_steps: the bag complete
+        return done
 
     def diverged_lines(self):
         """Return the simulator's log lines about a diverged plant."""
@@ -354,7 +401,10 @@ def controller_ticks(bag_path):
     for i, (_, m) in enumerate(msgs):
         effort[i, :len(m.effort)] = m.effort
     out['effort'] = effort
-    out['err_mm'] = 1000.0 * np.hypot(*(out['p'] - out['pd']).T)
+    diff = out['p'] - out['pd']
+    # 2 values (the planar arms: hypot, as before) or 3 (a spatial arm's tip)
+    out['err_mm'] = 1000.0 * (np.hypot(*diff.T) if diff.shape[1] == 2
+                              else np.linalg.norm(diff, axis=1))
     for f in fields:
         try:
             out['age:' + f] = np.array([float(getattr(m, f)) for _, m in msgs])
@@ -520,10 +570,62 @@ def summarise(ticks, mask):
     return out
 
 
-def bound_of(case, hogs):
-    """Return (bound mm, factor, offline worst max mm) of ``case``: the seeds run here."""
-    from freejoint_core.plan_figures import tracking_bound_mm
-    return tracking_bound_mm(case, bool(hogs), recompute=True)
+def bound_of(case, hogs, arm=None):
+    """
+    Return (bound mm, factor, offline worst max mm) of ``case``: the seeds run here.
+
+    With ``arm`` (``--arm``): of the arm's offline twin over the same seeds (the circle and
+    the hold, ``make offline ARM=arm``), run once per process.
+    """
+    from freejoint_core.plan_figures import BOUND_SEEDS, tracking_bound_mm
+    if arm is None:
+        return tracking_bound_mm(case, bool(hogs), recompute=True)
+    if arm not in _ARM_MAX_MM:
+        from freejoint_tools.arm_twin import run_ticks, twin
+        where = arm_dir(arm)
+        ticks = run_ticks(where, bench_graph.CONFIG)
+        _ARM_MAX_MM[arm] = [twin(where, seed, ticks, bench_graph.CONFIG)[0]['max_mm']
+                            for seed in BOUND_SEEDS]
+    return tracking_bound_mm(case, bool(hogs), offline_max_mm=_ARM_MAX_MM[arm])
+
+
+_ARM_MAX_MM = {}
+
+
+def arm_dir(arm):
+    """Return the directory of ``--arm``: ``config/<arm>/`` of a shipped one, else ``arm``."""
+    from freejoint_tools.arm_twin import SPATIAL_ARMS
+    return os.path.join(bench_graph.CONFIG, arm) if arm in SPATIAL_ARMS else os.path.abspath(arm)
+
+
+def arm_label(arm):
+    """Return the soak's name of a spatial arm: ``ur5``, ``panda`` or its directory's name."""
+    from freejoint_tools.arm_twin import arm_info
+    try:
+        arm_info(arm_dir(arm))
+    except FileNotFoundError as exc:
+        raise SystemExit('soak: --arm %s' % exc) from None
+    return os.path.basename(os.path.normpath(arm))
+
+
+def arm_overrides(arm):
+    """
+    Return the (simulator, controller, planner) ``-p`` items of a spatial arm and its plan.
+
+    The arm's files (``config/<arm>/<node>.yaml`` or those of an ``fj arm init``
+    directory) as overrides on top of ``config/<node>.yaml``, and the planner's values
+    (the circle the soak asks for) of both.
+    """
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_planner.params import SCHEMA as PLANNER
+    from freejoint_sim.params import SCHEMA as SIM
+    from freejoint_tools.arm_twin import arm_configs, arm_files
+    where = arm_dir(arm)
+    items = [[item for path in arm_files(where, node) for item in schema.overrides(path)]
+             for node, schema in (('sim', SIM), ('controller', CONTROLLER),
+                                  ('planner', PLANNER))]
+    plan = arm_configs(where, bench_graph.CONFIG)[2]
+    return items[0], items[1], items[2], plan
 
 
 def plan_row(bag, bound, window_ns):
@@ -706,27 +808,41 @@ def driver_overrides(driver, action):
 
 def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=False,
              fully_actuated=False, fail_at=None, ctl_extra=(), driver='watchdog',
-             action=None):
-    """Make one run of ``case``; return its row (dict). ``ctl_extra``: controller items."""
+             action=None, arm=None, lockstep=False):
+    """
+    Make one run of ``case``; return its row (dict). ``ctl_extra``: controller items.
+
+    ``arm``: a spatial arm (``--arm``; ``case`` its label, :func:`arm_label`).
+    ``lockstep``: the graph in lockstep for ``seconds`` of simulated time, one circle (the
+    soak's check of itself: its overlays, bound and judgement; no real-time figure).
+    """
     name = '%s_%d' % (case, run)
     planner = []
-    if fully_actuated:
+    plan = None
+    if arm is not None:
+        sim, ctl, planner, plan = arm_overrides(arm)
+    elif fully_actuated:
         sim, ctl, planner = fully_actuated_overrides(stabilise)
     else:
         sim, ctl = stabilised_overrides(case) if stabilise else ([], [])
     extra_sim, extra_ctl = driver_overrides(driver, action)
     sim, ctl = list(sim) + extra_sim, list(ctl) + extra_ctl + list(ctl_extra)
-    bound, factor, worst = bound_of(case, hogs)
+    bound, factor, worst = bound_of(case, hogs, arm)
     row = {'case': case, 'run': run, 'seconds': seconds, 'bound_mm': bound,
            'bound_factor': factor, 'offline_worst_max_mm': worst}
+    if arm is not None:
+        row['arm'] = arm
     load0 = os.getloadavg()[0]
-    with Session(name, index, case, seconds, sim=sim, ctl=ctl, planner=planner) as s:
+    with Session(name, index, case if arm is None else ARM_CASE, seconds, sim=sim, ctl=ctl,
+                 planner=planner, lockstep=lockstep) as s:
         row['ros_domain_id'] = s.env['ROS_DOMAIN_ID']
         s.up()
-        if fail_at is not None:
+        if lockstep:
+            loop = None
+        elif fail_at is not None:
             loop = FailAt(s.client, fail_at)
         else:
-            plan = bench_graph.ros_params('planner.yaml')
+            plan = plan or bench_graph.ros_params('planner.yaml')
             period = float(plan['duration']) + (STABILISED_REST if stabilise else 0.5)
             # a circle the planner refuses (the controller not ready) is asked for again
             # every RETRY_S; the run is judged from its bag, the refusals counted
@@ -740,7 +856,11 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
         # (a stall there stalls every node; columns 'wake' and '>10').
         with wakeup_probe.Probes() as probes:
             start = time.monotonic()
-            s.wait(seconds, loop)
+            if lockstep:
+                loop = s.one_circle(plan or bench_graph.ros_params('planner.yaml'))
+                start = -math.inf     # every step of the run (the timing file's)
+            else:
+                s.wait(seconds, loop)
             end = time.monotonic()
             wake = probes.stop()
     if fully_actuated:
@@ -753,6 +873,7 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
     else:
         row['wake_failure'] = probes.failure
         say('%s run %d: no figures from the machine probe (%s)' % (case, run, probes.failure))
+    row['lockstep'] = lockstep
     row['back_to_back'] = back_to_back
     row['stabilised'] = stabilise
     row['driver'], row['readiness_action'] = driver, action
@@ -967,6 +1088,12 @@ def parse(argv):
     ap.add_argument('--seconds', type=float, default=30.0,
                     help='measured seconds per run (default 30)')
     ap.add_argument('--cases', nargs='+', choices=CASES, default=list(CASES))
+    ap.add_argument('--arm', metavar='ARM',
+                    help="a spatial arm in place of the paper's cases: ur5, panda or a "
+                    'directory of fj arm init (its circle; bound from its offline twin)')
+    ap.add_argument('--lockstep', action='store_true',
+                    help='the graph in lockstep, one circle per run of --seconds simulated: '
+                    "the soak's check of its own overlays and judgement, no real-time figure")
     ap.add_argument('--hogs', type=int, default=0,
                     help='CPU hog processes at normal priority beside the graph (default 0)')
     ap.add_argument('--priority', type=int, default=50,
@@ -1006,6 +1133,10 @@ def parse(argv):
         args.readiness_action = 'damp'
     if args.fail_at is not None and (not args.fully_actuated or args.fail_at < 0):
         ap.error('--fail-at needs --fully-actuated and S >= 0')
+    if args.lockstep and (args.fully_actuated or args.driver != 'watchdog'):
+        ap.error('--lockstep: one circle in lockstep; --fully-actuated, --driver do not apply')
+    if args.arm is not None and (args.stabilise or args.fully_actuated):
+        ap.error("--arm: the paper arm's options --stabilise, --fully-actuated do not apply")
     if args.runs < 1 or args.seconds <= 0 or args.hogs < 0 or not 0 <= args.priority <= 98:
         ap.error('--runs >= 1, --seconds > 0, --hogs >= 0, 0 <= --priority <= 98')
     return args
@@ -1021,6 +1152,8 @@ def stop_on_sigterm():
 def main(argv=None):
     """Run the soak; print and write the tables; return the exit code."""
     args = parse(sys.argv[1:] if argv is None else argv)
+    if args.arm is not None:
+        args.cases = [arm_label(args.arm)]
     stop_on_sigterm()
     bench_graph.PRIORITY = args.priority
     os.makedirs(OUT, exist_ok=True)
@@ -1036,8 +1169,10 @@ def main(argv=None):
         '%d CPUs, load %.2f, driver %s, readiness_action %s' % (
             args.runs, args.seconds, ', '.join(args.cases), args.priority, args.hogs,
             os.cpu_count(), os.getloadavg()[0], args.driver, cond['readiness_action']))
+    cond['arm'] = args.arm
+    cond['lockstep'] = args.lockstep
     for case in args.cases:
-        bound, factor, worst = bound_of(case, args.hogs)
+        bound, factor, worst = bound_of(case, args.hogs, args.arm)
         say('%s: bound %.3f mm = %g x the offline worst max %.3f mm (seeds 0-9)'
             % (case, bound, factor, worst))
     rows = []
@@ -1052,7 +1187,8 @@ def main(argv=None):
                 try:
                     row = soak_run(case, index, run, args.seconds, args.hogs, args.back_to_back,
                                    args.stabilise, args.fully_actuated, args.fail_at,
-                                   driver=args.driver, action=args.readiness_action)
+                                   driver=args.driver, action=args.readiness_action,
+                                   arm=args.arm, lockstep=args.lockstep)
                 except Exception as exc:  # noqa: B902 - one bad run must not cost the soak
                     say('%s run %d failed: %s: %s' % (case, run, type(exc).__name__, exc))
                     row = {'case': case, 'run': run, 'error': str(exc), 'met': False}

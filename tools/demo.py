@@ -53,6 +53,8 @@ import subprocess
 import sys
 import time
 
+from freejoint_tools.arm_twin import SPATIAL_ARMS
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 INSTALL = os.path.join(ROOT, 'install')
 CONFIG = os.path.join(ROOT, 'config')
@@ -73,11 +75,7 @@ holds: with the contract's 1000 a reader stalled for 1000 ticks - well under a s
 wall time in lockstep, which runs faster than real time - loses messages for good
 (docs/performance.md, "The test suite")."""
 FIGURES = os.path.join(ROOT, 'docs', 'figures')
-ARMS = {'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0},
-        'ur5': {'passive_joint': 'wrist_2_joint', 'bound_mm': 3.0, 'spatial': 'ur5_wrist2',
-                'hold_s': 10.0},
-        'panda': {'passive_joint': 'panda_joint7', 'bound_mm': 3.0, 'spatial': 'panda_j7',
-                  'hold_s': 10.0}}
+ARMS = dict({'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0}}, **SPATIAL_ARMS)
 STABILISED = 'stabilised'
 STABILISED_HORIZONTAL = 'stabilised_horizontal'
 """The horizontal case's overlay of ``--stabilise`` (the free link settled in the rests)."""
@@ -101,17 +99,14 @@ def arm_info(arm):
     arm.yaml (``name``, ``passive_joint``, ``hold_s``, ``bound_mm``); its entry's
     ``spatial`` (the run's case label) is ``name``.
     """
+    from freejoint_tools.arm_twin import arm_info as dir_info
     if arm in ARMS:
         return ARMS[arm]
     meta = os.path.join(arm, 'arm.yaml')
     if not os.path.isfile(meta):
         raise SystemExit('demo: --arm %s: neither a shipped arm (%s) nor a directory of fj '
                          'arm init (no %s)' % (arm, ', '.join(sorted(ARMS)), meta))
-    import yaml
-    with open(meta, encoding='utf-8') as fh:
-        info = yaml.safe_load(fh)
-    return {'passive_joint': str(info['passive_joint']), 'bound_mm': float(info['bound_mm']),
-            'spatial': str(info['name']), 'hold_s': float(info['hold_s'])}
+    return dir_info(arm)
 
 
 def spatial_titles(passive_joint):
@@ -459,51 +454,36 @@ def arm_offline(arm, case, seed, n_ticks, normal=None):
                    label=case, seed=seed, n_ticks=n_ticks)
 
 
+def spatial_configs(arm):
+    """
+    Return the simulator's and the controller's configs and the planner's values of ``arm``.
+
+    ``config/<node>.yaml`` with the arm's overlay (``config/<arm>/`` or the directory of
+    ``fj arm init``) on top, as the graph's nodes read them (``freejoint_tools.arm_twin``).
+    """
+    from freejoint_tools.arm_twin import arm_configs
+    return arm_configs(os.path.join(CONFIG, arm), CONFIG)
+
+
+def spatial_ticks(arm):
+    """Return the ticks of a spatial arm's run: the planner's circle and the arm's hold."""
+    from freejoint_tools.arm_twin import run_ticks
+    return run_ticks(os.path.join(CONFIG, arm), CONFIG)
+
+
 def spatial_offline(arm, seed, n_ticks, normal=None):
     """
-    Return the offline twin's record and trace of a spatial example arm.
+    Return the offline twin's record and trace of a spatial arm (``freejoint_tools.arm_twin``).
 
     Everything is taken from the graph's parameter files (``config/*.yaml`` and
-    ``config/<arm>/*.yaml``): the real arm and its start posture, dt_sub, the disturbance
-    and the free joint's damping (the simulator's), the law built as the controller builds
-    it (its schema's config, ``freejoint_control.loop.config_law``), the circle's radius and
-    duration (the planner's); ``freejoint_core.spatial_offline.run_twin`` runs it for
-    ``n_ticks``. ``normal``: the circle plane's normal given to the planner on the command
-    line (``--plane-normal``), else the planner's file's ``plane_normal``.
+    ``config/<arm>/*.yaml`` or the arm's directory): the real arm and its start posture,
+    dt_sub, the disturbance and the free joint's damping (the simulator's), the law built
+    as the controller builds it, the circle's radius and duration (the planner's);
+    ``normal``: the circle plane's normal given to the planner on the command line
+    (``--plane-normal``), else the planner's file's ``plane_normal``.
     """
-    from freejoint_control.loop import config_law
-    from freejoint_control.params import SCHEMA as CONTROLLER
-    from freejoint_core.metrics import compute_record
-    from freejoint_core.spatial_offline import run_twin
-    from freejoint_planner.params import SCHEMA as PLANNER
-    from freejoint_planner.spatial_planning import plane_normal
-    from freejoint_sim.params import SCHEMA as SIM
-    import numpy as np
-    overlays = (arm,)
-    sim = SIM.from_yaml(os.path.join(CONFIG, 'sim.yaml'), *_overlay_files(overlays, 'sim'))
-    ctl = CONTROLLER.from_yaml(os.path.join(CONFIG, 'controller.yaml'),
-                               *_overlay_files(overlays, 'controller'))
-    plan = PLANNER.yaml_values(os.path.join(CONFIG, 'planner.yaml'),
-                               *_overlay_files(overlays, 'planner'))
-    law = config_law(ctl)
-    dt = sim.dt
-    duration = float(plan['duration'])
-    out = run_twin(sim.arm.spatial, sim.q0, law, seed, t_move=duration,
-                   t_hold=n_ticks * dt - duration, dt=dt, dt_sub=sim.dt_sub,
-                   dist=sim.dist_bound, radius=float(plan['radius']),
-                   passive_damping=sim.passive_damping,
-                   normal=plane_normal(plan['plane_normal'] if normal is None else normal))
-    trace = out['trace']
-    n = len(trace['p'])
-    passive = sim.arm.spatial.passive[0]
-    record = compute_record(arm_info(arm)['spatial'], 'spatial', seed,
-                            np.arange(n) * dt, trace['p'], trace['p_d'], trace['tau'],
-                            trace['theta'], trace['q'][:, passive], trace['kappa'],
-                            diverged_at_s=n * dt if out['diverged'] else None)
-    record.update({key: out[key] for key in ('tau_ratio', 'vel_ratio', 'vel_ratio_free',
-                                             'hold_last_s_max_mm', 'active_outside_limits',
-                                             'free_outside_limits')})
-    return record, trace
+    from freejoint_tools.arm_twin import twin
+    return twin(os.path.join(CONFIG, arm), seed, n_ticks, CONFIG, normal)
 
 
 def circles_offline(case, seed, settings, overlays=(STABILISED,), arm=None, circles=1,
@@ -687,12 +667,10 @@ def main(argv=None):
                 % args.arm)
             return 2
         from freejoint_core.errors import FreejointValueError
-        from freejoint_tools.arm_init import init_arm
-        name = os.path.splitext(os.path.basename(args.arm))[0]
-        arm_dir = os.path.abspath(os.path.join(args.out, name))     # its files, then its bag
-        try:
-            init_arm(args.arm, args.passive, arm_dir, args.tip, args.base,
-                     log=lambda line: say('fj arm init: ' + line))
+        from freejoint_tools.arm_twin import from_urdf
+        try:    # its files, then its bag, in args.out/<name>
+            arm_dir = from_urdf(args.arm, args.passive, args.out, args.tip, args.base,
+                                log=lambda line: say('fj arm init: ' + line))
         except FreejointValueError as exc:
             say('error: fj arm init %s: %s' % (args.arm, exc))
             return 2

@@ -4,13 +4,14 @@ import math
 import os
 
 from freejoint_control.params import SCHEMA as CONTROLLER
-from freejoint_core.arm_gains import BETA, CHECK_DT, joint_inertia, KD_REF, kernel_basis
+from freejoint_core.arm_gains import BETA, CHECK_DT, drivetrain_damping, joint_inertia
+from freejoint_core.arm_gains import KD_REF, kernel_basis, SPEED_SHARE, Z
 from freejoint_core.arm_gains import mode_steps, nullspace_gains, nullspace_inertia
 from freejoint_core.arm_gains import POSTURE_TIME, rule
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.spatial_model import robot_data_dir, SpatialArm
 from freejoint_planner.spatial_planning import check_spatial_plan, too_stiff
-from freejoint_tools.arm_init import arm_files, ArmInitError, tip_leaf
+from freejoint_tools.arm_init import arm_files, ArmInitError, free_damping, tip_leaf
 from freejoint_tools.harness import load_source
 import numpy as np
 import pinocchio as pin
@@ -163,3 +164,71 @@ def test_init_then_the_twin_runs_the_jaco_within_its_bound_for_half_a_second(tmp
     assert record['max_mm'] < 3.0
     assert record['active_outside_limits'] == [] and record['free_outside_limits'] == []
     assert record['case'] == 'kinova_j2s6s200_joint_6'
+
+
+def _ur10():
+    return SpatialArm(os.path.join(robot_data_dir(), UR10), 'world', 'tool0',
+                      ['wrist_2_joint'])
+
+
+def _xarm7():
+    return SpatialArm(os.path.join(robot_data_dir(), 'xarm_description/urdf/xarm7.urdf'),
+                      'link_base', 'link_eef', ['joint7'])
+
+
+def test_the_drivetrain_floor_by_hand_the_speed_a_disturbance_sustains_against_it():
+    arm = _ur10()
+    q = np.array(UR10_Q0)
+    got = drivetrain_damping(arm, q, 0.5, 1e-3, 5e-4, 15.0)
+    # 0.5 N m / (0.8 x 3.2 rad/s): wrist_2's rated speed sets it, not its +-2 pi range
+    assert (SPEED_SHARE, Z) == (0.8, 4.0)
+    assert got.floor == pytest.approx(0.5 / (0.8 * 3.2), rel=1e-12)
+    assert (got.joint, got.cause, got.reason) == ('wrist_2_joint', 'speed', '')
+    # the cap: the free joint's inertia with the active joints following, over dt_sub;
+    # independent: the Schur complement M_pp - M_pa M_aa^-1 M_ap of Pinocchio's crba
+    m = arm.terms(q, np.zeros(6)).M
+    a, p = list(arm.active), 4
+    inertia = m[p, p] - m[p, a] @ np.linalg.solve(m[np.ix_(a, a)], m[a, p])
+    assert got.cap == pytest.approx(inertia / 5e-4, rel=1e-9)
+
+
+def test_over_a_long_run_the_free_joints_walk_to_its_limit_sets_the_floor():
+    arm = _ur10()
+    q = np.array(UR10_Q0)
+    got = drivetrain_damping(arm, q, 0.5, 1e-3, 5e-4, 1000.0)
+    gap = min(q[4] + 2 * math.pi, 2 * math.pi - q[4])
+    # 4 sigma of sum d_k dt / b over 10^6 periods: 4 x 0.5 / sqrt(3) x sqrt(1000 x 1e-3)
+    assert got.floor == pytest.approx(4 * 0.5 / math.sqrt(3) * 1.0 / gap, rel=1e-9)
+    assert got.cause == 'position' and got.reason == ''
+
+
+def test_a_free_joint_the_simulator_cannot_hold_is_refused_with_its_limit_and_numbers():
+    arm = _xarm7()
+    q = np.zeros(arm.n)
+    got = drivetrain_damping(arm, q, 0.5, 1e-3, 5e-4, 3600.0)
+    assert got.floor > got.cap
+    assert got.reason.startswith('free joint joint7 cannot be kept within its limits under '
+                                 'the +-0.5 N m disturbance: its position limits ')
+    assert f'need b >= 4 sigma sqrt(T dt) / gap = {got.floor:.4g} N m s/rad' in got.reason
+    assert f'above the {got.cap:.4g} N m s/rad' in got.reason and 'dt_sub 0.0005 s' in got.reason
+    with pytest.raises(ArmInitError, match='free joint joint7 cannot be kept'):
+        free_damping(arm, q, 0.0, run_s=3600.0)
+    # a lab's identified value is taken (capped), not refused
+    assert free_damping(arm, q, 0.0, given=0.1, run_s=3600.0) == 0.1
+    # the URDF's damping where larger than the floor, within the cap
+    assert free_damping(arm, q, 0.25) == pytest.approx(min(0.25, got.cap))
+
+
+def test_init_refuses_a_circle_too_fast_or_out_of_reach_before_any_search():
+    path = os.path.join(robot_data_dir(), 'so_arm_description/urdf/so100.urdf')
+    with pytest.raises(ArmInitError, match=r'^duration: 5 s for radius 2 m peaks at 4.71239 '
+                       r'm/s, above max_speed 1 m/s \(duration >= 23.5619 s\)$'):
+        arm_files(path, ['wrist_roll'], radius=2.0)
+    with pytest.raises(ArmInitError) as err:
+        arm_files(path, ['wrist_roll'], radius=0.4)
+    assert str(err.value).startswith('no start posture found: radius: the circle leaves the '
+                                     'reach of the arm: its point ')
+    assert 'beyond the reach 0.4497 m' in str(err.value)
+    with pytest.raises(ArmInitError, match=r'^hold: expected a finite number of seconds > 0, '
+                       r'got -1.0$'):
+        arm_files(path, ['wrist_roll'], hold_s=-1.0)

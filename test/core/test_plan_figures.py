@@ -196,6 +196,16 @@ def test_the_bound_is_one_and_a_half_times_the_offline_worst(monkeypatch):
         pf.tracking_bound_mm('ur5')
 
 
+def test_another_arms_bound_is_made_the_same_way_of_its_own_seeds():
+    worst = [1.2, 1.39, 1.3, 1.0, 1.1, 1.25, 1.38, 1.2, 1.21, 1.22]
+    assert pf.tracking_bound_mm('ur5', offline_max_mm=worst) == (1.5 * 1.39, 1.5, 1.39)
+    assert pf.tracking_bound_mm('ur5', True, offline_max_mm=worst) == (3.0 * 1.39, 3.0, 1.39)
+    with pytest.raises(FreejointValueError, match=r'^offline_max_mm: expected shape \(10\)'):
+        pf.tracking_bound_mm('ur5', offline_max_mm=worst[:9])
+    with pytest.raises(FreejointValueError, match='^offline_max_mm: non-finite'):
+        pf.tracking_bound_mm('ur5', offline_max_mm=worst[:9] + [math.nan])
+
+
 def test_the_line_says_share_held_time_and_plans():
     t, sp, v = _line_plan()
     fig = pf.plan_figures(t, sp, t, sp, v, bound_mm=1.7, held=np.zeros(len(t), bool),

@@ -208,18 +208,17 @@ class PlanCheck:
         bag = open_bag(path)
         ee = {}
         for _, msg in bag.decode('/ee_position'):
-            ee.setdefault(to_ns(msg.header.stamp), (msg.point.x, msg.point.y))
+            ee.setdefault(to_ns(msg.header.stamp), (msg.point.x, msg.point.y, msg.point.z))
         setpoints = {}
         for _, msg in bag.decode('/setpoints'):
-            m = len(msg.position) // len(msg.stamps)
+            m = len(msg.position) // len(msg.stamps)     # 2 (planar) or 3 (a spatial tip)
             for i, ns in enumerate(msg.stamps):
-                setpoints[int(ns)] = (list(msg.position[i * m:i * m + 2]),
-                                      list(msg.velocity[i * m:i * m + 2]))
+                setpoints[int(ns)] = (list(msg.position[i * m:i * m + m]),
+                                      list(msg.velocity[i * m:i * m + m]))
         sp_ns = sorted(setpoints)
         first = sp_ns[0]
         x = np.array([float(ns - first) for ns in sp_ns])
-        px = np.array([setpoints[ns][0][0] for ns in sp_ns])
-        py = np.array([setpoints[ns][0][1] for ns in sp_ns])
+        axes = [np.array([setpoints[ns][0][j] for ns in sp_ns]) for j in range(m)]
         errors, moving = [], []
         for ns in sorted(ee):
             if window_ns is not None and not window_ns[0] <= ns <= window_ns[1]:
@@ -227,8 +226,8 @@ class PlanCheck:
             if not sp_ns[0] <= ns <= sp_ns[-1]:
                 continue
             at = float(ns - first)
-            plan = (float(np.interp(at, x, px)), float(np.interp(at, x, py)))
-            error = math.hypot(ee[ns][0] - plan[0], ee[ns][1] - plan[1])
+            plan = [float(np.interp(at, x, a)) for a in axes]
+            error = math.hypot(*(ee[ns][j] - plan[j] for j in range(m)))
             errors.append(error)
             i = int(np.searchsorted(sp_ns, ns))
             around = [sp_ns[i]] if sp_ns[i] == ns else [sp_ns[i - 1], sp_ns[i]]

@@ -211,3 +211,56 @@ def test_fj_campaign_delegates_to_the_campaign_command(tmp_path, capsys):
     assert capsys.readouterr().err == 'campaign: seeds: expected 1 .. 1e6, got 0\n'
     assert cli.main(['campaign', 'run', _file(tmp_path, GOOD, 'g.yaml'), '--check']) == 0
     assert capsys.readouterr().out == 'campaign tiny: 12 runs, axes scale, delay\n'
+
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SPATIAL = """
+name: ur5_tiny
+arm: {arm}
+duration: 0.3
+success: {{max_mm: 3.0}}
+axes:
+  dist_bound: {{values: [0.5, 2.0]}}
+"""
+
+
+def test_a_spatial_arms_campaign_runs_the_same_twin_as_make_offline(tmp_path):
+    from freejoint_tools.arm_twin import twin
+    from freejoint_tools.harness import load_source
+    # config/ur5 relative to the campaign file, as a lab's fj arm init directory would be
+    path = _file(tmp_path, SPATIAL.format(arm=os.path.relpath(
+        os.path.join(ROOT, 'config', 'ur5'), str(tmp_path))))
+    camp = campaign.load(path)
+    assert camp['case'] == 'spatial'
+    assert camp['arm']['dir'] == os.path.join(ROOT, 'config', 'ur5')
+    table = pq.read_table(campaign.run(camp, str(tmp_path / 'out'), progress=False))
+    assert table.column('dist_bound').to_pylist() == [0.5, 2.0]
+    assert table.column('ticks').to_pylist() == [300, 300]
+    # the paper's point (70 % nominal, 0.5 N m, seed 0) is make offline ARM=ur5's run
+    demo = load_source(os.path.join(ROOT, 'tools', 'demo.py'), 'freejoint_demo')
+    record, trace = demo.spatial_offline('ur5', 0, 300)
+    assert table.column('max_mm').to_pylist()[0] == record['max_mm']
+    assert table.column('min_det').to_pylist()[0] == float(np.min(trace['kappa']))
+    free = np.degrees(trace['q'][:, 4])       # wrist_2, the free joint
+    assert table.column('q3_max_deg').to_pylist()[0] == free.max()
+    # another disturbance bound: another run, the same as the twin given that bound
+    other, _ = twin(os.path.join(ROOT, 'config', 'ur5'), 0, 300, sim={'dist_bound': 2.0})
+    assert table.column('max_mm').to_pylist()[1] == other['max_mm'] != record['max_mm']
+    assert table.column('holds').to_pylist() == [True, True]
+    assert np.isnan(table.column('tau_peak_1_nm').to_pylist()).all()
+
+
+@pytest.mark.parametrize('extra,named', [
+    ('task: {radius: 0.1}', 'task: a spatial arm takes it from its parameter files'),
+    ('controller: {K: [1, 2, 3]}', 'controller: a spatial arm takes it from its'),
+    ('fixed: {delay: 2}', 'fixed.delay: not an axis of a spatial arm (its axes: scale, '
+     'dist_bound, seed)'),
+])
+def test_a_spatial_arms_campaign_refuses_what_its_files_say_naming_the_key(
+        tmp_path, capsys, extra, named):
+    text = SPATIAL.format(arm=os.path.join(ROOT, 'config', 'ur5')) + extra + '\n'
+    assert campaign.main(['run', _file(tmp_path, text), '--check']) == 2
+    assert capsys.readouterr().err.startswith('campaign: ' + named)
+    missing = SPATIAL.format(arm=str(tmp_path / 'none'))
+    assert campaign.main(['run', _file(tmp_path, missing, 'm.yaml'), '--check']) == 2
+    assert 'arm: ' in capsys.readouterr().err

@@ -46,8 +46,40 @@ Hand figures: ``I_i`` = 5e-4 kg m^2 gives 1 x 5e-4 / 0.002 = 0.25 N m s/rad; 0.0
 10; 0.04 and above the cap 20.  (The UR5's shipped scalar ``kd`` = 20 has
 ``dt lambda`` = 3.3 at 2 ms on its wrist_3 mode, 0.012 kg m^2: that mode is not excited by
 the circle, and at the controller's 1 ms it is 1.67, stable but reversing every tick.)
+
+**The free joints' drivetrain damping** (:func:`drivetrain_damping`; the simulator's
+``passive_damping``).  A free joint has no torque, and the law reaches it only through the
+inertial coupling of the active joints' null-space torques, which a light wrist barely
+feels (the law's ``free_damping`` on the UR10's wrist_2 at 5 to 50 1/s, 10 % of each
+effort: no change).  Its rate under the simulator's disturbance ``d_k``
+(``|d_k| <= d``, uniform, held over each control period ``dt``) is then set by the
+drivetrain's viscous damping ``b`` on its effective inertia ``I = 1 / (M^-1)_pp``
+(the joint's inertia with the active joints free to follow, the smallest it can have):
+``I qdd = d_k - b qd``.  Two bounds follow, one per URDF limit of the joint:
+
+* speed: from rest ``|qd| <= max |d_k| / b`` for any disturbance sequence (the rate is
+  a weighted mean of the ``d_k / b``), so ``b >= d / (SPEED_SHARE v)`` keeps it at most
+  ``SPEED_SHARE`` of its rated speed ``v`` (the rest is left to the arm's own motion,
+  which the joint feels through the coupling);
+* position: each period's impulse ``d_k dt`` ends as a displacement ``d_k dt / b``
+  whatever ``I``, so over a run of ``T`` the joint walks ``sum d_k dt / b``, of standard
+  deviation ``sigma sqrt(T dt) / b`` with ``sigma = d / sqrt(3)``; ``b >= Z sigma
+  sqrt(T dt) / g`` keeps ``Z`` of them between the start and the nearer limit at
+  ``g`` (none for a continuous joint): the walk's largest excursion passes ``Z`` standard
+  deviations in about ``4 Phi(-Z)`` = 1.3e-4 of runs at ``Z`` = 4.
+
+The floor is the larger (over all free joints); the URDF's ``<dynamics damping>`` is
+taken where it is larger.  The simulator integrates the joint by explicit RK4 at
+``dt_sub``, stable for ``dt_sub b / I`` up to 2.78: ``b`` is capped at ``I / dt_sub``
+(the lightest free joint), and a floor above that cap is a free joint the simulated arm
+cannot keep within its limits: refused, with the numbers (:class:`DampingFloor`).
+Hand figures (d = 0.5 N m, dt = 1 ms, T = 15 s): the UR10's wrist_2 (3.2 rad/s, 6.11 rad
+from its limit) 0.5 / (0.8 x 3.2) = 0.195 N m s/rad (position: 4 x 0.2887 x 0.1225 / 6.11
+= 0.0232); the Jaco2's joint 6 (continuous, 0.838 rad/s) 0.746.
 """
 
+
+from typing import NamedTuple
 
 from freejoint_core.errors import FreejointValueError
 import numpy as np
@@ -60,6 +92,12 @@ CHECK_DT = 2e-3
 """[s] The period the rule is stable at (the planner's nominal-loop period)."""
 POSTURE_TIME = 2.0
 """[s] ``kd / kp``: the time constant of the posture term's pull."""
+SPEED_SHARE = 0.8
+"""Share of a free joint's rated speed the disturbance alone may drive it to."""
+Z = 4.0
+"""Standard deviations of the free joint's walk kept from its nearer position limit."""
+RK4_STEP = 1.0
+"""Largest ``dt_sub b / I`` the simulator's damping is given (RK4 is stable to 2.78)."""
 
 
 def kernel_basis(da, tol=1e-10):
@@ -181,3 +219,91 @@ def nullspace_gains(nominal, q, dt=CHECK_DT):
 def rule(inertia, dt=CHECK_DT):
     """Return ``min(KD_REF, BETA I_i / dt)`` [N m s/rad] of joint inertias ``I_i`` [kg m^2]."""
     return np.minimum(KD_REF, BETA * np.asarray(inertia, dtype=float) / dt)
+
+
+class DampingFloor(NamedTuple):
+    """
+    The free joints' drivetrain damping of :func:`drivetrain_damping` and its terms.
+
+    Attributes
+    ----------
+    floor : float
+        [N m s/rad] The least damping the rule asks (module notes).
+    cap : float
+        [N m s/rad] The largest the simulator integrates stably (``I / dt_sub``).
+    joint : str
+        The free joint whose bound sets ``floor``.
+    cause : str
+        ``'speed'`` or ``'position'``: which of its limits sets it.
+    reason : str
+        '' or why no damping serves (``floor > cap``), one line with the numbers.
+
+    """
+
+    floor: float
+    cap: float
+    joint: str
+    cause: str
+    reason: str
+
+
+def drivetrain_damping(real, q0, dist, dt, dt_sub, run_s):
+    """
+    Return the free joints' damping floor and cap (:class:`DampingFloor`, module notes).
+
+    Parameters
+    ----------
+    real : SpatialArm
+        The real arm (its free joints, URDF limits and inertia).
+    q0 : array_like, (n,)
+        The start posture [rad], at rest.
+    dist : float
+        The disturbance bound ``d`` [N m] (the simulator's ``dist_bound``), >= 0.
+    dt, dt_sub : float
+        The control period and the simulator's RK4 step [s], > 0.
+    run_s : float
+        The run's length ``T`` [s] (circle and hold), > 0.
+
+    Raises
+    ------
+    FreejointValueError
+        A number not finite or out of range.
+
+    """
+    for name, value, low in (('dist', dist, 0.0), ('dt', dt, None), ('dt_sub', dt_sub, None),
+                             ('run_s', run_s, None)):
+        ok = isinstance(value, (int, float)) and np.isfinite(value) and (
+            value >= low if low is not None else value > 0.0)
+        if not ok:
+            raise FreejointValueError(f'{name}: expected a finite number '
+                                      f"{'>= 0' if low is not None else '> 0'}, got {value!r}")
+    q0 = np.asarray(q0, dtype=float)
+    minv = real.terms(q0, np.zeros(real.n)).Minv
+    sigma = dist / np.sqrt(3.0)
+    best = (0.0, '', '')
+    caps = []
+    for p in real.passive:
+        name = real.joint_names[p]
+        inertia = 1.0 / float(minv[p, p])
+        caps.append((RK4_STEP * inertia / dt_sub, name, inertia))
+        speed = dist / (SPEED_SHARE * float(real.velocity[p]))
+        best = max(best, (speed, name, 'speed'))
+        gap = min(q0[p] - real.lower[p], real.upper[p] - q0[p])
+        if np.isfinite(gap):
+            walk = Z * sigma * np.sqrt(run_s * dt) / max(gap, 1e-9)
+            best = max(best, (walk, name, 'position'))
+    cap, cap_joint, inertia = min(caps)
+    floor, joint, cause = best
+    reason = ''
+    if floor > cap:
+        p = real.joint_names.index(joint)
+        why = (f'its rated speed {real.velocity[p]:.4g} rad/s needs b >= d / '
+               f'({SPEED_SHARE} v) = {floor:.4g}' if cause == 'speed' else
+               f'its position limits [{real.lower[p]:.4g}, {real.upper[p]:.4g}] rad from '
+               f'{q0[p]:.4g} rad over {run_s:g} s need b >= {Z:g} sigma sqrt(T dt) / gap = '
+               f'{floor:.4g}')
+        reason = (f'free joint {joint} cannot be kept within its limits under the '
+                  f'+-{dist:g} N m disturbance: {why} N m s/rad, above the {cap:.4g} N m s/rad '
+                  f"the simulator's RK4 integrates stably on {cap_joint}'s effective inertia "
+                  f'{inertia:.3g} kg m^2 at dt_sub {dt_sub:g} s (I / dt_sub)')
+    return DampingFloor(float(floor), float(cap), joint, cause, reason)

@@ -40,7 +40,7 @@ gives other last bits). The tools that do not run the offline seeds take the bou
 _BOUNDS = {}
 
 
-def tracking_bound_mm(case, hogs=False, recompute=False):
+def tracking_bound_mm(case, hogs=False, recompute=False, offline_max_mm=None):
     """
     Return the tracking bound of ``case`` [mm] and how it is made.
 
@@ -49,15 +49,21 @@ def tracking_bound_mm(case, hogs=False, recompute=False):
     circle, robust law, disturbance on: ``freejoint_core.offline.run_case``): with
     ``recompute`` run here, once per process (a few seconds per seed; what the soak
     does), else :data:`OFFLINE_WORST_MAX_MM` (1.70 mm horizontal, 5.51 mm vertical).
+    Another arm (a spatial one: its offline twin, the graph's parameter files, circle and
+    hold) is judged the same way from its own seeds' max errors, ``offline_max_mm``.
 
     Parameters
     ----------
     case : str
-        'horizontal' or 'vertical' (the paper's arm).
+        'horizontal' or 'vertical' (the paper's arm), or the name of the arm whose
+        ``offline_max_mm`` are given.
     hogs : bool
         The run had CPU hogs beside it.
     recompute : bool
         Run the offline seeds on this machine.
+    offline_max_mm : sequence of float, optional
+        The max errors [mm] of the arm's offline runner over :data:`BOUND_SEEDS`, run by
+        the caller (the paper's runner does not run other arms).
 
     Returns
     -------
@@ -67,10 +73,16 @@ def tracking_bound_mm(case, hogs=False, recompute=False):
     Raises
     ------
     FreejointValueError
-        ``case`` is not one of the paper's cases.
+        ``case`` is not one of the paper's cases and no ``offline_max_mm`` are given, or
+        these are not one finite number per seed.
 
     """
     from .offline import run_case
+    factor = BOUND_FACTOR_HOGS if hogs else BOUND_FACTOR
+    if offline_max_mm is not None:
+        values = _array('offline_max_mm', offline_max_mm, (len(BOUND_SEEDS),))
+        worst = float(np.max(values))
+        return factor * worst, factor, worst
     if case not in ('horizontal', 'vertical'):
         raise FreejointValueError(f"case: expected 'horizontal' or 'vertical', got {case!r}")
     if not recompute:
@@ -80,7 +92,6 @@ def tracking_bound_mm(case, hogs=False, recompute=False):
             _BOUNDS[case] = max(run_case(case, 'robust', seed)[0]['max_mm']
                                 for seed in BOUND_SEEDS)
         worst = _BOUNDS[case]
-    factor = BOUND_FACTOR_HOGS if hogs else BOUND_FACTOR
     return factor * worst, factor, worst
 
 

@@ -23,9 +23,12 @@ bound).  Everything comes from the URDF and one documented rule each:
 * the null-space gains: :func:`freejoint_core.arm_gains.nullspace_gains` (its docstring
   derives the rule); task gains ``K``, ``Lambda``, ``R``: the shipped per-row values
   (accelerations after the nominal inertia is inverted: arm-independent);
-* the free joints' viscous damping in the simulator (``passive_damping``): their URDF
-  ``<dynamics damping>`` (a failed joint keeps its drivetrain; none given: 0), capped
-  at what the simulator's RK4 integrates stably (:func:`stable_damping`);
+* the free joints' viscous damping in the simulator (``passive_damping``, a failed
+  joint keeps its drivetrain): the floor that keeps them within their rated speed and
+  position limits under the simulator's disturbance
+  (:func:`freejoint_core.arm_gains.drivetrain_damping`, derived there) or their URDF
+  ``<dynamics damping>`` where larger, capped at what the simulator's RK4 integrates
+  stably; a floor above that cap is refused (:func:`free_damping`);
 * the circle: radius ``min(0.1 m, L / 10)``, the planner's 5-s duration and facing plane.
 
 A refusal is one line naming the cause and the numbers (:class:`ArmInitError`).
@@ -106,23 +109,47 @@ def joint_damping(text, names):
     return min(values) if values else 0.0
 
 
-def stable_damping(real, q, damping):
+def free_damping(real, q0, urdf_damping, given=None, run_s=None, log=None):
     """
-    Return ``(b, asked)``: the free joints' damping the simulator's RK4 integrates stably.
+    Return the simulator's ``passive_damping`` [N m s/rad] of the free joints (module notes).
 
-    A viscous damping ``b`` on a free joint of effective inertia ``I = 1 / (M^-1)_pp`` is a
-    decay at ``b / I`` [1/s]; the explicit RK4 at ``dt_sub`` (the simulator's) is stable
-    for ``dt_sub b / I`` up to 2.78: the rule caps ``b`` at ``I / dt_sub`` (the lightest
-    free joint at the start posture), so that the plant, not the arm, does not diverge.
-    ``asked`` is the damping given when capped, else 0.
+    The floor of :func:`freejoint_core.arm_gains.drivetrain_damping` at the simulator's
+    disturbance bound, control period and RK4 step (the simulator's defaults) over ``run_s``
+    (default the planner's duration and :data:`HOLD_S`), or the URDF's ``urdf_damping``
+    where larger, capped at what the RK4 integrates stably; ``given`` (``--passive-damping``,
+    a lab's identified value) is taken as it is (capped), a warning logged when below the
+    floor.
+
+    Raises
+    ------
+    ArmInitError
+        No damping within the cap meets the floor (the joint, the limit, the numbers).
+
     """
+    from freejoint_core.arm_gains import drivetrain_damping
+    from freejoint_planner.params import SCHEMA as PLANNER
     from freejoint_sim.params import SCHEMA as SIM
-    if damping <= 0.0:
-        return 0.0, 0.0
-    terms = real.terms(np.asarray(q, dtype=float), np.zeros(real.n))
-    inertia = float(min(1.0 / terms.Minv[p, p] for p in real.passive))
-    cap = inertia / float(SIM.defaults()['dt_sub'])
-    return (cap, damping) if damping > cap else (damping, 0.0)
+    sim = SIM.defaults()
+    if run_s is None:
+        run_s = float(PLANNER.defaults()['duration']) + HOLD_S
+    dist = float(sim['dist_bound'])
+    rule = drivetrain_damping(real, q0, dist, float(sim['control_period']),
+                              float(sim['dt_sub']), run_s)
+    if given is None and rule.reason:
+        raise ArmInitError(rule.reason)
+    damping = max(urdf_damping, rule.floor) if given is None else float(given)
+    if log is not None:
+        log(f'passive_damping: floor {rule.floor:.4g} N m s/rad ({rule.joint}, its '
+            f'{rule.cause} limit under the +-{dist:g} N m disturbance), URDF '
+            f'{urdf_damping:g}, cap {rule.cap:.4g}'
+            + ('' if given is None else f', given {damping:g}'))
+        if damping > rule.cap:
+            log(f'passive_damping: {damping:g} N m s/rad capped at {rule.cap:.4g}, what the '
+                "simulator's RK4 integrates stably on the free joints' inertia")
+        if given is not None and damping < rule.floor:
+            log(f'passive_damping: the given {damping:g} N m s/rad is below the floor '
+                f'{rule.floor:.4g}: {rule.joint} may pass its {rule.cause} limit')
+    return min(damping, rule.cap)
 
 
 def solve_ik(arm, target, q_init, iters=300, tol=1e-6):
@@ -212,6 +239,11 @@ def start_posture(nominal, radius, duration, max_speed, max_acceleration, log=No
 
     """
     from freejoint_planner.spatial_planning import check_spatial_plan, first_joint_origin
+    from freejoint_planner.spatial_planning import reach_refusal, spatial_bounds
+    from freejoint_planner.spatial_planning import SpatialCircle
+    why = spatial_bounds(radius, duration, max_speed, max_acceleration)
+    if why:
+        raise ArmInitError(why)
     reach = arm_reach(nominal)
     origin = first_joint_origin(nominal)
     rng = np.random.default_rng(0)
@@ -223,6 +255,12 @@ def start_posture(nominal, radius, duration, max_speed, max_acceleration, log=No
     reasons = []
     for share, height in TARGETS:
         target = origin + reach * np.array([share, 0.0, height])
+        why = reach_refusal(nominal, SpatialCircle(target, radius, duration), reach)[0]
+        if why:     # before the IK: this start point's circle cannot be reached
+            if log is not None:
+                log(f'tip {np.round(target, 3).tolist()} m: {why}')
+            reasons.append(why)
+            continue
         found = []
         for seed in seeds:
             q = solve_ik(nominal, target, seed)
@@ -264,7 +302,7 @@ def _floats(values):
 
 
 def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
-              passive_damping=None):
+              passive_damping=None, hold_s=HOLD_S):
     """
     Return ``{file name: YAML text}`` of an arm (module notes).
 
@@ -279,8 +317,10 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
     radius : float, optional
         The circle's radius [m] (default ``min(RADIUS, L / 10)``).
     passive_damping : float, optional
-        The free joints' viscous damping in the simulator [N m s/rad] (default: their
-        URDF ``<dynamics damping>``, 0 if none).
+        The free joints' viscous damping in the simulator [N m s/rad] (default:
+        :func:`free_damping`'s rule).
+    hold_s : float
+        The hold after the circle [s] (``arm.yaml``; the run the damping rule covers), > 0.
     log : callable, optional
         Called with a line per start point tried.
 
@@ -304,6 +344,8 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
     if not passive:
         raise ArmInitError('passive: name at least one free joint of the chain '
                            f'{real.joint_names}')
+    if not (isinstance(hold_s, (int, float)) and math.isfinite(hold_s) and hold_s > 0.0):
+        raise ArmInitError(f'hold: expected a finite number of seconds > 0, got {hold_s!r}')
     plan = PLANNER.defaults()
     reach = arm_reach(nominal)
     radius = float(radius) if radius is not None else min(RADIUS, reach / 10.0)
@@ -319,12 +361,8 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
             '# On top of config/{node}.yaml: --params-file config/{node}.yaml '
             '--params-file <this file>.\n')
     loop = found['verdict'].loop
-    damping = joint_damping(text, set(passive)) if passive_damping is None \
-        else float(passive_damping)
-    damping, capped = stable_damping(real, found['q0'], damping)
-    if capped and log is not None:
-        log(f'passive_damping: {capped:g} N m s/rad capped at {damping:.4g}, what the '
-            "simulator's RK4 integrates stably on the free joints' inertia")
+    damping = free_damping(real, found['q0'], joint_damping(text, set(passive)),
+                           passive_damping, float(plan['duration']) + hold_s, log=log)
     sim = (head.format(node='sim')
            + f'# Start posture: IK of the tip to {np.round(found["target"], 4).tolist()} m '
            f'(kappa {found["kappa"]:.3g}), the free joints at rest.\n'
@@ -332,7 +370,9 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
            + "    initial_joint_positions: '%s'\n" % ' '.join(
                repr(float(v)) for v in found['q0'])
            + ('' if damping <= 0.0 else
-              "    # the free joints' drivetrain (the URDF's <dynamics damping> unless given)\n"
+              "    # the free joints' drivetrain: the URDF's <dynamics damping> or the floor\n"
+              '    # that keeps them within their limits under the disturbance, whichever is\n'
+              '    # larger (freejoint_core.arm_gains.drivetrain_damping), unless given\n'
               f'    passive_damping: {damping!r}\n'))
     ctl = (head.format(node='controller')
            + "# nullspace_kd_joints: min(20, I_i / 2 ms) of the joints' effective "
@@ -357,16 +397,16 @@ def arm_files(urdf, passive, tip=None, base=None, radius=None, log=None,
             f'name: {os.path.splitext(os.path.basename(path))[0]}_'
             f'{"_".join(passive)}\n'
             f'passive_joint: {passive[0]}\n'
-            f'hold_s: {HOLD_S!r}\n'
+            f'hold_s: {float(hold_s)!r}\n'
             f'bound_mm: {BOUND_MM!r}\n')
     return {'sim.yaml': sim, 'controller.yaml': ctl, 'planner.yaml': planner,
             'arm.yaml': meta}
 
 
 def init_arm(urdf, passive, out, tip=None, base=None, radius=None, log=None,
-             passive_damping=None):
+             passive_damping=None, hold_s=HOLD_S):
     """Write :func:`arm_files` into ``out`` (created); return the paths written."""
-    files = arm_files(urdf, passive, tip, base, radius, log, passive_damping)
+    files = arm_files(urdf, passive, tip, base, radius, log, passive_damping, hold_s)
     os.makedirs(out, exist_ok=True)
     paths = []
     for name, text in files.items():

@@ -17,7 +17,8 @@ Campaign file::
     name: paper_vertical          # label (and the default output folder bags/campaigns/NAME)
     arm: paper                    # Table I, or a 3-link URDF arm whose last joint is free:
                                   # {urdf: PATH, passive_joints: [NAME], tip_link: LINK,
-                                  #  gravity: [x, y, z]} (gravity: default the case's)
+                                  #  gravity: [x, y, z]} (gravity: default the case's),
+                                  # or a spatial arm's directory (below)
     case: vertical                # horizontal (Case 1) | vertical (Case 2, gravity)
     task: {centre: [0.0, 0.0], radius: 0.2, duration: 5.0}   # the desired circle
     duration: 5.0                 # run length (s); dt 0.001, dt_sub 0.0005 by default
@@ -29,6 +30,15 @@ Campaign file::
     axes:                         # what varies: values: [...] or range: [lo, hi] (+ steps)
       scale: {range: [0.3, 1.5], steps: 7}
       dist_bound: {values: [0.0, 0.5, 1.0, 2.0]}
+
+A spatial arm (``arm: DIR``: a directory of ``fj arm init``, or ``config/ur5``,
+``config/panda``; relative to the campaign file) runs its offline twin
+(``freejoint_tools.arm_twin.twin``: its files' start posture, law, circle and hold, as
+``make offline ARM=DIR``) per run; axes ``scale`` (the controller's ``nominal_scale``),
+``dist_bound`` and ``seed`` (:data:`SPATIAL_AXES`); ``duration`` (default the circle and
+the hold) and ``success`` as above; ``case``, ``task``, ``dt``, ``dt_sub``, ``controller``
+and ``laws`` are the arm's files' (refused).  Its columns: ``q3_*`` the free joint's
+angles, ``min_det`` the smallest kappa, ``tau_peak_*`` NaN (the planar arm's joints).
 
 Axes (:data:`AXES`): ``scale`` (masses, inertias and COM distances together) or
 ``scale_mass``, ``scale_inertia``, ``scale_lc``; ``dist_bound`` [N m], ``dist_type``
@@ -71,6 +81,10 @@ _BOUNDS = {  # axis: (lowest, highest, lowest excluded, integer)
     'q3_0_deg': (-360.0, 360.0, False, False), 'seed': (0, 2 ** 63 - 1, False, True)}
 TOP_KEYS = ('name', 'arm', 'case', 'task', 'duration', 'dt', 'dt_sub', 'laws', 'controller',
             'success', 'design', 'seeds', 'fixed', 'axes', 'chunk')
+SPATIAL_AXES = ('scale', 'dist_bound', 'seed')
+"""The axes of a spatial arm's campaign (its controller's nominal scale, its disturbance)."""
+SPATIAL_FILE_KEYS = ('case', 'task', 'dt', 'dt_sub', 'controller', 'laws')
+"""Campaign keys a spatial arm takes from its parameter files instead."""
 DESIGNS = ('grid', 'lhs', 'random')
 SUCCESS_KEYS = ('max_mm', 'rms_mm', 'final_mm')
 DEFAULT_CHUNK = 250
@@ -238,13 +252,17 @@ def load(path):
         raw = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise CampaignError(f'{path}: not YAML: {str(exc).splitlines()[0]}') from None
-    camp = parse(raw)
+    camp = parse(raw, os.path.dirname(os.path.abspath(path)))
     camp['_text'] = text
     return camp
 
 
-def parse(raw):
-    """Check a campaign given as a dict (the parsed YAML); see :func:`load`."""
+def parse(raw, base_dir='.'):
+    """
+    Check a campaign given as a dict (the parsed YAML); see :func:`load`.
+
+    ``base_dir``: what a spatial arm's relative directory is relative to (the file's).
+    """
     from freejoint_core.arm import CASES, table1
     from freejoint_core.errors import FreejointValueError
     from freejoint_core.offline import initial_state
@@ -260,11 +278,13 @@ def parse(raw):
                                                         for ch in name):
         raise CampaignError(f'name: expected letters, digits, _ - . only, got {name!r}')
     c['name'] = name
+    arm = raw.get('arm', 'paper')
+    if isinstance(arm, str) and arm != 'paper':
+        return _parse_spatial(raw, c, os.path.normpath(os.path.join(base_dir, arm)))
     case = raw.get('case', 'vertical')
     if case not in CASES:
         raise CampaignError(f'case: expected one of {list(CASES)}, got {case!r}')
     c['case'] = case
-    arm = raw.get('arm', 'paper')
     if isinstance(arm, dict):
         c['arm'], real = _urdf_arm(arm, case)
         c['_arms'] = {False: real, True: real}
@@ -272,7 +292,8 @@ def parse(raw):
         c['arm'] = 'paper'
         real = table1(case)
     else:
-        raise CampaignError(f"arm: expected 'paper' or {{urdf: PATH, ...}}, got {arm!r}")
+        raise CampaignError(f"arm: expected 'paper', {{urdf: PATH, ...}} or a spatial arm's "
+                            f'directory, got {arm!r}')
     task = raw.get('task', {})
     if not isinstance(task, dict) or set(task) - {'centre', 'radius', 'duration'}:
         raise CampaignError(f'task: expected a mapping of centre, radius, duration, got {task!r}')
@@ -300,6 +321,29 @@ def parse(raw):
     c['_law_params'] = {k: float(v) for k, v in c['controller'].items() if '.' in k}
     if 'laws' in raw:
         c['laws'] = _check_laws(raw['laws'])
+    _parse_runs(raw, c)
+    # Every initial passive angle must have an initial state (inverse kinematics).
+    q3s = set()
+    spec = c['axes'].get('q3_0_deg')
+    if spec is None:
+        q3s.add(c['fixed'].get('q3_0_deg', PAPER_POINT['q3_0_deg']))
+    elif 'values' in spec:
+        q3s.update(spec['values'])
+    else:
+        q3s.update(np.linspace(spec['range'][0], spec['range'][1], 721).tolist())
+    start = CircleQuintic(**c['task']).sample(0.0)[0]
+    _check_lc(c, real)
+    for q3 in sorted(q3s):
+        try:
+            initial_state(real, q3, start)
+        except FreejointValueError:
+            raise CampaignError(f'axes.q3_0_deg: {q3:g} deg: no configuration puts the end '
+                                f'effector on the start of the task') from None
+    return c
+
+
+def _parse_runs(raw, c):
+    """Check what every campaign has: success, design, seeds, axes, fixed, chunk (into c)."""
     success = raw.get('success', {'max_mm': 20.0})
     if not isinstance(success, dict) or not success:
         raise CampaignError(f'success: expected a mapping of bounds, got {success!r}')
@@ -353,23 +397,34 @@ def parse(raw):
     if chunk < 1 or chunk > 100000:
         raise CampaignError(f'chunk: expected 1 .. 100000, got {chunk}')
     c['chunk'] = chunk
-    # Every initial passive angle must have an initial state (inverse kinematics).
-    q3s = set()
-    spec = c['axes'].get('q3_0_deg')
-    if spec is None:
-        q3s.add(c['fixed'].get('q3_0_deg', PAPER_POINT['q3_0_deg']))
-    elif 'values' in spec:
-        q3s.update(spec['values'])
-    else:
-        q3s.update(np.linspace(spec['range'][0], spec['range'][1], 721).tolist())
-    start = CircleQuintic(**c['task']).sample(0.0)[0]
-    _check_lc(c, real)
-    for q3 in sorted(q3s):
-        try:
-            initial_state(real, q3, start)
-        except FreejointValueError:
-            raise CampaignError(f'axes.q3_0_deg: {q3:g} deg: no configuration puts the end '
-                                f'effector on the start of the task') from None
+
+
+def _parse_spatial(raw, c, arm_dir):
+    """Check the campaign of a spatial arm's directory (module notes); return it."""
+    from freejoint_tools.arm_twin import arm_info, run_ticks
+    given = [k for k in SPATIAL_FILE_KEYS if k in raw]
+    if given:
+        raise CampaignError(f'{given[0]}: a spatial arm takes it from its parameter files '
+                            f'({arm_dir}/<node>.yaml)')
+    try:
+        c['_info'] = arm_info(arm_dir)
+        ticks = run_ticks(arm_dir)
+    except (OSError, ValueError) as exc:
+        raise CampaignError(f'arm: {exc}') from None
+    c['arm'] = {'dir': arm_dir}
+    c['case'] = 'spatial'
+    c['task'] = None
+    c['dt'], c['dt_sub'], c['controller'] = 1e-3, None, {}
+    duration = _number('duration', raw.get('duration', ticks * 1e-3))
+    if not 0.0 < duration <= 1e3:
+        raise CampaignError(f'duration: expected 0 .. 1000 s, got {duration}')
+    c['duration'] = duration
+    _parse_runs(raw, c)
+    for where, names in (('axes', c['axes']), ('fixed', c['fixed'])):
+        bad = sorted(set(names) - set(SPATIAL_AXES))
+        if bad:
+            raise CampaignError(f'{where}.{bad[0]}: not an axis of a spatial arm (its axes: '
+                                f'{", ".join(SPATIAL_AXES)})')
     return c
 
 
@@ -557,10 +612,17 @@ def run_chunk(camp, rows):
     """
     from freejoint_core.batch import simulate_law
     from freejoint_core.trajectory import CircleQuintic
+    if camp['case'] == 'spatial':
+        return _spatial_chunk(camp, rows)
     res = simulate_law(_batch_runs(rows, camp['case']), camp['_gains'],
                        law=camp.get('_law', 'robust'), law_params=camp['_law_params'],
                        dt=camp['dt'], dt_sub=camp['dt_sub'], duration=camp['duration'],
                        trajectory=CircleQuintic(**camp['task']), arms=camp.get('_arms'))
+    return _results(camp, rows, res)
+
+
+def _results(camp, rows, res):
+    """Return the result columns of ``rows`` and the runs' metrics ``res`` (and ``holds``)."""
     out = dict(rows)
     for k, v in res.items():
         out[k] = v
@@ -570,6 +632,40 @@ def run_chunk(camp, rows):
         holds &= res[key] <= bound
     out['holds'] = holds
     return {k: out[k] for k in INPUT_COLUMNS + METRIC_COLUMNS}
+
+
+def _spatial_chunk(camp, rows):
+    """:func:`run_chunk` of a spatial arm: its offline twin per run (module notes)."""
+    from freejoint_tools.arm_twin import twin
+    cols = {k: np.full(len(rows['run_index']), np.nan) for k in METRIC_COLUMNS
+            if k not in ('q3_range_deg', 'holds')}
+    ticks = int(round(camp['duration'] / camp['dt']))
+    for i in range(len(rows['run_index'])):
+        record, trace = twin(camp['arm']['dir'], int(rows['seed'][i]), ticks,
+                             sim={'dist_bound': float(rows['dist_bound'][i])},
+                             controller={'nominal_scale': float(rows['scale_mass'][i])})
+        err = 1e3 * np.linalg.norm(trace['p'] - trace['p_d'], axis=1)
+        free = np.degrees(trace['q'][:, record_free(trace, camp)])
+        values = {'rms_mm': record['rms_mm'], 'max_mm': record['max_mm'],
+                  'final_mm': err[-1], 'q3_min_deg': free.min(), 'q3_max_deg': free.max(),
+                  'min_det': float(np.min(trace['kappa'])),
+                  'theta_final_norm': float(np.linalg.norm(trace['theta'][-1])),
+                  'diverged_at_s': (np.nan if record['diverged_at_s'] is None
+                                    else record['diverged_at_s']),
+                  'ticks': len(err)}
+        for k, v in values.items():
+            cols[k][i] = v
+    cols['ticks'] = cols['ticks'].astype(np.int64)
+    return _results(camp, rows, cols)
+
+
+def record_free(trace, camp):
+    """Return the column of the trace's ``q`` that is the arm's (first) free joint."""
+    from freejoint_tools.arm_twin import arm_configs
+    if '_free' not in camp:
+        real = arm_configs(camp['arm']['dir'])[0].arm.spatial
+        camp['_free'] = real.passive[0]
+    return camp['_free']
 
 
 # -- results files ----------------------------------------------------------------------

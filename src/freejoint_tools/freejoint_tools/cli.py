@@ -672,7 +672,7 @@ def _arm_init(args):
     try:
         paths = init_arm(args.urdf, args.passive, args.out, args.tip, args.base, args.radius,
                          log=lambda line: print('fj arm init: ' + line, file=sys.stderr),
-                         passive_damping=args.passive_damping)
+                         passive_damping=args.passive_damping, hold_s=args.hold)
     except FreejointValueError as exc:
         print(f'fj arm init: refused: {exc}', file=sys.stderr)
         return 2
@@ -713,7 +713,10 @@ def build_parser():
     p.add_argument('--radius', type=float, help='circle radius [m] (default min(0.1, L/10))')
     p.add_argument('--passive-damping', type=float, metavar='B',
                    help="the free joints' drivetrain damping in the simulator [N m s/rad] "
-                   "(default: the URDF's <dynamics damping>, else 0)")
+                   '(default: the least that keeps them within their limits under the '
+                   "simulator's disturbance, or the URDF's <dynamics damping> where larger)")
+    p.add_argument('--hold', type=float, default=10.0, metavar='S',
+                   help='the hold after the circle [s] (default 10)')
     p.add_argument('--out', required=True, metavar='DIR')
     p.set_defaults(func=_arm_init, session=False)
 
