@@ -39,6 +39,7 @@ throttled kind of line, None: always); status bits are ControllerState's.
 import math
 
 from freejoint_common.arm_description import resolve_arm
+from freejoint_common.schema import nullspace_options
 from freejoint_control import failures
 from freejoint_control.readiness import guard_margins, ReadinessGuard
 from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
@@ -48,7 +49,7 @@ from freejoint_core.delay import extrapolate_setpoint, StatePredictor
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import (clamp_dt, hold_effort, law_output_fault, limit_effort,
                                    setpoint_refusal, state_refusal)
-from freejoint_core.laws import FreeLinkDampedLaw, make_law
+from freejoint_core.laws import make_law
 from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
 import numpy as np
 
@@ -149,10 +150,10 @@ def config_law(cfg):
     """
     Return the law a controller configuration names, with its null-space terms.
 
-    ``make_law`` of ``cfg.law`` on the nominal model, the gains and the laws' own gains,
-    then ``failures.install_nullspace`` (``nullspace_kd``, ``nullspace_kp``): the law the loop
-    steps (before the free link's damping wraps it) and the one an offline twin of the
-    graph must run.
+    ``make_law`` of ``cfg.law`` on the nominal model, the gains, the laws' own gains, the
+    null-space options (``nullspace_kd``, ``nullspace_kd_joints``, ``nullspace_kp``) and,
+    with ``free_link_damping``, the free link's damping around it: the law the loop steps
+    and the one an offline twin of the graph must run.
 
     Parameters
     ----------
@@ -164,10 +165,18 @@ def config_law(cfg):
     freejoint_core.laws.ControlLaw
 
     """
-    law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model,
-                   params=cfg.law_params)
-    failures.install_nullspace(law, cfg)
-    return law
+    values = cfg.values
+    free_link = None
+    if values['free_link_damping']:     # the reference damps the free link
+        free_link = {'delta_max': values['free_link_delta_max'],
+                     'k2_rest': values['free_link_rest_damping'],
+                     'rest_after': values['free_link_rest_after'],
+                     'mode': values['free_link_mode'],
+                     'settle_window': values['free_link_settle_window'],
+                     'sat': values['free_link_drive_max']}
+    return make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model,
+                    params=cfg.law_params, free_link=free_link,
+                    **nullspace_options(values))
 
 
 class ControlLoop:
@@ -187,14 +196,6 @@ class ControlLoop:
         cfg = config
         self.log = log or _no_log
         self.law = config_law(cfg)
-        if cfg.values['free_link_damping']:     # the reference damps the free link
-            values = cfg.values
-            self.law = FreeLinkDampedLaw(self.law, values['free_link_delta_max'],
-                                         k2_rest=values['free_link_rest_damping'],
-                                         rest_after=values['free_link_rest_after'],
-                                         mode=values['free_link_mode'],
-                                         settle_window=values['free_link_settle_window'],
-                                         sat=values['free_link_drive_max'])
         # Joint failures (freejoint_control/failures.py): None when off.
         self.failures = None if cfg.values['joint_failures'] == 'off' else \
             failures.FailureMonitor(cfg, self.law, self.log)
