@@ -40,11 +40,15 @@ import math
 
 from freejoint_common.arm_description import resolve_arm
 from freejoint_common.schema import nullspace_options
-from freejoint_control import failures
+from freejoint_control import failures, loop_status
+# The published state's names, imported from here by the node and the tests too.
+from freejoint_control.loop_status import (  # noqa: F401
+    DEBUG, ERROR, INFO, PeriodFigures, RECEIPT, Result, STATUS_DT_CLAMPED, STATUS_HOLDING,
+    STATUS_LAW_FAULT, status_message, STATUS_RATE_LIMITED, STATUS_RESUMING,
+    STATUS_SETPOINT_LATE, STATUS_STOPPED, WARN)
 from freejoint_control.readiness import guard_margins, ReadinessGuard
-from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
-                                    STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
-                                    STATUS_TORQUE_LIMITED)
+from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_STALE_SETPOINT,
+                                    STATUS_STALE_STATE)
 from freejoint_core.delay import extrapolate_setpoint, StatePredictor
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import (clamp_dt, hold_effort, law_output_fault, limit_effort,
@@ -53,27 +57,12 @@ from freejoint_core.laws import make_law
 from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
 import numpy as np
 
-# ControllerState's status bits beyond the core's (test_loop checks them against the message).
-STATUS_HOLDING = 32
-STATUS_RATE_LIMITED = 64
-STATUS_LAW_FAULT = 128
-STATUS_RESUMING = 256
-STATUS_DT_CLAMPED = 512
-STATUS_SETPOINT_LATE = 1024
-STATUS_STOPPED = 2048
-
 STANDBY_SETTLE = 0.5
 """[s] A spare is ready once nothing was lacking for this long (its discovery of the graph,
 which can list the simulator before the planner, settled)."""
 STANDBY_IDLE_STREAM = 0.25
 """[s] A matched setpoint publisher silent this long is not streaming: a spare does not
 wait for it to catch up before it tells the supervisor it is ready."""
-DEBUG, INFO, WARN, ERROR = 'debug', 'info', 'warn', 'error'
-"""Levels of the ``log`` callable."""
-RECEIPT = 'receipt'
-"""``Result.latency_ns`` of a lockstep answer: the node measures it from the state's receipt
-(``ControlLoop.last_state_wall``) to the command, on its own clock."""
-
 _isfinite = math.isfinite
 _NAME_MAP_CACHE = 16
 _SAY_PERIOD_NS = round(1e9)
@@ -87,63 +76,6 @@ _DAMP_SAID = ('the damped joint hold answered to every state (readiness_action d
 
 def _no_log(level, kind, text):
     """Drop a log line (the default of ``log``)."""
-
-
-class Result:
-    """
-    What to publish for one answered state (one object per loop, refilled per answer).
-
-    Attributes
-    ----------
-    stamp_ns : int
-        Stamp [ns] of the state answered (-1: none answered yet).
-    effort : list of float, (r,)
-        The command [N m] in the order of parameter ``joints``.
-    error, error_rate, sliding, position, position_desired : sequence of float, (m,)
-        ControllerState's task-space terms [m, m/s] (m: the task dimension); ``error``
-        against the controller's reference ``position_desired``.
-    position_planned : sequence of float, (m,) or (0,)
-        The plan's setpoint for the state, as streamed (before hold, blend or carrying
-        forward) [m]; empty without one (ControllerState's ``position_planned``).
-    det_dd, state_age, setpoint_age, dt : float
-        As ControllerState's fields.
-    status : int
-        Status bits; ``message`` says why when not 0.
-    setpoint_ns : int or None
-        Stamp of the setpoint used (None: none).
-    law_state_names : tuple of str
-        Names of the law's internal state (``ControlLaw.state_names``).
-    law_state_values : list of float
-        Its values after this answer (ControllerState's ``law_state``).
-    repeated : bool
-        The state's stamp was answered before: the same answer again.
-    latency_ns : int, RECEIPT or None
-        The latency of the answer [ns] for the diagnostics: real time from the state's
-        stamp; lockstep :data:`RECEIPT` (from its receipt, measured by the node); None for
-        a zero-effort answer (not counted).
-
-    """
-
-    __slots__ = ('stamp_ns', 'effort', 'error', 'error_rate', 'sliding', 'det_dd',
-                 'position', 'position_desired', 'position_planned', 'status',
-                 'message', 'setpoint_ns', 'setpoint_age', 'dt', 'state_age',
-                 'law_state_names', 'law_state_values', 'repeated', 'latency_ns')
-
-    def __init__(self, m=2):
-        zero = (0.0,) * m
-        self.stamp_ns = -1
-        self.effort = []
-        self.error = self.error_rate = self.sliding = zero
-        self.position = self.position_desired = zero
-        self.position_planned = ()
-        self.det_dd = self.state_age = self.setpoint_age = self.dt = 0.0
-        self.status = 0
-        self.message = ''
-        self.setpoint_ns = None
-        self.law_state_names = ()
-        self.law_state_values = []
-        self.repeated = False
-        self.latency_ns = 0
 
 
 def config_law(cfg):
@@ -251,10 +183,7 @@ class ControlLoop:
         self.old_states = 0
         self.stale_periods = 0          # onsets of a stale (or late) setpoint stream
         self._stale_now = False
-        self.period_bits = 0            # status bits of the answers of the status period
-        self._plan_error_max = 0.0      # |position - position_planned| max of the period [m]
-        self._plan_error_last = None    # and of the last answer (None: no plan)
-        self._ref_error_max = 0.0       # |error| (vs the controller's reference) max [m]
+        self.figures = PeriodFigures()  # what the status period reports beyond the counters
         self._last_sp_refusal = ''
         self._good_state = self.law.save_state()
         # Last command sent, in command order (None: none yet in lockstep, whose start is
@@ -1089,19 +1018,10 @@ class ControlLoop:
         res.position = out.p if pred is None else law.model.fk(q)
         res.position_desired = p_ref
         res.position_planned = planned
-        if planned:
-            plan_error = math.dist(res.position, planned)
-            self._plan_error_last = plan_error
-            if plan_error > self._plan_error_max:
-                self._plan_error_max = plan_error
-        else:
-            self._plan_error_last = None
-        ref_error = math.hypot(*out.e)
-        if ref_error > self._ref_error_max:
-            self._ref_error_max = ref_error
+        ref_error = self.figures.track(res.position, planned, out.e)
         res.status = status
-        res.message = _status_message(status, out.det, self.config, hold_reason,
-                                      shaper) if status else ''
+        res.message = status_message(status, out.det, self.config, hold_reason,
+                                     shaper) if status else ''
         if fm is not None and fm.message:
             res.message = fm.message + ('; ' + res.message if res.message else '')
         if sp_ns is None:
@@ -1120,7 +1040,7 @@ class ControlLoop:
             age_ns = now_ns - ns
             res.state_age = age_ns * 1e-9
             res.latency_ns = age_ns
-        self.period_bits |= status
+        self.figures.bits |= status
         self.last_ns = ns
         self._last_sp = p_ref
         self._last_det = out.det
@@ -1223,7 +1143,7 @@ class ControlLoop:
         res.dt = 0.0
         res.state_age = 0.0 if self.lockstep or ns < 0 else (now_ns - ns) * 1e-9
         res.latency_ns = None
-        self.period_bits |= status
+        self.figures.bits |= status
         if ns >= 0:
             self.last_ns = ns
         self.zero_answers += 1
@@ -1242,157 +1162,10 @@ class ControlLoop:
                 self.refused_setpoints, self.old_states)
 
     def diagnostics(self, elapsed, start, silent, latency, states_topic, activated_at):
-        """
-        Return (errors, warnings, ok message, key/values) of the status period now ending.
-
-        Parameters
-        ----------
-        elapsed : float
-            Length of the period [s].
-        start : tuple
-            :meth:`counters` at its start.
-        silent : bool
-            No state came in the period.
-        latency : (str, str)
-            Mean and maximum latency [ms] of the period, as text.
-        states_topic : str
-            The joint-states topic's resolved name (for the text).
-        activated_at : float or None
-            System time [s] of the activation from standby.
-
-        """
-        answers0, faults0, refused_states0, refused_sp0, old0 = start
-        answers = self.ticks + self.zero_answers + self.stops - answers0
-        faults = self.faults - faults0
-        refused_states = self.refused_states - refused_states0
-        refused_sp = self.refused_setpoints - refused_sp0
-        old = self.old_states - old0
-        bits = self.period_bits
-        self.period_bits = 0
-        plan_max, self._plan_error_max = self._plan_error_max, 0.0
-        ref_max, self._ref_error_max = self._ref_error_max, 0.0
-        res = self.result
-        current = res.status
-        period = 'in the last %.1f s' % elapsed
-        errors = []
-        warnings = []
-        no_state = None
-        if self.last_state_wall is None:
-            no_state = 'no joint_states yet on %s' % states_topic
-        elif self.stale_reported:
-            no_state = 'no joint_states for %g s: %s' % (
-                self.stale_timeout, 'zero effort commanded' if self.lockstep else
-                'the stop command sent (gravity hold), the brakes asked for')
-        elif silent:
-            no_state = 'no joint_states %s' % period
-        if no_state is not None:
-            if self.lockstep:
-                warnings.append(no_state + ' (lockstep: simulation time stands still)')
-            else:
-                errors.append(no_state)
-        guard = self._readiness
-        if guard is not None and not guard.ready:
-            errors.append('%s: %s' % (guard.reason, 'stopped (stop command, brakes asked '
-                                      'for); %d states not answered' % self.withheld
-                                      if self._guard_brakes else 'holding position'))
-        if faults:
-            errors.append('%d law faults %s: the previous command repeated, theta_hat '
-                          'restored' % (faults, period))
-        if current & STATUS_HOLDING or (current & STATUS_STALE_SETPOINT
-                                        and not self.hold_on_stale):
-            warnings.append(res.message)
-        elif bits & STATUS_HOLDING:
-            warnings.append('held %s' % period)
-        for bit, text in ((STATUS_RATE_LIMITED, 'torque change rate limited'),
-                          (STATUS_TORQUE_LIMITED, 'torque limited'),
-                          (STATUS_SETPOINT_LATE, 'setpoint stream late (carried forward)'),
-                          (STATUS_DT_CLAMPED, 'state stamps irregular: dt clamped')):
-            if bits & bit:
-                warnings.append('%s %s' % (text, period))
-        for count, what in ((refused_states, 'states refused'),
-                            (refused_sp, 'setpoints refused'),
-                            (old, 'states skipped as too old')):
-            if count:
-                warnings.append('%d %s %s' % (count, what, period))
-        if self.pending is not None:
-            ok = ('waiting for the setpoint of the state stamped %d ns (lockstep)'
-                  % self.pending[0])
-        else:
-            ok = res.message or 'tracking'
-        if self.failures is not None:
-            extra = self.failures.diagnostics(errors, warnings)
-        else:
-            extra = ()
-        values = (
-            ('mode', 'lockstep' if self.lockstep else 'realtime'),
-            ('activated from standby', 'no' if activated_at is None
-             else 'at %.3f (system time)' % activated_at),
-            ('answer rate [Hz]', '%.1f' % (answers / elapsed if elapsed > 0.0 else 0.0)),
-            ('latency mean [ms]', latency[0]),
-            ('latency max [ms]', latency[1]),
-            ('status', current),
-            ('status message', res.message),
-            ('error vs plan [mm]', '-' if self._plan_error_last is None
-             else '%.4g' % (self._plan_error_last * 1e3)),
-            ('error vs plan max [mm]', '%.4g' % (plan_max * 1e3)),
-            ('error vs controller reference max [mm]', '%.4g' % (ref_max * 1e3)),
-            ('ticks', self.ticks),
-            ('zero-effort answers', self.zero_answers),
-            ('holds', self.holds),
-            ('stale setpoint periods', self.stale_periods),
-            ('refused states', self.refused_states),
-            ('refused setpoints', self.refused_setpoints),
-            ('law faults', self.faults),
-            ('old states skipped', self.old_states)) + extra
-        if guard is not None:
-            values += (
-                ('readiness', 'ready' if guard.ready else 'not ready'),
-                ('readiness trips', guard.trips),
-                ('tolerated delay [ms]', '%.3g' % (guard.max_delay * 1e3)),
-                ('window mean delay [ms]', '-' if guard.last_delay is None
-                 else '%.3g' % (guard.last_delay * 1e3)),
-                ('window answered [%]', '-' if guard.last_rate is None
-                 else '%.0f' % (guard.last_rate * 100.0)),
-                ('states not answered (stopped)', self.withheld),
-                ('stop commands', self.stops),
-                ('brake requests', self.brake_requests))
-        return errors, warnings, ok, values
+        """Return (errors, warnings, ok message, key/values) of the status period ending."""
+        return loop_status.diagnostics(self, elapsed, start, silent, latency, states_topic,
+                                       activated_at)
 
     def report(self):
-        """One line for the end of the run: ticks, zero-effort answers, holds, refusals."""
-        return ('controller stopped: %d ticks computed, %d zero-effort answers (stale or bad '
-                'input), %d holds, %d states and %d setpoints refused, %d law faults, %d '
-                'states skipped as too old%s'
-                % (self.ticks, self.zero_answers, self.holds, self.refused_states,
-                   self.refused_setpoints, self.faults, self.old_states,
-                   '' if self._readiness is None else
-                   ', readiness guard: %d trips, %d stop commands, %d states not answered, %d '
-                   'brake requests' % (self._readiness.trips, self.stops, self.withheld,
-                                       self.brake_requests)))
-
-
-def _status_message(status, det, cfg, hold_reason, shaper):
-    """Return the ControllerState message of a computed answer's status bits."""
-    parts = []
-    if status & STATUS_HOLDING:
-        hold = shaper.hold_position
-        parts.append('holding at (%s) m: %s' % (', '.join('%.4f' % x for x in hold),
-                                                hold_reason))
-    if status & STATUS_RESUMING:
-        parts.append('resuming: blending from the hold to the setpoint over %.3g s'
-                     % shaper.blend_duration)
-    if status & STATUS_NEAR_SINGULAR:
-        parts.append('near singular: |det(Da Da^T)| = %.3g < %.3g, damped pseudo-inverse'
-                     % (det, cfg.gains.det_threshold))
-    if status & STATUS_TORQUE_LIMITED:
-        parts.append('torque limited to %s N m' % list(cfg.effort_limits))
-    if status & STATUS_RATE_LIMITED:
-        parts.append('torque change limited to %g N m/s' % cfg.effort_rate_limit)
-    if status & STATUS_LAW_FAULT:
-        parts.append('law fault: non-finite or out-of-range output, previous command repeated')
-    if status & STATUS_SETPOINT_LATE and not status & STATUS_HOLDING:
-        parts.append('setpoint late: the newest is older than %d control periods, carried '
-                     'forward along its velocity and acceleration' % cfg.late_periods)
-    if status & STATUS_DT_CLAMPED:
-        parts.append('state stamps outside [0.25, 4] x control_period: dt clamped')
-    return '; '.join(parts)
+        """Return the end of the run's line (``loop_status.report`` of this loop)."""
+        return loop_status.report(self)
