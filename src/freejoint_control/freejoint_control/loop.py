@@ -41,6 +41,7 @@ import math
 from freejoint_common.arm_description import resolve_arm
 from freejoint_common.schema import nullspace_options
 from freejoint_control import failures, loop_status
+from freejoint_control.loop_inputs import StateReader
 # The published state's names, imported from here by the node and the tests too.
 from freejoint_control.loop_status import (  # noqa: F401
     DEBUG, ERROR, INFO, PeriodFigures, RECEIPT, Result, STATUS_DT_CLAMPED, STATUS_HOLDING,
@@ -52,7 +53,7 @@ from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_STAL
 from freejoint_core.delay import extrapolate_setpoint, StatePredictor
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import (clamp_dt, hold_effort, law_output_fault, limit_effort,
-                                   setpoint_refusal, state_refusal)
+                                   setpoint_refusal)
 from freejoint_core.laws import make_law
 from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
 import numpy as np
@@ -63,8 +64,6 @@ which can list the simulator before the planner, settled)."""
 STANDBY_IDLE_STREAM = 0.25
 """[s] A matched setpoint publisher silent this long is not streaming: a spare does not
 wait for it to catch up before it tells the supervisor it is ready."""
-_isfinite = math.isfinite
-_NAME_MAP_CACHE = 16
 _SAY_PERIOD_NS = round(1e9)
 """[ns of stamps] At most one 'not ready' line per this period (a transition at once)."""
 _STOP_SAID = ('stop command sent (the gravity hold of the active joints), the brakes asked '
@@ -131,7 +130,7 @@ class ControlLoop:
         # Joint failures (freejoint_control/failures.py): None when off.
         self.failures = None if cfg.values['joint_failures'] == 'off' else \
             failures.FailureMonitor(cfg, self.law, self.log)
-        self._state_effort = None
+        self.inputs = StateReader()
         m = self.task_dim = self.law.model.task_dim
         self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep, m=m)
         self._predictor = None
@@ -171,9 +170,6 @@ class ControlLoop:
         self.stale_reported = False
         self._last_q = None
         self._last_det = 0.0
-        self._name_maps = {}
-        self._map_names = None
-        self._map = None
         self.ticks = 0
         self.zero_answers = 0
         self.holds = 0
@@ -218,8 +214,8 @@ class ControlLoop:
         self._hold_stiffness = cfg.hold_stiffness
         self.shaper.set_bounds(cfg.resume_max_velocity, cfg.resume_max_acceleration)
         self._sp_bounds = (cfg.reach, cfg.setpoint_max_velocity, cfg.setpoint_max_acceleration)
-        self._state_bounds = (cfg.position_lower, cfg.position_upper, cfg.velocity_limit)
-        self._offsets = cfg.joint_offsets
+        self.inputs.configure(cfg.joint_names, cfg.position_lower, cfg.position_upper,
+                              cfg.velocity_limit, cfg.joint_offsets)
         self._hold_wait = cfg.hold_brake_timeout
         if cfg.delay_compensation == 'predict':
             if self._predictor is None or self._predictor.params != cfg.nominal:
@@ -367,25 +363,6 @@ class ControlLoop:
         return True
 
     # -- inputs ------------------------------------------------------------------------
-    def _joint_map(self, names):
-        """Map a JointState name list to the model joints' indices (cached per list)."""
-        key = tuple(names)
-        found = self._name_maps.get(key)
-        if found is None:
-            want = self.config.joint_names
-            missing = [n for n in want if n not in key]
-            if missing:
-                found = (None, 'JointState lacks joint(s) %s (has %s)' % (missing, list(key)),
-                         'missing')
-            else:
-                found = (tuple(key.index(n) for n in want), '', '')
-            if len(self._name_maps) >= _NAME_MAP_CACHE:
-                self._name_maps.clear()
-            self._name_maps[key] = found
-        self._map_names = names
-        self._map = found
-        return found
-
     def on_state(self, ns, names, pos, vel, now_ns, mono, effort=None):
         """
         Take a joint state; return the Result to publish, or None (none yet).
@@ -407,7 +384,7 @@ class ControlLoop:
 
         """
         self.last_state_wall = mono
-        self._state_effort = effort
+        self.inputs.note_effort(effort)
         self.stale_reported = False
         guard = self._readiness
         if guard is not None:
@@ -448,39 +425,7 @@ class ControlLoop:
             self.reset()
             self._setpoints.clear()
             self._recent.clear()
-        found = self._map if names == self._map_names else self._joint_map(names)
-        idx, reason, kind = found
-        q = None
-        if idx is not None:
-            try:
-                if len(idx) == 3:
-                    i0, i1, i2 = idx
-                    q = (pos[i0], pos[i1], pos[i2])
-                    qd = (vel[i0], vel[i1], vel[i2])
-                else:   # an arm of another number of joints (robot_description)
-                    q = tuple([pos[i] for i in idx])
-                    qd = tuple([vel[i] for i in idx])
-            except (IndexError, ValueError):
-                q = None
-                kind = 'short'
-                reason = 'JointState has %d names but %d positions and %d velocities' % (
-                    len(names), len(pos), len(vel))
-            if q is not None and not all(map(_isfinite, q + qd)):
-                kind = 'nonfinite'
-                reason = 'JointState has a non-finite position or velocity: q=%s qd=%s' % (
-                    list(q), list(qd))
-                q = None
-            if q is not None:
-                lower, upper, vlim = self._state_bounds
-                implausible = state_refusal(q, qd, lower, upper, vlim)
-                if implausible is not None:
-                    kind = 'implausible'
-                    reason = 'implausible state: ' + implausible
-                    q = None
-                elif self._offsets:
-                    # the core's angles: the measured ones plus the arm's offsets (a URDF arm
-                    # whose task frame is turned to put gravity along -y)
-                    q = tuple([a + b for a, b in zip(q, self._offsets)])
+        q, qd, kind, reason = self.inputs.read(names, pos, vel)
         if q is None:
             self.refused_states += 1
             if not self.lockstep and not self._ever_commanded:
@@ -966,7 +911,7 @@ class ControlLoop:
         fault = None
         fm = self.failures
         if fm is not None:
-            fm.before_law(ns, q, qd, self._prev_cmd, self._effort_of(len(q)))
+            fm.before_law(ns, q, qd, self._prev_cmd, self.inputs.effort_of(len(q)))
         try:
             if fm is not None and fm.cannot_track:
                 out = fm.least_harm(q, qd, p_ref, self._last_det)
@@ -1071,14 +1016,6 @@ class ControlLoop:
         if self._guard_damps:
             return self._damped_stop(ns, q, qd, now_ns)
         return self.result
-
-    def _effort_of(self, n):
-        """Return the state's efforts in model order (n), or None (none or not finite)."""
-        eff = self._state_effort
-        idx = self._map[0] if self._map is not None else None
-        if eff is None or idx is None or len(eff) < len(self._map_names):
-            return None
-        return failures.finite_or_none([eff[i] for i in idx], n)
 
     def on_failure_notice(self, name):
         """
