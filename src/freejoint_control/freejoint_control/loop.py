@@ -42,6 +42,7 @@ from freejoint_common.arm_description import resolve_arm
 from freejoint_common.schema import nullspace_options
 from freejoint_control import failures, loop_status
 from freejoint_control.loop_inputs import StateReader
+from freejoint_control.loop_setpoints import SetpointStream
 # The published state's names, imported from here by the node and the tests too.
 from freejoint_control.loop_status import (  # noqa: F401
     DEBUG, ERROR, INFO, PeriodFigures, RECEIPT, Result, STATUS_DT_CLAMPED, STATUS_HOLDING,
@@ -52,8 +53,7 @@ from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_STAL
                                     STATUS_STALE_STATE)
 from freejoint_core.delay import extrapolate_setpoint, StatePredictor
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.guards import (clamp_dt, hold_effort, law_output_fault, limit_effort,
-                                   setpoint_refusal)
+from freejoint_core.guards import clamp_dt, hold_effort, law_output_fault, limit_effort
 from freejoint_core.laws import make_law
 from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
 import numpy as np
@@ -61,9 +61,6 @@ import numpy as np
 STANDBY_SETTLE = 0.5
 """[s] A spare is ready once nothing was lacking for this long (its discovery of the graph,
 which can list the simulator before the planner, settled)."""
-STANDBY_IDLE_STREAM = 0.25
-"""[s] A matched setpoint publisher silent this long is not streaming: a spare does not
-wait for it to catch up before it tells the supervisor it is ready."""
 _SAY_PERIOD_NS = round(1e9)
 """[ns of stamps] At most one 'not ready' line per this period (a transition at once)."""
 _STOP_SAID = ('stop command sent (the gravity hold of the active joints), the brakes asked '
@@ -131,6 +128,7 @@ class ControlLoop:
         self.failures = None if cfg.values['joint_failures'] == 'off' else \
             failures.FailureMonitor(cfg, self.law, self.log)
         self.inputs = StateReader()
+        self.setpoints = SetpointStream()
         m = self.task_dim = self.law.model.task_dim
         self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep, m=m)
         self._predictor = None
@@ -160,9 +158,6 @@ class ControlLoop:
         self._zero = [0.0] * len(cfg.joints)
         self.last_ns = -1               # stamp of the last answered state
         self.pending = None             # lockstep: (ns, q, qd, since) waiting for a setpoint
-        self._setpoints = {}            # lockstep: stamp_ns -> (p, v, a) flat, (3 m,)
-        self._recent = []               # real time: [(stamp_ns, values)], in arrival order
-        self._setpoint_seen = False     # a setpoint was received (lockstep: stale timeout on)
         self._setpoint_used = False     # a setpoint was tracked (else: 'no setpoint yet')
         self._late = False              # real time: the last setpoint used was late
         self._last_sp = self._zero_task
@@ -180,7 +175,6 @@ class ControlLoop:
         self.stale_periods = 0          # onsets of a stale (or late) setpoint stream
         self._stale_now = False
         self.figures = PeriodFigures()  # what the status period reports beyond the counters
-        self._last_sp_refusal = ''
         self._good_state = self.law.save_state()
         # Last command sent, in command order (None: none yet in lockstep, whose start is
         # the paper's; real time starts from the zero effort the arm had).
@@ -189,8 +183,6 @@ class ControlLoop:
         # Hot spare (real time): not answering until activate().
         self.standby = cfg.standby
         self._start_from_motion = False
-        self._sp_wall = None            # standby: monotonic time of the newest setpoint
-        self._sp_matched_wall = None    # standby: when a setpoint publisher was first matched
         self.waiting_for = 'start-up'   # standby: what it waits for before it is ready
         self._settled_since = None      # standby: since when nothing was lacking
 
@@ -199,7 +191,6 @@ class ControlLoop:
         """Cache what the tick needs from a validated configuration."""
         self.config = cfg
         self._dt = cfg.dt
-        self._half_ns = cfg.dt_ns // 2
         self._late_ns = cfg.late_periods * cfg.dt_ns
         self._carry_ns = round(cfg.carry_forward_time * 1e9)
         self._max_age_ns = 0 if cfg.lockstep else round(cfg.max_state_age * 1e9)
@@ -213,7 +204,9 @@ class ControlLoop:
         self.shaper.set_resume_time(cfg.resume_time)
         self._hold_stiffness = cfg.hold_stiffness
         self.shaper.set_bounds(cfg.resume_max_velocity, cfg.resume_max_acceleration)
-        self._sp_bounds = (cfg.reach, cfg.setpoint_max_velocity, cfg.setpoint_max_acceleration)
+        self.setpoints.configure(self.task_dim, (cfg.reach, cfg.setpoint_max_velocity,
+                                                 cfg.setpoint_max_acceleration),
+                                 cfg.dt_ns // 2, cfg.stale_timeout, self._carry_ns)
         self.inputs.configure(cfg.joint_names, cfg.position_lower, cfg.position_upper,
                               cfg.velocity_limit, cfg.joint_offsets)
         self._hold_wait = cfg.hold_brake_timeout
@@ -328,21 +321,7 @@ class ControlLoop:
         if cmd_matched == 0 or cmd_matched < cmd_listed:
             return '%s matched by %d of its %d subscribers' % (
                 names[0], cmd_matched, cmd_listed)
-        if sp_matched < sp_listed:
-            return '%s: %d of its %d publishers matched' % (names[1], sp_matched, sp_listed)
-        if sp_matched == 0:
-            return ''
-        if self._sp_matched_wall is None:
-            self._sp_matched_wall = mono
-        last = self._sp_wall if self._sp_wall is not None else self._sp_matched_wall
-        if mono - last > STANDBY_IDLE_STREAM:
-            return ''
-        if not self._recent:
-            return 'the setpoint stream matched, no setpoint received yet'
-        behind = (now_ns - self._recent[-1][0]) * 1e-9
-        if behind * 1e9 > self._carry_ns:
-            return 'the setpoint stream catching up (newest %.3f s old)' % behind
-        return ''
+        return self.setpoints.spare_waits_for(sp_matched, sp_listed, mono, now_ns, names[1])
 
     def standby_settled(self, waits_for, mono):
         """
@@ -423,8 +402,7 @@ class ControlLoop:
                      'state time went back from %d to %d ns (simulator restarted?): theta_hat '
                      'reset to theta0' % (self.last_ns, ns))
             self.reset()
-            self._setpoints.clear()
-            self._recent.clear()
+            self.setpoints.clear()
         q, qd, kind, reason = self.inputs.read(names, pos, vel)
         if q is None:
             self.refused_states += 1
@@ -445,9 +423,9 @@ class ControlLoop:
             self._start_from_motion = False
             self._start_from(q, qd)
         if self.lockstep:
-            sp = self._setpoints.pop(ns, None)
+            sp = self.setpoints.take(ns)
             if sp is None:
-                if self.shaper.mode == MODE_HOLD and self._setpoint_seen:
+                if self.shaper.mode == MODE_HOLD and self.setpoints.seen:
                     # Already holding on a stale stream: answer at once, not a timeout per tick.
                     self.pending = None
                     return self._no_setpoint(ns, q, qd, now_ns)
@@ -462,7 +440,7 @@ class ControlLoop:
                     return self._withhold(ns, now_ns)   # never started: the brakes stay on
                 return self._damped_stop(ns, q, qd, now_ns)
             return self._readiness_hold(ns, q, qd, now_ns, guard)
-        found = self._realtime_setpoint(ns)
+        found = self.setpoints.newest(ns)
         if found is None:
             self._ask_drive_wait(True)
             return self._no_setpoint(ns, q, qd, now_ns)
@@ -672,21 +650,6 @@ class ControlLoop:
             self.log(ERROR, None, 'cannot start from the measured motion (%s): blending '
                      'from the position at rest' % exc)
 
-    def _planned(self, ns, sp):
-        """
-        Return the plan's position for the state stamped ``ns`` (``position_planned``).
-
-        The setpoint ``sp`` used, as streamed; else (real time) the newest fresh one; else ().
-        """
-        if sp is None:
-            if self.lockstep:
-                return ()
-            found = self._realtime_setpoint(ns)
-            if found is None:
-                return ()
-            sp = found[1]
-        return sp[0:self.task_dim]
-
     def _no_setpoint(self, ns, q, qd, now_ns, late=None):
         """Answer a state without a fresh (or timely) setpoint: hold or zero effort."""
         if late is not None:
@@ -694,9 +657,9 @@ class ControlLoop:
                    'most' % (late, self.config.carry_forward_time))
         elif self._setpoint_used:
             why = ('stale setpoint: none stamped within %g s before the state%s'
-                   % (self.stale_timeout, self._sp_refusal_note()))
+                   % (self.stale_timeout, self.setpoints.refusal_note()))
         else:
-            why = 'no setpoint yet' + self._sp_refusal_note()
+            why = 'no setpoint yet' + self.setpoints.refusal_note()
         if not self._stale_now and (late is not None or self._setpoint_used):
             self._stale_now = True
             self.stale_periods += 1
@@ -708,27 +671,6 @@ class ControlLoop:
             self.log(WARN, 'hold', why + ': holding position')
         return self._tick(ns, q, qd, None, None, now_ns, why, late is not None)
 
-    def _sp_refusal_note(self):
-        text = self._last_sp_refusal
-        return ' (last setpoint refused: %s)' % text if text else ''
-
-    def _realtime_setpoint(self, ns):
-        """
-        Return (stamp_ns, values) of the newest fresh setpoint for ns, or None.
-
-        Fresh: stamped <= ns + dt/2 and not older than stale_timeout.
-        """
-        recent = self._recent
-        limit = ns + self._half_ns
-        while len(recent) > 1 and recent[1][0] <= limit:
-            del recent[0]
-        if not recent or recent[0][0] > limit:
-            return None
-        found = recent[0]
-        if (ns - found[0]) * 1e-9 > self.stale_timeout:
-            return None
-        return found
-
     def on_setpoint(self, ns, values, now_ns, mono):
         """
         Take a setpoint stamped ``ns``; return a Result or None.
@@ -739,31 +681,21 @@ class ControlLoop:
         Lockstep: the state waiting for it is answered now. A setpoint the guards refuse is
         dropped (counted, the reason logged and noted for the next hold's message).
         """
-        reach, vmax, amax = self._sp_bounds
-        reason = setpoint_refusal(values, reach, vmax, amax, self.task_dim)
+        stream = self.setpoints
+        reason = stream.refusal_of(values)
         if reason is not None:
             self.refuse_setpoint(ns, reason)
             return None
-        self._last_sp_refusal = ''
-        self._setpoint_seen = True
-        if self.standby:
-            self._sp_wall = mono    # only a spare's readiness reads it
+        stream.taken(mono, self.standby)
         if not self.lockstep:
-            recent = self._recent
-            recent.append((ns, values))
-            if len(recent) > 1000:
-                del recent[:500]
+            stream.add(ns, values)
             return None
         pending = self.pending
         if pending is not None and pending[0] == ns:
             self.pending = None
             return self._tick(ns, pending[1], pending[2], ns, values, now_ns)
         if ns > self.last_ns:
-            setpoints = self._setpoints
-            setpoints[ns] = values
-            if len(setpoints) > 10000:
-                for key in sorted(setpoints)[:5000]:
-                    del setpoints[key]
+            stream.keep(ns, values)
         return None
 
     def on_setpoints(self, samples, mono, publish):
@@ -801,7 +733,7 @@ class ControlLoop:
         ``count`` > 1: a batch of that many from ``ns`` on, dropped for one reason.
         """
         self.refused_setpoints += count
-        self._last_sp_refusal = reason
+        self.setpoints.refused(reason)
         what = ('setpoint stamped %d ns' % ns if count == 1 else
                 '%d setpoints from the one stamped %d ns' % (count, ns))
         self.log(ERROR, 'setpoint', '%s refused: %s; dropped' % (what, reason))
@@ -827,7 +759,7 @@ class ControlLoop:
         """
         pending = self.pending
         if pending is not None:
-            if self._setpoint_seen and mono - pending[3] > self.stale_timeout:
+            if self.setpoints.seen and mono - pending[3] > self.stale_timeout:
                 self.pending = None
                 return self._no_setpoint(pending[0], pending[1], pending[2], now_ns)
             return None
@@ -860,7 +792,7 @@ class ControlLoop:
     def _tick(self, ns, q, qd, sp_ns, sp, now_ns, hold_reason='', late=False):
         """Compute the answer to the state stamped ns (sp None: hold)."""
         status = 0
-        planned = self._planned(ns, sp)
+        planned = self.setpoints.planned(ns, sp, self.lockstep)
         shaper = self.shaper
         law = self.law
         if self.lockstep or self.last_ns < 0:
