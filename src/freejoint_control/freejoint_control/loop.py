@@ -36,12 +36,11 @@ throttled kind of line, None: always); status bits are ControllerState's.
 
 """
 
-import math
-
 from freejoint_common.arm_description import resolve_arm
 from freejoint_common.schema import nullspace_options
 from freejoint_control import failures, loop_status
 from freejoint_control.loop_inputs import StateReader
+from freejoint_control.loop_law import LawStep
 from freejoint_control.loop_setpoints import SetpointStream
 # The published state's names, imported from here by the node and the tests too.
 from freejoint_control.loop_status import (  # noqa: F401
@@ -49,11 +48,9 @@ from freejoint_control.loop_status import (  # noqa: F401
     STATUS_LAW_FAULT, status_message, STATUS_RATE_LIMITED, STATUS_RESUMING,
     STATUS_SETPOINT_LATE, STATUS_STOPPED, WARN)
 from freejoint_control.readiness import guard_margins, ReadinessGuard
-from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_STALE_SETPOINT,
-                                    STATUS_STALE_STATE)
-from freejoint_core.delay import extrapolate_setpoint, StatePredictor
+from freejoint_core.control import STATUS_BAD_INPUT, STATUS_STALE_SETPOINT, STATUS_STALE_STATE
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.guards import clamp_dt, hold_effort, law_output_fault, limit_effort
+from freejoint_core.guards import clamp_dt, hold_effort, limit_effort
 from freejoint_core.laws import make_law
 from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
 import numpy as np
@@ -131,7 +128,7 @@ class ControlLoop:
         self.setpoints = SetpointStream()
         m = self.task_dim = self.law.model.task_dim
         self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep, m=m)
-        self._predictor = None
+        self.stepper = LawStep(self.law, self.log)
         self._zero_task = (0.0,) * m
         self._readiness = None
         self._readiness_key = None
@@ -164,18 +161,15 @@ class ControlLoop:
         self.last_state_wall = None     # monotonic time of the last state received
         self.stale_reported = False
         self._last_q = None
-        self._last_det = 0.0
         self.ticks = 0
         self.zero_answers = 0
         self.holds = 0
-        self.faults = 0
         self.refused_setpoints = 0
         self.refused_states = 0
         self.old_states = 0
         self.stale_periods = 0          # onsets of a stale (or late) setpoint stream
         self._stale_now = False
         self.figures = PeriodFigures()  # what the status period reports beyond the counters
-        self._good_state = self.law.save_state()
         # Last command sent, in command order (None: none yet in lockstep, whose start is
         # the paper's; real time starts from the zero effort the arm had).
         self._prev_cmd = None if cfg.lockstep else list(self._zero)
@@ -210,11 +204,7 @@ class ControlLoop:
         self.inputs.configure(cfg.joint_names, cfg.position_lower, cfg.position_upper,
                               cfg.velocity_limit, cfg.joint_offsets)
         self._hold_wait = cfg.hold_brake_timeout
-        if cfg.delay_compensation == 'predict':
-            if self._predictor is None or self._predictor.params != cfg.nominal:
-                self._predictor = StatePredictor(cfg.nominal, cfg.dt)
-        else:
-            self._predictor = None
+        self.stepper.configure(cfg)
         self._install_readiness(cfg)
 
     def _install_readiness(self, cfg):
@@ -272,7 +262,7 @@ class ControlLoop:
             law.set_gains(cfg.gains)
             if cfg.gains.theta0 != old.gains.theta0:
                 law.reset()
-            self._good_state = law.save_state()
+            self.stepper.keep_state()
         if renew:
             self.failures = fm.renewed(cfg)
         self._install(cfg)
@@ -280,12 +270,11 @@ class ControlLoop:
     def reset(self):
         """Restart the law's state (theta_hat = theta0) and forget the hold / blend."""
         self.law.reset()
-        self._good_state = self.law.save_state()
+        self.stepper.keep_state()
         self.shaper.reset()
         self._kept_hold = None
         self._rate_armed = self._prev_cmd is not None
-        if self._predictor is not None:
-            self._predictor.reset()
+        self.stepper.restart_prediction()
 
     # -- standby -----------------------------------------------------------------------
     def activate(self):
@@ -599,8 +588,7 @@ class ControlLoop:
         self.zero_answers -= 1
         self.stops += 1
         self._prev_cmd = list(effort)   # a resume ramps from it, not from zero
-        if self._predictor is not None:
-            self._predictor.reset()
+        self.stepper.restart_prediction()
         return res
 
     def take_brake_request(self):
@@ -627,9 +615,8 @@ class ControlLoop:
         self.last_ns = -1               # dt of the first tick: one control period
         self._rate_armed = True         # ramp from the stop command the driver got
         self.law.restart_motion()       # e.g. the free link's shift: its swing was stopped
-        self._good_state = self.law.save_state()
-        if self._predictor is not None:
-            self._predictor.reset()
+        self.stepper.keep_state()
+        self.stepper.restart_prediction()
 
     def _readiness_hold(self, ns, q, qd, now_ns, guard):
         """Not ready, 'hold': hold the end effector, the message saying why."""
@@ -836,42 +823,14 @@ class ControlLoop:
         stiffness = shaper.stiffness(self._hold_stiffness)
         if stiffness != law.stiffness:
             law.set_stiffness(stiffness)
-        m = self.task_dim
-        p_ref = ref[0:m]
-        pred = self._predictor
+        p_ref = ref[0:self.task_dim]
         limits = self._limits
-        fault = None
         fm = self.failures
-        if fm is not None:
-            fm.before_law(ns, q, qd, self._prev_cmd, self.inputs.effort_of(len(q)))
-        try:
-            if fm is not None and fm.cannot_track:
-                out = fm.least_harm(q, qd, p_ref, self._last_det)
-            elif pred is None:
-                out = law.step(q, qd, p_ref, ref[m:2 * m], ref[2 * m:3 * m], dt)
-            else:
-                out = self._predicted_step(pred, ns, q, qd, ref, dt, now_ns)
-        except (FreejointValueError, ArithmeticError) as exc:
-            out = None
-            fault = 'result (%s: %s)' % (type(exc).__name__, exc)
-        if out is not None:
-            if fm is not None:
-                out = fm.after_law(out)
-            tau = out.tau.tolist()
-            effort = tau if self._identity else [tau[i] for i in self._cmd_index]
-            values = law.state_values()
-            fault = law_output_fault(effort, limits, values, law.state_bounds)
-        if fault is not None:
-            self.faults += 1
-            law.restore_state(self._good_state)
-            effort = list(self._prev_cmd) if self._prev_cmd is not None else list(self._zero)
+        out, effort, values, fault = self.stepper.step(
+            ns, q, qd, ref, dt, now_ns, fm, self._prev_cmd,
+            self.inputs.effort_of(len(q)) if fm is not None else None)
+        if fault:
             status |= STATUS_LAW_FAULT
-            self.log(ERROR, 'fault', 'the law gave a non-finite or out-of-range %s: not '
-                     'published, law state restored, previous command repeated' % fault)
-            out = self._fault_output(q)
-            values = law.state_values()
-        else:
-            self._good_state = law.save_state()
         status |= out.status
         if self._rate_armed:
             effort, clipped, rated = limit_effort(effort, limits, self._prev_cmd,
@@ -881,8 +840,7 @@ class ControlLoop:
             else:
                 self._rate_armed = False
         self._prev_cmd = effort
-        if pred is not None:
-            self._push(effort)
+        self.stepper.push(effort)
         res = self.result
         res.repeated = False
         res.stamp_ns = ns
@@ -892,7 +850,7 @@ class ControlLoop:
         res.sliding = out.s
         res.law_state_values = values
         res.det_dd = out.det
-        res.position = out.p if pred is None else law.model.fk(q)
+        res.position = out.p if self.stepper.predictor is None else law.model.fk(q)
         res.position_desired = p_ref
         res.position_planned = planned
         ref_error = self.figures.track(res.position, planned, out.e)
@@ -920,7 +878,6 @@ class ControlLoop:
         self.figures.bits |= status
         self.last_ns = ns
         self._last_sp = p_ref
-        self._last_det = out.det
         self.ticks += 1
         self._commanded = self._ever_commanded = True
         guard = self._readiness
@@ -961,36 +918,6 @@ class ControlLoop:
             return why
         return self.failures.notice(name)
 
-    def _fault_output(self, q):
-        """Return the published terms of a tick whose law result was refused."""
-        zero = np.zeros(self.task_dim)
-        return ControlOutput(np.zeros(len(self._zero)), zero, zero, zero,
-                             np.zeros(0), 0.0, zero, self._last_det,
-                             self.law.model.fk(q), 0)
-
-    def _predicted_step(self, pred, ns, q, qd, ref, dt, now_ns):
-        """Run the law on the state predicted to when the command takes effect."""
-        age = (now_ns - ns) * 1e-9
-        ticks = min(pred.max_ticks, max(1, math.ceil(age / self._dt - 1e-9)))
-        m = self.task_dim
-        p_d, v_d, a_d = ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
-        try:
-            q_pred, qd_pred = pred.predict(q, qd, ticks)
-            h = ticks * self._dt
-            p, v, a = extrapolate_setpoint(p_d, v_d, a_d, h)
-        except FreejointValueError as exc:
-            self.log(ERROR, 'predict', 'state prediction failed (%s): the law uses the '
-                     'measured state' % exc)
-            return self.law.step(q, qd, p_d, v_d, a_d, dt)
-        return self.law.step(q_pred, qd_pred, p, v, a, dt)
-
-    def _push(self, effort):
-        """Record the command sent (command order) in the predictor (model order)."""
-        tau = [0.0] * len(effort)
-        for j, i in enumerate(self._cmd_index):
-            tau[i] = effort[j]
-        self._predictor.push(tau)
-
     def _answer_zero(self, ns, status, message, now_ns):
         """Return the zero-effort answer to the state stamped ns, saying why."""
         law = self.law
@@ -1000,7 +927,7 @@ class ControlLoop:
         res.effort = self._zero
         res.error = res.error_rate = res.sliding = self._zero_task
         res.law_state_values = law.state_values()
-        res.det_dd = self._last_det
+        res.det_dd = self.stepper.last_det
         q = self._last_q
         res.position = law.model.fk(q) if q is not None else self._last_sp
         res.position_desired = self._last_sp
@@ -1020,11 +947,15 @@ class ControlLoop:
         # The arm got zero: the next computed command ramps up from it.
         self._prev_cmd = list(self._zero)
         self._rate_armed = True
-        if self._predictor is not None:
-            self._push(self._zero)
+        self.stepper.push(self._zero)
         return res
 
     # -- status ------------------------------------------------------------------------
+    @property
+    def faults(self):
+        """Return the law faults so far."""
+        return self.stepper.faults
+
     def counters(self):
         """Return the counters a status period starts from (answers, faults, refusals)."""
         return (self.ticks + self.zero_answers + self.stops, self.faults, self.refused_states,
