@@ -36,7 +36,6 @@ throttled kind of line, None: always); status bits are ControllerState's.
 
 """
 
-from freejoint_common.arm_description import resolve_arm
 from freejoint_common.schema import nullspace_options
 from freejoint_control import failures, loop_status
 from freejoint_control.loop_inputs import StateReader
@@ -47,10 +46,11 @@ from freejoint_control.loop_status import (  # noqa: F401
     DEBUG, ERROR, INFO, PeriodFigures, RECEIPT, Result, STATUS_DT_CLAMPED, STATUS_HOLDING,
     STATUS_LAW_FAULT, status_message, STATUS_RATE_LIMITED, STATUS_RESUMING,
     STATUS_SETPOINT_LATE, STATUS_STOPPED, WARN)
-from freejoint_control.readiness import guard_margins, ReadinessGuard
+from freejoint_control.loop_stop import (DAMP_SAID, DriverRequests, QUIET_SAID, Readiness,
+                                         stop_effort, STOP_SAID)
 from freejoint_core.control import STATUS_BAD_INPUT, STATUS_STALE_SETPOINT, STATUS_STALE_STATE
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.guards import clamp_dt, hold_effort, limit_effort
+from freejoint_core.guards import clamp_dt, limit_effort
 from freejoint_core.laws import make_law
 from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
 import numpy as np
@@ -60,11 +60,6 @@ STANDBY_SETTLE = 0.5
 which can list the simulator before the planner, settled)."""
 _SAY_PERIOD_NS = round(1e9)
 """[ns of stamps] At most one 'not ready' line per this period (a transition at once)."""
-_STOP_SAID = ('stop command sent (the gravity hold of the active joints), the brakes asked '
-              'for; no command until the loop is ready again')
-_QUIET_SAID = 'no command until the loop is ready (the brakes asked for)'
-_DAMP_SAID = ('the damped joint hold answered to every state (readiness_action damp) until '
-              'the loop is ready again')
 
 
 def _no_log(level, kind, text):
@@ -130,21 +125,13 @@ class ControlLoop:
         self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep, m=m)
         self.stepper = LawStep(self.law, self.log)
         self._zero_task = (0.0,) * m
-        self._readiness = None
-        self._readiness_key = None
+        self.watch = Readiness(self.log)
+        self.requests = DriverRequests()
         self._guard_ns = None           # stamp of the last state the guard took
         self._withholding = False       # not ready, 'brake': no command sent
         self._said_ns = None            # stamp of the last 'not ready' line
         self.withheld = 0               # states not answered by the readiness guard
-        self.brake_request = None       # why the driver is asked to brake now (the node sends)
-        self._brake_asked = False       # asked during this not-ready spell
         self._kept_hold = None          # the hold's position when the guard stopped it
-        self.brake_requests = 0
-        self.drive_wait = None          # the brake_timeout_request sent last [s] (None: none)
-        self.drive_wait_request = None  # the one to send now (the node sends), or None
-        self.readiness_note = None      # (stamp_ns, ready, reason) to publish, or None
-        self._stale_stop = False        # real time: stopped for want of states
-        self._stale_reason = ''
         self._commanded = False         # the last answer sent was a computed command
         self._ever_commanded = False    # a computed command was sent (or taken over)
         self._q_stop = None             # 'damp': the active joints' angles the stop found
@@ -190,8 +177,6 @@ class ControlLoop:
         self._max_age_ns = 0 if cfg.lockstep else round(cfg.max_state_age * 1e9)
         self.stale_timeout = cfg.stale_timeout
         self.lockstep = cfg.lockstep
-        self._cmd_index = cfg.cmd_index
-        self._identity = cfg.cmd_index == tuple(range(len(cfg.cmd_index)))
         self._limits = cfg.effort_limits
         self._rate = cfg.effort_rate_limit
         self.hold_on_stale = cfg.on_stale_setpoint == 'hold'
@@ -203,51 +188,12 @@ class ControlLoop:
                                  cfg.dt_ns // 2, cfg.stale_timeout, self._carry_ns)
         self.inputs.configure(cfg.joint_names, cfg.position_lower, cfg.position_upper,
                               cfg.velocity_limit, cfg.joint_offsets)
-        self._hold_wait = cfg.hold_brake_timeout
         self.stepper.configure(cfg)
-        self._install_readiness(cfg)
-
-    def _install_readiness(self, cfg):
-        """(Re)build the readiness guard when its parameters change (keeps its verdict)."""
-        self._guard_brakes = cfg.readiness_action == 'brake'
-        self._guard_damps = cfg.readiness_action == 'damp'
         self._stop_gains = (cfg.stop_stiffness, cfg.stop_damping)
-        self._ask_brakes = cfg.readiness_brake_request and not cfg.lockstep
-        if cfg.lockstep or not cfg.readiness_guard:
-            self._readiness = None
-            self._readiness_key = None
+        self.requests.configure(cfg.readiness_brake_request and not cfg.lockstep,
+                                cfg.hold_brake_timeout)
+        if self.watch.install(cfg):
             self._withholding = False
-            return
-        margins = guard_margins(resolve_arm(cfg.values).params, cfg.delay_compensation,
-                                cfg.readiness_max_delay, cfg.readiness_min_answer_rate,
-                                cfg.readiness_resume_delay, cfg.readiness_resume_answer_rate,
-                                cfg.readiness_max_gap)
-        max_delay = margins[0]
-        key = (cfg.dt_ns, max_delay, margins[1], cfg.readiness_window,
-               cfg.readiness_recover_windows, margins[2], margins[3], margins[4])
-        self._max_error = cfg.readiness_max_error
-        self._max_hold_error = cfg.readiness_max_hold_error or cfg.readiness_max_error
-        if key == self._readiness_key:
-            return
-        old = self._readiness
-        guard = ReadinessGuard(*key[:5], start_ready=cfg.standby, resume_delay=key[5],
-                               resume_rate=key[6], max_gap=key[7])
-        if 'not measured' in margins[5]:
-            self.log(WARN, None, 'readiness guard: ' + margins[5])
-        if old is not None:
-            guard.ready, guard.reason, guard.started = old.ready, old.reason, old.started
-            guard.trips, guard.recoveries = old.trips, old.recoveries
-        self._readiness = guard
-        self._readiness_key = key
-        self.log(INFO, None, 'readiness guard: trips past a mean state->command delay of '
-                 '%.3g ms, under %.0f %% of the states answered per %.3g s window or past %d '
-                 'states missed in a row, resumes within %.3g ms and %.0f %% (%s); not ready: '
-                 '%s' % (
-                     max_delay * 1e3, margins[1] * 100.0, cfg.readiness_window, margins[4],
-                     guard.good_delay * 1e3, guard.good_rate * 100.0, margins[5],
-                     'a stop command, the brakes asked for, then no command'
-                     if self._guard_brakes else 'the damped joint hold answered'
-                     if self._guard_damps else 'hold'))
 
     def apply(self, old, cfg):
         """Take a validated parameter change (effective on the next state)."""
@@ -354,21 +300,22 @@ class ControlLoop:
         self.last_state_wall = mono
         self.inputs.note_effort(effort)
         self.stale_reported = False
-        guard = self._readiness
+        watch = self.watch
+        guard = watch.guard
         if guard is not None:
             change = 0
             if ns != self._guard_ns:
                 self._guard_ns = ns
                 change = guard.observe(ns, now_ns)
                 if change:
-                    self._readiness_changed(change, ns)
+                    watch.changed(change, ns)
                     self._said_ns = ns
-        if self._stale_stop:
-            self._stale_stop = False
+        if watch.stale_reason:
+            watch.stale_reason = ''
             if guard is None or guard.ready:
-                self.readiness_note = (ns, True, '')
+                watch.note = (ns, True, '')
         if guard is not None:
-            if not guard.ready and self._guard_brakes:
+            if not guard.ready and watch.brakes:
                 return self._withhold(ns, now_ns)
             if self._withholding and guard.ready:
                 self._resume_after_brake()
@@ -423,40 +370,23 @@ class ControlLoop:
             self.pending = None
             return self._tick(ns, q, qd, ns, sp, now_ns)
         if guard is not None and not guard.ready:
-            self._ask_drive_wait(True)
-            if self._guard_damps:
+            self.requests.ask_drive_wait(True)
+            if watch.damps:
                 if not guard.started:
                     return self._withhold(ns, now_ns)   # never started: the brakes stay on
                 return self._damped_stop(ns, q, qd, now_ns)
             return self._readiness_hold(ns, q, qd, now_ns, guard)
         found = self.setpoints.newest(ns)
         if found is None:
-            self._ask_drive_wait(True)
+            self.requests.ask_drive_wait(True)
             return self._no_setpoint(ns, q, qd, now_ns)
         if ns - found[0] > self._carry_ns:
-            self._ask_drive_wait(True)
+            self.requests.ask_drive_wait(True)
             if self.hold_on_stale:
                 return self._no_setpoint(ns, q, qd, now_ns, (ns - found[0]) * 1e-9)
         else:
-            self._ask_drive_wait(not any(found[1][self.task_dim:]))
+            self.requests.ask_drive_wait(not any(found[1][self.task_dim:]))
         return self._tick(ns, q, qd, found[0], found[1], now_ns)
-
-    def _ask_drive_wait(self, rests):
-        """
-        Note the driver's wait to ask for (real time): ``hold_brake_timeout`` at rest, else 0.
-
-        ``rests``: this tick's setpoint rests (none, stale, or zero velocity and
-        acceleration). Sets ``drive_wait_request`` when it differs from the one sent.
-        """
-        wait = self._hold_wait if rests else 0.0
-        if wait != self.drive_wait:
-            self.drive_wait = self.drive_wait_request = wait
-
-    def take_drive_wait(self):
-        """Return the driver's wait to send now [s] (brake_timeout_request), once, or None."""
-        wait = self.drive_wait_request
-        self.drive_wait_request = None
-        return wait
 
     # -- readiness guard (real time) ---------------------------------------------------
     def readiness(self):
@@ -466,34 +396,49 @@ class ControlLoop:
         Lockstep, or real time without the guard: ready (never judged). A stop for want of
         states (the watchdog's stale state) is not ready until the next state.
         """
-        if self._stale_stop:
-            return False, self._stale_reason
-        guard = self._readiness
-        if guard is None:
-            return True, ''
-        return guard.ready, guard.reason
+        return self.watch.verdict()
 
     def take_readiness(self):
         """Return the readiness change to publish, ``(stamp_ns, ready, reason)``, once, or None."""
-        note = self.readiness_note
-        self.readiness_note = None
-        return note
+        return self.watch.take_note()
 
-    def _readiness_changed(self, change, ns):
-        """Log a change of the guard's verdict (once per transition); note it to publish."""
-        guard = self._readiness
-        self.readiness_note = (ns, guard.ready, guard.reason)
-        if change == 1:
-            action = (_STOP_SAID if self._guard_brakes else _DAMP_SAID if self._guard_damps
-                      else 'holding position')
-            self.log(ERROR, None, '%s: %s' % (guard.reason, action))
-        else:
-            self.log(WARN if guard.recoveries else INFO, None,
-                     'real-time loop ready%s (%d good windows: mean delay %.3g ms, %.0f %% of '
-                     'the states answered): tracking %s from a hold where the arm is' % (
-                         ' again' if guard.recoveries else '', guard.recover_windows,
-                         guard.last_delay * 1e3, guard.last_rate * 100.0,
-                         'resumes' if guard.recoveries else 'starts'))
+    def take_drive_wait(self):
+        """Return the driver's wait to send now [s] (brake_timeout_request), once, or None."""
+        return self.requests.take_drive_wait()
+
+    def take_brake_request(self):
+        """Return the brake request to send (why), once, or None."""
+        return self.requests.take_brake_request()
+
+    @property
+    def _readiness(self):
+        """Return the readiness guard (None: lockstep or off)."""
+        return self.watch.guard
+
+    @property
+    def readiness_note(self):
+        """Return the readiness change to publish, or None (:meth:`take_readiness`)."""
+        return self.watch.note
+
+    @property
+    def brake_request(self):
+        """Return why the driver is to brake now, or None (:meth:`take_brake_request`)."""
+        return self.requests.brake_request
+
+    @property
+    def brake_requests(self):
+        """Return the brake requests so far."""
+        return self.requests.brake_requests
+
+    @property
+    def drive_wait(self):
+        """Return the driver's wait sent last [s] (None: none)."""
+        return self.requests.drive_wait
+
+    @property
+    def drive_wait_request(self):
+        """Return the driver's wait to send now [s], or None (:meth:`take_drive_wait`)."""
+        return self.requests.drive_wait_request
 
     def _withhold(self, ns, now_ns):
         """
@@ -504,15 +449,15 @@ class ControlLoop:
         of the last tracking command) and the brakes are asked for (``brake_request``);
         the states after it are not answered (a driver with a command watchdog brakes).
         """
-        reason = self._readiness.reason
+        reason = self.watch.guard.reason
         if not self._withholding:
             self._kept_hold = self.shaper.hold_position     # None unless holding
             self._withholding = True
             self.pending = None
-            self._ask_brake(reason)
+            self.requests.ask_brake(reason)
             if self._commanded:
                 # The driver holds a computed command: replace it before going quiet.
-                return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, _STOP_SAID),
+                return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, STOP_SAID),
                                          now_ns)
         self.withheld += 1
         self.pending = None
@@ -520,15 +465,8 @@ class ControlLoop:
         if said is None or not 0 <= ns - said < _SAY_PERIOD_NS:
             # At most once per second of stamps (a transition is said at once).
             self._said_ns = ns
-            self.log(ERROR, 'readiness', '%s: %s' % (reason, _QUIET_SAID))
+            self.log(ERROR, 'readiness', '%s: %s' % (reason, QUIET_SAID))
         return None
-
-    def _ask_brake(self, reason):
-        """Ask the driver for its brakes now (once per stop; ``readiness_brake_request``)."""
-        if self._ask_brakes and not self._brake_asked:
-            self._brake_asked = True
-            self.brake_requests += 1
-            self.brake_request = '%s: brake now' % reason
 
     def _damped_stop(self, ns, q, qd, now_ns):
         """
@@ -538,7 +476,7 @@ class ControlLoop:
         ``stop_damping``, on the gravity load of the nominal model), every state until the
         loop is ready again; nothing is asked of the brakes.
         """
-        reason = self._readiness.reason
+        reason = self.watch.guard.reason
         if not self._withholding:
             self._kept_hold = self.shaper.hold_position     # None unless holding
             self._withholding = True
@@ -548,8 +486,8 @@ class ControlLoop:
         said = self._said_ns
         if not 0 <= ns - said < _SAY_PERIOD_NS:
             self._said_ns = ns
-            self.log(ERROR, 'readiness', '%s: %s' % (reason, _DAMP_SAID))
-        return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, _DAMP_SAID), now_ns,
+            self.log(ERROR, 'readiness', '%s: %s' % (reason, DAMP_SAID))
+        return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, DAMP_SAID), now_ns,
                                  q, qd)
 
     def stop_effort(self, q=None, qd=None):
@@ -562,23 +500,9 @@ class ControlLoop:
         stop, ``readiness_action: damp``): plus ``stop_stiffness`` towards the angles the
         stop found and ``stop_damping`` against ``qd``.
         """
-        q = self._last_q if q is None else q
-        if q is None:
-            return list(self._zero)
-        model = self.law.model
-        try:
-            if qd is None:
-                tau = hold_effort(model.gravity_torque(q).tolist(), model.active)
-            else:
-                tau = hold_effort(model.gravity_torque(q).tolist(), model.active, None, q, qd,
-                                  self._q_stop, *self._stop_gains)
-        except (FreejointValueError, ArithmeticError):
-            return list(self._zero)
-        effort = tau if self._identity else [tau[i] for i in self._cmd_index]
-        limits = self._limits
-        if limits is not None:
-            effort = hold_effort(effort, range(len(effort)), limits)
-        return effort
+        return stop_effort(self.law.model, self._last_q if q is None else q, qd,
+                           self._q_stop, self._stop_gains, self.config.cmd_index,
+                           self._limits)
 
     def _answer_stop(self, ns, status, message, now_ns, q=None, qd=None):
         """Return the stop command's answer to the state stamped ns, saying why."""
@@ -591,16 +515,10 @@ class ControlLoop:
         self.stepper.restart_prediction()
         return res
 
-    def take_brake_request(self):
-        """Return the brake request to send (why), once, or None."""
-        why = self.brake_request
-        self.brake_request = None
-        return why
-
     def _resume_after_brake(self):
         """Ready again after withholding: start over from where the braked arm is."""
         self._withholding = False
-        self._brake_asked = False
+        self.requests.stop_over()
         kept, self._kept_hold = self._kept_hold, None
         if kept is None:
             # Hold at fk(q), or blend to the setpoint from the measured motion: a braked arm
@@ -761,13 +679,13 @@ class ControlLoop:
             if not self._commanded:
                 return None     # nothing to replace (the driver got no computed command)
             why = ('stale state: no joint_states within %g s: %s'
-                   % (self.stale_timeout, _STOP_SAID))
+                   % (self.stale_timeout, STOP_SAID))
             self.log(ERROR, None, why)
-            self._stale_stop = True
-            self._stale_reason = why
-            self.readiness_note = (self.last_ns, False, why)
-            self._ask_brake('stale state: no joint_states within %g s' % self.stale_timeout)
-            self._brake_asked = False       # a later stop asks again
+            self.watch.stale_reason = why
+            self.watch.note = (self.last_ns, False, why)
+            self.requests.ask_brake('stale state: no joint_states within %g s'
+                                    % self.stale_timeout)
+            self.requests.stop_over()       # a later stop asks again
             res = self._answer_stop(self.last_ns, STATUS_STALE_STATE, why, now_ns)
             # The arm may move meanwhile: the next state starts a hold / blend from it.
             self.shaper.reset()
@@ -880,10 +798,10 @@ class ControlLoop:
         self._last_sp = p_ref
         self.ticks += 1
         self._commanded = self._ever_commanded = True
-        guard = self._readiness
+        guard = self.watch.guard
         if guard is not None and guard.ready:
             holding = sp is None
-            limit = self._max_hold_error if holding else self._max_error
+            limit = self.watch.error_limit(holding)
             if limit:
                 error = ref_error
                 if error > limit:
@@ -898,11 +816,11 @@ class ControlLoop:
                       % (error * 1e3, limit * 1e3, 'readiness_max_hold_error while holding'
                          if holding and self.config.readiness_max_hold_error
                          else 'readiness_max_error')):
-            self._readiness_changed(1, ns)
+            self.watch.changed(1, ns)
             self._said_ns = ns
-        if self._guard_brakes:
+        if self.watch.brakes:
             return self._withhold(ns, now_ns)
-        if self._guard_damps:
+        if self.watch.damps:
             return self._damped_stop(ns, q, qd, now_ns)
         return self.result
 

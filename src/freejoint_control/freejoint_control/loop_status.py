@@ -194,7 +194,7 @@ def diagnostics(loop, elapsed, start, silent, latency, states_topic, activated_a
     if guard is not None and not guard.ready:
         errors.append('%s: %s' % (guard.reason, 'stopped (stop command, brakes asked '
                                   'for); %d states not answered' % loop.withheld
-                                  if loop._guard_brakes else 'holding position'))
+                                  if loop.watch.brakes else 'holding position'))
     if faults:
         errors.append('%d law faults %s: the previous command repeated, theta_hat '
                       'restored' % (faults, period))
