@@ -66,6 +66,11 @@ def _no_log(level, kind, text):
     """Drop a log line (the default of ``log``)."""
 
 
+def _part(part, name, doc):
+    """Return a read-only property: the attribute ``name`` of the loop's part ``part``."""
+    return property(lambda loop: getattr(getattr(loop, part), name), doc=doc)
+
+
 def config_law(cfg):
     """
     Return the law a controller configuration names, with its null-space terms.
@@ -410,35 +415,14 @@ class ControlLoop:
         """Return the brake request to send (why), once, or None."""
         return self.requests.take_brake_request()
 
-    @property
-    def _readiness(self):
-        """Return the readiness guard (None: lockstep or off)."""
-        return self.watch.guard
-
-    @property
-    def readiness_note(self):
-        """Return the readiness change to publish, or None (:meth:`take_readiness`)."""
-        return self.watch.note
-
-    @property
-    def brake_request(self):
-        """Return why the driver is to brake now, or None (:meth:`take_brake_request`)."""
-        return self.requests.brake_request
-
-    @property
-    def brake_requests(self):
-        """Return the brake requests so far."""
-        return self.requests.brake_requests
-
-    @property
-    def drive_wait(self):
-        """Return the driver's wait sent last [s] (None: none)."""
-        return self.requests.drive_wait
-
-    @property
-    def drive_wait_request(self):
-        """Return the driver's wait to send now [s], or None (:meth:`take_drive_wait`)."""
-        return self.requests.drive_wait_request
+    # What the node and the tests read of the parts, as the loop's own attributes.
+    _readiness = _part('watch', 'guard', 'The readiness guard (None: lockstep or off).')
+    readiness_note = _part('watch', 'note', 'The readiness change to publish, or None.')
+    brake_request = _part('requests', 'brake_request', 'Why the driver is to brake now, or None.')
+    brake_requests = _part('requests', 'brake_requests', 'The brake requests so far.')
+    drive_wait = _part('requests', 'drive_wait', "The driver's wait sent last [s], or None.")
+    drive_wait_request = _part('requests', 'drive_wait_request',
+                               "The driver's wait to send now [s], or None.")
 
     def _withhold(self, ns, now_ns):
         """
@@ -869,10 +853,7 @@ class ControlLoop:
         return res
 
     # -- status ------------------------------------------------------------------------
-    @property
-    def faults(self):
-        """Return the law faults so far."""
-        return self.stepper.faults
+    faults = _part('stepper', 'faults', 'The law faults so far.')
 
     def counters(self):
         """Return the counters a status period starts from (answers, faults, refusals)."""
