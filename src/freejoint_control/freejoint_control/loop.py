@@ -40,6 +40,7 @@ from freejoint_common.schema import nullspace_options
 from freejoint_control import failures, loop_status
 from freejoint_control.loop_inputs import StateReader
 from freejoint_control.loop_law import LawStep
+from freejoint_control.loop_reference import Reference
 from freejoint_control.loop_setpoints import SetpointStream
 # The published state's names, imported from here by the node and the tests too.
 from freejoint_control.loop_status import (  # noqa: F401
@@ -52,7 +53,7 @@ from freejoint_core.control import STATUS_BAD_INPUT, STATUS_STALE_SETPOINT, STAT
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import clamp_dt, limit_effort
 from freejoint_core.laws import make_law
-from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
+from freejoint_core.reference import MODE_HOLD
 import numpy as np
 
 STANDBY_SETTLE = 0.5
@@ -127,7 +128,8 @@ class ControlLoop:
         self.inputs = StateReader()
         self.setpoints = SetpointStream()
         m = self.task_dim = self.law.model.task_dim
-        self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep, m=m)
+        self.reference = Reference(cfg.resume_time, cfg.lockstep, m)
+        self.shaper = self.reference.shaper
         self.stepper = LawStep(self.law, self.log)
         self._zero_task = (0.0,) * m
         self.watch = Readiness(self.log)
@@ -147,8 +149,6 @@ class ControlLoop:
         self._zero = [0.0] * len(cfg.joints)
         self.last_ns = -1               # stamp of the last answered state
         self.pending = None             # lockstep: (ns, q, qd, since) waiting for a setpoint
-        self._setpoint_used = False     # a setpoint was tracked (else: 'no setpoint yet')
-        self._late = False              # real time: the last setpoint used was late
         self._last_sp = self._zero_task
         self.last_state_wall = None     # monotonic time of the last state received
         self.stale_reported = False
@@ -177,7 +177,6 @@ class ControlLoop:
         """Cache what the tick needs from a validated configuration."""
         self.config = cfg
         self._dt = cfg.dt
-        self._late_ns = cfg.late_periods * cfg.dt_ns
         self._carry_ns = round(cfg.carry_forward_time * 1e9)
         self._max_age_ns = 0 if cfg.lockstep else round(cfg.max_state_age * 1e9)
         self.stale_timeout = cfg.stale_timeout
@@ -185,9 +184,7 @@ class ControlLoop:
         self._limits = cfg.effort_limits
         self._rate = cfg.effort_rate_limit
         self.hold_on_stale = cfg.on_stale_setpoint == 'hold'
-        self.shaper.set_resume_time(cfg.resume_time)
-        self._hold_stiffness = cfg.hold_stiffness
-        self.shaper.set_bounds(cfg.resume_max_velocity, cfg.resume_max_acceleration)
+        self.reference.configure(cfg)
         self.setpoints.configure(self.task_dim, (cfg.reach, cfg.setpoint_max_velocity,
                                                  cfg.setpoint_max_acceleration),
                                  cfg.dt_ns // 2, cfg.stale_timeout, self._carry_ns)
@@ -544,12 +541,12 @@ class ControlLoop:
         if late is not None:
             why = ('setpoint stream late: the newest is %.3g s old, carried forward %g s at '
                    'most' % (late, self.config.carry_forward_time))
-        elif self._setpoint_used:
+        elif self.reference.used:
             why = ('stale setpoint: none stamped within %g s before the state%s'
                    % (self.stale_timeout, self.setpoints.refusal_note()))
         else:
             why = 'no setpoint yet' + self.setpoints.refusal_note()
-        if not self._stale_now and (late is not None or self._setpoint_used):
+        if not self._stale_now and (late is not None or self.reference.used):
             self._stale_now = True
             self.stale_periods += 1
         if not self.hold_on_stale:
@@ -693,36 +690,13 @@ class ControlLoop:
                 self.log(WARN, 'dt', 'state stamps %g s apart, outside [0.25, 4] x '
                          'control_period: the law uses dt = %g s'
                          % ((ns - self.last_ns) * 1e-9, dt))
-        if sp is None:
-            self._late = False
-            if shaper.mode != MODE_HOLD:
-                ref = shaper.hold(law.model.fk(q).tolist(), ns * 1e-9)
-                self._rate_armed = self._prev_cmd is not None
-            else:
-                ref = shaper.hold(None, ns * 1e-9)
-            status |= STATUS_HOLDING
-            if late:
-                status |= STATUS_SETPOINT_LATE
-            elif self._setpoint_used:
-                status |= STATUS_STALE_SETPOINT
-        else:
-            if not self.lockstep:
-                age_ns = ns - sp_ns
-                if age_ns > 0:
-                    sp = extrapolate(sp, age_ns * 1e-9)
-                late = age_ns > self._late_ns
-                if late:
-                    status |= STATUS_SETPOINT_LATE
-                elif self._late:
-                    shaper.restart_blend()       # the stream is back: no step to it
-                self._late = late
-            p_now = law.model.fk(q).tolist() if shaper.mode == MODE_NONE else None
-            ref, blending = shaper.track(ns * 1e-9, sp, p_now)
-            self._setpoint_used = True
+        ref, bits, held = self.reference.step(law.model, q, ns, sp_ns, sp, late)
+        status |= bits
+        if held:
+            self._rate_armed = self._prev_cmd is not None
+        if sp is not None:
             self._stale_now = False
-            if blending:
-                status |= STATUS_RESUMING
-        stiffness = shaper.stiffness(self._hold_stiffness)
+        stiffness = self.reference.stiffness()
         if stiffness != law.stiffness:
             law.set_stiffness(stiffness)
         p_ref = ref[0:self.task_dim]
