@@ -31,6 +31,13 @@ values) or None when nothing is to be published yet.  It owns:
   real time): the active joints' static gravity load at the measured angles
   (``freejoint_core.guards.hold_effort``), never a stale tracking command.
 
+Each job is a part it composes: ``loop_inputs.StateReader`` (the state's mapping and
+checks), ``loop_setpoints.SetpointStream`` (the setpoints' checks and pairing),
+``loop_reference.Reference`` (hold, blend, carrying forward), ``loop_law.LawStep`` (the
+law's step and its faults), ``loop_stop`` (the readiness guard, the driver's requests, the
+stop command) and ``loop_status`` (the Result, its message, the status period's report);
+the loop decides between them which answer a state gets.
+
 Logging goes through the ``log(level, kind, text)`` callable given (``kind`` names a
 throttled kind of line, None: always); status bits are ControllerState's.
 

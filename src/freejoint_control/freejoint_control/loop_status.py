@@ -190,7 +190,7 @@ def diagnostics(loop, elapsed, start, silent, latency, states_topic, activated_a
             warnings.append(no_state + ' (lockstep: simulation time stands still)')
         else:
             errors.append(no_state)
-    guard = loop._readiness
+    guard = loop.watch.guard
     if guard is not None and not guard.ready:
         errors.append('%s: %s' % (guard.reason, 'stopped (stop command, brakes asked '
                                   'for); %d states not answered' % loop.withheld
@@ -266,9 +266,9 @@ def report(loop):
             'states skipped as too old%s'
             % (loop.ticks, loop.zero_answers, loop.holds, loop.refused_states,
                loop.refused_setpoints, loop.faults, loop.old_states,
-               '' if loop._readiness is None else
+               '' if loop.watch.guard is None else
                ', readiness guard: %d trips, %d stop commands, %d states not answered, %d '
-               'brake requests' % (loop._readiness.trips, loop.stops, loop.withheld,
+               'brake requests' % (loop.watch.guard.trips, loop.stops, loop.withheld,
                                    loop.brake_requests)))
 
 

@@ -133,6 +133,11 @@ class SpatialOutput(NamedTuple):
     p: np.ndarray
     status: int
 
+    @property
+    def det(self):
+        """Return the conditioning as ``ControlOutput.det`` names it: ``kappa``."""
+        return self.kappa
+
 
 def arm_reach(arm):
     """
