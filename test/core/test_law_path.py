@@ -320,3 +320,23 @@ def test_the_node_builds_the_laws_from_the_literature_with_their_namespaced_para
     values[gain] = -1.0
     with pytest.raises(FreejointValueError, match=f'^{gain}: '):
         SCHEMA.config(values)
+
+
+def test_the_null_space_parameters_are_one_declaration_checked_alike_in_both_nodes():
+    from freejoint_common.schema import nullspace_dampings
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_planner.params import SCHEMA as PLANNER
+    for schema in (CONTROLLER, PLANNER):
+        per_joint = schema['nullspace_kd_joints']
+        assert per_joint.validator is nullspace_dampings
+        # the reason names the parameter and the bad value
+        assert per_joint.reason([5.0, -1.0]) == (
+            'nullspace_kd_joints: expected one or more values in [0, 10000], got [5.0, -1.0]')
+        assert per_joint.reason([float('nan')]).startswith('nullspace_kd_joints: expected one')
+        assert per_joint.reason(['a']) == (
+            "nullspace_kd_joints: expected a list of numbers, got ['a']")
+        assert per_joint.reason([0.0]) is None and per_joint.reason([1.0, 2.5]) is None
+        for name in ('nullspace_kd', 'nullspace_kp'):
+            assert schema[name].bounds == (0.0, 1e4)
+            assert schema[name].reason(2e4).startswith(f'{name}: expected a value in [0, 10000]')
+    assert CONTROLLER['nullspace_kd'].default == 0.0 and PLANNER['nullspace_kd'].default == 20.0
