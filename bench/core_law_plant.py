@@ -3,8 +3,8 @@ Benchmark: control-law tick and plant period cost, and the plant step-size study
 
 Figures (printed; nothing is asserted):
 
-* ``RobustController.step`` per tick for the Table I nominal 3-link arm (scalar
-  kernel, target 20 us) and the general numpy path (reference);
+* the paper's law's step (``make_law('robust')``) per tick for the Table I nominal
+  3-link arm (scalar kernel, target 20 us) and the general numpy path (reference);
 * ``Plant.step`` per 1 ms control period at ``DEFAULT_DT_SUB`` (scalar kernel,
   target 50 us), at 1 ms, and on the general numpy path (reference);
 * step-size study: the change of the results when ``dt_sub`` is made 10x
@@ -20,7 +20,8 @@ import math
 
 from core_timing import per_call_us, print_rows
 from freejoint_core.arm import NOMINAL_SCALE, table1
-from freejoint_core.control import Gains, RobustController
+from freejoint_core.control import Gains
+from freejoint_core.laws import make_law
 from freejoint_core.models import make_model
 from freejoint_core.plant import DEFAULT_DT_SUB, Plant
 from freejoint_core.trajectory import CircleQuintic
@@ -31,7 +32,8 @@ Q3_0 = math.radians(120.0)
 
 
 def _tick_timing(use_fast, calls):
-    ctl = RobustController(table1('vertical').scaled(NOMINAL_SCALE), Gains(), use_fast=use_fast)
+    ctl = make_law('robust', table1('vertical').scaled(NOMINAL_SCALE), Gains(),
+                   use_fast=use_fast)
     q = np.array([0.3, 1.2, 2.0])
     qd = np.array([0.4, -0.3, 0.8])
     p_d, pd_d, pdd_d = np.array([0.2, 0.05]), np.array([0.1, 0.2]), np.array([0.5, -0.4])
@@ -58,7 +60,7 @@ def _closed_loop(case, dt_sub, seconds=5.0, seed=0):
     traj = CircleQuintic()
     q0 = make_model(real).ik(traj.sample(0.0)[0], [Q3_0], 1)
     plant = Plant(real, dt_sub, dist_bound=0.5, seed=seed, q0=q0)
-    ctl = RobustController(real.scaled(NOMINAL_SCALE), Gains())
+    ctl = make_law('robust', real.scaled(NOMINAL_SCALE), Gains())
     errors = []
     for k in range(round(seconds / DT)):
         p, pd, pdd = traj.sample(k * DT)

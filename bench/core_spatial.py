@@ -5,8 +5,9 @@ Figures (printed; nothing is asserted):
 
 * ``SpatialArm.terms`` (M, Minv, h, J, Jdot qd, placement; one Pinocchio pass) and
   ``decoupling`` (Da, b, M~aa) per tick, UR5 (wrist_2 free) and Panda (joint 7 free);
-* ``SpatialLaw.step`` per tick (m = 3, weighted inverse, null-space damping), and the
-  RK4 step of the plant on Pinocchio's ABA (4 ABA calls) at the same arms;
+* the spatial law's step (``make_law('spatial')``) per tick (m = 3, weighted inverse,
+  null-space damping), and the RK4 step of the plant on Pinocchio's ABA (4 ABA calls) at
+  the same arms;
 * the singularity criterion per sample: ``terms`` + ``decoupling`` +
   ``task_conditioning`` (kappa), and ``task_conditioning`` alone.
 
@@ -16,7 +17,8 @@ Usage: ``python bench/core_spatial.py`` in the workspace (``. tools/env.sh``).
 
 from core_timing import per_call_us, print_rows
 from freejoint_core.internal import NullSpace
-from freejoint_core.spatial_law import SpatialLaw, task_conditioning
+from freejoint_core.laws import make_law
+from freejoint_core.spatial_law import task_conditioning
 from freejoint_core.spatial_model import known_arm
 from freejoint_core.spatial_offline import CASES
 from freejoint_core.spatial_plant import SpatialPlant
@@ -34,7 +36,7 @@ def main():
         qd = np.full(arm.n, 0.1)
         terms = arm.terms(q, qd)
         da, _, maa = arm.decoupling(terms)
-        law = SpatialLaw(arm.nominal(0.7), nullspace=NullSpace(
+        law = make_law('spatial', arm.nominal(0.7), None, nullspace=NullSpace(
             kd=20.0, inverse='weighted', projector='dynamic'))
         p_d = arm.fk(q)
         zero3 = np.zeros(3)

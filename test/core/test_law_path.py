@@ -48,6 +48,67 @@ def test_every_runner_builds_its_law_through_the_registry(runner):
     assert not calls & set(LAW_CLASSES), (runner, sorted(calls & set(LAW_CLASSES)))
 
 
+LAW_MODULES = ('control.py', 'laws.py', 'law_tdc.py', 'law_vsc.py', 'spatial_law.py',
+               'task_law.py')
+"""The modules of freejoint_core that define the laws (and may build their parts)."""
+
+
+def _sources():
+    """Yield every Python file of src/ (tests excluded), tools/ and bench/, from ROOT."""
+    for top in ('src', 'tools', 'bench'):
+        for folder, dirs, files in os.walk(os.path.join(ROOT, top)):
+            dirs[:] = [d for d in dirs if d != 'test' and not d.startswith('.')]
+            for name in files:
+                if name.endswith('.py'):
+                    yield os.path.relpath(os.path.join(folder, name), ROOT)
+
+
+def test_no_law_is_built_but_by_the_registry_nor_changed_after_it_is_built():
+    """A law and its options (null space, the free link's damping) come from make_law."""
+    built = {}
+    changed = {}
+    for path in _sources():
+        law_module = path.startswith('src/freejoint_core/freejoint_core/') and \
+            os.path.basename(path) in LAW_MODULES
+        with open(os.path.join(ROOT, path), encoding='utf-8') as f:
+            tree = ast.parse(f.read())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call) and not law_module:
+                fn = node.func
+                name = fn.id if isinstance(fn, ast.Name) else getattr(fn, 'attr', '')
+                if name in LAW_CLASSES + ('FreeLinkDampedLaw',):
+                    built.setdefault(path, []).append(f'{name}() at line {node.lineno}')
+            if isinstance(node, ast.Assign) and not law_module:
+                for target in node.targets:
+                    if isinstance(target, ast.Attribute) and target.attr == 'nullspace':
+                        changed.setdefault(path, []).append(
+                            f'.nullspace = at line {node.lineno}')
+    assert built == {}
+    assert changed == {}
+
+
+def test_the_node_gets_its_null_space_through_the_registry():
+    from freejoint_common.schema import nullspace_options
+    nominal = table1('vertical').scaled(0.7)
+    full = nominal.__class__(**dict(nominal.__dict__, passive=()))
+    # the paper's arm (r = m): no null space, whatever nullspace_kd says
+    assert make_law('robust', nominal, Gains(), nullspace_kd=5.0).nullspace is None
+    law = make_law('robust', full, Gains(), **nullspace_options({'nullspace_kd': 5.0}))
+    assert law.nullspace.kd == 5.0
+    # a joint failing leaves r = m: the null space goes, and comes back with the joint
+    law.set_nominal(nominal)
+    assert law.nullspace is None
+    law.set_nominal(full)
+    assert law.nullspace.kd == 5.0
+    assert nullspace_options({'nullspace_kd': 0.0, 'nullspace_kd_joints': [0.0],
+                              'nullspace_kp': 0.0}) == {}
+    assert nullspace_options({'nullspace_kd': 1.0, 'nullspace_kd_joints': [2.0, 3.0],
+                              'nullspace_kp': 4.0}) == {'nullspace_kd': (2.0, 3.0),
+                                                        'nullspace_kp': 4.0}
+    with pytest.raises(FreejointValueError, match=r"^nullspace_kd: law 'vsc' has no null"):
+        make_law('vsc', full, Gains(), nullspace_kd=5.0)
+
+
 def test_the_shipped_laws_are_registered_with_their_namespaced_gains():
     assert {'robust', 'spatial', 'vsc', 'tdc'} <= set(LAWS)
     names = [g.name for g in laws.gain_schema()]
@@ -259,3 +320,23 @@ def test_the_node_builds_the_laws_from_the_literature_with_their_namespaced_para
     values[gain] = -1.0
     with pytest.raises(FreejointValueError, match=f'^{gain}: '):
         SCHEMA.config(values)
+
+
+def test_the_null_space_parameters_are_one_declaration_checked_alike_in_both_nodes():
+    from freejoint_common.schema import nullspace_dampings
+    from freejoint_control.params import SCHEMA as CONTROLLER
+    from freejoint_planner.params import SCHEMA as PLANNER
+    for schema in (CONTROLLER, PLANNER):
+        per_joint = schema['nullspace_kd_joints']
+        assert per_joint.validator is nullspace_dampings
+        # the reason names the parameter and the bad value
+        assert per_joint.reason([5.0, -1.0]) == (
+            'nullspace_kd_joints: expected one or more values in [0, 10000], got [5.0, -1.0]')
+        assert per_joint.reason([float('nan')]).startswith('nullspace_kd_joints: expected one')
+        assert per_joint.reason(['a']) == (
+            "nullspace_kd_joints: expected a list of numbers, got ['a']")
+        assert per_joint.reason([0.0]) is None and per_joint.reason([1.0, 2.5]) is None
+        for name in ('nullspace_kd', 'nullspace_kp'):
+            assert schema[name].bounds == (0.0, 1e4)
+            assert schema[name].reason(2e4).startswith(f'{name}: expected a value in [0, 10000]')
+    assert CONTROLLER['nullspace_kd'].default == 0.0 and PLANNER['nullspace_kd'].default == 20.0

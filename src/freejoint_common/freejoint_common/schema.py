@@ -356,3 +356,92 @@ CONTROL_PERIOD = Param('control_period', DEFAULT_DT,
 FRAME_ID = Param('frame_id', 'base_link',
                  'frame of the arm base: of ee_position (sim), of the setpoints, map and '
                  'marker (planner)', validator=_frame)
+
+
+# -- the null space of the law (controller: the law's; planner: its nominal closed loop) --
+NULLSPACE_MAX = 1e4
+"""[N m s/rad, N m/rad] Upper bound of a null-space damping or posture stiffness."""
+_NULLSPACE_TEXT = {
+    'nullspace_kd': 'null-space damping [N m s/rad] of the active joint rates when more '
+                    'joints are driven than the task has (r > 2, '
+                    "freejoint_core.internal.NullSpace); 0 = none (the paper's law exactly)",
+    'nullspace_kd_joints': 'spatial law: null-space damping per active joint [N m s/rad] (r '
+                           'values, the active joints base to tip), in place of nullspace_kd; '
+                           '[0.0] (default) = nullspace_kd for every joint. fj arm init sets '
+                           "it from the joints' effective inertia (freejoint_core.arm_gains)",
+    'nullspace_kp': "null-space posture stiffness [N m/rad] of the spatial law (law 'spatial'): "
+                    "the active joints are pulled to their angles at the law's first tick "
+                    'after start-up or ~/reset, through the null space (the task untouched), so '
+                    'that they do not drift over a long hold; 0 = none. Planar laws: must be 0',
+}
+
+
+def nullspace_dampings(value):
+    """
+    Return why ``value`` is not a list of null-space dampings, or None (``nullspace_kd_joints``).
+
+    One or more finite numbers [N m s/rad], each in ``[0, NULLSPACE_MAX]``.
+    """
+    try:
+        vals = [float(v) for v in value]
+    except (TypeError, ValueError):
+        return f'expected a list of numbers, got {value!r}'
+    if not vals or not all(0.0 <= v <= NULLSPACE_MAX for v in vals):     # NaN fails too
+        return f'expected one or more values in [0, {NULLSPACE_MAX:g}], got {vals}'
+    return None
+
+
+def nullspace_params(kd=0.0, kp=0.0, read_only=True, role=''):
+    """
+    Return the null-space parameters ``nullspace_kd``, ``nullspace_kd_joints``, ``nullspace_kp``.
+
+    One declaration (bounds, check, meaning) for the controller, whose law runs with them,
+    and the planner, whose nominal closed loop of a spatial plan must run with the same.
+
+    Parameters
+    ----------
+    kd, kp : float
+        Defaults of ``nullspace_kd`` [N m s/rad] and ``nullspace_kp`` [N m/rad].
+    read_only : bool
+        Declared read-only (the controller's: its law is built at start-up).
+    role : str
+        What the node does with them, put before the meaning (the planner's).
+
+    """
+    def text(name):
+        return role + _NULLSPACE_TEXT[name]
+    return (Param('nullspace_kd', float(kd), text('nullspace_kd'), (0.0, NULLSPACE_MAX),
+                  read_only=read_only),
+            Param('nullspace_kd_joints', [0.0], text('nullspace_kd_joints'),
+                  read_only=read_only, validator=nullspace_dampings),
+            Param('nullspace_kp', float(kp), text('nullspace_kp'), (0.0, NULLSPACE_MAX),
+                  read_only=read_only))
+
+
+def nullspace_kd(values):
+    """
+    Return the null-space damping in use: ``nullspace_kd_joints`` (a tuple), or ``nullspace_kd``.
+
+    ``nullspace_kd_joints: [0.0]`` (its default) means ``nullspace_kd`` for every joint (a
+    float); a mapping without it reads as that default.
+    """
+    per_joint = tuple(float(v) for v in values.get('nullspace_kd_joints', (0.0,)))
+    return float(values.get('nullspace_kd', 0.0)) if per_joint == (0.0,) else per_joint
+
+
+def nullspace_options(values):
+    """
+    Return the null-space options of ``make_law`` a node's parameters give (none at rest).
+
+    ``nullspace_kd`` (:func:`nullspace_kd`: per joint or for all) when not 0,
+    ``nullspace_kp`` when not 0: a law with a null space takes them, one without refuses
+    them on an arm with joints to spare.
+    """
+    out = {}
+    kd = nullspace_kd(values)
+    if kd != 0.0:
+        out['nullspace_kd'] = kd
+    kp = float(values.get('nullspace_kp', 0.0))
+    if kp != 0.0:
+        out['nullspace_kp'] = kp
+    return out

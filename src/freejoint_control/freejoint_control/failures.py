@@ -48,7 +48,6 @@ from freejoint_core.control import ControlOutput
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.failure import (assess_passive_set, Assessment, CANNOT_TRACK,
                                     least_harm_torque, M_TASK, Reconfigurer, TRACKING)
-from freejoint_core.internal import NullSpace
 from freejoint_core.offline import initial_state
 from freejoint_core.trajectory import CircleQuintic
 import numpy as np
@@ -66,39 +65,6 @@ HOLDOFF_S = 0.02
 watchdog, a stop), how long the effort detector waits before it judges again."""
 
 _ZERO2 = np.zeros(2)
-
-
-def spatial_nullspace_kd(values):
-    """Return ``nullspace_kd_joints`` as a tuple, or None when it is [0.0] (``nullspace_kd``)."""
-    per_joint = tuple(float(v) for v in values.get('nullspace_kd_joints', (0.0,)))
-    return None if per_joint == (0.0,) else per_joint
-
-
-def install_nullspace(law, cfg):
-    """
-    Give the law the null-space damping of ``nullspace_kd`` when it has r > m joints.
-
-    Parameters
-    ----------
-    law : freejoint_core.laws.ControlLaw
-        The loop's law (the paper's ``RobustLaw``: a ``nullspace`` attribute).
-    cfg : freejoint_control.params.Config
-        ``nullspace_kd`` [N m s/rad] (0: none, the paper's law exactly) and the nominal arm.
-
-    """
-    kd = float(cfg.values.get('nullspace_kd', 0.0))
-    if hasattr(law, 'set_nullspace_gains'):     # the spatial law: its own inverse, a posture
-        kp = float(cfg.values.get('nullspace_kp', 0.0))
-        per_joint = spatial_nullspace_kd(cfg.values)
-        if per_joint is not None:
-            law.set_nullspace_gains(per_joint, kp)
-        elif kd > 0.0 or kp > 0.0:
-            law.set_nullspace_gains(kd, kp)
-        return
-    if kd <= 0.0 or cfg.nominal.r <= M_TASK or not hasattr(law, 'nullspace'):
-        return
-    law.nullspace = NullSpace(kd=kd)
-    law.set_nominal(law.nominal, law.model)
 
 
 def precompute_verdicts(nominal, case, gains):
@@ -198,7 +164,6 @@ class FailureMonitor:
                                 margin=cfg.values['failure_margin'],
                                 ticks=cfg.values['failure_ticks'], effort=self.use_effort)
         self.precomputed = precompute_verdicts(cfg.nominal, cfg.values['case'], cfg.gains)
-        self._nullspace = getattr(law, 'nullspace', None)
         self._dt_ns = cfg.dt_ns
         self._last_ns = None
         # Real time: the commands sent within EFFORT_HISTORY_S (model order; NaN: none).
@@ -408,17 +373,13 @@ class FailureMonitor:
         limit = None if self._limit is None else tuple(
             self._limit[self._cfg_active.index(a)] for a in nominal.active)
         law.set_gains(replace(gains, tau_limit=None))
-        if nominal.r <= M_TASK and getattr(law, 'nullspace', None) is not None:
-            law.nullspace = None
-        law.set_nominal(nominal)
+        law.set_nominal(nominal)        # (a law drops its null space with no joint to spare)
         law.set_gains(replace(gains, tau_limit=limit))
 
     def release(self):
         """Put the law back on the configured arm (before a change of its model or gains)."""
         law = self.law
         law.set_gains(replace(law.gains, tau_limit=None))
-        if self._nullspace is not None:
-            law.nullspace = self._nullspace
         law.set_nominal(self.configured)
         law.set_gains(self._gains)
 
@@ -471,10 +432,8 @@ class FailureMonitor:
         for a, v in zip(act, tau.tolist()):
             full[self._cfg_active.index(a)] = v
         p = self.law.model.fk(q)
-        theta = np.array(self.law.state_values()[:5]) if len(
-            self.law.state_values()) >= 5 else np.zeros(5)
         return ControlOutput(np.array(full), p - np.asarray(p_d, dtype=float), _ZERO2.copy(),
-                             _ZERO2.copy(), theta, 0.0, _ZERO2.copy(), det, p, 0)
+                             _ZERO2.copy(), np.zeros(0), 0.0, _ZERO2.copy(), det, p, 0)
 
     def diagnostics(self, errors, warnings):
         """Add the failures to a status period's errors / warnings; return key / values."""

@@ -31,128 +31,62 @@ values) or None when nothing is to be published yet.  It owns:
   real time): the active joints' static gravity load at the measured angles
   (``freejoint_core.guards.hold_effort``), never a stale tracking command.
 
+Each job is a part it composes: ``loop_inputs.StateReader`` (the state's mapping and
+checks), ``loop_setpoints.SetpointStream`` (the setpoints' checks and pairing),
+``loop_reference.Reference`` (hold, blend, carrying forward), ``loop_law.LawStep`` (the
+law's step and its faults), ``loop_stop`` (the readiness guard, the driver's requests, the
+stop command) and ``loop_status`` (the Result, its message, the status period's report);
+the loop decides between them which answer a state gets.
+
 Logging goes through the ``log(level, kind, text)`` callable given (``kind`` names a
 throttled kind of line, None: always); status bits are ControllerState's.
 
 """
 
-import math
-
-from freejoint_common.arm_description import resolve_arm
-from freejoint_control import failures
-from freejoint_control.readiness import guard_margins, ReadinessGuard
-from freejoint_core.control import (ControlOutput, STATUS_BAD_INPUT, STATUS_NEAR_SINGULAR,
-                                    STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
-                                    STATUS_TORQUE_LIMITED)
-from freejoint_core.delay import extrapolate_setpoint, StatePredictor
+from freejoint_common.schema import nullspace_options
+from freejoint_control import failures, loop_status
+from freejoint_control.loop_inputs import StateReader
+from freejoint_control.loop_law import LawStep
+from freejoint_control.loop_reference import Reference
+from freejoint_control.loop_setpoints import SetpointStream
+# The published state's names, imported from here by the node and the tests too.
+from freejoint_control.loop_status import (  # noqa: F401
+    DEBUG, ERROR, INFO, PeriodFigures, RECEIPT, Result, STATUS_DT_CLAMPED, STATUS_HOLDING,
+    STATUS_LAW_FAULT, status_message, STATUS_RATE_LIMITED, STATUS_RESUMING,
+    STATUS_SETPOINT_LATE, STATUS_STOPPED, WARN)
+from freejoint_control.loop_stop import (DAMP_SAID, DriverRequests, QUIET_SAID, Readiness,
+                                         stop_effort, STOP_SAID)
+from freejoint_core.control import STATUS_BAD_INPUT, STATUS_STALE_SETPOINT, STATUS_STALE_STATE
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.guards import (clamp_dt, hold_effort, law_output_fault, limit_effort,
-                                   setpoint_refusal, state_refusal)
-from freejoint_core.laws import FreeLinkDampedLaw, make_law
-from freejoint_core.reference import extrapolate, MODE_HOLD, MODE_NONE, ReferenceShaper
+from freejoint_core.guards import clamp_dt, limit_effort
+from freejoint_core.laws import make_law
+from freejoint_core.reference import MODE_HOLD
 import numpy as np
-
-# ControllerState's status bits beyond the core's (test_loop checks them against the message).
-STATUS_HOLDING = 32
-STATUS_RATE_LIMITED = 64
-STATUS_LAW_FAULT = 128
-STATUS_RESUMING = 256
-STATUS_DT_CLAMPED = 512
-STATUS_SETPOINT_LATE = 1024
-STATUS_STOPPED = 2048
 
 STANDBY_SETTLE = 0.5
 """[s] A spare is ready once nothing was lacking for this long (its discovery of the graph,
 which can list the simulator before the planner, settled)."""
-STANDBY_IDLE_STREAM = 0.25
-"""[s] A matched setpoint publisher silent this long is not streaming: a spare does not
-wait for it to catch up before it tells the supervisor it is ready."""
-DEBUG, INFO, WARN, ERROR = 'debug', 'info', 'warn', 'error'
-"""Levels of the ``log`` callable."""
-RECEIPT = 'receipt'
-"""``Result.latency_ns`` of a lockstep answer: the node measures it from the state's receipt
-(``ControlLoop.last_state_wall``) to the command, on its own clock."""
-
-_isfinite = math.isfinite
-_NAME_MAP_CACHE = 16
 _SAY_PERIOD_NS = round(1e9)
 """[ns of stamps] At most one 'not ready' line per this period (a transition at once)."""
-_STOP_SAID = ('stop command sent (the gravity hold of the active joints), the brakes asked '
-              'for; no command until the loop is ready again')
-_QUIET_SAID = 'no command until the loop is ready (the brakes asked for)'
-_DAMP_SAID = ('the damped joint hold answered to every state (readiness_action damp) until '
-              'the loop is ready again')
 
 
 def _no_log(level, kind, text):
     """Drop a log line (the default of ``log``)."""
 
 
-class Result:
-    """
-    What to publish for one answered state (one object per loop, refilled per answer).
-
-    Attributes
-    ----------
-    stamp_ns : int
-        Stamp [ns] of the state answered (-1: none answered yet).
-    effort : list of float, (r,)
-        The command [N m] in the order of parameter ``joints``.
-    error, error_rate, sliding, position, position_desired : sequence of float, (m,)
-        ControllerState's task-space terms [m, m/s] (m: the task dimension); ``error``
-        against the controller's reference ``position_desired``.
-    position_planned : sequence of float, (m,) or (0,)
-        The plan's setpoint for the state, as streamed (before hold, blend or carrying
-        forward) [m]; empty without one (ControllerState's ``position_planned``).
-    det_dd, state_age, setpoint_age, dt : float
-        As ControllerState's fields.
-    status : int
-        Status bits; ``message`` says why when not 0.
-    setpoint_ns : int or None
-        Stamp of the setpoint used (None: none).
-    law_state_names : tuple of str
-        Names of the law's internal state (``ControlLaw.state_names``).
-    law_state_values : list of float
-        Its values after this answer (ControllerState's ``law_state``).
-    repeated : bool
-        The state's stamp was answered before: the same answer again.
-    latency_ns : int, RECEIPT or None
-        The latency of the answer [ns] for the diagnostics: real time from the state's
-        stamp; lockstep :data:`RECEIPT` (from its receipt, measured by the node); None for
-        a zero-effort answer (not counted).
-
-    """
-
-    __slots__ = ('stamp_ns', 'effort', 'error', 'error_rate', 'sliding', 'det_dd',
-                 'position', 'position_desired', 'position_planned', 'status',
-                 'message', 'setpoint_ns', 'setpoint_age', 'dt', 'state_age',
-                 'law_state_names', 'law_state_values', 'repeated', 'latency_ns')
-
-    def __init__(self, m=2):
-        zero = (0.0,) * m
-        self.stamp_ns = -1
-        self.effort = []
-        self.error = self.error_rate = self.sliding = zero
-        self.position = self.position_desired = zero
-        self.position_planned = ()
-        self.det_dd = self.state_age = self.setpoint_age = self.dt = 0.0
-        self.status = 0
-        self.message = ''
-        self.setpoint_ns = None
-        self.law_state_names = ()
-        self.law_state_values = []
-        self.repeated = False
-        self.latency_ns = 0
+def _part(part, name, doc):
+    """Return a read-only property: the attribute ``name`` of the loop's part ``part``."""
+    return property(lambda loop: getattr(getattr(loop, part), name), doc=doc)
 
 
 def config_law(cfg):
     """
     Return the law a controller configuration names, with its null-space terms.
 
-    ``make_law`` of ``cfg.law`` on the nominal model, the gains and the laws' own gains,
-    then ``failures.install_nullspace`` (``nullspace_kd``, ``nullspace_kp``): the law the loop
-    steps (before the free link's damping wraps it) and the one an offline twin of the
-    graph must run.
+    ``make_law`` of ``cfg.law`` on the nominal model, the gains, the laws' own gains, the
+    null-space options (``nullspace_kd``, ``nullspace_kd_joints``, ``nullspace_kp``) and,
+    with ``free_link_damping``, the free link's damping around it: the law the loop steps
+    and the one an offline twin of the graph must run.
 
     Parameters
     ----------
@@ -164,10 +98,18 @@ def config_law(cfg):
     freejoint_core.laws.ControlLaw
 
     """
-    law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model,
-                   params=cfg.law_params)
-    failures.install_nullspace(law, cfg)
-    return law
+    values = cfg.values
+    free_link = None
+    if values['free_link_damping']:     # the reference damps the free link
+        free_link = {'delta_max': values['free_link_delta_max'],
+                     'k2_rest': values['free_link_rest_damping'],
+                     'rest_after': values['free_link_rest_after'],
+                     'mode': values['free_link_mode'],
+                     'settle_window': values['free_link_settle_window'],
+                     'sat': values['free_link_drive_max']}
+    return make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model,
+                    params=cfg.law_params, free_link=free_link,
+                    **nullspace_options(values))
 
 
 class ControlLoop:
@@ -187,37 +129,23 @@ class ControlLoop:
         cfg = config
         self.log = log or _no_log
         self.law = config_law(cfg)
-        if cfg.values['free_link_damping']:     # the reference damps the free link
-            values = cfg.values
-            self.law = FreeLinkDampedLaw(self.law, values['free_link_delta_max'],
-                                         k2_rest=values['free_link_rest_damping'],
-                                         rest_after=values['free_link_rest_after'],
-                                         mode=values['free_link_mode'],
-                                         settle_window=values['free_link_settle_window'],
-                                         sat=values['free_link_drive_max'])
         # Joint failures (freejoint_control/failures.py): None when off.
         self.failures = None if cfg.values['joint_failures'] == 'off' else \
             failures.FailureMonitor(cfg, self.law, self.log)
-        self._state_effort = None
+        self.inputs = StateReader()
+        self.setpoints = SetpointStream()
         m = self.task_dim = self.law.model.task_dim
-        self.shaper = ReferenceShaper(cfg.resume_time, blend_on_start=not cfg.lockstep, m=m)
-        self._predictor = None
+        self.reference = Reference(cfg.resume_time, cfg.lockstep, m)
+        self.shaper = self.reference.shaper
+        self.stepper = LawStep(self.law, self.log)
         self._zero_task = (0.0,) * m
-        self._readiness = None
-        self._readiness_key = None
+        self.watch = Readiness(self.log)
+        self.requests = DriverRequests()
         self._guard_ns = None           # stamp of the last state the guard took
         self._withholding = False       # not ready, 'brake': no command sent
         self._said_ns = None            # stamp of the last 'not ready' line
         self.withheld = 0               # states not answered by the readiness guard
-        self.brake_request = None       # why the driver is asked to brake now (the node sends)
-        self._brake_asked = False       # asked during this not-ready spell
         self._kept_hold = None          # the hold's position when the guard stopped it
-        self.brake_requests = 0
-        self.drive_wait = None          # the brake_timeout_request sent last [s] (None: none)
-        self.drive_wait_request = None  # the one to send now (the node sends), or None
-        self.readiness_note = None      # (stamp_ns, ready, reason) to publish, or None
-        self._stale_stop = False        # real time: stopped for want of states
-        self._stale_reason = ''
         self._commanded = False         # the last answer sent was a computed command
         self._ever_commanded = False    # a computed command was sent (or taken over)
         self._q_stop = None             # 'damp': the active joints' angles the stop found
@@ -228,34 +156,19 @@ class ControlLoop:
         self._zero = [0.0] * len(cfg.joints)
         self.last_ns = -1               # stamp of the last answered state
         self.pending = None             # lockstep: (ns, q, qd, since) waiting for a setpoint
-        self._setpoints = {}            # lockstep: stamp_ns -> (p, v, a) flat, (3 m,)
-        self._recent = []               # real time: [(stamp_ns, values)], in arrival order
-        self._setpoint_seen = False     # a setpoint was received (lockstep: stale timeout on)
-        self._setpoint_used = False     # a setpoint was tracked (else: 'no setpoint yet')
-        self._late = False              # real time: the last setpoint used was late
         self._last_sp = self._zero_task
         self.last_state_wall = None     # monotonic time of the last state received
         self.stale_reported = False
         self._last_q = None
-        self._last_det = 0.0
-        self._name_maps = {}
-        self._map_names = None
-        self._map = None
         self.ticks = 0
         self.zero_answers = 0
         self.holds = 0
-        self.faults = 0
         self.refused_setpoints = 0
         self.refused_states = 0
         self.old_states = 0
         self.stale_periods = 0          # onsets of a stale (or late) setpoint stream
         self._stale_now = False
-        self.period_bits = 0            # status bits of the answers of the status period
-        self._plan_error_max = 0.0      # |position - position_planned| max of the period [m]
-        self._plan_error_last = None    # and of the last answer (None: no plan)
-        self._ref_error_max = 0.0       # |error| (vs the controller's reference) max [m]
-        self._last_sp_refusal = ''
-        self._good_state = self.law.save_state()
+        self.figures = PeriodFigures()  # what the status period reports beyond the counters
         # Last command sent, in command order (None: none yet in lockstep, whose start is
         # the paper's; real time starts from the zero effort the arm had).
         self._prev_cmd = None if cfg.lockstep else list(self._zero)
@@ -263,8 +176,6 @@ class ControlLoop:
         # Hot spare (real time): not answering until activate().
         self.standby = cfg.standby
         self._start_from_motion = False
-        self._sp_wall = None            # standby: monotonic time of the newest setpoint
-        self._sp_matched_wall = None    # standby: when a setpoint publisher was first matched
         self.waiting_for = 'start-up'   # standby: what it waits for before it is ready
         self._settled_since = None      # standby: since when nothing was lacking
 
@@ -273,72 +184,25 @@ class ControlLoop:
         """Cache what the tick needs from a validated configuration."""
         self.config = cfg
         self._dt = cfg.dt
-        self._half_ns = cfg.dt_ns // 2
-        self._late_ns = cfg.late_periods * cfg.dt_ns
         self._carry_ns = round(cfg.carry_forward_time * 1e9)
         self._max_age_ns = 0 if cfg.lockstep else round(cfg.max_state_age * 1e9)
         self.stale_timeout = cfg.stale_timeout
         self.lockstep = cfg.lockstep
-        self._cmd_index = cfg.cmd_index
-        self._identity = cfg.cmd_index == tuple(range(len(cfg.cmd_index)))
         self._limits = cfg.effort_limits
         self._rate = cfg.effort_rate_limit
         self.hold_on_stale = cfg.on_stale_setpoint == 'hold'
-        self.shaper.set_resume_time(cfg.resume_time)
-        self._hold_stiffness = cfg.hold_stiffness
-        self.shaper.set_bounds(cfg.resume_max_velocity, cfg.resume_max_acceleration)
-        self._sp_bounds = (cfg.reach, cfg.setpoint_max_velocity, cfg.setpoint_max_acceleration)
-        self._state_bounds = (cfg.position_lower, cfg.position_upper, cfg.velocity_limit)
-        self._offsets = cfg.joint_offsets
-        self._hold_wait = cfg.hold_brake_timeout
-        if cfg.delay_compensation == 'predict':
-            if self._predictor is None or self._predictor.params != cfg.nominal:
-                self._predictor = StatePredictor(cfg.nominal, cfg.dt)
-        else:
-            self._predictor = None
-        self._install_readiness(cfg)
-
-    def _install_readiness(self, cfg):
-        """(Re)build the readiness guard when its parameters change (keeps its verdict)."""
-        self._guard_brakes = cfg.readiness_action == 'brake'
-        self._guard_damps = cfg.readiness_action == 'damp'
+        self.reference.configure(cfg)
+        self.setpoints.configure(self.task_dim, (cfg.reach, cfg.setpoint_max_velocity,
+                                                 cfg.setpoint_max_acceleration),
+                                 cfg.dt_ns // 2, cfg.stale_timeout, self._carry_ns)
+        self.inputs.configure(cfg.joint_names, cfg.position_lower, cfg.position_upper,
+                              cfg.velocity_limit, cfg.joint_offsets)
+        self.stepper.configure(cfg)
         self._stop_gains = (cfg.stop_stiffness, cfg.stop_damping)
-        self._ask_brakes = cfg.readiness_brake_request and not cfg.lockstep
-        if cfg.lockstep or not cfg.readiness_guard:
-            self._readiness = None
-            self._readiness_key = None
+        self.requests.configure(cfg.readiness_brake_request and not cfg.lockstep,
+                                cfg.hold_brake_timeout)
+        if self.watch.install(cfg):
             self._withholding = False
-            return
-        margins = guard_margins(resolve_arm(cfg.values).params, cfg.delay_compensation,
-                                cfg.readiness_max_delay, cfg.readiness_min_answer_rate,
-                                cfg.readiness_resume_delay, cfg.readiness_resume_answer_rate,
-                                cfg.readiness_max_gap)
-        max_delay = margins[0]
-        key = (cfg.dt_ns, max_delay, margins[1], cfg.readiness_window,
-               cfg.readiness_recover_windows, margins[2], margins[3], margins[4])
-        self._max_error = cfg.readiness_max_error
-        self._max_hold_error = cfg.readiness_max_hold_error or cfg.readiness_max_error
-        if key == self._readiness_key:
-            return
-        old = self._readiness
-        guard = ReadinessGuard(*key[:5], start_ready=cfg.standby, resume_delay=key[5],
-                               resume_rate=key[6], max_gap=key[7])
-        if 'not measured' in margins[5]:
-            self.log(WARN, None, 'readiness guard: ' + margins[5])
-        if old is not None:
-            guard.ready, guard.reason, guard.started = old.ready, old.reason, old.started
-            guard.trips, guard.recoveries = old.trips, old.recoveries
-        self._readiness = guard
-        self._readiness_key = key
-        self.log(INFO, None, 'readiness guard: trips past a mean state->command delay of '
-                 '%.3g ms, under %.0f %% of the states answered per %.3g s window or past %d '
-                 'states missed in a row, resumes within %.3g ms and %.0f %% (%s); not ready: '
-                 '%s' % (
-                     max_delay * 1e3, margins[1] * 100.0, cfg.readiness_window, margins[4],
-                     guard.good_delay * 1e3, guard.good_rate * 100.0, margins[5],
-                     'a stop command, the brakes asked for, then no command'
-                     if self._guard_brakes else 'the damped joint hold answered'
-                     if self._guard_damps else 'hold'))
 
     def apply(self, old, cfg):
         """Take a validated parameter change (effective on the next state)."""
@@ -353,7 +217,7 @@ class ControlLoop:
             law.set_gains(cfg.gains)
             if cfg.gains.theta0 != old.gains.theta0:
                 law.reset()
-            self._good_state = law.save_state()
+            self.stepper.keep_state()
         if renew:
             self.failures = fm.renewed(cfg)
         self._install(cfg)
@@ -361,12 +225,11 @@ class ControlLoop:
     def reset(self):
         """Restart the law's state (theta_hat = theta0) and forget the hold / blend."""
         self.law.reset()
-        self._good_state = self.law.save_state()
+        self.stepper.keep_state()
         self.shaper.reset()
         self._kept_hold = None
         self._rate_armed = self._prev_cmd is not None
-        if self._predictor is not None:
-            self._predictor.reset()
+        self.stepper.restart_prediction()
 
     # -- standby -----------------------------------------------------------------------
     def activate(self):
@@ -402,21 +265,7 @@ class ControlLoop:
         if cmd_matched == 0 or cmd_matched < cmd_listed:
             return '%s matched by %d of its %d subscribers' % (
                 names[0], cmd_matched, cmd_listed)
-        if sp_matched < sp_listed:
-            return '%s: %d of its %d publishers matched' % (names[1], sp_matched, sp_listed)
-        if sp_matched == 0:
-            return ''
-        if self._sp_matched_wall is None:
-            self._sp_matched_wall = mono
-        last = self._sp_wall if self._sp_wall is not None else self._sp_matched_wall
-        if mono - last > STANDBY_IDLE_STREAM:
-            return ''
-        if not self._recent:
-            return 'the setpoint stream matched, no setpoint received yet'
-        behind = (now_ns - self._recent[-1][0]) * 1e-9
-        if behind * 1e9 > self._carry_ns:
-            return 'the setpoint stream catching up (newest %.3f s old)' % behind
-        return ''
+        return self.setpoints.spare_waits_for(sp_matched, sp_listed, mono, now_ns, names[1])
 
     def standby_settled(self, waits_for, mono):
         """
@@ -437,25 +286,6 @@ class ControlLoop:
         return True
 
     # -- inputs ------------------------------------------------------------------------
-    def _joint_map(self, names):
-        """Map a JointState name list to the model joints' indices (cached per list)."""
-        key = tuple(names)
-        found = self._name_maps.get(key)
-        if found is None:
-            want = self.config.joint_names
-            missing = [n for n in want if n not in key]
-            if missing:
-                found = (None, 'JointState lacks joint(s) %s (has %s)' % (missing, list(key)),
-                         'missing')
-            else:
-                found = (tuple(key.index(n) for n in want), '', '')
-            if len(self._name_maps) >= _NAME_MAP_CACHE:
-                self._name_maps.clear()
-            self._name_maps[key] = found
-        self._map_names = names
-        self._map = found
-        return found
-
     def on_state(self, ns, names, pos, vel, now_ns, mono, effort=None):
         """
         Take a joint state; return the Result to publish, or None (none yet).
@@ -477,23 +307,24 @@ class ControlLoop:
 
         """
         self.last_state_wall = mono
-        self._state_effort = effort
+        self.inputs.note_effort(effort)
         self.stale_reported = False
-        guard = self._readiness
+        watch = self.watch
+        guard = watch.guard
         if guard is not None:
             change = 0
             if ns != self._guard_ns:
                 self._guard_ns = ns
                 change = guard.observe(ns, now_ns)
                 if change:
-                    self._readiness_changed(change, ns)
+                    watch.changed(change, ns)
                     self._said_ns = ns
-        if self._stale_stop:
-            self._stale_stop = False
+        if watch.stale_reason:
+            watch.stale_reason = ''
             if guard is None or guard.ready:
-                self.readiness_note = (ns, True, '')
+                watch.note = (ns, True, '')
         if guard is not None:
-            if not guard.ready and self._guard_brakes:
+            if not guard.ready and watch.brakes:
                 return self._withhold(ns, now_ns)
             if self._withholding and guard.ready:
                 self._resume_after_brake()
@@ -516,41 +347,8 @@ class ControlLoop:
                      'state time went back from %d to %d ns (simulator restarted?): theta_hat '
                      'reset to theta0' % (self.last_ns, ns))
             self.reset()
-            self._setpoints.clear()
-            self._recent.clear()
-        found = self._map if names == self._map_names else self._joint_map(names)
-        idx, reason, kind = found
-        q = None
-        if idx is not None:
-            try:
-                if len(idx) == 3:
-                    i0, i1, i2 = idx
-                    q = (pos[i0], pos[i1], pos[i2])
-                    qd = (vel[i0], vel[i1], vel[i2])
-                else:   # an arm of another number of joints (robot_description)
-                    q = tuple([pos[i] for i in idx])
-                    qd = tuple([vel[i] for i in idx])
-            except (IndexError, ValueError):
-                q = None
-                kind = 'short'
-                reason = 'JointState has %d names but %d positions and %d velocities' % (
-                    len(names), len(pos), len(vel))
-            if q is not None and not all(map(_isfinite, q + qd)):
-                kind = 'nonfinite'
-                reason = 'JointState has a non-finite position or velocity: q=%s qd=%s' % (
-                    list(q), list(qd))
-                q = None
-            if q is not None:
-                lower, upper, vlim = self._state_bounds
-                implausible = state_refusal(q, qd, lower, upper, vlim)
-                if implausible is not None:
-                    kind = 'implausible'
-                    reason = 'implausible state: ' + implausible
-                    q = None
-                elif self._offsets:
-                    # the core's angles: the measured ones plus the arm's offsets (a URDF arm
-                    # whose task frame is turned to put gravity along -y)
-                    q = tuple([a + b for a, b in zip(q, self._offsets)])
+            self.setpoints.clear()
+        q, qd, kind, reason = self.inputs.read(names, pos, vel)
         if q is None:
             self.refused_states += 1
             if not self.lockstep and not self._ever_commanded:
@@ -570,9 +368,9 @@ class ControlLoop:
             self._start_from_motion = False
             self._start_from(q, qd)
         if self.lockstep:
-            sp = self._setpoints.pop(ns, None)
+            sp = self.setpoints.take(ns)
             if sp is None:
-                if self.shaper.mode == MODE_HOLD and self._setpoint_seen:
+                if self.shaper.mode == MODE_HOLD and self.setpoints.seen:
                     # Already holding on a stale stream: answer at once, not a timeout per tick.
                     self.pending = None
                     return self._no_setpoint(ns, q, qd, now_ns)
@@ -581,40 +379,23 @@ class ControlLoop:
             self.pending = None
             return self._tick(ns, q, qd, ns, sp, now_ns)
         if guard is not None and not guard.ready:
-            self._ask_drive_wait(True)
-            if self._guard_damps:
+            self.requests.ask_drive_wait(True)
+            if watch.damps:
                 if not guard.started:
                     return self._withhold(ns, now_ns)   # never started: the brakes stay on
                 return self._damped_stop(ns, q, qd, now_ns)
             return self._readiness_hold(ns, q, qd, now_ns, guard)
-        found = self._realtime_setpoint(ns)
+        found = self.setpoints.newest(ns)
         if found is None:
-            self._ask_drive_wait(True)
+            self.requests.ask_drive_wait(True)
             return self._no_setpoint(ns, q, qd, now_ns)
         if ns - found[0] > self._carry_ns:
-            self._ask_drive_wait(True)
+            self.requests.ask_drive_wait(True)
             if self.hold_on_stale:
                 return self._no_setpoint(ns, q, qd, now_ns, (ns - found[0]) * 1e-9)
         else:
-            self._ask_drive_wait(not any(found[1][self.task_dim:]))
+            self.requests.ask_drive_wait(not any(found[1][self.task_dim:]))
         return self._tick(ns, q, qd, found[0], found[1], now_ns)
-
-    def _ask_drive_wait(self, rests):
-        """
-        Note the driver's wait to ask for (real time): ``hold_brake_timeout`` at rest, else 0.
-
-        ``rests``: this tick's setpoint rests (none, stale, or zero velocity and
-        acceleration). Sets ``drive_wait_request`` when it differs from the one sent.
-        """
-        wait = self._hold_wait if rests else 0.0
-        if wait != self.drive_wait:
-            self.drive_wait = self.drive_wait_request = wait
-
-    def take_drive_wait(self):
-        """Return the driver's wait to send now [s] (brake_timeout_request), once, or None."""
-        wait = self.drive_wait_request
-        self.drive_wait_request = None
-        return wait
 
     # -- readiness guard (real time) ---------------------------------------------------
     def readiness(self):
@@ -624,34 +405,28 @@ class ControlLoop:
         Lockstep, or real time without the guard: ready (never judged). A stop for want of
         states (the watchdog's stale state) is not ready until the next state.
         """
-        if self._stale_stop:
-            return False, self._stale_reason
-        guard = self._readiness
-        if guard is None:
-            return True, ''
-        return guard.ready, guard.reason
+        return self.watch.verdict()
 
     def take_readiness(self):
         """Return the readiness change to publish, ``(stamp_ns, ready, reason)``, once, or None."""
-        note = self.readiness_note
-        self.readiness_note = None
-        return note
+        return self.watch.take_note()
 
-    def _readiness_changed(self, change, ns):
-        """Log a change of the guard's verdict (once per transition); note it to publish."""
-        guard = self._readiness
-        self.readiness_note = (ns, guard.ready, guard.reason)
-        if change == 1:
-            action = (_STOP_SAID if self._guard_brakes else _DAMP_SAID if self._guard_damps
-                      else 'holding position')
-            self.log(ERROR, None, '%s: %s' % (guard.reason, action))
-        else:
-            self.log(WARN if guard.recoveries else INFO, None,
-                     'real-time loop ready%s (%d good windows: mean delay %.3g ms, %.0f %% of '
-                     'the states answered): tracking %s from a hold where the arm is' % (
-                         ' again' if guard.recoveries else '', guard.recover_windows,
-                         guard.last_delay * 1e3, guard.last_rate * 100.0,
-                         'resumes' if guard.recoveries else 'starts'))
+    def take_drive_wait(self):
+        """Return the driver's wait to send now [s] (brake_timeout_request), once, or None."""
+        return self.requests.take_drive_wait()
+
+    def take_brake_request(self):
+        """Return the brake request to send (why), once, or None."""
+        return self.requests.take_brake_request()
+
+    # What the node and the tests read of the parts, as the loop's own attributes.
+    _readiness = _part('watch', 'guard', 'The readiness guard (None: lockstep or off).')
+    readiness_note = _part('watch', 'note', 'The readiness change to publish, or None.')
+    brake_request = _part('requests', 'brake_request', 'Why the driver is to brake now, or None.')
+    brake_requests = _part('requests', 'brake_requests', 'The brake requests so far.')
+    drive_wait = _part('requests', 'drive_wait', "The driver's wait sent last [s], or None.")
+    drive_wait_request = _part('requests', 'drive_wait_request',
+                               "The driver's wait to send now [s], or None.")
 
     def _withhold(self, ns, now_ns):
         """
@@ -662,15 +437,15 @@ class ControlLoop:
         of the last tracking command) and the brakes are asked for (``brake_request``);
         the states after it are not answered (a driver with a command watchdog brakes).
         """
-        reason = self._readiness.reason
+        reason = self.watch.guard.reason
         if not self._withholding:
             self._kept_hold = self.shaper.hold_position     # None unless holding
             self._withholding = True
             self.pending = None
-            self._ask_brake(reason)
+            self.requests.ask_brake(reason)
             if self._commanded:
                 # The driver holds a computed command: replace it before going quiet.
-                return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, _STOP_SAID),
+                return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, STOP_SAID),
                                          now_ns)
         self.withheld += 1
         self.pending = None
@@ -678,15 +453,8 @@ class ControlLoop:
         if said is None or not 0 <= ns - said < _SAY_PERIOD_NS:
             # At most once per second of stamps (a transition is said at once).
             self._said_ns = ns
-            self.log(ERROR, 'readiness', '%s: %s' % (reason, _QUIET_SAID))
+            self.log(ERROR, 'readiness', '%s: %s' % (reason, QUIET_SAID))
         return None
-
-    def _ask_brake(self, reason):
-        """Ask the driver for its brakes now (once per stop; ``readiness_brake_request``)."""
-        if self._ask_brakes and not self._brake_asked:
-            self._brake_asked = True
-            self.brake_requests += 1
-            self.brake_request = '%s: brake now' % reason
 
     def _damped_stop(self, ns, q, qd, now_ns):
         """
@@ -696,7 +464,7 @@ class ControlLoop:
         ``stop_damping``, on the gravity load of the nominal model), every state until the
         loop is ready again; nothing is asked of the brakes.
         """
-        reason = self._readiness.reason
+        reason = self.watch.guard.reason
         if not self._withholding:
             self._kept_hold = self.shaper.hold_position     # None unless holding
             self._withholding = True
@@ -706,8 +474,8 @@ class ControlLoop:
         said = self._said_ns
         if not 0 <= ns - said < _SAY_PERIOD_NS:
             self._said_ns = ns
-            self.log(ERROR, 'readiness', '%s: %s' % (reason, _DAMP_SAID))
-        return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, _DAMP_SAID), now_ns,
+            self.log(ERROR, 'readiness', '%s: %s' % (reason, DAMP_SAID))
+        return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, DAMP_SAID), now_ns,
                                  q, qd)
 
     def stop_effort(self, q=None, qd=None):
@@ -720,23 +488,9 @@ class ControlLoop:
         stop, ``readiness_action: damp``): plus ``stop_stiffness`` towards the angles the
         stop found and ``stop_damping`` against ``qd``.
         """
-        q = self._last_q if q is None else q
-        if q is None:
-            return list(self._zero)
-        model = self.law.model
-        try:
-            if qd is None:
-                tau = hold_effort(model.gravity_torque(q).tolist(), model.active)
-            else:
-                tau = hold_effort(model.gravity_torque(q).tolist(), model.active, None, q, qd,
-                                  self._q_stop, *self._stop_gains)
-        except (FreejointValueError, ArithmeticError):
-            return list(self._zero)
-        effort = tau if self._identity else [tau[i] for i in self._cmd_index]
-        limits = self._limits
-        if limits is not None:
-            effort = hold_effort(effort, range(len(effort)), limits)
-        return effort
+        return stop_effort(self.law.model, self._last_q if q is None else q, qd,
+                           self._q_stop, self._stop_gains, self.config.cmd_index,
+                           self._limits)
 
     def _answer_stop(self, ns, status, message, now_ns, q=None, qd=None):
         """Return the stop command's answer to the state stamped ns, saying why."""
@@ -746,20 +500,13 @@ class ControlLoop:
         self.zero_answers -= 1
         self.stops += 1
         self._prev_cmd = list(effort)   # a resume ramps from it, not from zero
-        if self._predictor is not None:
-            self._predictor.reset()
+        self.stepper.restart_prediction()
         return res
-
-    def take_brake_request(self):
-        """Return the brake request to send (why), once, or None."""
-        why = self.brake_request
-        self.brake_request = None
-        return why
 
     def _resume_after_brake(self):
         """Ready again after withholding: start over from where the braked arm is."""
         self._withholding = False
-        self._brake_asked = False
+        self.requests.stop_over()
         kept, self._kept_hold = self._kept_hold, None
         if kept is None:
             # Hold at fk(q), or blend to the setpoint from the measured motion: a braked arm
@@ -774,9 +521,8 @@ class ControlLoop:
         self.last_ns = -1               # dt of the first tick: one control period
         self._rate_armed = True         # ramp from the stop command the driver got
         self.law.restart_motion()       # e.g. the free link's shift: its swing was stopped
-        self._good_state = self.law.save_state()
-        if self._predictor is not None:
-            self._predictor.reset()
+        self.stepper.keep_state()
+        self.stepper.restart_prediction()
 
     def _readiness_hold(self, ns, q, qd, now_ns, guard):
         """Not ready, 'hold': hold the end effector, the message saying why."""
@@ -797,32 +543,17 @@ class ControlLoop:
             self.log(ERROR, None, 'cannot start from the measured motion (%s): blending '
                      'from the position at rest' % exc)
 
-    def _planned(self, ns, sp):
-        """
-        Return the plan's position for the state stamped ``ns`` (``position_planned``).
-
-        The setpoint ``sp`` used, as streamed; else (real time) the newest fresh one; else ().
-        """
-        if sp is None:
-            if self.lockstep:
-                return ()
-            found = self._realtime_setpoint(ns)
-            if found is None:
-                return ()
-            sp = found[1]
-        return sp[0:self.task_dim]
-
     def _no_setpoint(self, ns, q, qd, now_ns, late=None):
         """Answer a state without a fresh (or timely) setpoint: hold or zero effort."""
         if late is not None:
             why = ('setpoint stream late: the newest is %.3g s old, carried forward %g s at '
                    'most' % (late, self.config.carry_forward_time))
-        elif self._setpoint_used:
+        elif self.reference.used:
             why = ('stale setpoint: none stamped within %g s before the state%s'
-                   % (self.stale_timeout, self._sp_refusal_note()))
+                   % (self.stale_timeout, self.setpoints.refusal_note()))
         else:
-            why = 'no setpoint yet' + self._sp_refusal_note()
-        if not self._stale_now and (late is not None or self._setpoint_used):
+            why = 'no setpoint yet' + self.setpoints.refusal_note()
+        if not self._stale_now and (late is not None or self.reference.used):
             self._stale_now = True
             self.stale_periods += 1
         if not self.hold_on_stale:
@@ -832,27 +563,6 @@ class ControlLoop:
             self.holds += 1
             self.log(WARN, 'hold', why + ': holding position')
         return self._tick(ns, q, qd, None, None, now_ns, why, late is not None)
-
-    def _sp_refusal_note(self):
-        text = self._last_sp_refusal
-        return ' (last setpoint refused: %s)' % text if text else ''
-
-    def _realtime_setpoint(self, ns):
-        """
-        Return (stamp_ns, values) of the newest fresh setpoint for ns, or None.
-
-        Fresh: stamped <= ns + dt/2 and not older than stale_timeout.
-        """
-        recent = self._recent
-        limit = ns + self._half_ns
-        while len(recent) > 1 and recent[1][0] <= limit:
-            del recent[0]
-        if not recent or recent[0][0] > limit:
-            return None
-        found = recent[0]
-        if (ns - found[0]) * 1e-9 > self.stale_timeout:
-            return None
-        return found
 
     def on_setpoint(self, ns, values, now_ns, mono):
         """
@@ -864,31 +574,21 @@ class ControlLoop:
         Lockstep: the state waiting for it is answered now. A setpoint the guards refuse is
         dropped (counted, the reason logged and noted for the next hold's message).
         """
-        reach, vmax, amax = self._sp_bounds
-        reason = setpoint_refusal(values, reach, vmax, amax, self.task_dim)
+        stream = self.setpoints
+        reason = stream.refusal_of(values)
         if reason is not None:
             self.refuse_setpoint(ns, reason)
             return None
-        self._last_sp_refusal = ''
-        self._setpoint_seen = True
-        if self.standby:
-            self._sp_wall = mono    # only a spare's readiness reads it
+        stream.taken(mono, self.standby)
         if not self.lockstep:
-            recent = self._recent
-            recent.append((ns, values))
-            if len(recent) > 1000:
-                del recent[:500]
+            stream.add(ns, values)
             return None
         pending = self.pending
         if pending is not None and pending[0] == ns:
             self.pending = None
             return self._tick(ns, pending[1], pending[2], ns, values, now_ns)
         if ns > self.last_ns:
-            setpoints = self._setpoints
-            setpoints[ns] = values
-            if len(setpoints) > 10000:
-                for key in sorted(setpoints)[:5000]:
-                    del setpoints[key]
+            stream.keep(ns, values)
         return None
 
     def on_setpoints(self, samples, mono, publish):
@@ -926,7 +626,7 @@ class ControlLoop:
         ``count`` > 1: a batch of that many from ``ns`` on, dropped for one reason.
         """
         self.refused_setpoints += count
-        self._last_sp_refusal = reason
+        self.setpoints.refused(reason)
         what = ('setpoint stamped %d ns' % ns if count == 1 else
                 '%d setpoints from the one stamped %d ns' % (count, ns))
         self.log(ERROR, 'setpoint', '%s refused: %s; dropped' % (what, reason))
@@ -952,7 +652,7 @@ class ControlLoop:
         """
         pending = self.pending
         if pending is not None:
-            if self._setpoint_seen and mono - pending[3] > self.stale_timeout:
+            if self.setpoints.seen and mono - pending[3] > self.stale_timeout:
                 self.pending = None
                 return self._no_setpoint(pending[0], pending[1], pending[2], now_ns)
             return None
@@ -967,13 +667,13 @@ class ControlLoop:
             if not self._commanded:
                 return None     # nothing to replace (the driver got no computed command)
             why = ('stale state: no joint_states within %g s: %s'
-                   % (self.stale_timeout, _STOP_SAID))
+                   % (self.stale_timeout, STOP_SAID))
             self.log(ERROR, None, why)
-            self._stale_stop = True
-            self._stale_reason = why
-            self.readiness_note = (self.last_ns, False, why)
-            self._ask_brake('stale state: no joint_states within %g s' % self.stale_timeout)
-            self._brake_asked = False       # a later stop asks again
+            self.watch.stale_reason = why
+            self.watch.note = (self.last_ns, False, why)
+            self.requests.ask_brake('stale state: no joint_states within %g s'
+                                    % self.stale_timeout)
+            self.requests.stop_over()       # a later stop asks again
             res = self._answer_stop(self.last_ns, STATUS_STALE_STATE, why, now_ns)
             # The arm may move meanwhile: the next state starts a hold / blend from it.
             self.shaper.reset()
@@ -985,7 +685,7 @@ class ControlLoop:
     def _tick(self, ns, q, qd, sp_ns, sp, now_ns, hold_reason='', late=False):
         """Compute the answer to the state stamped ns (sp None: hold)."""
         status = 0
-        planned = self._planned(ns, sp)
+        planned = self.setpoints.planned(ns, sp, self.lockstep)
         shaper = self.shaper
         law = self.law
         if self.lockstep or self.last_ns < 0:
@@ -997,74 +697,23 @@ class ControlLoop:
                 self.log(WARN, 'dt', 'state stamps %g s apart, outside [0.25, 4] x '
                          'control_period: the law uses dt = %g s'
                          % ((ns - self.last_ns) * 1e-9, dt))
-        if sp is None:
-            self._late = False
-            if shaper.mode != MODE_HOLD:
-                ref = shaper.hold(law.model.fk(q).tolist(), ns * 1e-9)
-                self._rate_armed = self._prev_cmd is not None
-            else:
-                ref = shaper.hold(None, ns * 1e-9)
-            status |= STATUS_HOLDING
-            if late:
-                status |= STATUS_SETPOINT_LATE
-            elif self._setpoint_used:
-                status |= STATUS_STALE_SETPOINT
-        else:
-            if not self.lockstep:
-                age_ns = ns - sp_ns
-                if age_ns > 0:
-                    sp = extrapolate(sp, age_ns * 1e-9)
-                late = age_ns > self._late_ns
-                if late:
-                    status |= STATUS_SETPOINT_LATE
-                elif self._late:
-                    shaper.restart_blend()       # the stream is back: no step to it
-                self._late = late
-            p_now = law.model.fk(q).tolist() if shaper.mode == MODE_NONE else None
-            ref, blending = shaper.track(ns * 1e-9, sp, p_now)
-            self._setpoint_used = True
+        ref, bits, held = self.reference.step(law.model, q, ns, sp_ns, sp, late)
+        status |= bits
+        if held:
+            self._rate_armed = self._prev_cmd is not None
+        if sp is not None:
             self._stale_now = False
-            if blending:
-                status |= STATUS_RESUMING
-        stiffness = shaper.stiffness(self._hold_stiffness)
+        stiffness = self.reference.stiffness()
         if stiffness != law.stiffness:
             law.set_stiffness(stiffness)
-        m = self.task_dim
-        p_ref = ref[0:m]
-        pred = self._predictor
+        p_ref = ref[0:self.task_dim]
         limits = self._limits
-        fault = None
         fm = self.failures
-        if fm is not None:
-            fm.before_law(ns, q, qd, self._prev_cmd, self._effort_of(len(q)))
-        try:
-            if fm is not None and fm.cannot_track:
-                out = fm.least_harm(q, qd, p_ref, self._last_det)
-            elif pred is None:
-                out = law.step(q, qd, p_ref, ref[m:2 * m], ref[2 * m:3 * m], dt)
-            else:
-                out = self._predicted_step(pred, ns, q, qd, ref, dt, now_ns)
-        except (FreejointValueError, ArithmeticError) as exc:
-            out = None
-            fault = 'result (%s: %s)' % (type(exc).__name__, exc)
-        if out is not None:
-            if fm is not None:
-                out = fm.after_law(out)
-            tau = out.tau.tolist()
-            effort = tau if self._identity else [tau[i] for i in self._cmd_index]
-            values = law.state_values()
-            fault = law_output_fault(effort, limits, values, law.state_bounds)
-        if fault is not None:
-            self.faults += 1
-            law.restore_state(self._good_state)
-            effort = list(self._prev_cmd) if self._prev_cmd is not None else list(self._zero)
+        out, effort, values, fault = self.stepper.step(
+            ns, q, qd, ref, dt, now_ns, fm, self._prev_cmd,
+            self.inputs.effort_of(len(q)) if fm is not None else None)
+        if fault:
             status |= STATUS_LAW_FAULT
-            self.log(ERROR, 'fault', 'the law gave a non-finite or out-of-range %s: not '
-                     'published, law state restored, previous command repeated' % fault)
-            out = self._fault_output(q)
-            values = law.state_values()
-        else:
-            self._good_state = law.save_state()
         status |= out.status
         if self._rate_armed:
             effort, clipped, rated = limit_effort(effort, limits, self._prev_cmd,
@@ -1074,8 +723,7 @@ class ControlLoop:
             else:
                 self._rate_armed = False
         self._prev_cmd = effort
-        if pred is not None:
-            self._push(effort)
+        self.stepper.push(effort)
         res = self.result
         res.repeated = False
         res.stamp_ns = ns
@@ -1085,22 +733,13 @@ class ControlLoop:
         res.sliding = out.s
         res.law_state_values = values
         res.det_dd = out.det
-        res.position = out.p if pred is None else law.model.fk(q)
+        res.position = out.p if self.stepper.predictor is None else law.model.fk(q)
         res.position_desired = p_ref
         res.position_planned = planned
-        if planned:
-            plan_error = math.dist(res.position, planned)
-            self._plan_error_last = plan_error
-            if plan_error > self._plan_error_max:
-                self._plan_error_max = plan_error
-        else:
-            self._plan_error_last = None
-        ref_error = math.hypot(*out.e)
-        if ref_error > self._ref_error_max:
-            self._ref_error_max = ref_error
+        ref_error = self.figures.track(res.position, planned, out.e)
         res.status = status
-        res.message = _status_message(status, out.det, self.config, hold_reason,
-                                      shaper) if status else ''
+        res.message = status_message(status, out.det, self.config, hold_reason,
+                                     shaper) if status else ''
         if fm is not None and fm.message:
             res.message = fm.message + ('; ' + res.message if res.message else '')
         if sp_ns is None:
@@ -1119,16 +758,15 @@ class ControlLoop:
             age_ns = now_ns - ns
             res.state_age = age_ns * 1e-9
             res.latency_ns = age_ns
-        self.period_bits |= status
+        self.figures.bits |= status
         self.last_ns = ns
         self._last_sp = p_ref
-        self._last_det = out.det
         self.ticks += 1
         self._commanded = self._ever_commanded = True
-        guard = self._readiness
+        guard = self.watch.guard
         if guard is not None and guard.ready:
             holding = sp is None
-            limit = self._max_hold_error if holding else self._max_error
+            limit = self.watch.error_limit(holding)
             if limit:
                 error = ref_error
                 if error > limit:
@@ -1143,21 +781,13 @@ class ControlLoop:
                       % (error * 1e3, limit * 1e3, 'readiness_max_hold_error while holding'
                          if holding and self.config.readiness_max_hold_error
                          else 'readiness_max_error')):
-            self._readiness_changed(1, ns)
+            self.watch.changed(1, ns)
             self._said_ns = ns
-        if self._guard_brakes:
+        if self.watch.brakes:
             return self._withhold(ns, now_ns)
-        if self._guard_damps:
+        if self.watch.damps:
             return self._damped_stop(ns, q, qd, now_ns)
         return self.result
-
-    def _effort_of(self, n):
-        """Return the state's efforts in model order (n), or None (none or not finite)."""
-        eff = self._state_effort
-        idx = self._map[0] if self._map is not None else None
-        if eff is None or idx is None or len(eff) < len(self._map_names):
-            return None
-        return failures.finite_or_none([eff[i] for i in idx], n)
 
     def on_failure_notice(self, name):
         """
@@ -1171,36 +801,6 @@ class ControlLoop:
             return why
         return self.failures.notice(name)
 
-    def _fault_output(self, q):
-        """Return the published terms of a tick whose law result was refused."""
-        zero = np.zeros(self.task_dim)
-        return ControlOutput(np.zeros(len(self._zero)), zero, zero, zero,
-                             np.zeros(0), 0.0, zero, self._last_det,
-                             self.law.model.fk(q), 0)
-
-    def _predicted_step(self, pred, ns, q, qd, ref, dt, now_ns):
-        """Run the law on the state predicted to when the command takes effect."""
-        age = (now_ns - ns) * 1e-9
-        ticks = min(pred.max_ticks, max(1, math.ceil(age / self._dt - 1e-9)))
-        m = self.task_dim
-        p_d, v_d, a_d = ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
-        try:
-            q_pred, qd_pred = pred.predict(q, qd, ticks)
-            h = ticks * self._dt
-            p, v, a = extrapolate_setpoint(p_d, v_d, a_d, h)
-        except FreejointValueError as exc:
-            self.log(ERROR, 'predict', 'state prediction failed (%s): the law uses the '
-                     'measured state' % exc)
-            return self.law.step(q, qd, p_d, v_d, a_d, dt)
-        return self.law.step(q_pred, qd_pred, p, v, a, dt)
-
-    def _push(self, effort):
-        """Record the command sent (command order) in the predictor (model order)."""
-        tau = [0.0] * len(effort)
-        for j, i in enumerate(self._cmd_index):
-            tau[i] = effort[j]
-        self._predictor.push(tau)
-
     def _answer_zero(self, ns, status, message, now_ns):
         """Return the zero-effort answer to the state stamped ns, saying why."""
         law = self.law
@@ -1210,7 +810,7 @@ class ControlLoop:
         res.effort = self._zero
         res.error = res.error_rate = res.sliding = self._zero_task
         res.law_state_values = law.state_values()
-        res.det_dd = self._last_det
+        res.det_dd = self.stepper.last_det
         q = self._last_q
         res.position = law.model.fk(q) if q is not None else self._last_sp
         res.position_desired = self._last_sp
@@ -1222,7 +822,7 @@ class ControlLoop:
         res.dt = 0.0
         res.state_age = 0.0 if self.lockstep or ns < 0 else (now_ns - ns) * 1e-9
         res.latency_ns = None
-        self.period_bits |= status
+        self.figures.bits |= status
         if ns >= 0:
             self.last_ns = ns
         self.zero_answers += 1
@@ -1230,168 +830,22 @@ class ControlLoop:
         # The arm got zero: the next computed command ramps up from it.
         self._prev_cmd = list(self._zero)
         self._rate_armed = True
-        if self._predictor is not None:
-            self._push(self._zero)
+        self.stepper.push(self._zero)
         return res
 
     # -- status ------------------------------------------------------------------------
+    faults = _part('stepper', 'faults', 'The law faults so far.')
+
     def counters(self):
         """Return the counters a status period starts from (answers, faults, refusals)."""
         return (self.ticks + self.zero_answers + self.stops, self.faults, self.refused_states,
                 self.refused_setpoints, self.old_states)
 
     def diagnostics(self, elapsed, start, silent, latency, states_topic, activated_at):
-        """
-        Return (errors, warnings, ok message, key/values) of the status period now ending.
-
-        Parameters
-        ----------
-        elapsed : float
-            Length of the period [s].
-        start : tuple
-            :meth:`counters` at its start.
-        silent : bool
-            No state came in the period.
-        latency : (str, str)
-            Mean and maximum latency [ms] of the period, as text.
-        states_topic : str
-            The joint-states topic's resolved name (for the text).
-        activated_at : float or None
-            System time [s] of the activation from standby.
-
-        """
-        answers0, faults0, refused_states0, refused_sp0, old0 = start
-        answers = self.ticks + self.zero_answers + self.stops - answers0
-        faults = self.faults - faults0
-        refused_states = self.refused_states - refused_states0
-        refused_sp = self.refused_setpoints - refused_sp0
-        old = self.old_states - old0
-        bits = self.period_bits
-        self.period_bits = 0
-        plan_max, self._plan_error_max = self._plan_error_max, 0.0
-        ref_max, self._ref_error_max = self._ref_error_max, 0.0
-        res = self.result
-        current = res.status
-        period = 'in the last %.1f s' % elapsed
-        errors = []
-        warnings = []
-        no_state = None
-        if self.last_state_wall is None:
-            no_state = 'no joint_states yet on %s' % states_topic
-        elif self.stale_reported:
-            no_state = 'no joint_states for %g s: %s' % (
-                self.stale_timeout, 'zero effort commanded' if self.lockstep else
-                'the stop command sent (gravity hold), the brakes asked for')
-        elif silent:
-            no_state = 'no joint_states %s' % period
-        if no_state is not None:
-            if self.lockstep:
-                warnings.append(no_state + ' (lockstep: simulation time stands still)')
-            else:
-                errors.append(no_state)
-        guard = self._readiness
-        if guard is not None and not guard.ready:
-            errors.append('%s: %s' % (guard.reason, 'stopped (stop command, brakes asked '
-                                      'for); %d states not answered' % self.withheld
-                                      if self._guard_brakes else 'holding position'))
-        if faults:
-            errors.append('%d law faults %s: the previous command repeated, theta_hat '
-                          'restored' % (faults, period))
-        if current & STATUS_HOLDING or (current & STATUS_STALE_SETPOINT
-                                        and not self.hold_on_stale):
-            warnings.append(res.message)
-        elif bits & STATUS_HOLDING:
-            warnings.append('held %s' % period)
-        for bit, text in ((STATUS_RATE_LIMITED, 'torque change rate limited'),
-                          (STATUS_TORQUE_LIMITED, 'torque limited'),
-                          (STATUS_SETPOINT_LATE, 'setpoint stream late (carried forward)'),
-                          (STATUS_DT_CLAMPED, 'state stamps irregular: dt clamped')):
-            if bits & bit:
-                warnings.append('%s %s' % (text, period))
-        for count, what in ((refused_states, 'states refused'),
-                            (refused_sp, 'setpoints refused'),
-                            (old, 'states skipped as too old')):
-            if count:
-                warnings.append('%d %s %s' % (count, what, period))
-        if self.pending is not None:
-            ok = ('waiting for the setpoint of the state stamped %d ns (lockstep)'
-                  % self.pending[0])
-        else:
-            ok = res.message or 'tracking'
-        if self.failures is not None:
-            extra = self.failures.diagnostics(errors, warnings)
-        else:
-            extra = ()
-        values = (
-            ('mode', 'lockstep' if self.lockstep else 'realtime'),
-            ('activated from standby', 'no' if activated_at is None
-             else 'at %.3f (system time)' % activated_at),
-            ('answer rate [Hz]', '%.1f' % (answers / elapsed if elapsed > 0.0 else 0.0)),
-            ('latency mean [ms]', latency[0]),
-            ('latency max [ms]', latency[1]),
-            ('status', current),
-            ('status message', res.message),
-            ('error vs plan [mm]', '-' if self._plan_error_last is None
-             else '%.4g' % (self._plan_error_last * 1e3)),
-            ('error vs plan max [mm]', '%.4g' % (plan_max * 1e3)),
-            ('error vs controller reference max [mm]', '%.4g' % (ref_max * 1e3)),
-            ('ticks', self.ticks),
-            ('zero-effort answers', self.zero_answers),
-            ('holds', self.holds),
-            ('stale setpoint periods', self.stale_periods),
-            ('refused states', self.refused_states),
-            ('refused setpoints', self.refused_setpoints),
-            ('law faults', self.faults),
-            ('old states skipped', self.old_states)) + extra
-        if guard is not None:
-            values += (
-                ('readiness', 'ready' if guard.ready else 'not ready'),
-                ('readiness trips', guard.trips),
-                ('tolerated delay [ms]', '%.3g' % (guard.max_delay * 1e3)),
-                ('window mean delay [ms]', '-' if guard.last_delay is None
-                 else '%.3g' % (guard.last_delay * 1e3)),
-                ('window answered [%]', '-' if guard.last_rate is None
-                 else '%.0f' % (guard.last_rate * 100.0)),
-                ('states not answered (stopped)', self.withheld),
-                ('stop commands', self.stops),
-                ('brake requests', self.brake_requests))
-        return errors, warnings, ok, values
+        """Return (errors, warnings, ok message, key/values) of the status period ending."""
+        return loop_status.diagnostics(self, elapsed, start, silent, latency, states_topic,
+                                       activated_at)
 
     def report(self):
-        """One line for the end of the run: ticks, zero-effort answers, holds, refusals."""
-        return ('controller stopped: %d ticks computed, %d zero-effort answers (stale or bad '
-                'input), %d holds, %d states and %d setpoints refused, %d law faults, %d '
-                'states skipped as too old%s'
-                % (self.ticks, self.zero_answers, self.holds, self.refused_states,
-                   self.refused_setpoints, self.faults, self.old_states,
-                   '' if self._readiness is None else
-                   ', readiness guard: %d trips, %d stop commands, %d states not answered, %d '
-                   'brake requests' % (self._readiness.trips, self.stops, self.withheld,
-                                       self.brake_requests)))
-
-
-def _status_message(status, det, cfg, hold_reason, shaper):
-    """Return the ControllerState message of a computed answer's status bits."""
-    parts = []
-    if status & STATUS_HOLDING:
-        hold = shaper.hold_position
-        parts.append('holding at (%s) m: %s' % (', '.join('%.4f' % x for x in hold),
-                                                hold_reason))
-    if status & STATUS_RESUMING:
-        parts.append('resuming: blending from the hold to the setpoint over %.3g s'
-                     % shaper.blend_duration)
-    if status & STATUS_NEAR_SINGULAR:
-        parts.append('near singular: |det(Da Da^T)| = %.3g < %.3g, damped pseudo-inverse'
-                     % (det, cfg.gains.det_threshold))
-    if status & STATUS_TORQUE_LIMITED:
-        parts.append('torque limited to %s N m' % list(cfg.effort_limits))
-    if status & STATUS_RATE_LIMITED:
-        parts.append('torque change limited to %g N m/s' % cfg.effort_rate_limit)
-    if status & STATUS_LAW_FAULT:
-        parts.append('law fault: non-finite or out-of-range output, previous command repeated')
-    if status & STATUS_SETPOINT_LATE and not status & STATUS_HOLDING:
-        parts.append('setpoint late: the newest is older than %d control periods, carried '
-                     'forward along its velocity and acceleration' % cfg.late_periods)
-    if status & STATUS_DT_CLAMPED:
-        parts.append('state stamps outside [0.25, 4] x control_period: dt clamped')
-    return '; '.join(parts)
+        """Return the end of the run's line (``loop_status.report`` of this loop)."""
+        return loop_status.report(self)

@@ -18,7 +18,8 @@ import math
 from freejoint_common.arm_description import ARM_JOINT_NAMES, arm_joint_names, ARM_JOINTS
 from freejoint_common.arm_description import ARM_SPECS, resolve_arm
 from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR
-from freejoint_common.schema import LoopConfig, NOMINAL_SCALE, one_of, Param
+from freejoint_common.schema import LoopConfig, NOMINAL_SCALE, nullspace_params, one_of
+from freejoint_common.schema import Param
 from freejoint_common.schema import SCHEDULING, Schema, unique_names
 from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.circles import HORIZONTAL_SETTLE, MODULATION
@@ -134,15 +135,6 @@ def _follows_limits(name):
     return follows
 
 
-def _nonnegative_floats(name):
-    def check(value):
-        vals = _floats(name, value)
-        if any(not 0.0 <= v <= 1e4 for v in vals):
-            return f'values must be in [0, 1e4], got {list(vals)}'
-        return None
-    return check
-
-
 def _positive_floats(name):
     def check(value):
         vals = _floats(name, value)
@@ -180,22 +172,7 @@ FAILURE_PARAMS = (
     Param('failure_use_effort', True,
           "detect: also compare the command with the JointState's effort (a failed joint "
           'reads 0) when the state has one per joint', read_only=True),
-    Param('nullspace_kd', 0.0,
-          'null-space damping [N m s/rad] of the active joint rates when more joints are '
-          'driven than the task has (r > 2, freejoint_core.internal.NullSpace); 0 = none '
-          "(the paper's law exactly)", (0.0, 1e4), read_only=True),
-    Param('nullspace_kd_joints', [0.0],
-          'spatial law: null-space damping per active joint [N m s/rad] (r values, the '
-          'active joints base to tip), in place of nullspace_kd; [0.0] (default) = '
-          "nullspace_kd for every joint. fj arm init sets it from the joints' effective "
-          'inertia (freejoint_core.arm_gains)', read_only=True,
-          validator=_nonnegative_floats('nullspace_kd_joints')),
-    Param('nullspace_kp', 0.0,
-          "null-space posture stiffness [N m/rad] of the spatial law (law 'spatial'): the "
-          "active joints are pulled to their angles at the law's first tick after start-up "
-          'or ~/reset, through the null space (the task untouched), so that they do not '
-          'drift over a long hold; 0 = none. Planar laws: must be 0', (0.0, 1e4),
-          read_only=True),
+    nullspace_params(),
 )
 
 # The free link's damping (r = m; freejoint_core.laws.FreeLinkDampedLaw).

@@ -46,7 +46,7 @@ from .control import Gains
 from .errors import FreejointValueError
 from .failure import (DEFAULT_K_O, DEFAULT_MARGIN, DEFAULT_TICKS, least_harm_torque,
                       Reconfigurer, TRACKING)
-from .internal import FreeLinkModulation, NullSpace
+from .internal import FreeLinkModulation
 from .laws import make_law
 from .offline import DEFAULT_DT, initial_state
 from .plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
@@ -172,9 +172,8 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
                                **dict(free_link_damping))
         except (TypeError, ValueError) as exc:
             raise FreejointValueError(f'free_link_damping: {exc}') from None
-    ns = NullSpace(kd=nullspace_kd) if actuated == 'all' else None
     ctrl = make_law(law, nominal, Gains(), params=law_params,
-                    **({} if ns is None else {'nullspace': ns}))
+                    **({'nullspace_kd': nullspace_kd} if actuated == 'all' else {}))
     plant = Plant(real, dt_sub, dist_bound=dist_bound, seed=seed, q0=q0)
     fail = sorted(fail, key=lambda f: f[1])
     for j, at in fail:
@@ -225,9 +224,7 @@ def run_failure_case(case, seed, fail=(), *, actuated='all', notice=False, effor
             detected_by = detected_by or how
             sw = rec.switch(j, t, how, q, qd)
             if sw.verdict == TRACKING:
-                if sw.nominal.r <= 2:
-                    ctrl.nullspace = None
-                ctrl.set_nominal(sw.nominal)
+                ctrl.set_nominal(sw.nominal)    # (its null space dropped when r = 2)
                 last_free = sw.nominal.passive == (sw.nominal.n - 1,)
                 modulation = FreeLinkModulation(sw.nominal, **free_link_damping) \
                     if free_link_damping is not None and last_free else None

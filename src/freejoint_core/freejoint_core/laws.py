@@ -27,9 +27,10 @@ reference passes through the free link's damping first (the controller's paramet
 
 from dataclasses import replace
 
+from freejoint_core.arm import ArmModel
 from freejoint_core.control import RobustController
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.internal import FreeLinkModulation
+from freejoint_core.internal import FreeLinkModulation, NullSpace
 from freejoint_core.law_base import ControlLaw, INF, LAWS, register_law
 
 __all__ = ('ControlLaw', 'FreeLinkDampedLaw', 'gain_schema', 'INF', 'LAWS', 'make_law',
@@ -43,16 +44,35 @@ class RobustLaw(RobustController, ControlLaw):
     State: ``theta_hat[0..4]`` (after the tick's update), ``rho_hat`` (used in the tick)
     and ``delta_v[0..m-1]`` (the robust term [m/s^2], m the model's task dimension);
     ``theta_hat`` within ``[0, gains.theta_max]``.
+
+    Options beyond ``RobustController``'s (``nullspace``, ``use_fast``): ``nullspace_kd``
+    [N m s/rad], the null-space damping ``NullSpace(kd=nullspace_kd)`` while the nominal
+    arm drives more joints than the task has (r > 2: installed, and dropped while a failure
+    leaves r = 2); ``nullspace_kp`` must be 0 (no posture term on a planar arm).
     """
 
     name = 'robust'
     accelerator = 'robust'
 
-    def __init__(self, nominal_params, gains=None, model=None, nullspace=None, use_fast=True):
+    def __init__(self, nominal_params, gains=None, model=None, nullspace=None, use_fast=True,
+                 nullspace_kd=None, nullspace_kp=0.0):
         self._last = None
+        if nullspace_kp:
+            raise FreejointValueError(f"nullspace_kp: law 'robust' (a planar arm) has no "
+                                      f'posture term; expected 0, got {nullspace_kp!r}')
+        # The null-space damping nullspace_kd: on an arm with driven joints to spare only,
+        # dropped and put back as set_nominal's arm has them (a joint failing, its release).
+        self._spare_nullspace = None if nullspace is not None or nullspace_kd is None \
+            else NullSpace(kd=nullspace_kd)
         super().__init__(nominal_params, gains, use_fast=use_fast, model=model,
                          nullspace=nullspace)
         self.state_names = _robust_state_names(self.model.task_dim)
+
+    def set_nominal(self, params, model=None):
+        """Take a new nominal model (``RobustController.set_nominal``), the null space its."""
+        if self._spare_nullspace is not None:
+            self.nullspace = self._spare_nullspace if params.r > ArmModel.task_dim else None
+        super().set_nominal(params, model)
 
     def set_gains(self, gains):
         """Install new gains (``RobustController.set_gains``) and the state's bounds."""
@@ -100,7 +120,7 @@ def gain_schema():
     return tuple(g for factory in LAWS.values() for g in getattr(factory, 'gain_schema', ()))
 
 
-def make_law(name, nominal, gains, model=None, params=None, **options):
+def make_law(name, nominal, gains, model=None, params=None, free_link=None, **options):
     """
     Build the control law registered as ``name``.
 
@@ -117,8 +137,12 @@ def make_law(name, nominal, gains, model=None, params=None, **options):
     params : mapping of str to float, optional
         Laws' own gains by namespaced name (``vsc.phi``); the ones of law ``name`` are
         passed to it (``params=``), the others ignored.
+    free_link : mapping, optional
+        The free link's damping: the law wrapped in :class:`FreeLinkDampedLaw` of these
+        keywords (``delta_max`` and ``FreeLinkModulation``'s); None: none.
     **options
-        Passed to the factory (e.g. ``nullspace`` of the paper's law).
+        Passed to the factory (e.g. ``nullspace`` of the paper's law, ``nullspace_kd``
+        and ``nullspace_kp`` of the controller's parameters).
 
     Returns
     -------
@@ -138,22 +162,25 @@ def make_law(name, nominal, gains, model=None, params=None, **options):
         if not getattr(factory, 'gain_schema', ()):
             raise FreejointValueError(f'{next(iter(own))}: law {name!r} has no gains of its own')
         options['params'] = own
-    return factory(nominal, gains, model=model, **options)
+    law = factory(nominal, gains, model=model, **options)
+    return law if free_link is None else FreeLinkDampedLaw(law, **free_link)
 
 
 register_law(RobustLaw.name, RobustLaw)
 
 
-def _spatial_law(nominal, gains, model=None, nullspace=None, free_damping=None):
+def _spatial_law(nominal, gains, model=None, nullspace=None, free_damping=None,
+                 nullspace_kd=0.0, nullspace_kp=0.0):
     """
     Build the spatial law (``freejoint_core.spatial_law``, imported on first use).
 
-    ``SpatialControlLaw`` (the controller's); with ``nullspace`` or ``free_damping`` the
-    study's ``SpatialLaw`` of those options.
+    ``SpatialControlLaw`` (the controller's, its null space of ``nullspace_kd`` and
+    ``nullspace_kp``); with ``nullspace`` or ``free_damping`` the study's ``SpatialLaw`` of
+    those options (the offline runner's, the planner's nominal closed loop).
     """
     if nullspace is None and free_damping is None:
         from freejoint_core.spatial_law import SpatialControlLaw
-        return SpatialControlLaw(nominal, gains, model)
+        return SpatialControlLaw(nominal, gains, model, nullspace_kd, nullspace_kp)
     from freejoint_core.spatial_law import SpatialLaw
     return SpatialLaw(nominal, gains, nullspace, free_damping=free_damping or 0.0)
 

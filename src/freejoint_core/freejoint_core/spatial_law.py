@@ -133,6 +133,11 @@ class SpatialOutput(NamedTuple):
     p: np.ndarray
     status: int
 
+    @property
+    def det(self):
+        """Return the conditioning as ``ControlOutput.det`` names it: ``kappa``."""
+        return self.kappa
+
 
 def arm_reach(arm):
     """
@@ -456,12 +461,16 @@ class SpatialControlLaw(ControlLaw):
         Default ``SpatialGains(task_dim=nominal.m)``.
     model : None
         Not used (the nominal model is the model); accepted for the registry's signature.
+    nullspace_kd : float or tuple of float, (r,)
+        Null-space damping [N m s/rad] (:meth:`set_nullspace_gains`).
+    nullspace_kp : float
+        Posture stiffness [N m/rad] (:meth:`set_nullspace_gains`).
 
     """
 
     name = 'spatial'
 
-    def __init__(self, nominal, gains=None, model=None):
+    def __init__(self, nominal, gains=None, model=None, nullspace_kd=0.0, nullspace_kp=0.0):
         if isinstance(nominal, SpatialArm) and nominal.m != 3:
             raise FreejointValueError(
                 f'nominal: the spatial law takes m = 3 through the controller (a position '
@@ -473,6 +482,8 @@ class SpatialControlLaw(ControlLaw):
         names = tuple('theta_hat[%d]' % i for i in range(5))
         self.state_names = names + ('rho_hat', 'kappa')
         self._bounds()
+        if nullspace_kd != 0.0 or nullspace_kp:     # a tuple: per joint
+            self.set_nullspace_gains(nullspace_kd, nullspace_kp)
 
     def _bounds(self):
         tmax = self.law.gains.theta_max

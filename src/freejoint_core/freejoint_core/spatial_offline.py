@@ -296,7 +296,7 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
         t_law += time.perf_counter() - c0
         err[k] = np.linalg.norm(out.e)
         trace['p'][k], trace['p_d'][k], trace['q'][k], trace['tau'][k] = out.p, p_d, q, out.tau
-        trace['kappa'][k] = out.kappa if hasattr(out, 'kappa') else out.det
+        trace['kappa'][k] = out.det       # the conditioning (kappa) of either output
         trace['theta'][k] = out.theta
         tau_ratio = max(tau_ratio, float(np.max(np.abs(out.tau) / limit)))
         try:

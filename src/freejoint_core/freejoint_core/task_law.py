@@ -98,10 +98,23 @@ class TaskLaw(HoldStiffness, ControlLaw):
         The nominal model's implementation (default ``make_model(nominal)``).
     params : mapping of str to float, optional
         The law's own gains by namespaced name (its ``gain_schema``; defaults otherwise).
+    nullspace_kd, nullspace_kp : float
+        The controller's null-space parameters: such a law has no null-space term, so
+        both must be 0 on an arm with more driven joints than the task has (r > 2).
+
+    Raises
+    ------
+    FreejointValueError
+        A null-space parameter not 0 on such an arm.
 
     """
 
-    def __init__(self, nominal, gains=None, model=None, params=None):
+    def __init__(self, nominal, gains=None, model=None, params=None, nullspace_kd=0.0,
+                 nullspace_kp=0.0):
+        for option, value in (('nullspace_kd', nullspace_kd), ('nullspace_kp', nullspace_kp)):
+            if value != 0.0 and getattr(nominal, 'r', 0) > 2:
+                raise FreejointValueError(f'{option}: law {self.name!r} has no null-space term; '
+                                          f'expected 0, got {value!r}')
         self.stiffness = 1.0
         self.params = law_params(self.name, self.gain_schema, params)
         self.gains = None

@@ -17,7 +17,7 @@ import math
 
 from freejoint_common.arm_description import ARM_SPECS
 from freejoint_common.schema import CASE, CONTROL_PERIOD, FRAME_ID, NOMINAL_SCALE, Param
-from freejoint_common.schema import one_of, SCHEDULING, Schema
+from freejoint_common.schema import nullspace_params, one_of, SCHEDULING, Schema
 from freejoint_core.trajectory import CircleQuintic
 
 _CIRCLE = {name: p.default for name, p in
@@ -42,17 +42,6 @@ def _normal(value):
         return f'expected 3 numbers, got {value!r}'
     if len(vec) != 3 or not all(math.isfinite(v) for v in vec):
         return f'expected 3 finite numbers, got {value!r}'
-    return None
-
-
-def _kd_joints(value):
-    """Refuse null-space dampings that are not finite numbers in [0, 1e4]."""
-    try:
-        vec = [float(v) for v in value]
-    except (TypeError, ValueError):
-        return f'expected numbers, got {value!r}'
-    if not vec or not all(0.0 <= v <= 1e4 for v in vec):
-        return f'expected numbers in [0, 1e4], got {value!r}'
     return None
 
 
@@ -186,17 +175,10 @@ PARAMS = (
           "goal_time_tolerance of its end; 0 = success at the plan's end.", (0.0, 10.0)),
     Param('goal_time_tolerance', 1.0,
           "Time (s) after a plan's end to come within goal_tolerance.", (0.0, 3600.0)),
-    Param('nullspace_kd', 20.0,
-          "Spatial arms: the controller's nullspace_kd [N m s/rad], which the plan's "
-          'nominal closed loop runs with (give both nodes the same value: fj arm init writes '
-          "it into both files); 20 = the shipped arms'. Planar arms: not used.", (0.0, 1e4)),
-    Param('nullspace_kd_joints', [0.0],
-          "Spatial arms: the controller's nullspace_kd_joints (one damping per active joint "
-          '[N m s/rad], or [0.0] = nullspace_kd for all), for the nominal closed loop.',
-          validator=_kd_joints),
-    Param('nullspace_kp', 10.0,
-          "Spatial arms: the controller's nullspace_kp [N m/rad] for the plan's nominal "
-          "closed loop (as nullspace_kd); 10 = the shipped arms'.", (0.0, 1e4)),
+    nullspace_params(20.0, 10.0, read_only=False, role=(
+        "Spatial arms: the controller's parameter, for the plan's nominal closed loop (give "
+        'both nodes the same values: fj arm init writes them into both files; planar arms: '
+        "not used; 20 and 10 = the shipped arms'). The controller's: ")),
     Param('autostart', True,
           'Start the configured circle at activation and after every accepted change of its '
           'parameters.'),

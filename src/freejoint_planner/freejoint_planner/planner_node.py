@@ -105,6 +105,7 @@ from freejoint_common.contract import SETPOINTS, to_ns
 from freejoint_common.diagnostics import Diagnostics, ERROR, OK, WARN
 from freejoint_common.node_tools import NodeParameters, overridable, QOS_OVERRIDES
 from freejoint_common.runner import Lifecycle, run
+from freejoint_common.schema import nullspace_kd
 from freejoint_core.arm import table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.singularity import check_path
@@ -126,7 +127,6 @@ from .planning import end_effector, grid_bound, grid_extent, join_from_arm, join
 from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle, planner_status, READY, SETTLING
 from .planning import prepare_transition, settle_gate_refusal, swing_deg
 from .spatial_planning import check_spatial_plan, describe as describe_spatial, plane_normal
-from .spatial_planning import planner_kd
 from .spatial_planning import spatial_bounds, SpatialRequest, start_point
 from .stream import Plan, SetpointStream
 
@@ -674,7 +674,7 @@ class PlannerNode(Node, Lifecycle):
             p0 = self._spatial.fk(np.asarray(q, dtype=float))
         return check_spatial_plan(self._node_arm.nominal(cfg['nominal_scale']), q, qd, radius,
                                   duration, cfg['max_speed'], cfg['max_acceleration'], p0=p0,
-                                  normal=cfg['plane_normal'], kd=planner_kd(cfg),
+                                  normal=cfg['plane_normal'], kd=nullspace_kd(cfg),
                                   kp=cfg['nullspace_kp'])
 
     def _execute_spatial(self, radius, duration, start_delay, source, verdict=None):

@@ -48,8 +48,8 @@ import time
 from freejoint_core.arm_gains import joint_inertia, mode_steps, rule
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
+from freejoint_core.laws import make_law
 from freejoint_core.spatial_law import arm_reach, gravity_carrying_free_joint, SpatialGains
-from freejoint_core.spatial_law import SpatialLaw
 from freejoint_core.spatial_offline import circle, circle_axes, KD, KP
 from freejoint_core.spatial_plant import SpatialPlant
 from freejoint_core.trajectory import circle_peaks, CircleQuintic
@@ -311,7 +311,7 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
         else None
     nullspace = NullSpace(kd=kd, kp=kp if kp else 0.0, posture=posture, inverse='weighted',
                           projector='dynamic')
-    law = SpatialLaw(nominal, gains, nullspace)
+    law = make_law('spatial', nominal, gains, nullspace=nullspace)
     plant = SpatialPlant(nominal, period, 0.0, 0, q, qd)
     steps = int(math.floor((path.duration + hold) / period + 1e-9)) + 1
     lower, upper = nominal.lower, nominal.upper
@@ -367,12 +367,6 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
     outside = tuple(names[j] for j in free if q_min[j] < lower[j] or q_max[j] > upper[j])
     return LoopCheck(reason, kmin, t_kmin, emax, k + 1, time.perf_counter() - t0,
                      tuple(q_min.tolist()), tuple(q_max.tolist()), outside)
-
-
-def planner_kd(cfg):
-    """Return the planner's null-space damping: ``nullspace_kd_joints``, or ``nullspace_kd``."""
-    per_joint = tuple(float(v) for v in cfg['nullspace_kd_joints'])
-    return float(cfg['nullspace_kd']) if per_joint == (0.0,) else per_joint
 
 
 def too_stiff(nominal, q, kd, period=CHECK_PERIOD):
