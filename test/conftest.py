@@ -3,7 +3,7 @@ import os
 import threading
 import time
 
-from freejoint_tools.harness import clean_stale_fast_dds_shm, Processes
+from freejoint_tools.harness import claim_ros_domain, clean_stale_fast_dds_shm, Processes
 import pytest
 
 
@@ -12,8 +12,10 @@ def _domain():
     Return this test process's ROS domain: FREEJOINT_TEST_DOMAIN, else one of its own.
 
     Under pytest-xdist (``make test`` runs a worker per core and one more) the workers of
-    one run take consecutive domains (modulo 100) from a base drawn from the run's id, so
-    they never share one; otherwise 1 + pid % 100.
+    one run prefer consecutive domains (modulo 100) from a base drawn from the run's id;
+    otherwise 1 + pid % 100 is preferred. The domain is claimed (harness.claim_ros_domain):
+    if another process of this machine holds the one preferred - a worker of another run
+    whose draw coincided, a demo - the next free one is taken, so runs never share one.
     """
     given = os.environ.get('FREEJOINT_TEST_DOMAIN')
     if given:
@@ -21,8 +23,8 @@ def _domain():
     worker = os.environ.get('PYTEST_XDIST_WORKER', '')
     run = os.environ.get('PYTEST_XDIST_TESTRUNUID', '')
     if worker.startswith('gw') and run:
-        return 1 + (int(run[:8], 16) + int(worker[2:])) % 100
-    return 1 + os.getpid() % 100
+        return claim_ros_domain(1 + (int(run[:8], 16) + int(worker[2:])) % 100)
+    return claim_ros_domain(1 + os.getpid() % 100)
 
 
 # Every run (every xdist worker) gets its own domain and sees only this machine, so runs (and

@@ -734,7 +734,8 @@ def main(argv=None):
         overlays = (FULLY_ACTUATED,)
         node_args = {'sim': ['fail_joint:=' + args.fail]}
     if not os.environ.get('ROS_DOMAIN_ID'):
-        os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
+        from freejoint_tools.harness import claim_ros_domain
+        os.environ['ROS_DOMAIN_ID'] = str(claim_ros_domain(1 + os.getpid() % 100))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
     missing = [exe for exe in (executable('freejoint_sim', 'sim_node'),

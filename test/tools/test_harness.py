@@ -1,7 +1,14 @@
 """freejoint_tools.harness.Processes: the process harness of the demo, the bench and the tests."""
+import os
+import signal
 import sys
 
 from freejoint_tools.harness import node_cmd, Processes
+
+CLAIMER = ('import sys, time\n'
+           'from freejoint_tools.harness import claim_ros_domain\n'
+           'print(claim_ros_domain(5, first=1, count=6, lock_dir=sys.argv[1]), flush=True)\n'
+           'time.sleep(60 if sys.argv[2:] else 0)\n')
 
 SLEEPER = ('import signal, sys, time\n'
            'signal.signal(signal.SIGINT, lambda *a: sys.exit(7))\n'
@@ -86,3 +93,27 @@ def test_thread_report_names_the_busy_and_the_sleeping_thread_of_a_process(tmp_p
     assert main[2] == 'S' and float(main[5]) < 0.1, report
     assert other[2] == 'R' and float(other[5]) > float(main[5]), report
     assert main[3] == other[3] == 'OTHER/0'
+
+
+def test_a_claimed_ros_domain_is_not_given_again_until_its_holder_dies(tmp_path, wait):
+    # Two runs that prefer the same domain (two test runs' workers whose draws coincide):
+    # the second gets the next free one, wrapping at the range's end; a holder killed
+    # (SIGKILL, no clean-up of its own) gives its domain back.
+    locks = str(tmp_path / 'locks')
+    procs = Processes(str(tmp_path))
+    try:
+        holders = [procs.start('holder%d' % i, [sys.executable, '-c', CLAIMER, locks, 'hold'])
+                   for i in range(2)]
+        wait(lambda: all(procs.log(h) for h in holders), 30.0, 'both claims')
+        assert sorted(int(procs.log(h)) for h in holders) == [5, 6]
+        wrapped = procs.start('wrapped', [sys.executable, '-c', CLAIMER, locks])
+        wait(lambda: wrapped.poll() is not None, 30.0, 'the wrapped claim')
+        assert wrapped.returncode == 0 and int(procs.log(wrapped)) == 1
+        os.killpg(holders[0].pid, signal.SIGKILL)
+        holders[0].wait(30.0)
+        again = procs.start('again', [sys.executable, '-c', CLAIMER, locks])
+        wait(lambda: again.poll() is not None, 30.0, 'the claim after the kill')
+        assert again.returncode == 0
+        assert int(procs.log(again)) == int(procs.log(holders[0]))
+    finally:
+        procs.stop_all()

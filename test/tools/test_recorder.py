@@ -16,6 +16,10 @@ FLOOD = os.path.join(HERE, '..', 'nodes', 'flood_publisher.py')
 TICK_TOPICS = ('/joint_states', '/setpoints', '/controller_state')
 # what the recorder's ~/status waits for: the topics the publisher sends per tick
 READY_TOPICS = 'ready_topics:=[/clock, %s]' % ', '.join(TICK_TOPICS)
+# the same without /clock, for a publisher without it (system time); the publisher starts
+# the ticks only once the recorder's readers matched (--recorder): a tick published before
+# would be missing from the bag, unreported, and the gap check expects tick 0
+SYSTEM_READY_TOPICS = 'ready_topics:=[%s]' % ', '.join(TICK_TOPICS)
 
 
 def _start_recorder(procs, bag, *params):
@@ -143,11 +147,12 @@ def test_recorder_holds_every_message_of_a_1khz_lockstep_like_run(procs, wait, t
 def test_signal_mid_run_gives_a_finalised_bag_without_gaps(procs, wait, tmp_path, signum):
     from freejoint_tools.bagfile import open_bag
     bag_path = str(tmp_path / 'run')
-    recorder = _start_recorder(procs, bag_path)
+    recorder = _start_recorder(procs, bag_path, '-p', SYSTEM_READY_TOPICS)
     # setpoint offered volatile: the recorder's contract (transient local) subscription
     # does not match it and is replaced by one adapted to the offer
     publisher = procs.start_script(PUBLISHER, 'publisher', ['--ticks', '0', '--rate', '1000',
-                                                            '--setpoint-volatile'])
+                                                            '--setpoint-volatile',
+                                                            '--recorder', '/recorder'])
     mcap = os.path.join(bag_path, 'run_0.mcap')
     wait(lambda: os.path.exists(mcap) and os.path.getsize(mcap) > 100_000, 60.0,
          'the bag to grow (publisher: %s)' % procs.log(publisher))
@@ -222,8 +227,10 @@ def test_sigkill_leaves_a_bag_the_analysis_reads_up_to_the_last_chunk(procs, wai
     from freejoint_tools.bagfile import open_bag
     bag_path = str(tmp_path / 'vertical')
     recorder = _start_recorder(procs, bag_path, '-p', 'flush_period:=0.2', '-p',
-                               'custom_data:=[case=vertical, variant=robust, seed=2]')
-    publisher = procs.start_script(PUBLISHER, 'publisher', ['--ticks', '0', '--rate', '1000'])
+                               'custom_data:=[case=vertical, variant=robust, seed=2]',
+                               '-p', SYSTEM_READY_TOPICS)
+    publisher = procs.start_script(PUBLISHER, 'publisher', ['--ticks', '0', '--rate', '1000',
+                                                            '--recorder', '/recorder'])
     mcap = os.path.join(bag_path, 'vertical_0.mcap')
     wait(lambda: os.path.exists(mcap) and os.path.getsize(mcap) > 100_000, 60.0,
          'the bag to grow (publisher: %s)' % procs.log(publisher))

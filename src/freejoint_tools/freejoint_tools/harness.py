@@ -11,9 +11,10 @@ until a condition (bounded), call a service (waiting for it, bounded), the recor
 ``~/status`` (ready, drained) and the planner's ``~/plan_circle``. :class:`ParameterCalls`
 calls one node's parameter services (set, get, list, describe), sending a request again
 when its answer is lost. :func:`clean_stale_fast_dds_shm` removes the shared-memory files a
-killed node left (the test session calls it). :func:`thread_report` says what the threads
-of a process that stopped progressing do. :func:`load_source` imports a script that is not
-a package module (tools/demo.py, a test's helpers) by its path.
+killed node left (the test session calls it). :func:`claim_ros_domain` gives a process a ROS
+domain no other run of this machine's tests or demo has claimed. :func:`thread_report` says
+what the threads of a process that stopped progressing do. :func:`load_source` imports a
+script that is not a package module (tools/demo.py, a test's helpers) by its path.
 """
 
 import fcntl
@@ -22,6 +23,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
 from freejoint_tools.resend import first_answer
@@ -103,9 +105,11 @@ class Processes:
         path = os.path.join(self.log_dir, '%s_%s.log' % (self.tag, base) if self.tag
                             else base + '.log')
         log = open(path, 'w')
+        # The processes hold this process's domain claim too (claim_ros_domain): a node
+        # that outlives its test keeps its domain from the next run that would take it.
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
                                 env=dict(self.env, **(env or {})), cwd=self.cwd,
-                                start_new_session=True)
+                                start_new_session=True, pass_fds=tuple(_DOMAIN_CLAIMS))
         proc.name = name
         proc.log_path = path
         proc.log_file = log
@@ -488,6 +492,46 @@ def thread_report(pid, interval=1.0):
 
 SHM_DIR = '/dev/shm'
 SHM_PREFIX = 'fastrtps_'
+
+
+_DOMAIN_CLAIMS = []
+"""Open lock files of the domains this process claimed (held until it exits)."""
+DOMAIN_LOCK_DIR = os.path.join(tempfile.gettempdir(), 'freejoint_ros_domains')
+
+
+def claim_ros_domain(preferred, first=1, count=100, lock_dir=DOMAIN_LOCK_DIR):
+    """
+    Claim a ROS domain no other process of this machine holds; return its id.
+
+    Runs that share a machine (two ``make test``, a test run and ``make demo``) each pick a
+    domain, and with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` two that picked the same
+    one see each other's nodes: a recorder records the other run's publisher, a planner
+    takes the other run's arm (whatever the load, as soon as their picks coincide). Each
+    domain ``d`` of ``first .. first + count - 1`` has a lock file ``<lock_dir>/<d>.lock``;
+    this takes the first of ``preferred, preferred + 1, ...`` (wrapping) whose exclusive
+    ``flock`` nobody holds and holds it until the process exits (the kernel releases it
+    then, also on SIGKILL). The node processes :class:`Processes` starts inherit the lock,
+    so a node that outlives its run keeps the domain claimed.
+
+    Raises
+    ------
+    RuntimeError
+        Every domain of the range is claimed.
+
+    """
+    os.makedirs(lock_dir, exist_ok=True)
+    for i in range(count):
+        domain = first + (preferred - first + i) % count
+        fd = os.open(os.path.join(lock_dir, '%d.lock' % domain), os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        _DOMAIN_CLAIMS.append(fd)
+        return domain
+    raise RuntimeError('every ROS domain %d..%d is claimed (locks in %s)'
+                       % (first, first + count - 1, lock_dir))
 
 
 def clean_stale_fast_dds_shm(shm_dir=SHM_DIR):
