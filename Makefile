@@ -14,6 +14,11 @@ XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 # configuration (test/lint_cache.py, .stamps/lint), as in make test-fast; CI (CI set, as
 # .ci/run runs) lints every file.
 LINT_CACHE = $(if $(CI),,FREEJOINT_LINT_CACHE=$${FREEJOINT_LINT_CACHE-$$PWD/.stamps/lint})
+# The tests keep Python's bytecode (and pytest's rewritten test modules) in .stamps/pycache,
+# also where the environment sets PYTHONDONTWRITEBYTECODE: else each worker compiles every
+# test module again to collect (about 7 CPU-s) and each node process a test starts compiles
+# the packages again (about 0.3 CPU-s).
+PYCACHE = PYTHONDONTWRITEBYTECODE= PYTHONPYCACHEPREFIX=$$PWD/.stamps/pycache
 # CPU=avx2: the tests compute as a machine with AVX2 but no AVX-512 does (tools/avx2.sh:
 # numpy's and OpenBLAS's AVX-512 kernels off), to see what another user's CPU computes.
 AS_CPU = $(if $(filter avx2,$(CPU)),bash tools/avx2.sh ,$(if $(CPU),$(error CPU=$(CPU): expected avx2 or nothing),))
@@ -57,10 +62,10 @@ demo: setup
 	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise) $(if $(FAIL),--fail $(FAIL)) $(if $(CIRCLES),--circles $(CIRCLES)) $(if $(REST),--rest $(REST)) $(if $(PLANE),--plane-normal $(PLANE)) $(if $(PASSIVE),--passive $(PASSIVE)) $(if $(TIP),--tip $(TIP)) $(if $(BASE),--base $(BASE))
 
 test: setup
-	@$(ENV) $(LINT_CACHE) $(AS_CPU)python -m pytest -c pytest.ini $(XDIST)
+	@$(ENV) $(LINT_CACHE) $(PYCACHE) $(AS_CPU)python -m pytest -c pytest.ini $(XDIST)
 
 test-fast: setup
-	@$(ENV) $(AS_CPU)bash tools/test_fast.sh $(XDIST)
+	@$(ENV) $(PYCACHE) $(AS_CPU)bash tools/test_fast.sh $(XDIST)
 
 offline: setup
 	@$(ENV) $(if $(ARM),python tools/arm_offline.py $(ARM) --seeds $(or $(SEEDS),10) $(if $(PASSIVE),--passive $(PASSIVE)) $(if $(TIP),--tip $(TIP)) $(if $(BASE),--base $(BASE)),python -m freejoint_core.offline)

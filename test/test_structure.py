@@ -8,6 +8,7 @@ relative ones resolved against the importing module's package.  Only imports of 
 project's own modules are edges.
 """
 import ast
+import functools
 import os
 import xml.etree.ElementTree as ET
 
@@ -38,6 +39,13 @@ def _package_of(module, modules):
     return module if path.endswith('__init__.py') else module.rpartition('.')[0]
 
 
+@functools.lru_cache(maxsize=None)
+def parse(path):
+    """Return the ``ast`` tree of the file at ``path``, parsed once per test process."""
+    with open(path, encoding='utf-8') as fh:
+        return ast.parse(fh.read(), filename=path)
+
+
 def imports(module, modules):
     """
     Yield ``(target, names, node)`` for each import of a project module in ``module``.
@@ -45,9 +53,7 @@ def imports(module, modules):
     ``target`` is the project module imported; ``names`` the names taken from it by a
     ``from target import ...`` (empty for ``import target``); ``node`` the ast node.
     """
-    with open(modules[module], encoding='utf-8') as fh:
-        tree = ast.parse(fh.read(), filename=modules[module])
-    for node in ast.walk(tree):
+    for node in ast.walk(parse(modules[module])):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 name = alias.name
@@ -120,8 +126,7 @@ def private_imports_across_packages(modules):
     found = []
     for module, path in modules.items():
         pkg = module.split('.')[0]
-        with open(path, encoding='utf-8') as fh:
-            tree = ast.parse(fh.read(), filename=path)
+        tree = parse(path)
         bound = {}      # local name -> project module of another package
         for target, names, node in imports(module, modules):
             if target.split('.')[0] == pkg:

@@ -6,6 +6,7 @@ lockstep the graph must reproduce the offline runner (``freejoint_core.offline``
 whatever the start order and whatever the order of the joints in the JointState; in real
 time, a silent controller must leave the arm with zero effort.
 """
+import functools
 import os
 import re
 
@@ -129,7 +130,9 @@ class Run:
         return demo.ee_trajectory(self.collector.messages('ee_position'), DT_NS, n, dims)
 
 
+@functools.lru_cache(maxsize=None)
 def _offline(case):
+    """Return the offline runner's ``(record, trace)`` of ``case``, run once per worker."""
     return run_case(case, 'robust', 0, record_trace=True, **demo.offline_settings(CONFIG))
 
 
