@@ -5,7 +5,8 @@ Soak: the real-time graph at 1 kHz, many runs per case, each judged against the 
 5) of ``--seconds`` s (default 30): a process per node as ``make demo`` starts them (the
 installed executables with ``config/*.yaml``), the recorder on, the simulator and the
 controller at SCHED_FIFO ``--priority`` (default 50: ``thread_priority``), the planner's
-circle asked for again and again (each 0.5 s after the previous one's outcome). Each run has a ROS domain of its own
+circle asked for again and again (each 0.5 s after the previous one's outcome). Each run
+has a ROS domain of its own
 (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), every wait is bounded and every process is
 stopped (SIGINT, then SIGKILL of its group) whatever happens. ``--hogs N`` adds N CPU hog
 processes at normal priority beside the graph for the whole soak (each ends by itself after
@@ -96,7 +97,8 @@ from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION  # noqa: E40
 from freejoint_common.contract import JOINT_STATES, setpoint_samples  # noqa: E402
 from freejoint_common.contract import SETPOINTS, to_ns  # noqa: E402
 from freejoint_common.scheduling import rt_budget  # noqa: E402
-from freejoint_core.plan_figures import outcome_excuses, plan_met, SHARE_MET  # noqa: E402, I100, E501
+from freejoint_core.plan_figures import outcome_excuses, plan_met  # noqa: E402, I100
+from freejoint_core.plan_figures import SHARE_MET  # noqa: E402
 
 OUT = os.path.join(ROOT, 'bags', 'soak')
 CASES = ('horizontal', 'vertical')

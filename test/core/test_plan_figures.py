@@ -270,7 +270,8 @@ def test_a_plan_paused_and_finished_late_excuses_its_run_when_the_arm_stayed_on_
     ({}, 0.0, 'plan 1: off the bound and no outcome'),
     ({1: ('SUCCEEDED', 0)}, 0.0, 'plan 1: off the bound and SUCCEEDED with 0 pause(s)'),
     ({1: ('PREEMPTED', 1)}, 0.0, 'plan 1: off the bound and PREEMPTED'),
-    ({1: ('SUCCEEDED', 1)}, 0.002, 'plan 1: SUCCEEDED but the arm left the path by 2.00 mm > 1.700 mm'),
+    ({1: ('SUCCEEDED', 1)}, 0.002,
+     'plan 1: SUCCEEDED but the arm left the path by 2.00 mm > 1.700 mm'),
 ])
 def test_no_excuse_without_a_pause_or_abort_named_or_with_the_arm_off_the_path(
         outcomes, off, reason):
