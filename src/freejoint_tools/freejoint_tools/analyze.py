@@ -248,8 +248,8 @@ def verdict_line(trace):
         return ''
     outcomes = {int(m.plan_id): (m.code_name, int(m.pauses)) for m in trace['outcomes']
                 if int(m.plan_id) > 0}
-    share = '%.1f %% of the moving ticks within %.3f mm' % (100.0 * figures['share'],
-                                                           figures['bound_mm'])
+    share = '%.1f %% of the moving ticks within %.3f mm' % (
+        100.0 * figures['share'], figures['bound_mm'])
     if plan_met(figures):
         return 'met (%s)' % share
     excused, why = outcome_excuses(figures, outcomes)
