@@ -286,3 +286,22 @@ def test_a_plan_tracked_on_every_moving_tick_needs_no_excuse():
                           plan_time=t, final=t >= t[-1])
     assert fig['plans'][0]['within'] == fig['plans'][0]['moving_ticks']
     assert pf.outcome_excuses(fig, {}) == (False, 'no plan off the bound')
+
+
+def test_an_aborted_plan_ends_at_its_outcome_not_at_what_the_arm_did_after():
+    # The plan aborted at 1.2 s (stood from 0.6 s); at 2.0 s the arm is put back 50 mm
+    # off its path: that belongs to no plan once the outcome's time closes its span.
+    t = np.arange(3000) * DT
+    ptime = np.clip(t, None, 0.5)
+    w = 2.0 * math.pi / 2.0
+    sp = 0.1 * np.column_stack([np.cos(w * ptime), np.sin(w * ptime)])
+    v = 0.1 * w * np.column_stack([-np.sin(w * ptime), np.cos(w * ptime)]) * (
+        t < 0.5)[:, None]
+    arm = sp.copy()
+    arm[2000:] += [0.0, 0.05]
+    args = (t, arm, t, sp, v)
+    kw = dict(bound_mm=1.7, plan_id=np.ones(3000, int), plan_time=ptime,
+              final=np.zeros(3000, bool))
+    assert pf.plan_figures(*args, **kw)['plans'][0]['path_max_mm'] > 49.0
+    ended = pf.plan_figures(*args, plan_end={1: 1.2}, **kw)['plans'][0]
+    assert ended['path_max_mm'] < 1e-9 and ended['moving_ticks'] == 500

@@ -119,7 +119,7 @@ def _increasing(name, t):
 
 
 def plan_figures(t, p, sp_t, sp_p, sp_v, bound_mm=None, held=None, plan_id=None,
-                 plan_time=None, final=None):
+                 plan_time=None, final=None, plan_end=None):
     """
     Return the figures of a run against the plan.
 
@@ -143,6 +143,10 @@ def plan_figures(t, p, sp_t, sp_p, sp_v, bound_mm=None, held=None, plan_id=None,
     plan_id, plan_time, final : array_like, shape (K,), optional
         The setpoints' plan, time within it [s] and end mark (``CartesianSetpoints``):
         per plan its lateness. All three or none.
+    plan_end : dict, optional
+        Plan id -> the time its outcome was decided [s] (the planner's ``plan_outcome``
+        stamp, same time base): a plan aborted (stopped along its path, its setpoint
+        standing) ends there, not at the next plan's start.
 
     Returns
     -------
@@ -228,7 +232,7 @@ def plan_figures(t, p, sp_t, sp_p, sp_v, bound_mm=None, held=None, plan_id=None,
         'error_mm': error,
         'moving': moving,
     }
-    out.update(_plans(sp_t, extra, t, p, sp_p, error, moving, bound_mm)
+    out.update(_plans(sp_t, extra, t, p, sp_p, error, moving, bound_mm, plan_end or {})
                if plan_id is not None else
                {'plans': [], 'plans_completed': 0, 'late_max_s': None})
     return out
@@ -288,12 +292,13 @@ def path_distance(p, path):
     return out
 
 
-def _plans(sp_t, extra, t, p, sp_p, error, moving, bound_mm):
+def _plans(sp_t, extra, t, p, sp_p, error, moving, bound_mm, plan_end):
     """
     Return the per-plan figures of the setpoints' plan ids, times and end marks.
 
     Per plan also its states (stamped from its first setpoint at plan time >= 0 to its
-    end, else to the next plan's start or the last setpoint): ``moving_ticks``, ``within``
+    end, else to the next plan's start or the last setpoint, and not after its outcome in
+    ``plan_end``): ``moving_ticks``, ``within``
     (None without bound), ``max_mm`` (against the plan at the stamp) and ``path_max_mm``
     (the largest distance to the plan's path, all its setpoints as a polyline: where the
     arm was relative to the path, whenever the plan's time stood or ran).
@@ -327,6 +332,8 @@ def _plans(sp_t, extra, t, p, sp_p, error, moving, bound_mm):
             stop = sp_t[np.nonzero((ids == order[i + 1]) & started)[0][0]]
         else:
             stop = sp_t[-1]
+        if pid in plan_end:
+            stop = min(stop, float(plan_end[pid]))
         span = (t >= sp_t[first]) & (t <= stop)
         mov = error[span & moving]
         entry['moving_ticks'] = int(mov.size)

@@ -18,7 +18,7 @@ Stamps become seconds from the first state's stamp (integer ns subtracted first:
 time keeps its sub-microsecond resolution); ``origin_ns`` says from which.
 """
 
-from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, EE_POSITION
+from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, EE_POSITION, PLAN_OUTCOME
 from freejoint_common.contract import label_stamp, setpoint_samples, SETPOINTS, to_ns
 import numpy as np
 
@@ -46,8 +46,9 @@ def plan_arrays(bag, store=None, window_ns=None):
     -------
     tuple of (dict, int)
         ``t``, ``p``, ``sp_t``, ``sp_p``, ``sp_v``, ``held`` (None without commands
-        recorded), ``plan_id``, ``plan_time``, ``final``; and ``origin_ns`` (the first
-        state's stamp [ns], the time the stamps count from).
+        recorded), ``plan_id``, ``plan_time``, ``final``, ``plan_end`` (with
+        ``plan_outcome`` recorded: each plan's outcome stamp [s]); and ``origin_ns`` (the
+        first state's stamp [ns], the time the stamps count from).
 
     Raises
     ------
@@ -60,7 +61,7 @@ def plan_arrays(bag, store=None, window_ns=None):
     for name in names:
         if name not in bag.topics or not bag.topics[name].count:
             raise ValueError('no %s in the bag: no figures against the plan' % name)
-    extra = [n for n in (COMMANDS.absolute, CONTROLLER_STATE.absolute)
+    extra = [n for n in (COMMANDS.absolute, CONTROLLER_STATE.absolute, PLAN_OUTCOME.absolute)
              if n in bag.topics and bag.topics[n].count]
     decoded = bag.decode_topics(names + extra, store)
     ee = {}
@@ -93,6 +94,9 @@ def plan_arrays(bag, store=None, window_ns=None):
            'plan_id': np.array([sp.plan_id for sp in sps], dtype=np.int64),
            'plan_time': np.array([sp.plan_time for sp in sps], dtype=float),
            'final': np.array([sp.final for sp in sps], dtype=bool)}
+    if PLAN_OUTCOME.absolute in extra:
+        out['plan_end'] = {int(msg.plan_id): (to_ns(msg.stamp) - origin) * 1e-9
+                           for _, msg in decoded[PLAN_OUTCOME.absolute] if msg.plan_id > 0}
     if COMMANDS.absolute in extra:
         answered = {label_stamp(msg.layout.dim) for _, msg in decoded[COMMANDS.absolute]}
         answered = np.array(sorted(k for k in answered if k is not None), dtype=np.int64)
