@@ -300,8 +300,8 @@ def test_an_aborted_plan_ends_at_its_outcome_not_at_what_the_arm_did_after():
     arm = sp.copy()
     arm[2000:] += [0.0, 0.05]
     args = (t, arm, t, sp, v)
-    kw = dict(bound_mm=1.7, plan_id=np.ones(3000, int), plan_time=ptime,
-              final=np.zeros(3000, bool))
+    kw = {'bound_mm': 1.7, 'plan_id': np.ones(3000, int), 'plan_time': ptime,
+          'final': np.zeros(3000, bool)}
     assert pf.plan_figures(*args, **kw)['plans'][0]['path_max_mm'] > 49.0
     ended = pf.plan_figures(*args, plan_end={1: 1.2}, **kw)['plans'][0]
     assert ended['path_max_mm'] < 1e-9 and ended['moving_ticks'] == 500
