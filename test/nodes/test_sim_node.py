@@ -432,8 +432,8 @@ def _command_until_applied(ctl, wait, effort):
 
 def test_realtime_applies_the_latest_command_and_zero_after_the_timeout(
         procs, ros_node, wait):
-    proc = _start(procs, '-p', 'mode:=realtime', '-p', 'command_timeout:=0.3',
-                  '-p', 'publish_rate:=100.0', '-p', 'brake_timeout:=0.0')
+    proc = _realtime(procs, '-p', 'command_timeout:=0.3', '-p', 'publish_rate:=100.0',
+                     '-p', 'brake_timeout:=0.0')
     ctl = Controller(ros_node, wait)
     ctl.connect(proc, procs)
     _command_until_applied(ctl, wait, [1.5, -0.5])
