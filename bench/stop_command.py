@@ -5,8 +5,9 @@ Offline, no ROS. From the states of the paper's circle (robust, seed 0, every 0.
 real Table I arm is integrated for 2 s under one command held constant - the last tracking
 command, zero, the nominal model's gravity load of the active joints (the controller's
 stop command, ``freejoint_core.guards.hold_effort``), the exact load - and under the
-damped joint hold answered live (``readiness_action: damp``: 200 N m/rad, 20 N m s/rad on
-the nominal load) with 30 % of the states missed and a 1-3 ms delay. Prints per case and
+damped joint hold answered live (``readiness_action: damp``, ``stop_hold_time`` 0.1 s:
+``freejoint_core.guards.damped_hold_effort`` on the nominal load and inertia) with 30 % of
+the states missed and a 1-3 ms delay. Prints per case and
 command the end effector's largest travel from where it was and the fastest joint
 (docs/real-time.md, "Stopping").
 
@@ -16,14 +17,15 @@ command the end effector's largest travel from where it was and the fastest join
 import sys
 
 from freejoint_core.arm import ArmModel, table1
-from freejoint_core.guards import hold_effort
+from freejoint_core.arm_gains import active_inertia
+from freejoint_core.guards import damped_hold_effort, hold_effort
 from freejoint_core.offline import run_case
 from freejoint_core.plant import Plant
 import numpy as np
 
 DT = 1e-3
 HELD_S = 2.0
-STIFFNESS, DAMPING = 200.0, 20.0
+HOLD_TIME = 0.1
 
 
 def held(real, q, qd, command, seed):
@@ -50,8 +52,9 @@ def damped(nominal, q_stop, rng):
     def command(k, plant):
         if not sent or rng.random() > 0.3:
             q, qd = plant.q, plant.qd
-            sent.append(hold_effort(model.gravity_torque(q).tolist(), (0, 1), None, q, qd,
-                                    q_stop, STIFFNESS, DAMPING))
+            sent.append(damped_hold_effort(model.gravity_torque(q).tolist(), (0, 1),
+                                           active_inertia(model, q), q, qd, q_stop,
+                                           HOLD_TIME))
         else:
             sent.append(sent[-1])
         lag = 1 + int(rng.integers(0, 3))

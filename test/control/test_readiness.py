@@ -12,7 +12,7 @@ from freejoint_control.loop import (ControlLoop, ERROR, INFO, STATUS_HOLDING, ST
 from freejoint_control.params import SCHEMA
 from freejoint_control.readiness import (effective_periods, guard_margins, MEASURED,
                                          ReadinessGuard)
-from freejoint_core.arm import table1
+from freejoint_core.arm import ArmModel, table1
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import divergence_reason
 from freejoint_core.offline import run_case
@@ -580,8 +580,11 @@ def test_the_damp_action_answers_every_state_with_the_damped_joint_hold_once_it_
     ns = 700 * DT_NS
     res = loop.on_state(ns, NAMES, list(q), list(qd), ns, 100.2)
     assert res.status == STATUS_STOPPED and 'damped joint hold' in res.message
-    # G_a(q) + 200 (q_stop - q) - 20 qd: q_stop the angles at the trip (Q0).
+    # G_a(q) + M~aa(q) ((q_stop - q) / T^2 - 1.5 qd / T), T = stop_hold_time 0.1 s, q_stop
+    # the angles at the trip (Q0), M~aa the nominal model's eq. (3) effective inertia.
     hold = gravity_hold(q)
-    want = [hold[0] + 200.0 * 0.01 - 20.0 * 0.3, hold[1] - 200.0 * 0.02 + 20.0 * 0.2]
-    assert list(res.effort) == pytest.approx(want, abs=1e-9)
+    acc = np.array([100.0 * 0.01 - 15.0 * 0.3, -100.0 * 0.02 + 15.0 * 0.2])
+    inertia = ArmModel(table1('vertical').scaled(0.7)).effective(q)[1]
+    want = np.array(hold) + inertia @ acc
+    assert list(res.effort) == pytest.approx(want.tolist(), abs=1e-9)
     assert feed(loop, range(201, 210), 0)[-1][0] == STATUS_STOPPED      # every state

@@ -7,10 +7,13 @@ requests ignored); the controller reads the states through a link that drops bur
 them (test/nodes/starving_relay.py) once it is ready, so its readiness guard trips. With
 ``readiness_action: damp`` (docs/real-arm.md: what a controller of such a driver sets) it
 answers every state it still gets with the damped joint hold, says so on
-``controller_readiness``, and tracks again once the states come back.
+``controller_readiness``, and tracks again once the states come back. How the damped hold
+holds under given patterns of missed and late states is tested offline, where the pattern
+is set (test/core/test_guards.py); here, on whatever this machine's load makes of the
+timing, that the graph does it.
 """
-import math
 import os
+import time
 
 import pytest
 
@@ -24,16 +27,16 @@ RELAY = os.path.join(ROOT, 'test', 'nodes', 'starving_relay.py')
 @pytest.mark.parametrize('case', ['horizontal', 'vertical'])
 def test_a_driver_holding_its_last_command_keeps_the_arm_while_the_controller_is_starved(
         procs, ros_node, wait, case):
-    from freejoint_common.contract import CONTROLLER_READINESS, EE_POSITION, JOINT_STATES
+    from freejoint_common.contract import CONTROLLER_READINESS, JOINT_STATES
     from freejoint_common.contract import profile
-    readiness, ee, speeds = [], [], []
+    readiness, states = [], []
     ros_node.create_subscription(CONTROLLER_READINESS.msg_type, CONTROLLER_READINESS.name,
-                                 lambda m: readiness.append((m.ready, m.reason)),
+                                 lambda m: readiness.append((m.ready, m.reason,
+                                                             time.monotonic())),
                                  CONTROLLER_READINESS.qos)
-    ros_node.create_subscription(EE_POSITION.msg_type, EE_POSITION.name,
-                                 lambda m: ee.append((m.point.x, m.point.y)), profile(100))
     ros_node.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name,
-                                 lambda m: speeds.append(max(map(abs, m.velocity))),
+                                 lambda m: states.append((time.monotonic(), list(m.position),
+                                                          max(map(abs, m.velocity)))),
                                  profile(100))
 
     def spin():
@@ -49,7 +52,8 @@ def test_a_driver_holding_its_last_command_keeps_the_arm_while_the_controller_is
     relay = procs.start_script(RELAY, 'relay', ['--pass', '1.0', '--starve', '2.0',
                                                 '--gap', '0.1', '--period', '0.3'])
     # A state every 2 ms; the guard's thresholds loose enough for a loaded test machine
-    # to start (what is tested is the stop, not the margins).
+    # to start (what is tested is the stop, not the law's margins: how the law tracks at
+    # the delays this allows is not judged here).
     ctl = procs.start_node('freejoint_control', 'controller_node', 'controller', [
         '--ros-args', '--params-file', os.path.join(CONFIG, 'controller.yaml'),
         '-p', 'lockstep:=false', '-p', 'case:=%s' % case, '-p', 'control_period:=0.002',
@@ -59,26 +63,29 @@ def test_a_driver_holding_its_last_command_keeps_the_arm_while_the_controller_is
         '-r', 'joint_states:=driver/joint_states'])
     wait(lambda: readiness and not readiness[0][0], 30.0,
          'not ready at start-up on controller_readiness', spin=spin)
-    wait(lambda: any(r for r, _ in readiness), 60.0, 'ready (log %s)' % ctl.log_path, spin=spin)
+    wait(lambda: any(r[0] for r in readiness), 60.0, 'ready (log %s)' % ctl.log_path,
+         spin=spin)
     wait(lambda: 'relay: starving' in procs.log(relay), 30.0, 'the link starving', spin=spin)
     wait(lambda: 'relay: passing again' in procs.log(relay), 30.0, 'the link back', spin=spin)
     wait(lambda: len(readiness) >= 4 and readiness[-1][0], 60.0,
          'ready again after the stop (%s)' % readiness, spin=spin)
-    n = len(ee)
-    wait(lambda: len(ee) > n + 250, 30.0, '0.5 s more states', spin=spin)
     log = procs.log(ctl)
     # Stopped on the starved link, with the reason, the damped hold answered meanwhile.
-    stops = [reason for ready, reason in readiness[1:] if not ready]
+    stops = [reason for ready, reason, _ in readiness[1:] if not ready]
     assert stops and all(reason.startswith('real-time loop not ready') for reason in stops)
     assert 'the damped joint hold answered to every state' in log
-    # Not lost: never diverged, no joint over 20 rad/s, the end effector within 0.15 m of
-    # its first measured place throughout (the held end effector, then the held active
-    # joints: on the nominal model's gravity load, 70 % of the real one, the vertical arm
-    # sags a few centimetres until the joint stiffness takes it up; a swinging free link
-    # would carry it a metre, a runaway over the reach).
+    # While stopped (from the first trip to the first time ready again) the arm is held,
+    # not lost: the active joints within 0.25 rad of where the trip found them (the
+    # damped hold's sag on the 30 % of the gravity load the nominal model misses is some
+    # 0.13 rad), no joint faster than 20 rad/s (a runaway passes that within a second).
+    first = next(i for i, r in enumerate(readiness) if i and not r[0])
+    tripped = readiness[first][2]
+    back = next(r[2] for r in readiness[first:] if r[0])
+    held = [s for s in states if tripped <= s[0] <= back]
+    assert len(held) > 100, len(held)
+    q_stop = held[0][1][:2]
+    assert max(abs(a - b) for s in held for a, b in zip(s[1][:2], q_stop)) < 0.25
+    assert max(s[2] for s in held) < 20.0
     assert 'plant diverged' not in procs.log(sim)
-    assert max(speeds) < 20.0
-    worst = max(math.dist(p, ee[0]) for p in ee)
-    assert worst < 0.15, worst
     for proc in (ctl, relay, sim):
         procs.stop(proc)

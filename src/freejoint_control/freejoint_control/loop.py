@@ -198,7 +198,7 @@ class ControlLoop:
         self.inputs.configure(cfg.joint_names, cfg.position_lower, cfg.position_upper,
                               cfg.velocity_limit, cfg.joint_offsets)
         self.stepper.configure(cfg)
-        self._stop_gains = (cfg.stop_stiffness, cfg.stop_damping)
+        self._stop_hold_time = cfg.stop_hold_time
         self.requests.configure(cfg.readiness_brake_request and not cfg.lockstep,
                                 cfg.hold_brake_timeout)
         if self.watch.install(cfg):
@@ -460,9 +460,9 @@ class ControlLoop:
         """
         Not ready, 'damp': answer with the damped joint hold (a driver holding its last command).
 
-        The active joints held where the stop found them (``stop_stiffness``,
-        ``stop_damping``, on the gravity load of the nominal model), every state until the
-        loop is ready again; nothing is asked of the brakes.
+        The active joints held where the stop found them (gains from their effective
+        inertia and ``stop_hold_time``, on the gravity load of the nominal model), every
+        state until the loop is ready again; nothing is asked of the brakes.
         """
         reason = self.watch.guard.reason
         if not self._withholding:
@@ -485,11 +485,11 @@ class ControlLoop:
         The active joints' gravity load of the law's (nominal) model at ``q`` (the core's
         angles; default the last good measured state), within the torque limits: zero in a
         horizontal plane, and zero before any state was measured. With ``qd`` (the damped
-        stop, ``readiness_action: damp``): plus ``stop_stiffness`` towards the angles the
-        stop found and ``stop_damping`` against ``qd``.
+        stop, ``readiness_action: damp``): the damped joint hold towards the angles the
+        stop found (``freejoint_core.guards.damped_hold_effort``, ``stop_hold_time``).
         """
         return stop_effort(self.law.model, self._last_q if q is None else q, qd,
-                           self._q_stop, self._stop_gains, self.config.cmd_index,
+                           self._q_stop, self._stop_hold_time, self.config.cmd_index,
                            self._limits)
 
     def _answer_stop(self, ns, status, message, now_ns, q=None, qd=None):
@@ -508,6 +508,11 @@ class ControlLoop:
         self._withholding = False
         self.requests.stop_over()
         kept, self._kept_hold = self._kept_hold, None
+        if self.watch.damps:
+            # The damped hold let the free joints swing (and the active joints sag): start
+            # from where the arm is and how it moves, not back to the hold's old place
+            # (the free link would be dragged along; a plan rewinds to the arm itself).
+            kept = None
         if kept is None:
             # Hold at fk(q), or blend to the setpoint from the measured motion: a braked arm
             # is at rest, but one a driver kept moving (the stop command held, the damped

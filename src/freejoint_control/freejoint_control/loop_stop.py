@@ -13,8 +13,10 @@ of a driver: its brakes (once per stop) and how long it may wait for the next co
 from freejoint_common.arm_description import resolve_arm
 from freejoint_control.loop_status import ERROR, INFO, WARN
 from freejoint_control.readiness import guard_margins, ReadinessGuard
+from freejoint_core.arm_gains import active_inertia
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.guards import hold_effort
+from freejoint_core.guards import damped_hold_effort, hold_effort
+import numpy as np
 
 STOP_SAID = ('stop command sent (the gravity hold of the active joints), the brakes asked '
              'for; no command until the loop is ready again')
@@ -191,22 +193,22 @@ class DriverRequests:
         return wait
 
 
-def stop_effort(model, q, qd, q_stop, gains, cmd_index, limits):
+def stop_effort(model, q, qd, q_stop, hold_time, cmd_index, limits):
     """
-    Return the stop command [N m] in command order (``freejoint_core.guards.hold_effort``).
+    Return the stop command [N m] in command order (``freejoint_core.guards``).
 
     Parameters
     ----------
     model : ArmModel or SpatialArm
-        The law's (nominal) model: ``gravity_torque``, ``active``.
+        The law's (nominal) model: ``gravity_torque``, ``active`` and its inertia.
     q : sequence of float, (n,) or None
         The core's angles [rad] (None: no state measured yet: zero).
     qd : sequence of float, (n,) or None
-        Rates [rad/s] for the damped stop, or None (the gravity hold alone).
+        Rates [rad/s] for the damped hold, or None (the gravity hold alone).
     q_stop : sequence of float, (r,) or None
-        The damped stop's angles of the active joints [rad].
-    gains : (float, float)
-        ``stop_stiffness``, ``stop_damping``.
+        The damped hold's angles of the active joints [rad].
+    hold_time : float
+        ``stop_hold_time`` [s] (the damped hold's gains).
     cmd_index : tuple of int
         The command's joints as indices of the active ones.
     limits : sequence of float or None
@@ -215,20 +217,22 @@ def stop_effort(model, q, qd, q_stop, gains, cmd_index, limits):
     Returns
     -------
     list of float
-        The active joints' gravity load at ``q`` (plus the damped hold with ``qd``), within
-        ``limits``; zero when it cannot be computed.
+        The active joints' gravity load at ``q`` (``hold_effort``; with ``qd`` the damped
+        joint hold, ``damped_hold_effort``), within ``limits``; zero when it cannot be
+        computed.
 
     """
     zero = [0.0] * len(cmd_index)
     if q is None:
         return zero
     try:
+        gravity = model.gravity_torque(q).tolist()
         if qd is None:
-            tau = hold_effort(model.gravity_torque(q).tolist(), model.active)
+            tau = hold_effort(gravity, model.active)
         else:
-            tau = hold_effort(model.gravity_torque(q).tolist(), model.active, None, q, qd,
-                              q_stop, *gains)
-    except (FreejointValueError, ArithmeticError):
+            tau = damped_hold_effort(gravity, model.active, active_inertia(model, q), q, qd,
+                                     q_stop, hold_time)
+    except (FreejointValueError, ArithmeticError, np.linalg.LinAlgError):
         return zero
     identity = cmd_index == tuple(range(len(cmd_index)))
     effort = tau if identity else [tau[i] for i in cmd_index]

@@ -359,16 +359,17 @@ PARAMS = (
           "send no command (a driver's watchdog brakes: the simulator's brake_timeout); "
           "'damp' = for a driver that holds its last command and has no brakes to ask for "
           '(command_watchdog false in the simulator): answer every state with a damped '
-          'joint hold of the active joints (stop_stiffness, stop_damping on the gravity '
+          'joint hold of the active joints (stop_hold_time, on the gravity '
           "load), which tolerates what the law does not; 'hold' = hold the end effector "
           'with the law (the law still runs on late states)',
           validator=one_of(READINESS_ACTIONS)),
-    Param('stop_stiffness', 200.0,
-          "readiness_action 'damp': stiffness [N m/rad] of the joint hold towards the "
-          "active joints' angles when the loop stopped (docs/real-time.md)", (0.0, 1e5)),
-    Param('stop_damping', 20.0,
-          "readiness_action 'damp': damping [N m s/rad] of the active joints' speeds in "
-          'the joint hold', (0.0, 1e5)),
+    Param('stop_hold_time', 0.1,
+          "readiness_action 'damp': the longest [s] the driver is to keep one command of "
+          'the damped joint hold (a stalled controller, a burst of missed states): the '
+          "hold's stiffness and damping are the active joints' effective inertia times "
+          '1 / stop_hold_time^2 and 1.5 / stop_hold_time, stable for a command kept up to '
+          '1.33 times as long (freejoint_core.guards.damped_hold_effort; docs/real-time.md)',
+          (0.005, 1.0)),
     Param('readiness_brake_request', True,
           'real time: whenever the controller stops (a readiness trip with readiness_action '
           "'brake', or no joint_states for stale_timeout), ask the driver to brake now "

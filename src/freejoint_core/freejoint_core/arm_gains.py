@@ -138,6 +138,24 @@ def nullspace_inertia(nominal, q):
     return np.linalg.eigvalsh(basis.T @ maa @ basis)
 
 
+def active_inertia(model, q):
+    """
+    Return ``M~aa = ((M^-1)_aa)^-1`` (r, r) [kg m^2]: the active joints' effective inertia.
+
+    The inertia the active joints move with the free joints following (no torque on them),
+    of any model with ``active`` and either ``mass_matrix(q)`` (the planar models) or
+    ``terms(q, qd).M`` (``SpatialArm``), at the angles ``q`` (n,) [rad].
+    """
+    q = np.asarray(q, dtype=float)
+    if hasattr(model, 'mass_matrix'):
+        mass = np.asarray(model.mass_matrix(q), dtype=float)
+    else:
+        mass = model.terms(q, np.zeros(q.shape[0])).M
+    act = list(model.active)
+    inertia = np.linalg.inv(np.linalg.inv(mass)[np.ix_(act, act)])
+    return 0.5 * (inertia + inertia.T)
+
+
 def joint_inertia(nominal, q):
     """Return ``diag(M~aa)`` (r,) [kg m^2]: each active joint's inertia about its axis."""
     return np.diag(_terms(nominal, q)[1]).copy()

@@ -9,7 +9,8 @@ The controller's and the simulator's guards: plausibility checks and limits, in 
 - :func:`clamp_dt`: the law's time step measured from state stamps, bounded;
 - :func:`hold_effort`: the command a controller leaves a driver when it stops (the static
   gravity load of the active joints, safe to be held by a driver that keeps its last
-  command; docs/real-time.md);
+  command; docs/real-time.md); :func:`damped_hold_effort`: the joint hold it answers
+  every state with instead when the driver has no brakes and no watchdog;
 - :func:`divergence_reason`: a simulated plant whose state is not a physical one any more
   (``freejoint_core.plant.Plant.step`` raises ``PlantDivergedError`` on a non-finite state;
   the simulator also stops at a joint faster than its ``divergence_speed`` or an angle
@@ -61,21 +62,16 @@ def clamp_dt(dt, nominal, low=0.25, high=4.0):
     return dt, False
 
 
-def hold_effort(gravity, active, limits=None, q=None, qd=None, q_hold=None, stiffness=0.0,
-                damping=0.0):
+def hold_effort(gravity, active, limits=None):
     """
     Return the stop command: the active joints' gravity load ``G_a(q)``, limited.
 
-    What a controller sends when it stops (docs/real-time.md, "Stopping"). Sent once
-    before it goes quiet (no ``stiffness``, ``damping``): a driver that keeps applying its
-    last command (ros2_control's forward command controller) then holds the active joints
-    against gravity at the configuration the stop found, where zero effort lets a vertical
-    arm fall and a stale tracking command (its acceleration and feedback terms) drives it
-    on; the brakes, asked for at the same time, are what stops the arm. Answered to every
-    state (``readiness_action: damp``, for a driver without brakes or watchdog), with
-    ``stiffness`` and ``damping``: a joint-space hold of the active joints at ``q_hold``,
-    ``G_a(q) + stiffness (q_hold - q_a) - damping qd_a``, which tolerates the late and
-    missed states the law does not (its gains are far below the law's).
+    What a controller sends when it stops (docs/real-time.md, "Stopping"), once, before it
+    goes quiet: a driver that keeps applying its last command (ros2_control's forward
+    command controller) then holds the active joints against gravity at the configuration
+    the stop found, where zero effort lets a vertical arm fall and a stale tracking command
+    (its acceleration and feedback terms) drives it on; the brakes, asked for at the same
+    time, are what stops the arm.
 
     Parameters
     ----------
@@ -83,17 +79,9 @@ def hold_effort(gravity, active, limits=None, q=None, qd=None, q_hold=None, stif
         Gravity torques ``G(q) = dV/dq`` of the model at the measured angles [N m] (the
         controller's nominal model: ``model.gravity_torque(q)``); 0 in a horizontal plane.
     active : sequence of int, (r,)
-        Indices of the active joints in ``gravity``, ``q`` and ``qd`` (the model's order).
+        Indices of the active joints in ``gravity`` (the model's order).
     limits : sequence of float, (r,), optional
         Per-joint torque limits [N m] (> 0), None: none.
-    q, qd : sequence of float, (n,), optional
-        Measured angles [rad] and speeds [rad/s] (needed with stiffness or damping).
-    q_hold : sequence of float, (r,), optional
-        The active joints' angles to hold [rad] (needed with stiffness).
-    stiffness : float
-        [N m/rad] >= 0.
-    damping : float
-        [N m s/rad] >= 0.
 
     Returns
     -------
@@ -102,13 +90,72 @@ def hold_effort(gravity, active, limits=None, q=None, qd=None, q_hold=None, stif
         non-finite term gives 0 for that joint (never a non-finite command).
 
     """
+    return _limited([float(gravity[i]) for i in active], limits)
+
+
+DAMPED_HOLD_DAMPING = 1.5
+"""The damped hold's damping, times ``M~aa / stop_hold_time`` (see :func:`damped_hold_effort`)."""
+
+
+def damped_hold_effort(gravity, active, inertia, q, qd, q_hold, hold_time, limits=None):
+    """
+    Return the damped joint hold: ``G_a + M~aa ((q_hold - q_a) / T^2 - 1.5 qd_a / T)``.
+
+    What a controller answers every state with while it is not ready and its driver holds
+    the last command (``readiness_action: damp``): the active joints held at ``q_hold`` on
+    the gravity load, the free joints swinging on them.  Such a driver keeps each command
+    until the next, for as long as the controller is stalled or its states are missed, so
+    the gains are set by the longest interval ``T`` (``hold_time``) one command may be
+    kept, on the effective inertia ``M~aa`` the active joints move (the free joints
+    following).  Per mode of unit inertia, a torque ``-k x - d v`` held over ``T`` maps
+    ``(x, v T)`` by ``[[1 - a/2, 1 - b/2], [-a, 1 - b]]`` with ``a = k T^2``, ``b = d T``;
+    ``a = 1``, ``b = 1.5`` make both eigenvalues 0 (deadbeat: a command kept for exactly
+    ``T`` stops the joint where it is to be held).  Kept for ``s T`` it is stable while
+    ``1.5 s < 2``, i.e. up to ``1.33 T``, and up to ``1.9 T`` when the real inertia is the
+    nominal one over 0.7 (the law's model error); answered every few milliseconds it is a
+    joint PD of natural frequency ``1 / T`` and damping ratio 0.75.  The price is its
+    stiffness: a gravity load the nominal model misses by ``e`` [N m] sags the joints by
+    ``T^2 M~aa^-1 e`` [rad].
+
+    Parameters
+    ----------
+    gravity : sequence of float, (n,)
+        Gravity torques of the (nominal) model at ``q`` [N m].
+    active : sequence of int, (r,)
+        Indices of the active joints in ``gravity``, ``q`` and ``qd``.
+    inertia : array_like, (r, r)
+        ``M~aa(q)`` [kg m^2], the active joints' effective inertia
+        (``freejoint_core.arm_gains.active_inertia``).
+    q, qd : sequence of float, (n,)
+        Measured angles [rad] and speeds [rad/s].
+    q_hold : sequence of float, (r,)
+        The active joints' angles to hold [rad].
+    hold_time : float
+        ``T`` [s] > 0: the longest a driver is to keep one command (``stop_hold_time``).
+    limits : sequence of float, (r,), optional
+        Per-joint torque limits [N m] (> 0), None: none.
+
+    Returns
+    -------
+    list of float, (r,)
+        The command clipped to ``[-limit, limit]`` [N m], in the order of ``active``; a
+        non-finite term gives 0 for that joint (never a non-finite command).
+
+    """
+    stiff = 1.0 / (hold_time * hold_time)
+    damp = DAMPED_HOLD_DAMPING / hold_time
+    acc = [stiff * (q_hold[j] - q[i]) - damp * qd[i] for j, i in enumerate(active)]
     out = []
     for j, i in enumerate(active):
-        g = float(gravity[i])
-        if stiffness:
-            g += stiffness * (q_hold[j] - q[i])
-        if damping:
-            g -= damping * qd[i]
+        row = inertia[j]
+        out.append(float(gravity[i]) + sum(float(row[k]) * acc[k] for k in range(len(acc))))
+    return _limited(out, limits)
+
+
+def _limited(values, limits):
+    """Return ``values`` within ``[-limit, limit]``, a non-finite one as 0."""
+    out = []
+    for j, g in enumerate(values):
         if not _isfinite(g):
             g = 0.0
         if limits is not None:
