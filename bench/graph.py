@@ -619,7 +619,8 @@ class CircleLoop:
     s after the outcome of the previous arrived, so a plan the feed hold made late runs to
     its end and is neither cut off nor followed by ``before`` (the arm put back) while it
     runs. A plan without an outcome :data:`OUTCOME_WAIT` s past its nominal end is
-    recorded as such and the next asked for.
+    recorded as such and the next asked for. :meth:`finish` asks for no more and lets the
+    plan running now end (a run is judged with every plan it asked for closed).
     """
 
     OUTCOME_WAIT = 20.0
@@ -654,6 +655,8 @@ class CircleLoop:
         """Plan ids accepted while following, in order."""
         self.unanswered = []
         """Followed plan ids that had no outcome by their deadline."""
+        self.finishing = False
+        """No more plans asked for (:meth:`finish`)."""
         self._sub = None
         if follow:
             from freejoint_common.contract import PLAN_OUTCOME
@@ -676,9 +679,23 @@ class CircleLoop:
             self.next = now
         return False
 
+    def finish(self):
+        """
+        Ask for no more plans; return whether the followed plan running now has ended.
+
+        Called in place of :meth:`poll` once a run's time is up: True when no followed plan
+        is waiting for its outcome (it came, or the plan passed its deadline and is
+        recorded in ``unanswered``).
+        """
+        self.finishing = True
+        self._followed_done(time.monotonic())
+        return self.waiting is None
+
     def poll(self):
         """Ask for the next circle if due; a refusal or silence raises if ``strict``."""
         now = time.monotonic()
+        if self.finishing:
+            return False
         if self._sub is not None and not self._followed_done(now):
             return False
         if now < self.next:

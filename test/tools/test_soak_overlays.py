@@ -94,3 +94,24 @@ def test_a_followed_circle_is_not_cut_off_by_the_next_until_its_outcome_came(mon
     assert loop.followed == [7, 8] and loop.waiting[0] == 8
     now[0] += 5.0 + graph.CircleLoop.OUTCOME_WAIT + 0.1
     assert not loop.poll() and loop.unanswered == [8]    # given up: recorded, next asked
+
+
+def test_finishing_asks_for_no_more_circles_and_waits_for_the_running_ones_outcome(monkeypatch):
+    graph = load_source(os.path.join(ROOT, 'bench', 'graph.py'), 'bench_graph_finish')
+    now = [100.0]
+    monkeypatch.setattr(graph.time, 'monotonic', lambda: now[0])
+    client = _Client([_Answer(True, 3), _Answer(True, 4)])
+    loop = graph.CircleLoop(client, {'duration': 5.0}, period=5.5, follow=True, rest=0.5)
+    assert loop.poll() and loop.waiting[0] == 3
+    now[0] += 6.0                        # the run's time is up while plan 3 is paused
+    assert not loop.finish()             # still running: wait for it
+    client.deliver(_Outcome(3))
+    assert loop.finish() and loop.waiting is None
+    now[0] += 10.0
+    assert not loop.poll() and client.requests == 1      # no plan asked for after it
+    # A plan that never gets its outcome is given up at its deadline, as in poll.
+    other = graph.CircleLoop(_Client([_Answer(True, 9)]), {'duration': 5.0}, follow=True)
+    assert other.poll()
+    assert not other.finish()
+    now[0] += 5.0 + graph.CircleLoop.OUTCOME_WAIT + 0.1
+    assert other.finish() and other.unanswered == [9]
