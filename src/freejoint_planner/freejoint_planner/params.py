@@ -165,11 +165,12 @@ PARAMS = (
           'PAUSED_TOO_LONG and stays stopped (a plan the controller was never ready for '
           'waits at its start without limit). A follow_circle goal may set its own.',
           (0.0, 3600.0), exclusive_min=True),
-    Param('path_tolerance', 0.0,
+    Param('path_tolerance', 0.05,
           'Largest |end effector - setpoint| (m) while a plan moves at full feed (from '
           'feed_resume_time after a resume ramp): beyond it the plan stops along the path '
-          'and ends PATH_TOLERANCE_VIOLATED; 0 = not checked (the largest error is still '
-          'reported). A follow_circle goal may set its own.', (0.0, 10.0)),
+          'and ends PATH_TOLERANCE_VIOLATED (5 cm: an arm that far off its path is lost to '
+          'the task, some 10 times the tracking bounds); 0 = not checked (the largest error '
+          'is still reported). A follow_circle goal may set its own.', (0.0, 10.0)),
     Param('goal_tolerance', 0.0,
           "Largest |end effector - end point| (m) for a plan's success, within "
           "goal_time_tolerance of its end; 0 = success at the plan's end.", (0.0, 10.0)),
