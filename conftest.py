@@ -88,8 +88,8 @@ SLOW_TESTS = {
         "the campaign report's plots (matplotlib)",
 }
 """Single ``slow`` tests (``path::name``, with ``[parameters]`` for one case: why): whole
-closed-loop runs of a second or more of CPU each, run by ``make test`` only; each says
-what stays in ``make test-fast``."""
+closed-loop runs of a second or more of CPU each, run by ``make test`` only; where a check
+of the same path stays in ``make test-fast``, the entry says which."""
 
 _module_starts_dds = {}
 
