@@ -86,9 +86,32 @@ SLOW_TESTS = {
     'test/tools/test_campaign.py::'
     'test_the_report_prints_the_summary_and_draws_a_heatmap_per_pair_of_axes':
         "the campaign report's plots (matplotlib)",
+    'test/tools/test_campaign.py::'
+    'test_the_paper_arms_urdf_as_a_campaign_arm_gives_the_table_i_campaigns_results':
+        "a campaign on the paper arm's URDF (the spatial arm's campaign stays in test-fast)",
+    'test/tools/test_spatial_map_cli.py::test_two_worker_processes_write_the_same_map_as_one':
+        'worker processes (one and two workers in one process stay in test-fast)',
+    'test/control/test_takeover.py::'
+    'test_a_spare_activated_after_a_kill_mid_circle_tracks_within_2_s[0.25-vertical]':
+        'the braked takeover the watchdog test also runs in test-fast',
+    'test/control/test_takeover.py::'
+    'test_a_spare_activated_after_a_kill_mid_circle_tracks_within_2_s[0.25-horizontal]':
+        'a middle gap (0.03 s and 1 s stay in test-fast)',
+    'test/control/test_takeover.py::'
+    'test_a_spare_activated_after_a_kill_mid_circle_tracks_within_2_s[1.0-horizontal]':
+        'the horizontal case of the longest gap (the vertical stays in test-fast)',
+    'test/core/test_law_path.py::'
+    'test_the_laws_from_the_literature_track_the_paper_circle_offline[vertical-vsc]':
+        'the vertical case (the horizontal stays in test-fast)',
+    'test/core/test_law_path.py::'
+    'test_the_laws_from_the_literature_track_the_paper_circle_offline[vertical-tdc]':
+        'the vertical case (the horizontal stays in test-fast)',
+    'test/core/test_control.py::'
+    'test_sigma_modification_keeps_theta_nonnegative_with_a_large_step[False]':
+        '2000 ticks of the general path (the fast path stays in test-fast)',
 }
 """Single ``slow`` tests (``path::name``, with ``[parameters]`` for one case: why): whole
-closed-loop runs of a second or more of CPU each, run by ``make test`` only; where a check
+closed-loop runs (0.4-4.5 CPU-s each), run by ``make test`` only; where a check
 of the same path stays in ``make test-fast``, the entry says which."""
 
 _module_starts_dds = {}
