@@ -10,6 +10,11 @@ ENV := . tools/env.sh &&
 # (docs/performance.md, "The test suite").
 JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( 2 * n > 8 ? 8 : 2 * n )))
 XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
+# make test-fast: one worker per core unless JOBS is given. Its tests compute and never
+# wait, so a second worker per core only adds its start, its collection and its imports
+# (numba, Pinocchio, MuJoCo, matplotlib: each worker imports what its tests need).
+FAST_JOBS = $(if $(filter command line environment,$(origin JOBS)),$(JOBS),$(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( n > 8 ? 8 : n ))))
+FAST_XDIST = $(if $(filter 1,$(FAST_JOBS)),,-n $(FAST_JOBS) --dist worksteal)
 # The linters skip the files they found clean before with the same bytes, linters and
 # configuration (test/lint_cache.py, .stamps/lint), as in make test-fast; CI (CI set, as
 # .ci/run runs) lints every file.
@@ -39,7 +44,7 @@ help:
 	@echo 'make test     run every test (core math, nodes, interfaces, linters), JOBS (2 x nproc)'
 	@echo '              pytest processes at once; JOBS=1: one'
 	@echo 'make test-fast  the tests without DDS or node processes (core math, schemas,'
-	@echo '              loop logic, linters), JOBS processes: the edit-run loop'
+	@echo '              loop logic, linters), one process per core (JOBS): the edit-run loop'
 	@echo '              CPU=avx2 (test, test-fast): numpy and OpenBLAS limited to AVX2, as'
 	@echo '              a machine without AVX-512 computes (tools/avx2.sh)'
 	@echo 'make setup    only set up: .venv with ROS 2 Jazzy wheels, colcon build'
@@ -65,7 +70,7 @@ test: setup
 	@$(ENV) $(LINT_CACHE) $(PYCACHE) $(AS_CPU)python -m pytest -c pytest.ini $(XDIST)
 
 test-fast: setup
-	@$(ENV) $(PYCACHE) $(AS_CPU)bash tools/test_fast.sh $(XDIST)
+	@$(ENV) $(PYCACHE) $(AS_CPU)bash tools/test_fast.sh $(FAST_XDIST)
 
 offline: setup
 	@$(ENV) $(if $(ARM),python tools/arm_offline.py $(ARM) --seeds $(or $(SEEDS),10) $(if $(PASSIVE),--passive $(PASSIVE)) $(if $(TIP),--tip $(TIP)) $(if $(BASE),--base $(BASE)),python -m freejoint_core.offline)

@@ -40,6 +40,79 @@ SLOW_MODULES = {
     'test/workspace/test_setup_errors.py': 'tools/setup.sh in subprocesses',
 }
 """Modules of ``slow`` tests (workspace-relative path: why), run by ``make test`` only."""
+SLOW_TESTS = {
+    'test/core/test_failure.py::'
+    'test_damping_the_freed_link_in_the_rests_slows_its_revolutions_and_leaves_the_circle':
+        'two 12-s offline runs of the freed link, damped and not',
+    'test/control/test_failures.py::'
+    'test_the_freed_link_is_damped_in_the_rest_after_the_failure_as_offline_bit_for_bit':
+        'the loop over 6 s against two 6-s offline runs of the freed link',
+    'test/control/test_failures.py::'
+    'test_joint3_failure_is_found_by_the_residual_the_law_switches_as_offline_bit_for_bit'
+    '[vertical]': 'the vertical case (the horizontal one stays in test-fast)',
+    'test/control/test_internal_motion_loop.py::'
+    'test_the_loop_with_damping_commands_what_the_offline_circles_run_does_bit_for_bit[2.0]':
+        'the second damping (0.5 stays in test-fast)',
+    'test/core/test_internal_motion.py::'
+    'test_the_horizontal_stabilised_options_settle_the_free_rotor_in_the_rests':
+        'offline circles with rests (the loop against the offline settle stays in test-fast)',
+    'test/core/test_arm_init.py::'
+    'test_init_then_the_twin_runs_the_jaco_within_its_bound_for_half_a_second':
+        "fj arm init's search, then the Jaco's twin over half a second",
+    'src/freejoint_planner/test/test_plan_goal.py::'
+    'test_a_plan_paused_for_an_arm_braked_at_once_resumes_from_where_the_arm_stopped':
+        'a paused and resumed plan run through the circle',
+    'src/freejoint_planner/test/test_after_failure.py::'
+    'test_joint2_free_runs_away_in_both_cases_and_joint3_free_is_held':
+        'closed-loop runs of both failures in both cases',
+    'src/freejoint_planner/test/test_from_rest.py::'
+    'test_a_transition_into_the_semi_singular_region_is_refused_naming_the_arms_position':
+        "the transition's path check from many rest positions",
+    'test/core/test_delay.py::'
+    'test_delay_study_rows_summarise_the_runs_and_zero_delay_is_the_paper_run':
+        "the delay study's closed-loop runs",
+    'test/core/test_singularity_nlink.py::'
+    'test_path_check_on_the_four_link_example_circle_conservative_refuses_sampled_accepts':
+        "the four-link circle's path check, both ways, over the whole circle",
+    'test/core/test_trajectory.py::'
+    'test_repeated_circle_is_the_offline_circles_runners_setpoint_tick_by_tick':
+        'every tick of the repeated circles',
+    'test/core/test_guards.py::'
+    'test_kept_by_a_driver_through_bursts_of_missed_states_the_damped_hold_keeps_the_arm'
+    '[horizontal]': 'the horizontal case (the vertical one stays in test-fast)',
+    'test/control/test_failures.py::'
+    'test_the_fully_actuated_config_drives_all_three_joints_with_nullspace_damping':
+        'a closed-loop run of the fully actuated arm',
+    'test/tools/test_campaign.py::'
+    'test_the_report_prints_the_summary_and_draws_a_heatmap_per_pair_of_axes':
+        "the campaign report's plots (matplotlib)",
+    'test/tools/test_campaign.py::'
+    'test_the_paper_arms_urdf_as_a_campaign_arm_gives_the_table_i_campaigns_results':
+        "a campaign on the paper arm's URDF (the spatial arm's campaign stays in test-fast)",
+    'test/tools/test_spatial_map_cli.py::test_two_worker_processes_write_the_same_map_as_one':
+        'worker processes (one and two workers in one process stay in test-fast)',
+    'test/control/test_takeover.py::'
+    'test_a_spare_activated_after_a_kill_mid_circle_tracks_within_2_s[0.25-vertical]':
+        'the braked takeover the watchdog test also runs in test-fast',
+    'test/control/test_takeover.py::'
+    'test_a_spare_activated_after_a_kill_mid_circle_tracks_within_2_s[0.25-horizontal]':
+        'a middle gap (0.03 s and 1 s stay in test-fast)',
+    'test/control/test_takeover.py::'
+    'test_a_spare_activated_after_a_kill_mid_circle_tracks_within_2_s[1.0-horizontal]':
+        'the horizontal case of the longest gap (the vertical stays in test-fast)',
+    'test/core/test_law_path.py::'
+    'test_the_laws_from_the_literature_track_the_paper_circle_offline[vertical-vsc]':
+        'the vertical case (the horizontal stays in test-fast)',
+    'test/core/test_law_path.py::'
+    'test_the_laws_from_the_literature_track_the_paper_circle_offline[vertical-tdc]':
+        'the vertical case (the horizontal stays in test-fast)',
+    'test/core/test_control.py::'
+    'test_sigma_modification_keeps_theta_nonnegative_with_a_large_step[False]':
+        '2000 ticks of the general path (the fast path stays in test-fast)',
+}
+"""Single ``slow`` tests (``path::name``, with ``[parameters]`` for one case: why): whole
+closed-loop runs (0.4-4.5 CPU-s each), run by ``make test`` only; where a check
+of the same path stays in ``make test-fast``, the entry says which."""
 
 _module_starts_dds = {}
 
@@ -80,12 +153,13 @@ def pytest_configure(config):
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark every test that needs DDS with ``dds``, every one of ``SLOW_MODULES`` ``slow``."""
+    """Mark tests needing DDS ``dds``, those of ``SLOW_MODULES`` and ``SLOW_TESTS`` ``slow``."""
     for item in items:
         if needs_dds(item):
             item.add_marker(pytest.mark.dds)
         rel = os.path.relpath(str(item.path), ROOT).replace(os.sep, '/')
-        if rel in SLOW_MODULES:
+        if rel in SLOW_MODULES or f'{rel}::{item.name}' in SLOW_TESTS or \
+                f'{rel}::{getattr(item, "originalname", item.name)}' in SLOW_TESTS:
             item.add_marker(pytest.mark.slow)
 
 

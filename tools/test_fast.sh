@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # make test-fast: the tests that need no DDS and no node process (`-m 'not dds and not slow'`,
 # markers set by the root conftest.py): core math, schemas, control loop, structure, linters.
-# Extra arguments go to pytest (make passes `-n JOBS --dist worksteal`: pytest-xdist workers).
+# Extra arguments go to pytest (make passes `-n N --dist worksteal`: pytest-xdist workers, one
+# per core unless JOBS is given).
 set -u
 cd "$(dirname "$0")/.."
 start=$SECONDS

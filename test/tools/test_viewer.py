@@ -278,22 +278,41 @@ def test_foxglove_client_sees_the_running_graph_and_steers_it(procs, wait, ws_cl
     assert procs.stop(viewer) == 0
 
 
-@pytest.mark.parametrize('override, named', [
+BAD_START = [
     ('port:=70000', 'port'),
     ('services:=[plan_circle]', 'services'),
     ('services:=[/x=freejoint_msgs/srv/Nothing]', 'services'),
     ('description_file:=/nonexistent.urdf', 'description_file'),
     ('tf_rate:=0.0', 'tf_rate'),
-])
-def test_viewer_bad_start_up_parameter_is_one_line_and_exit_2(override, named, procs, wait):
-    proc = procs.start_node('freejoint_tools', 'viewer', 'viewer',
-                            ['--ros-args', '-p', 'port:=0', '-p', override])
-    wait(lambda: proc.poll() is not None, 30.0, 'the viewer to exit')
-    log = procs.log(proc)
-    assert proc.returncode == 2, log
+]
+"""A bad start-up value -> the parameter the viewer's one line names."""
+
+
+def _one_fatal_line(code, log, named):
+    assert code == 2, log
     assert 'Traceback' not in log
     fatal = [line for line in log.splitlines() if 'FATAL' in line]
     assert len(fatal) == 1 and 'bad parameter: %s' % named in fatal[0], log
+
+
+@pytest.mark.parametrize('override, named', BAD_START)
+def test_viewer_bad_start_up_parameter_makes_main_log_one_line_and_return_2(
+        override, named, run_main):
+    # In this process, as the executable runs it: rclpy.init, the viewer's constructor and
+    # its checks (all before its server starts), the runner's line; main's return is the
+    # process's exit status (test/conftest.py, run_main).
+    code, log = run_main('freejoint_tools', 'viewer',
+                         ['--ros-args', '-p', 'port:=0', '-p', override])
+    _one_fatal_line(code, log, named)
+
+
+def test_viewer_bad_start_up_parameter_is_one_line_and_exit_2(procs, wait):
+    # What only the process shows, once (every row: the test above).
+    override, named = BAD_START[0]
+    proc = procs.start_node('freejoint_tools', 'viewer', 'viewer',
+                            ['--ros-args', '-p', 'port:=0', '-p', override])
+    wait(lambda: proc.poll() is not None, 30.0, 'the viewer to exit')
+    _one_fatal_line(proc.returncode, procs.log(proc), named)
 
 
 def _decoder(channel):
