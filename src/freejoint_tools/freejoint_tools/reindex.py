@@ -6,7 +6,8 @@ without its summary and footer (its last chunk possibly cut short) and no
 ``metadata.yaml``: rosbags and mcap's indexed reader refuse such a file. ``reindex <bag>``
 reads the MCAP file (plain or zstd chunks) with mcap's StreamReader (:func:`scan_mcap`, the
 pass :func:`open_bag` makes over a cut bag too) up to where it is cut, keeps every complete
-chunk (a chunk with all its message indexes), cuts off the incomplete tail, appends the
+chunk (a chunk with all its message indexes; a whole last chunk whose indexes were cut
+short gets them rebuilt from its messages), cuts off the incomplete tail, appends the
 summary (schemas, channels, statistics, chunk and metadata indexes) and footer in place,
 and writes ``metadata.yaml`` from what the file holds; the run information comes from the
 MCAP run record (``freejoint_run``). Nothing is copied: it works on a full disk too. A
@@ -22,8 +23,8 @@ import glob
 import os
 import sys
 
-from .bagfile import (_dump_yaml, bag_information, BagError, finalise_mcap, METADATA_FILE,
-                      open_bag, RESERVE_SUFFIX, scan_mcap, write_metadata_yaml)
+from .bagfile import (_dump_yaml, bag_information, BagError, finalise_mcap, index_tail,
+                      METADATA_FILE, open_bag, RESERVE_SUFFIX, scan_mcap, write_metadata_yaml)
 
 
 def reindex(path, ros_distro=None):
@@ -58,7 +59,8 @@ def reindex(path, ros_distro=None):
     if contents.header.profile != 'ros2':
         raise BagError(mcap_path, "MCAP profile is %r, not 'ros2' (not a ROS 2 bag)"
                        % contents.header.profile)
-    cut = contents.size - contents.end
+    indexed = index_tail(mcap_path, contents)
+    cut = contents.size - contents.end if not indexed else 0
     topics = contents.topics()
     info = bag_information(files[0], [t for _, t in topics],
                            [contents.counts.get(cid, 0) for cid, _ in topics],
@@ -71,8 +73,9 @@ def reindex(path, ros_distro=None):
     finalise_mcap(mcap_path, {'serialized_metadata': _dump_yaml(info)}, contents)
     write_metadata_yaml(path, info)
     what = ('MCAP file finalised already' if was_finalised else
-            'summary rebuilt from %d complete chunk(s)%s' % (
+            'summary rebuilt from %d complete chunk(s)%s%s' % (
                 len(contents.chunk_indexes),
+                ", the last one's message indexes rebuilt (cut short)" if indexed else '',
                 ', incomplete tail of %d bytes cut off' % cut if cut else ''))
     return '%s: %d messages on %d topics; %s; metadata.yaml written' % (
         path, contents.message_count, len(topics), what)
