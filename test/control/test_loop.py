@@ -177,7 +177,9 @@ def test_each_lockstep_tick_is_the_core_law_and_a_repeated_stamp_gets_the_same_a
         assert res.position_desired == _setpoint(k)[0:2]
         assert res.status == 0 and res.message == '' and res.stamp_ns == k * DT_NS
         assert res.law_state_names[:5] == tuple('theta_hat[%d]' % i for i in range(5))
-        assert res.law_state_values == out.internal['theta_hat'].tolist() + [out.internal['rho_hat']] + out.internal['delta_v'].tolist()
+        internal = out.internal
+        assert res.law_state_values == internal['theta_hat'].tolist() + [
+            internal['rho_hat']] + internal['delta_v'].tolist()
     again = state(loop, 4, *_state_q(4))
     assert again.repeated and again.law_state_values[:5] == ctl.theta.tolist()
 
@@ -424,7 +426,8 @@ def test_real_time_holds_against_gravity_before_the_first_setpoint_and_resumes_w
         res = loop.on_state(ns, NAMES, q, qd, ns + 500_000, 0.0)
         used = _moving_setpoint(min(k, 79), hold) if 80 <= k < 100 else sp
         effort, ref, dt, out = rep.tick(ns, q, qd, used, 79 * DT_NS if 80 <= k < 100 else None)
-        assert res.effort == effort and res.law_state_values[:5] == out.internal['theta_hat'].tolist(), k
+        assert res.effort == effort, k
+        assert res.law_state_values[:5] == out.internal['theta_hat'].tolist(), k
         assert res.position_desired == tuple(ref[0:2]) and res.dt == dt
         assert res.state_age == 5e-4
         if k in (0, 100):
@@ -671,7 +674,8 @@ def test_a_non_finite_law_result_is_never_returned_and_the_law_state_is_restored
             rep.armed = False
         else:
             expected, _, _, out = rep.tick(k * DT_NS, Q0, QD0, _setpoint(k))
-            assert res.effort == expected and res.law_state_values[:5] == out.internal['theta_hat'].tolist(), k
+            assert res.effort == expected, k
+            assert res.law_state_values[:5] == out.internal['theta_hat'].tolist(), k
             assert not res.status & STATUS_LAW_FAULT
     assert loop.faults == 1 and '1 law faults' in loop.report()
     assert any(kind == 'fault' for _, kind, _ in logs)

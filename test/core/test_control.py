@@ -94,7 +94,8 @@ def test_pseudoinverse_is_a_right_inverse_da_tau_equals_v_plus_dv_minus_b(use_fa
         out = ctl.step(q, qd, p_d, pd_d, pdd_d, DT)
         da, b = model.decoupling(q, qd)
         v = pdd_d - (k + lam) * out.edot - k * lam * out.e
-        np.testing.assert_allclose(da @ out.tau, v + out.internal['delta_v'] - b, rtol=1e-10, atol=1e-9)
+        np.testing.assert_allclose(da @ out.tau, v + out.internal['delta_v'] - b, rtol=1e-10,
+                                   atol=1e-9)
         assert out.internal['det'] == pytest.approx(abs(np.linalg.det(da @ da.T)), rel=1e-10)
 
 
@@ -146,10 +147,11 @@ def test_torque_uses_the_estimate_before_the_update(use_fast):
     out = _hand_tick(ctl)
     assert out.internal['rho_hat'] == 0.0
     np.testing.assert_array_equal(out.internal['delta_v'], [0.0, 0.0])
-    assert out.internal['theta_hat'][0] > 0.0 and out.internal['theta_hat'][3] > 0.0
-    assert out.internal['theta_hat'][1] == 0.0 and out.internal['theta_hat'][2] == 0.0      # psi_2 = psi_3 = 0 here
-    assert _hand_tick(ctl).internal['rho_hat'] == pytest.approx(out.internal['theta_hat'][0] + 0.02 * out.internal['theta_hat'][3]
-                                                + 0.01 * out.internal['theta_hat'][4], rel=1e-12)
+    theta = out.internal['theta_hat']
+    assert theta[0] > 0.0 and theta[3] > 0.0
+    assert theta[1] == 0.0 and theta[2] == 0.0      # psi_2 = psi_3 = 0 here
+    assert _hand_tick(ctl).internal['rho_hat'] == pytest.approx(
+        theta[0] + 0.02 * theta[3] + 0.01 * theta[4], rel=1e-12)
 
 
 @pytest.mark.parametrize('use_fast', [True, False])
@@ -164,7 +166,8 @@ def test_sigma_modification_keeps_theta_nonnegative_with_a_large_step(use_fast):
         if k % 2:
             before = ctl.theta
             out = _hand_tick(ctl, e=(0.0, 0.0), edot=(0.0, 0.0), dt=dt)   # no error: decay
-            np.testing.assert_allclose(out.internal['theta_hat'], math.exp(-5.0) * before, rtol=1e-12)
+            np.testing.assert_allclose(out.internal['theta_hat'], math.exp(-5.0) * before,
+                                       rtol=1e-12)
         else:
             big = rng.uniform(-1.0, 1.0, 2)
             out = _hand_tick(ctl, e=big, edot=10.0 * rng.uniform(-1.0, 1.0, 2), dt=dt)
@@ -181,7 +184,8 @@ def test_adaptation_settles_at_the_low_pass_fixed_point(use_fast):
         out = _hand_tick(ctl, dt=0.01)
     na2 = 1.0016
     u = na2 / (math.sqrt(na2) + 0.1)
-    np.testing.assert_allclose(out.internal['theta_hat'], u * np.array([1.0, 0.0, 0.0, 0.02, 0.01]) / 2.0,
+    np.testing.assert_allclose(out.internal['theta_hat'],
+                               u * np.array([1.0, 0.0, 0.0, 0.02, 0.01]) / 2.0,
                                rtol=1e-12)
 
 
@@ -191,7 +195,8 @@ def test_adaptation_without_sigma_integrates_exactly(use_fast):
                            use_fast=use_fast)
     out = _hand_tick(ctl, dt=0.002)
     u = 1.0016 / (math.sqrt(1.0016) + 0.1)
-    np.testing.assert_allclose(out.internal['theta_hat'], 3.0 * u * np.array([1.0, 0, 0, 0.02, 0.01]) * 0.002,
+    np.testing.assert_allclose(out.internal['theta_hat'],
+                               3.0 * u * np.array([1.0, 0, 0, 0.02, 0.01]) * 0.002,
                                rtol=1e-12)
 
 
@@ -392,7 +397,8 @@ def test_every_joint_driven_the_scalar_path_gives_the_general_paths_torques(case
                 rng.uniform(-2.0, 2.0, 2), 1e-3)
         a, b = fast.step(*args), ref.step(*args)
         assert np.allclose(a.tau, b.tau, rtol=1e-12, atol=1e-12)
-        assert np.allclose(a.internal['theta_hat'], b.internal['theta_hat'], rtol=1e-12, atol=1e-15)
-        assert a.status == b.status and a.internal['det'] == pytest.approx(b.internal['det'], rel=1e-12)
+        ia, ib = a.internal, b.internal
+        assert np.allclose(ia['theta_hat'], ib['theta_hat'], rtol=1e-12, atol=1e-15)
+        assert a.status == b.status and ia['det'] == pytest.approx(ib['det'], rel=1e-12)
         statuses.add(a.status)
     assert len(statuses) > 1

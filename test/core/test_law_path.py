@@ -87,6 +87,57 @@ def test_no_law_is_built_but_by_the_registry_nor_changed_after_it_is_built():
     assert changed == {}
 
 
+PAPER_FIELDS = ('theta', 'rho', 'dv', 'det', 'kappa')
+"""What the paper's output tuple had beyond the generic fields: a law's internals now."""
+
+
+def test_no_runner_reads_a_law_output_but_by_its_generic_fields_and_declared_internals():
+    found = []
+    for path in _sources():
+        with open(os.path.join(ROOT, path)) as f:
+            tree = ast.parse(f.read(), path)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Name) and node.id in ('ControlOutput', 'SpatialOutput'):
+                found.append((path, node.lineno, node.id))
+            if (isinstance(node, ast.Attribute) and node.attr in PAPER_FIELDS
+                    and isinstance(node.value, ast.Name) and node.value.id == 'out'):
+                found.append((path, node.lineno, 'out.' + node.attr))
+    assert found == []
+
+
+def _spatial_nominal():
+    from freejoint_core.spatial_model import known_arm
+    return known_arm('ur5', ['wrist_2_joint'])
+
+
+@pytest.mark.parametrize('name', ['robust', 'vsc', 'tdc', 'spatial'])
+def test_each_law_gives_the_internal_values_it_declares_in_order_and_shape(name):
+    if name == 'spatial':
+        from freejoint_core.spatial_law import SpatialGains
+        nominal = _spatial_nominal()
+        law = make_law(name, nominal, SpatialGains(task_dim=3))
+        q = np.linspace(0.2, 0.8, nominal.n)
+        out = law.step(q, 0.1 * q, nominal.fk(q) + 0.01, (0.1, 0.0, 0.0), (0.0, 0.0, 0.0),
+                       1e-3)
+        m = 3
+    else:
+        law = make_law(name, table1('vertical').scaled(0.7), Gains())
+        out = law.step(Q, QD, *SP, 1e-3)
+        m = 2
+    declared = [v.name for v in law.internals]
+    assert list(out.internal) == declared and len(set(declared)) == len(declared)
+    for value in law.internals:
+        got = out.internal[value.name]
+        if value.shape:
+            shape = tuple(m if d == 'm' else d for d in value.shape)
+            assert isinstance(got, np.ndarray) and got.shape == shape, value.name
+        else:
+            assert isinstance(got, float), value.name
+        assert value.unit and value.description, value.name
+    assert law.conditioning in declared
+    assert out._fields == ('tau', 'e', 'edot', 's', 'p', 'status', 'internal')
+
+
 def test_the_node_gets_its_null_space_through_the_registry():
     from freejoint_common.schema import nullspace_options
     nominal = table1('vertical').scaled(0.7)

@@ -180,7 +180,7 @@ DET = LawValue('det', (), 'model units', '|det(Da Da^T)| of the nominal model, b
 """The conditioning value of a planar law that inverts ``Da Da^T``."""
 
 ROBUST_INTERNALS = (
-    LawValue('theta_hat', (5,), '-', 'adaptive estimate after this tick\'s update, eq. 19 '
+    LawValue('theta_hat', (5,), '-', "adaptive estimate after this tick's update, eq. 19 "
              '(the torque used the one before)'),
     LawValue('rho_hat', (), 'm/s^2', 'robust gain theta_hat^T psi used this tick (0 when '
              'robust is False)'),

@@ -35,7 +35,7 @@ from freejoint_core.arm import ArmModel
 from freejoint_core.control import RobustController
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import FreeLinkModulation, NullSpace
-from freejoint_core.law_base import ControlLaw, INF, LAWS, LawOutput, LawValue, register_law
+from freejoint_core.law_base import ControlLaw, INF, LawOutput, LAWS, LawValue, register_law
 
 __all__ = ('ControlLaw', 'FreeLinkDampedLaw', 'gain_schema', 'INF', 'LAWS', 'LawOutput',
            'LawValue', 'make_law', 'register_law', 'RobustLaw')
@@ -237,6 +237,7 @@ class FreeLinkDampedLaw(ControlLaw):
         self._bound = FreeLinkModulation(last_free, **self._options).delta_max
         self.modulation = self._modulation_for(nominal)
         self.name = law.name
+        self.internals, self.conditioning = law.internals, law.conditioning   # its output's
         self.state_names = tuple(law.state_names) + ('free_link_delta[0]',
                                                      'free_link_delta[1]')
 
@@ -251,16 +252,6 @@ class FreeLinkDampedLaw(ControlLaw):
         """Return the wrapped law's bounds and the shift's (its disc, 1 % slack)."""
         d = 1.01 * self._bound
         return tuple(self.law.state_bounds) + ((-d, d), (-d, d))
-
-    @property
-    def internals(self):
-        """Return the wrapped law's declared internal values (its output's)."""
-        return self.law.internals
-
-    @property
-    def conditioning(self):
-        """Return the name of the wrapped law's conditioning value (None: none)."""
-        return self.law.conditioning
 
     @property
     def model(self):

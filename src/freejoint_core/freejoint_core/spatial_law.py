@@ -186,17 +186,10 @@ class SpatialLaw(HoldStiffness):
         ``kf`` [1/s], >= 0: the null-space torque also asks the free joints for
         ``qdd_p = -kf qd_p`` (module notes); 0 (default): off.
 
-    Attributes
-    ----------
-    internals : tuple of LawValue
-        :data:`INTERNALS`, the output's internal values.
-    conditioning : str
-        ``'kappa'``: the internal value of the nominal task's conditioning.
-
     """
 
-    internals = INTERNALS
-    conditioning = 'kappa'
+    internals = INTERNALS          # the output's internal values
+    conditioning = 'kappa'         # the one that says how near a singularity the task is
 
     def __init__(self, nominal, gains=None, nullspace=None, free_damping=0.0):
         kf = float(free_damping)

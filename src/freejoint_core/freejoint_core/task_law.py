@@ -32,6 +32,7 @@ from freejoint_core.law_base import ControlLaw, law_params, LawOutput
 from freejoint_core.models import make_model
 import numpy as np
 
+
 def damped_right_inverse(da, w, thr):
     """
     Return ``Da# w`` (damped least squares near a singularity), ``|det(Da Da^T)|``, status.
