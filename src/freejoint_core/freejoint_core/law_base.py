@@ -3,6 +3,8 @@ The interface every control law implements (``freejoint_core.laws`` keeps the re
 
 A module defining a law imports :class:`ControlLaw` from here (or from ``laws``, which
 re-exports it); ``laws`` imports a law module only when a controller asks for that law.
+Every law's step returns a :class:`LawOutput`: the generic fields and the internal values
+the law declares (:class:`LawValue`); :class:`RunValues` reads what a run reports of them.
 """
 
 from dataclasses import dataclass
