@@ -106,7 +106,7 @@ class Replica:
         return self.ctl.model.fk(q).tolist()
 
     def tick(self, ns, q, qd, sp, sp_ns=None):
-        """Return (effort, reference, dt, ControlOutput) for the state stamped ns."""
+        """Return (effort, reference, dt, LawOutput) for the state stamped ns."""
         if self.lockstep or self.last_ns < 0:
             dt = self.dt
         else:
@@ -172,12 +172,14 @@ def test_each_lockstep_tick_is_the_core_law_and_a_repeated_stamp_gets_the_same_a
         res = state(loop, k, q, qd)
         out = ctl.step(q, qd, _setpoint(k)[0:2], _setpoint(k)[2:4], _setpoint(k)[4:6], DT)
         assert res.effort == out.tau.tolist()
-        assert res.law_state_values[:5] == out.theta.tolist()
-        assert list(res.position) == out.p.tolist() and res.det_dd == out.det
+        assert res.law_state_values[:5] == out.internal['theta_hat'].tolist()
+        assert list(res.position) == out.p.tolist() and res.det_dd == out.internal['det']
         assert res.position_desired == _setpoint(k)[0:2]
         assert res.status == 0 and res.message == '' and res.stamp_ns == k * DT_NS
         assert res.law_state_names[:5] == tuple('theta_hat[%d]' % i for i in range(5))
-        assert res.law_state_values == out.theta.tolist() + [out.rho] + out.dv.tolist()
+        internal = out.internal
+        assert res.law_state_values == internal['theta_hat'].tolist() + [
+            internal['rho_hat']] + internal['delta_v'].tolist()
     again = state(loop, 4, *_state_q(4))
     assert again.repeated and again.law_state_values[:5] == ctl.theta.tolist()
 
@@ -231,7 +233,7 @@ def test_joint_state_in_another_order_with_extra_joints_drives_it_the_same():
         else:
             res = state(loop, k, q, qd)
         assert res.effort == out.tau.tolist()
-        assert res.law_state_values[:5] == out.theta.tolist()
+        assert res.law_state_values[:5] == out.internal['theta_hat'].tolist()
 
 
 def test_lockstep_holds_when_setpoints_go_stale_and_answers_at_once_while_holding():
@@ -248,7 +250,7 @@ def test_lockstep_holds_when_setpoints_go_stale_and_answers_at_once_while_holdin
     assert res.effort == effort and res.effort != [0.0, 0.0]
     assert res.status & STATUS_HOLDING and res.status & STATUS_STALE_SETPOINT, res.message
     assert res.position_desired == tuple(rep.fk(q1))
-    assert res.law_state_values[:5] == out.theta.tolist()
+    assert res.law_state_values[:5] == out.internal['theta_hat'].tolist()
     assert any('holding position' in text for _, _, text in logs)
     res = state(loop, 2)                             # answered at once, same frozen reference
     assert res.effort == rep.tick(2 * DT_NS, Q0, QD0, None)[0]
@@ -424,7 +426,8 @@ def test_real_time_holds_against_gravity_before_the_first_setpoint_and_resumes_w
         res = loop.on_state(ns, NAMES, q, qd, ns + 500_000, 0.0)
         used = _moving_setpoint(min(k, 79), hold) if 80 <= k < 100 else sp
         effort, ref, dt, out = rep.tick(ns, q, qd, used, 79 * DT_NS if 80 <= k < 100 else None)
-        assert res.effort == effort and res.law_state_values[:5] == out.theta.tolist(), k
+        assert res.effort == effort, k
+        assert res.law_state_values[:5] == out.internal['theta_hat'].tolist(), k
         assert res.position_desired == tuple(ref[0:2]) and res.dt == dt
         assert res.state_age == 5e-4
         if k in (0, 100):
@@ -497,7 +500,7 @@ def test_reset_restarts_theta_hat_and_blends_in_again_from_the_arm():
     setpoint(loop, 25, _setpoint(25))
     res = state(loop, 25, Q0, qd)
     effort, ref, _, out = rep.tick(25 * DT_NS, Q0, qd, _setpoint(25))
-    assert res.effort == effort and res.law_state_values[:5] == out.theta.tolist()
+    assert res.effort == effort and res.law_state_values[:5] == out.internal['theta_hat'].tolist()
     assert res.status & STATUS_RESUMING and res.position_desired == tuple(rep.fk(Q0))
 
 
@@ -671,7 +674,8 @@ def test_a_non_finite_law_result_is_never_returned_and_the_law_state_is_restored
             rep.armed = False
         else:
             expected, _, _, out = rep.tick(k * DT_NS, Q0, QD0, _setpoint(k))
-            assert res.effort == expected and res.law_state_values[:5] == out.theta.tolist(), k
+            assert res.effort == expected, k
+            assert res.law_state_values[:5] == out.internal['theta_hat'].tolist(), k
             assert not res.status & STATUS_LAW_FAULT
     assert loop.faults == 1 and '1 law faults' in loop.report()
     assert any(kind == 'fault' for _, kind, _ in logs)
@@ -680,8 +684,7 @@ def test_a_non_finite_law_result_is_never_returned_and_the_law_state_is_restored
 def test_a_second_law_is_one_registration_and_one_parameter_value():
     """The nominal inverse dynamics (what ``robust: false`` computes) as a separate law."""
     import numpy as np
-    from freejoint_core.control import ControlOutput
-    from freejoint_core.laws import ControlLaw, LAWS, register_law
+    from freejoint_core.laws import ControlLaw, LAWS, LawOutput, register_law
     from freejoint_core.models import make_model
 
     class NominalInverseDynamics(ControlLaw):
@@ -704,8 +707,7 @@ def test_a_second_law_is_one_registration_and_one_parameter_value():
             da, b = m.decoupling(q, qd)
             tau = da.T @ np.linalg.solve(da @ da.T, v - b)
             tau = np.clip(tau, -np.array(self.gains.tau_limit), np.array(self.gains.tau_limit))
-            return ControlOutput(tau, e, edot, edot + lam * e, np.zeros(5), 0.0, np.zeros(2),
-                                 abs(float(np.linalg.det(da @ da.T))), p, 0)
+            return LawOutput(tau, e, edot, edot + lam * e, p, 0, {})   # no internal values
 
     register_law('nominal_id', NominalInverseDynamics)
     try:
@@ -718,6 +720,7 @@ def test_a_second_law_is_one_registration_and_one_parameter_value():
             res = state(loop, k, q, qd)
             out = ctl.step(q, qd, _setpoint(k)[0:2], _setpoint(k)[2:4], _setpoint(k)[4:6], DT)
             assert res.effort == pytest.approx(out.tau.tolist(), rel=1e-9, abs=1e-9)
+            assert res.det_dd == 0.0 and res.law_state_values == []   # declares none
             assert res.law_state_values == []
     finally:
         del LAWS['nominal_id']

@@ -4,7 +4,7 @@ import math
 
 from freejoint_core.arm import ArmModel, ArmParams, table1
 from freejoint_core.control import (
-    ControlOutput, Gains, RobustController, STATUS_NEAR_SINGULAR, STATUS_OK,
+    Gains, ROBUST_INTERNALS, RobustController, STATUS_NEAR_SINGULAR, STATUS_OK,
     STATUS_TORQUE_LIMITED)
 from freejoint_core.errors import FreejointValueError
 import numpy as np
@@ -94,8 +94,9 @@ def test_pseudoinverse_is_a_right_inverse_da_tau_equals_v_plus_dv_minus_b(use_fa
         out = ctl.step(q, qd, p_d, pd_d, pdd_d, DT)
         da, b = model.decoupling(q, qd)
         v = pdd_d - (k + lam) * out.edot - k * lam * out.e
-        np.testing.assert_allclose(da @ out.tau, v + out.dv - b, rtol=1e-10, atol=1e-9)
-        assert out.det == pytest.approx(abs(np.linalg.det(da @ da.T)), rel=1e-10)
+        np.testing.assert_allclose(da @ out.tau, v + out.internal['delta_v'] - b, rtol=1e-10,
+                                   atol=1e-9)
+        assert out.internal['det'] == pytest.approx(abs(np.linalg.det(da @ da.T)), rel=1e-10)
 
 
 # -- the robust term and the adaptation, hand values ------------------------------------
@@ -115,13 +116,13 @@ def test_robust_term_and_adaptation_match_hand_values(use_fast):
     na = math.sqrt(1.0016)
     h = na + 0.1
     np.testing.assert_allclose(out.s, [0.5, 0.02], atol=1e-13)
-    assert out.rho == pytest.approx(1.03, abs=1e-13)
-    np.testing.assert_allclose(out.dv, [-1.03 / h, -1.03 * 0.04 / h], atol=1e-12)
+    assert out.internal['rho_hat'] == pytest.approx(1.03, abs=1e-13)
+    np.testing.assert_allclose(out.internal['delta_v'], [-1.03 / h, -1.03 * 0.04 / h], atol=1e-12)
     np.testing.assert_allclose(out.p, [1.0, 0.5], atol=1e-15)
     psi = np.array([1.0, 0.0, 0.0, 0.02, 0.01])
     a = math.exp(-0.01 * 0.1 * DT)
     expected = a * 1.0 + (1.0 - a) * (1.0016 / h) * psi / 0.1
-    np.testing.assert_allclose(out.theta, expected, rtol=1e-12)
+    np.testing.assert_allclose(out.internal['theta_hat'], expected, rtol=1e-12)
     np.testing.assert_allclose(ctl.theta, expected, rtol=1e-12)
 
 
@@ -136,20 +137,21 @@ def test_chattering_function_forms(use_fast, h_form, e, dv_x):
     gains = Gains(theta0=(1.0, 0.0, 0.0, 0.0, 0.0), h_form=h_form)
     out = _hand_tick(RobustController(NOMINAL, gains, use_fast=use_fast), e=(e, 0.0),
                      edot=(0.0, 0.0))
-    assert out.rho == 1.0
-    np.testing.assert_allclose(out.dv, [dv_x, 0.0], atol=1e-14)
+    assert out.internal['rho_hat'] == 1.0
+    np.testing.assert_allclose(out.internal['delta_v'], [dv_x, 0.0], atol=1e-14)
 
 
 @pytest.mark.parametrize('use_fast', [True, False])
 def test_torque_uses_the_estimate_before_the_update(use_fast):
     ctl = RobustController(NOMINAL, Gains(), use_fast=use_fast)   # theta0 = 0
     out = _hand_tick(ctl)
-    assert out.rho == 0.0
-    np.testing.assert_array_equal(out.dv, [0.0, 0.0])
-    assert out.theta[0] > 0.0 and out.theta[3] > 0.0
-    assert out.theta[1] == 0.0 and out.theta[2] == 0.0      # psi_2 = psi_3 = 0 here
-    assert _hand_tick(ctl).rho == pytest.approx(out.theta[0] + 0.02 * out.theta[3]
-                                                + 0.01 * out.theta[4], rel=1e-12)
+    assert out.internal['rho_hat'] == 0.0
+    np.testing.assert_array_equal(out.internal['delta_v'], [0.0, 0.0])
+    theta = out.internal['theta_hat']
+    assert theta[0] > 0.0 and theta[3] > 0.0
+    assert theta[1] == 0.0 and theta[2] == 0.0      # psi_2 = psi_3 = 0 here
+    assert _hand_tick(ctl).internal['rho_hat'] == pytest.approx(
+        theta[0] + 0.02 * theta[3] + 0.01 * theta[4], rel=1e-12)
 
 
 @pytest.mark.parametrize('use_fast', [True, False])
@@ -164,11 +166,12 @@ def test_sigma_modification_keeps_theta_nonnegative_with_a_large_step(use_fast):
         if k % 2:
             before = ctl.theta
             out = _hand_tick(ctl, e=(0.0, 0.0), edot=(0.0, 0.0), dt=dt)   # no error: decay
-            np.testing.assert_allclose(out.theta, math.exp(-5.0) * before, rtol=1e-12)
+            np.testing.assert_allclose(out.internal['theta_hat'], math.exp(-5.0) * before,
+                                       rtol=1e-12)
         else:
             big = rng.uniform(-1.0, 1.0, 2)
             out = _hand_tick(ctl, e=big, edot=10.0 * rng.uniform(-1.0, 1.0, 2), dt=dt)
-        lowest = min(lowest, out.theta.min())
+        lowest = min(lowest, out.internal['theta_hat'].min())
     assert lowest >= 0.0
 
 
@@ -181,7 +184,8 @@ def test_adaptation_settles_at_the_low_pass_fixed_point(use_fast):
         out = _hand_tick(ctl, dt=0.01)
     na2 = 1.0016
     u = na2 / (math.sqrt(na2) + 0.1)
-    np.testing.assert_allclose(out.theta, u * np.array([1.0, 0.0, 0.0, 0.02, 0.01]) / 2.0,
+    np.testing.assert_allclose(out.internal['theta_hat'],
+                               u * np.array([1.0, 0.0, 0.0, 0.02, 0.01]) / 2.0,
                                rtol=1e-12)
 
 
@@ -191,7 +195,8 @@ def test_adaptation_without_sigma_integrates_exactly(use_fast):
                            use_fast=use_fast)
     out = _hand_tick(ctl, dt=0.002)
     u = 1.0016 / (math.sqrt(1.0016) + 0.1)
-    np.testing.assert_allclose(out.theta, 3.0 * u * np.array([1.0, 0, 0, 0.02, 0.01]) * 0.002,
+    np.testing.assert_allclose(out.internal['theta_hat'],
+                               3.0 * u * np.array([1.0, 0, 0, 0.02, 0.01]) * 0.002,
                                rtol=1e-12)
 
 
@@ -199,9 +204,9 @@ def test_adaptation_without_sigma_integrates_exactly(use_fast):
 def test_robust_off_means_no_robust_term_and_no_adaptation(use_fast):
     ctl = RobustController(NOMINAL, Gains(robust=False, theta0=(1.0,) * 5), use_fast=use_fast)
     out = _hand_tick(ctl)
-    assert out.rho == 0.0
-    np.testing.assert_array_equal(out.dv, [0.0, 0.0])
-    np.testing.assert_array_equal(out.theta, [1.0] * 5)
+    assert out.internal['rho_hat'] == 0.0
+    np.testing.assert_array_equal(out.internal['delta_v'], [0.0, 0.0])
+    np.testing.assert_array_equal(out.internal['theta_hat'], [1.0] * 5)
 
 
 # -- safeguards beyond the paper -----------------------------------------------------
@@ -222,7 +227,7 @@ def test_fallback_is_used_and_bounded_at_a_singular_configuration(use_fast):
     assert np.all(np.isfinite(out.tau))
     _, b = ArmModel(NOMINAL).decoupling([0.3, 0.0, 1.0], [0.5, -0.2, 0.1])
     k, lam = np.array(ctl.gains.K), np.array(ctl.gains.Lambda)
-    w = np.array([0.0, 1.0]) - (k + lam) * out.edot - k * lam * out.e + out.dv - b
+    w = np.array([0.0, 1.0]) - (k + lam) * out.edot - k * lam * out.e + out.internal['delta_v'] - b
     bound = math.sqrt((np.sum(da ** 2) + math.sqrt(thr)) / thr)   # documented bound
     assert np.linalg.norm(out.tau) <= bound * np.linalg.norm(w)
 
@@ -275,8 +280,10 @@ def test_scalar_tick_agrees_with_general_numpy_path(gains):
         a = fast.step(q, qd, p_d, pd_d, pdd_d, DT)
         b = ref.step(q, qd, p_d, pd_d, pdd_d, DT)
         assert a.status == b.status
-        for name in ControlOutput._fields:
-            x, y = np.asarray(getattr(a, name), float), np.asarray(getattr(b, name), float)
+        assert list(a.internal) == list(b.internal) == [v.name for v in ROBUST_INTERNALS]
+        for name in ('tau', 'e', 'edot', 's', 'p') + tuple(a.internal):
+            x, y = (np.asarray(out.internal[name] if name in out.internal
+                               else getattr(out, name), float) for out in (a, b))
             assert x.shape == y.shape, name
             tol = 1e-6 if singular else 1e-9
             np.testing.assert_allclose(x, y, rtol=tol, atol=tol * (1 + np.abs(y).max()),
@@ -285,10 +292,16 @@ def test_scalar_tick_agrees_with_general_numpy_path(gains):
 
 def test_output_shapes_and_types():
     out = RobustController(NOMINAL).step(Q_HAND, [0.0] * 3, (1.0, 0.5), (0, 0), (0, 0), DT)
-    for name, shape in (('tau', (2,)), ('e', (2,)), ('edot', (2,)), ('s', (2,)),
-                        ('theta', (5,)), ('dv', (2,)), ('p', (2,))):
+    for name, shape in (('tau', (2,)), ('e', (2,)), ('edot', (2,)), ('s', (2,)), ('p', (2,))):
         assert getattr(out, name).shape == shape, name
-    assert isinstance(out.rho, float) and isinstance(out.det, float)
+    # the internal values as the law declares them, in order ('m': the task dimension 2)
+    assert [v.name for v in ROBUST_INTERNALS] == list(out.internal)
+    for value in ROBUST_INTERNALS:
+        got = out.internal[value.name]
+        if value.shape:
+            assert got.shape == tuple(2 if d == 'm' else d for d in value.shape), value.name
+        else:
+            assert isinstance(got, float), value.name
     assert isinstance(out.status, int)
 
 
@@ -384,7 +397,8 @@ def test_every_joint_driven_the_scalar_path_gives_the_general_paths_torques(case
                 rng.uniform(-2.0, 2.0, 2), 1e-3)
         a, b = fast.step(*args), ref.step(*args)
         assert np.allclose(a.tau, b.tau, rtol=1e-12, atol=1e-12)
-        assert np.allclose(a.theta, b.theta, rtol=1e-12, atol=1e-15)
-        assert a.status == b.status and a.det == pytest.approx(b.det, rel=1e-12)
+        ia, ib = a.internal, b.internal
+        assert np.allclose(ia['theta_hat'], ib['theta_hat'], rtol=1e-12, atol=1e-15)
+        assert a.status == b.status and ia['det'] == pytest.approx(ib['det'], rel=1e-12)
         statuses.add(a.status)
     assert len(statuses) > 1

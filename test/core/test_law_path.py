@@ -87,6 +87,57 @@ def test_no_law_is_built_but_by_the_registry_nor_changed_after_it_is_built():
     assert changed == {}
 
 
+PAPER_FIELDS = ('theta', 'rho', 'dv', 'det', 'kappa')
+"""What the paper's output tuple had beyond the generic fields: a law's internals now."""
+
+
+def test_no_runner_reads_a_law_output_but_by_its_generic_fields_and_declared_internals():
+    found = []
+    for path in _sources():
+        with open(os.path.join(ROOT, path)) as f:
+            tree = ast.parse(f.read(), path)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Name) and node.id in ('ControlOutput', 'SpatialOutput'):
+                found.append((path, node.lineno, node.id))
+            if (isinstance(node, ast.Attribute) and node.attr in PAPER_FIELDS
+                    and isinstance(node.value, ast.Name) and node.value.id == 'out'):
+                found.append((path, node.lineno, 'out.' + node.attr))
+    assert found == []
+
+
+def _spatial_nominal():
+    from freejoint_core.spatial_model import known_arm
+    return known_arm('ur5', ['wrist_2_joint'])
+
+
+@pytest.mark.parametrize('name', ['robust', 'vsc', 'tdc', 'spatial'])
+def test_each_law_gives_the_internal_values_it_declares_in_order_and_shape(name):
+    if name == 'spatial':
+        from freejoint_core.spatial_law import SpatialGains
+        nominal = _spatial_nominal()
+        law = make_law(name, nominal, SpatialGains(task_dim=3))
+        q = np.linspace(0.2, 0.8, nominal.n)
+        out = law.step(q, 0.1 * q, nominal.fk(q) + 0.01, (0.1, 0.0, 0.0), (0.0, 0.0, 0.0),
+                       1e-3)
+        m = 3
+    else:
+        law = make_law(name, table1('vertical').scaled(0.7), Gains())
+        out = law.step(Q, QD, *SP, 1e-3)
+        m = 2
+    declared = [v.name for v in law.internals]
+    assert list(out.internal) == declared and len(set(declared)) == len(declared)
+    for value in law.internals:
+        got = out.internal[value.name]
+        if value.shape:
+            shape = tuple(m if d == 'm' else d for d in value.shape)
+            assert isinstance(got, np.ndarray) and got.shape == shape, value.name
+        else:
+            assert isinstance(got, float), value.name
+        assert value.unit and value.description, value.name
+    assert law.conditioning in declared
+    assert out._fields == ('tau', 'e', 'edot', 's', 'p', 'status', 'internal')
+
+
 def test_the_node_gets_its_null_space_through_the_registry():
     from freejoint_common.schema import nullspace_options
     nominal = table1('vertical').scaled(0.7)
@@ -163,11 +214,13 @@ def test_the_sliding_mode_law_is_its_documented_formula():
     out = law.step(Q, QD, *SP, 1e-3)
     assert out.tau == pytest.approx(tau, rel=1e-9)
     assert law.state_values() == pytest.approx([ks, np.linalg.norm(s) / 0.05], rel=1e-12)
-    assert out.theta.size == 0 and out.status == 0
+    assert list(out.internal) == ['switching_gain', 'switching_term', 'det']
+    assert out.internal['switching_gain'] == pytest.approx(ks, rel=1e-12) and out.status == 0
     # inside the layer the switching term is linear in s
     law.params['vsc.phi'] = 10.0 * np.linalg.norm(s)
     out = law.step(Q, QD, *SP, 1e-3)
-    assert out.dv == pytest.approx(-ks * s / law.params['vsc.phi'], rel=1e-9)
+    assert out.internal['switching_term'] == pytest.approx(-ks * s / law.params['vsc.phi'],
+                                                           rel=1e-9)
 
 
 def test_time_delay_control_starts_as_the_nominal_law_and_estimates_from_the_last_tick():
@@ -211,7 +264,7 @@ def test_the_laws_from_the_literature_track_the_paper_circle_offline(name, case)
 
 NEW_LAW = '''
 """A test law: the nominal computed torque with its feedback gains scaled."""
-from freejoint_core.law_base import LawGain
+from freejoint_core.law_base import LawGain, LawValue
 from freejoint_core.laws import register_law
 from freejoint_core.task_law import TaskLaw
 
@@ -219,11 +272,13 @@ from freejoint_core.task_law import TaskLaw
 class ScaledComputedTorque(TaskLaw):
     name = 'scaled_ct'
     gain_schema = (LawGain('scaled_ct.scale', 1.0, 'feedback scale', (0.1, 10.0)),)
+    internals = (LawValue('feedback_change', ('m',), 'm/s^2', 'u - u0'),)   # its own only
+    conditioning = None
 
     def command(self, q, qd, v, da, b, e, edot, s, u0, pdd_d, dt):
         c = self.params['scaled_ct.scale']
         u = pdd_d + c * (u0 - pdd_d)
-        return u - b, 0.0, u - u0
+        return u - b, {'feedback_change': u - u0}
 
 
 register_law(ScaledComputedTorque.name, ScaledComputedTorque)
@@ -252,6 +307,12 @@ def test_a_new_law_in_one_module_runs_in_the_loop_the_offline_runner_and_a_campa
                                    record_trace=True)
     assert np.allclose(tr['tau'], tr_ref['tau'], rtol=1e-7, atol=1e-9)
     assert rec['max_mm'] == pytest.approx(ref['max_mm'], rel=1e-6)
+    # ... reporting only what it declares: no estimate, no conditioning, no robust gain
+    assert rec['theta_final'] == [] and rec['min_det'] == 0.0 and ref['min_det'] > 0.0
+    assert tr['theta'].shape == (200, 0) and not tr['rho'].any() and not tr['det'].any()
+    out = make_law('scaled_ct', table1('vertical'), Gains()).step(Q, QD, *SP, 1e-3)
+    assert list(out.internal) == ['feedback_change'] and out.internal['feedback_change'] \
+        == pytest.approx([0.0, 0.0], abs=1e-12)
     # the control loop (the node's): the parameter value names it
     values = dict(SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml')),
                   readiness_guard=False, law='scaled_ct')
@@ -266,6 +327,7 @@ def test_a_new_law_in_one_module_runs_in_the_loop_the_offline_runner_and_a_campa
                             100.0 + k * 1e-3)
         out = twin.step(q0, qd0, (0.2, 0.01 * k), (0.0, 0.1), (0.0, 0.0), 1e-3)
         assert res.effort == pytest.approx(out.tau.tolist(), rel=1e-12)
+        assert res.det_dd == 0.0 and res.law_state_values == []
     # a small campaign comparing it with the paper's law (its scalar step: no kernel)
     camp = campaign.parse({'name': 'new_law', 'case': 'vertical', 'duration': 0.2,
                            'laws': ['robust', 'scaled_ct'],
@@ -279,6 +341,7 @@ def test_a_new_law_in_one_module_runs_in_the_loop_the_offline_runner_and_a_campa
         run.update(vertical=True, dist_type=0)
         m, _ = batch.run_scalar(run, law='scaled_ct', duration=0.2)
         assert res['max_mm'][i] == m['max_mm'] and res['ticks'][i] == m['ticks']
+        assert m['min_det'] == 0.0 and m['theta_final_norm'] == 0.0
 
 
 def test_a_law_without_a_kernel_runs_in_campaigns_through_its_scalar_step():

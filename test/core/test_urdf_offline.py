@@ -22,7 +22,7 @@ def test_controller_on_pinocchios_nominal_model_equals_the_general_numpy_path():
         a = numpy_ctl.step(plant.q, plant.qd, sp[0:2], sp[2:4], sp[4:6], 1e-3)
         b = pin_ctl.step(plant.q, plant.qd, sp[0:2], sp[2:4], sp[4:6], 1e-3)
         assert np.max(np.abs(a.tau - b.tau)) <= 1e-9
-        assert np.max(np.abs(a.theta - b.theta)) <= 1e-12
+        assert np.max(np.abs(a.internal['theta_hat'] - b.internal['theta_hat'])) <= 1e-12
         plant.step(b.tau, 1e-3)
 
 

@@ -181,10 +181,10 @@ def test_params_file_loads_and_each_tick_is_the_core_law(procs, ros_node, wait):
         out = _expect(ctl, q, qd, _setpoint(k))
         assert cmd == out.tau.tolist()
         assert list(st.effort) == out.tau.tolist()
-        assert list(st.law_state[:5]) == out.theta.tolist()
+        assert list(st.law_state[:5]) == out.internal['theta_hat'].tolist()
         assert list(st.position) == out.p.tolist()
         assert list(st.position_desired) == list(_setpoint(k)[0:2])
-        assert st.det_dd == out.det and st.status == 0 and st.message == ''
+        assert st.det_dd == out.internal['det'] and st.status == 0 and st.message == ''
         assert list(st.joint_names) == ['joint1', 'joint2']
     # A repeated state gets the cached answer: no second theta update.
     q, qd = _state_q(3)
@@ -312,7 +312,7 @@ def test_reset_service_restarts_theta_hat(procs, ros_node, wait):
     drv.joint_state(5, Q0, qd)
     st, cmd = drv.answer(5)
     out = _expect(ctl, Q0, qd, _setpoint(5))
-    assert list(st.law_state[:5]) == out.theta.tolist()
+    assert list(st.law_state[:5]) == out.internal['theta_hat'].tolist()
     # The rate limit armed by the reset: ramped from the previous command.
     assert st.status & STATUS_RATE_LIMITED or cmd == out.tau.tolist()
     assert procs.stop(proc) == 0

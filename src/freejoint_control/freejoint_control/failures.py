@@ -44,10 +44,10 @@ from dataclasses import replace
 import math
 
 from freejoint_core.arm import table1
-from freejoint_core.control import ControlOutput
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.failure import (assess_passive_set, Assessment, CANNOT_TRACK,
                                     least_harm_torque, M_TASK, Reconfigurer, TRACKING)
+from freejoint_core.law_base import LawOutput
 from freejoint_core.offline import initial_state
 from freejoint_core.trajectory import CircleQuintic
 import numpy as np
@@ -409,9 +409,9 @@ class FailureMonitor:
             full[self._cfg_active.index(a)] = v
         return out._replace(tau=np.array(full))
 
-    def least_harm(self, q, qd, p_d, det):
+    def least_harm(self, q, qd, p_d, internal):
         """
-        Return the ControlOutput of a tick after ``cannot_track``: the least-harm torque.
+        Return the ``LawOutput`` of a tick after ``cannot_track``: the least-harm torque.
 
         Parameters
         ----------
@@ -419,8 +419,8 @@ class FailureMonitor:
             Measured state.
         p_d : sequence of float, (2,)
             The reference position [m] (for the error reported).
-        det : float
-            ``det(Da Da^T)`` to report (the last one computed).
+        internal : dict
+            The internal values to report (the law's last conditioning).
 
         """
         rec = self.rec
@@ -432,8 +432,8 @@ class FailureMonitor:
         for a, v in zip(act, tau.tolist()):
             full[self._cfg_active.index(a)] = v
         p = self.law.model.fk(q)
-        return ControlOutput(np.array(full), p - np.asarray(p_d, dtype=float), _ZERO2.copy(),
-                             _ZERO2.copy(), np.zeros(0), 0.0, _ZERO2.copy(), det, p, 0)
+        return LawOutput(np.array(full), p - np.asarray(p_d, dtype=float), _ZERO2.copy(),
+                         _ZERO2.copy(), p, 0, internal)
 
     def diagnostics(self, errors, warnings):
         """Add the failures to a status period's errors / warnings; return key / values."""

@@ -737,13 +737,13 @@ class ControlLoop:
         res.error_rate = out.edot
         res.sliding = out.s
         res.law_state_values = values
-        res.det_dd = out.det
+        res.det_dd = self.stepper.last_det
         res.position = out.p if self.stepper.predictor is None else law.model.fk(q)
         res.position_desired = p_ref
         res.position_planned = planned
         ref_error = self.figures.track(res.position, planned, out.e)
         res.status = status
-        res.message = status_message(status, out.det, self.config, hold_reason,
+        res.message = status_message(status, res.det_dd, self.config, hold_reason,
                                      shaper) if status else ''
         if fm is not None and fm.message:
             res.message = fm.message + ('; ' + res.message if res.message else '')

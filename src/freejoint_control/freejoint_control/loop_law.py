@@ -8,17 +8,18 @@ predict`` on the state predicted to when the command takes effect
 around it (``freejoint_control.failures``). A step that raises, or whose command or
 state is non-finite or out of range (``freejoint_core.guards.law_output_fault``), is a
 law fault: the law's state put back to the last good one, the previous command repeated.
-It reads only what a law declares (``ControlLaw``: ``step``, ``state_values``,
-``state_bounds``, ``save_state`` / ``restore_state``, ``model``). No ROS, no clock.
+It reads only what a law declares (``ControlLaw``: ``step`` and its ``LawOutput``,
+``conditioning``, ``state_values``, ``state_bounds``, ``save_state`` /
+``restore_state``, ``model``). No ROS, no clock.
 """
 
 import math
 
 from freejoint_control.loop_status import ERROR
-from freejoint_core.control import ControlOutput
 from freejoint_core.delay import extrapolate_setpoint, StatePredictor
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import law_output_fault
+from freejoint_core.law_base import LawOutput
 import numpy as np
 
 
@@ -38,7 +39,8 @@ class LawStep:
     faults : int
         Law faults so far.
     last_det : float
-        The conditioning of the last step (``ControlOutput.det``).
+        The conditioning of the last step: its internal value the law's ``conditioning``
+        names (0: a law without one); a tick without a law step reports it again.
     predictor : freejoint_core.delay.StatePredictor or None
         The state predictor (``delay_compensation: predict``), else None.
 
@@ -100,7 +102,7 @@ class LawStep:
 
         Returns
         -------
-        out : ControlOutput
+        out : LawOutput
             The law's output (a fault's: zero terms, the measured position).
         effort : list of float, (r,)
             The command in command order (a fault's: ``prev_cmd`` or zero).
@@ -119,7 +121,7 @@ class LawStep:
             monitor.before_law(ns, q, qd, prev_cmd, effort_in)
         try:
             if monitor is not None and monitor.cannot_track:
-                out = monitor.least_harm(q, qd, p_ref, self.last_det)
+                out = monitor.least_harm(q, qd, p_ref, self._last_internal())
             elif pred is None:
                 out = law.step(q, qd, p_ref, ref[m:2 * m], ref[2 * m:3 * m], dt)
             else:
@@ -144,14 +146,20 @@ class LawStep:
             values = law.state_values()
         else:
             self._good_state = law.save_state()
-        self.last_det = out.det
+        cond = law.conditioning
+        self.last_det = out.internal[cond] if cond else 0.0
         return out, effort, values, fault is not None
+
+    def _last_internal(self):
+        """Return the internal values of a tick without a law step: the last conditioning."""
+        cond = self.law.conditioning
+        return {cond: self.last_det} if cond else {}
 
     def _fault_output(self, q, m):
         """Return the published terms of a tick whose law result was refused."""
         zero = np.zeros(m)
-        return ControlOutput(np.zeros(self._r), zero, zero, zero, np.zeros(0), 0.0, zero,
-                             self.last_det, self.law.model.fk(q), 0)
+        return LawOutput(np.zeros(self._r), zero, zero, zero, self.law.model.fk(q), 0,
+                         self._last_internal())
 
     def _predicted_step(self, pred, ns, q, qd, ref, dt, now_ns):
         """Run the law on the state predicted to when the command takes effect."""

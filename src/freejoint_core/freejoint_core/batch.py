@@ -53,6 +53,7 @@ import numpy as np
 from .arm import ArmParams, table1
 from .control import decay_coefficients, Gains
 from .errors import FreejointValueError
+from .law_base import RunValues
 from .laws import make_law
 from .offline import _BLOWUP, DEFAULT_DT, initial_state
 from .plant import DEFAULT_DT_SUB, Plant
@@ -540,7 +541,8 @@ def run_scalar(run, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duratio
     cmds = []
     u = None
     p_rec, err_mm, taus, q3s, dets = [], [], [], [], []
-    theta = ctrl.theta
+    reported = RunValues(ctrl)
+    theta = np.zeros(reported.theta_size)
     diverged = math.nan
     for k in range(n_ticks):
         t = k * dt
@@ -560,15 +562,16 @@ def run_scalar(run, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duratio
         ex = px - pdx
         ey = py - pdy
         err2 = ex * ex + ey * ey
-        if not all(map(math.isfinite, (err2, t0, t1, out.det))):
+        det = reported.conditioning(out)
+        if not all(map(math.isfinite, (err2, t0, t1, det))):
             diverged = t
             break
         p_rec.append((px, py))
         err_mm.append(1000.0 * math.hypot(ex, ey))
         taus.append((abs(t0), abs(t1)))
         q3s.append(q[2])
-        dets.append(out.det)
-        theta = out.theta
+        dets.append(det)
+        theta = reported.theta(out)
         if err2 > diverge_m * diverge_m or max(abs(v) for v in qd.tolist()) > diverge_qd:
             diverged = t
             break

@@ -25,7 +25,7 @@ exact solution of the linear low-pass, per component::
 
 a convex combination of ``theta_k >= 0`` and ``u / sigma >= 0``, so
 ``theta >= 0`` holds exactly for ``theta(0) >= 0`` for any dt (Remark 2).
-``ControlOutput.theta`` is ``theta_{k+1}``.
+The output's ``theta_hat`` (:data:`ROBUST_INTERNALS`) is ``theta_{k+1}``.
 
 Beyond the paper (Assumption 2 may fail): when ``|det(Da Da^T)| <
 det_threshold`` the pseudoinverse is replaced by damped least squares
@@ -56,11 +56,11 @@ they agree to round-off).
 
 from dataclasses import dataclass
 import math
-from typing import NamedTuple
 
 from freejoint_core.arm import ArmModel, ArmParams, check_vector, number_or_numbers
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace, projector, weighted_inverse
+from freejoint_core.law_base import LawOutput, LawValue
 from freejoint_core.models import make_model
 import numpy as np
 
@@ -175,41 +175,19 @@ class Gains:
                                _vector(self.theta_max, 5, 'theta_max', 0.0, True))
 
 
-class ControlOutput(NamedTuple):
-    """
-    Result of one control tick (numpy arrays are fresh, owned by the caller).
+DET = LawValue('det', (), 'model units', '|det(Da Da^T)| of the nominal model, before any '
+               'damping (its conditioning: near 0, near a singularity)')
+"""The conditioning value of a planar law that inverts ``Da Da^T``."""
 
-    Attributes
-    ----------
-    tau : numpy.ndarray, (r,)
-        Active joint torques [N m] (after the optional limit).
-    e, edot, s : numpy.ndarray, (2,)
-        Tracking error [m], its rate [m/s], ``s = edot + Lam e``.
-    theta : numpy.ndarray, (5,)
-        Adaptive estimate AFTER this tick's update (the torque used the one before).
-    rho : float
-        ``theta^T psi`` used this tick (0 when ``robust`` is False).
-    dv : numpy.ndarray, (2,)
-        Robust term [m/s^2].
-    det : float
-        ``|det(Da Da^T)|`` of the nominal model (before any damping).
-    p : numpy.ndarray, (2,)
-        Measured end-effector position [m].
-    status : int
-        Bitmask of ``STATUS_*``.
-
-    """
-
-    tau: np.ndarray
-    e: np.ndarray
-    edot: np.ndarray
-    s: np.ndarray
-    theta: np.ndarray
-    rho: float
-    dv: np.ndarray
-    det: float
-    p: np.ndarray
-    status: int
+ROBUST_INTERNALS = (
+    LawValue('theta_hat', (5,), '-', "adaptive estimate after this tick's update, eq. 19 "
+             '(the torque used the one before)'),
+    LawValue('rho_hat', (), 'm/s^2', 'robust gain theta_hat^T psi used this tick (0 when '
+             'robust is False)'),
+    LawValue('delta_v', ('m',), 'm/s^2', 'robust term, eq. 17'),
+    DET,
+)
+"""The internal values of the paper's law (``LawOutput.internal``)."""
 
 
 def stiffness_scale(scale):
@@ -374,8 +352,15 @@ class RobustController(HoldStiffness):
     ----------
     theta : numpy.ndarray, (5,)
         Current adaptive estimate (copy).
+    internals : tuple of LawValue
+        :data:`ROBUST_INTERNALS`, the output's internal values.
+    conditioning : str
+        ``'det'``: the internal value of the nominal task's conditioning.
 
     """
+
+    internals = ROBUST_INTERNALS
+    conditioning = 'det'
 
     def __init__(self, nominal_params, gains=None, use_fast=True, model=None, nullspace=None):
         self._use_fast = bool(use_fast)
@@ -541,7 +526,8 @@ class RobustController(HoldStiffness):
 
         Returns
         -------
-        ControlOutput
+        LawOutput
+            With the internal values :data:`ROBUST_INTERNALS`.
 
         """
         if not (type(dt) is float and dt > 0.0 and dt < math.inf):
@@ -646,9 +632,10 @@ class RobustController(HoldStiffness):
             status |= STATUS_TORQUE_LIMITED
         r = len(tau)
         arr = np.array((*tau, ex, ey, edx, edy, sx, sy, dvx, dvy, px, py, *self._theta))
-        return ControlOutput(arr[0:r], arr[r:r + 2], arr[r + 2:r + 4], arr[r + 4:r + 6],
-                             arr[r + 10:r + 15], rho, arr[r + 6:r + 8], abs(det),
-                             arr[r + 8:r + 10], status)
+        return LawOutput(arr[0:r], arr[r:r + 2], arr[r + 2:r + 4], arr[r + 4:r + 6],
+                         arr[r + 8:r + 10], status,
+                         {'theta_hat': arr[r + 10:r + 15], 'rho_hat': rho,
+                          'delta_v': arr[r + 6:r + 8], 'det': abs(det)})
 
     def _null_space_fast(self, tau, q, w, rx, ry, a00, a01, a11, det_use):
         """Add ``(I - Da# Da) tau0``, ``tau0 = -kd qd (+ kp (posture - q))``, to ``tau``."""
@@ -707,8 +694,9 @@ class RobustController(HoldStiffness):
         else:
             tau = self._null_space_torque(q, qd, da, a, status, v + dv - b)
         tau, limited = clip_torque(tau, self._limit)
-        return ControlOutput(tau, e, edot, s, np.array(self._theta), rho, dv, abs(det), p,
-                             status | limited)
+        return LawOutput(tau, e, edot, s, p, status | limited,
+                         {'theta_hat': np.array(self._theta), 'rho_hat': rho, 'delta_v': dv,
+                          'det': abs(det)})
 
     def _null_space_torque(self, q, qd, da, a, status, w):
         """``Da# w + N tau_0`` of ``freejoint_core.internal`` (a: ``Da Da^T``, damped)."""

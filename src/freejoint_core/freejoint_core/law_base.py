@@ -3,10 +3,13 @@ The interface every control law implements (``freejoint_core.laws`` keeps the re
 
 A module defining a law imports :class:`ControlLaw` from here (or from ``laws``, which
 re-exports it); ``laws`` imports a law module only when a controller asks for that law.
+Every law's step returns a :class:`LawOutput`: the generic fields and the internal values
+the law declares (:class:`LawValue`); :class:`RunValues` reads what a run reports of them.
 """
 
 from dataclasses import dataclass
 import math
+from typing import NamedTuple
 
 from freejoint_core.errors import FreejointValueError
 import numpy as np
@@ -47,6 +50,133 @@ class LawGain:
         if not (math.isfinite(value) and lo <= value <= hi):
             return f'{self.name}: expected a finite number in [{lo}, {hi}], got {value!r}'
         return ''
+
+
+@dataclass(frozen=True)
+class LawValue:
+    """
+    One internal value a law declares: a key of its output's ``internal``.
+
+    Attributes
+    ----------
+    name : str
+        The key (e.g. ``theta_hat``, ``det``).
+    shape : tuple
+        Its shape: ``()`` a float, ``(5,)`` an array of 5, ``('m',)`` an array of the
+        task dimension m.
+    unit : str
+        Its unit (``-``: none).
+    description : str
+        What it is.
+
+    """
+
+    name: str
+    shape: tuple
+    unit: str
+    description: str
+
+
+class LawOutput(NamedTuple):
+    """
+    One tick of a control law (arrays fresh, owned by the caller).
+
+    Attributes
+    ----------
+    tau : numpy.ndarray, (r,)
+        Active joint torques [N m] (after the law's torque limit).
+    e, edot, s : numpy.ndarray, (m,)
+        Task error ``p - p_d`` [m] (a spatial arm with m = 6: then [rad]), its rate
+        [m/s], the surface ``s = edot + Lam e``.
+    p : numpy.ndarray, (m,) or (3,)
+        Measured end-effector position [m] (the nominal model's forward kinematics).
+    status : int
+        Bitmask of ``freejoint_core.control.STATUS_*``.
+    internal : dict of str to float or numpy.ndarray
+        The law's internal values of this tick, keyed and ordered as the law's
+        ``internals`` declare them (:class:`LawValue`: name, shape, unit).
+
+    """
+
+    tau: np.ndarray
+    e: np.ndarray
+    edot: np.ndarray
+    s: np.ndarray
+    p: np.ndarray
+    status: int
+    internal: dict
+
+
+def finite_internal(internal):
+    """Return True when every value of ``LawOutput.internal`` (float or array) is finite."""
+    isfinite = math.isfinite
+    for value in internal.values():
+        if type(value) is np.ndarray:
+            if not all(map(isfinite, value.tolist())):
+                return False
+        elif not isfinite(value):
+            return False
+    return True
+
+
+def internal_size(law, name):
+    """
+    Return the size of the internal value ``name`` the law declares (None: not declared).
+
+    Parameters
+    ----------
+    law : ControlLaw
+        A law (its ``internals``).
+    name : str
+        The value's name (e.g. ``theta_hat``).
+
+    Returns
+    -------
+    int or None
+        1 for a float, k for an array of shape (k,), the task dimension for ``('m',)``.
+
+    """
+    for value in getattr(law, 'internals', ()):
+        if value.name == name:
+            if not value.shape:
+                return 1
+            size = value.shape[0]
+            return law.model.task_dim if size == 'm' else int(size)
+    return None
+
+
+class RunValues:
+    """
+    What a run reports of a law's outputs, read from its declared internal values by name.
+
+    The adaptive estimate ``theta_hat`` (the record's ``theta_final``; empty for a law that
+    does not declare it) and the conditioning ``law.conditioning`` names (the record's
+    ``min_det``; 0 for a law without one).
+
+    Parameters
+    ----------
+    law : ControlLaw
+        The run's law (its ``internals``, ``conditioning``).
+
+    Attributes
+    ----------
+    theta_size : int
+        Size of ``theta_hat`` (0: not declared).
+
+    """
+
+    def __init__(self, law):
+        self.theta_size = internal_size(law, 'theta_hat') or 0
+        self._cond = getattr(law, 'conditioning', None)
+        self._empty = np.zeros(0)
+
+    def theta(self, out):
+        """Return ``theta_hat`` of ``out`` (numpy, (k,); empty when not declared)."""
+        return out.internal['theta_hat'] if self.theta_size else self._empty
+
+    def conditioning(self, out):
+        """Return the conditioning of ``out`` (float; 0.0 when the law has none)."""
+        return out.internal[self._cond] if self._cond else 0.0
 
 
 def law_params(law_name, schema, given=None):
@@ -113,6 +243,14 @@ class ControlLaw:
     accelerator : str or None
         The batched campaign kernel registered for the law (``freejoint_core.batch``);
         None: a campaign runs the law through its scalar step (same results, slower).
+    internals : tuple of LawValue
+        The internal values of its output (``LawOutput.internal``), in order, each
+        declared once (name, shape, unit); the loop, the runners and the metrics read
+        them by name (``theta_hat``: the adaptive estimate a run reports at its end).
+    conditioning : str or None
+        The name of the internal value measuring how far the nominal task is from a
+        singularity (``ControllerState.det_dd``, the metrics' ``min_det``); None: the
+        law has none (reported as 0).
 
     """
 
@@ -121,6 +259,8 @@ class ControlLaw:
     state_bounds = ()
     gain_schema = ()
     accelerator = None
+    internals = ()
+    conditioning = None
 
     def step(self, q, qd, p_d, pd_d, pdd_d, dt):
         """
@@ -137,16 +277,12 @@ class ControlLaw:
 
         Returns
         -------
-        ControlOutput
-            ``tau`` (r,) [N m] and the law's instrumentation.
+        LawOutput
+            ``tau`` (r,) [N m], the task error, and the internal values the law declares
+            (``internals``).
 
         """
         raise NotImplementedError
-
-    @property
-    def theta(self):
-        """Return the law's adaptive estimate (numpy copy; empty: a law without one)."""
-        return np.zeros(0)
 
     def reset(self):
         """Start the law's internal state afresh."""

@@ -34,7 +34,8 @@ them).  Gains (:data:`GAINS`): ``tdc.mbar``, ``tdc.filter``.
 
 import math
 
-from freejoint_core.law_base import INF, LawGain, register_law
+from freejoint_core.control import DET
+from freejoint_core.law_base import INF, LawGain, LawValue, register_law
 from freejoint_core.task_law import TaskLaw
 
 GAINS = (
@@ -44,6 +45,12 @@ GAINS = (
             'estimate [s] (0: none)', (0.0, 1.0)),
 )
 """The law's own gains (``tdc.*``)."""
+
+INTERNALS = (
+    LawValue('n_hat', ('m',), 'm/s^2', 'filtered time-delay estimate N^f used this tick'),
+    DET,
+)
+"""The internal values of the law's output."""
 
 
 class TimeDelayLaw(TaskLaw):
@@ -59,6 +66,7 @@ class TimeDelayLaw(TaskLaw):
 
     name = 'tdc'
     gain_schema = GAINS
+    internals = INTERNALS
     state_names = ('n_hat[0]', 'n_hat[1]')
     state_bounds = ((-INF, INF), (-INF, INF))
 
@@ -73,7 +81,7 @@ class TimeDelayLaw(TaskLaw):
         self.reset()
 
     def command(self, q, qd, v, da, b, e, edot, s, u0, pdd_d, dt):
-        """Return ``mbar (u0 - N^f)`` (module notes), 0 and ``b^ - N^f``."""
+        """Return ``mbar (u0 - N^f)`` (module notes) and ``N^f``."""
         mbar = self.params['tdc.mbar']
         if self._prev is None:
             n_hat = b
@@ -85,7 +93,7 @@ class TimeDelayLaw(TaskLaw):
             n_hat = self._n_hat + a * (n_raw - self._n_hat)
         self._n_hat = n_hat
         self._v = v
-        return mbar * (u0 - n_hat), 0.0, b - n_hat
+        return mbar * (u0 - n_hat), {'n_hat': n_hat.copy()}
 
     def applied(self, tau, da):
         """Keep the torque and the task velocity of this tick for the next estimate."""

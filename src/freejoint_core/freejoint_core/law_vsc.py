@@ -35,14 +35,16 @@ the boundary layer ``||s|| <= phi`` the unit vector of ``s`` (the ideal switchin
 reaching the layer in finite time), inside it linear (no chattering); in the layer the
 tracking error is bounded by about ``phi / Lambda`` (``phi`` 0.1 m/s, ``Lambda`` 50 /s:
 2 mm).  The law has no internal state; it reports the switching gain ``k`` [m/s^2] and
-``||s|| / phi`` (above 1 outside the layer).
+``||s|| / phi`` (above 1 outside the layer); its output's internal values
+(:data:`INTERNALS`) are ``k``, the switching term ``-k sat(s / phi)`` and ``det``.
 
 Gains (namespaced, :data:`GAINS`): ``vsc.phi`` [m/s], ``vsc.eta`` [m/s^2],
 ``vsc.delta`` [-], ``vsc.beta0`` [m/s^2], ``vsc.beta1`` [m/rad^2]; the defaults cover the
 paper's point (70 % nominal: ``||E||`` about 0.3; 0.5 N m disturbance) with margin.
 """
 
-from freejoint_core.law_base import INF, LawGain, register_law
+from freejoint_core.control import DET
+from freejoint_core.law_base import INF, LawGain, LawValue, register_law
 from freejoint_core.task_law import sat, TaskLaw
 import numpy as np
 
@@ -59,6 +61,13 @@ GAINS = (
 )
 """The law's own gains (``vsc.*``)."""
 
+INTERNALS = (
+    LawValue('switching_gain', (), 'm/s^2', 'switching gain k of this tick'),
+    LawValue('switching_term', ('m',), 'm/s^2', 'switching term -k sat(s / phi)'),
+    DET,
+)
+"""The internal values of the law's output."""
+
 
 class SlidingModeLaw(TaskLaw):
     """
@@ -73,6 +82,7 @@ class SlidingModeLaw(TaskLaw):
 
     name = 'vsc'
     gain_schema = GAINS
+    internals = INTERNALS
     state_names = ('switching_gain', 'surface_over_layer')
     state_bounds = ((0.0, INF), (0.0, INF))
 
@@ -89,7 +99,7 @@ class SlidingModeLaw(TaskLaw):
              + g['vsc.beta1'] * float(qd @ qd) + g['vsc.eta']) / (1.0 - delta)
         dv = -k * sat(s, phi)
         self._report = [k, float(np.linalg.norm(s)) / phi]
-        return u0 + dv - b, k, dv
+        return u0 + dv - b, {'switching_gain': k, 'switching_term': dv}
 
     def state_values(self):
         """Return the switching gain [m/s^2] and ``||s|| / phi`` of the last step."""

@@ -4,8 +4,12 @@ The control-law seam: one small interface every control law implements, and its 
 A law maps one measured state and one task-space setpoint to the active joint torques and
 advances its own internal state over ``dt``::
 
-    out = law.step(q, qd, p_d, pd_d, pdd_d, dt)        # ControlOutput
+    out = law.step(q, qd, p_d, pd_d, pdd_d, dt)        # LawOutput
 
+The output (:class:`freejoint_core.law_base.LawOutput`) is the same for every law: the
+torque, the task error, its rate and surface, the measured position, the status bits, and
+``out.internal``, the values the law declares in ``law.internals`` (name, shape, unit),
+read by name (``law.conditioning`` names the one reported as the task's conditioning).
 Its internal state is explicit: ``law.state_names`` name the values ``law.state_values()``
 returns (reported generically, so that a second law needs no message change), and
 ``law.save_state()`` / ``law.restore_state(saved)`` take and put back a snapshot (the
@@ -31,10 +35,10 @@ from freejoint_core.arm import ArmModel
 from freejoint_core.control import RobustController
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import FreeLinkModulation, NullSpace
-from freejoint_core.law_base import ControlLaw, INF, LAWS, register_law
+from freejoint_core.law_base import ControlLaw, INF, LawOutput, LAWS, LawValue, register_law
 
-__all__ = ('ControlLaw', 'FreeLinkDampedLaw', 'gain_schema', 'INF', 'LAWS', 'make_law',
-           'register_law', 'RobustLaw')
+__all__ = ('ControlLaw', 'FreeLinkDampedLaw', 'gain_schema', 'INF', 'LAWS', 'LawOutput',
+           'LawValue', 'make_law', 'register_law', 'RobustLaw')
 
 
 class RobustLaw(RobustController, ControlLaw):
@@ -97,7 +101,8 @@ class RobustLaw(RobustController, ControlLaw):
         out = self._last
         if out is None:
             return list(self._theta) + [0.0] * (1 + self.model.task_dim)
-        return list(self._theta) + [out.rho] + out.dv.tolist()
+        internal = out.internal
+        return list(self._theta) + [internal['rho_hat']] + internal['delta_v'].tolist()
 
     def save_state(self):
         """Return theta_hat (a tuple)."""
@@ -232,6 +237,7 @@ class FreeLinkDampedLaw(ControlLaw):
         self._bound = FreeLinkModulation(last_free, **self._options).delta_max
         self.modulation = self._modulation_for(nominal)
         self.name = law.name
+        self.internals, self.conditioning = law.internals, law.conditioning   # its output's
         self.state_names = tuple(law.state_names) + ('free_link_delta[0]',
                                                      'free_link_delta[1]')
 

@@ -13,11 +13,12 @@ rms_mm         float        RMS over the recorded ticks of ``||p - p_d||`` (mm)
 max_mm         float        maximum of ``||p - p_d||`` (mm)
 final_mm       float        ``||p - p_d||`` at the last recorded tick (mm)
 tau_peak_nm    [float] (r)  ``max_k |tau_i(t_k)|`` per active joint (N m)
-theta_final    [float] (k)  adaptive estimate after the last tick (the paper's law: 5;
-                            a law without adaptation: none)
+theta_final    [float] (k)  adaptive estimate after the last tick: the law's declared
+                            ``theta_hat`` (the paper's law: 5; a law without one: none)
 q3_range_deg   [float] (2)  (min, max) of the passive joint angle (deg), as
                             integrated (not wrapped)
-min_det        float        minimum of ``|det(Da Da^T)|`` of the nominal model
+min_det        float        minimum of the law's conditioning (its ``conditioning``:
+                            ``|det(Da Da^T)|`` of the nominal model; 0 for a law without)
 diverged_at_s  float/None   time (s) of the tick where the run was stopped, or None
 source         str          'offline', 'graph' or 'bag'
 ============== ============ =====================================================

@@ -62,6 +62,7 @@ from .control import Gains
 from .delay import DEFAULT_BIAS_GAIN, extrapolate_setpoint, StatePredictor
 from .errors import FreejointValueError, positive
 from .internal import DEFAULT_Q3_0_DEG, initial_state, NullSpace  # noqa: F401 (API)
+from .law_base import finite_internal, internal_size, RunValues
 from .laws import make_law
 from .metrics import compute_record, format_summary, format_table, write_records
 from .models import make_model
@@ -262,6 +263,11 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
         arrive = []         # tick at which each computed command reaches the plant
         applied_at = []     # index of the command each plant step applied
 
+    # What the law declares, read by name: its adaptive estimate (reported at the end), its
+    # conditioning (the record's min_det) and its robust gain (the trace's); 0 / none otherwise.
+    reported = RunValues(ctrl)
+    has_rho = internal_size(ctrl, 'rho_hat') is not None
+    theta = np.zeros(reported.theta_size)
     # Setpoints of every tick, through the same scalar path the graph uses.
     sample = trajectory.sample_tuple
     des = [sample(k * dt) for k in range(n_ticks)]
@@ -273,7 +279,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     if record_trace:
         q_buf = np.empty((n_ticks, 3))
         qd_buf = np.empty((n_ticks, 3))
-        th_buf = np.empty((n_ticks, ctrl.theta.size))
+        th_buf = np.empty((n_ticks, reported.theta_size))
         rho_buf = np.empty(n_ticks)
         st_buf = np.empty(n_ticks, dtype=np.int64)
         if pred is not None:
@@ -282,7 +288,6 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     isfinite = math.isfinite
     passive = start_arm.passive[0]
     limit2 = diverge_m * diverge_m
-    theta = ctrl.theta
     diverged = None
     n_rec = 0
     last_k = 0
@@ -337,7 +342,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
                     qp, qdp = pred.predict(q, qd, predict_ticks)
                     sp = extrapolate_setpoint((pdx, pdy), (vdx, vdy), (adx, ady), h_pred)
                 out = ctrl.step(qp, qdp, *sp, dt_law)
-                if not all(map(isfinite, out.theta.tolist() + qdp.tolist())):
+                if not (finite_internal(out.internal) and all(map(isfinite, qdp.tolist()))):
                     raise ArithmeticError('non-finite prediction or estimate')
                 pred.push(out.tau)
         except _BLOWUP:
@@ -348,23 +353,23 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
         else:
             px, py = fk_real(q).tolist()
         tau_k = out.tau.tolist()
+        internal = out.internal
         ex = px - pdx
         ey = py - pdy
         err2 = ex * ex + ey * ey
-        if not (isfinite(err2) and all(map(isfinite, tau_k)) and isfinite(out.det)
-                and all(map(isfinite, out.theta.tolist()))):
+        if not (isfinite(err2) and all(map(isfinite, tau_k)) and finite_internal(internal)):
             diverged = t
             break
         p_buf[k] = px, py
         tau_buf[k] = tau_k
-        det_buf[k] = out.det
+        det_buf[k] = reported.conditioning(out)
         q3_buf[k] = q[passive]
-        theta = out.theta
+        theta = reported.theta(out)
         if record_trace:
             q_buf[k] = q
             qd_buf[k] = qd
             th_buf[k] = theta
-            rho_buf[k] = out.rho
+            rho_buf[k] = internal['rho_hat'] if has_rho else 0.0
             st_buf[k] = out.status
             if pred is not None:
                 ql_buf[k] = qp

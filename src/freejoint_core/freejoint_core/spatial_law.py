@@ -46,13 +46,12 @@ in another branch is not looked for.
 
 from dataclasses import dataclass
 import math
-from typing import NamedTuple
 
-from freejoint_core.control import _vector, ControlOutput, Gains, STATUS_NEAR_SINGULAR
+from freejoint_core.control import _vector, Gains, ROBUST_INTERNALS, STATUS_NEAR_SINGULAR
 from freejoint_core.control import HoldStiffness, STATUS_OK, STATUS_TORQUE_LIMITED
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
-from freejoint_core.law_base import ControlLaw, INF
+from freejoint_core.law_base import ControlLaw, INF, LawOutput, LawValue
 from freejoint_core.spatial_model import SpatialArm
 import numpy as np
 import pinocchio as pin
@@ -100,43 +99,14 @@ class SpatialGains(Gains):
         return self.task_dim
 
 
-class SpatialOutput(NamedTuple):
-    """
-    One tick of :class:`SpatialLaw` (arrays owned by the caller).
-
-    Attributes
-    ----------
-    tau : numpy.ndarray, (r,)
-        Active joint torques [N m], within the effort limits.
-    e, edot, s : numpy.ndarray, (m,)
-        Task error [m; rad], its rate, ``edot + Lam e``.
-    theta : numpy.ndarray, (5,)
-        Estimate after the update.
-    rho : float
-        Robust gain used.
-    kappa : float
-        Conditioning of the nominal task (module notes).
-    p : numpy.ndarray, (3,)
-        Measured tip position [m].
-    status : int
-        ``control.STATUS_*`` bits.
-
-    """
-
-    tau: np.ndarray
-    e: np.ndarray
-    edot: np.ndarray
-    s: np.ndarray
-    theta: np.ndarray
-    rho: float
-    kappa: float
-    p: np.ndarray
-    status: int
-
-    @property
-    def det(self):
-        """Return the conditioning as ``ControlOutput.det`` names it: ``kappa``."""
-        return self.kappa
+INTERNALS = (
+    ROBUST_INTERNALS[0],
+    LawValue('rho_hat', (), 'm/s^2; rad/s^2', 'robust gain theta_hat^T psi used this tick '
+             '(0 when robust is False)'),
+    LawValue('kappa', (), '-', 'scale-free conditioning of the nominal task in [0, 1], 0 at '
+             'a singularity (module notes, task_conditioning)'),
+)
+"""The internal values of the spatial law's output (``LawOutput.internal``)."""
 
 
 def arm_reach(arm):
@@ -218,6 +188,9 @@ class SpatialLaw(HoldStiffness):
 
     """
 
+    internals = INTERNALS          # the output's internal values
+    conditioning = 'kappa'         # the one that says how near a singularity the task is
+
     def __init__(self, nominal, gains=None, nullspace=None, free_damping=0.0):
         kf = float(free_damping)
         if not (math.isfinite(kf) and kf >= 0.0):
@@ -284,7 +257,9 @@ class SpatialLaw(HoldStiffness):
 
         Returns
         -------
-        SpatialOutput
+        LawOutput
+            With the internal values :data:`INTERNALS` (``theta_hat`` after the update,
+            ``rho_hat``, ``kappa``).
 
         """
         dt = float(dt)
@@ -353,8 +328,8 @@ class SpatialLaw(HoldStiffness):
         clipped = np.clip(tau, -self._limit, self._limit)
         if np.any(clipped != tau):
             status |= STATUS_TORQUE_LIMITED
-        return SpatialOutput(clipped, e, edot, s, self.theta.copy(), rho, kappa, terms.p,
-                             status)
+        return LawOutput(clipped, e, edot, s, terms.p, status,
+                         {'theta_hat': self.theta.copy(), 'rho_hat': rho, 'kappa': kappa})
 
     def _free_damping(self, terms, proj, qd):
         """``y`` with ``(M^-1)[p, a] N y = -kf qd_p`` (damped least squares)."""
@@ -450,8 +425,8 @@ class SpatialControlLaw(ControlLaw):
 
     State: ``theta_hat[0..4]`` (after the tick's update), ``rho_hat`` (used in the tick)
     and ``kappa`` (the scale-free conditioning of the tick, :func:`task_conditioning`);
-    the output's ``det`` is ``kappa`` too (the planar law's ``|det(Da Da^T)|`` has no
-    scale-free meaning in 3-D).
+    the output's internal values are :class:`SpatialLaw`'s, ``kappa`` its conditioning
+    (the planar law's ``|det(Da Da^T)|`` has no scale-free meaning in 3-D).
 
     Parameters
     ----------
@@ -469,6 +444,8 @@ class SpatialControlLaw(ControlLaw):
     """
 
     name = 'spatial'
+    internals = INTERNALS
+    conditioning = 'kappa'
 
     def __init__(self, nominal, gains=None, model=None, nullspace_kd=0.0, nullspace_kp=0.0):
         if isinstance(nominal, SpatialArm) and nominal.m != 3:
@@ -524,14 +501,13 @@ class SpatialControlLaw(ControlLaw):
         return self._posture
 
     def step(self, q, qd, p_d, pd_d, pdd_d, dt):
-        """Return one tick of :class:`SpatialLaw` as a ``control.ControlOutput``."""
+        """Return one tick of :class:`SpatialLaw` (its ``LawOutput``)."""
         if self._kp and self._posture is None:
             self._posture = tuple(float(q[i]) for i in self.law.model.active)
             self.law.nullspace = _nullspace(self._kd, self._kp, self._posture)
         out = self.law.step(q, qd, p_d, pd_d, pdd_d, dt)
         self._last = out
-        return ControlOutput(out.tau, out.e, out.edot, out.s, out.theta, out.rho,
-                             np.zeros(self.law.model.m), out.kappa, out.p, out.status)
+        return out
 
     def reset(self):
         """Set theta_hat back to ``gains.theta0``; the posture is taken again next step."""
@@ -546,7 +522,7 @@ class SpatialControlLaw(ControlLaw):
         out = self._last
         if out is None:
             return self.law.theta.tolist() + [0.0, 0.0]
-        return self.law.theta.tolist() + [out.rho, out.kappa]
+        return self.law.theta.tolist() + [out.internal['rho_hat'], out.internal['kappa']]
 
     def save_state(self):
         """Return theta_hat (a tuple)."""

@@ -41,6 +41,7 @@ import time
 
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.internal import NullSpace
+from freejoint_core.law_base import RunValues
 from freejoint_core.laws import make_law
 from freejoint_core.spatial_law import gravity_carrying_free_joint, SpatialGains
 from freejoint_core.spatial_model import known_arm
@@ -270,10 +271,11 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
         ``active_outside_limits`` and ``free_outside_limits`` (the active, the free joints
         that left their URDF position limits, names), and ``trace``:
         ``{'p', 'p_d', 'q': (K, 3 / 3 / n) arrays, 'tau': (K, r), 'kappa': (K,),
-        'theta': (K, 5)}`` of ticks 0..K-1 (``kappa`` the law's conditioning, ``theta``
-        its estimate after the tick).
+        'theta': (K, k)}`` of ticks 0..K-1 (``kappa`` the law's conditioning, ``theta``
+        its estimate ``theta_hat`` after the tick, k = 0 for a law without one).
 
     """
+    reported = RunValues(law)
     plant = SpatialPlant(real, dt_sub, dist, seed, q0, passive_damping=passive_damping)
     p0 = real.fk(np.asarray(q0, dtype=float))
     steps = int(round(((t_move + t_hold) if t_stop is None else t_stop) / dt))
@@ -282,7 +284,7 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
     err = np.empty(steps)
     trace = {'p': np.empty((steps, 3)), 'p_d': np.empty((steps, 3)),
              'q': np.empty((steps, real.n)), 'tau': np.empty((steps, real.r)),
-             'kappa': np.empty(steps), 'theta': np.empty((steps, 5))}
+             'kappa': np.empty(steps), 'theta': np.empty((steps, reported.theta_size))}
     tau_ratio = vel_ratio = vel_free = 0.0
     diverged = False
     t_law = 0.0
@@ -296,8 +298,8 @@ def run_twin(real, q0, law, seed, *, t_move=T_MOVE, t_hold=T_HOLD, dt=DT, dt_sub
         t_law += time.perf_counter() - c0
         err[k] = np.linalg.norm(out.e)
         trace['p'][k], trace['p_d'][k], trace['q'][k], trace['tau'][k] = out.p, p_d, q, out.tau
-        trace['kappa'][k] = out.det       # the conditioning (kappa) of either output
-        trace['theta'][k] = out.theta
+        trace['kappa'][k] = reported.conditioning(out)
+        trace['theta'][k] = reported.theta(out)
         tau_ratio = max(tau_ratio, float(np.max(np.abs(out.tau) / limit)))
         try:
             plant.step(out.tau, dt)

@@ -17,23 +17,20 @@ part; a law overrides :meth:`TaskLaw.command` (and, with internal state,
 singularity threshold are the shared :class:`freejoint_core.control.Gains`; a law's own
 gains are its ``gain_schema`` (``<law>.<gain>``, :class:`freejoint_core.law_base.LawGain`).
 
-The output is :class:`freejoint_core.control.ControlOutput` with the fields a law
-without adaptation has (``theta`` empty, ``rho`` the law's robust gain, ``dv`` its
-robust term): the loop and the metrics read ``tau``, ``e``, ``p``, ``det`` and
-``status``.
+The output is :class:`freejoint_core.law_base.LawOutput`; its ``internal`` holds the
+values a law's :meth:`TaskLaw.command` gives (declared in its ``internals``) and ``det``
+(``|det(Da Da^T)|`` of the nominal model, the law's ``conditioning``), declared last.
 """
 
 import math
 
 from freejoint_core.arm import ArmParams, check_vector
-from freejoint_core.control import (_dls_lambda2, clip_torque, ControlOutput, Gains,
-                                    HoldStiffness, RobustController, STATUS_NEAR_SINGULAR)
+from freejoint_core.control import (_dls_lambda2, clip_torque, DET, Gains, HoldStiffness,
+                                    RobustController, STATUS_NEAR_SINGULAR)
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.law_base import ControlLaw, law_params
+from freejoint_core.law_base import ControlLaw, law_params, LawOutput
 from freejoint_core.models import make_model
 import numpy as np
-
-_EMPTY = np.zeros(0)
 
 
 def damped_right_inverse(da, w, thr):
@@ -102,12 +99,24 @@ class TaskLaw(HoldStiffness, ControlLaw):
         The controller's null-space parameters: such a law has no null-space term, so
         both must be 0 on an arm with more driven joints than the task has (r > 2).
 
+    Attributes
+    ----------
+    internals : tuple of LawValue
+        The values :meth:`command` gives, then ``det`` (``control.DET``); a law adds its
+        own before it (``internals = OWN + (DET,)``).
+    conditioning : str or None
+        ``'det'``: the output's ``|det(Da Da^T)|`` under this name; None: not reported (a
+        law whose ``internals`` leave it out).
+
     Raises
     ------
     FreejointValueError
         A null-space parameter not 0 on such an arm.
 
     """
+
+    internals = (DET,)
+    conditioning = 'det'
 
     def __init__(self, nominal, gains=None, model=None, params=None, nullspace_kd=0.0,
                  nullspace_kp=0.0):
@@ -163,7 +172,7 @@ class TaskLaw(HoldStiffness, ControlLaw):
 
     def step(self, q, qd, p_d, pd_d, pdd_d, dt):
         """
-        Return the torques of one tick (``ControlOutput``) and advance the law by ``dt``.
+        Return the torques of one tick (``LawOutput``) and advance the law by ``dt``.
 
         Parameters
         ----------
@@ -192,12 +201,13 @@ class TaskLaw(HoldStiffness, ControlLaw):
         edot = v - pd_d
         s = edot + self.lam * e
         u0 = pdd_d - self.lam * edot - self.k * s
-        w, rho, dv = self.command(q, qd, v, da, b, e, edot, s, u0, pdd_d, dtf)
+        w, internal = self.command(q, qd, v, da, b, e, edot, s, u0, pdd_d, dtf)
         tau, det, status = damped_right_inverse(da, w, self.gains.det_threshold)
         tau, limited = clip_torque(tau, self._limit)
         self.applied(tau, da)
-        return ControlOutput(tau, e, edot, s, _EMPTY.copy(), float(rho), dv, det, p,
-                             status | limited)
+        if self.conditioning is not None:
+            internal[self.conditioning] = det
+        return LawOutput(tau, e, edot, s, p, status | limited, internal)
 
     def _terms(self, q, qd):
         """Return ``p``, ``J qd`` (m,), ``Da`` (m, r), ``b`` (m,) of the nominal model."""
@@ -211,12 +221,13 @@ class TaskLaw(HoldStiffness, ControlLaw):
 
     def command(self, q, qd, v, da, b, e, edot, s, u0, pdd_d, dt):
         """
-        Return the law's task acceleration minus drift ``w``, its gain ``rho`` and term.
+        Return the law's task acceleration minus drift ``w`` and its internal values.
 
-        The torque is ``Da# w``; the nominal computed torque is ``w = u0 - b`` (``rho``
-        0, term zeros).  ``v`` is the task velocity ``J qd`` [m/s].
+        The torque is ``Da# w``; the nominal computed torque is ``w = u0 - b`` (no
+        values).  ``v`` is the task velocity ``J qd`` [m/s].  The values: a dict of the
+        law's ``internals`` but ``det``, in their order.
         """
-        return u0 - b, 0.0, np.zeros_like(u0)
+        return u0 - b, {}
 
     def applied(self, tau, da):
         """Take note of the torque the step returns (after the limit); nothing here."""

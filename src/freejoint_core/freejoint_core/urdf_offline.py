@@ -24,6 +24,7 @@ import math
 from freejoint_core.arm import NOMINAL_SCALE
 from freejoint_core.control import Gains
 from freejoint_core.errors import FreejointValueError, PlantDivergedError
+from freejoint_core.law_base import RunValues
 from freejoint_core.laws import make_law
 from freejoint_core.metrics import compute_record
 from freejoint_core.plant import DEFAULT_DT_SUB, Plant
@@ -133,7 +134,8 @@ def run_arm(arm, trajectory, q0, *, label='urdf', seed=0, nominal_scale=NOMINAL_
         :func:`freejoint_core.metrics.compute_record` (``variant='robust'``).
     trace : dict
         ``t`` (N,), ``q``, ``qd`` (N, n), ``p``, ``p_d`` (N, 2), ``tau`` (N, r),
-        ``theta`` (N, 5), ``det`` (N,).
+        ``theta`` (N, k) (the law's ``theta_hat``, k = 0 for a law without one), ``det``
+        (N,) (its conditioning, 0 for a law without one).
 
     """
     if not isinstance(arm, UrdfArm):
@@ -148,8 +150,9 @@ def run_arm(arm, trajectory, q0, *, label='urdf', seed=0, nominal_scale=NOMINAL_
     t = np.arange(n_ticks) * dt
     q_buf, qd_buf = np.empty((n_ticks, n)), np.empty((n_ticks, n))
     p_buf, pd_buf = np.empty((n_ticks, 2)), np.empty((n_ticks, 2))
-    tau_buf, th_buf, det_buf = np.empty((n_ticks, r)), np.empty((n_ticks, ctrl.theta.size)), \
-        np.empty(n_ticks)
+    reported = RunValues(ctrl)
+    tau_buf, th_buf = np.empty((n_ticks, r)), np.empty((n_ticks, reported.theta_size))
+    det_buf = np.empty(n_ticks)
     diverged, done = None, 0
     for k in range(n_ticks):
         pdx, pdy, vdx, vdy, adx, ady = trajectory.sample_tuple(k * dt)
@@ -160,7 +163,8 @@ def run_arm(arm, trajectory, q0, *, label='urdf', seed=0, nominal_scale=NOMINAL_
             diverged = k * dt
             break
         q_buf[k], qd_buf[k], p_buf[k], pd_buf[k] = q, qd, out.p, (pdx, pdy)
-        tau_buf[k], th_buf[k], det_buf[k] = out.tau, out.theta, out.det
+        tau_buf[k], th_buf[k] = out.tau, reported.theta(out)
+        det_buf[k] = reported.conditioning(out)
         done = k + 1
         if err > diverge_m:
             diverged = k * dt

@@ -344,17 +344,18 @@ def nominal_loop(nominal, q, qd, path, hold=CHECK_HOLD, period=CHECK_PERIOD, kd=
             break
         err = float(np.linalg.norm(out.e))
         emax = max(emax, err)
-        if out.kappa < kmin:
-            kmin, t_kmin = out.kappa, t
-        if out.kappa < gains.kappa_min:
+        kappa = out.internal['kappa']
+        if kappa < kmin:
+            kmin, t_kmin = kappa, t
+        if kappa < gains.kappa_min:
             reason = (f'the nominal closed loop passes a singular posture: kappa '
-                      f'{out.kappa:.3g} < kappa_min {gains.kappa_min:g} at t = {t:.3f} s '
+                      f'{kappa:.3g} < kappa_min {gains.kappa_min:g} at t = {t:.3f} s '
                       f'(tip at {np.round(out.p, 4).tolist()} m)')
             break
         if err > TRACK_BOUND:
             reason = (f'the nominal closed loop cannot follow the path: tip error '
                       f'{err * 1e3:.3g} mm at t = {t:.3f} s (> {TRACK_BOUND * 1e3:g} mm; '
-                      f'kappa {out.kappa:.3g}): '
+                      f'kappa {kappa:.3g}): '
                       + (too_stiff(nominal, x, kd, period) or 'out of reach or through a '
                          'singular posture'))
             break
