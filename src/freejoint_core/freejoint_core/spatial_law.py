@@ -48,6 +48,7 @@ from dataclasses import dataclass
 import math
 from typing import NamedTuple
 
+from freejoint_core.arm_gains import delay_capped_damping
 from freejoint_core.control import _vector, ControlOutput, Gains, STATUS_NEAR_SINGULAR
 from freejoint_core.control import HoldStiffness, STATUS_OK, STATUS_TORQUE_LIMITED
 from freejoint_core.errors import FreejointValueError
@@ -479,6 +480,8 @@ class SpatialControlLaw(ControlLaw):
         self._last = None
         self._kd = self._kp = 0.0
         self._posture = None
+        self._delay = None      # real time: (periods, control period) the damping must stand
+        self._kd_now = None     # the damping in use (None: taken at the next step)
         names = tuple('theta_hat[%d]' % i for i in range(5))
         self.state_names = names + ('rho_hat', 'kappa')
         self._bounds()
@@ -516,7 +519,28 @@ class SpatialControlLaw(ControlLaw):
         ns.check(self.law.model.r)
         self._kd, self._kp = kd, kp
         self._posture = None
+        self._kd_now = None
         self.law.nullspace = _nullspace(kd)
+
+    def set_nullspace_delay(self, periods, dt):
+        """
+        Cap the null-space damping for a real-time loop ``periods`` control periods late.
+
+        From the next step on (and after each :meth:`reset`), the damping is
+        ``freejoint_core.arm_gains.delay_capped_damping`` of the configured ``kd`` at the
+        posture of that step: a light joint's damping that lockstep stands would reverse
+        and grow at the delay of a real-time loop.  ``periods`` >= 1 [periods], ``dt`` the
+        control period [s] > 0; ``periods`` None: uncapped (lockstep).
+        """
+        self._delay = None if periods is None else (int(periods), float(dt))
+        self._kd_now = None
+        self.law.nullspace = _nullspace(self._kd)
+        self._posture = None
+
+    @property
+    def nullspace_kd(self):
+        """Return the null-space damping in use (None: taken at the next step)."""
+        return self._kd_now
 
     @property
     def posture(self):
@@ -525,18 +549,30 @@ class SpatialControlLaw(ControlLaw):
 
     def step(self, q, qd, p_d, pd_d, pdd_d, dt):
         """Return one tick of :class:`SpatialLaw` as a ``control.ControlOutput``."""
-        if self._kp and self._posture is None:
-            self._posture = tuple(float(q[i]) for i in self.law.model.active)
-            self.law.nullspace = _nullspace(self._kd, self._kp, self._posture)
+        if self._kd_now is None or (self._kp and self._posture is None):
+            self._take_nullspace(q)
         out = self.law.step(q, qd, p_d, pd_d, pdd_d, dt)
         self._last = out
         return ControlOutput(out.tau, out.e, out.edot, out.s, out.theta, out.rho,
                              np.zeros(self.law.model.m), out.kappa, out.p, out.status)
 
+    def _take_nullspace(self, q):
+        """Take the posture (``kp`` > 0) and the damping (capped in real time) at ``q``."""
+        if self._kp and self._posture is None:
+            self._posture = tuple(float(q[i]) for i in self.law.model.active)
+        if self._kd_now is None:
+            kd = self._kd
+            if self._delay is not None and np.any(np.asarray(kd) != 0.0):
+                kd = delay_capped_damping(self.law.model, np.asarray(q, dtype=float), kd,
+                                          *self._delay)
+            self._kd_now = kd
+        self.law.nullspace = _nullspace(self._kd_now, self._kp, self._posture)
+
     def reset(self):
-        """Set theta_hat back to ``gains.theta0``; the posture is taken again next step."""
+        """Set theta_hat back to ``gains.theta0``; posture and damping taken again next step."""
         self.law.reset()
         self._last = None
+        self._kd_now = None
         if self._posture is not None:
             self._posture = None
             self.law.nullspace = _nullspace(self._kd)
