@@ -131,6 +131,12 @@ def test_effort_limits_below_the_urdfs_clip_the_spatial_laws_torque():
     assert abs(ref.tau[1]) > 10.0
 
 
+def _sim_config():
+    """Return the UR5 simulator's configuration (config/sim.yaml, config/ur5/sim.yaml)."""
+    return SIM_SCHEMA.config(SIM_SCHEMA.yaml_values(
+        os.path.join(ROOT, 'config', 'sim.yaml'), os.path.join(ROOT, 'config', 'ur5', 'sim.yaml')))
+
+
 def _realtime_ur5(late_ns, ticks):
     """
     Run the UR5's real-time loop from rest on its twin arm; return the joint speeds (ticks, n).
@@ -139,8 +145,7 @@ def _realtime_ur5(late_ns, ticks):
     answers from the first state), the planner holds the start point, and each command acts
     from the first simulator step after it arrives (before it: the start-up brakes).
     """
-    sim = SIM_SCHEMA.config(dict(SIM_SCHEMA.yaml_values(
-        os.path.join(ROOT, 'config', 'sim.yaml'), os.path.join(ROOT, 'config', 'ur5', 'sim.yaml'))))
+    sim = _sim_config()
     cfg = SCHEMA.config(_values('ur5', lockstep=False, readiness_guard=False))
     real = sim.arm.spatial
     plant = SpatialPlant(real, sim.dt_sub, sim.dist_bound, 0, sim.q0)
@@ -180,9 +185,7 @@ def test_a_real_time_ur5_keeps_its_light_wrist_within_its_speed_limit_at_the_loo
 
 
 def test_the_real_time_null_space_damping_is_capped_by_the_delay_and_lockstep_is_not():
-    q0 = np.array(SIM_SCHEMA.config(dict(SIM_SCHEMA.yaml_values(
-        os.path.join(ROOT, 'config', 'sim.yaml'),
-        os.path.join(ROOT, 'config', 'ur5', 'sim.yaml')))).q0)
+    q0 = np.array(_sim_config().q0)
     lockstep = config_law(SCHEMA.config(_values('ur5')))
     realtime = config_law(SCHEMA.config(_values('ur5', lockstep=False)))
     p_d = lockstep.model.fk(q0)

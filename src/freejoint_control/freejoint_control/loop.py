@@ -52,7 +52,6 @@ from freejoint_control.loop_inputs import StateReader
 from freejoint_control.loop_law import LawStep
 from freejoint_control.loop_reference import Reference
 from freejoint_control.loop_setpoints import SetpointStream
-from freejoint_control.readiness import guard_margins
 # The published state's names, imported from here by the node and the tests too.
 from freejoint_control.loop_status import (  # noqa: F401
     DEBUG, ERROR, INFO, PeriodFigures, RECEIPT, Result, STATUS_DT_CLAMPED, STATUS_HOLDING,
@@ -60,6 +59,7 @@ from freejoint_control.loop_status import (  # noqa: F401
     STATUS_SETPOINT_LATE, STATUS_STOPPED, WARN)
 from freejoint_control.loop_stop import (DAMP_SAID, DriverRequests, QUIET_SAID, Readiness,
                                          stop_effort, STOP_SAID)
+from freejoint_control.readiness import guard_margins
 from freejoint_core.control import STATUS_BAD_INPUT, STATUS_STALE_SETPOINT, STATUS_STALE_STATE
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import clamp_dt, limit_effort

@@ -185,14 +185,30 @@ def task_conditioning(da, maa, reach):
 
     """
     a = da @ maa @ da.T
-    m = a.shape[0]
-    ds = np.ones(m) / reach
-    if m == 6:
-        ds[3:] = 1.0
-    eig = np.linalg.eigvalsh(a * np.outer(ds, ds))
+    eig = np.linalg.eigvalsh(a * _row_scale(a.shape[0], reach))
     lmax = float(eig[-1])
     kappa = math.sqrt(max(float(eig[0]), 0.0) / lmax) if lmax > 0.0 else 0.0
     return kappa, a, lmax
+
+
+_ROW_SCALES = {}
+"""``outer(Ds, Ds)`` of :func:`task_conditioning` per (m, reach) (a few arms per process)."""
+
+
+def _row_scale(m, reach):
+    """Return ``outer(Ds, Ds)`` (m, m), ``Ds = diag(1, 1, 1, L, L, L)[:m] / L`` (cached)."""
+    key = (m, reach)
+    scale = _ROW_SCALES.get(key)
+    if scale is None:
+        ds = np.ones(m) / reach
+        if m == 6:
+            ds[3:] = 1.0
+        scale = np.outer(ds, ds)
+        scale.flags.writeable = False
+        if len(_ROW_SCALES) >= 64:
+            _ROW_SCALES.clear()
+        _ROW_SCALES[key] = scale
+    return scale
 
 
 def rotation_error(rot, rot_d):
@@ -242,6 +258,9 @@ class SpatialLaw(HoldStiffness):
         self._limit = nominal.effort[list(nominal.active)]
         if gains.tau_limit is not None:     # the smaller of the URDF's and the given limits
             self._limit = np.minimum(self._limit, np.asarray(gains.tau_limit, dtype=float))
+        self._low = -self._limit
+        self._eye = np.eye(nominal.r)
+        self._act = np.array(nominal.active, dtype=int)
         self._dt = None
         self._coef = None
         self.reset()
@@ -295,7 +314,7 @@ class SpatialLaw(HoldStiffness):
         vals = {}
         for name, val, k in (('p_d', p_d, 3), ('pd_d', pd_d, m), ('pdd_d', pdd_d, m)):
             arr = np.asarray(val, dtype=float)
-            if arr.shape != (k,) or not np.all(np.isfinite(arr)):
+            if arr.shape != (k,) or not np.isfinite(arr).all():
                 raise FreejointValueError(f'{name}: expected {k} finite numbers, got {val!r}')
             vals[name] = arr
         if m == 6:
@@ -315,10 +334,10 @@ class SpatialLaw(HoldStiffness):
         rho = 0.0
         if gains.robust:
             alpha = np.array(gains.R) * s
-            na = float(np.linalg.norm(alpha))
+            na = math.sqrt(alpha @ alpha)       # np.linalg.norm's sqrt(x . x), less overhead
             h = na + gains.epsilon if gains.h_form == 'sum' else max(na, gains.epsilon)
-            psi = np.array([1.0, float(qd @ qd), np.linalg.norm(pdd), np.linalg.norm(edot),
-                            np.linalg.norm(e)])
+            psi = np.array([1.0, float(qd @ qd), math.sqrt(pdd @ pdd), math.sqrt(edot @ edot),
+                            math.sqrt(e @ e)])
             rho = float(self.theta @ psi)
             v = v - rho * alpha / h
             a_c, c_c = self._decay(dt)
@@ -329,7 +348,7 @@ class SpatialLaw(HoldStiffness):
         da, b, maa = arm.decoupling(terms)
         kappa, amat, lmax = task_conditioning(da, maa, self.reach)
         status = STATUS_OK
-        weight = maa if self.nullspace.inverse == 'weighted' else np.eye(arm.r)
+        weight = maa if self.nullspace.inverse == 'weighted' else self._eye
         wd = weight @ da.T
         amat = da @ wd
         if kappa < gains.kappa_min:
@@ -342,16 +361,16 @@ class SpatialLaw(HoldStiffness):
         x = np.linalg.solve(amat, wd.T).T
         tau = x @ (v - b)
         if arm.r > m:
-            act = list(arm.active)
-            proj = np.eye(arm.r) - x @ da
+            act = self._act
+            proj = self._eye - x @ da
             if self.nullspace.projector == 'kinematic':
                 xp = np.linalg.solve(da @ da.T, da).T
-                proj = np.eye(arm.r) - xp @ da
+                proj = self._eye - xp @ da
             tau0 = self.nullspace.tau0(np.asarray(q, dtype=float)[act], qd[act])
             if self.free_damping > 0.0:
                 tau0 = tau0 + self._free_damping(terms, proj, qd)
             tau = tau + proj @ tau0
-        clipped = np.clip(tau, -self._limit, self._limit)
+        clipped = np.minimum(np.maximum(tau, self._low), self._limit)   # np.clip's values
         if np.any(clipped != tau):
             status |= STATUS_TORQUE_LIMITED
         return SpatialOutput(clipped, e, edot, s, self.theta.copy(), rho, kappa, terms.p,
