@@ -4,7 +4,8 @@ import os
 
 from freejoint_control.loop import config_law, ControlLoop
 from freejoint_control.params import SCHEMA
-from freejoint_core.arm_gains import delay_step_bound, joint_inertia, mode_steps
+from freejoint_core.arm_gains import (delay_capped_damping, delay_step_bound, joint_inertia,
+                                      mode_steps)
 from freejoint_core.control import STATUS_TORQUE_LIMITED
 from freejoint_core.spatial_law import SpatialControlLaw, SpatialGains
 from freejoint_core.spatial_offline import CASES, circle, run_twin, start_posture
@@ -201,3 +202,20 @@ def test_the_real_time_null_space_damping_is_capped_by_the_delay_and_lockstep_is
                                   rel=1e-9)
     assert mode_steps(realtime.model, q0, kd, 1e-3)[0][0] <= 0.309017 + 1e-6
     assert delay_step_bound(0) == 2.0 and delay_step_bound(1) == pytest.approx(1.0)
+
+
+def test_a_longer_trip_delay_given_live_caps_the_damping_anew_and_keeps_the_posture():
+    q0 = np.array(_sim_config().q0)
+    old = SCHEMA.config(_values('ur5', lockstep=False, readiness_guard=False))
+    loop = ControlLoop(old, lambda *line: None)
+    law = loop.law
+    p_d = law.model.fk(q0)
+    law.step(q0, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
+    posture, one = law.posture, law.nullspace_kd        # no guard: one period
+    new = SCHEMA.config(_values('ur5', lockstep=False, readiness_guard=True,
+                                readiness_max_delay=0.005))
+    loop.apply(old, new)
+    law.step(q0 + 0.01, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
+    assert law.posture == posture
+    five = delay_capped_damping(law.model, q0 + 0.01, 20.0, 5, 1e-3)
+    assert law.nullspace_kd == five and five[4] < one[4] / 2

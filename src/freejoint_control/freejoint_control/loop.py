@@ -241,6 +241,9 @@ class ControlLoop:
             self.stepper.keep_state()
         if renew:
             self.failures = fm.renewed(cfg)
+        if not cfg.lockstep and hasattr(law, 'set_nullspace_delay'):
+            # the guard's trip delay changed: the null-space damping capped anew (next step)
+            law.set_nullspace_delay(nullspace_delay_periods(cfg), cfg.dt)
         self._install(cfg)
 
     def reset(self):

@@ -547,14 +547,15 @@ class SpatialControlLaw(ControlLaw):
 
         From the next step on (and after each :meth:`reset`), the damping is
         ``freejoint_core.arm_gains.delay_capped_damping`` of the configured ``kd`` at the
-        posture of that step: a light joint's damping that lockstep stands would reverse
-        and grow at the delay of a real-time loop.  ``periods`` >= 1 [periods], ``dt`` the
-        control period [s] > 0; ``periods`` None: uncapped (lockstep).
+        state of that step (the posture pulled to is kept): a light joint's damping that
+        lockstep stands would reverse and grow at the delay of a real-time loop.
+        ``periods`` >= 1 [periods], ``dt`` the control period [s] > 0; ``periods`` None:
+        uncapped (lockstep).
         """
-        self._delay = None if periods is None else (int(periods), float(dt))
-        self._kd_now = None
-        self.law.nullspace = _nullspace(self._kd)
-        self._posture = None
+        delay = None if periods is None else (int(periods), float(dt))
+        if delay != self._delay:
+            self._delay = delay
+            self._kd_now = None
 
     @property
     def nullspace_kd(self):
