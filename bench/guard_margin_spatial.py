@@ -14,8 +14,8 @@ step takes the stamps' gap as dt, at most 4 periods, as the node clamps it). A s
 tolerated when every seed stays within the bound ``make soak`` judges the arm by (1.5 x the
 worst max error of the lockstep twin over the seeds) and every joint below the speed the
 controller's state reader refuses (``joint_velocity_limit``: the URDF's, wide on a free
-joint; a light wrist spinning in the null space hardly moves the tip). Prints a row per setting; nothing asserted; figures depend on the
-machine only through the last bits.
+joint; a light wrist spinning in the null space hardly moves the tip). Prints a row per
+setting; nothing asserted; figures depend on the machine only through the last bits.
 
     python bench/guard_margin_spatial.py                       # config/ur5, seeds 0-2
     python bench/guard_margin_spatial.py --arm config/panda --delays 1 2 --rates 0.05

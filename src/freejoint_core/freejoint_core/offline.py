@@ -316,7 +316,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
                 break
             try:
                 pipeline_step(plant, tau_buf, arrive, applied_at, k,
-                               delay_ticks + jitter[k], dt)
+                              delay_ticks + jitter[k], dt)
             except _BLOWUP:
                 diverged = (k + 1) * dt
                 break
@@ -377,7 +377,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
         try:
             if pipeline:
                 pipeline_step(plant, tau_buf, arrive, applied_at, k,
-                               delay_ticks + jitter[k], dt)
+                              delay_ticks + jitter[k], dt)
             else:
                 plant.step(out.tau, dt)
         except _BLOWUP:
