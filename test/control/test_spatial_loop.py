@@ -1,12 +1,16 @@
 """The controller's loop runs a spatial arm: lockstep ticks equal the offline twin."""
+import math
 import os
 
 from freejoint_control.loop import config_law, ControlLoop
 from freejoint_control.params import SCHEMA
+from freejoint_core.arm_gains import (delay_capped_damping, delay_step_bound, joint_inertia,
+                                      mode_steps)
 from freejoint_core.control import STATUS_TORQUE_LIMITED
 from freejoint_core.spatial_law import SpatialControlLaw, SpatialGains
 from freejoint_core.spatial_offline import CASES, circle, run_twin, start_posture
 from freejoint_core.spatial_plant import SpatialPlant
+from freejoint_sim.params import SCHEMA as SIM_SCHEMA
 import numpy as np
 import pytest
 
@@ -126,3 +130,92 @@ def test_effort_limits_below_the_urdfs_clip_the_spatial_laws_torque():
     urdf = config_law(SCHEMA.config(_values('ur5')))
     ref = urdf.step(q0, np.zeros(6), cfg.nominal.fk(q0) + 0.02, [0.0] * 3, [0.0] * 3, 1e-3)
     assert abs(ref.tau[1]) > 10.0
+
+
+def _sim_config():
+    """Return the UR5 simulator's configuration (config/sim.yaml, config/ur5/sim.yaml)."""
+    return SIM_SCHEMA.config(SIM_SCHEMA.yaml_values(
+        os.path.join(ROOT, 'config', 'sim.yaml'), os.path.join(ROOT, 'config', 'ur5', 'sim.yaml')))
+
+
+def _realtime_ur5(late_ns, ticks):
+    """
+    Run the UR5's real-time loop from rest on its twin arm; return the joint speeds (ticks, n).
+
+    The controller answers each state ``late_ns`` after its stamp (no readiness guard: it
+    answers from the first state), the planner holds the start point, and each command acts
+    from the first simulator step after it arrives (before it: the start-up brakes).
+    """
+    sim = _sim_config()
+    cfg = SCHEMA.config(_values('ur5', lockstep=False, readiness_guard=False))
+    real = sim.arm.spatial
+    plant = SpatialPlant(real, sim.dt_sub, sim.dist_bound, 0, sim.q0)
+    loop = ControlLoop(cfg, lambda *line: None)
+    hold = real.fk(np.array(sim.q0)).tolist() + [0.0] * 6
+    sent = []                   # (arrival [ns], effort in the model's active order)
+    effort = None
+    speeds = []
+    for k in range(ticks):
+        ns = k * DT_NS
+        while sent and sent[0][0] <= ns:
+            effort = sent.pop(0)[1]
+        if effort is not None:
+            plant.step(effort, 1e-3)
+            speeds.append(np.abs(plant.qd))
+        loop.on_setpoint(ns + DT_NS, hold, ns, 0.0)
+        res = loop.on_state(ns + DT_NS, list(cfg.joint_names), plant.q.tolist(),
+                            plant.qd.tolist(), ns + DT_NS + late_ns, 0.0)
+        if res is not None:
+            cmd = [0.0] * real.r
+            for name, value in zip(cfg.joints, res.effort):
+                cmd[real.active.index(cfg.joint_names.index(name))] = value
+            sent.append((ns + DT_NS + late_ns, cmd))
+    return np.array(speeds), real
+
+
+@pytest.mark.parametrize('late_ms', [0.5, 1.5, 2.5])
+def test_a_real_time_ur5_keeps_its_light_wrist_within_its_speed_limit_at_the_loops_delay(
+        late_ms):
+    # The null-space damping of the lockstep config (20 N m s/rad: 1.2 of wrist_3's rate per
+    # period) reverses and grows once a command acts a period late: wrist_3 passed its
+    # 3.2 rad/s within 40 ms of the first command, and the state reader refused it.
+    speeds, real = _realtime_ur5(round(late_ms * 1e6), 200)
+    assert np.all(speeds < real.velocity), speeds.max(axis=0) / real.velocity
+    wrist_3 = real.joint_names.index('wrist_3_joint')
+    assert speeds[-50:, wrist_3].max() < 0.1 * real.velocity[wrist_3]
+
+
+def test_the_real_time_null_space_damping_is_capped_by_the_delay_and_lockstep_is_not():
+    q0 = np.array(_sim_config().q0)
+    lockstep = config_law(SCHEMA.config(_values('ur5')))
+    realtime = config_law(SCHEMA.config(_values('ur5', lockstep=False)))
+    p_d = lockstep.model.fk(q0)
+    for law in (lockstep, realtime):
+        law.step(q0, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
+    assert lockstep.nullspace_kd == 20.0
+    kd = realtime.nullspace_kd
+    # the guard's trip delay (not measured for the UR5: the strictest, 1.5 ms) is 2 periods:
+    # wrist_3 (0.012 kg m^2 on the 70 % model) at half of 2 sin(pi / 10) = 0.618 per period
+    inertia = joint_inertia(realtime.model, q0)
+    assert kd[:4] == pytest.approx((20.0,) * 4, rel=1e-9)
+    assert kd[4] == pytest.approx(0.5 * 2 * math.sin(math.pi / 10) * inertia[4] / 1e-3,
+                                  rel=1e-9)
+    assert mode_steps(realtime.model, q0, kd, 1e-3)[0][0] <= 0.309017 + 1e-6
+    assert delay_step_bound(0) == 2.0 and delay_step_bound(1) == pytest.approx(1.0)
+
+
+def test_a_longer_trip_delay_given_live_caps_the_damping_anew_and_keeps_the_posture():
+    q0 = np.array(_sim_config().q0)
+    old = SCHEMA.config(_values('ur5', lockstep=False, readiness_guard=False))
+    loop = ControlLoop(old, lambda *line: None)
+    law = loop.law
+    p_d = law.model.fk(q0)
+    law.step(q0, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
+    posture, one = law.posture, law.nullspace_kd        # no guard: one period
+    new = SCHEMA.config(_values('ur5', lockstep=False, readiness_guard=True,
+                                readiness_max_delay=0.005))
+    loop.apply(old, new)
+    law.step(q0 + 0.01, np.zeros(6), p_d, [0.0] * 3, [0.0] * 3, 1e-3)
+    assert law.posture == posture
+    five = delay_capped_damping(law.model, q0 + 0.01, 20.0, 5, 1e-3)
+    assert law.nullspace_kd == five and five[4] < one[4] / 2

@@ -43,6 +43,9 @@ throttled kind of line, None: always); status bits are ControllerState's.
 
 """
 
+import math
+
+from freejoint_common.arm_description import resolve_arm
 from freejoint_common.schema import nullspace_options
 from freejoint_control import failures, loop_status
 from freejoint_control.loop_inputs import StateReader
@@ -56,6 +59,7 @@ from freejoint_control.loop_status import (  # noqa: F401
     STATUS_SETPOINT_LATE, STATUS_STOPPED, WARN)
 from freejoint_control.loop_stop import (DAMP_SAID, DriverRequests, QUIET_SAID, Readiness,
                                          stop_effort, STOP_SAID)
+from freejoint_control.readiness import guard_margins
 from freejoint_core.control import STATUS_BAD_INPUT, STATUS_STALE_SETPOINT, STATUS_STALE_STATE
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import clamp_dt, limit_effort
@@ -107,9 +111,26 @@ def config_law(cfg):
                      'mode': values['free_link_mode'],
                      'settle_window': values['free_link_settle_window'],
                      'sat': values['free_link_drive_max']}
-    return make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model,
-                    params=cfg.law_params, free_link=free_link,
-                    **nullspace_options(values))
+    law = make_law(cfg.law, cfg.nominal, cfg.gains, model=cfg.nominal_model,
+                   params=cfg.law_params, free_link=free_link, **nullspace_options(values))
+    if not cfg.lockstep and hasattr(law, 'set_nullspace_delay'):
+        law.set_nullspace_delay(nullspace_delay_periods(cfg), cfg.dt)
+    return law
+
+
+def nullspace_delay_periods(cfg):
+    """
+    Return the control periods of delay a real-time loop's null-space damping must stand.
+
+    The readiness guard's trip delay (``readiness_max_delay``, else the arm's measured or
+    the strictest one: ``freejoint_control.readiness.guard_margins``) in whole periods, at
+    least 1 (a command acts from the period after its state's); 1 without the guard.
+    """
+    if not cfg.readiness_guard:
+        return 1
+    max_delay = guard_margins(resolve_arm(cfg.values).params, cfg.delay_compensation,
+                              cfg.readiness_max_delay)[0]
+    return max(1, math.ceil(max_delay / cfg.dt - 1e-9))
 
 
 class ControlLoop:
@@ -220,6 +241,9 @@ class ControlLoop:
             self.stepper.keep_state()
         if renew:
             self.failures = fm.renewed(cfg)
+        if not cfg.lockstep and hasattr(law, 'set_nullspace_delay'):
+            # the guard's trip delay changed: the null-space damping capped anew (next step)
+            law.set_nullspace_delay(nullspace_delay_periods(cfg), cfg.dt)
         self._install(cfg)
 
     def reset(self):

@@ -79,6 +79,7 @@ from its limit) 0.5 / (0.8 x 3.2) = 0.195 N m s/rad (position: 4 x 0.2887 x 0.12
 """
 
 
+import math
 from typing import NamedTuple
 
 from freejoint_core.errors import FreejointValueError
@@ -96,6 +97,8 @@ SPEED_SHARE = 0.8
 """Share of a free joint's rated speed the disturbance alone may drive it to."""
 Z = 4.0
 """Standard deviations of the free joint's walk kept from its nearer position limit."""
+DELAY_MARGIN = 0.5
+"""Share of :func:`delay_step_bound` the real-time null-space damping is capped at."""
 RK4_STEP = 1.0
 """Largest ``dt_sub b / I`` the simulator's damping is given (RK4 is stable to 2.78)."""
 
@@ -232,6 +235,61 @@ def nullspace_gains(nominal, q, dt=CHECK_DT):
     if steps.size and steps[0] > 1.0:
         kd = kd / steps[0]
     return tuple(float(v) for v in kd), KD_REF / POSTURE_TIME, inertia
+
+
+def delay_step_bound(periods):
+    """
+    Return the largest ``dt lambda`` a mode stands when its damping acts ``periods`` late.
+
+    A mode damped by a torque computed from the rate measured ``periods`` control periods
+    before it acts maps ``x_{k+1} = x_k - a x_{k-periods}`` (``a = dt lambda``); its roots
+    stay in the unit circle while ``a < 2 sin(pi / (2 (2 periods + 1)))``: 2 with none (the
+    zero-order hold alone, lockstep), 1 at one period, 0.618 at two, 0.445 at three.
+    ``periods``: an integer >= 0.
+    """
+    return 2.0 * math.sin(math.pi / (2.0 * (2 * int(periods) + 1)))
+
+
+def delay_capped_damping(nominal, q, kd, periods, dt):
+    """
+    Return the null-space damping (r,) [N m s/rad] ``kd`` capped for a loop ``periods`` late.
+
+    Real time, a command acts one period after its state at the least and later with the
+    loop's delay, and the null-space damping of a light joint that is stable in lockstep
+    is not then: the UR5's ``kd`` = 20 on its wrist_3 (``dt lambda`` 1.2 at 1 ms on the
+    real arm) grows by about 9 % per period at one period more, to its rated speed within
+    tens of milliseconds of the first command.  The cap keeps every internal mode within
+    half the bound of :func:`delay_step_bound` (a gain margin of 2 for the model's inertia
+    error and commands held over missed states): each joint's ``kd_i`` first capped at
+    ``a I_i / dt`` (``I_i`` its effective inertia on ``nominal`` at ``q``), then all of them
+    scaled down together if a coupled mode still steps further (:func:`mode_steps`).  A
+    ``kd`` already within it is returned unchanged.
+
+    Parameters
+    ----------
+    nominal : SpatialArm
+        The law's (nominal) model.
+    q : array_like, (n,)
+        Posture [rad] (where the task begins).
+    kd : float or sequence of float, (r,)
+        The configured damping [N m s/rad].
+    periods : int
+        Control periods from a state to the period its command acts in, >= 1.
+    dt : float
+        Control period [s], > 0.
+
+    Returns
+    -------
+    tuple of float, (r,)
+
+    """
+    kd = np.broadcast_to(np.asarray(kd, dtype=float), (nominal.r,)).copy()
+    step = DELAY_MARGIN * delay_step_bound(periods)
+    kd = np.minimum(kd, step * joint_inertia(nominal, q) / dt)
+    steps, _ = mode_steps(nominal, q, kd, dt)
+    if steps.size and steps[0] > step:
+        kd = kd * (step / steps[0])
+    return tuple(float(v) for v in kd)
 
 
 def rule(inertia, dt=CHECK_DT):

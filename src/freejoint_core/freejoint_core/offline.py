@@ -244,7 +244,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     if law != 'robust':
         label = f'{law} {label}'
     pred = None
-    missed = _loss_pattern(loss_rate, int(loss_burst), n_ticks, seed)
+    missed = loss_pattern(loss_rate, int(loss_burst), n_ticks, seed)
     pipeline = bool(delay_ticks or delay_jitter or missed)
     fk_real = make_model(real).fk
     if pipeline:
@@ -320,8 +320,8 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
                 diverged = t
                 break
             try:
-                _pipeline_step(plant, tau_buf, arrive, applied_at, k,
-                               delay_ticks + jitter[k], dt)
+                pipeline_step(plant, tau_buf, arrive, applied_at, k,
+                              delay_ticks + jitter[k], dt)
             except _BLOWUP:
                 diverged = (k + 1) * dt
                 break
@@ -381,8 +381,8 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
             break
         try:
             if pipeline:
-                _pipeline_step(plant, tau_buf, arrive, applied_at, k,
-                               delay_ticks + jitter[k], dt)
+                pipeline_step(plant, tau_buf, arrive, applied_at, k,
+                              delay_ticks + jitter[k], dt)
             else:
                 plant.step(out.tau, dt)
         except _BLOWUP:
@@ -409,7 +409,7 @@ def run_case(case, variant, seed, *, q3_0_deg=DEFAULT_Q3_0_DEG, dt=DEFAULT_DT,
     return record, trace
 
 
-def _loss_pattern(rate, burst, n_ticks, seed):
+def loss_pattern(rate, burst, n_ticks, seed):
     """
     Return the set of ticks not answered: bursts of ``burst`` ticks, a share ``rate``.
 
@@ -433,8 +433,15 @@ def _loss_pattern(rate, burst, n_ticks, seed):
     return frozenset(out)
 
 
-def _pipeline_step(plant, tau_buf, arrive, applied_at, k, lag, dt):
-    """Step the plant over tick ``k`` with the newest command arrived (delayed loop)."""
+def pipeline_step(plant, tau_buf, arrive, applied_at, k, lag, dt):
+    """
+    Step the plant over tick ``k`` with the newest command arrived (a delayed loop).
+
+    ``tau_buf[j]``: the command computed at tick j (<= k); ``lag``: the periods command
+    ``k`` takes to arrive (it arrives at tick ``k + lag``, never before the previous one);
+    ``arrive`` and ``applied_at`` are the caller's lists (empty at tick 0), appended to:
+    each command's arrival tick and the command applied over each tick.
+    """
     arrive.append(max(k + lag, arrive[-1] if k else 0))
     cur = applied_at[-1] if applied_at else 0
     while cur < k and arrive[cur + 1] <= k:

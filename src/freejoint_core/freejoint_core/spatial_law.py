@@ -47,6 +47,7 @@ in another branch is not looked for.
 from dataclasses import dataclass
 import math
 
+from freejoint_core.arm_gains import delay_capped_damping
 from freejoint_core.control import _vector, Gains, ROBUST_INTERNALS, STATUS_NEAR_SINGULAR
 from freejoint_core.control import HoldStiffness, STATUS_OK, STATUS_TORQUE_LIMITED
 from freejoint_core.errors import FreejointValueError
@@ -154,14 +155,30 @@ def task_conditioning(da, maa, reach):
 
     """
     a = da @ maa @ da.T
-    m = a.shape[0]
-    ds = np.ones(m) / reach
-    if m == 6:
-        ds[3:] = 1.0
-    eig = np.linalg.eigvalsh(a * np.outer(ds, ds))
+    eig = np.linalg.eigvalsh(a * _row_scale(a.shape[0], reach))
     lmax = float(eig[-1])
     kappa = math.sqrt(max(float(eig[0]), 0.0) / lmax) if lmax > 0.0 else 0.0
     return kappa, a, lmax
+
+
+_ROW_SCALES = {}
+"""``outer(Ds, Ds)`` of :func:`task_conditioning` per (m, reach) (a few arms per process)."""
+
+
+def _row_scale(m, reach):
+    """Return ``outer(Ds, Ds)`` (m, m), ``Ds = diag(1, 1, 1, L, L, L)[:m] / L`` (cached)."""
+    key = (m, reach)
+    scale = _ROW_SCALES.get(key)
+    if scale is None:
+        ds = np.ones(m) / reach
+        if m == 6:
+            ds[3:] = 1.0
+        scale = np.outer(ds, ds)
+        scale.flags.writeable = False
+        if len(_ROW_SCALES) >= 64:
+            _ROW_SCALES.clear()
+        _ROW_SCALES[key] = scale
+    return scale
 
 
 def rotation_error(rot, rot_d):
@@ -214,6 +231,9 @@ class SpatialLaw(HoldStiffness):
         self._limit = nominal.effort[list(nominal.active)]
         if gains.tau_limit is not None:     # the smaller of the URDF's and the given limits
             self._limit = np.minimum(self._limit, np.asarray(gains.tau_limit, dtype=float))
+        self._low = -self._limit
+        self._eye = np.eye(nominal.r)
+        self._act = np.array(nominal.active, dtype=int)
         self._dt = None
         self._coef = None
         self.reset()
@@ -269,7 +289,7 @@ class SpatialLaw(HoldStiffness):
         vals = {}
         for name, val, k in (('p_d', p_d, 3), ('pd_d', pd_d, m), ('pdd_d', pdd_d, m)):
             arr = np.asarray(val, dtype=float)
-            if arr.shape != (k,) or not np.all(np.isfinite(arr)):
+            if arr.shape != (k,) or not np.isfinite(arr).all():
                 raise FreejointValueError(f'{name}: expected {k} finite numbers, got {val!r}')
             vals[name] = arr
         if m == 6:
@@ -289,10 +309,10 @@ class SpatialLaw(HoldStiffness):
         rho = 0.0
         if gains.robust:
             alpha = np.array(gains.R) * s
-            na = float(np.linalg.norm(alpha))
+            na = math.sqrt(alpha @ alpha)       # np.linalg.norm's sqrt(x . x), less overhead
             h = na + gains.epsilon if gains.h_form == 'sum' else max(na, gains.epsilon)
-            psi = np.array([1.0, float(qd @ qd), np.linalg.norm(pdd), np.linalg.norm(edot),
-                            np.linalg.norm(e)])
+            psi = np.array([1.0, float(qd @ qd), math.sqrt(pdd @ pdd), math.sqrt(edot @ edot),
+                            math.sqrt(e @ e)])
             rho = float(self.theta @ psi)
             v = v - rho * alpha / h
             a_c, c_c = self._decay(dt)
@@ -303,7 +323,7 @@ class SpatialLaw(HoldStiffness):
         da, b, maa = arm.decoupling(terms)
         kappa, amat, lmax = task_conditioning(da, maa, self.reach)
         status = STATUS_OK
-        weight = maa if self.nullspace.inverse == 'weighted' else np.eye(arm.r)
+        weight = maa if self.nullspace.inverse == 'weighted' else self._eye
         wd = weight @ da.T
         amat = da @ wd
         if kappa < gains.kappa_min:
@@ -316,16 +336,16 @@ class SpatialLaw(HoldStiffness):
         x = np.linalg.solve(amat, wd.T).T
         tau = x @ (v - b)
         if arm.r > m:
-            act = list(arm.active)
-            proj = np.eye(arm.r) - x @ da
+            act = self._act
+            proj = self._eye - x @ da
             if self.nullspace.projector == 'kinematic':
                 xp = np.linalg.solve(da @ da.T, da).T
-                proj = np.eye(arm.r) - xp @ da
+                proj = self._eye - xp @ da
             tau0 = self.nullspace.tau0(np.asarray(q, dtype=float)[act], qd[act])
             if self.free_damping > 0.0:
                 tau0 = tau0 + self._free_damping(terms, proj, qd)
             tau = tau + proj @ tau0
-        clipped = np.clip(tau, -self._limit, self._limit)
+        clipped = np.minimum(np.maximum(tau, self._low), self._limit)   # np.clip's values
         if np.any(clipped != tau):
             status |= STATUS_TORQUE_LIMITED
         return LawOutput(clipped, e, edot, s, terms.p, status,
@@ -456,6 +476,8 @@ class SpatialControlLaw(ControlLaw):
         self._last = None
         self._kd = self._kp = 0.0
         self._posture = None
+        self._delay = None      # real time: (periods, control period) the damping must stand
+        self._kd_now = None     # the damping in use (None: taken at the next step)
         names = tuple('theta_hat[%d]' % i for i in range(5))
         self.state_names = names + ('rho_hat', 'kappa')
         self._bounds()
@@ -493,7 +515,29 @@ class SpatialControlLaw(ControlLaw):
         ns.check(self.law.model.r)
         self._kd, self._kp = kd, kp
         self._posture = None
+        self._kd_now = None
         self.law.nullspace = _nullspace(kd)
+
+    def set_nullspace_delay(self, periods, dt):
+        """
+        Cap the null-space damping for a real-time loop ``periods`` control periods late.
+
+        From the next step on (and after each :meth:`reset`), the damping is
+        ``freejoint_core.arm_gains.delay_capped_damping`` of the configured ``kd`` at the
+        state of that step (the posture pulled to is kept): a light joint's damping that
+        lockstep stands would reverse and grow at the delay of a real-time loop.
+        ``periods`` >= 1 [periods], ``dt`` the control period [s] > 0; ``periods`` None:
+        uncapped (lockstep).
+        """
+        delay = None if periods is None else (int(periods), float(dt))
+        if delay != self._delay:
+            self._delay = delay
+            self._kd_now = None
+
+    @property
+    def nullspace_kd(self):
+        """Return the null-space damping in use (None: taken at the next step)."""
+        return self._kd_now
 
     @property
     def posture(self):
@@ -502,17 +546,29 @@ class SpatialControlLaw(ControlLaw):
 
     def step(self, q, qd, p_d, pd_d, pdd_d, dt):
         """Return one tick of :class:`SpatialLaw` (its ``LawOutput``)."""
-        if self._kp and self._posture is None:
-            self._posture = tuple(float(q[i]) for i in self.law.model.active)
-            self.law.nullspace = _nullspace(self._kd, self._kp, self._posture)
+        if self._kd_now is None or (self._kp and self._posture is None):
+            self._take_nullspace(q)
         out = self.law.step(q, qd, p_d, pd_d, pdd_d, dt)
         self._last = out
         return out
 
+    def _take_nullspace(self, q):
+        """Take the posture (``kp`` > 0) and the damping (capped in real time) at ``q``."""
+        if self._kp and self._posture is None:
+            self._posture = tuple(float(q[i]) for i in self.law.model.active)
+        if self._kd_now is None:
+            kd = self._kd
+            if self._delay is not None and np.any(np.asarray(kd) != 0.0):
+                kd = delay_capped_damping(self.law.model, np.asarray(q, dtype=float), kd,
+                                          *self._delay)
+            self._kd_now = kd
+        self.law.nullspace = _nullspace(self._kd_now, self._kp, self._posture)
+
     def reset(self):
-        """Set theta_hat back to ``gains.theta0``; the posture is taken again next step."""
+        """Set theta_hat back to ``gains.theta0``; posture and damping taken again next step."""
         self.law.reset()
         self._last = None
+        self._kd_now = None
         if self._posture is not None:
             self._posture = None
             self.law.nullspace = _nullspace(self._kd)

@@ -322,6 +322,7 @@ class SpatialArm:
         self._zero = np.zeros(self.n)
         self._ia = np.array(self.active, dtype=int)
         self._ip = np.array(self.passive, dtype=int)
+        self._iaa = np.ix_(self._ia, self._ia)
 
     @property
     def task_dim(self):
@@ -336,12 +337,12 @@ class SpatialArm:
 
     def _state(self, q, qd=None):
         q = np.asarray(q, dtype=float)
-        if q.shape != (self.n,) or not np.all(np.isfinite(q)):
+        if q.shape != (self.n,) or not np.isfinite(q).all():
             raise FreejointValueError(f'q: expected {self.n} finite numbers, got {q!r}')
         if qd is None:
             return q
         qd = np.asarray(qd, dtype=float)
-        if qd.shape != (self.n,) or not np.all(np.isfinite(qd)):
+        if qd.shape != (self.n,) or not np.isfinite(qd).all():
             raise FreejointValueError(f'qd: expected {self.n} finite numbers, got {qd!r}')
         return q, qd
 
@@ -425,7 +426,7 @@ class SpatialArm:
         w = terms.J @ terms.Minv
         da = w[:, self._ia]
         b = terms.jdqd - w @ terms.h
-        maa = np.linalg.inv(terms.Minv[np.ix_(self._ia, self._ia)])
+        maa = np.linalg.inv(terms.Minv[self._iaa])
         return da, b, 0.5 * (maa + maa.T)
 
     def gravity_torque(self, q):
