@@ -64,8 +64,9 @@ STALL_TIMEOUT = 30.0
 """Wall seconds without a new tick after which a run is given up."""
 SETTLE = 1.0
 """Wall seconds between the recorder's readiness and the start of the circle."""
-DRAIN_QUIET = 0.5
-"""Wall seconds the recorder's count must stay unchanged before the nodes are stopped."""
+DRAIN_QUIET = None
+"""Wall seconds the recorder's count must stay unchanged before the nodes are stopped
+(None: ``freejoint_tools.recorder.REPAIR_QUIET``, past a reliable writer's heartbeat)."""
 COLLECT_DEPTH = 20000
 """Keep-last depth of the collected streams, in this process's readers and in the nodes'
 writers of them (:func:`collected_writer_args`).

@@ -16,7 +16,7 @@ def main(planner_yaml, ticks):
     from freejoint_common.contract import JOINT_STATES, to_ns
     from freejoint_msgs.srv import PlanCircle
     from freejoint_planner.params import SCHEMA
-    from freejoint_tools.recorder import wait_drained
+    from freejoint_tools.recorder import REPAIR_QUIET, wait_drained
     import rclpy
     from std_srvs.srv import Trigger
 
@@ -77,7 +77,7 @@ def main(planner_yaml, ticks):
         result = call(status, Trigger.Request(), 5.0)
         return result.message if result else ''
 
-    count, _ = wait_drained(read_status, 2.0, 60.0, spin)
+    count, _ = wait_drained(read_status, REPAIR_QUIET, 60.0, spin)
     print('driver: drained %s' % count, flush=True)
     node.destroy_node()
     rclpy.try_shutdown()

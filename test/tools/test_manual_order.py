@@ -28,7 +28,7 @@ def test_readme_order_recorder_first_records_the_run_from_tick_0(
 
     from freejoint_common.records import stamp_ns
     from freejoint_tools.bagfile import open_bag
-    from freejoint_tools.recorder import received_count, wait_drained
+    from freejoint_tools.recorder import received_count, REPAIR_QUIET, wait_drained
     bag_path = str(tmp_path / 'my_run')
     client = ros_node.create_client(Trigger, '/recorder/status')
 
@@ -57,7 +57,7 @@ def test_readme_order_recorder_first_records_the_run_from_tick_0(
     wait(lambda: (received_count(read_status()) or 0) > 4 * TICKS, 120.0,
          'the run (sim: %s)' % procs.log(nodes[0])[-800:],
          spin=lambda: rclpy.spin_once(ros_node, timeout_sec=0.1))
-    count, _ = wait_drained(read_status, 1.0, 60.0,
+    count, _ = wait_drained(read_status, REPAIR_QUIET, 60.0,
                             lambda: rclpy.spin_once(ros_node, timeout_sec=0.05))
     assert count is not None
     for proc in reversed(nodes):               # controller first: the lockstep pauses

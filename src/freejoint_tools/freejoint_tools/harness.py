@@ -265,14 +265,18 @@ class ServiceCalls:
             self.spin_until(lambda: False, 0.2)
         return False, answer.message if answer is not None else 'no answer'
 
-    def recorder_drained(self, quiet=1.0, timeout=120.0):
+    def recorder_drained(self, quiet=None, timeout=120.0):
         """
         Wait until the recorder's received count is unchanged for ``quiet`` s.
+
+        ``quiet`` None: ``recorder.REPAIR_QUIET`` (a reliable writer's repair of a sample
+        the recorder missed comes after its next heartbeat).
 
         Called once the simulator holds at ``max_steps`` (the graph is silent): a steady
         count means the recorder has taken everything. Return (count or None, wall s).
         """
-        from freejoint_tools.recorder import wait_drained
+        from freejoint_tools.recorder import REPAIR_QUIET, wait_drained
+        quiet = REPAIR_QUIET if quiet is None else quiet
         deadline = time.monotonic() + timeout
         return wait_drained(
             lambda: self.recorder_status(max(0.1, deadline - time.monotonic())),

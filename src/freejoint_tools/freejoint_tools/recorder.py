@@ -852,6 +852,14 @@ def received_count(status):
     return int(match.group(1)) if match else None
 
 
+REPAIR_QUIET = 3.5
+"""[s] How long the recorder's count must stay unchanged before a silent graph is taken as
+recorded: longer than Fast DDS's reliable writers' heartbeat period (3 s by default, not
+set in config/fastdds.xml), after which a sample a starved reader missed is sent again. A
+shorter quiet can stop the publishers while a repair is due, and the sample is lost (a
+loaded test machine lost the last 130 ticks of a lockstep run that way)."""
+
+
 def wait_drained(read_status, quiet, timeout, pause):
     """
     Wait until the recorder's received count stays the same for ``quiet`` s.
