@@ -164,6 +164,22 @@ def pytest_collection_modifyitems(config, items):
 
 
 @pytest.fixture(autouse=True)
+def _flake8_serial(request, monkeypatch):
+    """
+    A ``linter`` test runs flake8 in its own process, not in a forked pool.
+
+    flake8 forks a ``multiprocessing`` pool of the test worker, which has rclpy's DDS
+    threads, numba and Pinocchio loaded: a forked child segfaulted while collecting
+    garbage and the pool waited for its result until pytest's timeout (a clean-clone CI
+    run). The workers already keep the cores busy; serial costs nothing here.
+    """
+    if request.node.get_closest_marker('linter') is None:
+        return
+    import flake8.checker
+    monkeypatch.setattr(flake8.checker, '_try_initialize_processpool', lambda *a, **k: None)
+
+
+@pytest.fixture(autouse=True)
 def _lint_cache(request, monkeypatch):
     """
     With ``FREEJOINT_LINT_CACHE`` set (``make test-fast``): linters skip files found clean.
