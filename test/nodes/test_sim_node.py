@@ -485,8 +485,10 @@ def test_realtime_states_are_stamped_on_the_step_grid_at_publish_rate(procs, ros
     dropped = (MAX_CATCH_UP + 1) * DT_NS
     assert all(g == 2 * DT_NS or g >= dropped for g in gaps), gaps
     assert all(s % DT_NS == stamps[0] % DT_NS for s in stamps)
-    # The grid is system time: the newest stamp is within a few seconds of the clock.
-    assert abs(stamps[-1] - time.time_ns()) < 5_000_000_000
+    # The grid is system time (a simulation-time grid would be some 1.7e9 s behind): the
+    # newest stamp within a minute of the clock, however long a loaded machine kept this
+    # test from reading it (8.8 s once).
+    assert abs(stamps[-1] - time.time_ns()) < 60_000_000_000
 
     def answering():            # labelled with the stamp of the newest state
         ctl.command([0.5, -0.5], stamp_ns=Controller._ns(ctl.arrivals[-1]))

@@ -39,7 +39,7 @@ def test_player_republishes_a_bag_in_order_with_its_clock(procs, ros_node, wait,
         rclpy.spin_once(ros_node, timeout_sec=0.01)
 
     wait(lambda: all(len(got[t]) == len(written[t]) for t in TOPICS) and len(clocks) >= 300,
-         10.0, 'every message and clock', spin=spin)
+         60.0, 'every message and clock', spin=spin)
     for topic in TOPICS:
         cls = message_class(bag.topics[topic].type)
         # compared as decoded (float32 fields round, the wire form may carry padding)
