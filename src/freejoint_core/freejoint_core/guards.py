@@ -133,13 +133,12 @@ def damped_hold_effort(gravity, active, inertia, q, qd, q_hold, hold_time, limit
     hold_time : float
         ``T`` [s] > 0: the longest a driver is to keep one command (``stop_hold_time``).
     limits : sequence of float, (r,), optional
-        Per-joint torque limits [N m] (> 0), None: none.
+        As in :func:`hold_effort`.
 
     Returns
     -------
     list of float, (r,)
-        The command clipped to ``[-limit, limit]`` [N m], in the order of ``active``; a
-        non-finite term gives 0 for that joint (never a non-finite command).
+        The command, limited and finite as :func:`hold_effort`'s.
 
     """
     stiff = 1.0 / (hold_time * hold_time)
