@@ -114,6 +114,21 @@ def test_the_active_inertia_is_the_paper_arms_effective_inertia():
     assert active_inertia(model, q) == pytest.approx(model.effective(q)[1], rel=1e-12)
 
 
+def test_a_spatial_arms_active_inertia_is_its_mass_matrix_reduced_by_hand():
+    # The UR5 with wrist_2 free: the law's decoupling against ((M^-1)_aa)^-1 of the mass
+    # matrix, and M_aa - M_ap M_pp^-1 M_pa.
+    import os
+    from freejoint_core.spatial_model import KNOWN_ARMS, robot_data_dir, SpatialArm
+    path, base, tip = KNOWN_ARMS['ur5']
+    arm = SpatialArm(os.path.join(robot_data_dir(), path), base, tip, ['wrist_2_joint'])
+    q = np.array([0.1, -1.2, 1.5, -0.4, 0.8, 0.3])
+    mass = arm.terms(q, np.zeros(6)).M
+    act, free = [0, 1, 2, 3, 5], [4]
+    schur = (mass[np.ix_(act, act)] - mass[np.ix_(act, free)]
+             @ np.linalg.solve(mass[np.ix_(free, free)], mass[np.ix_(free, act)]))
+    assert active_inertia(arm, q) == pytest.approx(schur, rel=1e-9, abs=1e-12)
+
+
 @pytest.mark.parametrize('case', ['horizontal', 'vertical'])
 def test_kept_by_a_driver_through_bursts_of_missed_states_the_damped_hold_keeps_the_arm(case):
     # A driver that keeps each command until the next: from an active motion of 0.5 rad/s

@@ -146,16 +146,14 @@ def active_inertia(model, q):
     Return ``M~aa = ((M^-1)_aa)^-1`` (r, r) [kg m^2]: the active joints' effective inertia.
 
     The inertia the active joints move with the free joints following (no torque on them),
-    of any model with ``active`` and either ``mass_matrix(q)`` (the planar models) or
-    ``terms(q, qd).M`` (``SpatialArm``), at the angles ``q`` (n,) [rad].
+    at the angles ``q`` (n,) [rad]: a ``SpatialArm``'s from its ``decoupling`` (the law's
+    own), a planar model's (``active``, ``mass_matrix(q)``) the same way from its mass matrix.
     """
+    if not hasattr(model, 'mass_matrix'):
+        return _terms(model, q)[1]
     q = np.asarray(q, dtype=float)
-    if hasattr(model, 'mass_matrix'):
-        mass = np.asarray(model.mass_matrix(q), dtype=float)
-    else:
-        mass = model.terms(q, np.zeros(q.shape[0])).M
     act = list(model.active)
-    inertia = np.linalg.inv(np.linalg.inv(mass)[np.ix_(act, act)])
+    inertia = np.linalg.inv(np.linalg.inv(model.mass_matrix(q))[np.ix_(act, act)])
     return 0.5 * (inertia + inertia.T)
 
 

@@ -1048,8 +1048,7 @@ def index_tail(path, contents):
         If the file cannot be written.
 
     """
-    tail = contents.tail
-    if tail is None or tail.chunk is None or tail.index.chunk_start_offset != contents.end:
+    if _indexable_tail(contents) is None:
         return False
     try:
         with open(path, 'r+b') as fh:
@@ -1059,10 +1058,18 @@ def index_tail(path, contents):
     return True
 
 
-def _index_tail(fh, contents):
-    """:func:`index_tail` on the open file ``fh`` (no check)."""
+def _indexable_tail(contents):
+    """Return ``contents.tail`` if :func:`index_tail` can keep it (it follows the rest)."""
     tail = contents.tail
     if tail is None or tail.chunk is None or tail.index.chunk_start_offset != contents.end:
+        return None
+    return tail
+
+
+def _index_tail(fh, contents):
+    """:func:`index_tail` on the open file ``fh`` (nothing without an indexable tail)."""
+    tail = _indexable_tail(contents)
+    if tail is None:
         return
     indexes = _message_indexes(tail.chunk)
     fh.truncate(tail.end)
