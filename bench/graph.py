@@ -44,7 +44,7 @@ import sys
 import time
 
 from freejoint_common.contract import COMMANDS, CONTROLLER_STATE, EE_POSITION, JOINT_STATES
-from freejoint_common.contract import NEVER_QUIET_TOPICS, SETPOINTS
+from freejoint_common.contract import lockstep_writer_overrides, NEVER_QUIET_TOPICS, SETPOINTS
 from freejoint_tools.harness import Processes, ServiceCalls
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -426,8 +426,8 @@ def lockstep(client, env, layout='separate', ticks=LOCKSTEP_TICKS, record=True,
     try:
         start_graph(graph, layout, bag,
                     ['timing_file:=' + timing_path, 'timing_steps:=%d' % (ticks + 1),
-                     'max_steps:=%d' % ticks],
-                    list(ctl_overrides), [],
+                     'max_steps:=%d' % ticks] + lockstep_writer_overrides('sim'),
+                    lockstep_writer_overrides('controller') + list(ctl_overrides), [],
                     ['use_sim_time:=true',
                      # the drain wait below needs a count that goes quiet
                      'exclude:=[%s]' % ', '.join(NEVER_QUIET_TOPICS)],

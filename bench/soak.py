@@ -94,7 +94,8 @@ if HERE not in sys.path:
 import graph as bench_graph  # noqa: E402 - bench/graph.py, the process harness
 import wakeup_probe  # noqa: E402, I100 - bench/wakeup_probe.py, the machine's lateness
 from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION  # noqa: E402, I100
-from freejoint_common.contract import JOINT_STATES, setpoint_samples  # noqa: E402
+from freejoint_common.contract import JOINT_STATES, lockstep_writer_overrides  # noqa: E402
+from freejoint_common.contract import setpoint_samples  # noqa: E402
 from freejoint_common.contract import SETPOINTS, to_ns  # noqa: E402
 from freejoint_common.scheduling import rt_budget  # noqa: E402
 from freejoint_core.plan_figures import outcome_excuses, plan_met  # noqa: E402, I100
@@ -217,16 +218,18 @@ class Session:
         self.timing_path = os.path.join(self.dir, 'timing.npz') if timing else None
         self.env = domain_env(index)
         self.sim = list(sim)
+        self.ctl, self.planner, self.reset = list(ctl), list(planner), reset
         self.lockstep = lockstep
         self.steps = int(round(seconds * 1000))
         if lockstep:
             self.sim += ['timing_file:=' + self.timing_path,
                          'timing_steps:=%d' % (self.steps + 1), 'max_steps:=%d' % self.steps]
+            self.sim += lockstep_writer_overrides('sim')    # the recorder loses no tick
+            self.ctl += lockstep_writer_overrides('controller')
         elif timing:
             self.sim += ['timing_file:=' + self.timing_path,
                          'timing_steps:=%d' % (int(seconds * 1000) + FINISH_STEPS
                                                + bench_graph.RT_STARTUP_STEPS)]
-        self.ctl, self.planner, self.reset = list(ctl), list(planner), reset
         self.client = None
         self.graph = bench_graph.Graph(os.path.join(self.dir, 'logs'), 'run', self.env)
         self.codes = {}

@@ -53,6 +53,7 @@ import subprocess
 import sys
 import time
 
+from freejoint_common.contract import LOCKSTEP_WRITER_DEPTH
 from freejoint_tools.arm_twin import SPATIAL_ARMS
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -67,14 +68,10 @@ SETTLE = 1.0
 DRAIN_QUIET = None
 """Wall seconds the recorder's count must stay unchanged before the nodes are stopped
 (None: ``freejoint_tools.recorder.REPAIR_QUIET``, past a reliable writer's heartbeat)."""
-COLLECT_DEPTH = 20000
+COLLECT_DEPTH = LOCKSTEP_WRITER_DEPTH
 """Keep-last depth of the collected streams, in this process's readers and in the nodes'
-writers of them (:func:`collected_writer_args`).
-
-A reliable writer can resend to a reader that fell behind only what its own history still
-holds: with the contract's 1000 a reader stalled for 1000 ticks - well under a second of
-wall time in lockstep, which runs faster than real time - loses messages for good
-(docs/performance.md, "The test suite")."""
+writers of them (:func:`collected_writer_args`; ``freejoint_common.contract``'s
+``LOCKSTEP_WRITER_DEPTH`` says why)."""
 FIGURES = os.path.join(ROOT, 'docs', 'figures')
 ARMS = dict({'four_link': {'passive_joint': 'joint1', 'bound_mm': 2.0}}, **SPATIAL_ARMS)
 STABILISED = 'stabilised'
@@ -280,13 +277,10 @@ def collected_writer_args(node):
     Return ``-p`` items giving ``node``'s writers of the collected streams COLLECT_DEPTH.
 
     ``node``: 'sim' (joint_states, ee_position) or 'controller' (controller_state); any
-    other node writes none of them (``[]``).  The items are ros2's read-only
-    ``qos_overrides.<topic>.publisher.depth``, which the nodes take at start-up.
+    other node writes none of them (``[]``): ``contract.lockstep_writer_overrides``.
     """
-    from freejoint_common.contract import CONTROLLER_STATE, EE_POSITION, JOINT_STATES
-    from freejoint_common.contract import publisher_depth_override
-    topics = {'sim': (JOINT_STATES, EE_POSITION), 'controller': (CONTROLLER_STATE,)}
-    return [publisher_depth_override(topic, COLLECT_DEPTH) for topic in topics.get(node, ())]
+    from freejoint_common.contract import lockstep_writer_overrides
+    return lockstep_writer_overrides(node, COLLECT_DEPTH)
 
 
 def _overlay_files(overlays, node):

@@ -195,6 +195,28 @@ transient local, depth 10 (a recorder or ``fj`` started later still reads the la
 GRAPH_TOPICS = (CLOCK, JOINT_STATES, EE_POSITION, COMMANDS, CONTROLLER_STATE, SETPOINTS,
                 SEMI_SINGULAR_MAP, PLANNED_PATH, CONTROLLER_READINESS, PLAN_OUTCOME)
 """The run's topics a recorder subscribes to from its start (docs/GRAPH.md, Recording)."""
+LOCKSTEP_STREAMS = {'sim': (JOINT_STATES, EE_POSITION), 'controller': (CONTROLLER_STATE,)}
+"""Per node, the per-tick streams it writes whose every message a lockstep run's reader (the
+recorder, a collector) keeps: :func:`lockstep_writer_overrides` deepens their writers."""
+LOCKSTEP_WRITER_DEPTH = 20000
+"""Keep-last depth of the writers of :data:`LOCKSTEP_STREAMS` in a run that must lose none.
+
+A reliable writer can resend to a reader that fell behind only what its own history still
+holds: with the contract's 1000 a reader stalled for 1000 ticks - well under a second of
+wall time in lockstep, which runs faster than real time, on a loaded host - loses messages
+for good. 20000 covers a 20-s run whole."""
+
+
+def lockstep_writer_overrides(node, depth=LOCKSTEP_WRITER_DEPTH):
+    """
+    Return the ``-p`` items (``name:=value``) giving ``node``'s per-tick writers ``depth``.
+
+    ``node``: 'sim' (joint_states, ee_position) or 'controller' (controller_state); any
+    other node writes none of them (``[]``). See :func:`publisher_depth_override`.
+    """
+    return [publisher_depth_override(topic, depth) for topic in LOCKSTEP_STREAMS.get(node, ())]
+
+
 NEVER_QUIET_TOPICS = ('/rosout', '/parameter_events', DIAGNOSTICS.name)
 """Topics every running node publishes on its own (its log, parameter events, its 1-Hz
 diagnostics): a recorder whose drain is awaited once the lockstep simulator holds at
