@@ -713,6 +713,27 @@ def rest_at_q0(client):
     client.spin_until(lambda: False, 0.2)     # the reset step and the hold settle
 
 
+def rest_at_q0_after(client, loop):
+    """
+    Put the arm back at q(0) if the last circle ended at its start point; return whether.
+
+    :func:`rest_at_q0` after a circle ``loop`` followed to SUCCEEDED (the circle closes at
+    its start point: the reset moves the arm by its tracking error).
+    A plan that ended otherwise (aborted: stopped along its path, the setpoint standing
+    there) is not followed by a reset: it would move the arm away from the stream's standing
+    setpoint to the start point at once, a jump no arm makes (the vertical arm 220 mm off
+    its setpoint, the next plan aborted for the path tolerance at once). The next circle
+    joins from where the arm stopped by the planner's transition instead, as it would on a
+    real arm. No circle followed yet: reset.
+    """
+    followed = getattr(loop, 'followed', [])
+    outcome = loop.outcomes.get(followed[-1]) if followed else None
+    if outcome is not None and outcome.code_name != 'SUCCEEDED':
+        return False
+    rest_at_q0(client)
+    return True
+
+
 STABILISED_OVERLAYS = {'vertical': 'stabilised', 'horizontal': 'stabilised_horizontal'}
 """The overlay of ``--stabilise`` per case (``freejoint_core.circles.
 stabilised_options``): vertical config/stabilised/ (the free link starts hanging, its
@@ -871,7 +892,7 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
             # next asked for period - duration s after it
             loop = bench_graph.CircleLoop(
                 s.client, plan, period, strict=False, retry=RETRY_S,
-                before=None if back_to_back else (lambda: rest_at_q0(s.client)),
+                before=None if back_to_back else (lambda: rest_at_q0_after(s.client, loop)),
                 follow=True, rest=period - float(plan['duration']))
         # The machine's own lateness beside the run: a SCHED_FIFO 99 probe per CPU
         # (a stall there stalls every node; columns 'wake' and '>10').

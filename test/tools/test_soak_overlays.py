@@ -49,8 +49,9 @@ class _Answer:
 
 
 class _Outcome:
-    def __init__(self, plan_id):
+    def __init__(self, plan_id, code_name='SUCCEEDED'):
         self.plan_id = plan_id
+        self.code_name = code_name
 
 
 class _Client:
@@ -115,3 +116,24 @@ def test_finishing_asks_for_no_more_circles_and_waits_for_the_running_ones_outco
     assert not other.finish()
     now[0] += 5.0 + graph.CircleLoop.OUTCOME_WAIT + 0.1
     assert other.finish() and other.unanswered == [9]
+
+
+def test_the_arm_is_put_back_at_q0_only_after_a_circle_that_ended_at_its_start(monkeypatch):
+    # An aborted plan leaves its setpoint standing along the path where the arm stopped: a
+    # reset to q(0) there would move the arm away from it at once (the vertical arm 220 mm
+    # off, the next plan aborted for its path tolerance), so the next circle joins from
+    # where the arm is, by the planner's transition.
+    reset = []
+    monkeypatch.setattr(soak, 'rest_at_q0', reset.append)
+
+    class Loop:
+        followed, outcomes = [], {}
+    loop = Loop()
+    assert soak.rest_at_q0_after('client', loop) and reset == ['client']     # the first
+    loop.followed, loop.outcomes = [4], {4: _Outcome(4, 'SUCCEEDED')}
+    assert soak.rest_at_q0_after('client', loop) and len(reset) == 2
+    for code in ('PAUSED_TOO_LONG', 'PATH_TOLERANCE_VIOLATED', 'CONTROLLER_NOT_READY'):
+        loop.outcomes = {4: _Outcome(4, code)}
+        assert not soak.rest_at_q0_after('client', loop) and len(reset) == 2, code
+    loop.outcomes = {}                   # followed, its outcome never came: put back
+    assert soak.rest_at_q0_after('client', loop) and len(reset) == 3
