@@ -5,7 +5,8 @@ Soak: the real-time graph at 1 kHz, many runs per case, each judged against the 
 5) of ``--seconds`` s (default 30): a process per node as ``make demo`` starts them (the
 installed executables with ``config/*.yaml``), the recorder on, the simulator and the
 controller at SCHED_FIFO ``--priority`` (default 50: ``thread_priority``), the planner's
-circle asked for again and again (each 0.5 s after the previous one's outcome). Each run
+circle asked for again and again (each 0.5 s after the previous one's outcome; the arm put
+back at q(0) after one that succeeded, :func:`rest_at_q0_after`). Each run
 has a ROS domain of its own
 (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), every wait is bounded and every process is
 stopped (SIGINT, then SIGKILL of its group) whatever happens. ``--hogs N`` adds N CPU hog
