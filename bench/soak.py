@@ -71,7 +71,7 @@ Usage: ``. tools/env.sh && python bench/soak.py [--runs 5] [--seconds 30]
 [--cases horizontal vertical | --arm ARM] [--lockstep] [--hogs N] [--priority 50]
 [--driver hold-last] [--readiness-action brake|damp|hold]``. ``--driver hold-last`` meets a
 driver that holds its last command (no watchdog, no brakes on request; the controller's
-``readiness_action`` then ``damp`` unless given). Bags and logs stay in
+``readiness_action`` then ``hold`` unless given). Bags and logs stay in
 ``bags/soak/<case>_<run>/`` (git-ignored). Exit code 0 whatever the figures (a benchmark),
 1 if a run could not be made.
 """
@@ -1169,12 +1169,12 @@ def parse(argv):
                     'false); docs/real-arm.md')
     ap.add_argument('--readiness-action', choices=('brake', 'damp', 'hold'), default=None,
                     help="the controller's readiness_action (default: its config's, brake, "
-                    'with --driver watchdog; damp with --driver hold-last, what '
+                    'with --driver watchdog; hold with --driver hold-last, what '
                     'docs/real-arm.md prescribes for such a driver)')
     ap.add_argument('--out', default=os.path.join(OUT, 'soak.json'))
     args = ap.parse_args(argv)
     if args.readiness_action is None and args.driver == 'hold-last':
-        args.readiness_action = 'damp'
+        args.readiness_action = 'hold'
     if args.fail_at is not None and (not args.fully_actuated or args.fail_at < 0):
         ap.error('--fail-at needs --fully-actuated and S >= 0')
     if args.lockstep and (args.fully_actuated or args.driver != 'watchdog'):

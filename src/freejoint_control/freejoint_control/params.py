@@ -357,11 +357,12 @@ PARAMS = (
           'command (the gravity hold of the active joints, what a driver that keeps its '
           'last command then holds), ask for the brakes (readiness_brake_request), then '
           "send no command (a driver's watchdog brakes: the simulator's brake_timeout); "
-          "'damp' = for a driver that holds its last command and has no brakes to ask for "
-          '(command_watchdog false in the simulator): answer every state with a damped '
-          'joint hold of the active joints (stop_hold_time, on the gravity '
-          "load), which tolerates what the law does not; 'hold' = hold the end effector "
-          'with the law (the law still runs on late states)',
+          "'damp' = answer every state with a damped joint hold of the active joints "
+          '(stop_hold_time, on the gravity load), which tolerates held commands the law '
+          "does not but leaves the free link to swing or spin; 'hold' = for a driver that "
+          'holds its last command and has no brakes to ask for (command_watchdog false in '
+          'the simulator): hold the end effector with the law, answering every state '
+          '(the law still runs on late states; docs/real-arm.md)',
           validator=one_of(READINESS_ACTIONS)),
     Param('stop_hold_time', 0.1,
           "readiness_action 'damp': the longest [s] the driver is to keep one command of "
