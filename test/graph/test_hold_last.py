@@ -1,15 +1,16 @@
 """
-A driver that holds its last command meets a starved controller: it gets the damped hold.
+A driver that holds its last command meets a starved controller: it gets every state answered.
 
 The simulator in real time as ros2_control's forward command controller drives an arm
 (``command_watchdog: false``: every command applied until the next, no watchdog, brake
 requests ignored); the controller reads the states through a link that drops bursts of
 them (test/nodes/starving_relay.py) once it is ready, so its readiness guard trips. With
-``readiness_action: damp`` (docs/real-arm.md: what a controller of such a driver sets) it
-answers every state it still gets with the damped joint hold, says so on
-``controller_readiness``, and tracks again once the states come back. What the damped hold
-does to the arm under given patterns of missed and late states is tested offline, where
-the pattern is set (test/core/test_guards.py), and measured in real time by the soak
+``readiness_action: hold`` (docs/real-arm.md: what a controller of such a driver sets) it
+answers every state it still gets with the law holding the end effector, with ``damp``
+with the damped joint hold, says so on ``controller_readiness``, and tracks again once the
+states come back. What the holds do to the arm under given patterns of missed and late
+states is tested offline, where the pattern is set (test/core/test_guards.py), and
+measured in real time by the soak
 (``make soak SOAK_ARGS="--driver hold-last"``, docs/real-time.md): in this graph it depends
 on how long this machine's load keeps each command (a stall past the hold's tolerance
 loses the arm with any controller), so here the test asks what the graph must do whatever
@@ -26,9 +27,17 @@ CONFIG = os.path.join(ROOT, 'config')
 RELAY = os.path.join(ROOT, 'test', 'nodes', 'starving_relay.py')
 
 
+ANSWERED = {
+    # readiness_action: (its line in the controller's log, what its answers say)
+    'hold': (': holding position', 'holding at ('),
+    'damp': ('the damped joint hold answered to every state', 'the damped joint hold answered'),
+}
+
+
+@pytest.mark.parametrize('action', sorted(ANSWERED))
 @pytest.mark.parametrize('case', ['horizontal', 'vertical'])
-def test_a_starved_controller_answers_a_driver_holding_its_last_command_with_the_damped_hold(
-        procs, ros_node, wait, case):
+def test_a_starved_controller_answers_every_state_of_a_driver_holding_its_last_command(
+        procs, ros_node, wait, case, action):
     from freejoint_common.contract import CONTROLLER_READINESS, CONTROLLER_STATE
     from freejoint_common.contract import profile
     readiness, answers = [], []
@@ -56,7 +65,7 @@ def test_a_starved_controller_answers_a_driver_holding_its_last_command_with_the
     ctl = procs.start_node('freejoint_control', 'controller_node', 'controller', [
         '--ros-args', '--params-file', os.path.join(CONFIG, 'controller.yaml'),
         '-p', 'lockstep:=false', '-p', 'case:=%s' % case, '-p', 'control_period:=0.002',
-        '-p', 'readiness_action:=damp', '-p', 'readiness_max_delay:=0.012',
+        '-p', 'readiness_action:=%s' % action, '-p', 'readiness_max_delay:=0.012',
         '-p', 'readiness_min_answer_rate:=0.6', '-p', 'readiness_resume_delay:=0.012',
         '-p', 'readiness_resume_answer_rate:=0.7',
         '-r', 'joint_states:=driver/joint_states'])
@@ -69,13 +78,15 @@ def test_a_starved_controller_answers_a_driver_holding_its_last_command_with_the
     wait(lambda: len(readiness) >= 4 and readiness[-1][0], 60.0,
          'ready again after the stop (%s)' % readiness, spin=spin)
     log = procs.log(ctl)
-    # Stopped on the starved link, with the reason, the damped hold answered meanwhile.
+    # Stopped on the starved link, with the reason, the hold answered meanwhile.
     stops = [reason for ready, reason in readiness[1:] if not ready]
     assert stops and all(reason.startswith('real-time loop not ready') for reason in stops)
-    assert 'the damped joint hold answered to every state' in log
-    # The stop's answers went out: the damped hold with the reason, on the state stream.
-    damped = [m for m in answers if m.startswith('real-time loop not ready')
-              and 'the damped joint hold answered' in m]
-    assert len(damped) >= 10, (len(damped), answers[-3:])
+    said, answer = ANSWERED[action]
+    assert said in log, log[-2000:]
+    # The stop's answers went out: the hold with the reason, on the state stream.
+    held = [m for m in answers if 'real-time loop not ready' in m and answer in m]
+    assert len(held) >= 10, (len(held), answers[-3:])
+    other = [a for a in ANSWERED.values() if a[1] != answer][0][1]
+    assert not [m for m in answers if 'real-time loop not ready' in m and other in m]
     for proc in (ctl, relay, sim):
         procs.stop(proc)

@@ -88,7 +88,8 @@ class Readiness:
                      guard.good_delay * 1e3, guard.good_rate * 100.0, margins[5],
                      'a stop command, the brakes asked for, then no command'
                      if self.brakes else 'the damped joint hold answered'
-                     if self.damps else 'hold'))
+                     if self.damps else 'the end effector held by the law, every state '
+                     'answered'))
         return False
 
     def error_limit(self, holding):
