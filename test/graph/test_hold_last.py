@@ -13,8 +13,9 @@ states is tested offline, where the pattern is set (test/core/test_guards.py), a
 measured in real time by the soak
 (``make soak SOAK_ARGS="--driver hold-last"``, docs/real-time.md): in this graph it depends
 on how long this machine's load keeps each command (a stall past the hold's tolerance
-loses the arm with any controller), so here the test asks what the graph must do whatever
-the timing - the stop, its reason, the damped hold answered, the resume.
+loses the arm with any controller: on this link's 0.1-s gaps the law's hold drives a
+joint past 100 rad/s, which the damped hold does not), so here the test asks what the graph
+must do whatever the timing - the stop, its reason, the action's answers, the resume.
 """
 import os
 
@@ -28,9 +29,11 @@ RELAY = os.path.join(ROOT, 'test', 'nodes', 'starving_relay.py')
 
 
 ANSWERED = {
-    # readiness_action: (its line in the controller's log, what its answers say)
+    # readiness_action: (what a not-ready line of the controller's log ends with, what its
+    # not-ready answers on controller_state say)
     'hold': (': holding position', 'holding at ('),
-    'damp': ('the damped joint hold answered to every state', 'the damped joint hold answered'),
+    'damp': ('the damped joint hold answered to every state (readiness_action damp) until the '
+             'loop is ready again', 'the damped joint hold answered'),
 }
 
 
@@ -82,11 +85,11 @@ def test_a_starved_controller_answers_every_state_of_a_driver_holding_its_last_c
     stops = [reason for ready, reason in readiness[1:] if not ready]
     assert stops and all(reason.startswith('real-time loop not ready') for reason in stops)
     said, answer = ANSWERED[action]
-    assert said in log, log[-2000:]
+    stopped = [line for line in log.splitlines()
+               if 'real-time loop not ready' in line and line.endswith(said)]
+    assert stopped, log[-2000:]
     # The stop's answers went out: the hold with the reason, on the state stream.
     held = [m for m in answers if 'real-time loop not ready' in m and answer in m]
     assert len(held) >= 10, (len(held), answers[-3:])
-    other = [a for a in ANSWERED.values() if a[1] != answer][0][1]
-    assert not [m for m in answers if 'real-time loop not ready' in m and other in m]
     for proc in (ctl, relay, sim):
         procs.stop(proc)
