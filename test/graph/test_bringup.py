@@ -11,7 +11,6 @@ pytestmark = pytest.mark.ros
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CONFIG = os.path.join(ROOT, 'config')
 DT_NS = 1_000_000
-DEPTH = 20000
 
 
 def _offline_settings():
@@ -23,7 +22,8 @@ def _offline_settings():
 def test_one_process_graph_reproduces_the_offline_run_and_stops_cleanly(
         procs, ros_node, wait):
     from freejoint_msgs.srv import PlanCircle
-    from freejoint_common.contract import EE_POSITION, profile, publisher_depth_override, to_ns
+    from freejoint_common.contract import EE_POSITION, LOCKSTEP_WRITER_DEPTH
+    from freejoint_common.contract import lockstep_writer_overrides, profile, to_ns
     from rclpy.experimental import EventsExecutor
     graph = procs.start_node('freejoint_bringup', 'graph', 'graph', [
         '--sim-params', os.path.join(CONFIG, 'sim.yaml'),
@@ -31,8 +31,8 @@ def test_one_process_graph_reproduces_the_offline_run_and_stops_cleanly(
         '--planner-params', os.path.join(CONFIG, 'planner.yaml'),
         '--planner', 'autostart=false',
         # ee_position's writer keeps every tick this test reads: the contract's 1 s of history
-        # is lost to a reader that a loaded host stalls for longer (tools/demo.py does the same)
-        '--sim', publisher_depth_override(EE_POSITION, DEPTH).replace(':=', '=')])
+        # is lost to a reader that a loaded host stalls for longer (as every lockstep run's)
+        '--sim', *(item.replace(':=', '=', 1) for item in lockstep_writer_overrides('sim'))])
     executor = EventsExecutor()
     executor.add_node(ros_node)
 
@@ -45,7 +45,7 @@ def test_one_process_graph_reproduces_the_offline_run_and_stops_cleanly(
         points.setdefault(to_ns(msg.header.stamp), (msg.point.x, msg.point.y))
 
     sub = ros_node.create_subscription(EE_POSITION.msg_type, EE_POSITION.name, on_point,
-                                       profile(DEPTH))
+                                       profile(LOCKSTEP_WRITER_DEPTH))
     wait(lambda: sub.get_publisher_count() > 0 or graph.poll() is not None, 60.0,
          'the graph process to publish ee_position', spin=spin)
     assert graph.poll() is None, procs.log(graph)
