@@ -727,8 +727,7 @@ def rest_at_q0_after(client, loop):
     joins from where the arm stopped by the planner's transition instead, as it would on a
     real arm. No circle followed yet: reset.
     """
-    followed = getattr(loop, 'followed', [])
-    outcome = loop.outcomes.get(followed[-1]) if followed else None
+    outcome = loop.outcomes.get(loop.followed[-1]) if loop.followed else None
     if outcome is not None and outcome.code_name != 'SUCCEEDED':
         return False
     rest_at_q0(client)
