@@ -613,6 +613,38 @@ def test_with_the_settle_gate_a_plan_waits_for_the_free_link_to_settle(procs, ro
          spin=lambda: _spin(ros_node, 0.05))
 
 
+def test_in_sim_time_a_standing_clock_gets_one_status_until_the_clock_moves(
+        procs, ros_node, wait):
+    # A lockstep run over (the simulator holds at max_steps, /clock stands still): the
+    # planner's unchanged status is not repeated each second, so a recorder's count stays
+    # steady and its drain ends; a tick of the clock brings the next status.
+    import time
+    from freejoint_common.contract import DIAGNOSTICS
+    proc = _start_planner(procs, ('-p', 'use_sim_time:=true', '-p', 'autostart:=false'))
+    _wait_ready(ros_node, procs, proc, wait)
+    clock = ClockDriver(ros_node)
+    arrivals = []
+    ros_node.create_subscription(
+        DIAGNOSTICS.msg_type, DIAGNOSTICS.name,
+        lambda msg: arrivals.extend(time.monotonic() for s in msg.status
+                                    if s.name == 'freejoint_planner: planner'),
+        DIAGNOSTICS.qos)
+    wait(clock.matched, 30.0, 'the planner matching /clock',
+         spin=lambda: _spin(ros_node, 0.05))
+    clock.publish(5_000_000)
+    wait(lambda: arrivals, 15.0, 'a planner status after the clock moved',
+         spin=lambda: _spin(ros_node, 0.05))
+    first = arrivals[0]
+    # three status periods (1 s each) with the clock standing still: nothing more
+    end = time.monotonic() + 3.5
+    while time.monotonic() < end:
+        _spin(ros_node, 0.05)
+    assert [round(t - first, 2) for t in arrivals[1:]] == []
+    clock.publish(6_000_000)
+    wait(lambda: len(arrivals) >= 2, 15.0, 'the next status once the clock moved again',
+         spin=lambda: _spin(ros_node, 0.05))
+
+
 def test_a_joint_reported_failed_joins_the_passive_set_and_an_arm_that_cannot_track_refuses_plans(  # noqa: E501
         procs, ros_node, wait):
     # The paper's arm (joint 3 free): joint 3 reported failed changes nothing; joint 2

@@ -245,6 +245,7 @@ class PlannerNode(Node, Lifecycle):
                                  self._on_joint_failure, JOINT_FAILURES.qos)
         # Its state on /diagnostics once a second: ready, settling (the settle gate) or
         # cannot plan (a joint failure), with the running plan (planning.planner_status).
+        self._diag_seen = None
         self._diagnostics = Diagnostics(self, 'planner', 'freejoint_planner',
                                         self._on_diagnostics_timer)
         self._params.listen(self._apply, self._check, watch=('use_sim_time',))
@@ -385,7 +386,14 @@ class PlannerNode(Node, Lifecycle):
                 if out.refusal else ''))
 
     def _on_diagnostics_timer(self):
-        """Every second: the planner's state (``planning.planner_status``) and its plan."""
+        """
+        Every second: the planner's state (``planning.planner_status``) and its plan.
+
+        In sim time, while ``/clock`` stands still (a lockstep simulator waiting, holding
+        at ``max_steps`` or gone), a status goes out only when it differs from the last
+        one: a recorder's received count then stays steady (drained), as with the
+        controller's and the simulator's status, and a change is still reported.
+        """
         settling = (self._settling() if self._cfg['settle_swing_deg'] > 0.0
                     and self._spatial is None else None)
         state, message = planner_status(self._failure_refusal, self._failures_pending,
@@ -396,14 +404,18 @@ class PlannerNode(Node, Lifecycle):
         if monitor is not None and monitor.outcome is None and monitor.paused:
             level = max(level, WARN)
             message += f'; plan {monitor.plan.plan_id} paused: {monitor.why}'
-        self._diagnostics.publish(
-            level, message,
-            (('state', state), ('plan', plan.plan_id if plan is not None else 'none'),
-             ('plan state', 'none' if monitor is None else
-              monitor.status(self._now_ns())['state']),
-             ('passive joints', [self._joint_names[i] for i in (
-                 self._model.nominal.passive if self._spatial is None
-                 else self._spatial.passive)])))
+        values = (('state', state), ('plan', plan.plan_id if plan is not None else 'none'),
+                  ('plan state', 'none' if monitor is None else
+                   monitor.status(self._now_ns())['state']),
+                  ('passive joints', [self._joint_names[i] for i in (
+                      self._model.nominal.passive if self._spatial is None
+                      else self._spatial.passive)]))
+        if self._sim:
+            seen = (self._now_ns(), level, message, repr(values))
+            if seen == self._diag_seen:
+                return
+            self._diag_seen = seen
+        self._diagnostics.publish(level, message, values)
 
     def _make_timer(self):
         """
