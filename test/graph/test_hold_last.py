@@ -6,15 +6,16 @@ The simulator in real time as ros2_control's forward command controller drives a
 requests ignored); the controller reads the states through a link that drops bursts of
 them (test/nodes/starving_relay.py) once it is ready, so its readiness guard trips. With
 ``readiness_action: hold`` (docs/real-arm.md: what a controller of such a driver sets) it
-answers every state it still gets with the law holding the end effector, with ``damp``
-with the damped joint hold, says so on ``controller_readiness``, and tracks again once the
-states come back. What the holds do to the arm under given patterns of missed and late
-states is tested offline, where the pattern is set (test/core/test_guards.py), and
-measured in real time by the soak
+answers every state it still gets, the law holding the end effector until a gap longer
+than the law rides through (``readiness_max_gap``; this link's gaps are 0.1 s), the damped
+joint hold from then on; with ``damp`` the damped joint hold throughout. It says so on
+``controller_readiness`` and tracks again once the states come back. What the holds do to
+the arm under given patterns of missed and late states is tested offline, where the
+pattern is set (test/core/test_guards.py), and measured in real time by the soak
 (``make soak SOAK_ARGS="--driver hold-last"``, docs/real-time.md): in this graph it depends
 on how long this machine's load keeps each command (a stall past the hold's tolerance
-loses the arm with any controller: on this link's 0.1-s gaps the law's hold drives a
-joint past 100 rad/s, which the damped hold does not), so here the test asks what the graph
+loses the arm with any controller: on this link's 0.1-s gaps the law's hold alone drove a
+joint past 100 rad/s, which the damped hold did not), so here the test asks what the graph
 must do whatever the timing - the stop, its reason, the action's answers, the resume.
 """
 import os
@@ -31,7 +32,9 @@ RELAY = os.path.join(ROOT, 'test', 'nodes', 'starving_relay.py')
 ANSWERED = {
     # readiness_action: (what a not-ready line of the controller's log ends with, what its
     # not-ready answers on controller_state say)
-    'hold': (': holding position', 'holding at ('),
+    'hold': ('the damped joint hold answered to every state (the law held until a gap longer '
+             'than it rides through) until the loop is ready again',
+             'the damped joint hold answered'),
     'damp': ('the damped joint hold answered to every state (readiness_action damp) until the '
              'loop is ready again', 'the damped joint hold answered'),
 }

@@ -57,9 +57,9 @@ from freejoint_control.loop_status import (  # noqa: F401
     DEBUG, ERROR, INFO, PeriodFigures, RECEIPT, Result, STATUS_DT_CLAMPED, STATUS_HOLDING,
     STATUS_LAW_FAULT, status_message, STATUS_RATE_LIMITED, STATUS_RESUMING,
     STATUS_SETPOINT_LATE, STATUS_STOPPED, WARN)
-from freejoint_control.loop_stop import (DAMP_SAID, DriverRequests, QUIET_SAID, Readiness,
-                                         stop_effort, STOP_SAID)
-from freejoint_control.readiness import guard_margins
+from freejoint_control.loop_stop import (DAMP_SAID, DriverRequests, HOLD_GAP_SAID, QUIET_SAID,
+                                         Readiness, stop_effort, STOP_SAID)
+from freejoint_control.readiness import GAP_REASON_END, guard_margins
 from freejoint_core.control import STATUS_BAD_INPUT, STATUS_STALE_SETPOINT, STATUS_STALE_STATE
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import clamp_dt, limit_effort
@@ -170,6 +170,9 @@ class ControlLoop:
         self._commanded = False         # the last answer sent was a computed command
         self._ever_commanded = False    # a computed command was sent (or taken over)
         self._q_stop = None             # 'damp': the active joints' angles the stop found
+        # 'hold': the gap [states] after which this not-ready spell gave way to the damped
+        # joint hold (None: it did not)
+        self._hold_gap = None
         self.stops = 0                  # stop commands sent
         self._install(cfg)
         self.result = Result(m)
@@ -224,6 +227,7 @@ class ControlLoop:
                                 cfg.hold_brake_timeout)
         if self.watch.install(cfg):
             self._withholding = False
+            self._hold_gap = None
 
     def apply(self, old, cfg):
         """Take a validated parameter change (effective on the next state)."""
@@ -343,6 +347,11 @@ class ControlLoop:
                 if change:
                     watch.changed(change, ns)
                     self._said_ns = ns
+                if (guard.gapped and not guard.ready and guard.started and watch.holds
+                        and self._hold_gap is None):
+                    # 'hold': a gap longer than the law rides through, its last command
+                    # kept by the driver all along (even if this state is skipped as old).
+                    self._hold_gap = guard.last_missed
         if watch.stale_reason:
             watch.stale_reason = ''
             if guard is None or guard.ready:
@@ -352,6 +361,8 @@ class ControlLoop:
                 return self._withhold(ns, now_ns)
             if self._withholding and guard.ready:
                 self._resume_after_brake()
+            elif guard.ready:
+                self._hold_gap = None   # (ready again before a state was answered)
         if self._max_age_ns:
             age_ns = now_ns - ns
             if age_ns > self._max_age_ns:
@@ -408,6 +419,10 @@ class ControlLoop:
                 if not guard.started:
                     return self._withhold(ns, now_ns)   # never started: the brakes stay on
                 return self._damped_stop(ns, q, qd, now_ns)
+            if self._hold_gap is not None:
+                # A gap longer than the law rides through: its last command was kept all
+                # along; from here the damped joint hold, whose command is safe to keep.
+                return self._gap_stop(ns, q, qd, now_ns, guard)
             return self._readiness_hold(ns, q, qd, now_ns, guard)
         found = self.setpoints.newest(ns)
         if found is None:
@@ -480,7 +495,28 @@ class ControlLoop:
             self.log(ERROR, 'readiness', '%s: %s' % (reason, QUIET_SAID))
         return None
 
-    def _damped_stop(self, ns, q, qd, now_ns):
+    def _gap_stop(self, ns, q, qd, now_ns, guard):
+        """
+        Not ready, 'hold', after a gap: the damped joint hold until ready again.
+
+        The law's hold answers every state, but a driver keeps the law's last command for
+        the whole of a gap in the states; past ``readiness_max_gap`` missed states that
+        command is no longer one the law rides through (its stiffness acts on an error
+        it no longer sees). The damped joint hold's command stays stable when kept up to
+        1.33 ``stop_hold_time``; so from the first gap of a not-ready spell on, the spell
+        is answered as ``readiness_action: damp`` answers it, and tracking resumes from
+        where the arm is.
+        """
+        if not self._withholding:
+            self._said_ns = None
+            if not guard.reason.endswith(GAP_REASON_END):
+                # (a trip by the gap itself was said as such by the trip's line)
+                self.log(ERROR, None, '%s; then %d states missed in a row (more than the '
+                         '%d the law rides through): %s' % (
+                             guard.reason, self._hold_gap, guard.max_gap, HOLD_GAP_SAID))
+        return self._damped_stop(ns, q, qd, now_ns, HOLD_GAP_SAID)
+
+    def _damped_stop(self, ns, q, qd, now_ns, said=DAMP_SAID):
         """
         Not ready, 'damp': answer with the damped joint hold (a driver holding its last command).
 
@@ -495,11 +531,11 @@ class ControlLoop:
             self._q_stop = [q[i] for i in self.law.model.active]
             if self._said_ns is None:
                 self._said_ns = ns      # (a transition was said at once)
-        said = self._said_ns
-        if not 0 <= ns - said < _SAY_PERIOD_NS:
+        last_said = self._said_ns
+        if not 0 <= ns - last_said < _SAY_PERIOD_NS:
             self._said_ns = ns
-            self.log(ERROR, 'readiness', '%s: %s' % (reason, DAMP_SAID))
-        return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, DAMP_SAID), now_ns,
+            self.log(ERROR, 'readiness', '%s: %s' % (reason, said))
+        return self._answer_stop(ns, STATUS_STOPPED, '%s: %s' % (reason, said), now_ns,
                                  q, qd)
 
     def stop_effort(self, q=None, qd=None):
@@ -532,7 +568,8 @@ class ControlLoop:
         self._withholding = False
         self.requests.stop_over()
         kept, self._kept_hold = self._kept_hold, None
-        if self.watch.damps:
+        if self.watch.damps or self._hold_gap is not None:
+            self._hold_gap = None
             # The damped hold let the free joints swing (and the active joints sag): start
             # from where the arm is and how it moves, not back to the hold's old place
             # (the free link would be dragged along; a plan rewinds to the arm itself).

@@ -23,6 +23,8 @@ STOP_SAID = ('stop command sent (the gravity hold of the active joints), the bra
 QUIET_SAID = 'no command until the loop is ready (the brakes asked for)'
 DAMP_SAID = ('the damped joint hold answered to every state (readiness_action damp) until '
              'the loop is ready again')
+HOLD_GAP_SAID = ('the damped joint hold answered to every state (the law held until a gap '
+                 'longer than it rides through) until the loop is ready again')
 
 
 class Readiness:
@@ -33,8 +35,8 @@ class Readiness:
     ----------
     guard : freejoint_control.readiness.ReadinessGuard or None
         The guard (None: lockstep, or ``readiness_guard`` off).
-    brakes, damps : bool
-        ``readiness_action`` is 'brake' / 'damp' (else: hold).
+    brakes, damps, holds : bool
+        ``readiness_action`` is 'brake' / 'damp' / 'hold'.
     note : tuple or None
         ``(stamp_ns, ready, reason)`` to publish, or None.
     stale_reason : str
@@ -46,7 +48,7 @@ class Readiness:
         self.log = log
         self.guard = None
         self._key = None
-        self.brakes = self.damps = False
+        self.brakes = self.damps = self.holds = False
         self.note = None
         self.stale_reason = ''
         self._max_error = self._max_hold_error = 0.0
@@ -55,6 +57,7 @@ class Readiness:
         """(Re)build the guard when its parameters change (keeps its verdict); True: none."""
         self.brakes = cfg.readiness_action == 'brake'
         self.damps = cfg.readiness_action == 'damp'
+        self.holds = cfg.readiness_action == 'hold'
         if cfg.lockstep or not cfg.readiness_guard:
             self.guard = None
             self._key = None
@@ -117,7 +120,7 @@ class Readiness:
         self.note = (ns, guard.ready, guard.reason)
         if change == 1:
             action = (STOP_SAID if self.brakes else DAMP_SAID if self.damps
-                      else 'holding position')
+                      else HOLD_GAP_SAID if guard.gapped else 'holding position')
             self.log(ERROR, None, '%s: %s' % (guard.reason, action))
         else:
             self.log(WARN if guard.recoveries else INFO, None,

@@ -362,7 +362,9 @@ PARAMS = (
           "does not but leaves the free link to swing or spin; 'hold' = for a driver that "
           'holds its last command and has no brakes to ask for (command_watchdog false in '
           'the simulator): hold the end effector with the law, answering every state '
-          '(the law still runs on late states; docs/real-arm.md)',
+          '(the law still runs on late states), until a gap of more than '
+          "readiness_max_gap missed states (the law's last command kept all along): "
+          'from then on, until ready again, the damped joint hold (docs/real-arm.md)',
           validator=one_of(READINESS_ACTIONS)),
     Param('stop_hold_time', 0.1,
           "readiness_action 'damp': the longest [s] the driver is to keep one command of "
