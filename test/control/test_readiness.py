@@ -309,52 +309,57 @@ def test_the_hold_action_holds_with_the_reason_in_the_message():
     assert loop.holds == 2 and loop.withheld == 0     # at start (not judged yet), at 200 ms
 
 
-def test_the_hold_action_gives_way_to_the_damped_joint_hold_after_a_gap_until_ready_again():
-    # A driver keeps the law's last command through a gap in the states; past the missed
-    # states the law rides through (readiness_max_gap 5 here) the spell goes on with the
-    # damped joint hold (its command safe to keep), and tracking resumes when ready.
-    loop, logs = make(readiness_action='hold', readiness_max_gap=5)
+def test_the_hold_action_gives_way_to_the_damped_joint_hold_after_a_long_gap_until_ready():
+    # A driver keeps the law's last command through a gap in the states; past
+    # readiness_hold_max_gap (10 ms here) the not-ready spell goes on with the damped joint
+    # hold (its command safe to keep), and tracking resumes when ready.
+    loop, logs = make(readiness_action='hold', readiness_hold_max_gap=0.01)
     feed(loop, range(200), 2_500_000)                    # trips at 100 ms: the delay
     assert feed(loop, [200], 2_500_000)[0][0] & STATUS_HOLDING
-    assert feed(loop, [206], 2_500_000)[0][0] & STATUS_HOLDING      # 5 missed: still the law
-    status, message, effort = feed(loop, [213], 2_500_000)[0]       # 6 missed (207-212)
+    # 9 missed: 10 ms from the last state, not more: still the law
+    assert feed(loop, [210], 2_500_000)[0][0] & STATUS_HOLDING
+    status, message, effort = feed(loop, [221], 2_500_000)[0]       # 10 missed: 11 ms
     assert status == STATUS_STOPPED
     assert message.endswith(': the damped joint hold answered to every state (the law held '
                             'until a gap longer than it rides through) until the loop is '
                             'ready again')
     # At rest where the switch found the arm: the hold is the gravity load alone.
     assert effort == pytest.approx(gravity_hold(Q0), abs=1e-9)
-    said = [text for level, kind, text in logs if 'rides through):' in text]
+    said = [text for level, kind, text in logs if 'readiness_hold_max_gap' in text]
     assert said == ['real-time loop not ready: mean state->command delay 3 ms > the 2 ms '
-                    'the law tolerates over 0.1 s; then 6 states missed in a row (more '
-                    'than the 5 the law rides through): ' + message.split(': ', 2)[-1]]
+                    'the law tolerates over 0.1 s; then 10 states missed in a row (0.011 s '
+                    '> readiness_hold_max_gap 0.01 s): ' + message.split(': ', 2)[-1]]
     # Every state after it, short gaps or not, until the loop is ready again.
-    assert {a[0] for a in feed(loop, range(214, 230), 2_500_000)} == {STATUS_STOPPED}
-    answers = feed(loop, range(230, 900), 0)
+    assert {a[0] for a in feed(loop, range(222, 240), 2_500_000)} == {STATUS_STOPPED}
+    answers = feed(loop, range(240, 900), 0)
     assert loop._readiness.ready
     back = [a for a in answers if a[0] != STATUS_STOPPED]
     assert back and not back[0][0] & STATUS_HOLDING and answers[-1][0] != STATUS_STOPPED
     assert all(a[0] == STATUS_STOPPED for a in answers[:len(answers) - len(back)])
 
 
-def test_a_hold_tripped_by_a_gap_answers_with_the_damped_joint_hold_at_once():
-    loop, _ = make(readiness_action='hold', readiness_max_gap=5)
+def test_a_hold_tripped_by_a_long_gap_answers_with_the_damped_joint_hold_at_once():
+    loop, _ = make(readiness_action='hold', readiness_max_gap=5, readiness_hold_max_gap=0.01)
     assert feed(loop, range(10), 0)[-1][0] != STATUS_STOPPED
-    [(status, message, _)] = feed(loop, [16], 0)                     # 6 missed (10-15)
+    [(status, message, _)] = feed(loop, [21], 0)                     # 11 missed: 12 ms
     assert status == STATUS_STOPPED and message.startswith(
-        'real-time loop not ready: 6 consecutive states not answered, more than the 5 the '
+        'real-time loop not ready: 11 consecutive states not answered, more than the 5 the '
         'law rides through: the damped joint hold')
+    # A gap that trips the guard but is within readiness_hold_max_gap: the law holds.
+    loop, _ = make(readiness_action='hold', readiness_max_gap=5, readiness_hold_max_gap=0.01)
+    feed(loop, range(10), 0)
+    assert feed(loop, [16], 0)[0][0] & STATUS_HOLDING               # 6 missed: 7 ms
     # The state after the gap skipped as too old (max_state_age): the spell gives way all
     # the same (the driver kept the law's command through the gap), from the next answer.
-    loop, _ = make(readiness_action='hold', readiness_max_gap=5, max_state_age=0.05)
+    loop, _ = make(readiness_action='hold', readiness_hold_max_gap=0.01, max_state_age=0.05)
     feed(loop, range(200), 2_500_000)
     assert feed(loop, [200], 2_500_000)[0][0] & STATUS_HOLDING
-    assert feed(loop, [207], 60_000_000) == [None]
-    assert feed(loop, [208], 2_500_000)[0][0] == STATUS_STOPPED
-    # Without the gap criterion (the pinned tests' 100000) the law holds instead.
-    loop, _ = make(readiness_action='hold')
+    assert feed(loop, [215], 60_000_000) == [None]
+    assert feed(loop, [216], 2_500_000)[0][0] == STATUS_STOPPED
+    # readiness_hold_max_gap 0: the law holds through any gap.
+    loop, _ = make(readiness_action='hold', readiness_hold_max_gap=0.0)
     feed(loop, range(200), 2_500_000)
-    assert feed(loop, [260], 2_500_000)[0][0] & STATUS_HOLDING
+    assert feed(loop, [400], 2_500_000)[0][0] & STATUS_HOLDING
 
 
 def test_every_stop_asks_the_driver_to_brake_now_once_saying_why():

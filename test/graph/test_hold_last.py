@@ -7,7 +7,7 @@ requests ignored); the controller reads the states through a link that drops bur
 them (test/nodes/starving_relay.py) once it is ready, so its readiness guard trips. With
 ``readiness_action: hold`` (docs/real-arm.md: what a controller of such a driver sets) it
 answers every state it still gets, the law holding the end effector until a gap longer
-than the law rides through (``readiness_max_gap``; this link's gaps are 0.1 s), the damped
+than ``readiness_hold_max_gap`` (0.05 s; this link's gaps are 0.1 s), the damped
 joint hold from then on; with ``damp`` the damped joint hold throughout. It says so on
 ``controller_readiness`` and tracks again once the states come back. What the holds do to
 the arm under given patterns of missed and late states is tested offline, where the

@@ -59,7 +59,7 @@ from freejoint_control.loop_status import (  # noqa: F401
     STATUS_SETPOINT_LATE, STATUS_STOPPED, WARN)
 from freejoint_control.loop_stop import (DAMP_SAID, DriverRequests, HOLD_GAP_SAID, QUIET_SAID,
                                          Readiness, stop_effort, STOP_SAID)
-from freejoint_control.readiness import GAP_REASON_END, guard_margins
+from freejoint_control.readiness import guard_margins
 from freejoint_core.control import STATUS_BAD_INPUT, STATUS_STALE_SETPOINT, STATUS_STALE_STATE
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import clamp_dt, limit_effort
@@ -173,6 +173,7 @@ class ControlLoop:
         # 'hold': the gap [states] after which this not-ready spell gave way to the damped
         # joint hold (None: it did not)
         self._hold_gap = None
+        self._gap_tripped = False       # the trip's own line said the damped hold's start
         self.stops = 0                  # stop commands sent
         self._install(cfg)
         self.result = Result(m)
@@ -344,13 +345,15 @@ class ControlLoop:
             if ns != self._guard_ns:
                 self._guard_ns = ns
                 change = guard.observe(ns, now_ns)
+                self._gap_tripped = change == 1 and watch.gives_way(guard)
                 if change:
                     watch.changed(change, ns)
                     self._said_ns = ns
-                if (guard.gapped and not guard.ready and guard.started and watch.holds
-                        and self._hold_gap is None):
-                    # 'hold': a gap longer than the law rides through, its last command
-                    # kept by the driver all along (even if this state is skipped as old).
+                if (not guard.ready and guard.started and self._hold_gap is None
+                        and watch.gives_way(guard)):
+                    # 'hold': a gap longer than readiness_hold_max_gap, the law's last
+                    # command kept by the driver all along (even if this state is skipped
+                    # as old).
                     self._hold_gap = guard.last_missed
         if watch.stale_reason:
             watch.stale_reason = ''
@@ -509,11 +512,13 @@ class ControlLoop:
         """
         if not self._withholding:
             self._said_ns = None
-            if not guard.reason.endswith(GAP_REASON_END):
+            if not self._gap_tripped:
                 # (a trip by the gap itself was said as such by the trip's line)
-                self.log(ERROR, None, '%s; then %d states missed in a row (more than the '
-                         '%d the law rides through): %s' % (
-                             guard.reason, self._hold_gap, guard.max_gap, HOLD_GAP_SAID))
+                self.log(ERROR, None, '%s; then %d states missed in a row (%.3g s > '
+                         'readiness_hold_max_gap %g s): %s' % (
+                             guard.reason, self._hold_gap,
+                             (self._hold_gap + 1) * guard.dt_ns * 1e-9,
+                             self.config.readiness_hold_max_gap, HOLD_GAP_SAID))
         return self._damped_stop(ns, q, qd, now_ns, HOLD_GAP_SAID)
 
     def _damped_stop(self, ns, q, qd, now_ns, said=DAMP_SAID):

@@ -49,6 +49,7 @@ class Readiness:
         self.guard = None
         self._key = None
         self.brakes = self.damps = self.holds = False
+        self._hold_max_gap_ns = 0
         self.note = None
         self.stale_reason = ''
         self._max_error = self._max_hold_error = 0.0
@@ -58,6 +59,7 @@ class Readiness:
         self.brakes = cfg.readiness_action == 'brake'
         self.damps = cfg.readiness_action == 'damp'
         self.holds = cfg.readiness_action == 'hold'
+        self._hold_max_gap_ns = round(cfg.readiness_hold_max_gap * 1e9)
         if cfg.lockstep or not cfg.readiness_guard:
             self.guard = None
             self._key = None
@@ -95,6 +97,17 @@ class Readiness:
                      'answered'))
         return False
 
+    def gives_way(self, guard):
+        """
+        Tell whether the law's hold gives way to the damped joint hold now.
+
+        True: ``readiness_action`` 'hold', and the state ``guard`` just observed came after
+        a gap longer than ``readiness_hold_max_gap``.
+        """
+        limit = self._hold_max_gap_ns
+        return (self.holds and limit > 0
+                and (guard.last_missed + 1) * guard.dt_ns > limit)
+
     def error_limit(self, holding):
         """Return the tracking error [m] past which the loop is not ready (0: none)."""
         return self._max_hold_error if holding else self._max_error
@@ -120,7 +133,7 @@ class Readiness:
         self.note = (ns, guard.ready, guard.reason)
         if change == 1:
             action = (STOP_SAID if self.brakes else DAMP_SAID if self.damps
-                      else HOLD_GAP_SAID if guard.gapped else 'holding position')
+                      else HOLD_GAP_SAID if self.gives_way(guard) else 'holding position')
             self.log(ERROR, None, '%s: %s' % (guard.reason, action))
         else:
             self.log(WARN if guard.recoveries else INFO, None,

@@ -362,9 +362,9 @@ PARAMS = (
           "does not but leaves the free link to swing or spin; 'hold' = for a driver that "
           'holds its last command and has no brakes to ask for (command_watchdog false in '
           'the simulator): hold the end effector with the law, answering every state '
-          '(the law still runs on late states), until a gap of more than '
-          "readiness_max_gap missed states (the law's last command kept all along): "
-          'from then on, until ready again, the damped joint hold (docs/real-arm.md)',
+          '(the law still runs on late states), until a gap in the states longer than '
+          "readiness_hold_max_gap (the law's last command kept all along): from then on, "
+          'until ready again, the damped joint hold (docs/real-arm.md)',
           validator=one_of(READINESS_ACTIONS)),
     Param('stop_hold_time', 0.1,
           "readiness_action 'damp': the longest [s] the driver is to keep one command of "
@@ -401,6 +401,13 @@ PARAMS = (
           'trip: a ready loop stops at the first state after more consecutive states not '
           'answered than this (a stall of the loop); 0 = measured for the arm (as '
           'readiness_max_delay)', (0, 100000)),
+    Param('readiness_hold_max_gap', 0.05,
+          "readiness_action 'hold': the longest gap [s] between two states (the driver "
+          "keeping the law's last command all through it) after which a not-ready spell "
+          'goes on with the damped joint hold instead of the law; 0 = the law holds '
+          'through any gap. The default: the vertical law was lost under 35-49 ms stalls '
+          'and on 0.1-s gaps, the damped hold is stable to 1.33 stop_hold_time, and a '
+          'switch costs the free link its hold (docs/real-time.md)', (0.0, 1.0)),
     Param('readiness_resume_delay', 0.0,
           'resume: a window counts towards readiness (readiness_recover_windows of them in '
           'a row) at this mean effective delay [s] or less; 0 = measured for the arm (as '

@@ -74,10 +74,6 @@ STRICTEST = MEASURED[(table1('vertical'), 'off')]
 """What an arm without a measurement gets: the strictest measured thresholds."""
 
 
-GAP_REASON_END = ' the law rides through'
-"""How the reason of a trip by a gap (``readiness_max_gap``) ends."""
-
-
 def guard_margins(arm, delay_compensation, max_delay=0.0, min_rate=0.0, resume_delay=0.0,
                   resume_rate=0.0, max_gap=0):
     """
@@ -217,8 +213,6 @@ class ReadinessGuard:
         # Stamps further apart than this [ns]: a gap of more than max_gap states.
         self._gap_ns = None if max_gap is None else (max_gap + 1) * dt_ns + dt_ns // 2
         self._last_ns = None
-        # The state just observed came after more than max_gap missed states (ready or not).
-        self.gapped = False
         self.last_missed = 0            # states missed just before the one observed
         self.ready = self.started = bool(start_ready)
         self.reason = '' if start_ready else (
@@ -253,12 +247,12 @@ class ReadinessGuard:
         last, self._last_ns = self._last_ns, ns
         gap_ns = self._gap_ns
         self.last_missed = 0 if last is None else max(0, (ns - last) // self.dt_ns - 1)
-        self.gapped = gap_ns is not None and last is not None and ns - last > gap_ns
-        if self.gapped and self.ready:
+        if (gap_ns is not None and self.ready and last is not None
+                and ns - last > gap_ns):
             self._start_ns = None       # the next window opens at the next state
             return self._not_ready(
                 'real-time loop not ready: %d consecutive states not answered, more than '
-                'the %d%s' % ((ns - last) // self.dt_ns - 1, self.max_gap, GAP_REASON_END))
+                'the %d the law rides through' % ((ns - last) // self.dt_ns - 1, self.max_gap))
         start = self._start_ns
         if start is None or ns < start:
             self._start_ns = ns
