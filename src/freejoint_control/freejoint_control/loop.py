@@ -423,7 +423,7 @@ class ControlLoop:
                     return self._withhold(ns, now_ns)   # never started: the brakes stay on
                 return self._damped_stop(ns, q, qd, now_ns)
             if self._hold_gap is not None:
-                # A gap longer than the law rides through: its last command was kept all
+                # A gap past readiness_hold_max_gap: the law's last command was kept all
                 # along; from here the damped joint hold, whose command is safe to keep.
                 return self._gap_stop(ns, q, qd, now_ns, guard)
             return self._readiness_hold(ns, q, qd, now_ns, guard)
@@ -503,9 +503,9 @@ class ControlLoop:
         Not ready, 'hold', after a gap: the damped joint hold until ready again.
 
         The law's hold answers every state, but a driver keeps the law's last command for
-        the whole of a gap in the states; past ``readiness_max_gap`` missed states that
-        command is no longer one the law rides through (its stiffness acts on an error
-        it no longer sees). The damped joint hold's command stays stable when kept up to
+        the whole of a gap in the states; past ``readiness_hold_max_gap`` that command is
+        no longer one the law rides through (its stiffness acts on an error it no longer
+        sees). The damped joint hold's command stays stable when kept up to
         1.33 ``stop_hold_time``; so from the first gap of a not-ready spell on, the spell
         is answered as ``readiness_action: damp`` answers it, and tracking resumes from
         where the arm is.
