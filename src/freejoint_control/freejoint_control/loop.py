@@ -173,7 +173,7 @@ class ControlLoop:
         # 'hold': the gap [states] after which this not-ready spell gave way to the damped
         # joint hold (None: it did not)
         self._hold_gap = None
-        self._gap_tripped = False       # the trip's own line said the damped hold's start
+        self._gap_tripped = False       # that gap tripped the guard: its line said so
         self.stops = 0                  # stop commands sent
         self._install(cfg)
         self.result = Result(m)
@@ -345,7 +345,6 @@ class ControlLoop:
             if ns != self._guard_ns:
                 self._guard_ns = ns
                 change = guard.observe(ns, now_ns)
-                self._gap_tripped = change == 1 and watch.gives_way(guard)
                 if change:
                     watch.changed(change, ns)
                     self._said_ns = ns
@@ -355,6 +354,7 @@ class ControlLoop:
                     # command kept by the driver all along (even if this state is skipped
                     # as old).
                     self._hold_gap = guard.last_missed
+                    self._gap_tripped = change == 1
         if watch.stale_reason:
             watch.stale_reason = ''
             if guard is None or guard.ready:
