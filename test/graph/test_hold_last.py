@@ -69,15 +69,20 @@ def test_a_starved_controller_answers_every_state_of_a_driver_holding_its_last_c
         *(['-p', 'start_pose:=hanging'] if case == 'vertical' else [])])
     relay = procs.start_script(RELAY, 'relay', ['--pass', '1.0', '--starve', '2.0',
                                                 '--gap', '0.1', '--period', '0.3'])
-    # A state every 2 ms; the guard's thresholds loose enough for a loaded test machine
-    # to start (what is tested is the stop, not the law's margins: how the law tracks at
-    # the delays this allows is not judged here).
+    # A state every 2 ms. The stop comes from the link's gaps (0.1 s: 50 states, more than
+    # the 30 readiness_max_gap lets through), whatever the machine's timing; the windows'
+    # thresholds are loose enough for a test machine under full load (a controller there
+    # answered under half of the states, late) to start and to resume, and the following-
+    # error stop is off (such a loop's law may stray past 10 mm): what is tested is the stop
+    # on the link's gaps and its answers, not the law's margins (how the law tracks at the
+    # delays this allows is not judged here).
     ctl = procs.start_node('freejoint_control', 'controller_node', 'controller', [
         '--ros-args', '--params-file', os.path.join(CONFIG, 'controller.yaml'),
         '-p', 'lockstep:=false', '-p', 'case:=%s' % case, '-p', 'control_period:=0.002',
-        '-p', 'readiness_action:=%s' % action, '-p', 'readiness_max_delay:=0.012',
-        '-p', 'readiness_min_answer_rate:=0.6', '-p', 'readiness_resume_delay:=0.012',
-        '-p', 'readiness_resume_answer_rate:=0.7',
+        '-p', 'readiness_action:=%s' % action, '-p', 'readiness_max_gap:=30',
+        '-p', 'readiness_max_delay:=0.05', '-p', 'readiness_min_answer_rate:=0.2',
+        '-p', 'readiness_resume_delay:=0.05', '-p', 'readiness_resume_answer_rate:=0.25',
+        '-p', 'readiness_max_error:=0.0',
         '-r', 'joint_states:=driver/joint_states'])
     wait(lambda: readiness and not readiness[0][0], 30.0,
          'not ready at start-up on controller_readiness', spin=spin)
@@ -88,9 +93,12 @@ def test_a_starved_controller_answers_every_state_of_a_driver_holding_its_last_c
     wait(lambda: len(readiness) >= 4 and readiness[-1][0], 60.0,
          'ready again after the stop (%s)' % readiness, spin=spin)
     log = procs.log(ctl)
-    # Stopped on the starved link, with the reason, the hold answered meanwhile.
+    # Stopped on the starved link, with the reason, the hold answered meanwhile (a stall of
+    # the loaded machine past the stale-state timeout may stop it too, and says so).
     stops = [reason for ready, reason in readiness[1:] if not ready]
-    assert stops and all(reason.startswith('real-time loop not ready') for reason in stops)
+    assert any(reason.startswith('real-time loop not ready') for reason in stops), stops
+    assert all(reason.startswith(('real-time loop not ready', 'stale state'))
+               for reason in stops), stops
     said, answer = ANSWERED[action]
     stopped = [line for line in log.splitlines()
                if 'real-time loop not ready' in line and line.endswith(said)]
