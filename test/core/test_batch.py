@@ -60,6 +60,48 @@ def test_each_batched_run_follows_its_scalar_run_to_1e9_m_with_every_axis_on(
     assert stopped >= 1   # the divergence rule is exercised
 
 
+@pytest.mark.parametrize('law', ['vsc', 'tdc'])
+def test_each_task_law_kernel_run_follows_its_scalar_step_to_1e9_m_with_every_axis_on(law):
+    # The kernel does the task law's operations in the scalar step's order (task_law,
+    # law_vsc, law_tdc: plain float arithmetic, no BLAS), so a run equals its scalar run up
+    # to what the compiled closed forms round otherwise (1e-9 m over 1500 ticks, as the
+    # paper's law); a diverging run diverges at the same tick.
+    runs = _sample()
+    out = batch.simulate_law(runs, law=law, duration=DURATION, record_trace=True)
+    robust = batch.simulate(runs, duration=DURATION)
+    stopped = 0
+    for i in range(6):
+        metrics, p = batch.run_scalar({k: v[i] for k, v in runs.items()}, duration=DURATION,
+                                      law=law)
+        ticks = len(p)
+        assert out['ticks'][i] == ticks == metrics['ticks']
+        assert np.max(np.abs(out['p'][i, :ticks] - p)) <= 1e-9
+        div = metrics['diverged_at_s']
+        assert (math.isnan(div) and math.isnan(out['diverged_at_s'][i])) \
+            or out['diverged_at_s'][i] == div
+        stopped += not math.isnan(div)
+        for name in batch.METRICS:
+            if name not in ('diverged_at_s', 'ticks'):
+                assert out[name][i] == pytest.approx(metrics[name], rel=1e-9, abs=1e-9), name
+        assert out['theta_final_norm'][i] == 0.0     # no adaptive estimate
+    # it is that law that ran: the paper's law's runs differ
+    assert not np.allclose(out['max_mm'], robust['max_mm'])
+    assert stopped < 6
+
+
+@pytest.mark.parametrize('law,gain,value', [('vsc', 'vsc.phi', 0.02),
+                                            ('tdc', 'tdc.filter', 0.0)])
+def test_a_task_law_kernel_takes_the_laws_own_gains(law, gain, value):
+    runs = _sample()
+    own = batch.simulate_law(runs, law=law, law_params={gain: value}, duration=0.5)
+    default = batch.simulate_law(runs, law=law, duration=0.5)
+    assert not np.array_equal(own['rms_mm'], default['rms_mm'], equal_nan=True)
+    for i in (0, 1):
+        metrics, _ = batch.run_scalar({k: v[i] for k, v in runs.items()}, duration=0.5,
+                                      law=law, law_params={gain: value})
+        assert own['rms_mm'][i] == pytest.approx(metrics['rms_mm'], rel=1e-9, abs=1e-9)
+
+
 @pytest.mark.parametrize('case', ['horizontal', 'vertical'])
 def test_with_the_axes_off_the_scalar_reference_is_the_offline_runner(case):
     rec, trace = run_case(case, 'robust', 4, duration=1.0, record_trace=True)

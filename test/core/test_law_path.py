@@ -344,16 +344,18 @@ def test_a_new_law_in_one_module_runs_in_the_loop_the_offline_runner_and_a_campa
         assert m['min_det'] == 0.0 and m['theta_final_norm'] == 0.0
 
 
-def test_a_law_without_a_kernel_runs_in_campaigns_through_its_scalar_step():
+def test_a_law_without_a_kernel_runs_in_campaigns_through_its_scalar_step(new_law):
+    assert 'scaled_ct' not in batch.KERNELS
     runs = batch.run_defaults(3)
     runs['vertical'][:] = True
     runs['dist_bound'] = np.array([0.0, 0.5, 2.0])
-    one = batch.simulate_law(runs, law='vsc', duration=0.3, processes=1)
-    two = batch.simulate_law(runs, law='vsc', duration=0.3, processes=2)
+    one = batch.simulate_law(runs, law='scaled_ct', duration=0.3, processes=1)
+    two = batch.simulate_law(runs, law='scaled_ct', duration=0.3, processes=2)
     for name in batch.METRICS:
         assert np.array_equal(one[name], two[name], equal_nan=True), name
     for i in range(3):
-        m, _ = batch.run_scalar({k: v[i] for k, v in runs.items()}, law='vsc', duration=0.3)
+        m, _ = batch.run_scalar({k: v[i] for k, v in runs.items()}, law='scaled_ct',
+                                duration=0.3)
         assert one['max_mm'][i] == m['max_mm'] and math.isnan(one['diverged_at_s'][i])
     # the paper's law runs its batched kernel, which equals its scalar step
     ker = batch.simulate_law(runs, law='robust', duration=0.3)

@@ -7,7 +7,9 @@ the same divergence rule) with a few uncertainty axes a robustness campaign
 varies per run, compiled with numba (``batch_kernel``); the arm
 is Table I's (three links, joint 3 passive) or, with ``arms``, another 3-link arm whose
 joint 3 alone is passive (a URDF arm's ``ArmParams``), the law the paper's fast path
-(``control.RobustController._step_fast``), the plant ``plant.Plant`` (fast3 RK4).
+(``control.RobustController._step_fast``) or the sliding-mode or time-delay law
+(``law_vsc``, ``law_tdc``: ``task_law.TaskLaw.step``), the plant ``plant.Plant``
+(fast3 RK4).
 
 Per-run inputs (:data:`RUN_FIELDS`), each a 1-D array over the runs:
 
@@ -246,13 +248,13 @@ def check_grid(dt, dt_sub, duration):
 
 def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration=5.0,
              trajectory=None, diverge_m=0.5, diverge_qd=1000.0, record_trace=False,
-             engine='numba', threads=None, arms=None):
+             engine='numba', threads=None, arms=None, law='robust', law_params=None):
     """
-    Run every run of ``runs`` with the paper's law's batched kernel; return their metrics.
+    Run every run of ``runs`` with a law's batched kernel; return their metrics.
 
-    The kernel registered for the law ``robust`` (:data:`KERNELS`): ``batch_kernel``,
-    compiled with numba, threads over runs; :func:`run_scalar` with the same law is the
-    reference it equals run by run.
+    The kernel registered for the laws ``robust`` (the paper's), ``vsc`` and ``tdc``
+    (:data:`KERNELS`): ``batch_kernel``, compiled with numba, threads over runs;
+    :func:`run_scalar` with the same law is the reference it equals run by run.
 
     Parameters
     ----------
@@ -274,6 +276,10 @@ def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration
         Threads of the numba engine (default: every core).
     arms : mapping of bool to ArmParams, optional
         The real arm per value of ``vertical`` (:func:`real_arms`; Table I's by default).
+    law : {'robust', 'vsc', 'tdc'}
+        The law the kernel runs (``batch_kernel.LAWS``).
+    law_params : mapping of str to float, optional
+        The law's own gains by namespaced name (``vsc.phi``, ...; its defaults otherwise).
 
     Returns
     -------
@@ -282,6 +288,8 @@ def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration
         after a run's last recorded tick.
 
     """
+    if law not in KERNEL_LAWS:
+        raise FreejointValueError(f'law: the batched kernel runs {KERNEL_LAWS}, got {law!r}')
     if engine not in ENGINES:
         raise FreejointValueError(f'engine: expected one of {ENGINES}, got {engine!r}')
     runs = check_runs(runs)
@@ -291,8 +299,9 @@ def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration
     trajectory = CircleQuintic() if trajectory is None else trajectory
     n_ticks, n_sub = check_grid(dt, dt_sub, duration)
     reals = real_arms(arms)
+    lp = _law_vector(law, gains, law_params, dt)
     return _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory, diverge_m,
-                           diverge_qd, record_trace, threads, reals)
+                           diverge_qd, record_trace, threads, reals, law, lp)
 
 
 def _prepare(runs, trajectory, dt, n_ticks, reals):
@@ -329,6 +338,27 @@ def _gain_vector(gains, dt):
                        gains.det_threshold]
                     + [a for a, _ in coef] + [c for _, c in coef]
                     + list(gains.theta0) + list(tmax) + list(limit))
+
+
+def _law_vector(law, gains, law_params, dt):
+    """
+    Return the task law's values in the ``lp`` layout of ``batch_kernel`` (empty: robust).
+
+    ``K`` (2) then the law's own gains in its schema's order; for ``tdc`` the filter's
+    time constant as the low-pass coefficient ``1 - exp(-dt / tc)`` (1: none), computed
+    here as the scalar step computes it.
+    """
+    if law == 'robust':
+        return np.zeros(0)
+    from .laws import LAWS
+    from .law_base import law_params as own
+    cls = LAWS[law]
+    g = own(law, cls.gain_schema, law_params)
+    values = [g[item.name] for item in cls.gain_schema]
+    if law == 'tdc':
+        tc = g['tdc.filter']
+        values = [g['tdc.mbar'], 1.0 - math.exp(-dt / tc) if tc > 0.0 else 1.0]
+    return np.array(list(gains.K) + values, dtype=float)
 
 
 def draws(runs, n_ticks):
@@ -375,7 +405,7 @@ def draws(runs, n_ticks):
 
 
 def _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory, diverge_m,
-                    diverge_qd, record_trace, threads, reals):
+                    diverge_qd, record_trace, threads, reals, law, lp):
     from . import batch_kernel
     cr, cn, ln, q_init, des = _prepare(runs, trajectory, dt, n_ticks, reals)
     dist, nq, nqd, ntau, flags = draws(runs, n_ticks)
@@ -384,7 +414,8 @@ def _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory, diverge
     n = cr.shape[0]
     out = np.empty((n, batch_kernel.N_OUT))
     out_p = np.full((n, n_ticks, 2) if record_trace else (1, 1, 2), np.nan)
-    args = (cr, cn, ln, q_init, des, _gain_vector(gains, dt), dist, nq, nqd, ntau, flags,
+    args = (cr, cn, ln, q_init, des, _gain_vector(gains, dt), KERNEL_LAWS.index(law), lp,
+            dist, nq, nqd, ntau, flags,
             runs['delay'], alpha, float(dt), float(dt_sub), int(n_sub),
             float(diverge_m * diverge_m), float(diverge_qd), bool(record_trace), out, out_p)
     threads = max(1, min(threads or os.cpu_count() or 1, n))
@@ -404,9 +435,22 @@ def _simulate_numba(runs, gains, dt, dt_sub, n_ticks, n_sub, trajectory, diverge
     return res
 
 
-KERNELS = {'robust': simulate}
-"""Batched kernels registered per law name: ``kernel(runs, gains, **options)`` computing
-what :func:`run_scalar` computes with that law, run by run (tests check they agree)."""
+KERNEL_LAWS = ('robust', 'vsc', 'tdc')
+"""The laws ``batch_kernel`` runs, in the order of its ``law`` codes."""
+
+
+def _kernel_of(law):
+    """Return :func:`simulate` for ``law`` (a kernel as :data:`KERNELS` holds them)."""
+    def kernel(runs, gains=None, **options):
+        return simulate(runs, gains, law=law, **options)
+    kernel.__name__ = f'simulate_{law}'
+    return kernel
+
+
+KERNELS = {law: _kernel_of(law) for law in KERNEL_LAWS}
+"""Batched kernels registered per law name: ``kernel(runs, gains, law_params=None,
+**options)`` computing what :func:`run_scalar` computes with that law, run by run (tests
+check they agree)."""
 
 
 def register_kernel(law, kernel):
@@ -421,8 +465,8 @@ def simulate_law(runs, gains=None, *, law='robust', law_params=None, processes=N
     """
     Run every run of ``runs`` with the registered law ``law``; return their metrics.
 
-    The law's batched kernel (:data:`KERNELS`) when it has one and no own gains are
-    given, else its scalar step run by run (:func:`run_scalar`, ``processes`` worker
+    The law's batched kernel (:data:`KERNELS`, given the law's own gains) when it has
+    one, else its scalar step run by run (:func:`run_scalar`, ``processes`` worker
     processes, default every core): the same metrics, slower.
 
     Parameters
@@ -449,8 +493,8 @@ def simulate_law(runs, gains=None, *, law='robust', law_params=None, processes=N
     if law not in LAWS:
         raise FreejointValueError(f'law: expected one of {tuple(LAWS)}, got {law!r}')
     own = {k: v for k, v in (law_params or {}).items() if k.startswith(law + '.')}
-    if law in KERNELS and not own:
-        return KERNELS[law](runs, gains, **options)
+    if law in KERNELS:
+        return KERNELS[law](runs, gains, **({'law_params': own} if own else {}), **options)
     runs = check_runs(runs)
     n = runs['seed'].shape[0]
     one = [{k: v[i] for k, v in runs.items()} for i in range(n)]

@@ -28,6 +28,8 @@ import numba
 import numpy as np
 
 N_OUT = 11
+ROBUST, VSC, TDC = 0, 1, 2
+"""``law`` of :func:`run_range`: the paper's law, ``law_vsc``, ``law_tdc``."""
 
 
 _jit = numba.njit(cache=True, error_model='numpy')
@@ -52,8 +54,8 @@ def _task(c, ln, q0, q1, q2, w0, w1, w2):
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def _run(i, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay, alpha, dt, h,
-         n_sub, limit2, qd_max, record, out, out_p):
+def _run(i, cr, cn, ln, q_init, des, gp, law, lp, dist, nq, nqd, ntau, flags, delay, alpha,
+         dt, h, n_sub, limit2, qd_max, record, out, out_p):
     n_ticks = des.shape[0]
     cri = cr[i]
     cni = cn[i]
@@ -63,9 +65,18 @@ def _run(i, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay, alph
     w0 = 0.0
     w1 = 0.0
     w2 = 0.0
-    th = np.empty(5)
-    for j in range(5):
-        th[j] = gp[22 + j]
+    th = np.zeros(5)
+    if law == ROBUST:
+        for j in range(5):
+            th[j] = gp[22 + j]
+    # tdc: the filtered estimate, the previous tick's task velocity and torque
+    nhx = 0.0
+    nhy = 0.0
+    vpx = 0.0
+    vpy = 0.0
+    tq0 = 0.0
+    tq1 = 0.0
+    has_prev = False
     cmds = np.empty((n_ticks, 2))
     m = delay[i]
     al = alpha[i]
@@ -113,47 +124,75 @@ def _run(i, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay, alph
         edy = vy - vdy
         sx = edx + gp[0] * ex
         sy = edy + gp[1] * ey
-        vvx = adx - gp[2] * edx - gp[4] * ex
-        vvy = ady - gp[3] * edy - gp[5] * ey
         t_0 = th[0]
         t_1 = th[1]
         t_2 = th[2]
         t_3 = th[3]
         t_4 = th[4]
-        if gp[10] != 0.0:
-            alx = gp[6] * sx
-            aly = gp[7] * sy
-            na2 = alx * alx + aly * aly
-            na = math.sqrt(na2)
-            eps = gp[8]
-            if gp[9] != 0.0:
-                hh = na + eps
+        if law == ROBUST:
+            vvx = adx - gp[2] * edx - gp[4] * ex
+            vvy = ady - gp[3] * edy - gp[5] * ey
+            if gp[10] != 0.0:
+                alx = gp[6] * sx
+                aly = gp[7] * sy
+                na2 = alx * alx + aly * aly
+                na = math.sqrt(na2)
+                eps = gp[8]
+                if gp[9] != 0.0:
+                    hh = na + eps
+                else:
+                    hh = na if na > eps else eps
+                ps1 = n0 * n0 + n1 * n1 + n2 * n2
+                ps2 = math.sqrt(adx * adx + ady * ady)
+                ps3 = math.sqrt(edx * edx + edy * edy)
+                ps4 = math.sqrt(ex * ex + ey * ey)
+                rho = t_0 + t_1 * ps1 + t_2 * ps2 + t_3 * ps3 + t_4 * ps4
+                f = rho / hh
+                dvx = -f * alx
+                dvy = -f * aly
+                uu = na2 / hh
+                t_0 = gp[12] * t_0 + gp[17] * (uu * 1.0)
+                t_1 = gp[13] * t_1 + gp[18] * (uu * ps1)
+                t_2 = gp[14] * t_2 + gp[19] * (uu * ps2)
+                t_3 = gp[15] * t_3 + gp[20] * (uu * ps3)
+                t_4 = gp[16] * t_4 + gp[21] * (uu * ps4)
+                t_0 = gp[27] if t_0 > gp[27] else t_0
+                t_1 = gp[28] if t_1 > gp[28] else t_1
+                t_2 = gp[29] if t_2 > gp[29] else t_2
+                t_3 = gp[30] if t_3 > gp[30] else t_3
+                t_4 = gp[31] if t_4 > gp[31] else t_4
             else:
-                hh = na if na > eps else eps
-            ps1 = n0 * n0 + n1 * n1 + n2 * n2
-            ps2 = math.sqrt(adx * adx + ady * ady)
-            ps3 = math.sqrt(edx * edx + edy * edy)
-            ps4 = math.sqrt(ex * ex + ey * ey)
-            rho = t_0 + t_1 * ps1 + t_2 * ps2 + t_3 * ps3 + t_4 * ps4
-            f = rho / hh
-            dvx = -f * alx
-            dvy = -f * aly
-            uu = na2 / hh
-            t_0 = gp[12] * t_0 + gp[17] * (uu * 1.0)
-            t_1 = gp[13] * t_1 + gp[18] * (uu * ps1)
-            t_2 = gp[14] * t_2 + gp[19] * (uu * ps2)
-            t_3 = gp[15] * t_3 + gp[20] * (uu * ps3)
-            t_4 = gp[16] * t_4 + gp[21] * (uu * ps4)
-            t_0 = gp[27] if t_0 > gp[27] else t_0
-            t_1 = gp[28] if t_1 > gp[28] else t_1
-            t_2 = gp[29] if t_2 > gp[29] else t_2
-            t_3 = gp[30] if t_3 > gp[30] else t_3
-            t_4 = gp[31] if t_4 > gp[31] else t_4
+                dvx = 0.0
+                dvy = 0.0
+            wx = vvx + dvx - bx
+            wy = vvy + dvy - by
         else:
-            dvx = 0.0
-            dvy = 0.0
-        wx = vvx + dvx - bx
-        wy = vvy + dvy - by
+            # a task law (task_law.TaskLaw.step): u0 = pdd_d - Lam edot - K s, then its command
+            u0x = adx - gp[0] * edx - lp[0] * sx
+            u0y = ady - gp[1] * edy - lp[1] * sy
+            if law == VSC:      # law_vsc.SlidingModeLaw.command
+                delta = lp[4]
+                phi = lp[2]
+                gx = u0x - bx
+                gy = u0y - by
+                kk = (delta * math.sqrt(gx * gx + gy * gy) + lp[5]
+                      + lp[6] * (n0 * n0 + n1 * n1 + n2 * n2) + lp[3]) / (1.0 - delta)
+                ns = math.sqrt(sx * sx + sy * sy)
+                dd = ns if ns > phi else phi
+                wx = u0x + -kk * (sx / dd) - bx
+                wy = u0y + -kk * (sy / dd) - by
+            else:               # TDC: law_tdc.TimeDelayLaw.command
+                mbar = lp[2]
+                if has_prev:
+                    nrx = (vx - vpx) / dt - (d00 * tq0 + d01 * tq1) / mbar
+                    nry = (vy - vpy) / dt - (d10 * tq0 + d11 * tq1) / mbar
+                    nhx = nhx + lp[3] * (nrx - nhx)
+                    nhy = nhy + lp[3] * (nry - nhy)
+                else:
+                    nhx = bx
+                    nhy = by
+                wx = mbar * (u0x - nhx)
+                wy = mbar * (u0y - nhy)
         a00 = d00 * d00 + d01 * d01
         a01 = d00 * d10 + d01 * d11
         a11 = d10 * d10 + d11 * d11
@@ -177,6 +216,12 @@ def _run(i, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay, alph
         if c0 > l0 or c0 < -l0 or c1 > l1 or c1 < -l1:
             c0 = l0 if c0 > l0 else (-l0 if c0 < -l0 else c0)
             c1 = l1 if c1 > l1 else (-l1 if c1 < -l1 else c1)
+        if law == TDC:          # TimeDelayLaw.applied: this tick's torque and velocity
+            tq0 = c0
+            tq1 = c1
+            vpx = vx
+            vpy = vy
+            has_prev = True
         if noisy_q or noisy_qd:
             f2 = q0 + q1
             f3 = f2 + q2
@@ -279,9 +324,9 @@ def _run(i, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay, alph
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def run_range(lo, hi, step, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay,
-              alpha, dt, h, n_sub, limit2, qd_max, record, out, out_p):
+def run_range(lo, hi, step, cr, cn, ln, q_init, des, gp, law, lp, dist, nq, nqd, ntau, flags,
+              delay, alpha, dt, h, n_sub, limit2, qd_max, record, out, out_p):
     """Run the runs ``lo, lo + step, ... < hi`` (without the GIL); fills ``out``, ``out_p``."""
     for i in range(lo, hi, step):
-        _run(i, cr, cn, ln, q_init, des, gp, dist, nq, nqd, ntau, flags, delay, alpha, dt, h,
-             n_sub, limit2, qd_max, record, out, out_p)
+        _run(i, cr, cn, ln, q_init, des, gp, law, lp, dist, nq, nqd, ntau, flags, delay, alpha,
+             dt, h, n_sub, limit2, qd_max, record, out, out_p)

@@ -36,7 +36,8 @@ import math
 
 from freejoint_core.control import DET
 from freejoint_core.law_base import INF, LawGain, LawValue, register_law
-from freejoint_core.task_law import TaskLaw
+from freejoint_core.task_law import dot, TaskLaw
+import numpy as np
 
 GAINS = (
     LawGain('tdc.mbar', 1.0, 'scale of the assumed inertia: Dbar = Da^ / mbar (1: the '
@@ -65,6 +66,7 @@ class TimeDelayLaw(TaskLaw):
     """
 
     name = 'tdc'
+    accelerator = 'tdc'
     gain_schema = GAINS
     internals = INTERNALS
     state_names = ('n_hat[0]', 'n_hat[1]')
@@ -87,7 +89,8 @@ class TimeDelayLaw(TaskLaw):
             n_hat = b
         else:
             v_prev, tau_prev = self._prev
-            n_raw = (v - v_prev) / dt - (da @ tau_prev) / mbar
+            n_raw = (v - v_prev) / dt - np.array([dot(row, tau_prev.tolist())
+                                                  for row in da.tolist()]) / mbar
             tc = self.params['tdc.filter']
             a = 1.0 - math.exp(-dt / tc) if tc > 0.0 else 1.0
             n_hat = self._n_hat + a * (n_raw - self._n_hat)

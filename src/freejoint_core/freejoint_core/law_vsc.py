@@ -45,8 +45,7 @@ paper's point (70 % nominal: ``||E||`` about 0.3; 0.5 N m disturbance) with marg
 
 from freejoint_core.control import DET
 from freejoint_core.law_base import INF, LawGain, LawValue, register_law
-from freejoint_core.task_law import sat, TaskLaw
-import numpy as np
+from freejoint_core.task_law import norm, norm2, sat, TaskLaw
 
 GAINS = (
     LawGain('vsc.phi', 0.1, 'boundary layer of the sliding surface [m/s] (tracking error '
@@ -81,6 +80,7 @@ class SlidingModeLaw(TaskLaw):
     """
 
     name = 'vsc'
+    accelerator = 'vsc'
     gain_schema = GAINS
     internals = INTERNALS
     state_names = ('switching_gain', 'surface_over_layer')
@@ -95,10 +95,10 @@ class SlidingModeLaw(TaskLaw):
         g = self.params
         delta = g['vsc.delta']
         phi = g['vsc.phi']
-        k = (delta * float(np.linalg.norm(u0 - b)) + g['vsc.beta0']
-             + g['vsc.beta1'] * float(qd @ qd) + g['vsc.eta']) / (1.0 - delta)
+        k = (delta * norm(u0 - b) + g['vsc.beta0'] + g['vsc.beta1'] * norm2(qd)
+             + g['vsc.eta']) / (1.0 - delta)
         dv = -k * sat(s, phi)
-        self._report = [k, float(np.linalg.norm(s)) / phi]
+        self._report = [k, norm(s) / phi]
         return u0 + dv - b, {'switching_gain': k, 'switching_term': dv}
 
     def state_values(self):

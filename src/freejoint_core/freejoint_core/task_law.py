@@ -33,9 +33,36 @@ from freejoint_core.models import make_model
 import numpy as np
 
 
+def dot(a, b):
+    """Return ``sum(a_i b_i)`` of two float sequences, left to right (no BLAS, no FMA)."""
+    out = a[0] * b[0]
+    for x, y in zip(a[1:], b[1:]):
+        out += x * y
+    return out
+
+
+def norm2(v):
+    """
+    Return the squared Euclidean norm ``v_0^2 + v_1^2 + ...`` of the vector ``v``.
+
+    Plain float arithmetic, left to right: the same operations as a compiled kernel's
+    (``batch_kernel``), where numpy's ``norm`` or ``@`` may pick another summation.
+    """
+    x = v.tolist()
+    return dot(x, x)
+
+
+def norm(v):
+    """Return the Euclidean norm ``sqrt(norm2(v))`` of the vector ``v``."""
+    return math.sqrt(norm2(v))
+
+
 def damped_right_inverse(da, w, thr):
     """
     Return ``Da# w`` (damped least squares near a singularity), ``|det(Da Da^T)|``, status.
+
+    Plain float arithmetic in a fixed order (no BLAS): the batched kernel of a task law
+    (``batch_kernel``) does the same operations, so its runs equal the scalar ones.
 
     Parameters
     ----------
@@ -55,7 +82,10 @@ def damped_right_inverse(da, w, thr):
         ``STATUS_NEAR_SINGULAR`` when damped, else 0.
 
     """
-    (a00, a01), (_, a11) = (da @ da.T).tolist()
+    d0, d1 = da.tolist()
+    a00 = dot(d0, d0)
+    a01 = dot(d0, d1)
+    a11 = dot(d1, d1)
     det = a00 * a11 - a01 * a01
     status = 0
     if abs(det) < thr:
@@ -65,8 +95,9 @@ def damped_right_inverse(da, w, thr):
         status = STATUS_NEAR_SINGULAR
     det_use = a00 * a11 - a01 * a01
     wx, wy = w.tolist()
-    c = np.array(((a11 * wx - a01 * wy) / det_use, (a00 * wy - a01 * wx) / det_use))
-    return da.T @ c, abs(det), status
+    c0 = (a11 * wx - a01 * wy) / det_use
+    c1 = (a00 * wy - a01 * wx) / det_use
+    return np.array([x * c0 + y * c1 for x, y in zip(d0, d1)]), abs(det), status
 
 
 def sat(s, phi):
@@ -77,7 +108,7 @@ def sat(s, phi):
     layer's edge; outside, the unit vector of ``s`` (the discontinuous ``sign`` of an
     ideal sliding mode, smoothed).
     """
-    ns = float(np.linalg.norm(s))
+    ns = norm(s)
     return s / (ns if ns > phi else phi)
 
 
