@@ -44,20 +44,23 @@ def test_each_batched_run_follows_its_scalar_run_to_1e9_m_with_every_axis_on(
     runs, refs = references
     out = batch.simulate(runs, duration=DURATION, record_trace=True, engine=engine)
     assert {bool(v) for v in runs['vertical']} == {False, True}
-    stopped = 0
-    for i, (metrics, p) in enumerate(refs):
-        ticks = len(p)
-        assert out['ticks'][i] == ticks == metrics['ticks']
-        assert np.max(np.abs(out['p'][i, :ticks] - p)) <= 1e-9
-        assert np.all(np.isnan(out['p'][i, ticks:]))
-        div = metrics['diverged_at_s']
-        assert (math.isnan(div) and math.isnan(out['diverged_at_s'][i])) \
-            or out['diverged_at_s'][i] == div
-        stopped += not math.isnan(div)
-        for name in batch.METRICS:
-            if name not in ('diverged_at_s', 'ticks'):
-                assert out[name][i] == pytest.approx(metrics[name], rel=1e-9, abs=1e-9), name
+    stopped = sum(_follows(out, i, metrics, p) for i, (metrics, p) in enumerate(refs))
     assert stopped >= 1   # the divergence rule is exercised
+
+
+def _follows(out, i, metrics, p):
+    """Assert batched run ``i`` of ``out`` is the scalar run (metrics, p); return if it stopped."""
+    ticks = len(p)
+    assert out['ticks'][i] == ticks == metrics['ticks']
+    assert np.max(np.abs(out['p'][i, :ticks] - p)) <= 1e-9
+    assert np.all(np.isnan(out['p'][i, ticks:]))
+    div = metrics['diverged_at_s']
+    assert (math.isnan(div) and math.isnan(out['diverged_at_s'][i])) \
+        or out['diverged_at_s'][i] == div
+    for name in batch.METRICS:
+        if name not in ('diverged_at_s', 'ticks'):
+            assert out[name][i] == pytest.approx(metrics[name], rel=1e-9, abs=1e-9), name
+    return not math.isnan(div)
 
 
 @pytest.mark.parametrize('law', ['vsc', 'tdc'])
@@ -73,16 +76,7 @@ def test_each_task_law_kernel_run_follows_its_scalar_step_to_1e9_m_with_every_ax
     for i in range(6):
         metrics, p = batch.run_scalar({k: v[i] for k, v in runs.items()}, duration=DURATION,
                                       law=law)
-        ticks = len(p)
-        assert out['ticks'][i] == ticks == metrics['ticks']
-        assert np.max(np.abs(out['p'][i, :ticks] - p)) <= 1e-9
-        div = metrics['diverged_at_s']
-        assert (math.isnan(div) and math.isnan(out['diverged_at_s'][i])) \
-            or out['diverged_at_s'][i] == div
-        stopped += not math.isnan(div)
-        for name in batch.METRICS:
-            if name not in ('diverged_at_s', 'ticks'):
-                assert out[name][i] == pytest.approx(metrics[name], rel=1e-9, abs=1e-9), name
+        stopped += _follows(out, i, metrics, p)
         assert out['theta_final_norm'][i] == 0.0     # no adaptive estimate
     # it is that law that ran: the paper's law's runs differ
     assert not np.allclose(out['max_mm'], robust['max_mm'])
