@@ -20,9 +20,8 @@ from dataclasses import dataclass, field
 import math
 
 from freejoint_common.scheduling import MAX_PRIORITY, validate_affinity, validate_priority
-from freejoint_core.arm import CASES, NOMINAL_SCALE as PAPER_NOMINAL_SCALE
+from freejoint_core.arm import CASES, DEFAULT_DT, NOMINAL_SCALE as PAPER_NOMINAL_SCALE
 from freejoint_core.errors import FreejointValueError
-from freejoint_core.offline import DEFAULT_DT
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,9 @@ CASES = ('horizontal', 'vertical')
 NOMINAL_SCALE = 0.7
 """The paper's nominal model: Table I masses, inertias and COM distances times this."""
 
+DEFAULT_DT = 1e-3
+"""The paper's control period [s]."""
+
 GRAVITY_VERTICAL = 9.81
 """Gravity [m/s^2] for the paper's vertical case (Table I, Case 2)."""
 

@@ -52,12 +52,12 @@ import os
 
 import numpy as np
 
-from .arm import ArmParams, table1
+from .arm import ArmParams, DEFAULT_DT, table1
 from .control import decay_coefficients, Gains
 from .errors import FreejointValueError
 from .law_base import RunValues
 from .laws import make_law
-from .offline import _BLOWUP, DEFAULT_DT, initial_state
+from .offline import _BLOWUP, initial_state
 from .plant import DEFAULT_DT_SUB, Plant
 from .trajectory import CircleQuintic
 

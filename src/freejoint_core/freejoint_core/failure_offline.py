@@ -41,14 +41,14 @@ import time
 
 import numpy as np
 
-from .arm import CASES, NOMINAL_SCALE, table1
+from .arm import CASES, DEFAULT_DT, NOMINAL_SCALE, table1
 from .control import Gains
 from .errors import FreejointValueError
 from .failure import (DEFAULT_K_O, DEFAULT_MARGIN, DEFAULT_TICKS, least_harm_torque,
                       Reconfigurer, TRACKING)
 from .internal import FreeLinkModulation
 from .laws import make_law
-from .offline import DEFAULT_DT, initial_state
+from .offline import initial_state
 from .plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant
 from .trajectory import CircleQuintic
 

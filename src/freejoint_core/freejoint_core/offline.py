@@ -57,7 +57,7 @@ import time
 
 import numpy as np
 
-from .arm import CASES, NOMINAL_SCALE, table1
+from .arm import CASES, DEFAULT_DT, NOMINAL_SCALE, table1
 from .control import Gains
 from .delay import DEFAULT_BIAS_GAIN, extrapolate_setpoint, StatePredictor
 from .errors import FreejointValueError, positive
@@ -72,8 +72,6 @@ from .trajectory import CircleQuintic
 VARIANTS = ('robust', 'robust_off', 'exact')
 ACTUATED = ('paper', 'all')
 DEFAULT_OUT = 'bags/offline/metrics.json'
-DEFAULT_DT = 1e-3
-"""The paper's control period [s]."""
 # Errors that mean "the numbers blew up" inside the model/controller/plant.
 _BLOWUP = (ArithmeticError, ValueError, np.linalg.LinAlgError)
 
