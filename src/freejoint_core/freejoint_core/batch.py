@@ -277,7 +277,7 @@ def simulate(runs, gains=None, *, dt=DEFAULT_DT, dt_sub=DEFAULT_DT_SUB, duration
     arms : mapping of bool to ArmParams, optional
         The real arm per value of ``vertical`` (:func:`real_arms`; Table I's by default).
     law : {'robust', 'vsc', 'tdc'}
-        The law the kernel runs (``batch_kernel.LAWS``).
+        The law the kernel runs (:data:`KERNEL_LAWS`).
     law_params : mapping of str to float, optional
         The law's own gains by namespaced name (``vsc.phi``, ...; its defaults otherwise).
 

@@ -45,8 +45,8 @@ def norm2(v):
     """
     Return the squared Euclidean norm ``v_0^2 + v_1^2 + ...`` of the vector ``v``.
 
-    Plain float arithmetic, left to right: the same operations as a compiled kernel's
-    (``batch_kernel``), where numpy's ``norm`` or ``@`` may pick another summation.
+    Plain float arithmetic, left to right, as the compiled kernel (``batch_kernel``)
+    computes it; numpy's ``norm`` or ``@`` may sum otherwise (BLAS, FMA).
     """
     x = v.tolist()
     return dot(x, x)
