@@ -252,7 +252,7 @@ class ReadinessGuard:
             self._start_ns = None       # the next window opens at the next state
             return self._not_ready(
                 'real-time loop not ready: %d consecutive states not answered, more than '
-                'the %d the law rides through' % ((ns - last) // self.dt_ns - 1, self.max_gap))
+                'the %d the law rides through' % (self.last_missed, self.max_gap))
         start = self._start_ns
         if start is None or ns < start:
             self._start_ns = ns

@@ -344,18 +344,19 @@ def _law_vector(law, gains, law_params, dt):
     """
     Return the task law's values in the ``lp`` layout of ``batch_kernel`` (empty: robust).
 
-    ``K`` (2) then the law's own gains in its schema's order; for ``tdc`` the filter's
-    time constant as the low-pass coefficient ``1 - exp(-dt / tc)`` (1: none), computed
-    here as the scalar step computes it.
+    ``K`` (2) then the law's own gains by name in the order the kernel reads them; for
+    ``tdc`` the filter's time constant as the low-pass coefficient ``1 - exp(-dt / tc)``
+    (1: none), computed here as the scalar step computes it.
     """
     if law == 'robust':
         return np.zeros(0)
     from .laws import LAWS
     from .law_base import law_params as own
-    cls = LAWS[law]
-    g = own(law, cls.gain_schema, law_params)
-    values = [g[item.name] for item in cls.gain_schema]
-    if law == 'tdc':
+    g = own(law, LAWS[law].gain_schema, law_params)
+    if law == 'vsc':
+        values = [g[name] for name in ('vsc.phi', 'vsc.eta', 'vsc.delta', 'vsc.beta0',
+                                       'vsc.beta1')]
+    else:
         tc = g['tdc.filter']
         values = [g['tdc.mbar'], 1.0 - math.exp(-dt / tc) if tc > 0.0 else 1.0]
     return np.array(list(gains.K) + values, dtype=float)

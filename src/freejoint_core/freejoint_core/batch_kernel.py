@@ -15,6 +15,9 @@ Layouts (n runs, N ticks):
 * ``cr``, ``cn`` (n, 9): real and nominal constants ``d1 d2 d3 h12 h13 h23 gh1 gh2 gh3``;
 * ``gp`` (34,): ``lam(2) K+lam(2) K*lam(2) R(2) eps sum robust thr a(5) c(5)
   theta0(5) theta_max(5) limit(2)`` (``inf`` for no bound);
+* ``law`` (:data:`ROBUST`, :data:`VSC`, :data:`TDC`) and ``lp``: empty for the paper's
+  law (``gp`` holds it), else ``K(2)`` then ``phi eta delta beta0 beta1`` (vsc) or
+  ``mbar a`` (tdc, ``a = 1 - exp(-dt / filter)`` the low-pass coefficient, 1: none);
 * ``dist`` (n, N, 3) per-tick disturbance [N m]; ``nq``, ``nqd`` (n, N, 3), ``ntau``
   (n, N, 2) already scaled noise (rows of a run without it are not read: ``flags``);
 * ``out`` (n, 11): the ``batch.METRICS`` columns; ``out_p`` (n, N, 2) with ``record``.

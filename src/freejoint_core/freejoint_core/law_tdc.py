@@ -89,8 +89,8 @@ class TimeDelayLaw(TaskLaw):
             n_hat = b
         else:
             v_prev, tau_prev = self._prev
-            n_raw = (v - v_prev) / dt - np.array([dot(row, tau_prev.tolist())
-                                                  for row in da.tolist()]) / mbar
+            tau = tau_prev.tolist()
+            n_raw = (v - v_prev) / dt - np.array([dot(row, tau) for row in da.tolist()]) / mbar
             tc = self.params['tdc.filter']
             a = 1.0 - math.exp(-dt / tc) if tc > 0.0 else 1.0
             n_hat = self._n_hat + a * (n_raw - self._n_hat)
