@@ -9,6 +9,7 @@ import os
 
 from freejoint_control.loop import (ControlLoop, ERROR, INFO, STATUS_HOLDING, STATUS_RESUMING,
                                     STATUS_STOPPED, WARN)
+from freejoint_control.loop_stop import HOLD_ERROR_SAID
 from freejoint_control.params import SCHEMA
 from freejoint_control.readiness import (effective_periods, guard_margins, MEASURED,
                                          ReadinessGuard)
@@ -495,6 +496,57 @@ def test_a_tracking_error_past_readiness_max_error_stops_a_ready_loop_braking_at
     answers = feed(loop, range(11, 711), 0)
     assert answers[:400] == [None] * 400 and answers[-1] is not None
     assert answers[-1][0] != STATUS_STOPPED
+
+
+def test_with_the_hold_action_a_tracking_error_past_readiness_max_error_gives_way_at_once():
+    # The law that does not hold the arm on this loop would not hold it in a hold either:
+    # the damped joint hold answers from the trip on, every state until the loop is ready.
+    loop, logs = make(readiness_action='hold')
+    feed(loop, range(10), 0)
+    q, offset = _sagged(loop)
+    ns = 510 * DT_NS
+    loop.on_setpoint(ns, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 0.01)
+    res = loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.01)
+    assert res.status == STATUS_STOPPED and not loop._readiness.ready
+    # At rest where the trip found the arm: the damped hold is the gravity load alone.
+    assert list(res.effort) == pytest.approx(gravity_hold(q), abs=1e-9)
+    reason = ('real-time loop not ready: tracking error %.3g mm > the 10 mm of '
+              'readiness_max_error (the law does not hold the arm on this loop)'
+              % (offset * 1e3))
+    said = HOLD_ERROR_SAID
+    assert res.message == reason + ': ' + said
+    assert [text for level, kind, text in logs if 'tracking error' in text] == [
+        reason + ': ' + said]
+    assert {a[0] for a in feed(loop, range(11, 60), 0)} == {STATUS_STOPPED}
+    answers = feed(loop, range(60, 700), 0)
+    assert answers[-1][0] != STATUS_STOPPED and loop._readiness.ready
+
+
+def test_a_not_ready_hold_off_by_more_than_readiness_max_error_gives_way_until_ready():
+    loop, logs = make(readiness_action='hold')
+    feed(loop, range(200), 2_500_000)                    # trips at 100 ms: the delay
+    assert feed(loop, [200], 2_500_000)[0][0] & STATUS_HOLDING
+    q, offset = _sagged(loop)
+    ns = 701 * DT_NS
+    res = loop.on_state(ns, NAMES, list(q), list(QD0), ns + 2_500_000, 100.201)
+    assert res.status == STATUS_STOPPED and res.message.endswith(': ' + HOLD_ERROR_SAID)
+    assert list(res.effort) == pytest.approx(gravity_hold(q), abs=1e-9)
+    assert [text for level, kind, text in logs if 'mm off' in text] == [
+        'real-time loop not ready: mean state->command delay 3 ms > the 2 ms the law '
+        'tolerates over 0.1 s; then the hold %.3g mm off (> 10 mm): %s'
+        % (offset * 1e3, HOLD_ERROR_SAID)]
+    # Back in place, short of an error: still the damped hold until ready, then tracking.
+    assert {a[0] for a in feed(loop, range(202, 240), 2_500_000)} == {STATUS_STOPPED}
+    answers = feed(loop, range(240, 900), 0)
+    assert loop._readiness.ready and answers[-1][0] != STATUS_STOPPED
+    # Within the bound the law holds as before (the tests above).
+    loop, _ = make(readiness_action='hold')
+    feed(loop, range(200), 2_500_000)
+    q, offset = _sagged(loop, drop=0.02)
+    assert offset < 0.010
+    ns = 701 * DT_NS
+    res = loop.on_state(ns, NAMES, list(q), list(QD0), ns + 2_500_000, 100.201)
+    assert res.status & STATUS_HOLDING
 
 
 def test_readiness_max_error_0_leaves_a_drifting_arm_to_the_law():

@@ -57,8 +57,9 @@ from freejoint_control.loop_status import (  # noqa: F401
     DEBUG, ERROR, INFO, PeriodFigures, RECEIPT, Result, STATUS_DT_CLAMPED, STATUS_HOLDING,
     STATUS_LAW_FAULT, status_message, STATUS_RATE_LIMITED, STATUS_RESUMING,
     STATUS_SETPOINT_LATE, STATUS_STOPPED, WARN)
-from freejoint_control.loop_stop import (DAMP_SAID, DriverRequests, HOLD_GAP_SAID, QUIET_SAID,
-                                         Readiness, stop_effort, STOP_SAID)
+from freejoint_control.loop_stop import (DAMP_SAID, DriverRequests, HOLD_ERROR_SAID,
+                                         HOLD_GAP_SAID, QUIET_SAID, Readiness, stop_effort,
+                                         STOP_SAID)
 from freejoint_control.readiness import guard_margins
 from freejoint_core.control import STATUS_BAD_INPUT, STATUS_STALE_SETPOINT, STATUS_STALE_STATE
 from freejoint_core.errors import FreejointValueError
@@ -174,6 +175,9 @@ class ControlLoop:
         # joint hold (None: it did not)
         self._hold_gap = None
         self._gap_tripped = False       # that gap tripped the guard: its line said so
+        # 'hold': the law's error [m] past its bound (readiness_max_error) after which this
+        # not-ready spell gave way to the damped joint hold (None: it did not)
+        self._hold_error = None
         self.stops = 0                  # stop commands sent
         self._install(cfg)
         self.result = Result(m)
@@ -228,7 +232,7 @@ class ControlLoop:
                                 cfg.hold_brake_timeout)
         if self.watch.install(cfg):
             self._withholding = False
-            self._hold_gap = None
+            self._hold_gap = self._hold_error = None
 
     def apply(self, old, cfg):
         """Take a validated parameter change (effective on the next state)."""
@@ -349,7 +353,7 @@ class ControlLoop:
                     watch.changed(change, ns)
                     self._said_ns = ns
                 if (not guard.ready and guard.started and self._hold_gap is None
-                        and watch.gives_way(guard)):
+                        and self._hold_error is None and watch.gives_way(guard)):
                     # 'hold': a gap longer than readiness_hold_max_gap, the law's last
                     # command kept by the driver all along (even if this state is skipped
                     # as old).
@@ -365,7 +369,8 @@ class ControlLoop:
             if self._withholding and guard.ready:
                 self._resume_after_brake()
             elif guard.ready:
-                self._hold_gap = None   # (ready again before a state was answered)
+                # (ready again before a state was answered)
+                self._hold_gap = self._hold_error = None
         if self._max_age_ns:
             age_ns = now_ns - ns
             if age_ns > self._max_age_ns:
@@ -422,9 +427,10 @@ class ControlLoop:
                 if not guard.started:
                     return self._withhold(ns, now_ns)   # never started: the brakes stay on
                 return self._damped_stop(ns, q, qd, now_ns)
-            if self._hold_gap is not None:
-                # A gap past readiness_hold_max_gap: the law's last command was kept all
-                # along; from here the damped joint hold, whose command is safe to keep.
+            if self._hold_gap is not None or self._hold_error is not None:
+                # A gap past readiness_hold_max_gap (the law's last command was kept all
+                # along), or the law's hold off by more than its bound: from here the
+                # damped joint hold, whose command is safe to keep.
                 return self._gap_stop(ns, q, qd, now_ns, guard)
             return self._readiness_hold(ns, q, qd, now_ns, guard)
         found = self.setpoints.newest(ns)
@@ -500,26 +506,35 @@ class ControlLoop:
 
     def _gap_stop(self, ns, q, qd, now_ns, guard):
         """
-        Not ready, 'hold', after a gap: the damped joint hold until ready again.
+        Not ready, 'hold', after a gap or a failed hold: the damped joint hold until ready.
 
         The law's hold answers every state, but a driver keeps the law's last command for
         the whole of a gap in the states; past ``readiness_hold_max_gap`` that command is
         no longer one the law rides through (its stiffness acts on an error it no longer
-        sees). The damped joint hold's command stays stable when kept up to
-        1.33 ``stop_hold_time``; so from the first gap of a not-ready spell on, the spell
-        is answered as ``readiness_action: damp`` answers it, and tracking resumes from
-        where the arm is.
+        sees). Nor is a hold whose error passed the law's bound (``readiness_max_error``
+        while holding): the loop late and lossy enough to destabilise the law, which a
+        driver holding each command turns into a runaway within tenths of a second. The
+        damped joint hold's command stays stable when kept up to 1.33 ``stop_hold_time``;
+        so from the first such gap or error of a not-ready spell on, the spell is answered
+        as ``readiness_action: damp`` answers it, and tracking resumes from where the arm
+        is.
         """
         if not self._withholding:
             self._said_ns = None
-            if not self._gap_tripped:
-                # (a trip by the gap itself was said as such by the trip's line)
+            if self._gap_tripped:
+                pass    # the trip (by the gap or the error itself) said it in its line
+            elif self._hold_error is not None:
+                self.log(ERROR, None, '%s; then the hold %.3g mm off (> %.3g mm): %s' % (
+                    guard.reason, self._hold_error * 1e3,
+                    self.watch.error_limit(True) * 1e3, HOLD_ERROR_SAID))
+            else:
                 self.log(ERROR, None, '%s; then %d states missed in a row (%.3g s > '
                          'readiness_hold_max_gap %g s): %s' % (
                              guard.reason, self._hold_gap,
                              (self._hold_gap + 1) * guard.dt_ns * 1e-9,
                              self.config.readiness_hold_max_gap, HOLD_GAP_SAID))
-        return self._damped_stop(ns, q, qd, now_ns, HOLD_GAP_SAID)
+        return self._damped_stop(ns, q, qd, now_ns, HOLD_GAP_SAID
+                                 if self._hold_error is None else HOLD_ERROR_SAID)
 
     def _damped_stop(self, ns, q, qd, now_ns, said=DAMP_SAID):
         """
@@ -573,8 +588,8 @@ class ControlLoop:
         self._withholding = False
         self.requests.stop_over()
         kept, self._kept_hold = self._kept_hold, None
-        if self.watch.damps or self._hold_gap is not None:
-            self._hold_gap = None
+        if self.watch.damps or self._hold_gap is not None or self._hold_error is not None:
+            self._hold_gap = self._hold_error = None
             # The damped hold let the free joints swing (and the active joints sag): start
             # from where the arm is and how it moves, not back to the hold's old place
             # (the free link would be dragged along; a plan rewinds to the arm itself).
@@ -835,14 +850,18 @@ class ControlLoop:
         self.ticks += 1
         self._commanded = self._ever_commanded = True
         guard = self.watch.guard
-        if guard is not None and guard.ready:
+        if guard is not None:
             holding = sp is None
             limit = self.watch.error_limit(holding)
-            if limit:
-                error = ref_error
-                if error > limit:
-                    return self._following_error(ns, error, guard, limit, holding, now_ns,
-                                                 q, qd)
+            if limit and ref_error > limit:
+                if guard.ready:
+                    return self._following_error(ns, ref_error, guard, limit, holding,
+                                                 now_ns, q, qd)
+                if self.watch.holds and self._hold_gap is None and self._hold_error is None:
+                    # Not ready, the law's hold off by more than its bound: it gives way.
+                    self._hold_error = ref_error
+                    self._gap_tripped = False
+                    return self._gap_stop(ns, q, qd, now_ns, guard)
         return res
 
     def _following_error(self, ns, error, guard, limit, holding, now_ns, q, qd):
@@ -852,13 +871,17 @@ class ControlLoop:
                       % (error * 1e3, limit * 1e3, 'readiness_max_hold_error while holding'
                          if holding and self.config.readiness_max_hold_error
                          else 'readiness_max_error')):
-            self.watch.changed(1, ns)
+            self.watch.changed(1, ns, HOLD_ERROR_SAID if self.watch.holds else None)
             self._said_ns = ns
         if self.watch.brakes:
             return self._withhold(ns, now_ns)
         if self.watch.damps:
             return self._damped_stop(ns, q, qd, now_ns)
-        return self.result
+        # 'hold': the law that does not hold the arm on this loop would not hold it in a
+        # hold either; the damped joint hold, whose command is safe to keep (as after a gap).
+        self._hold_error = error
+        self._gap_tripped = True        # (the trip's line said it)
+        return self._gap_stop(ns, q, qd, now_ns, guard)
 
     def on_failure_notice(self, name):
         """

@@ -25,6 +25,8 @@ DAMP_SAID = ('the damped joint hold answered to every state (readiness_action da
              'the loop is ready again')
 HOLD_GAP_SAID = ('the damped joint hold answered to every state (the law held until a gap '
                  'longer than it rides through) until the loop is ready again')
+HOLD_ERROR_SAID = ('the damped joint hold answered to every state (a command safe to keep, '
+                   "the law's hold given up) until the loop is ready again")
 
 
 class Readiness:
@@ -127,13 +129,19 @@ class Readiness:
         self.note = None
         return note
 
-    def changed(self, change, ns):
-        """Log a change of the guard's verdict (once per transition); note it to publish."""
+    def changed(self, change, ns, action=None):
+        """
+        Log a change of the guard's verdict (once per transition); note it to publish.
+
+        ``action``: what a trip (``change`` 1) does, when not what ``readiness_action``
+        does (the loop's words).
+        """
         guard = self.guard
         self.note = (ns, guard.ready, guard.reason)
         if change == 1:
-            action = (STOP_SAID if self.brakes else DAMP_SAID if self.damps
-                      else HOLD_GAP_SAID if self.gives_way(guard) else 'holding position')
+            action = action or (STOP_SAID if self.brakes else DAMP_SAID if self.damps
+                                else HOLD_GAP_SAID if self.gives_way(guard)
+                                else 'holding position')
             self.log(ERROR, None, '%s: %s' % (guard.reason, action))
         else:
             self.log(WARN if guard.recoveries else INFO, None,
