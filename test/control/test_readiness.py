@@ -9,7 +9,7 @@ import os
 
 from freejoint_control.loop import (ControlLoop, ERROR, INFO, STATUS_HOLDING, STATUS_RESUMING,
                                     STATUS_STOPPED, WARN)
-from freejoint_control.loop_stop import HOLD_ERROR_SAID
+from freejoint_control.loop_stop import HOLD_ERROR_SAID, REJOIN_SAID
 from freejoint_control.params import SCHEMA
 from freejoint_control.readiness import (effective_periods, guard_margins, MEASURED,
                                          ReadinessGuard)
@@ -547,6 +547,40 @@ def test_a_not_ready_hold_off_by_more_than_readiness_max_error_gives_way_until_r
     ns = 701 * DT_NS
     res = loop.on_state(ns, NAMES, list(q), list(QD0), ns + 2_500_000, 100.201)
     assert res.status & STATUS_HOLDING
+
+
+def test_ready_again_after_the_damped_hold_a_plan_waits_until_the_reference_rejoined():
+    # The damped joint hold let the arm move (here: it sagged 5 mm and stays there). Ready
+    # again, the loop tracks from where the arm is at once, but tells a planner it is not
+    # ready (a paused plan stays paused, a new one is refused) until its reference has
+    # blended back to the setpoints; then it says ready.
+    loop, logs = make(readiness_action='damp')
+    loop.take_readiness()
+    feed(loop, range(200), 2_500_000)                    # trips at 100 ms: the delay
+    q, offset = _sagged(loop, drop=0.01)
+    assert 0.001 < offset < 0.010
+    notes, answers = [(0,) + loop.take_readiness()[1:]], []
+    for k in range(200, 3000):
+        ns = (k + 500) * DT_NS
+        loop.on_setpoint(ns, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, k * 1e-3)
+        res = loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.0 + k * 1e-3)
+        answers.append((k, res.status))
+        note = loop.take_readiness()
+        if note is not None:
+            notes.append((k, note[1], note[2]))
+    assert notes[0][1] is False and 'delay' in notes[0][2] and len(notes) == 3
+    ready_at, rejoined_at = notes[1][0], notes[2][0]
+    assert notes[1][1:] == (False, REJOIN_SAID) and notes[2][1:] == (True, '')
+    status = dict(answers)
+    assert status[ready_at - 1] == STATUS_STOPPED
+    # Tracking (blending from the sagged arm) from the state that judged the loop ready,
+    # ready for a plan at the first state after the blend.
+    assert all(status[k] & STATUS_RESUMING for k in range(ready_at, rejoined_at))
+    assert not status[rejoined_at] & STATUS_RESUMING and status[rejoined_at] != STATUS_STOPPED
+    assert rejoined_at - ready_at > 100 and loop.readiness() == (True, '')
+    assert [text for level, kind, text in logs if text.startswith('re-joined')] == [
+        're-joined the setpoints %.3g s after the loop was ready again (%.3g mm off the '
+        'reference): ready for a plan' % ((rejoined_at - ready_at) * 1e-3, offset * 1e3)]
 
 
 def test_readiness_max_error_0_leaves_a_drifting_arm_to_the_law():

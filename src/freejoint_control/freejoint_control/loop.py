@@ -58,14 +58,14 @@ from freejoint_control.loop_status import (  # noqa: F401
     STATUS_LAW_FAULT, status_message, STATUS_RATE_LIMITED, STATUS_RESUMING,
     STATUS_SETPOINT_LATE, STATUS_STOPPED, WARN)
 from freejoint_control.loop_stop import (DAMP_SAID, DriverRequests, HOLD_ERROR_SAID,
-                                         HOLD_GAP_SAID, QUIET_SAID, Readiness, stop_effort,
-                                         STOP_SAID)
+                                         HOLD_GAP_SAID, QUIET_SAID, Readiness, REJOIN_SAID,
+                                         stop_effort, STOP_SAID)
 from freejoint_control.readiness import guard_margins
 from freejoint_core.control import STATUS_BAD_INPUT, STATUS_STALE_SETPOINT, STATUS_STALE_STATE
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import clamp_dt, limit_effort
 from freejoint_core.laws import make_law
-from freejoint_core.reference import MODE_HOLD
+from freejoint_core.reference import MODE_BLEND, MODE_HOLD
 import numpy as np
 
 STANDBY_SETTLE = 0.5
@@ -178,6 +178,8 @@ class ControlLoop:
         # 'hold': the law's error [m] past its bound (readiness_max_error) after which this
         # not-ready spell gave way to the damped joint hold (None: it did not)
         self._hold_error = None
+        self._damped = False            # this stop answered with the damped joint hold
+        self._rejoin_ns = 0             # the state at which the loop, ready again, re-joins
         self.stops = 0                  # stop commands sent
         self._install(cfg)
         self.result = Result(m)
@@ -367,7 +369,7 @@ class ControlLoop:
             if not guard.ready and watch.brakes:
                 return self._withhold(ns, now_ns)
             if self._withholding and guard.ready:
-                self._resume_after_brake()
+                self._resume_after_brake(ns)
             elif guard.ready:
                 # (ready again before a state was answered)
                 self._hold_gap = self._hold_error = None
@@ -548,6 +550,7 @@ class ControlLoop:
         if not self._withholding:
             self._kept_hold = self.shaper.hold_position     # None unless holding
             self._withholding = True
+            self._damped = True
             self._q_stop = [q[i] for i in self.law.model.active]
             if self._said_ns is None:
                 self._said_ns = ns      # (a transition was said at once)
@@ -583,8 +586,15 @@ class ControlLoop:
         self.stepper.restart_prediction()
         return res
 
-    def _resume_after_brake(self):
-        """Ready again after withholding: start over from where the braked arm is."""
+    def _resume_after_brake(self, ns):
+        """
+        Ready again after withholding (at the state stamped ``ns``): start over from the arm.
+
+        After the damped joint hold (the free link swung, the active joints sagged) the
+        loop starts from where the arm is and tracks at once, but says it is not ready for
+        a plan until its reference has re-joined the setpoints (``Readiness.rejoining``;
+        :meth:`_tick` ends it).
+        """
         self._withholding = False
         self.requests.stop_over()
         kept, self._kept_hold = self._kept_hold, None
@@ -594,6 +604,10 @@ class ControlLoop:
             # from where the arm is and how it moves, not back to the hold's old place
             # (the free link would be dragged along; a plan rewinds to the arm itself).
             kept = None
+        if self._damped:
+            self._damped = False
+            self._rejoin_ns = ns
+            self.watch.rejoining(ns, REJOIN_SAID)
         if kept is None:
             # Hold at fk(q), or blend to the setpoint from the measured motion: a braked arm
             # is at rest, but one a driver kept moving (the stop command held, the damped
@@ -609,6 +623,17 @@ class ControlLoop:
         self.law.restart_motion()       # e.g. the free link's shift: its swing was stopped
         self.stepper.keep_state()
         self.stepper.restart_prediction()
+
+    def _rejoined(self, ns, ref_error, holding):
+        """Say ready for a plan once the blend after a stop is over, within the error bound."""
+        limit = self.watch.error_limit(holding)
+        if limit and ref_error > limit:
+            return
+        self.watch.rejoined(ns)
+        self.log(INFO, None, 're-joined the %s %.3g s after the loop was ready again (%.3g mm '
+                 'off the reference): ready for a plan' % (
+                     'hold' if holding else 'setpoints', (ns - self._rejoin_ns) * 1e-9,
+                     ref_error * 1e3))
 
     def _readiness_hold(self, ns, q, qd, now_ns, guard):
         """Not ready, 'hold': hold the end effector, the message saying why."""
@@ -823,6 +848,8 @@ class ControlLoop:
         res.position_desired = p_ref
         res.position_planned = planned
         ref_error = self.figures.track(res.position, planned, out.e)
+        if self.watch.rejoin and shaper.mode != MODE_BLEND:
+            self._rejoined(ns, ref_error, sp is None)
         res.status = status
         res.message = status_message(status, res.det_dd, self.config, hold_reason,
                                      shaper) if status else ''

@@ -25,6 +25,8 @@ DAMP_SAID = ('the damped joint hold answered to every state (readiness_action da
              'the loop is ready again')
 HOLD_GAP_SAID = ('the damped joint hold answered to every state (the law held until a gap '
                  'longer than it rides through) until the loop is ready again')
+REJOIN_SAID = ('real-time loop ready again, re-joining: the reference blends from where the '
+               'stop left the arm back to the setpoints (a plan waits until it has)')
 HOLD_ERROR_SAID = ('the damped joint hold answered to every state (a command safe to keep, '
                    "the law's hold given up) until the loop is ready again")
 
@@ -43,6 +45,9 @@ class Readiness:
         ``(stamp_ns, ready, reason)`` to publish, or None.
     stale_reason : str
         Why the loop stopped for want of states ('' : it did not, or a state came since).
+    rejoin : str
+        Why a loop ready again is not yet ready for a plan: its reference blends from where
+        a stop left the arm back to the setpoints ('' : it is not re-joining).
 
     """
 
@@ -54,6 +59,7 @@ class Readiness:
         self._hold_max_gap_ns = 0
         self.note = None
         self.stale_reason = ''
+        self.rejoin = ''
         self._max_error = self._max_hold_error = 0.0
 
     def install(self, cfg):
@@ -65,6 +71,7 @@ class Readiness:
         if cfg.lockstep or not cfg.readiness_guard:
             self.guard = None
             self._key = None
+            self.rejoin = ''
             return True
         margins = guard_margins(resolve_arm(cfg.values).params, cfg.delay_compensation,
                                 cfg.readiness_max_delay, cfg.readiness_min_answer_rate,
@@ -121,7 +128,26 @@ class Readiness:
         guard = self.guard
         if guard is None:
             return True, ''
+        if guard.ready and self.rejoin:
+            return False, self.rejoin
         return guard.ready, guard.reason
+
+    def rejoining(self, ns, reason):
+        """
+        Say (note) that the loop, ready again at the state stamped ``ns``, re-joins first.
+
+        A stop moved the arm off the setpoints (the damped joint hold let the free link
+        fall, the arm braked away from a plan that went on): until the reference has
+        blended back to them, the loop tracks but is not ready for a plan, so that a plan
+        paused for it stays paused and a new one is refused, with ``reason``.
+        """
+        self.rejoin = reason
+        self.note = (ns, False, reason)
+
+    def rejoined(self, ns):
+        """Say (note) that the reference is back on the setpoints at the state ``ns``."""
+        self.rejoin = ''
+        self.note = (ns, True, self.guard.reason if self.guard is not None else '')
 
     def take_note(self):
         """Return the readiness change to publish, ``(stamp_ns, ready, reason)``, once, or None."""
@@ -138,6 +164,7 @@ class Readiness:
         """
         guard = self.guard
         self.note = (ns, guard.ready, guard.reason)
+        self.rejoin = ''
         if change == 1:
             action = action or (STOP_SAID if self.brakes else DAMP_SAID if self.damps
                                 else HOLD_GAP_SAID if self.gives_way(guard)
