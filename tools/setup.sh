@@ -12,6 +12,12 @@
 # package cache). Without uv (no wheel for the machine, the bootstrap failed) pip installs
 # the same pins. FREEJOINT_INSTALLER=pip forces pip, FREEJOINT_INSTALLER=uv forbids the
 # fallback. Each phase prints its time; a summary line lists them at the end.
+#
+# The interfaces (freejoint_msgs: most of colcon's time) are built once per content: without
+# ROS 2, their install tree is kept in that folder too (FREEJOINT_CACHE, default
+# ${XDG_CACHE_HOME:-~/.cache}/freejoint: interfaces/), keyed by src/freejoint_msgs and the
+# pins, and a checkout whose key matches copies it in (its paths rewritten) instead of
+# building it. FREEJOINT_BUILD_CACHE=off neither reads nor writes it.
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -247,18 +253,52 @@ fi
 src_hash=$(cd "$ROOT" && find src -type f ! -path '*/__pycache__/*' \
   ! \( -name '*.py' ! -name setup.py \) | sort | xargs sha256sum | sha256sum | cut -c1-16)
 want_build="$src_hash $(cat "$STAMPS/venv")"
+# The interfaces' cache (see the top; tools/interface_cache.sh): the key is their sources
+# and the venv's pins.
+msgs_key=$(cd "$ROOT" && find src/freejoint_msgs -type f ! -path '*/__pycache__/*' | sort \
+  | xargs sha256sum | cat - "$STAMPS/venv" | sha256sum | cut -c1-16)
+CACHE_BASE=${FREEJOINT_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/freejoint}/interfaces
+MSGS_CACHE=
+if [ "$MODE" = wheels ] && [ "${FREEJOINT_BUILD_CACHE:-on}" != off ]; then
+  MSGS_CACHE=$CACHE_BASE/$msgs_key
+fi
+msgs_current() {
+  [ "$(cat "$STAMPS/msgs" 2>/dev/null || true)" = "$msgs_key" ] \
+    && [ -f "$ROOT/install/freejoint_msgs/share/freejoint_msgs/package.xml" ]
+}
 if [ "$want_build" != "$(cat "$STAMPS/build" 2>/dev/null || true)" ] || [ ! -d "$ROOT/install" ]; then
-  # shellcheck disable=SC1091
   phase colcon
+  skip=()
+  if msgs_current; then
+    skip=(--packages-skip freejoint_msgs)
+  elif [ -n "$MSGS_CACHE" ] && [ -f "$MSGS_CACHE/root" ]; then
+    rm -f "$STAMPS/msgs"
+    if bash "$ROOT/tools/interface_cache.sh" restore "$MSGS_CACHE" "$ROOT"; then
+      printf '%s' "$msgs_key" >"$STAMPS/msgs"
+      say "freejoint_msgs from the interface cache $MSGS_CACHE (built for these sources)"
+      skip=(--packages-skip freejoint_msgs)
+    else
+      say "the interface cache $MSGS_CACHE could not be copied: building freejoint_msgs"
+    fi
+  fi
+  if [ ${#skip[@]} -eq 0 ] && [ ! -d "$ROOT/build/freejoint_msgs" ]; then
+    rm -rf "$ROOT/install/freejoint_msgs"     # a copy from the cache: built afresh
+  fi
+  # shellcheck disable=SC1091
   . "$ROOT/tools/env.sh" --no-install
   cd "$ROOT"
   total=$(colcon list --names-only 2>/dev/null | wc -l)
-  say "colcon build of $total packages (the interfaces, freejoint_msgs, take a minute or more the first time)"
+  if [ ${#skip[@]} -gt 0 ]; then
+    total=$((total - 1))
+    say "colcon build of $total packages (freejoint_msgs built already)"
+  else
+    say "colcon build of $total packages (the interfaces, freejoint_msgs, take a minute or more the first time)"
+  fi
   # Progress from colcon's start/end events (tools/colcon_progress.awk): a line per
   # package started and per package built, "k/total", as they happen.
   set +e
   colcon --log-base log build --symlink-install --event-handlers console_direct- status- \
-    console_start_end+ \
+    console_start_end+ ${skip[@]+"${skip[@]}"} \
     --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF 2>&1 \
     | tee "$STAMPS/colcon.log" \
     | "${AWK[@]}" -v n="$total" -f "$ROOT/tools/colcon_progress.awk"
@@ -269,6 +309,16 @@ if [ "$want_build" != "$(cat "$STAMPS/build" 2>/dev/null || true)" ] || [ ! -d "
     die "colcon build failed (log: .stamps/colcon.log, last lines above)."
   fi
   grep -E '^Summary' "$STAMPS/colcon.log" | sed 's/^/[setup] /' || true
+  if [ ${#skip[@]} -eq 0 ]; then
+    printf '%s' "$msgs_key" >"$STAMPS/msgs"
+    if [ -n "$MSGS_CACHE" ]; then
+      if bash "$ROOT/tools/interface_cache.sh" save "$MSGS_CACHE" "$ROOT"; then
+        say "freejoint_msgs kept for other checkouts in $MSGS_CACHE"
+      else
+        say "freejoint_msgs could not be kept in $MSGS_CACHE (built here all the same)"
+      fi
+    fi
+  fi
   printf '%s' "$want_build" >"$STAMPS/build"
   phase -
 else
