@@ -20,6 +20,7 @@ must do whatever the timing - the stop, its reason, the action's answers, the re
 """
 import os
 
+from freejoint_control.loop_stop import REJOIN_SAID
 import pytest
 
 pytestmark = pytest.mark.ros
@@ -95,17 +96,23 @@ def test_a_starved_controller_answers_every_state_of_a_driver_holding_its_last_c
     log = procs.log(ctl)
     # Stopped on the starved link, with the reason, the hold answered meanwhile (a stall of
     # the loaded machine past the stale-state timeout may stop it too, and says so).
+    # Ready again after the damped joint hold, it may re-join the setpoints before it says
+    # ready for a plan (REJOIN_SAID; with no planner here the hold is where the arm is).
     stops = [reason for ready, reason in readiness[1:] if not ready]
     assert any(reason.startswith('real-time loop not ready') for reason in stops), stops
     assert all(reason.startswith(('real-time loop not ready', 'stale state'))
-               for reason in stops), stops
+               or reason == REJOIN_SAID for reason in stops), stops
     said, answer = ANSWERED[action]
     stopped = [line for line in log.splitlines()
                if 'real-time loop not ready' in line and line.endswith(said)]
     assert stopped, log[-2000:]
     # The stop's answers went out: the hold with the reason, on the state stream.
+    # (Under 'hold' on a loaded machine the law's command kept through the first gap may
+    # have spun the arm past the plausible: those states are answered with the stop
+    # command, refused as bad input - answered all the same, never left to silence.)
     held = [m for m in answers if 'real-time loop not ready' in m
-            and any(text in m for text in answer)]
+            and any(text in m for text in answer)
+            or action == 'hold' and 'implausible state' in m and 'the stop command' in m]
     assert len(held) >= 10, (len(held), answers[-3:])
     for proc in (ctl, relay, sim):
         procs.stop(proc)

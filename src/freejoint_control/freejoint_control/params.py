@@ -363,8 +363,11 @@ PARAMS = (
           'holds its last command and has no brakes to ask for (command_watchdog false in '
           'the simulator): hold the end effector with the law, answering every state '
           '(the law still runs on late states), until a gap in the states longer than '
-          "readiness_hold_max_gap (the law's last command kept all along): from then on, "
-          'until ready again, the damped joint hold (docs/real-arm.md)',
+          "readiness_hold_max_gap (the law's last command kept all along) or the hold off "
+          'by more than readiness_max_error (a following-error trip: at once): from then '
+          'on, until ready again, the damped joint hold; ready again after it, the '
+          'controller says not ready for a plan until it has re-joined the setpoints '
+          '(docs/real-time.md, docs/real-arm.md)',
           validator=one_of(READINESS_ACTIONS)),
     Param('stop_hold_time', 0.1,
           "readiness_action 'damp': the longest [s] the driver is to keep one command of "
