@@ -136,10 +136,10 @@ class Readiness:
         """
         Say (note) that the loop, ready again at the state stamped ``ns``, re-joins first.
 
-        A stop moved the arm off the setpoints (the damped joint hold let the free link
-        fall, the arm braked away from a plan that went on): until the reference has
-        blended back to them, the loop tracks but is not ready for a plan, so that a plan
-        paused for it stays paused and a new one is refused, with ``reason``.
+        The stop may have left the arm off the setpoints (the damped joint hold lets the
+        free link swing and the active joints sag): until the reference has blended back
+        to them, the loop tracks but is not ready for a plan, so that a plan paused for it
+        stays paused and a new one is refused, with ``reason``.
         """
         self.rejoin = reason
         self.note = (ns, False, reason)
