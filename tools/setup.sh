@@ -262,9 +262,10 @@ MSGS_CACHE=
 if [ "$MODE" = wheels ] && [ "${FREEJOINT_BUILD_CACHE:-on}" != off ]; then
   MSGS_CACHE=$CACHE_BASE/$msgs_key
 fi
+# Built (or copied) for these sources, and whole: a built tree's links into build/ resolve.
 msgs_current() {
   [ "$(cat "$STAMPS/msgs" 2>/dev/null || true)" = "$msgs_key" ] \
-    && [ -f "$ROOT/install/freejoint_msgs/share/freejoint_msgs/package.xml" ]
+    && [ -f "$ROOT/install/freejoint_msgs/share/freejoint_msgs/local_setup.sh" ]
 }
 if [ "$want_build" != "$(cat "$STAMPS/build" 2>/dev/null || true)" ] || [ ! -d "$ROOT/install" ]; then
   phase colcon
