@@ -40,7 +40,10 @@ Per run, from its bag and the simulator's per-step timing file:
 * the machine's lateness beside the run (``bench/wakeup_probe.py``: a SCHED_FIFO 99
   thread per CPU sleeping 1 ms): its latest wake-up [ms late] (column ``wake``) and the
   count of wake-ups over 10 ms late (``>10``), the latest 20 with their Unix times in the
-  JSON. A stall there stalls every node, whatever its priority.
+  JSON. A stall there stalls every node, whatever its priority;
+* the CPU over the run (:func:`cpu_shares`), in cores: the graph's nodes (column ``cpu``),
+  the time the hypervisor took from the machine's CPUs (``steal``) and the machine's idle
+  time (in the JSON): a graph that needs more than the machine has left falls behind.
 
 The bound per case is 1.5 x the offline runner's worst max error over seeds 0-9 (3 x with
 hogs; ``freejoint_core.plan_figures.tracking_bound_mm``). A run is met when at least 99 %
@@ -897,14 +900,17 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
         # The machine's own lateness beside the run: a SCHED_FIFO 99 probe per CPU
         # (a stall there stalls every node; columns 'wake' and '>10').
         with wakeup_probe.Probes() as probes:
-            start = time.monotonic()
+            cpu0, jiffies0 = s.graph.cpu(), bench_graph.machine_cpu_jiffies()
+            start = wall0 = time.monotonic()
             if lockstep:
                 loop = s.one_circle(plan or bench_graph.ros_params('planner.yaml'))
                 start = -math.inf     # every step of the run (the timing file's)
             else:
                 s.wait(seconds, loop)
             end = time.monotonic()
+            cpu1, jiffies1 = s.graph.cpu(), bench_graph.machine_cpu_jiffies()
             wake = probes.stop()
+    row.update(cpu_shares(cpu0, cpu1, jiffies0, jiffies1, end - wall0))
     if fully_actuated:
         row['failure_lines'] = controller_detections(s.graph)
         row['detections'] = len(row['failure_lines'])
@@ -1006,6 +1012,27 @@ def failure_judgement(row, ticks, fail):
     return out
 
 
+def cpu_shares(cpu0, cpu1, jiffies0, jiffies1, seconds):
+    """
+    Return the graph's and the machine's CPU over a run, in cores.
+
+    ``cpu0`` / ``cpu1``: ``{node: CPU seconds}`` of the graph's processes at the run's start
+    and end (``bench_graph.Graph.cpu``); ``jiffies0`` / ``jiffies1``: the machine's
+    ``(idle, steal)`` jiffies then (``bench_graph.machine_cpu_jiffies``); ``seconds``: the
+    wall time between. ``graph_cores``: the nodes' CPU; ``idle_cores``: the machine's idle
+    (and iowait) time; ``steal_cores``: the time the hypervisor gave the machine's CPUs to
+    others - a graph that needs more cores than the machine has left it falls behind, in
+    any controller. None when ``seconds`` is not positive.
+    """
+    if not seconds > 0.0:
+        return {'graph_cores': None, 'idle_cores': None, 'steal_cores': None}
+    tick = float(os.sysconf('SC_CLK_TCK'))
+    used = sum(cpu1.get(name, 0.0) - cpu0.get(name, 0.0) for name in cpu1)
+    return {'graph_cores': used / seconds,
+            'idle_cores': (jiffies1[0] - jiffies0[0]) / tick / seconds,
+            'steal_cores': (jiffies1[1] - jiffies0[1]) / tick / seconds}
+
+
 FAIL_DELAY_MS = 50.0
 """A failure made by ``--fail-at`` must be detected within this (the offline detection
 budget is 100 ms horizontal, 20 ms vertical; real time adds the service call and a period)."""
@@ -1019,11 +1046,12 @@ COLUMNS = (('case', '%-10s'), ('run', '%3s'), ('plan_rms_mm', '%7.3f'),
            ('state_age_max_ms', '%7.2f'),
            ('plans', '%3d'), ('load_after', '%5.2f'), ('wake_max_ms', '%6.1f'),
            ('wake_late', '%4d'), ('rest_max_mm', '%7.3f'), ('plan_path_max_mm', '%7.3f'),
-           ('guard_trips', '%5d'), ('met', '%4s'))
+           ('guard_trips', '%5d'), ('graph_cores', '%4.2f'), ('steal_cores', '%4.2f'),
+           ('met', '%4s'))
 HEADER = ('case', 'run', 'plan rms', 'plan max', 'in %', 'held s', 'late s', 'bound',
           'ref max', 'stale', 'run', 'holds', 'div',
           'lat ms', 'age ms', 'pl', 'load', 'wake', '>10', 'rest mm', 'path mm', 'trips',
-          'met')
+          'cpu', 'steal', 'met')
 
 
 def format_row(row):
@@ -1080,6 +1108,10 @@ def worst_of(rows):
             'latency_max_ms': max((r['latency_max_ms'] or 0.0) for r in done),
             'state_age_max_ms': max((r.get('state_age_max_ms') or 0.0) for r in done),
             'wake_max_ms': max((r.get('wake_max_ms') or 0.0) for r in done),
+            'graph_cores': max((r.get('graph_cores') or 0.0) for r in done),
+            'steal_cores': max((r.get('steal_cores') or 0.0) for r in done),
+            'idle_cores': min((r['idle_cores'] for r in done
+                               if r.get('idle_cores') is not None), default=None),
             'rest_max_mm': max((r.get('rest_max_mm') or 0.0) for r in done),
             'bound_mm': done[0]['bound_mm'],
             'met_runs': sum(1 for r in rows if r.get('met')),
@@ -1116,6 +1148,10 @@ def worst_lines(case, worst):
                worst['runs']))
     if worst['rest_max_mm']:
         rest += '; in the rests at most %.3f mm' % worst['rest_max_mm']
+    if worst.get('idle_cores') is not None:
+        rest += ('; the graph used up to %.2f cores, the machine idle down to %.2f, stolen '
+                 'up to %.2f' % (worst['graph_cores'], worst['idle_cores'],
+                                 worst['steal_cores']))
     return [plan, rest]
 
 

@@ -196,3 +196,22 @@ def test_a_lockstep_soak_run_of_a_spatial_arm_is_judged_in_3_d_against_its_plan(
     from freejoint_tools.bagfile import open_bag
     _, msg = open_bag(bag).decode('/setpoints')[-1]
     assert len(msg.position) == 3 * len(msg.stamps)
+
+
+def test_the_soak_states_the_cpu_the_graph_used_and_the_machine_had_left(monkeypatch):
+    # 10 s at 100 jiffies per second: the nodes used 12 CPU-s (1.2 cores); the machine was
+    # idle 500 jiffies (0.5 core) and 150 were stolen (0.15 core). A node that exited
+    # keeps its last reading (Graph.cpu), so it counts up to its exit.
+    monkeypatch.setattr(soak.os, 'sysconf', lambda name: 100)
+    shares = soak.cpu_shares({'sim': 1.0, 'controller': 2.0, 'recorder': 0.5},
+                             {'sim': 6.0, 'controller': 8.0, 'recorder': 1.5},
+                             (10_000, 40), (10_500, 190), 10.0)
+    assert shares == {'graph_cores': pytest.approx(1.2), 'idle_cores': pytest.approx(0.5),
+                      'steal_cores': pytest.approx(0.15)}
+    assert soak.cpu_shares({}, {}, (0, 0), (0, 0), 0.0) == {
+        'graph_cores': None, 'idle_cores': None, 'steal_cores': None}
+    row = {'graph_cores': 1.2, 'steal_cores': 0.15, 'met': True}
+    cells = soak.format_row(row).split()
+    assert cells[-3:] == ['1.20', '0.15', 'met']
+    header = soak.format_header().split()
+    assert header[-3:] == ['cpu', 'steal', 'met']
