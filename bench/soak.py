@@ -33,6 +33,8 @@ Per run, from its bag and the simulator's per-step timing file:
 * holds: controller ticks with the ``STATUS_HOLDING`` bit (32);
 * divergence: the simulator's warning/error log lines about a diverged plant, its
   ``/diagnostics`` messages saying so (when recorded), and a tracking error above 0.5 m;
+  beside it the fastest joint of the run (``qd max``, :func:`joint_speed_max`), which tells
+  a runaway from an arm parked off the plan by the damped joint hold;
 * worst state age: the largest ``state_age`` of ``controller_state`` (the state's age when
   the command went out; every ``*age*`` field is kept in the JSON) and the largest
   state->command latency of the simulator's timing file;
@@ -577,6 +579,26 @@ def diagnostics_diverged(bag_path):
     return count
 
 
+def joint_speed_max(bag_path, window_ns):
+    """
+    Return the fastest |joint velocity| [rad/s] of the bag's joint_states in ``window_ns``.
+
+    Any joint, the passive ones included, as the simulator measured it: it tells an arm
+    that ran away (a joint at hundreds of rad/s) from one parked off the plan by a stop
+    (the damped joint hold: the free link swinging at a few rad/s), which the error
+    against the plan does not. None without a state in the window.
+    """
+    from freejoint_tools.bagfile import open_bag
+    lo, hi = window_ns
+    fastest = None
+    for _, msg in open_bag(bag_path).decode(JOINT_STATES.absolute):
+        if lo <= stamp_ns(msg) <= hi and len(msg.velocity):
+            speed = max(abs(v) for v in msg.velocity)
+            if fastest is None or speed > fastest:
+                fastest = speed
+    return fastest
+
+
 def summarise(ticks, mask):
     """Return tracking, holds, efforts and ages of the ticks selected by ``mask``."""
     import numpy as np
@@ -966,6 +988,7 @@ def soak_run(case, index, run, seconds, hogs, back_to_back=False, stabilise=Fals
     row['diverged_log_lines'] = s.diverged_lines()
     row['guard_trips'] = s.guard_trips()
     row['diverged_diagnostics'] = diagnostics_diverged(s.bag)
+    row['speed_max'] = joint_speed_max(s.bag, (lo, hi))
     judge(row, s.bag, bound, (lo, hi))
     if fully_actuated:
         row.update(failure_judgement(row, ticks, loop if fail_at is not None else None))
@@ -1046,12 +1069,12 @@ COLUMNS = (('case', '%-10s'), ('run', '%3s'), ('plan_rms_mm', '%7.3f'),
            ('state_age_max_ms', '%7.2f'),
            ('plans', '%3d'), ('load_after', '%5.2f'), ('wake_max_ms', '%6.1f'),
            ('wake_late', '%4d'), ('rest_max_mm', '%7.3f'), ('plan_path_max_mm', '%7.3f'),
-           ('guard_trips', '%5d'), ('graph_cores', '%4.2f'), ('steal_cores', '%4.2f'),
-           ('met', '%4s'))
+           ('guard_trips', '%5d'), ('speed_max', '%6.1f'), ('graph_cores', '%4.2f'),
+           ('steal_cores', '%4.2f'), ('met', '%4s'))
 HEADER = ('case', 'run', 'plan rms', 'plan max', 'in %', 'held s', 'late s', 'bound',
           'ref max', 'stale', 'run', 'holds', 'div',
           'lat ms', 'age ms', 'pl', 'load', 'wake', '>10', 'rest mm', 'path mm', 'trips',
-          'cpu', 'steal', 'met')
+          'qd max', 'cpu', 'steal', 'met')
 
 
 def format_row(row):
@@ -1108,6 +1131,7 @@ def worst_of(rows):
             'latency_max_ms': max((r['latency_max_ms'] or 0.0) for r in done),
             'state_age_max_ms': max((r.get('state_age_max_ms') or 0.0) for r in done),
             'wake_max_ms': max((r.get('wake_max_ms') or 0.0) for r in done),
+            'speed_max': max((r.get('speed_max') or 0.0) for r in done),
             'graph_cores': max((r.get('graph_cores') or 0.0) for r in done),
             'steal_cores': max((r.get('steal_cores') or 0.0) for r in done),
             'idle_cores': min((r['idle_cores'] for r in done
@@ -1140,10 +1164,12 @@ def worst_lines(case, worst):
                      worst['circles_succeeded'], worst['circles_ended'],
                      worst['excused_runs']))
     rest = ('%-10s vs the controller reference: max %.3f mm, rms %.3f mm; stale %d (longest '
-            'run %d), holds %d, diverged runs %d, latency max %.2f ms, state age max %.2f ms, '
+            'run %d), holds %d, diverged runs %d (the fastest joint %.1f rad/s), latency max '
+            '%.2f ms, state age max %.2f ms, '
             'machine wake-up late %.1f ms; %d/%d runs within the bound against the reference'
             % (case, worst['max_mm'], worst['rms_mm'], worst['stale'], worst['longest_stale'],
-               worst['holds'], worst['diverged_runs'], worst['latency_max_ms'],
+               worst['holds'], worst['diverged_runs'], worst['speed_max'],
+               worst['latency_max_ms'],
                worst['state_age_max_ms'], worst['wake_max_ms'], worst['met_reference_runs'],
                worst['runs']))
     if worst['rest_max_mm']:

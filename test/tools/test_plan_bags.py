@@ -215,3 +215,22 @@ def test_the_soak_states_the_cpu_the_graph_used_and_the_machine_had_left(monkeyp
     assert cells[-3:] == ['1.20', '0.15', 'met']
     header = soak.format_header().split()
     assert header[-3:] == ['cpu', 'steal', 'met']
+
+
+def test_the_soak_tells_a_runaway_by_its_fastest_joint_in_the_window(tmp_path):
+    from freejoint_common.contract import stamp_from_ns
+    from sensor_msgs.msg import JointState
+    path = str(tmp_path / 'run')
+
+    def more(put, k, ns):
+        # joint3 (the free link) swings at 2 rad/s, then at tick 900 a state at -300 rad/s
+        # (every vector filled: rclpy pads an empty float64[] as rosbags does not read)
+        js = JointState(name=['joint1', 'joint2', 'joint3'], position=[0.0, 0.0, 0.0],
+                        velocity=[0.5, -1.0, -300.0 if k == 900 else 2.0],
+                        effort=[0.0, 0.0, 0.0])
+        stamp_from_ns(ns, js.header.stamp)
+        put('/joint_states', 'sensor_msgs/msg/JointState', ns, js)
+    _write_held_run(path, 1.0, more)
+    assert soak.joint_speed_max(path, (START_NS, START_NS + 899_000_000)) == 2.0
+    assert soak.joint_speed_max(path, (START_NS, START_NS + 999_000_000)) == 300.0
+    assert soak.joint_speed_max(path, (0, START_NS - 1)) is None
