@@ -29,8 +29,14 @@ save)
   cp -rL "$root/install/$PKG" "$tmp/" || exit 1
   find "$tmp" -name __pycache__ -prune -exec rm -rf {} +
   printf '%s' "$root" >"$tmp/root"
-  rm -rf "$entry"
-  mv "$tmp" "$entry"
+  # Replaced by renames, so that a restore running meanwhile finds a whole entry or none.
+  if [ -e "$entry" ]; then
+    mv "$entry" "$entry.tmp.old.$$"
+    mv "$tmp" "$entry"
+    rm -rf "$entry.tmp.old.$$"
+  else
+    mv "$tmp" "$entry"
+  fi
   find "$(dirname "$entry")" -mindepth 1 -maxdepth 1 -type d ! -name '*.tmp.*' \
     -printf '%T@ %p\n' | sort -rn | tail -n +4 | cut -d' ' -f2- \
     | while IFS= read -r old; do rm -rf "$old"; done

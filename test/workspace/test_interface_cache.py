@@ -95,3 +95,16 @@ def test_setup_restores_the_interfaces_from_the_cache_and_builds_the_rest():
     assert 'interface_cache.sh" restore "$MSGS_CACHE" "$ROOT"' in text
     assert 'interface_cache.sh" save "$MSGS_CACHE" "$ROOT"' in text
     assert '${skip[@]+"${skip[@]}"}' in text        # --packages-skip freejoint_msgs
+
+
+def test_saving_again_replaces_the_entry_whole(tmp_path):
+    a = tmp_path / 'a'
+    _built_checkout(a)
+    entry = tmp_path / 'cache' / 'key1'
+    assert _cache('save', entry, a).returncode == 0
+    (entry / 'leftover').write_text('')
+    b = tmp_path / 'b'
+    _built_checkout(b)
+    assert _cache('save', entry, b).returncode == 0
+    assert (entry / 'root').read_text() == str(b) and not (entry / 'leftover').exists()
+    assert os.listdir(tmp_path / 'cache') == ['key1']
