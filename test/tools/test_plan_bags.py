@@ -137,7 +137,9 @@ def test_a_real_time_soak_run_prints_the_figures_an_independent_check_gives(
     row = soak.soak_run('horizontal', 79, 0, 4.0, 0, ctl_extra=['readiness_guard:=false'])
     bag = _printed_row_is_the_bags(row, 'horizontal', plan_check)
     bound = row['bound_mm']
-    assert row['plan_moving_ticks'] > 1000                         # the circle ran
+    # The circle ran (at least 0.1 s of it: a loaded machine starts it late in the 4 s, and
+    # how much of it the window holds is not what is under test).
+    assert row['plan_moving_ticks'] >= 100
     done = analyze(bag, '--no-plots')
     assert done.returncode == 0, done.stderr
     plan_check.assert_printed_equals(plan_check.analyze_line(done, 'bag'),

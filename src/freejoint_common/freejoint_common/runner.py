@@ -35,8 +35,10 @@ executor sleeps, a signal stops it after the callback it interrupted), not one
 
 import gc
 import inspect
+import os
 import signal
 import sys
+import threading
 import time
 
 from freejoint_common.node_tools import GC_PAUSES, parameter_error
@@ -74,22 +76,49 @@ class Lifecycle:
 
 
 class StopFlag:
-    """SIGINT/SIGTERM handler that notes the signal (:attr:`signum`) and returns."""
+    """
+    SIGINT/SIGTERM handler that notes the signal (:attr:`signum`) and returns.
+
+    The handler only notes the signal and writes one byte to a pipe: a thread waiting on
+    the pipe completes the future :meth:`wake_on_signal` gave it. Completing it in the
+    handler could wait forever: the signal may interrupt this very thread inside the
+    future's own methods, which hold its lock (rclpy's ``Future`` takes a non-reentrant
+    lock in ``add_done_callback``, ``remove_done_callback`` and ``set_result``, and the
+    executor calls the first two on every spin of the loop).
+    """
 
     def __init__(self):
         self.signum = None
         self._previous = {}
         self._wake = None
+        self._pipe = None
 
     def __call__(self, signum, frame):
         self.signum = signum
-        wake, self._wake = self._wake, None
-        if wake is not None and not wake.done():
-            wake.set_result(signum)
+        if self._pipe is not None:
+            try:
+                os.write(self._pipe[1], b'\0')
+            except BlockingIOError:
+                pass                # bytes not yet read: the waker is woken anyway
 
     def wake_on_signal(self, future):
         """Complete ``future`` (an ``rclpy.task.Future``) at the next signal (the loop's)."""
         self._wake = future
+        if self._pipe is None:
+            self._pipe = os.pipe()
+            os.set_blocking(self._pipe[1], False)
+            threading.Thread(target=self._waker, args=(self._pipe[0],), daemon=True,
+                             name='stop-flag-wake').start()
+
+    def _waker(self, fd):
+        while os.read(fd, 64):      # b'': the write end closed (restore)
+            self._complete()
+        os.close(fd)
+
+    def _complete(self):
+        wake = self._wake
+        if wake is not None and not wake.done():
+            wake.set_result(self.signum)
 
     def __bool__(self):
         return self.signum is not None
@@ -105,6 +134,9 @@ class StopFlag:
         for signum, handler in self._previous.items():
             signal.signal(signum, handler)
         self._previous = {}
+        if self._pipe is not None:
+            os.close(self._pipe[1])             # ends the waker
+            self._pipe = None
 
 
 def make_executor(kind='events'):

@@ -80,3 +80,45 @@ def test_the_stop_flag_notes_the_signal_and_gives_the_handlers_back():
     finally:
         stop.restore()
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+def test_a_signal_inside_the_wake_futures_own_lock_returns_and_the_future_completes_after():
+    # A signal interrupts the loop's thread anywhere, also inside the wake future's methods
+    # that hold its (non-reentrant) lock, as the executor's remove_done_callback does on
+    # every spin. Here the signal is delivered from there by a done callback's comparison.
+    import signal
+    import threading
+    import time
+
+    from rclpy.task import Future
+    stop = StopFlag()
+    woken = Future()
+    stop.wake_on_signal(woken)
+
+    class SignalOnCompare:
+        def __call__(self, future):
+            pass
+
+        def __eq__(self, other):            # list.remove compares under the future's lock
+            stop(signal.SIGTERM, None)
+            return self is other
+
+        __hash__ = object.__hash__
+
+    woken.add_done_callback(SignalOnCompare())
+    returned = threading.Event()
+
+    def spin_end():
+        woken.remove_done_callback(lambda future: None)
+        returned.set()
+
+    threading.Thread(target=spin_end, daemon=True).start()
+    try:
+        assert returned.wait(10.0), 'the handler waited for the lock its own thread held'
+        assert stop.signum == signal.SIGTERM
+        deadline = time.monotonic() + 10.0
+        while not woken.done() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert woken.done() and woken.result() == signal.SIGTERM
+    finally:
+        stop.restore()
