@@ -15,10 +15,11 @@ XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 # (numba, Pinocchio, MuJoCo, matplotlib: each worker imports what its tests need).
 FAST_JOBS = $(if $(filter command line environment,$(origin JOBS)),$(JOBS),$(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( n > 8 ? 8 : n ))))
 FAST_XDIST = $(if $(filter 1,$(FAST_JOBS)),,-n $(FAST_JOBS) --dist worksteal)
-# The linters skip the files they found clean before with the same bytes, linters and
-# configuration (test/lint_cache.py, .stamps/lint), as in make test-fast; CI (CI set, as
-# .ci/run runs) lints every file.
-LINT_CACHE = $(if $(CI),,FREEJOINT_LINT_CACHE=$${FREEJOINT_LINT_CACHE-$$PWD/.stamps/lint})
+# The linters skip the files they found clean before at the same path in a checkout with
+# the same bytes, linters and configuration (test/lint_cache.py; the marks in the user's
+# cache, shared by checkouts), as in make test-fast; CI (CI set, as .ci/run runs) lints
+# every file.
+LINT_CACHE = $(if $(CI),,FREEJOINT_LINT_CACHE=$${FREEJOINT_LINT_CACHE-$${FREEJOINT_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/freejoint}/lint})
 # The tests keep Python's bytecode (and pytest's rewritten test modules) in .stamps/pycache,
 # also where the environment sets PYTHONDONTWRITEBYTECODE: else each worker compiles every
 # test module again to collect (about 7 CPU-s) and each node process a test starts compiles

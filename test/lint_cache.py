@@ -1,16 +1,19 @@
 """
-The clean results of the ament linters per file, for ``make test-fast``'s edit-run loop.
+The clean results of the ament linters per file, for ``make test`` and ``make test-fast``.
 
-``tools/test_fast.sh`` sets ``FREEJOINT_LINT_CACHE`` to a folder (``.stamps/lint``); the
-root conftest then gives every ``linter`` test, in place of ``ament_flake8``'s
-``main_with_errors`` and ``ament_pep257``'s ``main``, a call that lints only the files not
-found clean before: a file is skipped when a mark of its path, its bytes and the linter
-(its configuration file, the versions of Python, the linter packages and their plugins)
-exists, and marks are written for the files linted when the linter found them all clean.
-A changed file, a changed configuration or a new plugin version is linted again; files
+The Makefile and ``tools/test_fast.sh`` set ``FREEJOINT_LINT_CACHE`` to a folder (default
+``${FREEJOINT_CACHE:-~/.cache/freejoint}/lint``, beside the interface cache, shared by
+every checkout of the user); the root conftest then gives every ``linter`` test, in place
+of ``ament_flake8``'s ``main_with_errors`` and ``ament_pep257``'s ``main``, a call that
+lints only the files not found clean before: a file is skipped when a mark of its path in
+the checkout, its bytes and the linter (its configuration file, the versions of Python,
+the linter packages and their plugins) exists, and marks are written for the files linted
+when the linter found them all clean. The path is the one relative to the checkout's root
+(the folder above ``test/``): a fresh clone of the same commit finds its files clean, as
+the linters are given their configuration explicitly (ament's, not a file of the tree). A
+changed file, a changed configuration or a new plugin version is linted again; files
 linted with a finding get no mark, so the finding fails every run until mended. Without
-the variable (``make test``, CI, a package's ``colcon test``) every file is linted every
-time.
+the variable (CI, a package's ``colcon test``) every file is linted every time.
 """
 
 import functools
@@ -20,6 +23,8 @@ import os
 import sys
 
 ENV = 'FREEJOINT_LINT_CACHE'
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+"""The checkout's root: the marks name a file by its path relative to it."""
 """The environment variable naming the cache folder (unset or empty: no cache)."""
 LINTER_PACKAGES = ('flake8', 'pycodestyle', 'pyflakes', 'mccabe', 'pep257', 'pydocstyle',
                    'ament-flake8', 'ament_flake8', 'ament-pep257', 'ament_pep257')
@@ -73,10 +78,10 @@ def python_files(paths):
     return sorted(found)
 
 
-def _mark(folder, tool, path):
+def _mark(folder, tool, path, root):
     digest = hashlib.sha256()
     digest.update(linter_key(tool).encode())
-    digest.update(b'\0' + path.encode() + b'\0')
+    digest.update(b'\0' + os.path.relpath(path, root).encode() + b'\0')
     with open(path, 'rb') as fh:
         digest.update(fh.read())
     return os.path.join(folder, tool, digest.hexdigest())
@@ -88,28 +93,29 @@ def _write(mark):
         pass
 
 
-def _split(folder, tool, argv):
+def _split(folder, tool, argv, root):
     """Return (options, [(file, mark)] of the files not found clean before)."""
     options = [a for a in argv if a.startswith('-')]
     if options:
         return options, None
     todo = []
     for path in python_files(argv):
-        mark = _mark(folder, tool, path)
+        mark = _mark(folder, tool, path, root)
         if not os.path.exists(mark):
             todo.append((path, mark))
     return options, todo
 
 
-def cached_flake8(run, folder):
+def cached_flake8(run, folder, root=ROOT):
     """
     Return ``main_with_errors(argv)`` of ament_flake8 that lints only unmarked files.
 
-    ``run``: ament_flake8's ``main_with_errors``; ``argv``: paths (options, if any, are
-    passed on, and then nothing is cached).
+    ``run``: ament_flake8's ``main_with_errors``; ``folder``: the marks; ``root``: the
+    checkout the marks' paths are relative to; ``argv``: paths (options, if any, are passed
+    on, and then nothing is cached).
     """
     def main_with_errors(argv):
-        options, todo = _split(folder, 'flake8', argv)
+        options, todo = _split(folder, 'flake8', argv, root)
         if options:
             return run(argv=argv)
         if not todo:
@@ -122,10 +128,10 @@ def cached_flake8(run, folder):
     return main_with_errors
 
 
-def cached_pep257(run, folder):
+def cached_pep257(run, folder, root=ROOT):
     """Return ``main(argv)`` of ament_pep257 that lints only unmarked files (see above)."""
     def main(argv):
-        options, todo = _split(folder, 'pep257', argv)
+        options, todo = _split(folder, 'pep257', argv, root)
         if options:
             return run(argv=argv)
         if not todo:

@@ -121,3 +121,21 @@ def test_the_real_flake8_through_the_cache_finds_a_long_line(tmp_path):
     bad.write_text('"""Doc."""\nX = 1\n')
     assert run([str(bad)]) == (0, [])
     assert os.listdir(str(tmp_path / 'cache' / 'flake8'))
+
+
+def test_a_file_found_clean_in_one_checkout_is_clean_at_the_same_path_in_another(tmp_path):
+    cache = str(tmp_path / 'cache')
+    linter = Linter()
+    trees = []
+    for name in ('clone_a', 'clone_b'):
+        (tmp_path / name / 'pkg').mkdir(parents=True)
+        (tmp_path / name / 'pkg' / 'a.py').write_text('A = 1\n')
+        trees.append(tmp_path / name)
+    for root in trees:
+        run = lint_cache.cached_flake8(linter.flake8, cache, root=str(root))
+        assert run([str(root / 'pkg')]) == (0, [])
+    assert linter.calls == [[str(trees[0] / 'pkg' / 'a.py')]]     # the second clone: none
+    (trees[1] / 'pkg' / 'b.py').write_text('A = 1\n')              # same bytes, other path
+    run = lint_cache.cached_flake8(linter.flake8, cache, root=str(trees[1]))
+    assert run([str(trees[1] / 'pkg')]) == (0, [])
+    assert linter.calls[-1] == [str(trees[1] / 'pkg' / 'b.py')]

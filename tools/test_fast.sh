@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 start=$SECONDS
 # The linters lint only the files they have not found clean before (test/lint_cache.py);
 # CI and a package's colcon test lint every file.
-export FREEJOINT_LINT_CACHE=${FREEJOINT_LINT_CACHE-$PWD/.stamps/lint}
+export FREEJOINT_LINT_CACHE=${FREEJOINT_LINT_CACHE-${FREEJOINT_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/freejoint}/lint}
 python -m pytest -c pytest.ini -q -m 'not dds and not slow' "$@"
 rc=$?
 echo "[test-fast] $((SECONDS - start)) s wall"
