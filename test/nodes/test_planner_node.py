@@ -619,7 +619,7 @@ def test_in_sim_time_a_standing_clock_gets_one_status_until_the_clock_moves(
     # planner's unchanged status is not repeated each second, so a recorder's count stays
     # steady and its drain ends; a tick of the clock brings the next status.
     import time
-    from freejoint_common.contract import DIAGNOSTICS
+    from freejoint_common.contract import DIAGNOSTICS, to_ns
     proc = _start_planner(procs, ('-p', 'use_sim_time:=true', '-p', 'autostart:=false'))
     _wait_ready(ros_node, procs, proc, wait)
     clock = ClockDriver(ros_node)
@@ -628,9 +628,9 @@ def test_in_sim_time_a_standing_clock_gets_one_status_until_the_clock_moves(
     def on_status(msg):
         # Only the statuses of the moved clock (stamped in sim time): one the planner sent
         # before it took the clock's first message, stamped 0, may arrive too.
-        stamped_ns = msg.header.stamp.sec * 10 ** 9 + msg.header.stamp.nanosec
         arrivals.extend(time.monotonic() for s in msg.status
-                        if s.name == 'freejoint_planner: planner' and stamped_ns > 0)
+                        if s.name == 'freejoint_planner: planner'
+                        and to_ns(msg.header.stamp) > 0)
     ros_node.create_subscription(DIAGNOSTICS.msg_type, DIAGNOSTICS.name, on_status,
                                  DIAGNOSTICS.qos)
     wait(clock.matched, 30.0, 'the planner matching /clock',
