@@ -6,15 +6,20 @@ queue to it overflows, and the samples it then receives skip sequence numbers, w
 middleware reports lost). Flooding alone does not do it on a fast machine: the reader's
 receive thread can keep up.
 
-Usage: flood_publisher.py --topic NAME --seconds S --summary FILE
+Usage: flood_publisher.py --topic NAME --seconds S --summary FILE [--progress FILE]
+[--stop-file FILE]
 
 It waits (up to 30 s) for a matched subscription, prints ``flooding NAME`` when it starts
-publishing, publishes for S seconds, writes ``{"published": N}`` to FILE and exits 0 (1 if
-nothing matched).
+publishing, publishes for S seconds (or until the stop file exists, checked every
+:data:`EVERY` messages), writes the count published so far to the progress file every
+:data:`EVERY` messages (a test stopping the reader until a given number went by: a starved
+machine publishes fewer per second), writes ``{"published": N}`` to the summary and exits
+0 (1 if nothing matched).
 """
 
 import argparse
 import json
+import os
 import sys
 import time
 
@@ -23,6 +28,8 @@ import rclpy
 from std_msgs.msg import String
 
 FLOOD_QOS = profile(1, reliable=False)
+EVERY = 200
+"""Messages between two writes of the progress file and two looks for the stop file."""
 
 
 def main():
@@ -31,6 +38,8 @@ def main():
     parser.add_argument('--topic', required=True)
     parser.add_argument('--seconds', type=float, required=True)
     parser.add_argument('--summary', required=True)
+    parser.add_argument('--progress')
+    parser.add_argument('--stop-file')
     args = parser.parse_args()
     rclpy.init()
     node = rclpy.create_node('flood_publisher')
@@ -49,6 +58,13 @@ def main():
     while time.monotonic() < end:
         pub.publish(msg)
         count += 1
+        if count % EVERY == 0:
+            if args.progress:
+                with open(args.progress + '.tmp', 'w') as fh:
+                    fh.write(str(count))
+                os.replace(args.progress + '.tmp', args.progress)
+            if args.stop_file and os.path.exists(args.stop_file):
+                break
     with open(args.summary, 'w') as fh:
         json.dump({'published': count}, fh)
     node.destroy_node()

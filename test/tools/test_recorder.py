@@ -20,6 +20,10 @@ READY_TOPICS = 'ready_topics:=[/clock, %s]' % ', '.join(TICK_TOPICS)
 # the ticks only once the recorder's readers matched (--recorder): a tick published before
 # would be missing from the bag, unreported, and the gap check expects tick 0
 SYSTEM_READY_TOPICS = 'ready_topics:=[%s]' % ', '.join(TICK_TOPICS)
+BURST = 5000
+"""Messages flooded while the recorder stands still: ten times what the transport queues for
+a reader (Fast DDS's shared-memory port: 512 descriptors; a UDP socket's default receive
+buffer: about 1400 such datagrams)."""
 
 
 def _start_recorder(procs, bag, *params):
@@ -183,9 +187,10 @@ def test_messages_the_middleware_loses_are_counted_and_the_recorder_still_stops_
     """
     A best-effort topic flooded while the recorder is starved of CPU: real losses.
 
-    The recorder is stopped (SIGSTOP) for 1 s of a 6 s flood, so the transport's queue to
-    it overflows whatever the machine's speed (a flood alone let a fast reader keep up and
-    lose nothing). The middleware reports the losses (message-lost events); the recorder
+    The recorder is stopped (SIGSTOP) until the flood has published BURST messages more
+    (and 0.2 s at least), so the transport's queue to it overflows whatever the machine's
+    speed (a flood alone let a fast reader keep up and lose nothing; a stop of 1 s let a
+    starved flood publish too few to overflow it, in one clean-clone CI run). The middleware reports the losses (message-lost events); the recorder
     logs and counts each report, keeps recording, and on SIGINT finalises the bag and exits
     0. Through the EventsExecutor those events deadlocked rmw_fastrtps 8.4.3 within seconds
     of such a flood (the recorder then never answered the signal: the module docstring).
@@ -196,15 +201,32 @@ def test_messages_the_middleware_loses_are_counted_and_the_recorder_still_stops_
     recorder = _start_recorder(procs, bag_path, '-p', 'topics:=[/flood]', '-p',
                                'graph_topics:=false', '-p', 'queue_depth:=1', '-p',
                                'batch_period:=0.1')
-    flood = procs.start_script(FLOOD, 'flood', ['--topic', '/flood', '--seconds', '6',
-                                                '--summary', summary_path])
+    progress_path = str(tmp_path / 'progress')
+    stop_path = str(tmp_path / 'stop')
+    flood = procs.start_script(FLOOD, 'flood', ['--topic', '/flood', '--seconds', '60',
+                                                '--summary', summary_path,
+                                                '--progress', progress_path,
+                                                '--stop-file', stop_path])
     wait(lambda: 'flooding' in procs.log(flood) or flood.poll() is not None, 60.0,
          'the flood to start (%s)' % procs.log(flood))
+
+    def published():
+        try:
+            with open(progress_path) as fh:
+                return int(fh.read())
+        except (OSError, ValueError):
+            return 0
     os.killpg(recorder.pid, signal.SIGSTOP)
     try:
-        time.sleep(1.0)
+        start = published()
+        time.sleep(0.2)
+        wait(lambda: published() >= start + BURST or flood.poll() is not None, 60.0,
+             '%d messages flooded while the recorder stood still' % BURST)
     finally:
         os.killpg(recorder.pid, signal.SIGCONT)
+    time.sleep(0.5)                                 # the recorder takes the rest, then stop
+    with open(stop_path, 'w'):
+        pass
     wait(lambda: flood.poll() is not None, 60.0, 'the flood to end (%s)' % procs.log(flood))
     assert flood.returncode == 0, procs.log(flood)
     wait(lambda: 'the middleware reports' in procs.log(recorder), 10.0,
