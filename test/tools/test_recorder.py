@@ -190,10 +190,11 @@ def test_messages_the_middleware_loses_are_counted_and_the_recorder_still_stops_
     The recorder is stopped (SIGSTOP) until the flood has published BURST messages more
     (and 0.2 s at least), so the transport's queue to it overflows whatever the machine's
     speed (a flood alone let a fast reader keep up and lose nothing; a stop of 1 s let a
-    starved flood publish too few to overflow it, in one clean-clone CI run). The middleware reports the losses (message-lost events); the recorder
-    logs and counts each report, keeps recording, and on SIGINT finalises the bag and exits
-    0. Through the EventsExecutor those events deadlocked rmw_fastrtps 8.4.3 within seconds
-    of such a flood (the recorder then never answered the signal: the module docstring).
+    starved flood publish too few to overflow it). The middleware reports the losses
+    (message-lost events); the recorder logs and counts each report, keeps recording, and
+    on SIGINT finalises the bag and exits 0. Through the EventsExecutor those events
+    deadlocked rmw_fastrtps 8.4.3 within seconds of such a flood (the recorder then never
+    answered the signal: the module docstring).
     """
     from freejoint_tools.bagfile import open_bag
     bag_path = str(tmp_path / 'flood')
