@@ -22,8 +22,11 @@ planner run through :func:`run`. Its lifecycle, for one node or several in one e
    own (the recorder's batched takes, the player's single pass) passes ``loop``.
 3. shut down, for each node in order: :meth:`Lifecycle.on_shutdown` (stop threads,
    write files, finalise the bag), then its :meth:`Lifecycle.report` line is logged; then
-   the collector's pauses; the nodes are destroyed. A node's :meth:`Lifecycle.failure`
-   (something recorded was lost) is one line ``<name>: error: <reason>`` and exit 1.
+   the collector's pauses; the executor is shut down (the events executor then clears
+   the middleware callbacks it set on the nodes' entities: ``remove_node`` only queues
+   that for a spin that no longer comes), then the nodes are destroyed. A node's
+   :meth:`Lifecycle.failure` (something recorded was lost) is one line
+   ``<name>: error: <reason>`` and exit 1.
 
 ``EventsExecutor.spin()`` of the rclpy 7.1.6 wheels never runs a timer and busy-waits;
 the default loop hands the executor :data:`SPIN_PERIOD` at a time through
@@ -47,6 +50,8 @@ from freejoint_core.errors import FreejointValueError
 
 REFRESH_PERIOD = 1.0
 """Wall period [s] of applying the process scheduling to threads started meanwhile."""
+EXECUTOR_SHUTDOWN_WAIT = 5.0
+"""Wall time [s] shutting the executor down waits for callbacks still running."""
 SPIN_PERIOD = 0.2
 """Wall time [s] the default loop leaves the executor at most before it checks ``ok()``
 and the refresh (a signal stops it sooner once a callback runs)."""
@@ -91,6 +96,7 @@ class StopFlag:
         self.signum = None
         self._previous = {}
         self._wake = None
+        self._wake_lock = threading.Lock()
         self._pipe = None
 
     def __call__(self, signum, frame):
@@ -102,9 +108,16 @@ class StopFlag:
                 pass                # bytes not yet read: the waker is woken anyway
 
     def wake_on_signal(self, future):
-        """Complete ``future`` (an ``rclpy.task.Future``) at the next signal (the loop's)."""
-        self._wake = future
-        if self._pipe is None:
+        """
+        Complete ``future`` (an ``rclpy.task.Future``) at the next signal (the loop's).
+
+        None: complete nothing from now on; it returns once a completion under way (and
+        the executor's done callback it runs) is over, so the executor is not touched
+        from the waker after the loop has left it.
+        """
+        with self._wake_lock:
+            self._wake = future
+        if future is not None and self._pipe is None:
             self._pipe = os.pipe()
             os.set_blocking(self._pipe[1], False)
             threading.Thread(target=self._waker, args=(self._pipe[0],), daemon=True,
@@ -116,9 +129,10 @@ class StopFlag:
         os.close(fd)
 
     def _complete(self):
-        wake = self._wake
-        if wake is not None and not wake.done():
-            wake.set_result(self.signum)
+        with self._wake_lock:
+            wake = self._wake
+            if wake is not None and not wake.done():
+                wake.set_result(self.signum)
 
     def __bool__(self):
         return self.signum is not None
@@ -160,14 +174,17 @@ def spin_until(executor, ok, stop):
     refresh = process_scheduling().refresh
     monotonic = time.monotonic
     next_refresh = monotonic() + REFRESH_PERIOD
-    while not stop and ok():
-        woken = Future()
-        stop.wake_on_signal(woken)
-        if not stop:
-            executor.spin_until_future_complete(woken, timeout_sec=SPIN_PERIOD)
-        if monotonic() >= next_refresh:
-            next_refresh = monotonic() + REFRESH_PERIOD
-            refresh()
+    try:
+        while not stop and ok():
+            woken = Future()
+            stop.wake_on_signal(woken)
+            if not stop:
+                executor.spin_until_future_complete(woken, timeout_sec=SPIN_PERIOD)
+            if monotonic() >= next_refresh:
+                next_refresh = monotonic() + REFRESH_PERIOD
+                refresh()
+    finally:
+        stop.wake_on_signal(None)
 
 
 def spin_nodes(nodes, executor, stop):
@@ -256,8 +273,10 @@ def shut_down(nodes, executor=None):
             failures.append(reason)
     if nodes and GC_PAUSES in gc.callbacks:
         nodes[0].get_logger().info(GC_PAUSES.report())
+    if executor is not None and not executor.shutdown(timeout_sec=EXECUTOR_SHUTDOWN_WAIT):
+        nodes[0].get_logger().warning(
+            'the executor did not finish its callbacks within %.0f s of the stop'
+            % EXECUTOR_SHUTDOWN_WAIT)
     for node in nodes:
-        if executor is not None:
-            executor.remove_node(node)
         node.destroy_node()
     return failures
