@@ -23,9 +23,9 @@ import os
 import sys
 
 ENV = 'FREEJOINT_LINT_CACHE'
+"""The environment variable naming the cache folder (unset or empty: no cache)."""
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 """The checkout's root: the marks name a file by its path relative to it."""
-"""The environment variable naming the cache folder (unset or empty: no cache)."""
 LINTER_PACKAGES = ('flake8', 'pycodestyle', 'pyflakes', 'mccabe', 'pep257', 'pydocstyle',
                    'ament-flake8', 'ament_flake8', 'ament-pep257', 'ament_pep257')
 """Distributions (and every ``flake8-*`` plugin) whose versions key the marks."""
