@@ -14,6 +14,7 @@ set: ``pytest -m 'not dds and not slow'`` (``make test-fast``, ``tools/test_fast
 in-process test, e.g. of the loop under ``test/control`` or ``src/<pkg>/test``, is in it
 without more.
 """
+import functools
 import os
 
 import pytest
@@ -179,6 +180,17 @@ def _flake8_serial(request, monkeypatch):
     monkeypatch.setattr(flake8.checker, '_try_initialize_processpool', lambda *a, **k: None)
 
 
+@functools.lru_cache(maxsize=None)
+def _lint_cache_module():
+    """Load ``test/lint_cache.py`` once per process (its linter keys are cached in it)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        'freejoint_lint_cache', os.path.join(ROOT, 'test', 'lint_cache.py'))
+    cache = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cache)
+    return cache
+
+
 @pytest.fixture(autouse=True)
 def _lint_cache(request, monkeypatch):
     """
@@ -190,11 +202,7 @@ def _lint_cache(request, monkeypatch):
     folder = os.environ.get('FREEJOINT_LINT_CACHE')
     if not folder or request.node.get_closest_marker('linter') is None:
         return
-    import importlib.util
-    spec = importlib.util.spec_from_file_location(
-        'freejoint_lint_cache', os.path.join(ROOT, 'test', 'lint_cache.py'))
-    cache = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(cache)
+    cache = _lint_cache_module()
     from ament_flake8.main import main_with_errors
     from ament_pep257.main import main as pep257_main
     module = request.module

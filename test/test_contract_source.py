@@ -8,6 +8,7 @@ where a literal second of nanoseconds as data is fine; every topic and service t
 names is in docs/GRAPH.md's tables, which name the contract module as their source.
 """
 import ast
+import functools
 import os
 import re
 
@@ -47,7 +48,18 @@ def sources(root, tops=SCANNED):
 
 
 def code_lines(path):
-    """Yield ``(line number, text)`` of the code of ``path`` (docstrings, comments out)."""
+    """Return ``(line number, text)`` of the code of ``path`` (docstrings, comments out)."""
+    stat = os.stat(path)
+    return _code_lines(path, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=None)
+def _code_lines(path, mtime_ns, size):
+    """:func:`code_lines` once per file version and test process (several tests read all)."""
+    return tuple(_read_code_lines(path))
+
+
+def _read_code_lines(path):
     with open(path, encoding='utf-8') as fh:
         text = fh.read()
     lines = text.splitlines()

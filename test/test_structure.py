@@ -46,6 +46,13 @@ def parse(path):
         return ast.parse(fh.read(), filename=path)
 
 
+@functools.lru_cache(maxsize=None)
+def import_nodes(path):
+    """Return the ``Import`` and ``ImportFrom`` nodes of the file at ``path``, in walk order."""
+    return tuple(node for node in ast.walk(parse(path))
+                 if isinstance(node, (ast.Import, ast.ImportFrom)))
+
+
 def imports(module, modules):
     """
     Yield ``(target, names, node)`` for each import of a project module in ``module``.
@@ -53,7 +60,7 @@ def imports(module, modules):
     ``target`` is the project module imported; ``names`` the names taken from it by a
     ``from target import ...`` (empty for ``import target``); ``node`` the ast node.
     """
-    for node in ast.walk(parse(modules[module])):
+    for node in import_nodes(modules[module]):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 name = alias.name

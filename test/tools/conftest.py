@@ -1,4 +1,5 @@
 """Fixtures of the freejoint_tools tests: bags written in-process, the test publisher."""
+import bisect
 import math
 import os
 import re
@@ -229,7 +230,7 @@ class PlanCheck:
             plan = [float(np.interp(at, x, a)) for a in axes]
             error = math.hypot(*(ee[ns][j] - plan[j] for j in range(m)))
             errors.append(error)
-            i = int(np.searchsorted(sp_ns, ns))
+            i = bisect.bisect_left(sp_ns, ns)
             around = [sp_ns[i]] if sp_ns[i] == ns else [sp_ns[i - 1], sp_ns[i]]
             moves = any(any(v != 0.0 for v in setpoints[k][1]) for k in around)
             if moves:
