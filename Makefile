@@ -2,7 +2,13 @@
 # Each target sets the workspace up first (tools/setup.sh: idempotent, seconds when done).
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
-ENV := . tools/env.sh &&
+# Every target keeps Python's bytecode (and pytest's rewritten test modules) in
+# .stamps/pycache, also where the environment sets PYTHONDONTWRITEBYTECODE: else each node
+# process of a demo, a soak or a test compiles the packages it imports again (numpy, rclpy,
+# the nodes' modules: about 1 CPU-s where the venv holds no bytecode, as uv installs it) and
+# each test worker every test module it collects (about 7 CPU-s).
+PYCACHE = PYTHONDONTWRITEBYTECODE= PYTHONPYCACHEPREFIX=$$PWD/.stamps/pycache
+ENV = . tools/env.sh && $(PYCACHE)
 # Test processes (pytest-xdist workers): two per core (the node-process tests mostly wait),
 # at most 8; JOBS=1 runs the tests one after the other in one process. The graph tests give
 # the simulator a 30-s command deadline and the nodes' collected writers the collector's
@@ -20,11 +26,6 @@ FAST_XDIST = $(if $(filter 1,$(FAST_JOBS)),,-n $(FAST_JOBS) --dist worksteal)
 # cache, shared by checkouts), as in make test-fast; CI (CI set, as .ci/run runs) lints
 # every file.
 LINT_CACHE = $(if $(CI),,FREEJOINT_LINT_CACHE=$${FREEJOINT_LINT_CACHE-$${FREEJOINT_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/freejoint}/lint})
-# The tests keep Python's bytecode (and pytest's rewritten test modules) in .stamps/pycache,
-# also where the environment sets PYTHONDONTWRITEBYTECODE: else each worker compiles every
-# test module again to collect (about 7 CPU-s) and each node process a test starts compiles
-# the packages again (about 0.3 CPU-s).
-PYCACHE = PYTHONDONTWRITEBYTECODE= PYTHONPYCACHEPREFIX=$$PWD/.stamps/pycache
 # CPU=avx2: the tests compute as a machine with AVX2 but no AVX-512 does (tools/avx2.sh:
 # numpy's and OpenBLAS's AVX-512 kernels off), to see what another user's CPU computes.
 AS_CPU = $(if $(filter avx2,$(CPU)),bash tools/avx2.sh ,$(if $(CPU),$(error CPU=$(CPU): expected avx2 or nothing),))
@@ -68,10 +69,10 @@ demo: setup
 	@$(ENV) python tools/demo.py $(if $(VIEW),--view) $(if $(ARM),--arm $(ARM)) $(if $(STABILISE),--stabilise) $(if $(FAIL),--fail $(FAIL)) $(if $(CIRCLES),--circles $(CIRCLES)) $(if $(REST),--rest $(REST)) $(if $(PLANE),--plane-normal $(PLANE)) $(if $(PASSIVE),--passive $(PASSIVE)) $(if $(TIP),--tip $(TIP)) $(if $(BASE),--base $(BASE))
 
 test: setup
-	@$(ENV) $(LINT_CACHE) $(PYCACHE) $(AS_CPU)python -m pytest -c pytest.ini $(XDIST)
+	@$(ENV) $(LINT_CACHE) $(AS_CPU)python -m pytest -c pytest.ini $(XDIST)
 
 test-fast: setup
-	@$(ENV) $(PYCACHE) $(AS_CPU)bash tools/test_fast.sh $(FAST_XDIST)
+	@$(ENV) $(AS_CPU)bash tools/test_fast.sh $(FAST_XDIST)
 
 offline: setup
 	@$(ENV) $(if $(ARM),python tools/arm_offline.py $(ARM) --seeds $(or $(SEEDS),10) $(if $(PASSIVE),--passive $(PASSIVE)) $(if $(TIP),--tip $(TIP)) $(if $(BASE),--base $(BASE)),python -m freejoint_core.offline)
