@@ -125,8 +125,9 @@ def run_main(capfd, monkeypatch):
     ``run_main(pkg, exe, argv)`` calls the ``main`` of the installed executable ``exe``
     of ``pkg`` (its console_scripts entry point) with ``argv`` (``sys.argv[1:]``), as its
     process would: rclpy.init, the node's constructor and parameter checks, the runner's
-    lines. It returns (main's return: the process's exit status, what main wrote to this
-    process's stdout and stderr, rcutils' log lines included). Bounded: a node that took
+    lines; it asserts that main destroyed every middleware participant it made. It returns
+    (main's return: the process's exit status, what main wrote to this process's stdout
+    and stderr, rcutils' log lines included). Bounded: a node that took
     the value would run on; rclpy shut down after 60 s ends the runner's loop, main then
     returns 0. The runner installs signal handlers: the test runs in the main thread
     (pytest-xdist's workers' too).
@@ -139,6 +140,7 @@ def run_main(capfd, monkeypatch):
         # scheduling: a scheduling state of this test's own, not the test process's.
         monkeypatch.setattr(scheduling, '_PROCESS', [])
         capfd.readouterr()
+        before = _live_participants()
         deadline = threading.Timer(60.0, rclpy.try_shutdown)
         deadline.start()
         try:
@@ -147,6 +149,12 @@ def run_main(capfd, monkeypatch):
             deadline.cancel()
             deadline.join()
         captured = capfd.readouterr()
+        # Its node destroyed with it, even one whose constructor raised: a participant left
+        # to a later garbage collection is destroyed beside the next test's, and Fast DDS
+        # can deadlock there (the worker then hangs, its timeout thread without the GIL).
+        left = _live_participants() - before
+        assert left <= 0, '%s left %d participant(s) alive after its main returned' % (
+            exe, left)
         return code, captured.out + captured.err
     return run
 

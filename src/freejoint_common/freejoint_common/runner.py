@@ -253,6 +253,13 @@ def run(make, name, args=None, *, loop=spin_nodes, errors=(), handle_signals=Tru
         pass
     finally:
         failures = shut_down(nodes, executor)
+        # A node whose constructor raised (a bad parameter) is reachable only through its
+        # own reference cycles: collect it now, so that its middleware participant is
+        # destroyed with this run, not by a later collection beside another participant of
+        # the process (Fast DDS 2.14 can deadlock destroying a participant while another
+        # one in the process delivers discovery data to it: a test process's in-process
+        # main, run_main of test/conftest.py, hung so).
+        gc.collect()
         rclpy.try_shutdown()
         stop.restore()
     for text in failures:
