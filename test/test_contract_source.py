@@ -47,33 +47,29 @@ def sources(root, tops=SCANNED):
                     yield os.path.join(folder, name)
 
 
-def code_lines(path):
-    """Return ``(line number, text)`` of the code of ``path`` (docstrings, comments out)."""
-    stat = os.stat(path)
-    return _code_lines(path, stat.st_mtime_ns, stat.st_size)
-
-
 @functools.lru_cache(maxsize=None)
-def _code_lines(path, mtime_ns, size):
-    """:func:`code_lines` once per file version and test process (several tests read all)."""
-    return tuple(_read_code_lines(path))
+def code_lines(path):
+    """
+    Return ``(line number, text)`` of the code of ``path`` (docstrings, comments out).
 
-
-def _read_code_lines(path):
+    Read once per test process (several tests read every file), as test_structure's
+    ``parse``; a test's scratch files each have a tmp_path of their own.
+    """
     with open(path, encoding='utf-8') as fh:
         text = fh.read()
-    lines = text.splitlines()
     doc = set()
     for node in ast.walk(ast.parse(text, filename=path)):
         if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant) \
                 and isinstance(node.value.value, str):
             doc.update(range(node.lineno, node.end_lineno + 1))
-    for number, line in enumerate(lines, 1):
+    code = []
+    for number, line in enumerate(text.splitlines(), 1):
         if number in doc:
             continue
         if '#' in line and "'" not in line and '"' not in line:
             line = line.split('#', 1)[0]     # a comment (no string on the line)
-        yield number, line
+        code.append((number, line))
+    return tuple(code)
 
 
 def violations(paths, contract=CONTRACT, forbidden=FORBIDDEN):
