@@ -126,8 +126,6 @@ from .planning import assess_failure, circle_bounds, compute_model, describe_joi
 from .planning import end_effector, grid_bound, grid_extent, join_from_arm, joint_state
 from .planning import JOIN_REFUSED, JOIN_WAIT, make_circle, planner_status, READY, SETTLING
 from .planning import prepare_transition, settle_gate_refusal, swing_deg
-from .spatial_planning import check_spatial_plan, describe as describe_spatial, plane_normal
-from .spatial_planning import spatial_bounds, SpatialRequest, start_point
 from .stream import Plan, SetpointStream
 
 NODE_NAME = 'freejoint_planner'
@@ -575,8 +573,12 @@ class PlannerNode(Node, Lifecycle):
         return response
 
     # ---- spatial arms ---------------------------------------------------------------
+    # .spatial_planning is imported in these methods only: it imports Pinocchio, about a
+    # tenth of a second of the start of a planar arm's planner, which never uses it.
     def _init_spatial(self):
         """Check a spatial arm's configured circle and say what does not apply to it."""
+        from .spatial_planning import describe as describe_spatial, plane_normal
+        from .spatial_planning import spatial_bounds
         cfg = self._cfg
         reason = spatial_bounds(cfg['radius'], cfg['duration'], cfg['max_speed'],
                                 cfg['max_acceleration'])
@@ -598,6 +600,7 @@ class PlannerNode(Node, Lifecycle):
 
     def _check_change_spatial(self, sim, changed, new):
         """Check a valid parameter change of a spatial arm's planner (``_check``)."""
+        from .spatial_planning import describe as describe_spatial, spatial_bounds
         reason = spatial_bounds(new['radius'], new['duration'], new['max_speed'],
                                 new['max_acceleration'])
         what = describe_spatial(new['radius'], new['duration'])
@@ -657,6 +660,7 @@ class PlannerNode(Node, Lifecycle):
         newest joint state at once even so (``~/plan_circle``), or, with no joint state yet,
         leave it to its start (``later``) or refuse it (a check without execution).
         """
+        from .spatial_planning import spatial_bounds, start_point
         if self._failures_pending:
             self._take_failures()
         if self._failure_refusal:
@@ -681,6 +685,7 @@ class PlannerNode(Node, Lifecycle):
 
     def _check_spatial_plan(self, radius, duration, cfg, state, p0=None):
         """Return ``check_spatial_plan`` from ``state``; ``p0`` None: the tip of the real arm."""
+        from .spatial_planning import check_spatial_plan
         q, qd = state
         if p0 is None:          # the tip as the offline runner takes it (the real arm's fk)
             p0 = self._spatial.fk(np.asarray(q, dtype=float))
@@ -691,6 +696,7 @@ class PlannerNode(Node, Lifecycle):
 
     def _execute_spatial(self, radius, duration, start_delay, source, verdict=None):
         """Replace the running plan by a spatial circle (``verdict`` None: from the tip)."""
+        from .spatial_planning import describe as describe_spatial, SpatialRequest
         self._last_plan_id += 1
         traj = SpatialRequest(radius, duration, self._cfg['plane_normal']) if verdict is None \
             else verdict.circle
@@ -711,6 +717,7 @@ class PlannerNode(Node, Lifecycle):
 
     def _join_spatial(self, plan):
         """Check a spatial plan from rest from the arm's posture and start it; True: hold."""
+        from .spatial_planning import describe as describe_spatial
         state = self._spatial_state()
         if state is None:
             if self._waits_logged != plan.plan_id:
@@ -739,6 +746,7 @@ class PlannerNode(Node, Lifecycle):
 
     def _plan_circle_spatial(self, request, response):
         """``~/plan_circle`` of a spatial arm: radius, duration, execute (module notes)."""
+        from .spatial_planning import describe as describe_spatial
         centre = [float(v) for v in request.centre]
         problem = validate({'radius': request.radius, 'duration': request.duration})
         if not problem and (centre != [0.0, 0.0] or request.start_angle != 0.0
@@ -973,8 +981,10 @@ class PlannerNode(Node, Lifecycle):
                                              self._now_ns()))
 
     def _publish_marker(self, plan):
-        if isinstance(plan.trajectory, SpatialRequest):
-            return          # its start point (the tip) is not known yet
+        if self._spatial is not None:
+            from .spatial_planning import SpatialRequest
+            if isinstance(plan.trajectory, SpatialRequest):
+                return      # its start point (the tip) is not known yet
         self._marker_pub.publish(path_marker(plan.trajectory.points(MARKER_POINTS),
                                              self._cfg['frame_id'], self._now_ns(),
                                              plan.plan_id))
