@@ -88,10 +88,15 @@ class Session:
         self.args = args
         self.context = rclpy.Context()
         rclpy.init(args=[], context=self.context)
+        from rclpy.parameter import Parameter
+        # A hidden node that only asks: no parameter services, no /rosout and no
+        # ~/get_type_description service (its type support is a third of a command's start).
         self.node = rclpy.create_node('%sfj_%d' % (HIDDEN_PREFIX, os.getpid()),
                                       context=self.context,
                                       start_parameter_services=False,
-                                      enable_rosout=False)
+                                      enable_rosout=False,
+                                      parameter_overrides=[Parameter(
+                                          'start_type_description_service', value=False)])
         from rclpy.executors import SingleThreadedExecutor
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
