@@ -30,6 +30,7 @@ import signal
 import subprocess
 import time
 
+from freejoint_tools.harness import ParameterCalls
 import pytest
 
 pytestmark = pytest.mark.ros
@@ -39,7 +40,6 @@ README = os.path.join(ROOT, 'README.md')
 ROS_INSTALL = os.path.join(ROOT, 'docs', 'ros-install.md')
 REAL_ARM = os.path.join(ROOT, 'docs', 'real-arm.md')
 OWN_ARM_DOC = os.path.join(ROOT, 'docs', 'own-arm.md')
-FJ = os.path.join(ROOT, 'install', 'freejoint_tools', 'lib', 'freejoint_tools', 'fj')
 NODE_NAMES = {'sim_node': '/sim_node', 'planner_node': '/freejoint_planner',
               'controller_node': '/controller_node', 'recorder': '/recorder'}
 """Executable -> the node it starts."""
@@ -88,12 +88,25 @@ def test_the_readme_points_to_each_page_whose_commands_are_run_here():
         assert os.path.relpath(path, ROOT) in text, path
 
 
-class Runner:
-    """Run README lines in a scratch directory under tools/env.sh; keep started nodes."""
+def sourced_env(cwd):
+    """Return the environment a shell in ``cwd`` has after ``. tools/env.sh``."""
+    done = subprocess.run(['bash', '-c', '. %s/tools/env.sh && env -0' % ROOT], cwd=cwd,
+                          capture_output=True, check=True, timeout=60)
+    return dict(item.split('=', 1) for item in done.stdout.decode().split('\0') if '=' in item)
 
-    def __init__(self, cwd):
+
+class Runner:
+    """
+    Run README lines in a scratch directory under tools/env.sh; keep started nodes.
+
+    Each line runs in a shell of its own with the environment ``. tools/env.sh`` gives
+    (sourced once: each line's shell is what the user's is after it).
+    """
+
+    def __init__(self, cwd, ros_node):
         import yaml
         self.cwd = cwd
+        self.ros_node = ros_node
         config = os.path.join(cwd, 'config')
         os.mkdir(config)
         for name in os.listdir(os.path.join(ROOT, 'config')):
@@ -106,30 +119,34 @@ class Runner:
             yaml.safe_dump(sim, f)
         self.nodes = []
         self.ran = []
+        self.env = sourced_env(cwd)
 
     def shell(self, line, timeout=120):
-        return subprocess.run(['bash', '-c', '. %s/tools/env.sh && %s' % (ROOT, line)],
-                              cwd=self.cwd, capture_output=True, text=True, timeout=timeout)
+        return subprocess.run(['bash', '-c', line], cwd=self.cwd, env=self.env,
+                              capture_output=True, text=True, timeout=timeout)
 
     def start(self, line, exe):
         log = open(os.path.join(self.cwd, '%s_%d.log' % (exe, len(self.nodes))), 'w')
         # Niced: a lockstep graph started by hand steps on after its circle as fast as it
         # can (docs/hand_run.md), and would take the CPU from the lines under test.
-        proc = subprocess.Popen(['nice', '-n', str(NODE_NICE), 'bash', '-c',
-                                 '. %s/tools/env.sh && exec %s' % (ROOT, line)],
-                                cwd=self.cwd, stdout=log, stderr=subprocess.STDOUT,
-                                start_new_session=True)
+        proc = subprocess.Popen(['nice', '-n', str(NODE_NICE), 'bash', '-c', 'exec ' + line],
+                                cwd=self.cwd, env=self.env, stdout=log,
+                                stderr=subprocess.STDOUT, start_new_session=True)
         proc.log = log
         self.nodes.append(proc)
         # its parameter services answer (a get returns at the first answer; a list would
-        # wait for discovery to settle: 3.5 s or more a node). The answer may come late
-        # too: a planner computes its map before it answers (beside a numpy hog and the
-        # other workers, the niced four-link planner took over fj's default 10 s)
-        up = subprocess.run([FJ, 'param', 'get', NODE_NAMES[exe], 'use_sim_time',
-                             '--timeout', '60', '--service-timeout', '60'],
-                            capture_output=True, text=True, timeout=180)
-        assert up.returncode == 0 and proc.poll() is None, (
-            '%r did not come up: %s\n%s' % (line, up.stderr, self.log(proc)))
+        # wait for discovery to settle: 3.5 s or more a node), asked from this process (the
+        # lines' own fj calls are the ones under test). The answer may come late too: a
+        # planner computes its map before it answers (beside a numpy hog and the other
+        # workers, the niced four-link planner took over 10 s)
+        try:
+            ParameterCalls(self.ros_node, NODE_NAMES[exe], timeout=60.0).get_parameters(
+                ['use_sim_time'])
+            why = ''
+        except TimeoutError as e:
+            why = str(e)
+        assert not why and proc.poll() is None, (
+            '%r did not come up: %s\n%s' % (line, why, self.log(proc)))
 
     def log(self, proc):
         proc.log.flush()
@@ -205,8 +222,8 @@ class Runner:
 
 
 @pytest.fixture
-def runner(tmp_path):
-    r = Runner(str(tmp_path))
+def runner(tmp_path, ros_node):
+    r = Runner(str(tmp_path), ros_node)
     yield r
     r.stop_all()
 
