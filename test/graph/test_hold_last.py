@@ -15,8 +15,10 @@ pattern is set (test/core/test_guards.py), and measured in real time by the soak
 (``make soak SOAK_ARGS="--driver hold-last"``, docs/real-time.md): in this graph it depends
 on how long this machine's load keeps each command (a stall past the hold's tolerance
 loses the arm with any controller: on this link's 0.1-s gaps the law's hold alone drove a
-joint past 100 rad/s, which the damped hold did not), so here the test asks what the graph
-must do whatever the timing - the stop, its reason, the action's answers, the resume.
+joint past 100 rad/s, which the damped hold did not; beside the suite's other workers the
+law tracking at this test's loose thresholds, half of the states answered 8 ms late, spun
+the free link past it before the first gap), so here the test asks what the graph must do
+whatever the timing - the stop, its reason, the action's answers, the resume.
 """
 import os
 
@@ -108,12 +110,13 @@ def test_a_starved_controller_answers_every_state_of_a_driver_holding_its_last_c
                if 'real-time loop not ready' in line and line.endswith(said)]
     assert stopped, log[-2000:]
     # The stop's answers went out: the hold with the reason, on the state stream.
-    # (Under 'hold' on a loaded machine the law's command kept through the first gap may
-    # have spun the arm past the plausible: those states are answered with the stop
-    # command, refused as bad input - answered all the same, never left to silence.)
+    # (On a loaded machine a command the driver kept through a stall of the controller -
+    # the law's through the first gap under 'hold', any under 'damp' - may have spun the
+    # arm past the plausible: those states are answered with the stop command, refused as
+    # bad input - answered all the same, never left to silence.)
     held = [m for m in answers if 'real-time loop not ready' in m
             and any(text in m for text in answer)
-            or action == 'hold' and 'implausible state' in m and 'the stop command' in m]
+            or 'implausible state' in m and 'the stop command' in m]
     assert len(held) >= 10, (len(held), answers[-3:])
     for proc in (ctl, relay, sim):
         procs.stop(proc)
