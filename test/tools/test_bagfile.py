@@ -303,3 +303,39 @@ def test_a_damaged_chunk_of_a_finalised_bag_fails_the_read_naming_the_file(tmp_p
     with pytest.raises(BagError, match='corrupt MCAP data') as info:
         bag.decode('/joint_states')
     assert str(info.value).startswith(mcap + ': ') and '\n' not in str(info.value)
+
+
+def _record(opcode, body):
+    import struct
+    return struct.pack('<BQ', opcode, len(body)) + body
+
+
+def test_a_chunks_messages_are_cut_from_its_records_as_mcap_reads_them():
+    """Two Message records around a Channel record, by hand; then one running past the end."""
+    import struct
+
+    from mcap.records import Chunk
+    from mcap.stream_reader import breakup_chunk
+
+    from freejoint_tools.bagfile import _chunk_messages
+
+    def message(channel, seq, log, pub, data):
+        return _record(0x05, struct.pack('<HIQQ', channel, seq, log, pub) + data)
+    # opcodes: 0x04 Channel (id, schema id, topic, encoding, empty metadata), 0x05 Message
+    channel = _record(0x04, struct.pack('<HHI', 3, 0, 2) + b'/a' + struct.pack('<I', 3)
+                      + b'cdr' + struct.pack('<I', 0))
+    records = message(3, 1, 1000, 1001, b'abc') + channel + message(3, 2, 2000, 2002, b'')
+
+    def chunk(data):
+        return Chunk(message_start_time=1000, message_end_time=2000,
+                     uncompressed_size=len(data), uncompressed_crc=0, compression='',
+                     data=data)
+    assert list(_chunk_messages(chunk(records))) == [(3, 1000, 1001, b'abc'),
+                                                     (3, 2000, 2002, b'')]
+    assert [(r.channel_id, r.log_time, r.publish_time, bytes(r.data))
+            for r in breakup_chunk(chunk(records)) if type(r).__name__ == 'Message'] == \
+        list(_chunk_messages(chunk(records)))
+    # A record whose length runs 1 byte past the chunk: a damaged chunk, named as such
+    cut = records[:-31] + struct.pack('<BQ', 0x05, 23) + records[-22:]
+    with pytest.raises(ValueError, match='runs past its chunk'):
+        list(_chunk_messages(chunk(cut)))
