@@ -9,12 +9,14 @@ SHELL := /bin/bash
 # each test worker every test module it collects (about 7 CPU-s).
 PYCACHE = PYTHONDONTWRITEBYTECODE= PYTHONPYCACHEPREFIX=$$PWD/.stamps/pycache
 ENV = . tools/env.sh && $(PYCACHE)
-# Test processes (pytest-xdist workers): two per core (the node-process tests mostly wait),
-# at most 8; JOBS=1 runs the tests one after the other in one process. The graph tests give
+# Test processes (pytest-xdist workers): three per two cores (the node-process tests mostly
+# wait; two per core starve the real-time graphs' nodes, which then run longer: on 2 cores,
+# 3 workers spent 10-13 % less CPU than 4 at the same wall time, docs/performance.md), at
+# most 8; JOBS=1 runs the tests one after the other in one process. The graph tests give
 # the simulator a 30-s command deadline and the nodes' collected writers the collector's
 # depth, so a slowed machine neither zeroes a command nor loses a message of the test's
 # (docs/performance.md, "The test suite").
-JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( 2 * n > 8 ? 8 : 2 * n )))
+JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); j=$$(( (3 * n + 1) / 2 )); echo $$(( j > 8 ? 8 : j )))
 XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 # make test-fast: one worker per core unless JOBS is given. Its tests compute and never
 # wait, so a second worker per core only adds its start, its collection and its imports
@@ -43,7 +45,7 @@ help:
 	@echo '              STABILISE=1: internal motion stabilised, both cases'
 	@echo '              FAIL=joint3@2.5: all joints driven, joint 3 fails at 2.5 s'
 	@echo '              CIRCLES=N REST=S: N revolutions back to back, S s rest between'
-	@echo 'make test     run every test (core math, nodes, interfaces, linters), JOBS (2 x nproc)'
+	@echo 'make test     run every test (core math, nodes, interfaces, linters), JOBS (3 per 2 cores)'
 	@echo '              pytest processes at once; JOBS=1: one'
 	@echo 'make test-fast  the tests without DDS or node processes (core math, schemas,'
 	@echo '              loop logic, linters), one process per core (JOBS): the edit-run loop'

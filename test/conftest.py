@@ -11,7 +11,7 @@ def _domain():
     """
     Return this test process's ROS domain: FREEJOINT_TEST_DOMAIN, else one of its own.
 
-    Under pytest-xdist (``make test`` runs a worker per core and one more) the workers of
+    Under pytest-xdist (``make test`` runs three workers per two cores) the workers of
     one run prefer consecutive domains (modulo 100) from a base drawn from the run's id;
     otherwise 1 + pid % 100 is preferred. The domain is claimed (harness.claim_ros_domain):
     if another process of this machine holds the one preferred - a worker of another run
