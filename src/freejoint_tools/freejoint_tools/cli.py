@@ -90,7 +90,7 @@ class Session:
         rclpy.init(args=[], context=self.context)
         from rclpy.parameter import Parameter
         # A hidden node that only asks: no parameter services, no /rosout and no
-        # ~/get_type_description service (its type support is a third of a command's start).
+        # ~/get_type_description service (nobody asks fj for its types).
         self.node = rclpy.create_node('%sfj_%d' % (HIDDEN_PREFIX, os.getpid()),
                                       context=self.context,
                                       start_parameter_services=False,
