@@ -23,9 +23,9 @@ XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist worksteal)
 # (numba, Pinocchio, MuJoCo, matplotlib: each worker imports what its tests need).
 FAST_JOBS = $(if $(filter command line environment,$(origin JOBS)),$(JOBS),$(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( n > 8 ? 8 : n ))))
 FAST_XDIST = $(if $(filter 1,$(FAST_JOBS)),,-n $(FAST_JOBS) --dist worksteal)
-# The linters skip the files they found clean before at the same path in a checkout with
-# the same bytes, linters and configuration (test/lint_cache.py; the marks in the user's
-# cache, shared by checkouts), as in make test-fast; CI (CI set, as .ci/run runs) lints
+# make test and make test-fast: the linters skip the files they found clean before at the
+# same path in a checkout with the same bytes, linters and configuration (test/lint_cache.py;
+# the marks in the user's cache, shared by checkouts); CI (CI set, as .ci/run runs) lints
 # every file.
 LINT_CACHE = $(if $(CI),,FREEJOINT_LINT_CACHE=$${FREEJOINT_LINT_CACHE-$${FREEJOINT_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/freejoint}/lint})
 # CPU=avx2: the tests compute as a machine with AVX2 but no AVX-512 does (tools/avx2.sh:
@@ -74,7 +74,7 @@ test: setup
 	@$(ENV) $(LINT_CACHE) $(AS_CPU)python -m pytest -c pytest.ini $(XDIST)
 
 test-fast: setup
-	@$(ENV) $(AS_CPU)bash tools/test_fast.sh $(FAST_XDIST)
+	@$(ENV) $(LINT_CACHE) $(AS_CPU)bash tools/test_fast.sh $(FAST_XDIST)
 
 offline: setup
 	@$(ENV) $(if $(ARM),python tools/arm_offline.py $(ARM) --seeds $(or $(SEEDS),10) $(if $(PASSIVE),--passive $(PASSIVE)) $(if $(TIP),--tip $(TIP)) $(if $(BASE),--base $(BASE)),python -m freejoint_core.offline)

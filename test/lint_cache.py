@@ -1,7 +1,7 @@
 """
 The clean results of the ament linters per file, for ``make test`` and ``make test-fast``.
 
-The Makefile and ``tools/test_fast.sh`` set ``FREEJOINT_LINT_CACHE`` to a folder (default
+The Makefile sets ``FREEJOINT_LINT_CACHE`` for both (outside CI) to a folder (default
 ``${FREEJOINT_CACHE:-~/.cache/freejoint}/lint``, beside the interface cache, shared by
 every checkout of the user); the root conftest then gives every ``linter`` test, in place
 of ``ament_flake8``'s ``main_with_errors`` and ``ament_pep257``'s ``main``, a call that

@@ -25,6 +25,9 @@ VENV=$ROOT/.venv
 STAMPS=$ROOT/.stamps
 REQ=$ROOT/tools/requirements.txt
 UV_REQ=$ROOT/tools/requirements-uv.txt
+# The user's cache of what checkouts share (the uv bootstrap, the interfaces; the Makefile's
+# lint marks beside them).
+CACHE=${FREEJOINT_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/freejoint}
 PY=${PYTHON:-python3}
 INSTALLER=${FREEJOINT_INSTALLER:-auto}
 START=$SECONDS
@@ -113,10 +116,9 @@ find_uv() {
     say "installer: uv on PATH ($("$UV" --version 2>/dev/null || echo "$UV"))"
     return 0
   fi
-  local pin cache dir
+  local pin dir
   pin=$(grep -m1 -E '^uv==' "$UV_REQ" | cut -d= -f3)
-  cache=${FREEJOINT_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/freejoint}
-  dir=$cache/uv-$pin
+  dir=$CACHE/uv-$pin
   if [ -x "$dir/bin/uv" ]; then
     UV=$dir/bin/uv
     say "installer: uv $pin (bootstrap folder $dir)"
@@ -124,7 +126,7 @@ find_uv() {
   fi
   [ "${1:-}" = --bootstrap ] || return 0
   say "installer: installing uv $pin with pip into $dir (once per user)"
-  mkdir -p "$cache" || { WHY_NO_UV="cannot create $cache"; return 0; }
+  mkdir -p "$CACHE" || { WHY_NO_UV="cannot create $CACHE"; return 0; }
   rm -rf "$dir.tmp.$$"
   if "$VENV/bin/pip" install --disable-pip-version-check --progress-bar off --no-deps \
       --target "$dir.tmp.$$" -r "$UV_REQ" >"$STAMPS/uv-bootstrap.log" 2>&1 \
@@ -257,7 +259,7 @@ want_build="$src_hash $(cat "$STAMPS/venv")"
 # and the venv's pins.
 msgs_key=$(cd "$ROOT" && find src/freejoint_msgs -type f ! -path '*/__pycache__/*' | sort \
   | xargs sha256sum | cat - "$STAMPS/venv" | sha256sum | cut -c1-16)
-CACHE_BASE=${FREEJOINT_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/freejoint}/interfaces
+CACHE_BASE=$CACHE/interfaces
 MSGS_CACHE=
 if [ "$MODE" = wheels ] && [ "${FREEJOINT_BUILD_CACHE:-on}" != off ]; then
   MSGS_CACHE=$CACHE_BASE/$msgs_key

@@ -6,9 +6,9 @@
 set -u
 cd "$(dirname "$0")/.."
 start=$SECONDS
-# The linters lint only the files they have not found clean before (test/lint_cache.py);
-# CI and a package's colcon test lint every file.
-export FREEJOINT_LINT_CACHE=${FREEJOINT_LINT_CACHE-${FREEJOINT_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/freejoint}/lint}
+# The linters lint only the files they have not found clean before where FREEJOINT_LINT_CACHE
+# names a folder (make test-fast sets it, as make test does: test/lint_cache.py); CI and a
+# package's colcon test lint every file.
 python -m pytest -c pytest.ini -q -m 'not dds and not slow' "$@"
 rc=$?
 echo "[test-fast] $((SECONDS - start)) s wall"
