@@ -339,3 +339,7 @@ def test_a_chunks_messages_are_cut_from_its_records_as_mcap_reads_them():
     cut = records[:-31] + struct.pack('<BQ', 0x05, 23) + records[-22:]
     with pytest.raises(ValueError, match='runs past its chunk'):
         list(_chunk_messages(chunk(cut)))
+    # A message record of 21 bytes, one short of its fields
+    short = records[:-31] + struct.pack('<BQ', 0x05, 21) + records[-22:-1]
+    with pytest.raises(ValueError, match='shorter than its 22-byte fields'):
+        list(_chunk_messages(chunk(short)))

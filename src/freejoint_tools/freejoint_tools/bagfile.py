@@ -714,8 +714,8 @@ def _chunk_messages(chunk):
     Raises
     ------
     ValueError
-        A record runs past the end of the chunk (a damaged chunk); mcap's CRC error is a
-        ValueError too.
+        A record runs past the end of the chunk, or a Message record is shorter than its
+        fields (a damaged chunk); mcap's CRC error is a ValueError too.
     struct.error
         A record's header or a Message's fields are cut short.
 
@@ -734,6 +734,9 @@ def _chunk_messages(chunk):
             raise ValueError('record of %d bytes at %d runs past its chunk of %d bytes'
                              % (length, pos - 9, size))
         if opcode == Opcode.MESSAGE:
+            if length < head:
+                raise ValueError('message record of %d bytes at %d, shorter than its %d-byte '
+                                 'fields' % (length, pos - 9, head))
             channel_id, _, log_time, publish_time = unpack_head(data, pos)
             yield channel_id, log_time, publish_time, data[pos + head:end]
         pos = end
