@@ -311,7 +311,7 @@ def _record(opcode, body):
 
 
 def test_a_chunks_messages_are_cut_from_its_records_as_mcap_reads_them():
-    """Two Message records around a Channel record, by hand; then one running past the end."""
+    """Two Message records around a Channel record, by hand; then damaged ones."""
     import struct
 
     from mcap.records import Chunk
@@ -330,11 +330,12 @@ def test_a_chunks_messages_are_cut_from_its_records_as_mcap_reads_them():
         return Chunk(message_start_time=1000, message_end_time=2000,
                      uncompressed_size=len(data), uncompressed_crc=0, compression='',
                      data=data)
-    assert list(_chunk_messages(chunk(records))) == [(3, 1000, 1001, b'abc'),
-                                                     (3, 2000, 2002, b'')]
+    # offsets: the first message record 9 + 25 bytes, the channel record 9 + 21
+    assert list(_chunk_messages(chunk(records))) == [(0, 3, 1000, 1001, b'abc'),
+                                                     (64, 3, 2000, 2002, b'')]
     assert [(r.channel_id, r.log_time, r.publish_time, bytes(r.data))
             for r in breakup_chunk(chunk(records)) if type(r).__name__ == 'Message'] == \
-        list(_chunk_messages(chunk(records)))
+        [m[1:] for m in _chunk_messages(chunk(records))]
     # A record whose length runs 1 byte past the chunk: a damaged chunk, named as such
     cut = records[:-31] + struct.pack('<BQ', 0x05, 23) + records[-22:]
     with pytest.raises(ValueError, match='runs past its chunk'):

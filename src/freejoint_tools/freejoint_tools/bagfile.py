@@ -688,7 +688,7 @@ class _McapFile:
                         continue
                     fh.seek(start + 9)                          # opcode, record length
                     chunk = Chunk.read(ReadDataStream(fh))
-                    for channel_id, log_time, publish_time, data in _chunk_messages(chunk):
+                    for _, channel_id, log_time, publish_time, data in _chunk_messages(chunk):
                         if ids is None or channel_id in ids:
                             yield self.topics[channel_id], log_time, publish_time, data
         except OSError as exc:
@@ -704,7 +704,10 @@ _MESSAGE_HEAD = struct.Struct('<HIQQ')
 
 def _chunk_messages(chunk):
     """
-    Yield ``(channel id, log_time, publish_time, data bytes)`` of a Chunk's Message records.
+    Yield ``(offset, channel id, log_time, publish_time, data bytes)`` of a Chunk's Messages.
+
+    ``offset``: where the Message record starts in the chunk's uncompressed records (what
+    MCAP's message index holds).
 
     The chunk is decompressed and its CRC checked as mcap's ``breakup_chunk`` does; the
     records are then cut from its bytes with one unpack each (mcap's record classes read
@@ -738,7 +741,7 @@ def _chunk_messages(chunk):
                 raise ValueError('message record of %d bytes at %d, shorter than its %d-byte '
                                  'fields' % (length, pos - 9, head))
             channel_id, _, log_time, publish_time = unpack_head(data, pos)
-            yield channel_id, log_time, publish_time, data[pos + head:end]
+            yield pos - 9, channel_id, log_time, publish_time, data[pos + head:end]
         pos = end
 
 
@@ -1057,19 +1060,9 @@ def _message_indexes(chunk):
     offset of the message record in the chunk's uncompressed records (MCAP's message
     index, what a writer writes after each chunk).
     """
-    stream, length = get_chunk_data_stream(chunk, validate_crc=True)
     entries = {}
-    while stream.count < length:
-        offset = stream.count
-        opcode = stream.read1()
-        size = stream.read8()
-        if opcode == Opcode.MESSAGE:
-            head = stream.read(2 + 4 + 8)
-            channel_id, _, log_time = struct.unpack('<HIQ', head)
-            entries.setdefault(channel_id, []).append((log_time, offset))
-            stream.read(size - len(head))
-        else:
-            stream.read(size)
+    for offset, channel_id, log_time, _, _ in _chunk_messages(chunk):
+        entries.setdefault(channel_id, []).append((log_time, offset))
     return [MessageIndex(channel_id=cid, records=rows) for cid, rows in entries.items()]
 
 
