@@ -1232,8 +1232,12 @@ def parse(argv):
                     help="the controller's readiness_action (default: its config's, brake, "
                     'with --driver watchdog; hold with --driver hold-last, what '
                     'docs/real-arm.md prescribes for such a driver)')
+    ap.add_argument('--ctl', nargs='+', default=[], metavar='NAME:=VALUE',
+                    help="the controller's parameters beside the soak's own (as its -p items)")
     ap.add_argument('--out', default=os.path.join(OUT, 'soak.json'))
     args = ap.parse_args(argv)
+    if any(':=' not in item for item in args.ctl):
+        ap.error('--ctl: NAME:=VALUE items')
     if args.readiness_action is None and args.driver == 'hold-last':
         args.readiness_action = 'hold'
     if args.fail_at is not None and (not args.fully_actuated or args.fail_at < 0):
@@ -1270,6 +1274,7 @@ def main(argv=None):
     cond['fail_at_s'] = args.fail_at
     cond['driver'] = args.driver
     cond['readiness_action'] = args.readiness_action or 'configured (brake)'
+    cond['controller_parameters'] = args.ctl
     say('%d run(s) x %g s per case %s, sim and controller thread_priority %d, %d hog(s), '
         '%d CPUs, load %.2f, driver %s, readiness_action %s' % (
             args.runs, args.seconds, ', '.join(args.cases), args.priority, args.hogs,
@@ -1292,8 +1297,9 @@ def main(argv=None):
                 try:
                     row = soak_run(case, index, run, args.seconds, args.hogs, args.back_to_back,
                                    args.stabilise, args.fully_actuated, args.fail_at,
-                                   driver=args.driver, action=args.readiness_action,
-                                   arm=args.arm, lockstep=args.lockstep)
+                                   ctl_extra=args.ctl, driver=args.driver,
+                                   action=args.readiness_action, arm=args.arm,
+                                   lockstep=args.lockstep)
                 except Exception as exc:  # noqa: B902 - one bad run must not cost the soak
                     say('%s run %d failed: %s: %s' % (case, run, type(exc).__name__, exc))
                     row = {'case': case, 'run': run, 'error': str(exc), 'met': False}

@@ -12,6 +12,7 @@ from freejoint_control.loop import (ControlLoop, STATUS_DT_CLAMPED, STATUS_HOLDI
                                     STATUS_LAW_FAULT, STATUS_RATE_LIMITED, STATUS_RESUMING,
                                     STATUS_SETPOINT_LATE, STATUS_STOPPED)
 from freejoint_control.params import SCHEMA
+from freejoint_control.readiness import REALTIME_EPSILON
 from freejoint_core.arm import ArmModel, table1
 from freejoint_core.control import (Gains, RobustController, STATUS_BAD_INPUT,
                                     STATUS_STALE_SETPOINT, STATUS_STALE_STATE,
@@ -89,8 +90,10 @@ class Replica:
 
     def __init__(self, case, lockstep, resume=0.5, limits=LIMITS, rate=RATE, dt=DT,
                  resume_bounds=(1.0, 5.0), stiffness=STIFFNESS, gains=None):
+        # In real time the law's chattering bound is the arm's measured real-time one.
         self.ctl = RobustController(table1(case).scaled(0.7), gains or Gains(
-            tau_limit=limits, theta_max=(100.0,) * 5))
+            tau_limit=limits, theta_max=(100.0,) * 5,
+            epsilon=Gains().epsilon if lockstep else REALTIME_EPSILON[table1(case)]))
         self.shaper = ReferenceShaper(resume, not lockstep, *resume_bounds)
         self.lockstep = lockstep
         self.stiffness = stiffness

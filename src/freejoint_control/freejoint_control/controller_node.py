@@ -38,6 +38,7 @@ from freejoint_common.scheduling import process_scheduling
 from freejoint_control.conversions import Messages, StateThinning
 from freejoint_control.loop import ControlLoop, ERROR, RECEIPT, WARN
 from freejoint_control.params import SCHEMA
+from freejoint_control.readiness import realtime_epsilon
 from freejoint_control.supervisor import notify_ready
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -127,11 +128,13 @@ class ControllerNode(Node, Lifecycle):
         period = min(0.05, cfg.stale_timeout / 4.0)
         self.create_timer(period, self._watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         arm = resolve_arm(cfg.values)   # its gravity vector, not a case name, when given
+        epsilon = '' if cfg.lockstep else ', epsilon %g (realtime_epsilon: %s)' % (
+            realtime_epsilon(arm.params, cfg.realtime_epsilon, cfg.epsilon))
         self.get_logger().info(
             'controller ready: %s, nominal scale %g, %s, joints %s, dt %g s, law %s, robust %s'
             % (arm.source if arm.described else cfg.case, cfg.nominal_scale,
                'lockstep' if cfg.lockstep else 'real time', list(cfg.joints), cfg.dt, cfg.law,
-               cfg.gains.robust)
+               cfg.gains.robust) + epsilon
             + (' (standby: idle until SIGUSR1)' if cfg.standby else ''))
         if not cfg.standby:
             notify_ready()

@@ -21,6 +21,7 @@ from freejoint_common.schema import above, CASE, CONTROL_PERIOD, EXECUTOR
 from freejoint_common.schema import LoopConfig, NOMINAL_SCALE, nullspace_params, one_of
 from freejoint_common.schema import Param
 from freejoint_common.schema import SCHEDULING, Schema, unique_names
+from freejoint_control.readiness import realtime_epsilon
 from freejoint_core.arm import ArmModel, ArmParams
 from freejoint_core.circles import HORIZONTAL_SETTLE, MODULATION
 from freejoint_core.control import Gains, H_FORMS
@@ -243,8 +244,14 @@ PARAMS = (
           validator=_gain('Gamma')),
     Param('sigma', list(_DEFAULT.sigma), 'diagonal of the sigma-modification (5 values >= 0)',
           validator=_gain('sigma')),
-    Param('epsilon', _DEFAULT.epsilon, 'chattering bound epsilon of h_alpha (> 0)',
-          (1e-12, 1e6)),
+    Param('epsilon', _DEFAULT.epsilon, 'chattering bound epsilon of h_alpha (> 0) in '
+          "lockstep (the paper's); real time: realtime_epsilon", (1e-12, 1e6)),
+    Param('realtime_epsilon', 0.0,
+          'chattering bound epsilon of h_alpha in real time (lockstep: false), where each '
+          'command acts 1-3 ms late and a driver may keep it through missed states; 0 = '
+          'measured for the arm (freejoint_control.readiness.REALTIME_EPSILON: 0.5 for the '
+          "paper's arms, docs/real-time.md), epsilon for an arm without a measurement",
+          (0.0, 1e6)),
     Param('h_form', _DEFAULT.h_form,
           "h_alpha: 'sum' = ||a|| + epsilon (paper), 'sat' = max(||a||, epsilon)",
           validator=_h_form),
@@ -663,9 +670,13 @@ def build(values):
     else:
         reach = float(sum(nominal.lengths))
         task_dim = (model if model is not None else ArmModel).task_dim
+    law_values = values
+    if not values['lockstep']:
+        law_values = dict(values, epsilon=realtime_epsilon(
+            arm.params, values['realtime_epsilon'], values['epsilon'])[0])
     return Config(
         values=dict(values), nominal=nominal,
-        gains=gains(values, tuple(limits[joints.index(name)] for name in active_names),
+        gains=gains(law_values, tuple(limits[joints.index(name)] for name in active_names),
                     _floats('theta_max', values['theta_max']), task_dim),
         joint_names=joint_names, joints=joints,
         cmd_index=tuple(active_names.index(name) for name in joints), dt=dt,
