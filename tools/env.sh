@@ -32,4 +32,8 @@ if [ -z "${FASTRTPS_DEFAULT_PROFILES_FILE:-}${FASTDDS_DEFAULT_PROFILES_FILE:-}" 
   export FASTRTPS_DEFAULT_PROFILES_FILE="$_fj_root/config/fastdds.xml"
   export FASTDDS_DEFAULT_PROFILES_FILE="$_fj_root/config/fastdds.xml"
 fi
+# numpy's OpenBLAS on one thread per process unless chosen: the arrays are at most an arm's
+# (7 x 7), too small for OpenBLAS to split, and its thread pool costs every process's start
+# about 0.1 CPU-s and puts idle threads beside the control loop.
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 unset _fj_root

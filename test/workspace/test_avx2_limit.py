@@ -47,3 +47,16 @@ def test_without_the_limit_numpy_dispatches_to_what_this_cpu_has():
     with open('/proc/cpuinfo', encoding='utf-8') as fh:
         avx512 = ' avx512f ' in fh.read()
     assert ('X86_V4' in targets) == avx512, targets
+
+
+def test_env_sh_runs_openblas_on_one_thread_unless_one_is_chosen():
+    # OpenBLAS sizes its thread pool from OPENBLAS_NUM_THREADS when numpy loads it.
+    env = {k: v for k, v in os.environ.items() if k != 'OPENBLAS_NUM_THREADS'}
+    show = '. tools/env.sh --no-install && echo "$OPENBLAS_NUM_THREADS"'
+    out = subprocess.run(['bash', '-c', show], cwd=ROOT, env=env, capture_output=True,
+                         text=True, timeout=30).stdout.split()
+    assert out == ['1']
+    env['OPENBLAS_NUM_THREADS'] = '2'
+    out = subprocess.run(['bash', '-c', show], cwd=ROOT, env=env, capture_output=True,
+                         text=True, timeout=30).stdout.split()
+    assert out == ['2']
