@@ -64,7 +64,9 @@ def study(cases, seeds, rates, bursts, delay, jitter, progress=print, with_zero=
     for case in cases:
         base = [run_case(case, 'robust', s)[0] for s in seeds]
         bound = BOUND_FACTOR * worst(base)[0]
-        eps = REALTIME_EPSILON[table1(case)] if epsilon is None else epsilon
+        eps = REALTIME_EPSILON.get(
+            (table1(case), 'predict' if options.get('predict') else 'off'),
+            Gains().epsilon) if epsilon is None else epsilon
         options['gains'] = Gains(epsilon=eps)
         settings = [(0.0, 1)] * with_zero + [(r, b) for r in rates for b in bursts]
         for rate, burst in settings:

@@ -93,7 +93,7 @@ class Replica:
         # In real time the law's chattering bound is the arm's measured real-time one.
         self.ctl = RobustController(table1(case).scaled(0.7), gains or Gains(
             tau_limit=limits, theta_max=(100.0,) * 5,
-            epsilon=Gains().epsilon if lockstep else REALTIME_EPSILON[table1(case)]))
+            epsilon=Gains().epsilon if lockstep else REALTIME_EPSILON[(table1(case), 'off')]))
         self.shaper = ReferenceShaper(resume, not lockstep, *resume_bounds)
         self.lockstep = lockstep
         self.stiffness = stiffness
@@ -627,7 +627,9 @@ def test_delay_compensation_predict_runs_the_law_on_the_predicted_state():
     from freejoint_core.delay import extrapolate_setpoint, StatePredictor
     loop, _ = make(case='vertical', lockstep=False, max_state_age=0.0, stale_timeout=2.0,
                    resume_time=0.0, delay_compensation='predict')
-    rep = Replica('vertical', lockstep=False, resume=0.0)
+    # With the predictor the law keeps the paper's chattering bound in real time.
+    rep = Replica('vertical', lockstep=False, resume=0.0, gains=Gains(
+        tau_limit=LIMITS, theta_max=(100.0,) * 5))
     pred = StatePredictor(table1('vertical').scaled(0.7), DT)
     for k in range(5):
         setpoint(loop, k, _setpoint(k))

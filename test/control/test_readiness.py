@@ -12,7 +12,8 @@ from freejoint_control.loop import (ControlLoop, ERROR, INFO, STATUS_HOLDING, ST
 from freejoint_control.loop_stop import HOLD_ERROR_SAID, REJOIN_SAID
 from freejoint_control.params import SCHEMA
 from freejoint_control.readiness import (effective_periods, guard_margins, MEASURED,
-                                         ReadinessGuard, REALTIME_EPSILON, realtime_epsilon)
+                                         ReadinessGuard, REALTIME_EPSILON, realtime_epsilon,
+                                         STRICTEST)
 from freejoint_core.arm import ArmModel, table1
 from freejoint_core.control import Gains
 from freejoint_core.errors import FreejointValueError
@@ -118,10 +119,21 @@ def test_the_guard_thresholds_are_the_arms_measured_ones_unless_given():
         assert m.resume_delay <= m.max_delay and m.resume_rate >= m.min_rate
     other = table1('vertical').scaled(1.1)
     strictest = guard_margins(other, 'off')
-    assert strictest[:5] == guard_margins(table1('vertical'), 'off')[:5]
+    assert strictest[:5] == (STRICTEST.max_delay, STRICTEST.min_rate, STRICTEST.resume_delay,
+                             STRICTEST.resume_rate, STRICTEST.max_gap)
     assert strictest[5].startswith('readiness_max_delay, readiness_min_answer_rate, '
                                    'readiness_resume_delay, readiness_resume_answer_rate, '
                                    'readiness_max_gap not measured for this arm')
+    # The strictest is no looser than any measured threshold.
+    for m in MEASURED.values():
+        assert (STRICTEST.max_delay <= m.max_delay and STRICTEST.min_rate >= m.min_rate
+                and STRICTEST.max_gap <= m.max_gap)
+    # Thresholds measured at one chattering bound are not measured for another.
+    assert guard_margins(table1('vertical'), 'off', epsilon=0.5)[:5] == (
+        vertical.max_delay, vertical.min_rate, vertical.resume_delay, vertical.resume_rate,
+        vertical.max_gap)
+    paper = guard_margins(table1('vertical'), 'off', epsilon=0.1)
+    assert paper[:5] == strictest[:5] and 'and epsilon 0.1: the strictest' in paper[5]
     assert guard_margins(other, 'off', 0.003, 0.9, 0.002, 0.95, 7) == (
         0.003, 0.9, 0.002, 0.95, 7, 'given')
 
@@ -131,16 +143,21 @@ def test_a_real_time_law_of_the_papers_arms_takes_the_measured_chattering_bound(
         values = dict(FILE, case=case)
         assert SCHEMA.config(values).gains.epsilon == 0.1       # lockstep: the paper's
         real_time = dict(values, lockstep=False)
-        assert SCHEMA.config(real_time).gains.epsilon == REALTIME_EPSILON[table1(case)] == 0.5
+        assert SCHEMA.config(real_time).gains.epsilon == REALTIME_EPSILON[
+            (table1(case), 'off')] == 0.5
+        # With the predictor the paper's (its delay margin measured there)
+        predict = dict(real_time, delay_compensation='predict')
+        assert SCHEMA.config(predict).gains.epsilon == 0.1
         assert SCHEMA.config(dict(real_time, realtime_epsilon=0.3)).gains.epsilon == 0.3
         assert SCHEMA.config(dict(real_time, epsilon=0.2)).gains.epsilon == 0.5
     # The paper's arm under another gravity is another arm, not measured: its epsilon.
     other = dict(FILE, case='vertical', lockstep=False, gravity=[0.0, -5.0, 0.0], epsilon=0.2)
     assert SCHEMA.config(other).gains.epsilon == 0.2
-    assert realtime_epsilon(table1('vertical').scaled(1.1), 0.0, 0.2) == (
+    assert realtime_epsilon(table1('vertical').scaled(1.1), 'off', 0.0, 0.2) == (
         0.2, 'not measured for this arm: epsilon')
-    assert realtime_epsilon(table1('vertical'), 0.0, 0.1) == (0.5, 'measured for this arm')
-    assert realtime_epsilon(table1('vertical'), 0.7, 0.1) == (0.7, 'given')
+    assert realtime_epsilon(table1('vertical'), 'off', 0.0, 0.1) == (
+        0.5, 'measured for this arm')
+    assert realtime_epsilon(table1('vertical'), 'off', 0.7, 0.1) == (0.7, 'given')
 
 
 def test_at_the_real_time_chattering_bound_a_late_vertical_command_can_be_kept_through_a_stall():
@@ -148,7 +165,8 @@ def test_at_the_real_time_chattering_bound_a_late_vertical_command_can_be_kept_t
     # epsilon the command swings by 150 N m from one period to the next (99th percentile),
     # at the real-time one by 4 N m.
     late = {'delay_ticks': 1, 'delay_jitter': 2}
-    paper, realtime = Gains(epsilon=0.1), Gains(epsilon=REALTIME_EPSILON[table1('vertical')])
+    paper = Gains(epsilon=0.1)
+    realtime = Gains(epsilon=REALTIME_EPSILON[(table1('vertical'), 'off')])
 
     def swing(gains):
         trace = run_case('vertical', 'robust', 0, gains=gains, record_trace=True, **late)[1]
@@ -170,9 +188,8 @@ def test_an_arm_without_measured_thresholds_gets_the_strictest_and_a_warning():
     values.update(dict.fromkeys(PINNED, 0))
     logs = []
     loop = ControlLoop(SCHEMA.config(values), lambda *line: logs.append(line))
-    vertical = MEASURED[(table1('vertical'), 'off')]
-    assert loop._readiness.max_gap == vertical.max_gap
-    assert loop._readiness.max_delay == vertical.max_delay
+    assert loop._readiness.max_gap == STRICTEST.max_gap
+    assert loop._readiness.max_delay == STRICTEST.max_delay
     assert [text for level, _, text in logs if level == WARN][0].startswith(
         'readiness guard: readiness_max_delay, readiness_min_answer_rate')
     given = dict(values, readiness_max_delay=0.002, readiness_min_answer_rate=0.9,
@@ -280,17 +297,21 @@ def test_windows_within_the_answer_rate_pass():
     assert guard.trips == 0 and guard.last_rate == pytest.approx(1 / 3, abs=0.01)
 
 
-def test_by_default_a_vertical_loop_rides_through_5_missed_states_and_stops_after_6():
-    # The vertical arm's measured default (readiness_max_gap 5: bursts of 5 missed states
-    # kept every seed within the bound at a 1-ms delay, bursts of 20 did not).
+def test_by_default_a_vertical_loop_rides_through_10_missed_states_and_stops_after_11():
+    # The vertical arm's measured default at its real-time chattering bound
+    # (readiness_max_gap 10: bursts of 10 missed states kept every seed within the bound
+    # at a 1-3 ms delay up to 10 % missed, bursts of 20 did not at 10 %).
     loop, _ = make(**dict.fromkeys(PINNED, 0))
-    assert loop._readiness.max_gap == 5
+    assert loop._readiness.max_gap == 10
     assert None not in feed(loop, range(10), 0)
-    assert feed(loop, [15], 0)[0][0] != STATUS_STOPPED         # 5 missed (10-14)
-    [(status, _, _)] = feed(loop, [22], 0)                      # 6 missed (16-21)
+    assert feed(loop, [20], 0)[0][0] != STATUS_STOPPED         # 10 missed (10-19)
+    [(status, _, _)] = feed(loop, [32], 0)                      # 11 missed (21-31)
     assert status == STATUS_STOPPED
-    assert loop._readiness.reason == ('real-time loop not ready: 6 consecutive states not '
-                                      'answered, more than the 5 the law rides through')
+    assert loop._readiness.reason == ('real-time loop not ready: 11 consecutive states not '
+                                      'answered, more than the 10 the law rides through')
+    # At the paper's chattering bound it stops after 6 (the strictest thresholds).
+    loop, _ = make(realtime_epsilon=0.1, **dict.fromkeys(PINNED, 0))
+    assert loop._readiness.max_gap == 5
 
 
 def test_a_stall_of_the_loop_trips_the_guard_at_the_first_state_after_it():

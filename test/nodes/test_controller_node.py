@@ -379,14 +379,14 @@ def test_the_node_publishes_its_readiness_at_start_up_and_at_each_change(ros_nod
             _serialized_state(node, k)
         assert sent[1] == (1000 * DT_NS, True, '') and len(sent) == 2
         n = len(commands)
-        now[0] = 1110 * DT_NS              # 10 states missed (> 5, the vertical arm's gap)
-        _serialized_state(node, 1110)
-        assert sent[2] == (1110 * DT_NS, False, 'real-time loop not ready: 10 consecutive '
-                           'states not answered, more than the 5 the law rides through')
+        now[0] = 1115 * DT_NS              # 15 states missed (> 10, the vertical arm's gap)
+        _serialized_state(node, 1115)
+        assert sent[2] == (1115 * DT_NS, False, 'real-time loop not ready: 15 consecutive '
+                           'states not answered, more than the 10 the law rides through')
         assert len(commands) == n + 1      # the stop command, then nothing
         assert node._loop.result.status == STATUS_STOPPED
-        now[0] = 1111 * DT_NS
-        _serialized_state(node, 1111)
+        now[0] = 1116 * DT_NS
+        _serialized_state(node, 1116)
         assert len(commands) == n + 1 and len(sent) == 3
     finally:
         node.destroy_node()

@@ -129,7 +129,8 @@ class ControllerNode(Node, Lifecycle):
         self.create_timer(period, self._watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         arm = resolve_arm(cfg.values)   # its gravity vector, not a case name, when given
         epsilon = '' if cfg.lockstep else ', epsilon %g (realtime_epsilon: %s)' % (
-            realtime_epsilon(arm.params, cfg.realtime_epsilon, cfg.epsilon))
+            realtime_epsilon(arm.params, cfg.delay_compensation, cfg.realtime_epsilon,
+                             cfg.epsilon))
         self.get_logger().info(
             'controller ready: %s, nominal scale %g, %s, joints %s, dt %g s, law %s, robust %s'
             % (arm.source if arm.described else cfg.case, cfg.nominal_scale,

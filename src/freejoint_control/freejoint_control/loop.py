@@ -130,7 +130,7 @@ def nullspace_delay_periods(cfg):
     if not cfg.readiness_guard:
         return 1
     max_delay = guard_margins(resolve_arm(cfg.values).params, cfg.delay_compensation,
-                              cfg.readiness_max_delay)[0]
+                              cfg.readiness_max_delay, epsilon=cfg.gains.epsilon)[0]
     return max(1, math.ceil(max_delay / cfg.dt - 1e-9))
 
 

@@ -76,7 +76,7 @@ class Readiness:
         margins = guard_margins(resolve_arm(cfg.values).params, cfg.delay_compensation,
                                 cfg.readiness_max_delay, cfg.readiness_min_answer_rate,
                                 cfg.readiness_resume_delay, cfg.readiness_resume_answer_rate,
-                                cfg.readiness_max_gap)
+                                cfg.readiness_max_gap, cfg.gains.epsilon)
         max_delay = margins[0]
         key = (cfg.dt_ns, max_delay, margins[1], cfg.readiness_window,
                cfg.readiness_recover_windows, margins[2], margins[3], margins[4])

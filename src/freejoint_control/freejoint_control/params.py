@@ -249,8 +249,9 @@ PARAMS = (
     Param('realtime_epsilon', 0.0,
           'chattering bound epsilon of h_alpha in real time (lockstep: false), where each '
           'command acts 1-3 ms late and a driver may keep it through missed states; 0 = '
-          'measured for the arm (freejoint_control.readiness.REALTIME_EPSILON: 0.5 for the '
-          "paper's arms, docs/real-time.md), epsilon for an arm without a measurement",
+          'measured for the arm and delay_compensation (freejoint_control.readiness.'
+          "REALTIME_EPSILON: 0.5 for the paper's arms uncompensated, docs/real-time.md), "
+          'epsilon for one without a measurement',
           (0.0, 1e6)),
     Param('h_form', _DEFAULT.h_form,
           "h_alpha: 'sum' = ||a|| + epsilon (paper), 'sat' = max(||a||, epsilon)",
@@ -673,7 +674,8 @@ def build(values):
     law_values = values
     if not values['lockstep']:
         law_values = dict(values, epsilon=realtime_epsilon(
-            arm.params, values['realtime_epsilon'], values['epsilon'])[0])
+            arm.params, values['delay_compensation'], values['realtime_epsilon'],
+            values['epsilon'])[0])
     return Config(
         values=dict(values), nominal=nominal,
         gains=gains(law_values, tuple(limits[joints.index(name)] for name in active_names),
