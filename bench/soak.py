@@ -74,9 +74,12 @@ the circle and the hold), run here.
 
 Usage: ``. tools/env.sh && python bench/soak.py [--runs 5] [--seconds 30]
 [--cases horizontal vertical | --arm ARM] [--lockstep] [--hogs N] [--priority 50]
-[--driver hold-last] [--readiness-action brake|damp|hold]``. ``--driver hold-last`` meets a
-driver that holds its last command (no watchdog, no brakes on request; the controller's
-``readiness_action`` then ``hold`` unless given). Bags and logs stay in
+[--driver hold-last] [--readiness-action brake|damp|hold] [--stalls LO HI] [--ctl
+NAME:=VALUE ...]``. ``--driver hold-last`` meets a driver that holds its last command (no
+watchdog, no brakes on request; the controller's ``readiness_action`` then ``hold`` unless
+given). ``--stalls 20 50`` stalls each CPU for 20-50 ms every 0.5-2 s (a SCHED_FIFO 98 busy
+loop, above the nodes' priority; the same pattern each soak): the stalls of a machine whose
+host is busy, on demand. ``--ctl`` gives the controller parameters. Bags and logs stay in
 ``bags/soak/<case>_<run>/`` (git-ignored). Exit code 0 whatever the figures (a benchmark),
 1 if a run could not be made.
 """
@@ -124,6 +127,20 @@ HOG_CODE = ('import sys, time\n'
             'end = time.monotonic() + float(sys.argv[1])\n'
             'while time.monotonic() < end:\n'
             '    pass\n')
+STALL_CODE = ('import os, random, sys, time\n'
+              'cpu, lo, hi, life = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3]), '
+              'float(sys.argv[4])\n'
+              'os.sched_setaffinity(0, {cpu})\n'
+              'os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(98))\n'
+              'rng = random.Random(cpu)\n'
+              'end = time.monotonic() + life\n'
+              'while time.monotonic() < end:\n'
+              '    time.sleep(rng.uniform(0.5, 2.0))\n'
+              '    until = time.monotonic() + rng.uniform(lo, hi) / 1e3\n'
+              '    while time.monotonic() < until:\n'
+              '        pass\n')
+"""A stall of one CPU: SCHED_FIFO 98 (above the graph's nodes), busy for lo-hi ms, every
+0.5-2 s, its pattern seeded by the CPU's number."""
 
 
 def say(text):
@@ -173,14 +190,30 @@ def effort_limits():
 
 # -- CPU hogs ---------------------------------------------------------------------------
 class Hogs:
-    """N busy-loop processes at normal priority; each ends by itself after ``lifetime`` s."""
+    """
+    N busy-loop processes at normal priority; each ends by itself after ``lifetime`` s.
 
-    def __init__(self, count, lifetime):
+    ``stalls`` (lo, hi) [ms]: a stalling process per CPU instead (:data:`STALL_CODE`).
+    """
+
+    def __init__(self, count, lifetime, stalls=None):
         self.procs = []
-        for _ in range(count):
+        args = ([[STALL_CODE, str(cpu), '%g' % stalls[0], '%g' % stalls[1], '%.0f' % lifetime]
+                 for cpu in sorted(os.sched_getaffinity(0))] if stalls else
+                [[HOG_CODE, '%.0f' % lifetime]] * count)
+        for arg in args:
             self.procs.append(subprocess.Popen(
-                [sys.executable, '-c', HOG_CODE, '%.0f' % lifetime],
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
+                [sys.executable, '-c', *arg], stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE if stalls else subprocess.DEVNULL,
+                start_new_session=True))
+        if stalls:
+            time.sleep(0.5)
+            for proc in self.procs:
+                if proc.poll() is not None:
+                    err = proc.stderr.read().decode(errors='replace').strip().splitlines()
+                    self.stop()
+                    raise RuntimeError('--stalls needs SCHED_FIFO (root, CAP_SYS_NICE or an '
+                                       'rtprio limit): %s' % (err[-1] if err else 'exited'))
 
     def __enter__(self):
         return self
@@ -1232,12 +1265,17 @@ def parse(argv):
                     help="the controller's readiness_action (default: its config's, brake, "
                     'with --driver watchdog; hold with --driver hold-last, what '
                     'docs/real-arm.md prescribes for such a driver)')
+    ap.add_argument('--stalls', nargs=2, type=float, default=None, metavar=('LO', 'HI'),
+                    help='stall each CPU for LO-HI ms every 0.5-2 s (a SCHED_FIFO 98 busy '
+                    'loop per CPU, above the nodes: what a machine that stalls does)')
     ap.add_argument('--ctl', nargs='+', default=[], metavar='NAME:=VALUE',
                     help="the controller's parameters beside the soak's own (as its -p items)")
     ap.add_argument('--out', default=os.path.join(OUT, 'soak.json'))
     args = ap.parse_args(argv)
     if any(':=' not in item for item in args.ctl):
         ap.error('--ctl: NAME:=VALUE items')
+    if args.stalls is not None and not 0 < args.stalls[0] <= args.stalls[1] <= 500:
+        ap.error('--stalls LO HI: 0 < LO <= HI <= 500 [ms]')
     if args.readiness_action is None and args.driver == 'hold-last':
         args.readiness_action = 'hold'
     if args.fail_at is not None and (not args.fully_actuated or args.fail_at < 0):
@@ -1275,10 +1313,14 @@ def main(argv=None):
     cond['driver'] = args.driver
     cond['readiness_action'] = args.readiness_action or 'configured (brake)'
     cond['controller_parameters'] = args.ctl
+    cond['stalls_ms'] = args.stalls
     say('%d run(s) x %g s per case %s, sim and controller thread_priority %d, %d hog(s), '
         '%d CPUs, load %.2f, driver %s, readiness_action %s' % (
             args.runs, args.seconds, ', '.join(args.cases), args.priority, args.hogs,
-            os.cpu_count(), os.getloadavg()[0], args.driver, cond['readiness_action']))
+            os.cpu_count(), os.getloadavg()[0], args.driver, cond['readiness_action'])
+        + ('' if args.stalls is None else ', each CPU stalled %g-%g ms every 0.5-2 s'
+           % tuple(args.stalls))
+        + ('' if not args.ctl else ', controller ' + ' '.join(args.ctl)))
     cond['arm'] = args.arm
     cond['lockstep'] = args.lockstep
     for case in args.cases:
@@ -1289,7 +1331,7 @@ def main(argv=None):
     failed = 0
     # The hogs outlive no soak: each ends after the soak's expected length plus a margin.
     lifetime = len(args.cases) * args.runs * (args.seconds + 60.0) + 120.0
-    with Hogs(args.hogs, lifetime):
+    with Hogs(args.hogs, lifetime, args.stalls):
         index = 0
         for case in args.cases:
             for run in range(args.runs):

@@ -137,3 +137,16 @@ def test_the_arm_is_put_back_at_q0_only_after_a_circle_that_ended_at_its_start(m
         assert not soak.rest_at_q0_after('client', loop) and len(reset) == 2, code
     loop.outcomes = {}                   # followed, its outcome never came: put back
     assert soak.rest_at_q0_after('client', loop) and len(reset) == 3
+
+
+def test_stalls_and_controller_items_are_parsed_and_bad_ones_refused(capsys):
+    args = soak.parse(['--stalls', '20', '50', '--ctl', 'realtime_epsilon:=0.1'])
+    assert args.stalls == [20.0, 50.0] and args.ctl == ['realtime_epsilon:=0.1']
+    for bad in (['--stalls', '50', '20'], ['--stalls', '0', '20'], ['--ctl', 'epsilon=0.1']):
+        try:
+            soak.parse(bad)
+        except SystemExit as exc:
+            assert exc.code == 2
+        else:
+            raise AssertionError('accepted %s' % bad)
+    assert '--stalls LO HI' in capsys.readouterr().err
