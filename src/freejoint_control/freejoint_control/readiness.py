@@ -103,16 +103,22 @@ The law's measured chattering bound in real time per arm and ``delay_compensatio
 """
 
 
+def _measured(table, arm, delay_compensation):
+    """Return ``table``'s entry of the arm and delay_compensation, None if it has none."""
+    try:
+        return table.get((arm, delay_compensation))
+    except TypeError:       # an arm of no hashable kind: not measured
+        return None
+
+
 def realtime_epsilon(arm, delay_compensation, given, epsilon):
     """
     Return the chattering bound the law uses in real time, and where it came from.
 
     Parameters
     ----------
-    arm : freejoint_core.arm.ArmParams or other arm
-        The real arm's parameters (``resolve_arm(values).params``).
-    delay_compensation : {'off', 'predict'}
-        The controller's parameter of that name.
+    arm, delay_compensation
+        As :func:`guard_margins`'s.
     given : float
         The parameter ``realtime_epsilon``; > 0 is used as given.
     epsilon : float
@@ -129,10 +135,7 @@ def realtime_epsilon(arm, delay_compensation, given, epsilon):
     """
     if given > 0.0:
         return float(given), 'given'
-    try:
-        measured = REALTIME_EPSILON.get((arm, delay_compensation))
-    except TypeError:       # an arm of no hashable kind: not measured
-        measured = None
+    measured = _measured(REALTIME_EPSILON, arm, delay_compensation)
     if measured is None:
         return float(epsilon), 'not measured for this arm: epsilon'
     return measured, 'measured for this arm'
@@ -170,10 +173,7 @@ def guard_margins(arm, delay_compensation, max_delay=0.0, min_rate=0.0, resume_d
     given = (max_delay, min_rate, resume_delay, resume_rate, max_gap)
     names = ('readiness_max_delay', 'readiness_min_answer_rate', 'readiness_resume_delay',
              'readiness_resume_answer_rate', 'readiness_max_gap')
-    try:
-        measured = MEASURED.get((arm, delay_compensation))
-    except TypeError:       # an arm of no hashable kind: not measured
-        measured = None
+    measured = _measured(MEASURED, arm, delay_compensation)
     if measured is not None and epsilon is not None and epsilon != measured.epsilon:
         measured = None
     if measured is None:
