@@ -582,31 +582,38 @@ def test_with_the_hold_action_a_tracking_error_past_readiness_max_error_gives_wa
     assert answers[-1][0] != STATUS_STOPPED and loop._readiness.ready
 
 
-def test_a_not_ready_hold_off_by_more_than_readiness_max_error_gives_way_until_ready():
+def test_a_not_ready_hold_off_by_more_than_readiness_hold_max_error_gives_way_until_ready():
     loop, logs = make(readiness_action='hold')
     feed(loop, range(200), 2_500_000)                    # trips at 100 ms: the delay
     assert feed(loop, [200], 2_500_000)[0][0] & STATUS_HOLDING
-    q, offset = _sagged(loop)
+    q, offset = _sagged(loop, drop=0.3)
+    assert offset > 0.05                                 # readiness_hold_max_error
     ns = 701 * DT_NS
     res = loop.on_state(ns, NAMES, list(q), list(QD0), ns + 2_500_000, 100.201)
     assert res.status == STATUS_STOPPED and res.message.endswith(': ' + HOLD_ERROR_SAID)
     assert list(res.effort) == pytest.approx(gravity_hold(q), abs=1e-9)
     assert [text for level, kind, text in logs if 'mm off' in text] == [
         'real-time loop not ready: mean state->command delay 3 ms > the 2 ms the law '
-        'tolerates over 0.1 s; then the hold %.3g mm off (> 10 mm): %s'
+        'tolerates over 0.1 s; then the hold %.3g mm off (> 50 mm): %s'
         % (offset * 1e3, HOLD_ERROR_SAID)]
     # Back in place, short of an error: still the damped hold until ready, then tracking.
     assert {a[0] for a in feed(loop, range(202, 240), 2_500_000)} == {STATUS_STOPPED}
     answers = feed(loop, range(240, 900), 0)
     assert loop._readiness.ready and answers[-1][0] != STATUS_STOPPED
-    # Within the bound the law holds as before (the tests above).
+    # Past readiness_max_error (10 mm, a ready loop's following error) but within the
+    # hold's own bound the law holds on: what a stall of 40-60 ms costs it.
     loop, _ = make(readiness_action='hold')
     feed(loop, range(200), 2_500_000)
-    q, offset = _sagged(loop, drop=0.02)
-    assert offset < 0.010
+    q, offset = _sagged(loop)
+    assert 0.010 < offset < 0.05
     ns = 701 * DT_NS
     res = loop.on_state(ns, NAMES, list(q), list(QD0), ns + 2_500_000, 100.201)
     assert res.status & STATUS_HOLDING
+    # readiness_hold_max_error 0: the hold's bound is readiness_max_error's.
+    loop, _ = make(readiness_action='hold', readiness_hold_max_error=0.0)
+    feed(loop, range(200), 2_500_000)
+    res = loop.on_state(ns, NAMES, list(q), list(QD0), ns + 2_500_000, 100.201)
+    assert res.status == STATUS_STOPPED and res.message.endswith(': ' + HOLD_ERROR_SAID)
 
 
 def test_ready_again_after_the_damped_hold_a_plan_waits_until_the_reference_rejoined():

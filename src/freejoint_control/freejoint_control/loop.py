@@ -528,7 +528,7 @@ class ControlLoop:
             elif self._hold_error is not None:
                 self.log(ERROR, None, '%s; then the hold %.3g mm off (> %.3g mm): %s' % (
                     guard.reason, self._hold_error * 1e3,
-                    self.watch.error_limit(True) * 1e3, HOLD_ERROR_SAID))
+                    self.watch.law_hold_limit() * 1e3, HOLD_ERROR_SAID))
             else:
                 self.log(ERROR, None, '%s; then %d states missed in a row (%.3g s > '
                          'readiness_hold_max_gap %g s): %s' % (
@@ -879,12 +879,14 @@ class ControlLoop:
         guard = self.watch.guard
         if guard is not None:
             holding = sp is None
-            limit = self.watch.error_limit(holding)
-            if limit and ref_error > limit:
-                if guard.ready:
+            if guard.ready:
+                limit = self.watch.error_limit(holding)
+                if limit and ref_error > limit:
                     return self._following_error(ns, ref_error, guard, limit, holding,
                                                  now_ns, q, qd)
-                if self.watch.holds and self._hold_gap is None and self._hold_error is None:
+            elif self.watch.holds and self._hold_gap is None and self._hold_error is None:
+                limit = self.watch.law_hold_limit()
+                if limit and ref_error > limit:
                     # Not ready, the law's hold off by more than its bound: it gives way.
                     self._hold_error = ref_error
                     self._gap_tripped = False

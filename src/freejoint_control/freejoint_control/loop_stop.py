@@ -60,7 +60,7 @@ class Readiness:
         self.note = None
         self.stale_reason = ''
         self.rejoin = ''
-        self._max_error = self._max_hold_error = 0.0
+        self._max_error = self._max_hold_error = self._max_law_hold_error = 0.0
 
     def install(self, cfg):
         """(Re)build the guard when its parameters change (keeps its verdict); True: none."""
@@ -82,6 +82,7 @@ class Readiness:
                cfg.readiness_recover_windows, margins[2], margins[3], margins[4])
         self._max_error = cfg.readiness_max_error
         self._max_hold_error = cfg.readiness_max_hold_error or cfg.readiness_max_error
+        self._max_law_hold_error = cfg.readiness_hold_max_error or self._max_hold_error
         if key == self._key:
             return False
         old = self.guard
@@ -120,6 +121,10 @@ class Readiness:
     def error_limit(self, holding):
         """Return the tracking error [m] past which the loop is not ready (0: none)."""
         return self._max_hold_error if holding else self._max_error
+
+    def law_hold_limit(self):
+        """Return the error [m] past which a not-ready law's hold gives way (0: never)."""
+        return self._max_law_hold_error
 
     def verdict(self):
         """Return ``(ready, reason)`` now (a stop for want of states: not ready)."""

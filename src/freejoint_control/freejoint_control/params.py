@@ -419,6 +419,13 @@ PARAMS = (
           'through any gap. The default: the vertical law was lost under 35-49 ms stalls '
           'and on 0.1-s gaps, the damped hold is stable to 1.33 stop_hold_time, and a '
           'switch costs the free link its hold (docs/real-time.md)', (0.0, 1.0)),
+    Param('readiness_hold_max_error', 0.05,
+          "readiness_action 'hold', not ready: the law's hold off by more than this [m] "
+          'gives the rest of the spell to the damped joint hold; 0 = readiness_max_hold_error '
+          '(else readiness_max_error). The default: offline, at the real-time bound, an '
+          "isolated 40-60 ms stall of the driver's kept command carried the vertical hold "
+          '4-26 mm off and the law recovered, while the damped joint hold lets a vertical free '
+          'link fall (docs/real-time.md)', (0.0, 10.0)),
     Param('readiness_resume_delay', 0.0,
           'resume: a window counts towards readiness (readiness_recover_windows of them in '
           'a row) at this mean effective delay [s] or less; 0 = measured for the arm (as '
