@@ -34,7 +34,7 @@ import os
 import sys
 import time
 
-from freejoint_control.readiness import REALTIME_EPSILON
+from freejoint_control.readiness import realtime_epsilon
 from freejoint_core.arm import table1
 from freejoint_core.control import Gains
 from freejoint_core.offline import run_case
@@ -66,9 +66,8 @@ def study(cases, seeds, rates, bursts, delay, jitter, progress=print, with_zero=
     for case in cases:
         base = [run_case(case, 'robust', s)[0] for s in seeds]
         bound = BOUND_FACTOR * worst(base)[0]
-        eps = REALTIME_EPSILON.get(
-            (table1(case), 'predict' if options.get('predict') else 'off'),
-            Gains().epsilon) if epsilon is None else epsilon
+        eps = realtime_epsilon(table1(case), 'predict' if options.get('predict') else 'off',
+                               epsilon or 0.0, Gains().epsilon)[0]
         options['gains'] = Gains(epsilon=eps)
         settings = [(0.0, 1)] * with_zero + [(r, b) for r in rates for b in bursts]
         for rate, burst in settings:
