@@ -193,22 +193,23 @@ class Hogs:
     """
     N busy-loop processes at normal priority; each ends by itself after ``lifetime`` s.
 
-    ``stalls`` (lo, hi) [ms]: a stalling process per CPU instead (:data:`STALL_CODE`).
+    ``stalls`` (lo, hi) [ms]: a stalling process per CPU besides (:data:`STALL_CODE`).
     """
 
     def __init__(self, count, lifetime, stalls=None):
         self.procs = []
-        args = ([[STALL_CODE, str(cpu), '%g' % stalls[0], '%g' % stalls[1], '%.0f' % lifetime]
-                 for cpu in sorted(os.sched_getaffinity(0))] if stalls else
-                [[HOG_CODE, '%.0f' % lifetime]] * count)
-        for arg in args:
+        for _ in range(count):
             self.procs.append(subprocess.Popen(
-                [sys.executable, '-c', *arg], stdout=subprocess.DEVNULL,
-                stderr=subprocess.PIPE if stalls else subprocess.DEVNULL,
-                start_new_session=True))
-        if stalls:
+                [sys.executable, '-c', HOG_CODE, '%.0f' % lifetime],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
+        stallers = [subprocess.Popen(
+            [sys.executable, '-c', STALL_CODE, str(cpu), '%g' % stalls[0], '%g' % stalls[1],
+             '%.0f' % lifetime], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+            start_new_session=True) for cpu in sorted(os.sched_getaffinity(0))] if stalls else []
+        self.procs += stallers
+        if stallers:
             time.sleep(0.5)
-            for proc in self.procs:
+            for proc in stallers:
                 if proc.poll() is not None:
                     err = proc.stderr.read().decode(errors='replace').strip().splitlines()
                     self.stop()
