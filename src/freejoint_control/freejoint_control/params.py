@@ -410,9 +410,8 @@ PARAMS = (
           (0.0, 1.0)),
     Param('readiness_max_gap', 0,
           'trip: a ready loop stops at the first state after more consecutive states not '
-          'answered than this, or taken more than this many periods after the one before '
-          '(a stall of the loop, the states queued meanwhile answered late); 0 = measured '
-          'for the arm (as readiness_max_delay)', (0, 100000)),
+          'answered than this (a stall of the loop); 0 = measured for the arm (as '
+          'readiness_max_delay)', (0, 100000)),
     Param('readiness_hold_max_gap', 0.05,
           "readiness_action 'hold': the longest gap [s] between two states (the driver "
           "keeping the law's last command all through it) after which a not-ready spell "

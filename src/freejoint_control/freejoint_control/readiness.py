@@ -13,10 +13,7 @@ arm (docs/real-time.md, ``bench/guard_margin.py``: :data:`MEASURED`, :func:`guar
   against ``max_delay`` (parameter ``readiness_max_delay``);
 - the answer rate: states taken / states expected (the window's stamp span over the
   control period), against ``min_rate`` (``readiness_min_answer_rate``);
-- a gap: more consecutive states not answered than ``max_gap`` (``readiness_max_gap``),
-  or more than ``max_gap`` periods between two states taken (a loop that stalled, then
-  answers the states that queued meanwhile: none is missed, but the driver kept its last
-  command through the stall as through missed states).
+- a gap: more consecutive states not answered than ``max_gap`` (``readiness_max_gap``).
 
 A loop starts not ready (the driver's brakes, engaged at start, stay on) until
 ``readiness_recover_windows`` good windows; a hot spare starts ready (it must take over at
@@ -236,10 +233,8 @@ class ReadinessGuard:
         misses ``min_rate`` allows).
     max_gap : int, optional
         A ready loop trips at the first state after more consecutive states not answered
-        than this (stamps more than ``max_gap + 1`` periods apart), or taken more than
-        ``max_gap + 1`` periods of system time after the one before (the driver kept the
-        previous command through that stall, whatever the states queued meanwhile);
-        None: only the window's share.
+        than this (stamps more than ``max_gap + 1`` periods apart); None: only the
+        window's share.
 
     Attributes
     ----------
@@ -288,7 +283,6 @@ class ReadinessGuard:
         # Stamps further apart than this [ns]: a gap of more than max_gap states.
         self._gap_ns = None if max_gap is None else (max_gap + 1) * dt_ns + dt_ns // 2
         self._last_ns = None
-        self._last_now_ns = None        # system time the state before was taken at
         self.last_missed = 0            # states missed just before the one observed
         self.ready = self.started = bool(start_ready)
         self.reason = '' if start_ready else (
@@ -321,7 +315,6 @@ class ReadinessGuard:
 
         """
         last, self._last_ns = self._last_ns, ns
-        last_now, self._last_now_ns = self._last_now_ns, now_ns
         gap_ns = self._gap_ns
         self.last_missed = 0 if last is None else max(0, (ns - last) // self.dt_ns - 1)
         if (gap_ns is not None and self.ready and last is not None
@@ -330,14 +323,6 @@ class ReadinessGuard:
             return self._not_ready(
                 'real-time loop not ready: %d consecutive states not answered, more than '
                 'the %d the law rides through' % (self.last_missed, self.max_gap))
-        if (gap_ns is not None and self.ready and last_now is not None
-                and now_ns - last_now > gap_ns):
-            self._start_ns = None
-            return self._not_ready(
-                'real-time loop not ready: no state taken for %.1f ms (the driver kept its '
-                'last command for %d periods), more than the %d missed states the law rides '
-                'through' % ((now_ns - last_now) * 1e-6, (now_ns - last_now) // self.dt_ns,
-                             self.max_gap))
         start = self._start_ns
         if start is None or ns < start:
             self._start_ns = ns
