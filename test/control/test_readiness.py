@@ -546,7 +546,7 @@ def test_a_tracking_error_past_readiness_max_error_stops_a_ready_loop_braking_at
     assert res.status == STATUS_STOPPED
     assert list(res.effort) == pytest.approx(gravity_hold(q), abs=1e-9)
     reason = ('real-time loop not ready: tracking error %.3g mm > the 10 mm of '
-              'readiness_max_error (the law does not hold the arm on this loop)'
+              'readiness_max_error (the arm does not follow its reference)'
               % (offset * 1e3))
     assert loop.take_brake_request() == reason + ': brake now'
     assert [text for level, kind, text in logs if level == ERROR][-1] == (
@@ -558,28 +558,47 @@ def test_a_tracking_error_past_readiness_max_error_stops_a_ready_loop_braking_at
     assert answers[-1][0] != STATUS_STOPPED
 
 
-def test_with_the_hold_action_a_tracking_error_past_readiness_max_error_gives_way_at_once():
-    # The law that does not hold the arm on this loop would not hold it in a hold either:
-    # the damped joint hold answers from the trip on, every state until the loop is ready.
+def test_with_the_hold_action_a_tracking_error_past_readiness_max_error_holds_where_the_arm_is():
+    # A following error may come from a push or a transient, not from the loop: the law
+    # holds the end effector from the next state on, as after any other trip (the damped
+    # joint hold would let a vertical free link fall), and gives way only past
+    # readiness_hold_max_error (the next test).
     loop, logs = make(readiness_action='hold')
     feed(loop, range(10), 0)
     q, offset = _sagged(loop)
     ns = 510 * DT_NS
     loop.on_setpoint(ns, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 0.01)
     res = loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.01)
-    assert res.status == STATUS_STOPPED and not loop._readiness.ready
-    # At rest where the trip found the arm: the damped hold is the gravity load alone.
-    assert list(res.effort) == pytest.approx(gravity_hold(q), abs=1e-9)
+    # The state that tripped is answered with the law's command, computed for it.
+    assert not res.status & (STATUS_STOPPED | STATUS_HOLDING) and not loop._readiness.ready
+    assert list(res.effort) != pytest.approx(gravity_hold(q), abs=1e-3)
     reason = ('real-time loop not ready: tracking error %.3g mm > the 10 mm of '
-              'readiness_max_error (the law does not hold the arm on this loop)'
+              'readiness_max_error (the arm does not follow its reference)'
               % (offset * 1e3))
-    said = HOLD_ERROR_SAID
-    assert res.message == reason + ': ' + said
     assert [text for level, kind, text in logs if 'tracking error' in text] == [
-        reason + ': ' + said]
-    assert {a[0] for a in feed(loop, range(11, 60), 0)} == {STATUS_STOPPED}
-    answers = feed(loop, range(60, 700), 0)
-    assert answers[-1][0] != STATUS_STOPPED and loop._readiness.ready
+        reason + ': holding position']
+    assert not [text for level, kind, text in logs if 'damped' in text]
+    # From the next state on: the law's hold, at the end effector the trip found.
+    ns = 511 * DT_NS
+    loop.on_setpoint(ns, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 0.011)
+    res = loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.011)
+    assert res.status & STATUS_HOLDING and not res.status & STATUS_STOPPED
+    p = loop.law.model.fk(q)
+    assert res.message.startswith('holding at (%.4f, %.4f) m: %s' % (p[0], p[1], reason))
+    assert loop.shaper.hold_position == pytest.approx(tuple(loop.law.model.fk(q)), abs=1e-12)
+    assert list(res.position_desired) == pytest.approx(list(loop.law.model.fk(q)), abs=1e-12)
+    # Held there until ready again after its windows; then tracking resumes, blending
+    # from the hold (no re-joining spell: the arm was not let go).
+    statuses = []
+    for k in range(12, 700):
+        ns = (k + 500) * DT_NS
+        loop.on_setpoint(ns, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, k * 1e-3)
+        statuses.append(loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.0 + k * 1e-3).status)
+        if loop._readiness.ready:
+            break
+    assert loop._readiness.ready and loop.readiness() == (True, '')
+    assert all(st & STATUS_HOLDING and not st & STATUS_STOPPED for st in statuses[:-1])
+    assert statuses[-1] & STATUS_RESUMING
 
 
 def test_a_not_ready_hold_off_by_more_than_readiness_hold_max_error_gives_way_until_ready():
@@ -681,8 +700,8 @@ def test_a_hold_without_setpoints_stops_at_readiness_max_hold_error_and_resumes_
     assert 0.003 < offset < 0.005                  # under readiness_max_error's 10 mm
     assert states(loop, [1], q)[0] is not None and loop.result.status == STATUS_STOPPED
     reason = ('real-time loop not ready: tracking error %.3g mm > the 3 mm of '
-              'readiness_max_hold_error while holding (the law does not hold the arm on '
-              'this loop)' % (offset * 1e3))
+              'readiness_max_hold_error while holding (the arm does not follow its '
+              'reference)' % (offset * 1e3))
     assert loop.take_brake_request() == reason + ': brake now'
     # Braked where it drifted to; after its good windows the hold resumes at its own
     # position, the reference starting at the braked arm (no step, no second trip).

@@ -882,8 +882,8 @@ class ControlLoop:
             if guard.ready:
                 limit = self.watch.error_limit(holding)
                 if limit and ref_error > limit:
-                    return self._following_error(ns, ref_error, guard, limit, holding,
-                                                 now_ns, q, qd)
+                    return self._following_error(res, ns, ref_error, guard, limit,
+                                                 holding, now_ns, q, qd)
             elif self.watch.holds and self._hold_gap is None and self._hold_error is None:
                 limit = self.watch.law_hold_limit()
                 if limit and ref_error > limit:
@@ -893,24 +893,29 @@ class ControlLoop:
                     return self._gap_stop(ns, q, qd, now_ns, guard)
         return res
 
-    def _following_error(self, ns, error, guard, limit, holding, now_ns, q, qd):
-        """Real time: the arm does not follow; stop tracking as a bad window would."""
+    def _following_error(self, res, ns, error, guard, limit, holding, now_ns, q, qd):
+        """
+        Real time: the arm does not follow; stop tracking as a bad window would.
+
+        'brake' and 'damp' stop at once. 'hold' answers this state with the command just
+        computed and holds the end effector from the next state on, as after any other
+        trip: the error may come from a push or a transient rather than from the loop (a
+        state that jumped, a stall ridden through), and the damped joint hold lets a free
+        link fall (a vertical arm's swings through its whole range). The law's hold still
+        gives way to the damped joint hold past ``readiness_hold_max_error``.
+        """
         if guard.trip('real-time loop not ready: tracking error %.3g mm > the %.3g mm of '
-                      '%s (the law does not hold the arm on this loop)'
+                      '%s (the arm does not follow its reference)'
                       % (error * 1e3, limit * 1e3, 'readiness_max_hold_error while holding'
                          if holding and self.config.readiness_max_hold_error
                          else 'readiness_max_error')):
-            self.watch.changed(1, ns, HOLD_ERROR_SAID if self.watch.holds else None)
+            self.watch.changed(1, ns)
             self._said_ns = ns
         if self.watch.brakes:
             return self._withhold(ns, now_ns)
         if self.watch.damps:
             return self._damped_stop(ns, q, qd, now_ns)
-        # 'hold': the law that does not hold the arm on this loop would not hold it in a
-        # hold either; the damped joint hold, whose command is safe to keep (as after a gap).
-        self._hold_error = error
-        self._gap_tripped = True        # (the trip's line said it)
-        return self._gap_stop(ns, q, qd, now_ns, guard)
+        return res
 
     def on_failure_notice(self, name):
         """
