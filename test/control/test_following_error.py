@@ -38,13 +38,14 @@ def run(event, at, size, seed=0):
     """
     Run one circle with ``event`` at ``at`` s into it; return what the arm did after it.
 
-    ``event``: 'push' (``size`` N m on the active joints, +/-, for 30 ms) or 'reset' (the
+    ``event``: 'push' (``size`` N m on the active joints, +/-, for 30 ms), 'reset' (the
     plant back at q(0) at rest, the loop silent ``size`` ticks from then, the states
-    answered once it is back). Returns a dict: ``worst`` [m], the end effector's largest
-    distance from the circle (from its start point outside the circle's time) from the
-    event on; ``fastest`` [rad/s], the fastest joint then; ``tripped``, ``damped``,
-    whether a following error tripped the guard and whether the damped joint hold
-    answered; ``done``, whether the plan finished.
+    answered once it is back) or 'starve' (11 states lost, then for ``size`` ticks one
+    state in 10 answered: a loop the machine starves, a gap trip first). Returns a dict:
+    ``worst`` [m], the end effector's largest distance from the circle (from its start
+    point outside the circle's time) from the event on; ``fastest`` [rad/s], the fastest
+    joint then; ``tripped``, ``damped``, whether a following error tripped the guard and
+    whether the damped joint hold answered; ``done``, whether the plan finished.
     """
     values = dict(CONTROLLER, case='vertical', lockstep=False, readiness_action='hold')
     loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: None)
@@ -71,7 +72,10 @@ def run(event, at, size, seed=0):
         if event == 'reset' and k == start:
             plant.reset(q0=q0, qd0=np.zeros(3))
         state = (ns, plant.q.tolist(), plant.qd.tolist(), mono)
-        if event == 'reset' and start <= k < start + size:
+        if event == 'starve' and start <= k < start + 11 + size and (
+                k < start + 11 or (k - start) % 10):
+            pass                                    # lost: the driver keeps the command
+        elif event == 'reset' and start <= k < start + size:
             queued.append(state)
         else:
             for st in queued + [state]:
@@ -109,6 +113,15 @@ def test_a_following_error_with_the_hold_action_keeps_the_vertical_arm(event, at
     assert out['worst'] < 0.025, out            # measured 8.1 (push) and 17.2 mm (reset)
     assert out['fastest'] < 40.0, out           # the circle's own: up to 32 rad/s
     assert out['done']                          # the plan paused and went on to its end
+
+
+def test_a_starved_loop_holds_at_readiness_hold_stiffness_and_keeps_the_vertical_arm():
+    # Seed 5, 2.5 s into the circle: after the gap trip the loop answers 1 state in 10 for
+    # 50 ms. The law's hold at hold_stiffness (2) lost the arm (1.29 m, past 50 mm the
+    # damped hold); at readiness_hold_stiffness (1) it stays within 4 mm of the path.
+    out = run('starve', 2.5, 50, seed=5)
+    assert not out['damped'] and out['done']
+    assert out['worst'] < 0.010, out
 
 
 def test_a_small_push_is_ridden_through_without_a_trip():

@@ -601,6 +601,32 @@ def test_with_the_hold_action_a_tracking_error_past_readiness_max_error_holds_wh
     assert statuses[-1] & STATUS_RESUMING
 
 
+def test_a_timing_trip_holds_at_readiness_hold_stiffness_a_following_error_at_hold_stiffness():
+    # A late loop (mean delay 2.5 ms > 2 ms) holds at readiness_hold_stiffness (1: the
+    # paper's gains); a following error of a loop on time holds at hold_stiffness (2).
+    loop, _ = make(readiness_action='hold')
+    assert loop.config.hold_stiffness == 2.0 and loop.config.readiness_hold_stiffness == 1.0
+    feed(loop, range(200), 2_500_000)                    # trips at 100 ms: the delay
+    assert feed(loop, [200], 2_500_000)[0][0] & STATUS_HOLDING
+    assert loop.law.stiffness == 1.0
+    loop, _ = make(readiness_action='hold', readiness_hold_stiffness=3.0)
+    feed(loop, range(201), 2_500_000)
+    assert loop.law.stiffness == 3.0
+    loop, _ = make(readiness_action='hold')
+    feed(loop, range(10), 0)
+    q, _offset = _sagged(loop)
+    for k in (10, 11):                                   # the trip, then the hold
+        ns = (k + 500) * DT_NS
+        loop.on_setpoint(ns, (0.2, 0.0, 0.0, 0.0, 0.0, 0.0), 0, k * 1e-3)
+        res = loop.on_state(ns, NAMES, list(q), list(QD0), ns, 100.0 + k * 1e-3)
+    assert res.status & STATUS_HOLDING and loop.law.stiffness == 2.0
+
+
+def test_readiness_hold_stiffness_is_checked_against_the_discrete_loop():
+    with pytest.raises(FreejointValueError, match='readiness_hold_stiffness'):
+        make(readiness_action='hold', readiness_hold_stiffness=10.0)
+
+
 def test_a_not_ready_hold_off_by_more_than_readiness_hold_max_error_gives_way_until_ready():
     loop, logs = make(readiness_action='hold')
     feed(loop, range(200), 2_500_000)                    # trips at 100 ms: the delay

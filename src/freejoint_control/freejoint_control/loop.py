@@ -178,6 +178,9 @@ class ControlLoop:
         # 'hold': the law's error [m] past its bound (readiness_max_error) after which this
         # not-ready spell gave way to the damped joint hold (None: it did not)
         self._hold_error = None
+        # 'hold': this not-ready spell began with a following-error trip (the loop on time):
+        # its hold at hold_stiffness, else at readiness_hold_stiffness
+        self._error_spell = False
         self._damped = False            # this stop answered with the damped joint hold
         self._rejoin_ns = 0             # the state at which the loop, ready again, re-joins
         self.stops = 0                  # stop commands sent
@@ -354,6 +357,7 @@ class ControlLoop:
                 if change:
                     watch.changed(change, ns)
                     self._said_ns = ns
+                    self._error_spell = False
                 if (not guard.ready and guard.started and self._hold_gap is None
                         and self._hold_error is None and watch.gives_way(guard)):
                     # 'hold': a gap longer than readiness_hold_max_gap, the law's last
@@ -636,11 +640,19 @@ class ControlLoop:
                      ref_error * 1e3))
 
     def _readiness_hold(self, ns, q, qd, now_ns, guard):
-        """Not ready, 'hold': hold the end effector, the message saying why."""
+        """
+        Not ready, 'hold': hold the end effector, the message saying why.
+
+        After a trip by the loop's timing the hold's gains are scaled by
+        ``readiness_hold_stiffness`` (a late, lossy loop tolerates less gain); after a
+        following-error trip by ``hold_stiffness``, as any hold.
+        """
         if self.shaper.mode != MODE_HOLD:
             self.holds += 1
         self.log(ERROR, 'readiness', guard.reason + ': holding position')
-        return self._tick(ns, q, qd, None, None, now_ns, guard.reason)
+        return self._tick(ns, q, qd, None, None, now_ns, guard.reason,
+                          hold_scale=None if self._error_spell
+                          else self.config.readiness_hold_stiffness)
 
     def _start_from(self, q, qd):
         """Start the reference from the measured end-effector motion (fk, J qd)."""
@@ -793,7 +805,7 @@ class ControlLoop:
         return None
 
     # -- outputs -----------------------------------------------------------------------
-    def _tick(self, ns, q, qd, sp_ns, sp, now_ns, hold_reason='', late=False):
+    def _tick(self, ns, q, qd, sp_ns, sp, now_ns, hold_reason='', late=False, hold_scale=None):
         """Compute the answer to the state stamped ns (sp None: hold)."""
         status = 0
         planned = self.setpoints.planned(ns, sp, self.lockstep)
@@ -808,7 +820,7 @@ class ControlLoop:
                 self.log(WARN, 'dt', 'state stamps %g s apart, outside [0.25, 4] x '
                          'control_period: the law uses dt = %g s'
                          % ((ns - self.last_ns) * 1e-9, dt))
-        ref, bits, held = self.reference.step(law.model, q, ns, sp_ns, sp, late)
+        ref, bits, held = self.reference.step(law.model, q, ns, sp_ns, sp, late, hold_scale)
         status |= bits
         if held:
             self._rate_armed = self._prev_cmd is not None
@@ -915,6 +927,7 @@ class ControlLoop:
             return self._withhold(ns, now_ns)
         if self.watch.damps:
             return self._damped_stop(ns, q, qd, now_ns)
+        self._error_spell = True
         return res
 
     def on_failure_notice(self, name):

@@ -41,6 +41,7 @@ class Reference:
         self.shaper = ReferenceShaper(resume_time, blend_on_start=not lockstep, m=m)
         self.used = False
         self._late = False      # real time: the last setpoint used was late
+        self._hold_scale = None     # the hold's own stiffness scale (None: hold_stiffness)
 
     def configure(self, cfg):
         """Take the blend's and the hold's parameters and the lateness of a configuration."""
@@ -50,7 +51,7 @@ class Reference:
         self.shaper.set_resume_time(cfg.resume_time)
         self.shaper.set_bounds(cfg.resume_max_velocity, cfg.resume_max_acceleration)
 
-    def step(self, model, q, ns, sp_ns, sp, late):
+    def step(self, model, q, ns, sp_ns, sp, late, hold_scale=None):
         """
         Return ``(ref, status, held)``: the reference for the state stamped ``ns``.
 
@@ -66,6 +67,10 @@ class Reference:
             The setpoint (None: hold).
         late : bool
             Holding for a late stream (not a stale one).
+        hold_scale : float, optional
+            The stiffness scale of a hold that starts here (a not-ready loop's,
+            ``readiness_hold_stiffness``); None: ``hold_stiffness``. It holds until the
+            blend after the hold is over.
 
         Returns
         -------
@@ -85,6 +90,7 @@ class Reference:
             if shaper.mode != MODE_HOLD:
                 ref = shaper.hold(model.fk(q).tolist(), ns * 1e-9)
                 held = True
+                self._hold_scale = hold_scale
             else:
                 ref = shaper.hold(None, ns * 1e-9)
             status |= STATUS_HOLDING
@@ -111,5 +117,11 @@ class Reference:
         return ref, status, held
 
     def stiffness(self):
-        """Return the stiffness scale the law runs at now (``hold_stiffness`` in a hold)."""
-        return self.shaper.stiffness(self._hold_stiffness)
+        """
+        Return the stiffness scale the law runs at now.
+
+        ``hold_stiffness`` in a hold (or the hold's own scale, ``step``'s ``hold_scale``),
+        brought back to 1 over the blend after it.
+        """
+        scale = self._hold_scale
+        return self.shaper.stiffness(self._hold_stiffness if scale is None else scale)

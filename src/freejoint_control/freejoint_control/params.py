@@ -427,6 +427,16 @@ PARAMS = (
           "isolated 40-60 ms stall of the driver's kept command carried the vertical hold "
           '4-26 mm off and the law recovered, while the damped joint hold lets a vertical free '
           'link fall (docs/real-time.md)', (0.0, 10.0)),
+    Param('readiness_hold_stiffness', 1.0,
+          "readiness_action 'hold': K and Lambda are multiplied by this, instead of "
+          "hold_stiffness, in the law's hold after a trip by the loop's timing (a late "
+          'mean delay, too few states answered, a gap): such a loop tolerates less gain, '
+          'and a driver keeps each of its commands for longer. A following-error trip '
+          '(the loop on time, the arm thrown off) holds at hold_stiffness. The default: in '
+          'one process, a vertical loop answering 1 state in 10 after a gap lost the arm '
+          'in 2-6 of 10 seeds at 2 and 0-1 at 1, while a push or a reset lost it more '
+          'often at 1 than at 2 (docs/real-time.md); '
+          'readiness_hold_stiffness * (K + Lambda) * control_period <= 1', (1.0, 10.0)),
     Param('readiness_resume_delay', 0.0,
           'resume: a window counts towards readiness (readiness_recover_windows of them in '
           'a row) at this mean effective delay [s] or less; 0 = measured for the arm (as '
@@ -479,9 +489,10 @@ def _check_joints(values):
 
 
 def _check_loop_rate(values):
-    """(K + Lambda) dt <= 1, also when held (times hold_stiffness): the discrete loop."""
+    """(K + Lambda) dt <= 1, also when held (times either hold's stiffness): the discrete loop."""
     dt = float(values['control_period'])
     stiff = float(values['hold_stiffness'])
+    loose = float(values['readiness_hold_stiffness'])
     pairs = list(enumerate(zip(values['K'], values['Lambda'])))
     for i, (k, lam) in pairs:
         if (k + lam) * dt > 1.0:
@@ -491,6 +502,10 @@ def _check_loop_rate(values):
         if stiff * (k + lam) * dt > 1.0:
             return (f'hold_stiffness: {stiff:g} x (K[{i}] + Lambda[{i}]) = '
                     f'{stiff * (k + lam):g} 1/s is beyond 1 / control_period = {1.0 / dt:g} '
+                    '1/s (the held loop would be unstable)')
+        if loose * (k + lam) * dt > 1.0:
+            return (f'readiness_hold_stiffness: {loose:g} x (K[{i}] + Lambda[{i}]) = '
+                    f'{loose * (k + lam):g} 1/s is beyond 1 / control_period = {1.0 / dt:g} '
                     '1/s (the held loop would be unstable)')
     return None
 
