@@ -373,7 +373,7 @@ PARAMS = (
           '(the law still runs on late states), until a gap in the states longer than '
           "readiness_hold_max_gap (the law's last command kept all along) or the hold off "
           'by more than readiness_hold_max_error (a following-error trip, '
-          'readiness_max_error, goes to the law\'s hold too): from then '
+          "readiness_max_error, goes to the law's hold too): from then "
           'on, until ready again, the damped joint hold; ready again after it, the '
           'controller says not ready for a plan until it has re-joined the setpoints '
           '(docs/real-time.md, docs/real-arm.md)',
