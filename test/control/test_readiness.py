@@ -585,8 +585,8 @@ def test_with_the_hold_action_a_tracking_error_past_readiness_max_error_holds_wh
     assert res.status & STATUS_HOLDING and not res.status & STATUS_STOPPED
     p = loop.law.model.fk(q)
     assert res.message.startswith('holding at (%.4f, %.4f) m: %s' % (p[0], p[1], reason))
-    assert loop.shaper.hold_position == pytest.approx(tuple(loop.law.model.fk(q)), abs=1e-12)
-    assert list(res.position_desired) == pytest.approx(list(loop.law.model.fk(q)), abs=1e-12)
+    assert loop.shaper.hold_position == pytest.approx(tuple(p), abs=1e-12)
+    assert list(res.position_desired) == pytest.approx(list(p), abs=1e-12)
     # Held there until ready again after its windows; then tracking resumes, blending
     # from the hold (no re-joining spell: the arm was not let go).
     statuses = []

@@ -491,22 +491,19 @@ def _check_joints(values):
 def _check_loop_rate(values):
     """(K + Lambda) dt <= 1, also when held (times either hold's stiffness): the discrete loop."""
     dt = float(values['control_period'])
-    stiff = float(values['hold_stiffness'])
-    loose = float(values['readiness_hold_stiffness'])
+    holds = [(name, float(values[name]))
+             for name in ('hold_stiffness', 'readiness_hold_stiffness')]
     pairs = list(enumerate(zip(values['K'], values['Lambda'])))
     for i, (k, lam) in pairs:
         if (k + lam) * dt > 1.0:
             return (f'K: K[{i}] + Lambda[{i}] = {k + lam:g} 1/s is beyond 1 / control_period = '
                     f'{1.0 / dt:g} 1/s (the discrete loop would be unstable)')
     for i, (k, lam) in pairs:
-        if stiff * (k + lam) * dt > 1.0:
-            return (f'hold_stiffness: {stiff:g} x (K[{i}] + Lambda[{i}]) = '
-                    f'{stiff * (k + lam):g} 1/s is beyond 1 / control_period = {1.0 / dt:g} '
-                    '1/s (the held loop would be unstable)')
-        if loose * (k + lam) * dt > 1.0:
-            return (f'readiness_hold_stiffness: {loose:g} x (K[{i}] + Lambda[{i}]) = '
-                    f'{loose * (k + lam):g} 1/s is beyond 1 / control_period = {1.0 / dt:g} '
-                    '1/s (the held loop would be unstable)')
+        for name, scale in holds:
+            if scale * (k + lam) * dt > 1.0:
+                return (f'{name}: {scale:g} x (K[{i}] + Lambda[{i}]) = '
+                        f'{scale * (k + lam):g} 1/s is beyond 1 / control_period = '
+                        f'{1.0 / dt:g} 1/s (the held loop would be unstable)')
     return None
 
 
