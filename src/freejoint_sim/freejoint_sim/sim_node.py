@@ -33,7 +33,8 @@ Modes (docs/GRAPH.md):
   node that streams ahead of ``/clock`` every N steps needs a lookahead of at least N - 1
   steps (the planner: ``docs/GRAPH.md``, lockstep item 5).
 * ``realtime``: steps on the wall clock at ``1 / control_period`` and applies the latest
-  command.  Each state is stamped with its step's time on the stepping grid (the
+  command, which the stepping thread takes itself at each step as a driver reads its
+  command at its update (no executor callback per command).  Each state is stamped with its step's time on the stepping grid (the
   monotonic grid mapped to system time once at start), so a late publication shows as
   age, not as a wrong time.  With ``start_braked`` (default) the arm is held at q(0) at
   rest until the first accepted command (brakes engaged; states still published), and
@@ -83,6 +84,7 @@ from freejoint_sim.params import SCHEMA
 from freejoint_sim.timing import StepTiming
 from freejoint_sim.watchdog import DriveWatchdog
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
 REPUBLISH_PERIOD = 0.2
@@ -95,6 +97,10 @@ _UNLABELLED = 1 << 62
 _isfinite = math.isfinite
 _monotonic = time.monotonic
 _time_ns = time.time_ns
+
+
+def _never_called(_msg):
+    """Stand for the callback of the real-time command subscription (no executor spins it)."""
 
 
 def _command_fields(msg):
@@ -175,9 +181,12 @@ class SimNode(Node, Lifecycle):
                                              qos_overriding_options=QOS_OVERRIDES)
         self._pub_clock = (self.create_publisher(CLOCK.msg_type, CLOCK.name, CLOCK.qos)
                            if cfg.lockstep else None)
-        self.create_subscription(COMMANDS.msg_type, COMMANDS.name,
-                                 self._on_command, overridable(COMMANDS.qos),
-                                 qos_overriding_options=QOS_OVERRIDES, raw=True)
+        self._cmd_node = None
+        self._cmd_sub = self.create_subscription(COMMANDS.msg_type, COMMANDS.name,
+                                                 self._on_command, overridable(COMMANDS.qos),
+                                                 qos_overriding_options=QOS_OVERRIDES, raw=True)
+        if not cfg.lockstep:
+            self._take_commands_yourself()
         self.create_service(RESET.srv_type, RESET.name, self._on_reset)
         if not cfg.lockstep:    # a drive that brakes when told (the watchdog stays)
             self.create_subscription(BRAKE_REQUEST.msg_type, BRAKE_REQUEST.name,
@@ -226,6 +235,27 @@ class SimNode(Node, Lifecycle):
                                        'timeout and no brakes on request (a driver that '
                                        'holds the last command)')
             self._rt_thread.start()
+
+    def _take_commands_yourself(self):
+        """
+        Real time: move the command subscription to a hidden node the stepping thread takes.
+
+        A driver reads the newest command at its update, not when the command arrives: the
+        stepping thread takes what arrived at each step (``_take_commands``), so no executor
+        wakes up per command (one wake-up and a hand-over of the GIL per period fewer; the
+        executor still runs services, the brake topics and the diagnostics timer). The
+        subscription made on this node declared the QoS overrides' parameters and resolved
+        the topic (remapped) and the QoS (overridden); the hidden node's, with both, replaces
+        it.
+        """
+        made = self._cmd_sub
+        topic, qos = made.topic_name, made.qos_profile
+        self.destroy_subscription(made)
+        self._cmd_node = Node('_%s_commands' % self.get_name(), namespace=self.get_namespace(),
+                              context=self.context, use_global_arguments=False,
+                              enable_rosout=False, start_parameter_services=False)
+        self._cmd_sub = self._cmd_node.create_subscription(
+            COMMANDS.msg_type, topic, _never_called, qos, raw=True)
 
     def _publish_description(self, arm):
         """Publish the arm's URDF on /robot_description (latched, as robot_state_publisher)."""
@@ -358,31 +388,71 @@ class SimNode(Node, Lifecycle):
                        'command refused: %s; zero effort applied' % problem)
         return None
 
-    def _on_command(self, raw):
-        now = _monotonic()
+    def _read(self, raw):
+        """Return a serialized command's (label, data); None if unreadable (counted, logged)."""
         try:
-            label, data = read_serialized(raw, self._read_command, COMMANDS.msg_type,
-                                          _command_fields)
+            return read_serialized(raw, self._read_command, COMMANDS.msg_type,
+                                   _command_fields)
         except ValueError as exc:
             self._refused += 1
             self._throttle(self.get_logger().error, 'unreadable',
                            'command refused: %s; not applied' % exc)
+            return None
+
+    def _take_commands(self):
+        """
+        Real time: take every command that arrived since the last step, the newest last.
+
+        Each is judged at its receipt: the middleware's reception time (system clock),
+        mapped to the monotonic clock by the two clocks read now.
+        """
+        sub = self._cmd_sub
+        handle = sub.handle
+        take = handle.take_message
+        msg_type = sub.msg_type
+        mono = sys_ns = None
+        try:
+            with handle:
+                while True:
+                    got = take(msg_type, True)
+                    if got is None:
+                        return
+                    if mono is None:
+                        mono, sys_ns = _monotonic(), _time_ns()
+                    received = got[1]['received_timestamp'] or sys_ns
+                    self._command_arrived(got[0], mono - max(0, sys_ns - received) * 1e-9,
+                                          received)
+        except InvalidHandle:          # destroyed at shutdown
             return
+
+    def _command_arrived(self, raw, now, received_ns):
+        """Real time: a command received at ``now`` (monotonic s), ``received_ns`` (system)."""
+        read = self._read(raw)
+        if read is None:
+            return
+        label, data = read
         ns = label_to_stamp(label)     # None: no label, the current step's answer
-        if not self._lockstep:
-            tau = self._command_effort(data)
-            if ns is not None:   # the age of the state it answers (its grid time) at receipt
-                self._note_latency(_time_ns() - ns)
-            answered = -1
-            if self._observer is not None:
-                answered = self._observer.command_received(ns, self._k, now)
-            self._latest = (self._zero if tau is None else tau, now, answered, tau is not None,
-                            *self._watchdog.judge(self._qd_list, self._requested_wait),
-                            _UNLABELLED if ns is None else ns)
-            if self._cmd_timed_out:
-                self._cmd_timed_out = False
-                self.get_logger().info('commands are back')
+        tau = self._command_effort(data)
+        if ns is not None:   # the age of the state it answers (its grid time) at receipt
+            self._note_latency(received_ns - ns)
+        answered = -1
+        if self._observer is not None:
+            answered = self._observer.command_received(ns, self._k, now)
+        self._latest = (self._zero if tau is None else tau, now, answered, tau is not None,
+                        *self._watchdog.judge(self._qd_list, self._requested_wait),
+                        _UNLABELLED if ns is None else ns)
+        if self._cmd_timed_out:
+            self._cmd_timed_out = False
+            self.get_logger().info('commands are back')
+
+    def _on_command(self, raw):
+        """Lockstep: a command answering the current step advances it."""
+        now = _monotonic()
+        read = self._read(raw)
+        if read is None:
             return
+        label, data = read
+        ns = label_to_stamp(label)     # None: no label, the current step's answer
         if self._holding():
             return
         if ns is not None and ns != self._t_ns:
@@ -520,10 +590,10 @@ class SimNode(Node, Lifecycle):
         Real time: step on the wall clock in a thread of its own.
 
         Sleeps to the next period boundary ``t0 + (k + 1) dt`` of the monotonic clock (an
-        absolute grid: no drift), then integrates what is due and publishes. A thread
-        instead of an executor timer: the state goes out on time even while the executor
-        thread takes a command, parameters or a service call, and each period costs one
-        wake-up (a timer costs two and fires late under load: docs/performance.md). The
+        absolute grid: no drift), then takes the commands that arrived, integrates what is due
+        and publishes. A thread instead of an executor timer: the state goes out on time even
+        while the executor thread runs parameters or a service call, and each period costs
+        one wake-up (a timer costs two and fires late under load: docs/performance.md). The
         thread inherits the process's ``thread_priority``; an unexpected error is logged
         (throttled) and stepping goes on.
         """
@@ -553,6 +623,7 @@ class SimNode(Node, Lifecycle):
             now = _monotonic()
             self._rt_start = now - self._dt
             self._rt_origin_ns = system_ns - self._dt_ns
+        self._take_commands()
         now = _monotonic()
         due = int((now - self._rt_start) / self._dt) - self._k
         if due > MAX_CATCH_UP:
@@ -581,7 +652,9 @@ class SimNode(Node, Lifecycle):
         elif (latest is not None and self._watchdog.expired(now, latest[1], latest[4])
               and self._diverged is None):
             self._engage_brakes(now, waited=latest[4], wait_kind=latest[5])
-        for _ in range(due):
+        for i in range(due):
+            if i:
+                self._take_commands()   # catching up: a command answering a state just out
             latest = self._latest
             if latest is None:
                 tau = self._zero
@@ -765,6 +838,13 @@ class SimNode(Node, Lifecycle):
         self.stop_stepping()
         if self._observer is not None:
             self._observer.run_over()
+
+    def destroy_node(self):
+        """Stop stepping; destroy the node and (real time) its hidden command node."""
+        self.stop_stepping()
+        if self._cmd_node is not None:
+            self._cmd_node.destroy_node()
+        super().destroy_node()
 
 
 def main(args=None):
