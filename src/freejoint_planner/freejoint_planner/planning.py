@@ -10,6 +10,7 @@ bundles the map with what was computed from it, and samples a circle densely eno
 """
 
 from dataclasses import dataclass, replace
+import functools
 import math
 import time
 
@@ -130,6 +131,11 @@ class SingularityModel:
     nominal: object
     region: object
     seconds: float
+
+    @functools.cached_property
+    def arm(self):
+        """Return the nominal arm's ``ArmModel`` (:func:`end_effector`'s kinematics), once."""
+        return ArmModel(self.nominal)
 
     def check(self, circle):
         """Return the ``PathCheck`` of a circle against this region (and the reach)."""
@@ -288,7 +294,7 @@ def end_effector(model, joint_names, names, positions, offsets=()):
         return None
     if offsets:
         q = q + np.asarray(offsets, dtype=float)
-    return ArmModel(model.nominal).fk(q)
+    return model.arm.fk(q)
 
 
 def settle_gate_refusal(params):
