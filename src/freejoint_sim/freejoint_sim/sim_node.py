@@ -34,10 +34,11 @@ Modes (docs/GRAPH.md):
   steps (the planner: ``docs/GRAPH.md``, lockstep item 5).
 * ``realtime``: steps on the wall clock at ``1 / control_period`` and applies the latest
   command, which the stepping thread takes itself at each step as a driver reads its
-  command at its update (no executor callback per command).  Each state is stamped with its step's time on the stepping grid (the
-  monotonic grid mapped to system time once at start), so a late publication shows as
-  age, not as a wrong time.  With ``start_braked`` (default) the arm is held at q(0) at
-  rest until the first accepted command (brakes engaged; states still published), and
+  command at its update (no executor callback per command).  Each state is stamped with
+  its step's time on the stepping grid (the monotonic grid mapped to system time once at
+  start), so a late publication shows as age, not as a wrong time.  With ``start_braked``
+  (default) the arm is held at q(0) at rest until the first accepted command (brakes
+  engaged; states still published), and
   again after ``~/reset``; once running, no command for ``brake_timeout`` engages the
   brakes where the arm is (a drive watchdog) until the next accepted command;
   ``brake_timeout_at_rest`` after a command that found the arm at rest, or the
