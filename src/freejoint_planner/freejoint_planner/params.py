@@ -167,7 +167,8 @@ PARAMS = (
           (0.0, 3600.0), exclusive_min=True),
     Param('path_tolerance', 0.05,
           'Largest |end effector - setpoint| (m) while a plan moves at full feed (from '
-          'feed_resume_time after a resume ramp): beyond it the plan stops along the path '
+          'feed_resume_time after a resume ramp), and from its path while it is paused: '
+          'beyond it the plan stops along the path '
           'and ends PATH_TOLERANCE_VIOLATED (5 cm: an arm that far off its path is lost to '
           'the task, some 10 times the tracking bounds); 0 = not checked (the largest error '
           'is still reported). A follow_circle goal may set its own.', (0.0, 10.0)),

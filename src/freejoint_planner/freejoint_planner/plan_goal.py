@@ -15,7 +15,10 @@ unpublished tick and decides the outcome (docs/feed_hold.md):
 * **PATH_TOLERANCE_VIOLATED** when the end effector is farther than ``path_tolerance``
   from the setpoint the plan streamed for the state's stamp, on ticks at full feed and at
   least ``settle`` after a resume ramp ended (the controller's blend from the arm to the
-  held setpoint runs meanwhile): the plan stops along the path.
+  held setpoint runs meanwhile): the plan stops along the path. While a plan that moved is
+  paused, when the end effector is farther than ``path_tolerance`` from the plan's path
+  behind where it stands (:data:`REWIND_WINDOW` of plan time: the arm a stopped or held
+  controller left there, or one that fell): the plan stays stopped.
 * **SUCCEEDED** at the plan's end (its setpoint at the current time at the plan's
   duration: the end point), or, with
   a ``goal_tolerance``, once the end effector is within it of the end point;
@@ -65,6 +68,11 @@ REWIND_WINDOW = 1.0
 """[s] Plan time searched back from where a paused plan stands for the point of its path
 nearest the arm (its stop ramp travels half ``feed_hold_time``, the guard's trip comes
 within a readiness window of the stop)."""
+
+PATH_STEP = 0.005
+"""[s] Plan time between the points of a paused plan's path the arm is measured against (a
+point between two is taken as within half their distance of one: the path's curvature over
+5 ms neglected, e.g. 6e-6 of the chord on the paper's circle)."""
 
 HISTORY_BATCHES = 400
 """Published batches kept to find the setpoint of a measured state's stamp (at 10 ticks a
@@ -227,6 +235,17 @@ class PlanMonitor:
                            f"the end effector was {error * 1e3:.2f} mm from the plan's "
                            f'setpoint at t = {stamp_ns * 1e-9:.3f} s (path_tolerance '
                            f'{path * 1e3:.2f} mm): stopped along the path', stamp_ns)
+        elif (self.paused and self.moved and self.stopping is None and self.outcome is None
+                and self.limits.path is not None):
+            off = self._off_path(position, self.limits.path)
+            if off is not None:
+                if not off <= self.max_error:
+                    self.max_error = off
+                self._stop(PATH_TOLERANCE_VIOLATED,
+                           f'paused ({self.why}), the end effector was {off * 1e3:.2f} mm '
+                           f"from the plan's path (path_tolerance "
+                           f'{self.limits.path * 1e3:.2f} mm) at t = {stamp_ns * 1e-9:.3f} s: '
+                           'it stays stopped', stamp_ns)
         return error
 
     def cancel(self, now_ns):
@@ -397,6 +416,39 @@ class PlanMonitor:
         if back:
             plan.feed.rewind(k, back)
         self.rewound = (back * stream.dt, moved)
+
+    def _off_path(self, position, tolerance):
+        """
+        Return how far ``position`` is from a paused plan's path, if beyond ``tolerance``.
+
+        The path: from where the plan stands back :data:`REWIND_WINDOW` s of plan time (not
+        before its start), every :data:`PATH_STEP`; None within ``tolerance`` (or a plan
+        that stands in its transition or before its start). Only when the point where it
+        stands is farther than ``tolerance`` are the others measured.
+        """
+        stream, plan = self.stream, self.plan
+        k = stream.next_tick
+        if k is None:
+            return None
+        tau = stream.plan_time_at(k)
+        if not tau > 0.0:
+            return None
+        sample = plan.trajectory.sample_tuple
+        m = len(position)
+        here = sample(tau)[:m]
+        best = math.dist(position, here)
+        if best <= tolerance:
+            return None
+        slack = 0.0
+        lo = max(0.0, tau - REWIND_WINDOW)
+        for i in range(1, int((tau - lo) / PATH_STEP) + 2):
+            point = sample(max(lo, tau - i * PATH_STEP))[:m]
+            slack = max(slack, 0.5 * math.dist(point, here))
+            best = min(best, math.dist(position, point))
+            here = point
+            if best - slack <= tolerance:
+                return None
+        return best
 
     def _stood_still(self, now_ns):
         end = self.plan.feed.ramp_end()

@@ -181,6 +181,42 @@ def test_no_path_check_while_paused_nor_until_the_resume_settled():
     assert run.step(ee=braked).code == PATH_TOLERANCE_VIOLATED   # ... 2.52 s is
 
 
+def test_an_arm_that_leaves_the_path_while_the_plan_is_paused_aborts_it():
+    # Paused with the arm braked 30 mm outside the circle (radially, where it stopped):
+    # within path_tolerance of the path, the plan waits. The arm then falls to the base,
+    # 0.2 m from every point of the circle: PATH_TOLERANCE_VIOLATED while paused, and the
+    # plan stays stopped (not SUCCEEDED after a resume, the fall unseen).
+    run = Run()
+    run.until(1.0)
+    x, y = position_of(run.out[run.now - 10 * MS])
+    out = (x * 0.23 / 0.2, y * 0.23 / 0.2)
+    assert run.until(1.5, ready=False, reason='tripped', ee=out) is None
+    assert run.monitor.paused
+    outcome = run.step(ready=False, reason='tripped', ee=(0.0, 0.0))
+    assert outcome.code == PATH_TOLERANCE_VIOLATED
+    assert 'paused (tripped)' in outcome.message and '200.00 mm' in outcome.message
+    assert outcome.max_path_error == pytest.approx(0.2, abs=1e-9)
+    stood = run.positions()[-1]
+    run.run_to(3.0, ready=True)                 # ready again: an aborted plan stays stopped
+    assert run.positions()[-1] == stood
+    assert run.monitor.outcome is outcome
+
+
+def test_a_paused_arm_behind_the_stop_ramp_is_measured_against_the_path_behind_it():
+    # The feed stands 0.1 s of plan time ahead of where the arm was braked (its ramp),
+    # up to about 47 mm ahead along the circle; before the rewind the arm is that far from
+    # the standing setpoint but on the path: nothing trips, and without a rewind (the arm's
+    # position not yet measured after the ramp) the same holds.
+    run = Run(LIMITS._replace(path=0.02))
+    run.until(1.0)
+    braked = position_of(run.out[run.now - 10 * MS])
+    for _ in range(15):
+        assert run.step(ready=False, ee=braked) is None
+        assert run.monitor._off_path(braked, 0.02) is None
+    ahead = position_of(run.out[max(run.out)])
+    assert math.dist(ahead, braked) > 0.02      # the standing setpoint is beyond 20 mm
+
+
 def test_a_cancelled_plan_stops_along_the_path_then_ends_cancelled():
     run = Run()
     run.until(1.0)
