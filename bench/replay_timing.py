@@ -1,0 +1,227 @@
+"""
+Replay a real-time run's timing through the control loop and the plant, in one process.
+
+A real-time run's simulator timing file (``timing_file``: ``make soak`` and ``make bench``
+keep one per run, ``bags/soak/<case>_<n>/timing.npz``) says, for each state k, when it
+was published, when the command answering it arrived and which state's command the driver
+applied over period k. Around a moment of that run (a trip, a lost arm) this tool takes
+that pattern (``Pattern``: the states the loop took, how late, which answer was applied at
+each period) and puts it, at several points of the paper's vertical circle and for seeds
+0-9, into ``freejoint_control.loop.ControlLoop`` (the real-time configuration of
+``config/controller.yaml``, ``readiness_action: hold``) on the Table I plant (70 %
+nominal model in the law, disturbance on), a driver keeping its last command (the
+hold-last driver), every other period answered at once. While the loop is not ready the
+plan's time stands still, as the planner's feed hold does. A run is **lost** when the end
+effector ends more than 0.1 m from the path (or the plan never finishes).
+
+    python bench/replay_timing.py bags/soak/vertical_1/timing.npz 1796421442.817
+    python bench/replay_timing.py FILE STAMP --set effort_rate_limit=1e9 --at 0.5 2.5
+
+``STAMP`` [s, system time]: the moment (a state's stamp; the controller's log line of a
+trip gives it); the pattern runs from ``--before`` s before it to ``--after`` s after.
+``--set name=value`` overrides a controller parameter (repeatable). ``--save FILE`` writes
+the pattern as JSON, which replays in place of a timing file (no ``STAMP``):
+``bench/patterns/hold_last_vertical_loss.json`` is the pattern of a SCHED_FIFO hold-last
+soak run that lost the vertical arm (docs/real-time.md). Prints one line per run and the
+count of runs lost. Exit code 0 whatever the figures (a benchmark).
+
+    python bench/replay_timing.py bench/patterns/hold_last_vertical_loss.json
+"""
+
+import argparse
+import json
+import math
+import os
+import sys
+from typing import NamedTuple
+
+from freejoint_control.loop import ControlLoop
+from freejoint_control.params import SCHEMA
+from freejoint_core.arm import table1
+from freejoint_core.plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant, PlantDivergedError
+from freejoint_core.trajectory import CircleQuintic
+from freejoint_sim.params import SCHEMA as SIM
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DT, DT_NS, T0_NS = 0.001, 1_000_000, 10 ** 12
+NAMES = ['joint1', 'joint2', 'joint3']
+LEAD = 1.5              # [s] the start point held first: the loop judged ready meanwhile
+RADIUS = 0.2            # [m] the paper's circle, centred at the base
+LOST = 0.1              # [m] farther from the path than this: the arm is lost
+ANSWER_S = 0.0003       # [s] the answer's delay outside the pattern
+
+
+class Pattern(NamedTuple):
+    """
+    The timing of a run's periods 0 .. n-1 from a chosen state on.
+
+    Attributes
+    ----------
+    taken : dict of int -> float
+        Period r whose state the loop took -> how late it took it [s] (its publication's
+        lateness on the grid plus the answer's delay, less 0.2 ms for the answer itself).
+    applied : list of int, (n,)
+        The period whose state's answer the driver applied over period r (< 0: an answer
+        from before the pattern: the last one kept).
+
+    """
+
+    taken: dict
+    applied: list
+
+
+def pattern(timing, stamp_s, before=0.1, after=0.6):
+    """
+    Return the :class:`Pattern` of a timing file around ``stamp_s``.
+
+    Parameters
+    ----------
+    timing : mapping
+        ``published`` [s], ``received`` [s] (NaN: no answer), ``stamp_ns`` and ``applied``
+        arrays of a simulator timing file (``freejoint_sim.timing``), one entry per state.
+    stamp_s : float
+        System time [s] of the moment; the state stamped nearest it is the centre.
+    before, after : float
+        Seconds of states before and after it.
+
+    """
+    stamps = np.asarray(timing['stamp_ns'], dtype=float)
+    pub = np.asarray(timing['published'], dtype=float)
+    rec = np.asarray(timing['received'], dtype=float)
+    app = np.asarray(timing['applied'])
+    i = int(np.argmin(np.abs(stamps - stamp_s * 1e9)))
+    lo, hi = max(0, i - int(before / DT)), min(len(stamps), i + int(after / DT))
+    if not (np.isfinite(pub[lo]) and hi > lo):
+        raise ValueError('stamp %.3f s: no published state there' % stamp_s)
+    taken, applied = {}, []
+    for j in range(lo, hi):
+        late = pub[j] - pub[lo] - (stamps[j] - stamps[lo]) * 1e-9
+        if np.isfinite(rec[j]) and np.isfinite(pub[j]):
+            taken[j - lo] = max(rec[j] - pub[j] - 0.0002, 0.0) + max(late, 0.0)
+        applied.append(int(app[j]) - lo)
+    return Pattern(taken, applied)
+
+
+def run(pat, at, seed, overrides=None):
+    """
+    Run the vertical circle with ``pat`` from ``at`` s into it; return what the arm did.
+
+    Returns a dict: ``worst`` [m], the end effector's largest distance from the path from
+    the pattern on (inf: the plant diverged); ``fastest`` [rad/s]; ``damped``, whether the
+    damped joint hold answered; ``tripped``, whether the loop was not ready from the pattern
+    on; ``done``, whether the plan finished.
+    """
+    controller = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'))
+    simulator = SIM.yaml_values(os.path.join(ROOT, 'config', 'sim.yaml'))
+    values = dict(controller, case='vertical', lockstep=False, readiness_action='hold',
+                  **(overrides or {}))
+    loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: None)
+    q0 = SIM.config(dict(simulator, case='vertical')).q0
+    plant = Plant(table1('vertical'), DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND,
+                  seed=seed, q0=q0)
+    traj = CircleQuintic()
+    p0 = traj.sample(0.0)[0]
+    rest = (float(p0[0]), float(p0[1]), 0.0, 0.0, 0.0, 0.0)
+    end = traj.duration
+    start = int(round((LEAD + at) / DT))
+    t, sp, tau, answers = -LEAD, rest, [0.0, 0.0], {}
+    out = {'worst': 0.0, 'fastest': 0.0, 'damped': False, 'tripped': False, 'done': False}
+    for k in range(int((LEAD + end + 9.0) / DT)):
+        ns, mono = T0_NS + k * DT_NS, 100.0 + k * DT
+        if t < 0.0 or loop.readiness()[0]:
+            t += DT
+            sp = traj.sample_tuple(t) if 0.0 <= t < end else rest
+        else:
+            sp = tuple(sp[:2]) + (0.0,) * 4          # paused: the setpoint stands
+        if t > end + 1.0:
+            out['done'] = True
+            break
+        loop.on_setpoint(ns, sp, ns, mono)
+        r = k - start
+        q, qd = plant.q.tolist(), plant.qd.tolist()
+        inside = 0 <= r < len(pat.applied)
+        late = pat.taken.get(r) if inside else ANSWER_S
+        if late is not None:
+            res = loop.on_state(ns, NAMES, q, qd, ns + int(late * 1e9), mono + late)
+            out['damped'] |= 'damped joint hold' in res.message
+            if inside:
+                answers[r] = list(res.effort)
+            else:
+                tau = list(res.effort)
+        if inside and pat.applied[r] in answers:
+            tau = answers[pat.applied[r]]
+        try:
+            plant.step(np.array(tau), DT)
+        except PlantDivergedError:
+            out['worst'] = math.inf
+            return out
+        if k >= start:
+            out['tripped'] |= not loop.readiness()[0]
+            p = loop.law.model.fk(plant.q)
+            off = (abs(math.hypot(p[0], p[1]) - RADIUS) if 0.0 <= t < end
+                   else math.hypot(p[0] - rest[0], p[1] - rest[1]))
+            out['worst'] = max(out['worst'], off)
+            out['fastest'] = max(out['fastest'], float(np.max(np.abs(plant.qd))))
+    return out
+
+
+def _value(text):
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[1])
+    parser.add_argument('timing', help='a simulator timing file (timing.npz) or a pattern '
+                        '(.json, --save)')
+    parser.add_argument('stamp', type=float, nargs='?',
+                        help='the moment [s, system time] (a timing file)')
+    parser.add_argument('--save', metavar='FILE', help='write the pattern as JSON')
+    parser.add_argument('--before', type=float, default=0.1)
+    parser.add_argument('--after', type=float, default=0.6)
+    parser.add_argument('--at', type=float, nargs='+', default=[0.5, 1.5, 2.5, 3.5],
+                        help='points of the circle [s] the pattern starts at')
+    parser.add_argument('--seeds', type=int, default=10)
+    parser.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
+                        help='a controller parameter (repeatable)')
+    args = parser.parse_args(argv)
+    overrides = {}
+    for item in args.set:
+        name, sep, text = item.partition('=')
+        if not sep or name not in SCHEMA:
+            parser.error('--set %s: expected NAME=VALUE with a controller parameter' % item)
+        overrides[name] = _value(text)
+    if args.timing.endswith('.json'):
+        with open(args.timing) as f:
+            saved = json.load(f)
+        pat = Pattern({int(r): float(v) for r, v in saved['taken'].items()},
+                      [int(v) for v in saved['applied']])
+    else:
+        if args.stamp is None:
+            parser.error('a timing file needs STAMP')
+        with np.load(args.timing) as timing:
+            pat = pattern(timing, args.stamp, args.before, args.after)
+    if args.save:
+        with open(args.save, 'w') as f:
+            json.dump({'taken': {r: round(v, 6) for r, v in pat.taken.items()},   # 1 us
+                       'applied': pat.applied}, f)
+            f.write('\n')
+    lost = 0
+    for at in args.at:
+        for seed in range(args.seeds):
+            out = run(pat, at, seed, overrides)
+            bad = not out['worst'] <= LOST or not out['done']
+            lost += bad
+            print('at %.2f s seed %d: worst %.1f mm, fastest joint %.1f rad/s, damped hold %s%s'
+                  % (at, seed, out['worst'] * 1e3, out['fastest'],
+                     'yes' if out['damped'] else 'no', ', LOST' if bad else ''), flush=True)
+    print('%s: %d of %d runs lost the arm' % (overrides or 'as configured', lost,
+                                              len(args.at) * args.seeds))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
