@@ -44,6 +44,8 @@ from freejoint_sim.params import SCHEMA as SIM
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONTROLLER = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'))
+SIMULATOR = SIM.yaml_values(os.path.join(ROOT, 'config', 'sim.yaml'))
 DT, DT_NS, T0_NS = 0.001, 1_000_000, 10 ** 12
 NAMES = ['joint1', 'joint2', 'joint3']
 LEAD = 1.5              # [s] the start point held first: the loop judged ready meanwhile
@@ -103,6 +105,102 @@ def pattern(timing, stamp_s, before=0.1, after=0.6):
     return Pattern(taken, applied)
 
 
+class CircleRun:
+    """
+    The paper's vertical circle in one process: ``ControlLoop`` on the Table I plant.
+
+    The loop has ``config/controller.yaml``'s real-time configuration with
+    ``readiness_action: hold`` (and ``overrides``); the plant is Table I's vertical arm
+    (the loop's law on its 70 % nominal model), disturbance on, from the simulator's q(0).
+    The circle's start point is held for :data:`LEAD` s (the loop judged ready meanwhile),
+    then the circle runs; while the loop is not ready the plan's time stands still, as the
+    planner's feed hold does. The caller answers the states and drives the plant:
+
+        run = CircleRun(seed)
+        for k, ns, mono in run.ticks():      # each tick's setpoint given to the loop
+            ...                              # run.loop.on_state(...) as the test needs
+            if not run.step(effort, k >= start):
+                break                        # the plant diverged
+
+    Attributes
+    ----------
+    loop : ControlLoop
+    plant : Plant
+    q0 : numpy.ndarray, (3,)
+        The plant's initial angles [rad].
+    worst : float
+        The end effector's largest distance [m] from the path (from the circle's start
+        point outside the circle's time) over the measured periods; inf: diverged.
+    fastest : float
+        The fastest joint [rad/s] over the measured periods.
+    done : bool
+        The plan finished (one second past its end).
+
+    """
+
+    def __init__(self, seed, overrides=None):
+        values = dict(CONTROLLER, case='vertical', lockstep=False, readiness_action='hold',
+                      **(overrides or {}))
+        self.loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: None)
+        self.q0 = SIM.config(dict(SIMULATOR, case='vertical')).q0
+        self.plant = Plant(table1('vertical'), DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND,
+                           seed=seed, q0=self.q0)
+        self._traj = CircleQuintic()
+        p0 = self._traj.sample(0.0)[0]
+        self._rest = (float(p0[0]), float(p0[1]), 0.0, 0.0, 0.0, 0.0)
+        self._t = -LEAD
+        self.worst = 0.0
+        self.fastest = 0.0
+        self.done = False
+
+    @staticmethod
+    def tick_at(at):
+        """Return the tick ``at`` s into the circle (its start point held before it)."""
+        return int(round((LEAD + at) / DT))
+
+    def ticks(self):
+        """Yield ``(k, ns, mono)`` per tick after giving the loop its setpoint; stop when done."""
+        loop, traj, rest = self.loop, self._traj, self._rest
+        end = traj.duration
+        sp = rest
+        for k in range(int((LEAD + end + 9.0) / DT)):
+            ns, mono = T0_NS + k * DT_NS, 100.0 + k * DT
+            if self._t < 0.0 or loop.readiness()[0]:
+                self._t += DT
+                sp = traj.sample_tuple(self._t) if 0.0 <= self._t < end else rest
+            else:
+                sp = tuple(sp[:2]) + (0.0,) * 4          # paused: the setpoint stands
+            if self._t > end + 1.0:
+                self.done = True
+                return
+            loop.on_setpoint(ns, sp, ns, mono)
+            yield k, ns, mono
+
+    def step(self, effort, measure):
+        """
+        Integrate one period with ``effort`` [N m] on the active joints; measure if asked.
+
+        Returns False when the plant diverged (``worst`` is then inf).
+        """
+        plant = self.plant
+        try:
+            plant.step(np.asarray(effort, dtype=float), DT)
+        except PlantDivergedError:
+            self.worst = math.inf
+            return False
+        if measure:
+            p = self.loop.law.model.fk(plant.q)
+            off = (abs(math.hypot(p[0], p[1]) - RADIUS) if 0.0 <= self._t < self._traj.duration
+                   else math.hypot(p[0] - self._rest[0], p[1] - self._rest[1]))
+            self.worst = max(self.worst, off)
+            self.fastest = max(self.fastest, float(np.max(np.abs(plant.qd))))
+        return True
+
+    def figures(self, **flags):
+        """Return ``worst``, ``fastest`` and ``done`` in a dict with ``flags``."""
+        return dict(flags, worst=self.worst, fastest=self.fastest, done=self.done)
+
+
 def run(pat, at, seed, overrides=None):
     """
     Run the vertical circle with ``pat`` from ``at`` s into it; return what the arm did.
@@ -112,58 +210,30 @@ def run(pat, at, seed, overrides=None):
     damped joint hold answered; ``tripped``, whether the loop was not ready from the pattern
     on; ``done``, whether the plan finished.
     """
-    controller = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'))
-    simulator = SIM.yaml_values(os.path.join(ROOT, 'config', 'sim.yaml'))
-    values = dict(controller, case='vertical', lockstep=False, readiness_action='hold',
-                  **(overrides or {}))
-    loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: None)
-    q0 = SIM.config(dict(simulator, case='vertical')).q0
-    plant = Plant(table1('vertical'), DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND,
-                  seed=seed, q0=q0)
-    traj = CircleQuintic()
-    p0 = traj.sample(0.0)[0]
-    rest = (float(p0[0]), float(p0[1]), 0.0, 0.0, 0.0, 0.0)
-    end = traj.duration
-    start = int(round((LEAD + at) / DT))
-    t, sp, tau, answers = -LEAD, rest, [0.0, 0.0], {}
-    out = {'worst': 0.0, 'fastest': 0.0, 'damped': False, 'tripped': False, 'done': False}
-    for k in range(int((LEAD + end + 9.0) / DT)):
-        ns, mono = T0_NS + k * DT_NS, 100.0 + k * DT
-        if t < 0.0 or loop.readiness()[0]:
-            t += DT
-            sp = traj.sample_tuple(t) if 0.0 <= t < end else rest
-        else:
-            sp = tuple(sp[:2]) + (0.0,) * 4          # paused: the setpoint stands
-        if t > end + 1.0:
-            out['done'] = True
-            break
-        loop.on_setpoint(ns, sp, ns, mono)
+    circle = CircleRun(seed, overrides)
+    loop, plant = circle.loop, circle.plant
+    start = circle.tick_at(at)
+    tau, answers = [0.0, 0.0], {}
+    damped = tripped = False
+    for k, ns, mono in circle.ticks():
         r = k - start
         q, qd = plant.q.tolist(), plant.qd.tolist()
         inside = 0 <= r < len(pat.applied)
         late = pat.taken.get(r) if inside else ANSWER_S
         if late is not None:
             res = loop.on_state(ns, NAMES, q, qd, ns + int(late * 1e9), mono + late)
-            out['damped'] |= 'damped joint hold' in res.message
+            damped |= 'damped joint hold' in res.message
             if inside:
                 answers[r] = list(res.effort)
             else:
                 tau = list(res.effort)
         if inside and pat.applied[r] in answers:
             tau = answers[pat.applied[r]]
-        try:
-            plant.step(np.array(tau), DT)
-        except PlantDivergedError:
-            out['worst'] = math.inf
-            return out
+        if not circle.step(tau, k >= start):
+            break
         if k >= start:
-            out['tripped'] |= not loop.readiness()[0]
-            p = loop.law.model.fk(plant.q)
-            off = (abs(math.hypot(p[0], p[1]) - RADIUS) if 0.0 <= t < end
-                   else math.hypot(p[0] - rest[0], p[1] - rest[1]))
-            out['worst'] = max(out['worst'], off)
-            out['fastest'] = max(out['fastest'], float(np.max(np.abs(plant.qd))))
-    return out
+            tripped |= not loop.readiness()[0]
+    return circle.figures(damped=damped, tripped=tripped)
 
 
 def _value(text):

@@ -9,29 +9,20 @@ throws the arm off its reference by more than ``readiness_max_error`` (10 mm): a
 the active joints, or the arm put back at q(0) at rest while the loop is silent (the soak's
 ``~/reset`` meeting a stall). The law's hold answers from the trip on; the damped joint
 hold would let the vertical free link fall (docs/real-time.md, "readiness_action hold").
+The loop, the plant and the plan's clock are ``bench/replay_timing.py``'s ``CircleRun``
+(the same in-process run its replays of real-time timing use).
 """
-import math
 import os
 
-from freejoint_control.loop import ControlLoop
-from freejoint_control.params import SCHEMA
-from freejoint_core.arm import table1
-from freejoint_core.plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant, PlantDivergedError
 from freejoint_core.trajectory import CircleQuintic
-from freejoint_sim.params import SCHEMA as SIM
+from freejoint_tools.harness import load_source
 import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-CONTROLLER = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'))
-SIMULATOR = SIM.yaml_values(os.path.join(ROOT, 'config', 'sim.yaml'))
-DT = 0.001
-DT_NS = 1_000_000
-T0_NS = 10 ** 12
-NAMES = ['joint1', 'joint2', 'joint3']
+harness = load_source(os.path.join(ROOT, 'bench', 'replay_timing.py'), 'following_error_run')
+NAMES = harness.NAMES
 TRAJ = CircleQuintic()
-LEAD = 1.5              # the start point held before the circle: the loop ready meanwhile
-RADIUS = 0.2            # the circle's, centred at the origin
 
 
 def run(event, at, size, seed=0):
@@ -47,30 +38,14 @@ def run(event, at, size, seed=0):
     joint then; ``tripped``, ``damped``, whether a following error tripped the guard and
     whether the damped joint hold answered; ``done``, whether the plan finished.
     """
-    values = dict(CONTROLLER, case='vertical', lockstep=False, readiness_action='hold')
-    loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: None)
-    q0 = SIM.config(dict(SIMULATOR, case='vertical')).q0
-    plant = Plant(table1('vertical'), DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND,
-                  seed=seed, q0=q0)
-    p0 = TRAJ.sample(0.0)[0]
-    rest = (float(p0[0]), float(p0[1]), 0.0, 0.0, 0.0, 0.0)
-    end = TRAJ.duration
-    start = int(round((LEAD + at) / DT))
-    t, sp, tau, queued = -LEAD, rest, [0.0, 0.0], []
-    out = {'worst': 0.0, 'fastest': 0.0, 'tripped': False, 'damped': False, 'done': False}
-    for k in range(int((LEAD + end + 9.0) / DT)):
-        ns, mono = T0_NS + k * DT_NS, 100.0 + k * DT
-        if t < 0.0 or loop.readiness()[0]:
-            t += DT
-            sp = TRAJ.sample_tuple(t) if 0.0 <= t < end else rest
-        else:
-            sp = tuple(sp[:2]) + (0.0,) * 4       # paused: the setpoint stands
-        if t > end + 1.0:
-            out['done'] = True
-            break
-        loop.on_setpoint(ns, sp, ns, mono)
+    circle = harness.CircleRun(seed)
+    loop, plant = circle.loop, circle.plant
+    start = circle.tick_at(at)
+    tau, queued = [0.0, 0.0], []
+    tripped = damped = False
+    for k, ns, mono in circle.ticks():
         if event == 'reset' and k == start:
-            plant.reset(q0=q0, qd0=np.zeros(3))
+            plant.reset(q0=circle.q0, qd0=np.zeros(3))
         state = (ns, plant.q.tolist(), plant.qd.tolist(), mono)
         if event == 'starve' and start <= k < start + 11 + size and (
                 k < start + 11 or (k - start) % 10):
@@ -81,24 +56,15 @@ def run(event, at, size, seed=0):
             for st in queued + [state]:
                 res = loop.on_state(st[0], NAMES, st[1], st[2], ns, st[3])
                 tau = list(res.effort)
-                out['damped'] |= 'damped joint hold' in res.message
-                out['tripped'] |= 'tracking error' in loop._readiness.reason
+                damped |= 'damped joint hold' in res.message
+                tripped |= 'tracking error' in loop._readiness.reason
             queued = []
         applied = np.array(tau)
         if event == 'push' and start <= k < start + 30:
             applied = applied + np.array([size, -size])
-        try:
-            plant.step(applied, DT)
-        except PlantDivergedError:
-            out['worst'] = math.inf
-            return out
-        if k >= start:
-            p = loop.law.model.fk(plant.q)
-            off = (abs(math.hypot(p[0], p[1]) - RADIUS) if 0.0 <= t < end
-                   else math.hypot(p[0] - rest[0], p[1] - rest[1]))
-            out['worst'] = max(out['worst'], off)
-            out['fastest'] = max(out['fastest'], float(np.max(np.abs(plant.qd))))
-    return out
+        if not circle.step(applied, k >= start):
+            break
+    return circle.figures(tripped=tripped, damped=damped)
 
 
 @pytest.mark.parametrize('event, at, size', [
