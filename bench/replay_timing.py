@@ -11,8 +11,9 @@ each period) and puts it, at several points of the paper's vertical circle and f
 ``config/controller.yaml``, ``readiness_action: hold``) on the Table I plant (70 %
 nominal model in the law, disturbance on), a driver keeping its last command (the
 hold-last driver), every other period answered at once. While the loop is not ready the
-plan's time stands still, as the planner's feed hold does. A run is **lost** when the end
-effector ends more than 0.1 m from the path (or the plan never finishes).
+plan pauses along its path as the planner's feed hold pauses it (``CircleRun``). A run is
+**lost** when the end effector ends more than 0.1 m from the path (or the plan never
+finishes).
 
     python bench/replay_timing.py bags/soak/vertical_1/timing.npz 1796421442.817
     python bench/replay_timing.py FILE STAMP --set effort_rate_limit=1e9 --at 0.5 2.5
@@ -38,14 +39,18 @@ from typing import NamedTuple
 from freejoint_control.loop import ControlLoop
 from freejoint_control.params import SCHEMA
 from freejoint_core.arm import table1
+from freejoint_core.feed_hold import FeedRate, ramp_time, scale_sample
 from freejoint_core.plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant, PlantDivergedError
 from freejoint_core.trajectory import CircleQuintic
+from freejoint_planner.params import SCHEMA as PLANNER_SCHEMA
+from freejoint_planner.plan_goal import circle_peak_speed, REWIND_WINDOW
 from freejoint_sim.params import SCHEMA as SIM
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONTROLLER = SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'controller.yaml'))
 SIMULATOR = SIM.yaml_values(os.path.join(ROOT, 'config', 'sim.yaml'))
+PLANNER = PLANNER_SCHEMA.yaml_values(os.path.join(ROOT, 'config', 'planner.yaml'))
 DT, DT_NS, T0_NS = 0.001, 1_000_000, 10 ** 12
 NAMES = ['joint1', 'joint2', 'joint3']
 LEAD = 1.5              # [s] the start point held first: the loop judged ready meanwhile
@@ -107,14 +112,18 @@ def pattern(timing, stamp_s, before=0.1, after=0.6):
 
 class CircleRun:
     """
-    The paper's vertical circle in one process: ``ControlLoop`` on the Table I plant.
+    The paper's circle in one process: ``ControlLoop`` on the Table I plant.
 
     The loop has ``config/controller.yaml``'s real-time configuration with
-    ``readiness_action: hold`` (and ``overrides``); the plant is Table I's vertical arm
-    (the loop's law on its 70 % nominal model), disturbance on, from the simulator's q(0).
+    ``readiness_action: hold`` (and ``overrides``); the plant is Table I's arm of ``case``
+    (``'vertical'`` or ``'horizontal'``; the loop's law on its 70 % nominal model),
+    disturbance on, from the simulator's q(0).
     The circle's start point is held for :data:`LEAD` s (the loop judged ready meanwhile),
-    then the circle runs; while the loop is not ready the plan's time stands still, as the
-    planner's feed hold does. The caller answers the states and drives the plant:
+    then the circle runs, paused as the planner pauses it (``config/planner.yaml``'s feed
+    hold, reacting at once): from the tick the loop is not ready its feed ramps to a stop
+    along the path (``feed_hold_time``); ready again, a plan that stands goes back along
+    its path to the point nearest the arm (within ``REWIND_WINDOW``) and its feed ramps
+    up (``feed_resume_time``). The caller answers the states and drives the plant:
 
         run = CircleRun(seed)
         for k, ns, mono in run.ticks():      # each tick's setpoint given to the loop
@@ -138,17 +147,22 @@ class CircleRun:
 
     """
 
-    def __init__(self, seed, overrides=None):
-        values = dict(CONTROLLER, case='vertical', lockstep=False, readiness_action='hold',
+    def __init__(self, seed, overrides=None, case='vertical'):
+        values = dict(CONTROLLER, case=case, lockstep=False, readiness_action='hold',
                       **(overrides or {}))
         self.loop = ControlLoop(SCHEMA.config(values), lambda level, kind, text: None)
-        self.q0 = SIM.config(dict(SIMULATOR, case='vertical')).q0
-        self.plant = Plant(table1('vertical'), DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND,
+        self.q0 = SIM.config(dict(SIMULATOR, case=case)).q0
+        self.plant = Plant(table1(case), DEFAULT_DT_SUB, dist_bound=DEFAULT_DIST_BOUND,
                            seed=seed, q0=self.q0)
         self._traj = CircleQuintic()
         p0 = self._traj.sample(0.0)[0]
         self._rest = (float(p0[0]), float(p0[1]), 0.0, 0.0, 0.0, 0.0)
         self._t = -LEAD
+        self._feed = FeedRate(DT)
+        peak = circle_peak_speed(RADIUS, self._traj.duration)
+        self._stop_time = ramp_time(PLANNER['feed_hold_time'], peak, PLANNER['max_acceleration'])
+        self._start_time = ramp_time(PLANNER['feed_resume_time'], peak,
+                                     PLANNER['max_acceleration'])
         self.worst = 0.0
         self.fastest = 0.0
         self.done = False
@@ -160,21 +174,40 @@ class CircleRun:
 
     def ticks(self):
         """Yield ``(k, ns, mono)`` per tick after giving the loop its setpoint; stop when done."""
-        loop, traj, rest = self.loop, self._traj, self._rest
+        loop, traj, rest, feed = self.loop, self._traj, self._rest, self._feed
         end = traj.duration
-        sp = rest
+        k0 = int(round(LEAD / DT)) - 1         # the circle's plan time 0
         for k in range(int((LEAD + end + 9.0) / DT)):
             ns, mono = T0_NS + k * DT_NS, 100.0 + k * DT
-            if self._t < 0.0 or loop.readiness()[0]:
-                self._t += DT
-                sp = traj.sample_tuple(self._t) if 0.0 <= self._t < end else rest
-            else:
-                sp = tuple(sp[:2]) + (0.0,) * 4          # paused: the setpoint stands
+            if k >= k0:
+                ready = loop.readiness()[0]
+                if not ready and feed.target != 0.0:
+                    feed.ramp(k, 0.0, self._stop_time)
+                elif ready and feed.target == 0.0:
+                    if k >= feed.ramp_end():
+                        self._rewind(k, k0)
+                    feed.ramp(k, 1.0, self._start_time)
+            lag, rate, rate_dot = feed.at(k) if k >= k0 else (0, 1.0, 0.0)
+            self._t = (k - k0 - lag) * DT
             if self._t > end + 1.0:
                 self.done = True
                 return
+            sp = (scale_sample(traj.sample_tuple(self._t), rate, rate_dot)
+                  if 0.0 <= self._t < end else rest)
             loop.on_setpoint(ns, sp, ns, mono)
             yield k, ns, mono
+
+    def _rewind(self, k, k0):
+        """Move the standing plan back along its path to the point nearest the arm."""
+        traj = self._traj
+        tau = (k - k0 - self._feed.at(k)[0]) * DT
+        if not 0.0 < tau < traj.duration:
+            return
+        p = self.loop.law.model.fk(self.plant.q)
+        back = min(range(int(min(tau, REWIND_WINDOW) / DT) + 1),
+                   key=lambda i: math.dist(p[0:2], traj.sample_tuple(tau - i * DT)[0:2]))
+        if back:
+            self._feed.rewind(k, back)
 
     def step(self, effort, measure):
         """

@@ -4,7 +4,7 @@ A following error of a ready loop with ``readiness_action: hold``, in one proces
 The real-time loop (``ControlLoop``, the guard on) drives the Table I plant, stepped here 1 ms
 per tick, with a driver that keeps its last command (no watchdog, no brakes). The planner's
 circle starts 1.5 s in (the loop is ready after its 5 good windows); while the loop is not
-ready the plan's time stands still (its feed hold), as the planner's does. An event then
+ready the plan pauses along its path, as the planner's feed hold pauses it. An event then
 throws the arm off its reference by more than ``readiness_max_error`` (10 mm): a push on
 the active joints, or the arm put back at q(0) at rest while the loop is silent (the soak's
 ``~/reset`` meeting a stall). The law's hold answers from the trip on; the damped joint

@@ -622,6 +622,58 @@ def test_a_timing_trip_holds_at_readiness_hold_stiffness_a_following_error_at_ho
     assert res.status & STATUS_HOLDING and loop.law.stiffness == 2.0
 
 
+def _circle_stream(loop, ks, age_ns, speed=0.02):
+    """
+    Feed states at Q0 under setpoints moving on the 0.2-m circle from (0.2, 0).
+
+    Returns ``(status, reference position)`` per answer.
+    """
+    out = []
+    for k in ks:
+        ns = (k + 500) * DT_NS
+        phi = speed * k * 1e-3 / 0.2
+        c, s = math.cos(phi), math.sin(phi)
+        w = speed * speed / 0.2
+        loop.on_setpoint(ns, (0.2 * c, 0.2 * s, -speed * s, speed * c, -w * c, -w * s), 0,
+                         k * 1e-3)
+        res = loop.on_state(ns, NAMES, list(Q0), list(QD0), ns + age_ns, 100.0 + k * 1e-3)
+        out.append((res.status, tuple(res.position_desired)))
+    return out
+
+
+@pytest.mark.parametrize('stop', [0.1, 0.0])
+def test_a_timing_trip_stops_a_moving_reference_along_its_path_unless_told_not_to(stop):
+    # Tracking a setpoint on the circle at 20 mm/s (the arm kept at its start: the
+    # following error off), then late states: the delay trips the guard. At
+    # readiness_stop_acceleration 0.1 m/s^2 the hold is reached by stopping along the
+    # circle over 1.875 * 0.02 / 0.1 = 0.375 s, 3.75 mm on from the last reference
+    # tracked; at 0 it holds where the arm is, at once (the arm's fk: (0.2, 0)).
+    loop, _ = make(readiness_action='hold', readiness_max_error=0.0,
+                   readiness_stop_acceleration=stop)
+    tracked = _circle_stream(loop, range(600), 0)
+    assert not any(status & STATUS_HOLDING for status, _ in tracked)
+    late = _circle_stream(loop, range(600, 1400), 2_500_000)
+    trip = next(i for i, (status, _) in enumerate(late) if status & STATUS_HOLDING)
+    last = late[trip - 1][1]
+    held = [ref for status, ref in late[trip:]]
+    assert all(status & STATUS_HOLDING for status, _ in late[trip:])
+    if stop == 0.0:
+        arm = tuple(loop.law.model.fk(Q0))
+        assert arm == pytest.approx((0.2, 0.0), abs=1e-6)
+        assert held == [pytest.approx(arm, abs=1e-15)] * len(held)
+        return
+    radius = [math.hypot(*p) for p in held]
+    assert radius == pytest.approx([0.2] * len(held), abs=1e-12)
+    angle = [math.atan2(p[1], p[0]) for p in held]
+    assert all(b >= a for a, b in zip(angle, angle[1:]))      # on along the path, no back
+    phi_last = math.atan2(last[1], last[0])
+    assert angle[-1] == pytest.approx(phi_last + 0.02 * 0.375 / 2 / 0.2, abs=1e-12)
+    stands = next(i for i, a in enumerate(angle) if a == angle[-1])
+    assert stands == 375 - 1 or stands == 375         # the ramp's end, its first tick
+    assert held[0] != held[1] != held[2]                    # no step to a standstill
+    assert loop.law.stiffness == 1.0                         # readiness_hold_stiffness
+
+
 def test_readiness_hold_stiffness_is_checked_against_the_discrete_loop():
     with pytest.raises(FreejointValueError, match='readiness_hold_stiffness'):
         make(readiness_action='hold', readiness_hold_stiffness=10.0)

@@ -3,8 +3,10 @@ bench/replay_timing.py: a run's timing put through the loop and the plant in one
 
 The pattern read from a timing file is checked against hand-made arrays; a pattern with
 every state answered at once tracks as the loop does, and a 30-period silence of the loop
-(the driver keeping its command) trips the guard, holds and finishes the plan.
+(the driver keeping its command) trips the guard, holds and finishes the plan; the saved
+pattern of a soak run that lost the arm keeps it now.
 """
+import json
 import math
 import os
 
@@ -69,3 +71,19 @@ def test_a_saved_pattern_replays_as_the_timing_file_it_came_from(tmp_path, capsy
     assert replay_timing.main([str(saved)] + args) == 0
     assert capsys.readouterr().out == from_file
     assert from_file.endswith('as configured: 0 of 1 runs lost the arm\n')
+
+
+def test_the_lost_soak_run_replayed_keeps_the_arm_by_stopping_along_the_path():
+    # The SCHED_FIFO hold-last soak run that lost the vertical arm, 2.5 s into the circle,
+    # seed 0: held where the arm was at the gap's trip (readiness_stop_acceleration 0),
+    # the law's hold went past 50 mm, the damped joint hold took over and the free link
+    # fell (1.28 m); stopped along the circle first it stays on its path (2.4 mm).
+    with open(os.path.join(ROOT, 'bench', 'patterns', 'hold_last_vertical_loss.json')) as f:
+        saved = json.load(f)
+    pat = replay_timing.Pattern({int(r): v for r, v in saved['taken'].items()},
+                                saved['applied'])
+    held = replay_timing.run(pat, 2.5, seed=0, overrides={'readiness_stop_acceleration': 0.0})
+    assert held['damped'] and held['worst'] > replay_timing.LOST
+    stopped = replay_timing.run(pat, 2.5, seed=0)
+    assert stopped['tripped'] and not stopped['damped'] and stopped['done']
+    assert stopped['worst'] < 0.010

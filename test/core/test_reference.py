@@ -5,8 +5,8 @@ from freejoint_core.arm import table1
 from freejoint_core.control import Gains, RobustController
 from freejoint_core.errors import FreejointValueError
 from freejoint_core.guards import clamp_dt, limit_effort, setpoint_refusal, state_refusal
-from freejoint_core.reference import (MODE_BLEND, MODE_HOLD, MODE_STREAM, quintic_offset,
-                                      ReferenceShaper)
+from freejoint_core.reference import (ArcStop, MODE_BLEND, MODE_HOLD, MODE_STREAM,
+                                      quintic_offset, ReferenceShaper, STOP_MIN_SPEED)
 from freejoint_core.trajectory import CircleQuintic
 import numpy as np
 import pytest
@@ -269,3 +269,95 @@ def test_start_from_is_refused_for_non_finite_motion_and_a_hold_forgets_it():
     assert sh.hold((0.3, 0.4)) == (0.3, 0.4, 0.0, 0.0, 0.0, 0.0)
     ref, _ = sh.track(0.0, (0.5, 0.5, 0.0, 0.0, 0.0, 0.0), None)
     assert ref[:4] == pytest.approx((0.3, 0.4, 0.0, 0.0))
+
+
+def _circling(phi, r=0.2, speed=0.4):
+    """Return uniform motion on the circle of radius r about the origin at angle phi (ccw)."""
+    c, s = math.cos(phi), math.sin(phi)
+    w = speed * speed / r
+    return (r * c, r * s, -speed * s, speed * c, -w * c, -w * s)
+
+
+def test_a_stop_along_a_circle_stays_on_it_and_stands_half_its_ramp_along():
+    # 0.4 m/s on a 0.2-m circle, stopped over T = 0.15 s: the feed hold's ramp, which
+    # travels s0 T / 2 = 30 mm (0.15 rad) and decelerates at most 1.875 s0 / T = 5 m/s^2.
+    start = _circling(0.3)
+    stop = ArcStop(start, 2.0, 0.15)
+    assert stop.end == pytest.approx((0.2 * math.cos(0.45), 0.2 * math.sin(0.45)), abs=1e-15)
+    assert stop.sample(2.0) == pytest.approx(start, abs=1e-15)     # no step
+    for t in np.linspace(2.0, 2.2, 41):
+        p = stop.sample(t)
+        assert math.hypot(p[0], p[1]) == pytest.approx(0.2, abs=1e-15)
+    assert stop.sample(2.15) == pytest.approx(stop.end + (0.0,) * 4, abs=1e-15)
+    assert stop.sample(9.0) == pytest.approx(stop.end + (0.0,) * 4, abs=0.0)
+    # Half way: half the speed, along the tangent, and the ramp's peak deceleration
+    # 1.875 s0 / T = 5 m/s^2 on top of the centripetal (s0 / 2)^2 / r = 0.2 m/s^2; the
+    # angle travelled is s0 T (1/2 - int_0^1/2 S) / r = 0.06 (1/2 - 5/64) / 0.2.
+    phi = 0.3 + 0.06 * (0.5 - 5.0 / 64.0) / 0.2
+    tangent, inward = (-math.sin(phi), math.cos(phi)), (-math.cos(phi), -math.sin(phi))
+    mid = stop.sample(2.075)
+    assert mid[0:2] == pytest.approx((0.2 * math.cos(phi), 0.2 * math.sin(phi)), abs=1e-15)
+    assert mid[2:4] == pytest.approx((0.2 * tangent[0], 0.2 * tangent[1]), abs=1e-15)
+    assert mid[4:6] == pytest.approx((-5.0 * tangent[0] + 0.2 * inward[0],
+                                      -5.0 * tangent[1] + 0.2 * inward[1]), abs=1e-12)
+    # Its velocity and acceleration are the derivatives of its position and velocity.
+    h = 1e-6
+    for t in (2.01, 2.07, 2.13):
+        a, b, now = stop.sample(t - h), stop.sample(t + h), stop.sample(t)
+        for i in range(2):
+            assert (b[i] - a[i]) / (2 * h) == pytest.approx(now[2 + i], abs=1e-8)
+            assert (b[2 + i] - a[2 + i]) / (2 * h) == pytest.approx(now[4 + i], abs=1e-5)
+
+
+def test_a_stop_without_normal_acceleration_is_straight_and_one_in_space_keeps_its_plane():
+    # Along x at 0.5 m/s, the acceleration along the motion: a straight line, 25 mm in
+    # T = 0.1 s, the reference's own tangential acceleration replaced by the ramp's.
+    stop = ArcStop((0.1, 0.2, 0.5, 0.0, 3.0, 0.0), 0.0, 0.1)
+    assert stop.end == pytest.approx((0.125, 0.2), abs=1e-15)
+    assert stop.sample(0.0) == pytest.approx((0.1, 0.2, 0.5, 0.0, 0.0, 0.0), abs=1e-15)
+    # A circle of radius 0.1 about (0, 0, 0.3) in the x-z plane (task dimension 3).
+    ref = (0.1, 0.0, 0.3, 0.0, 0.0, 0.2, -0.4, 0.0, 0.0)
+    stop = ArcStop(ref, 0.0, 0.2)                  # 20 mm along: 0.2 rad
+    assert stop.end == pytest.approx((0.1 * math.cos(0.2), 0.0, 0.3 + 0.1 * math.sin(0.2)),
+                                     abs=1e-15)
+    for t in (0.05, 0.1, 0.15):
+        p = stop.sample(t)
+        assert p[1] == 0.0 and math.hypot(p[0], p[2] - 0.3) == pytest.approx(0.1, abs=1e-15)
+
+
+def test_a_stop_is_refused_without_motion_or_with_bad_values_naming_them():
+    with pytest.raises(FreejointValueError, match='^ref: the velocity'):
+        ArcStop((0.1, 0.2, 0.0, 0.0, 1.0, 0.0), 0.0, 0.1)
+    with pytest.raises(FreejointValueError, match='^ref: expected 3 m finite'):
+        ArcStop((0.1, 0.2, math.nan, 0.0, 1.0, 0.0), 0.0, 0.1)
+    with pytest.raises(FreejointValueError, match='^duration: expected'):
+        ArcStop(_circling(0.0), 0.0, 0.0)
+    with pytest.raises(FreejointValueError, match='^max_acceleration: expected'):
+        ReferenceShaper(0.5).stop(0.0, 0.0, -1.0)
+
+
+def test_a_moving_reference_stops_along_its_arc_into_the_hold():
+    sh = ReferenceShaper(0.5, blend_on_start=False)
+    # Nothing to stop: no reference yet, a hold, a reference slower than STOP_MIN_SPEED.
+    assert sh.stop(0.0, 0.001, 5.0) is None and sh.mode == 'none'
+    sh.hold((0.2, 0.0))
+    assert sh.stop(0.0, 0.001, 5.0) is None and sh.hold_position == (0.2, 0.0)
+    sh = ReferenceShaper(0.5, blend_on_start=False)
+    sh.track(1.0, (0.2, 0.0, 0.5 * STOP_MIN_SPEED, 0.0, 0.0, 0.0), None)
+    assert sh.stop(1.0, 1.001, 5.0) is None and sh.mode == MODE_STREAM
+    # Streaming at 0.4 m/s on the circle, the last reference at 3.0 s; the hold starts
+    # 12 ms later (a gap): 1.875 * 0.4 / 5 = 0.15 s of stop from 3.0 s, as ArcStop's.
+    sh.track(3.0, _circling(0.3), None)
+    expected = ArcStop(_circling(0.3), 3.0, 0.15)
+    assert sh.stop(3.0, 3.012, 5.0) == expected.sample(3.012)
+    assert sh.mode == MODE_HOLD and sh.stopping and sh.hold_position == expected.end
+    assert sh.hold(None, 3.1) == expected.sample(3.1)
+    assert sh.hold(None, 3.16) == expected.end + (0.0,) * 4 and not sh.stopping
+    assert sh.hold((0.0, 0.0), 4.0) == expected.end + (0.0,) * 4
+    # A setpoint mid-stop: the blend starts from the moving reference, no step.
+    sh.reset()
+    sh.track(3.0, _circling(0.3), None)
+    sh.stop(3.0, 3.012, 5.0)
+    here = sh.hold(None, 3.05)
+    ref, blending = sh.track(3.05, _circling(0.2), None)
+    assert blending and ref == pytest.approx(here, abs=1e-15) and not sh.stopping

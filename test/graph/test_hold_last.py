@@ -41,7 +41,8 @@ ANSWERED = {
     'hold': ((': holding position',
               'the damped joint hold answered to every state (the law held until a gap longer '
               'than it rides through) until the loop is ready again'),
-             ('holding at (', 'the damped joint hold answered')),
+             ('holding at (', 'stopping along the path to (',
+              'the damped joint hold answered')),
     'damp': (('the damped joint hold answered to every state (readiness_action damp) until '
               'the loop is ready again',), ('the damped joint hold answered',)),
 }

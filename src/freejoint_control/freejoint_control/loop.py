@@ -644,15 +644,18 @@ class ControlLoop:
         Not ready, 'hold': hold the end effector, the message saying why.
 
         After a trip by the loop's timing the hold's gains are scaled by
-        ``readiness_hold_stiffness`` (a late, lossy loop tolerates less gain); after a
-        following-error trip by ``hold_stiffness``, as any hold.
+        ``readiness_hold_stiffness`` (a late, lossy loop tolerates less gain) and a moving
+        reference first stops along its path (``readiness_stop_acceleration``: no step to
+        zero velocity for a driver to keep); after a following-error trip (the arm thrown
+        off) it holds where the arm is, at ``hold_stiffness``, as any hold.
         """
         if self.shaper.mode != MODE_HOLD:
             self.holds += 1
         self.log(ERROR, 'readiness', guard.reason + ': holding position')
+        timing = not self._error_spell
         return self._tick(ns, q, qd, None, None, now_ns, guard.reason,
-                          hold_scale=None if self._error_spell
-                          else self.config.readiness_hold_stiffness)
+                          hold_scale=self.config.readiness_hold_stiffness if timing else None,
+                          stop=timing)
 
     def _start_from(self, q, qd):
         """Start the reference from the measured end-effector motion (fk, J qd)."""
@@ -805,7 +808,8 @@ class ControlLoop:
         return None
 
     # -- outputs -----------------------------------------------------------------------
-    def _tick(self, ns, q, qd, sp_ns, sp, now_ns, hold_reason='', late=False, hold_scale=None):
+    def _tick(self, ns, q, qd, sp_ns, sp, now_ns, hold_reason='', late=False, hold_scale=None,
+              stop=False):
         """Compute the answer to the state stamped ns (sp None: hold)."""
         status = 0
         planned = self.setpoints.planned(ns, sp, self.lockstep)
@@ -820,7 +824,8 @@ class ControlLoop:
                 self.log(WARN, 'dt', 'state stamps %g s apart, outside [0.25, 4] x '
                          'control_period: the law uses dt = %g s'
                          % ((ns - self.last_ns) * 1e-9, dt))
-        ref, bits, held = self.reference.step(law.model, q, ns, sp_ns, sp, late, hold_scale)
+        ref, bits, held = self.reference.step(law.model, q, ns, sp_ns, sp, late, hold_scale,
+                                              stop)
         status |= bits
         if held:
             self._rate_armed = self._prev_cmd is not None

@@ -3,7 +3,8 @@ The reference the controller's law tracks: the plan's setpoint, held, blended or
 
 :class:`Reference` gives, per answered state, the position, velocity and acceleration
 (``3 m`` values) the law is to track, through ``freejoint_core.reference.ReferenceShaper``:
-without a setpoint a hold (at the end effector where the arm is when it starts); with one,
+without a setpoint a hold (at the end effector where the arm is when it starts, or, asked
+to, at the end of a stop along the moving reference's path); with one,
 in real time carried forward along its velocity and acceleration to the state's stamp
 (``extrapolate``; older than ``late_periods`` periods: late), blended from a hold or from
 the motion back to it. It says so in the status bits (holding, late, stale, resuming) and
@@ -42,16 +43,18 @@ class Reference:
         self.used = False
         self._late = False      # real time: the last setpoint used was late
         self._hold_scale = None     # the hold's own stiffness scale (None: hold_stiffness)
+        self._ns = None             # stamp [ns] of the last reference given
 
     def configure(self, cfg):
         """Take the blend's and the hold's parameters and the lateness of a configuration."""
         self._lockstep = cfg.lockstep
         self._late_ns = cfg.late_periods * cfg.dt_ns
         self._hold_stiffness = cfg.hold_stiffness
+        self._stop_acceleration = cfg.readiness_stop_acceleration
         self.shaper.set_resume_time(cfg.resume_time)
         self.shaper.set_bounds(cfg.resume_max_velocity, cfg.resume_max_acceleration)
 
-    def step(self, model, q, ns, sp_ns, sp, late, hold_scale=None):
+    def step(self, model, q, ns, sp_ns, sp, late, hold_scale=None, stop=False):
         """
         Return ``(ref, status, held)``: the reference for the state stamped ``ns``.
 
@@ -71,6 +74,11 @@ class Reference:
             The stiffness scale of a hold that starts here (a not-ready loop's,
             ``readiness_hold_stiffness``); None: ``hold_stiffness``. It holds until the
             blend after the hold is over.
+        stop : bool, optional
+            A hold that starts here while the reference moves stops along its path first
+            (``ReferenceShaper.stop`` at ``readiness_stop_acceleration``, from the last
+            reference given; real time, the acceleration > 0) instead of holding where the
+            arm is.
 
         Returns
         -------
@@ -88,11 +96,17 @@ class Reference:
         if sp is None:
             self._late = False
             if shaper.mode != MODE_HOLD:
-                ref = shaper.hold(model.fk(q).tolist(), ns * 1e-9)
+                ref = None
+                if stop and self._stop_acceleration > 0.0 and self._ns is not None \
+                        and not self._lockstep:
+                    ref = shaper.stop(self._ns * 1e-9, ns * 1e-9, self._stop_acceleration)
+                if ref is None:
+                    ref = shaper.hold(model.fk(q).tolist(), ns * 1e-9)
                 held = True
                 self._hold_scale = hold_scale
             else:
                 ref = shaper.hold(None, ns * 1e-9)
+            self._ns = ns
             status |= STATUS_HOLDING
             if late:
                 status |= STATUS_SETPOINT_LATE
@@ -112,6 +126,7 @@ class Reference:
         p_now = model.fk(q).tolist() if shaper.mode == MODE_NONE else None
         ref, blending = shaper.track(ns * 1e-9, sp, p_now)
         self.used = True
+        self._ns = ns
         if blending:
             status |= STATUS_RESUMING
         return ref, status, held

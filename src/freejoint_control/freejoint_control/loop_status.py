@@ -277,8 +277,9 @@ def status_message(status, det, cfg, hold_reason, shaper):
     parts = []
     if status & STATUS_HOLDING:
         hold = shaper.hold_position
-        parts.append('holding at (%s) m: %s' % (', '.join('%.4f' % x for x in hold),
-                                                hold_reason))
+        parts.append('%s (%s) m: %s' % ('stopping along the path to' if shaper.stopping
+                                        else 'holding at',
+                                        ', '.join('%.4f' % x for x in hold), hold_reason))
     if status & STATUS_RESUMING:
         parts.append('resuming: blending from the hold to the setpoint over %.3g s'
                      % shaper.blend_duration)

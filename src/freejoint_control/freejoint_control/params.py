@@ -437,6 +437,17 @@ PARAMS = (
           'in 2-6 of 10 seeds at 2 and 0-1 at 1, while a push or a reset lost it more '
           'often at 1 than at 2 (docs/real-time.md); '
           'readiness_hold_stiffness * (K + Lambda) * control_period <= 1', (1.0, 10.0)),
+    Param('readiness_stop_acceleration', 5.0,
+          "readiness_action 'hold', a trip by the loop's timing while the reference moves: "
+          "the law's hold starts by stopping the reference along its path (the last "
+          "reference's osculating arc, the plan's own circle) on the feed hold's ramp, its "
+          'tangential deceleration peaking at this [m/s^2] (a stop of T = 1.875 speed / '
+          'this, speed T / 2 along), as the planner stops its plan; 0 = hold where the arm '
+          'is at once (a step to zero velocity the driver keeps). The default: the '
+          "planner's max_acceleration; in one process the stalls of a vertical soak run "
+          'that lost the arm, replayed at four points of the circle for seeds 0-9, lost it '
+          'in 9 of 40 runs held at once, in none stopped at 5 (docs/real-time.md)',
+          (0.0, 1e4)),
     Param('readiness_resume_delay', 0.0,
           'resume: a window counts towards readiness (readiness_recover_windows of them in '
           'a row) at this mean effective delay [s] or less; 0 = measured for the arm (as '

@@ -16,7 +16,11 @@ A real arm must not go limp when its setpoints stop, nor jump when they come bac
 - **return to a hold** (:meth:`ReferenceShaper.return_to`): a hold interrupted by a stop
   of the loop (the arm braked where it had drifted) blends back to its own position;
 - **start from the measured motion** (:meth:`ReferenceShaper.start_from`): a controller
-  taking over a moving arm blends from the end effector's measured position and velocity.
+  taking over a moving arm blends from the end effector's measured position and velocity;
+- **stop along the path** (:meth:`ReferenceShaper.stop`): a hold that starts while the
+  reference moves, reached by the plan's own stop (the feed hold's ramp,
+  ``freejoint_core.feed_hold``) along the last reference's osculating arc (:class:`ArcStop`):
+  no step in the reference, and on the path of a circle.
 
 Besides, :func:`extrapolate` carries a late setpoint forward to the state's time (the
 controller's guards are ``freejoint_core.guards``).
@@ -29,6 +33,8 @@ Plain floats and tuples, no ROS types.  A reference (and a setpoint) is one flat
 import math
 
 from freejoint_core.errors import FreejointValueError
+from freejoint_core.feed_hold import (PEAK_RATE, scale_sample, smoothstep, smoothstep_integral,
+                                      smoothstep_rate)
 
 _isfinite = math.isfinite
 
@@ -36,6 +42,9 @@ MODE_NONE = 'none'
 MODE_HOLD = 'hold'
 MODE_BLEND = 'blend'
 MODE_STREAM = 'stream'
+
+STOP_MIN_SPEED = 1e-6
+"""[m/s] A reference slower than this is held where it is (:meth:`ReferenceShaper.stop`)."""
 
 
 def quintic_offset(d0, v0, a0, duration, t):
@@ -73,6 +82,86 @@ def quintic_offset(d0, v0, a0, duration, t):
     v = v0 + t * (2.0 * c2 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)))
     a = 2.0 * c2 + t * (6.0 * c3 + t * (12.0 * c4 + t * 20.0 * c5))
     return d, v, a
+
+
+class ArcStop:
+    """
+    A stop along the osculating arc of a moving reference, on the feed hold's ramp.
+
+    The reference ``(p0, v0, a0)`` at ``t0`` moves at the speed ``s0 = |v0|`` along the
+    tangent ``v0 / s0``; the normal part of ``a0``, ``a_n = a0 - (a0 . t) t``, gives the
+    curvature ``k = |a_n| / s0^2`` and the normal of its arc (k below 1e-9 1/m: a straight
+    line). The stop runs that arc at full speed as a plan and scales its time with the
+    feed rate ``r = 1 - S(u)``, ``u = (t - t0) / T`` (``freejoint_core.feed_hold``): the
+    reference's position, velocity and acceleration stay continuous (but for ``a0``'s own
+    tangential part, which the stop replaces), it stands after ``T`` at ``s0 T / 2`` along
+    the arc, and its extra tangential deceleration peaks at ``1.875 s0 / T``. On a circle
+    (the paper's plan) the arc is the path itself.
+
+    Parameters
+    ----------
+    ref : sequence of float, (3 m,)
+        The reference the stop starts from: position [m], velocity [m/s] (speed
+        > 0), acceleration [m/s^2].
+    t0 : float
+        Its time [s].
+    duration : float
+        ``T`` [s], > 0.
+
+    Attributes
+    ----------
+    t0, duration : float
+    end : tuple of float, (m,)
+        Where it stands [m].
+
+    """
+
+    def __init__(self, ref, t0, duration):
+        m = len(ref) // 3
+        vals = [float(x) for x in ref]
+        if m < 1 or len(vals) != 3 * m or not all(map(_isfinite, vals)):
+            raise FreejointValueError(f'ref: expected 3 m finite values, got {list(ref)!r}')
+        if not (duration > 0.0 and _isfinite(duration)):
+            raise FreejointValueError(f'duration: expected a finite value > 0, got {duration!r}')
+        p0, v0, a0 = vals[0:m], vals[m:2 * m], vals[2 * m:3 * m]
+        s0 = math.sqrt(sum(x * x for x in v0))
+        if not s0 > 0.0:
+            raise FreejointValueError(f'ref: the velocity {v0!r} has no direction to stop along')
+        tangent = [x / s0 for x in v0]
+        along = sum(a0[i] * tangent[i] for i in range(m))
+        normal = [a0[i] - along * tangent[i] for i in range(m)]
+        a_n = math.sqrt(sum(x * x for x in normal))
+        k = a_n / (s0 * s0)
+        if k > 1e-9:
+            normal = [x / a_n for x in normal]
+        else:
+            k, normal = 0.0, [0.0] * m
+        self.m, self.t0, self.duration = m, float(t0), float(duration)
+        self._p0, self._t, self._n, self._k, self._s0 = p0, tangent, normal, k, s0
+        self.end = self.sample(self.t0 + self.duration)[0:m]
+
+    def _arc(self, s):
+        """Return the arc's point [m], tangent and normal at the length ``s`` [m] along it."""
+        p0, t, n, k, m = self._p0, self._t, self._n, self._k, self.m
+        if k == 0.0:
+            return [p0[i] + s * t[i] for i in range(m)], t, n
+        c, sn = math.cos(k * s), math.sin(k * s)
+        return ([p0[i] + (sn * t[i] + (1.0 - c) * n[i]) / k for i in range(m)],
+                [c * t[i] + sn * n[i] for i in range(m)],
+                [c * n[i] - sn * t[i] for i in range(m)])
+
+    def sample(self, t):
+        """
+        Return the reference ``(p, v, a)`` [m, m/s, m/s^2] at ``t`` [s] (3 m values).
+
+        Before ``t0`` the start, after ``t0 + duration`` the end at rest.
+        """
+        T, s0 = self.duration, self._s0
+        u = min(max((t - self.t0) / T, 0.0), 1.0)
+        p, tangent, normal = self._arc(s0 * T * (u - smoothstep_integral(u)))
+        k = self._k
+        plan = (p + [s0 * x for x in tangent] + [s0 * s0 * k * x for x in normal])
+        return scale_sample(plan, 1.0 - smoothstep(u), -smoothstep_rate(u) / T)
 
 
 class ReferenceShaper:
@@ -160,6 +249,7 @@ class ReferenceShaper:
         self._start = None       # (p, v, 0) given by start_from
         self._target = None      # (m,) the next hold's position, given by return_to
         self._hold_blend = None  # (t0, offset (3 m,), duration) of a hold returning to it
+        self._stop = None        # the ArcStop a hold starts with
 
     def start_from(self, p, v):
         """
@@ -256,12 +346,63 @@ class ReferenceShaper:
         p = self.progress
         return 1.0 + (scale - 1.0) * (1.0 - p * p * p * (10.0 - 15.0 * p + 6.0 * p * p))
 
+    @property
+    def stopping(self):
+        """Return True while a hold started by :meth:`stop` still moves along its arc."""
+        return self._stop is not None and self.mode == MODE_HOLD
+
+    def stop(self, t0, t, max_acceleration):
+        """
+        Start a hold at the end of a stop along the path; return its reference at ``t``.
+
+        While the reference moves (streaming or blending; its last value ``(p, v, a)``
+        given at ``t0``) the hold is reached by stopping along that reference's
+        osculating arc (:class:`ArcStop`) over ``T = 1.875 |v| / max_acceleration``
+        (the feed hold's ramp, its extra tangential deceleration within
+        ``max_acceleration``), as a plan's feed hold stops along its path, instead of a
+        step to zero velocity where the arm is; :meth:`hold` then gives the stop and,
+        after it, the hold at its end. Returns None (nothing started) when the reference
+        does not move (no reference, a hold, slower than :data:`STOP_MIN_SPEED`): hold
+        where the arm is.
+
+        Parameters
+        ----------
+        t0 : float
+            Time [s] of the last reference.
+        t : float
+            Time [s] of this tick, >= ``t0``.
+        max_acceleration : float
+            Bound [m/s^2] on the stop's extra tangential deceleration, > 0.
+
+        Returns
+        -------
+        tuple of float, (3 m,) or None
+
+        """
+        if not (max_acceleration > 0.0 and _isfinite(max_acceleration)):
+            raise FreejointValueError(f'max_acceleration: expected a finite value > 0, got '
+                                      f'{max_acceleration!r}')
+        last = self._last
+        if last is None or self.mode not in (MODE_STREAM, MODE_BLEND):
+            return None
+        m = self.m
+        speed = math.sqrt(sum(x * x for x in last[m:2 * m]))
+        if not speed >= STOP_MIN_SPEED:
+            return None
+        stop = ArcStop(last, t0, PEAK_RATE * speed / max_acceleration)
+        self.reset()
+        self._stop = stop
+        self._hold = tuple(stop.end)
+        self.mode = MODE_HOLD
+        return self.hold(None, t)
+
     def hold(self, p_now, t=None):
         """
         Return the hold reference; the hold starts (frozen at ``p_now``) if not holding.
 
         After :meth:`return_to` the hold is at its target instead, reached by a blend from
-        ``p_now`` that starts at ``t``.
+        ``p_now`` that starts at ``t``; after :meth:`stop`, at the stop's end, reached along
+        its arc (``t`` needed: without it the stop is over).
 
         Parameters
         ----------
@@ -275,10 +416,17 @@ class ReferenceShaper:
         -------
         tuple of float, (3 m,)
             ``(p, 0, 0)``: position [m], velocity [m/s], acceleration [m/s^2]; while
-            returning to a target, its blend.
+            returning to a target, its blend; while stopping, the stop.
 
         """
         m = self.m
+        stop = self._stop
+        if stop is not None and self.mode == MODE_HOLD:
+            if t is not None and t - stop.t0 < stop.duration:
+                ref = stop.sample(t)
+                self._last = ref
+                return ref
+            self._stop = None
         if self.mode != MODE_HOLD:
             self.mode = MODE_HOLD
             self._start = None
@@ -330,7 +478,7 @@ class ReferenceShaper:
         if mode == MODE_STREAM:
             self._last = sp
             return sp, False
-        self._target = self._hold_blend = None
+        self._target = self._hold_blend = self._stop = None
         if mode == MODE_NONE:
             start, self._start = self._start, None
             if start is not None:
