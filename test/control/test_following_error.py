@@ -9,62 +9,19 @@ throws the arm off its reference by more than ``readiness_max_error`` (10 mm): a
 the active joints, or the arm put back at q(0) at rest while the loop is silent (the soak's
 ``~/reset`` meeting a stall). The law's hold answers from the trip on; the damped joint
 hold would let the vertical free link fall (docs/real-time.md, "readiness_action hold").
-The loop, the plant and the plan's clock are ``bench/replay_timing.py``'s ``CircleRun``
-(the same in-process run its replays of real-time timing use).
+The loop, the plant, the plan's feed hold and the events are ``bench/replay_timing.py``'s
+(``run_event``, on the in-process run its replays of real-time timing use).
 """
 import os
 
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_tools.harness import load_source
-import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 harness = load_source(os.path.join(ROOT, 'bench', 'replay_timing.py'), 'following_error_run')
-NAMES = harness.NAMES
+run = harness.run_event
 TRAJ = CircleQuintic()
-
-
-def run(event, at, size, seed=0):
-    """
-    Run one circle with ``event`` at ``at`` s into it; return what the arm did after it.
-
-    ``event``: 'push' (``size`` N m on the active joints, +/-, for 30 ms), 'reset' (the
-    plant back at q(0) at rest, the loop silent ``size`` ticks from then, the states
-    answered once it is back) or 'starve' (11 states lost, then for ``size`` ticks one
-    state in 10 answered: a loop the machine starves, a gap trip first). Returns a dict:
-    ``worst`` [m], the end effector's largest distance from the circle (from its start
-    point outside the circle's time) from the event on; ``fastest`` [rad/s], the fastest
-    joint then; ``tripped``, ``damped``, whether a following error tripped the guard and
-    whether the damped joint hold answered; ``done``, whether the plan finished.
-    """
-    circle = harness.CircleRun(seed)
-    loop, plant = circle.loop, circle.plant
-    start = circle.tick_at(at)
-    tau, queued = [0.0, 0.0], []
-    tripped = damped = False
-    for k, ns, mono in circle.ticks():
-        if event == 'reset' and k == start:
-            plant.reset(q0=circle.q0, qd0=np.zeros(3))
-        state = (ns, plant.q.tolist(), plant.qd.tolist(), mono)
-        if event == 'starve' and start <= k < start + 11 + size and (
-                k < start + 11 or (k - start) % 10):
-            pass                                    # lost: the driver keeps the command
-        elif event == 'reset' and start <= k < start + size:
-            queued.append(state)
-        else:
-            for st in queued + [state]:
-                res = loop.on_state(st[0], NAMES, st[1], st[2], ns, st[3])
-                tau = list(res.effort)
-                damped |= 'damped joint hold' in res.message
-                tripped |= 'tracking error' in loop._readiness.reason
-            queued = []
-        applied = np.array(tau)
-        if event == 'push' and start <= k < start + 30:
-            applied = applied + np.array([size, -size])
-        if not circle.step(applied, k >= start):
-            break
-    return circle.figures(tripped=tripped, damped=damped)
 
 
 @pytest.mark.parametrize('event, at, size', [

@@ -12,6 +12,7 @@ import os
 
 from freejoint_tools.harness import load_source
 import numpy as np
+import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 replay_timing = load_source(os.path.join(ROOT, 'bench', 'replay_timing.py'), 'replay_timing')
@@ -70,7 +71,26 @@ def test_a_saved_pattern_replays_as_the_timing_file_it_came_from(tmp_path, capsy
     from_file = capsys.readouterr().out
     assert replay_timing.main([str(saved)] + args) == 0
     assert capsys.readouterr().out == from_file
-    assert from_file.endswith('as configured: 0 of 1 runs lost the arm\n')
+    assert from_file.splitlines()[-1].startswith('as configured: 0 of 1 runs lost the arm; '
+                                                 'the others ')
+
+
+def test_a_made_event_runs_on_either_arm_and_a_bad_one_is_refused(capsys):
+    # A 30-ms stall of the loop 1 s into the horizontal circle: the guard trips (a gap of
+    # 30 states), the law's hold stops along the path, the plan pauses and finishes.
+    assert replay_timing.main(['--event', 'stall', '30', '--case', 'horizontal', '--at', '1.0',
+                               '--seeds', '1']) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith('at 1.00 s seed 0: ') and lines[0].endswith('damped hold no')
+    assert lines[1].startswith('as configured: 0 of 1 runs lost the arm; ')
+    out = replay_timing.run_event('stall', 1.0, 30, case='horizontal')
+    assert out['done'] and not out['damped'] and out['worst'] < 0.0017   # the bound
+    with pytest.raises(SystemExit):
+        replay_timing.main(['--event', 'jolt', '3'])
+    assert "--event: expected one of push, reset, starve, stall, got 'jolt'" in \
+        capsys.readouterr().err
+    with pytest.raises(ValueError, match='^event: expected one of'):
+        replay_timing.run_event('jolt', 1.0, 3)
 
 
 def test_the_lost_soak_run_replayed_keeps_the_arm_by_stopping_along_the_path():

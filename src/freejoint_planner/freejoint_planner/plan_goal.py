@@ -388,8 +388,10 @@ class PlanMonitor:
         Move a plan that stands back along its path to the point nearest the arm.
 
         The arm stops at once when the controller stops (the driver brakes it, or holds
-        it) while the plan's feed decelerates along the path for half ``feed_hold_time``:
-        it stands ahead of the arm. Once the feed stands and a state measured since says
+        it), or along the path on a ramp no longer than the plan's and started earlier
+        (the controller's hold after a timing trip: ``readiness_stop_acceleration``), while
+        the plan's feed decelerates along the path for half ``feed_hold_time``: it stands
+        ahead of the arm, or level with it. Once the feed stands and a state measured since says
         where the arm is, the plan's time goes back (``FeedRate.rewind``, from the first
         unpublished tick) to the point of its path nearest it, searched over
         :data:`REWIND_WINDOW` s of plan time (not before the plan's start): it resumes
