@@ -433,9 +433,9 @@ PARAMS = (
           'mean delay, too few states answered, a gap): such a loop tolerates less gain, '
           'and a driver keeps each of its commands for longer. A following-error trip '
           '(the loop on time, the arm thrown off) holds at hold_stiffness. The default: in '
-          'one process, a vertical loop answering 1 state in 10 after a gap lost the arm '
-          'in 2-6 of 10 seeds at 2 and 0-1 at 1, while a push or a reset lost it more '
-          'often at 1 than at 2 (docs/real-time.md); '
+          'one process, a vertical loop answering 1 state in 10 after a gap, or stalled '
+          '60-80 ms, lost the arm in 2-9 of 10 seeds at 2 and 1-3 at 1, while a reset of '
+          'the arm under a silent loop lost it more often at 1 (docs/real-time.md); '
           'readiness_hold_stiffness * (K + Lambda) * control_period <= 1', (1.0, 10.0)),
     Param('readiness_stop_acceleration', 5.0,
           "readiness_action 'hold', a trip by the loop's timing while the reference moves: "
