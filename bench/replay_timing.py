@@ -47,7 +47,7 @@ from freejoint_core.feed_hold import FeedRate, ramp_time, scale_sample
 from freejoint_core.plant import DEFAULT_DIST_BOUND, DEFAULT_DT_SUB, Plant, PlantDivergedError
 from freejoint_core.trajectory import CircleQuintic
 from freejoint_planner.params import SCHEMA as PLANNER_SCHEMA
-from freejoint_planner.plan_goal import circle_peak_speed, REWIND_WINDOW
+from freejoint_planner.plan_goal import circle_peak_speed, ticks_back_to
 from freejoint_sim.params import SCHEMA as SIM
 import numpy as np
 
@@ -126,8 +126,8 @@ class CircleRun:
     then the circle runs, paused as the planner pauses it (``config/planner.yaml``'s feed
     hold, reacting at once): from the tick the loop is not ready its feed ramps to a stop
     along the path (``feed_hold_time``); ready again, a plan that stands goes back along
-    its path to the point nearest the arm (within ``REWIND_WINDOW``) and its feed ramps
-    up (``feed_resume_time``). The caller answers the states and drives the plant:
+    its path to the point nearest the arm (the planner's ``ticks_back_to``) and its feed
+    ramps up (``feed_resume_time``). The caller answers the states and drives the plant:
 
         run = CircleRun(seed)
         for k, ns, mono in run.ticks():      # each tick's setpoint given to the loop
@@ -207,9 +207,7 @@ class CircleRun:
         tau = (k - k0 - self._feed.at(k)[0]) * DT
         if not 0.0 < tau < traj.duration:
             return
-        p = self.loop.law.model.fk(self.plant.q)
-        back = min(range(int(min(tau, REWIND_WINDOW) / DT) + 1),
-                   key=lambda i: math.dist(p[0:2], traj.sample_tuple(tau - i * DT)[0:2]))
+        back = ticks_back_to(traj, tau, self.loop.law.model.fk(self.plant.q)[0:2], DT)
         if back:
             self._feed.rewind(k, back)
 

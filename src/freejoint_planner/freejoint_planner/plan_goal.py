@@ -74,6 +74,38 @@ PATH_STEP = 0.005
 point between two is taken as within half their distance of one: the path's curvature over
 5 ms neglected, e.g. 6e-6 of the chord on the paper's circle)."""
 
+
+def ticks_back_to(trajectory, tau, position, dt):
+    """
+    Return how many ticks back from plan time ``tau`` the path comes nearest ``position``.
+
+    Parameters
+    ----------
+    trajectory : object with ``sample_tuple(t)``
+        The plan (position first in each sample).
+    tau : float
+        Plan time [s] where the search starts, > 0.
+    position : sequence of float, (m,)
+        The end effector [m].
+    dt : float
+        The tick [s].
+
+    Returns
+    -------
+    int
+        Ticks back (0: where it stands), over :data:`REWIND_WINDOW` s of plan time, not
+        before 0; the first of equally near points.
+
+    """
+    m = len(position)
+    best, back = math.inf, 0
+    for i in range(int(min(tau, REWIND_WINDOW) / dt) + 1):
+        d = math.dist(position, trajectory.sample_tuple(tau - i * dt)[:m])
+        if d < best:
+            best, back = d, i
+    return back
+
+
 HISTORY_BATCHES = 400
 """Published batches kept to find the setpoint of a measured state's stamp (at 10 ticks a
 batch, 4 s of ticks: a joint state taken late is still matched)."""
@@ -393,8 +425,8 @@ class PlanMonitor:
         the plan's feed decelerates along the path for half ``feed_hold_time``: it stands
         ahead of the arm, or level with it. Once the feed stands and a state measured since says
         where the arm is, the plan's time goes back (``FeedRate.rewind``, from the first
-        unpublished tick) to the point of its path nearest it, searched over
-        :data:`REWIND_WINDOW` s of plan time (not before the plan's start): it resumes
+        unpublished tick) to the point of its path nearest it (:func:`ticks_back_to`, over
+        :data:`REWIND_WINDOW` s of plan time, not before the plan's start): it resumes
         from where the arm stopped, the arm not catching up. Once per pause.
         """
         stream, plan = self.stream, self.plan
@@ -408,11 +440,7 @@ class PlanMonitor:
             return
         traj = plan.trajectory
         m = len(self.position)
-        best, back = math.inf, 0
-        for i in range(int(min(tau, REWIND_WINDOW) / stream.dt) + 1):
-            d = math.dist(self.position, traj.sample_tuple(tau - i * stream.dt)[:m])
-            if d < best:
-                best, back = d, i
+        back = ticks_back_to(traj, tau, self.position, stream.dt)
         moved = math.dist(traj.sample_tuple(tau)[:m], traj.sample_tuple(tau - back
                                                                         * stream.dt)[:m])
         if back:
